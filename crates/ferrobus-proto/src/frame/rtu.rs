@@ -1,0 +1,473 @@
+//! RTU framing: unit address, PDU, CRC-16 low byte first; at most 256 bytes.
+//!
+//! Spec: MODBUS over Serial Line V1.02 §2.5.1 (RTU transmission mode), §2.5.1.1 (framing:
+//! t1.5 and t3.5) and §2.5.1.2 (CRC). Read them first.
+//!
+//! # How [`RtuCodec`] finds frames
+//!
+//! RTU has no length field and no start marker. The spec separates frames by 3.5 characters
+//! of silence, but a PC rarely sees that silence: the OS and USB adapters deliver bytes in
+//! bursts. So the receiver uses both, in this order:
+//!
+//! 1. **By length.** After each byte it asks the function code how long the frame is
+//!    ([`Request::wire_len`], [`Response::wire_len`]): a read request is 8 bytes, a read
+//!    response carries a byte count, and so on. When the bytes reach that length and the CRC
+//!    agrees, the frame is complete — at once, without waiting for silence. Without knowing the
+//!    direction it tries both layouts; the CRC tells which one fits, and the frame reports it
+//!    as its [`Direction`].
+//! 2. **By silence.** Where the code cannot tell (custom codes, 0x08 with long data), the
+//!    frame ends at the t3.5 gap and is accepted if its CRC agrees.
+//! 3. **Resync.** When every layout is ruled out (the CRC fails at the predicted length, the
+//!    header is impossible, 256 bytes pass without a frame), the receiver drops one byte and
+//!    looks for a frame starting at the next — so noise before a frame, or a frame cut short,
+//!    costs only the bad bytes. At a gap, whatever is left is examined the same way and then
+//!    dropped. Each run of dropped bytes is one [`RxEvent::Discarded`], counted in
+//!    [`RxStats`]. Nothing here ends a session.
+//!
+//! Timestamps are per chunk: bytes that arrive together share one `now`, so gaps inside a
+//! chunk are invisible. Strict t1.5 checking ([`RtuCodec::with_strict_t1_5`]) is off by
+//! default for that reason; turn it on where timing is exact (the virtual line).
+
+use core::time::Duration;
+
+use super::{Adu, AduHeader, Direction, Expect, Framing, LineTiming, RxEvent, RxStats};
+use crate::crc::{crc_ok, crc16_wire};
+use crate::cursor::Writer;
+use crate::error::{BufferTooSmall, DiscardReason};
+use crate::pdu::{MAX_PDU_LEN, Request, Response, WireLen};
+use crate::time::Instant;
+
+/// The largest RTU frame: address, 253-byte PDU, CRC (§2.5.1).
+pub const MAX_ADU_LEN: usize = 256;
+
+/// The smallest RTU frame: address, function code, CRC.
+pub const MIN_ADU_LEN: usize = 4;
+
+/// Receive buffer: room for a whole frame behind a frame's worth of bytes being examined.
+const BUF_LEN: usize = 2 * MAX_ADU_LEN;
+
+/// Frames `pdu` for `unit`: address, PDU, CRC low byte first. Returns the frame length.
+pub fn encode_pdu(unit: u8, pdu: &[u8], out: &mut [u8]) -> Result<usize, BufferTooSmall> {
+    let needed = pdu.len().saturating_add(3);
+    if out.len() < needed {
+        return Err(BufferTooSmall { needed, available: out.len() });
+    }
+    let n = {
+        let mut w = Writer::new(out);
+        w.u8(unit)?;
+        w.bytes(pdu)?;
+        w.position()
+    };
+    let crc = crc16_wire(out.get(..n).unwrap_or_default());
+    let mut w = Writer::new(out.get_mut(n..).unwrap_or_default());
+    w.bytes(&crc)?;
+    Ok(n.saturating_add(2))
+}
+
+/// Frames a request for `unit`. `out` needs [`MAX_ADU_LEN`] bytes at most.
+pub fn encode_request(unit: u8, request: &Request<'_>, out: &mut [u8]) -> Result<usize, BufferTooSmall> {
+    let mut pdu = [0u8; MAX_PDU_LEN];
+    let n = request.emit(&mut pdu)?;
+    encode_pdu(unit, pdu.get(..n).unwrap_or_default(), out)
+}
+
+/// Frames a response for `unit`. `out` needs [`MAX_ADU_LEN`] bytes at most.
+pub fn encode_response(unit: u8, response: &Response<'_>, out: &mut [u8]) -> Result<usize, BufferTooSmall> {
+    let mut pdu = [0u8; MAX_PDU_LEN];
+    let n = response.emit(&mut pdu)?;
+    encode_pdu(unit, pdu.get(..n).unwrap_or_default(), out)
+}
+
+/// A checked view of one complete RTU frame.
+#[derive(Clone, Copy, PartialEq, Eq, Debug)]
+pub struct RtuFrame<'a> {
+    bytes: &'a [u8],
+}
+
+impl<'a> RtuFrame<'a> {
+    /// Checks length (4–256 bytes) and CRC.
+    pub fn new_checked(bytes: &'a [u8]) -> Result<Self, DiscardReason> {
+        if bytes.len() < MIN_ADU_LEN {
+            return Err(DiscardReason::TooShort);
+        }
+        if bytes.len() > MAX_ADU_LEN {
+            return Err(DiscardReason::TooLong);
+        }
+        if !crc_ok(bytes) {
+            return Err(DiscardReason::ChecksumMismatch);
+        }
+        Ok(RtuFrame { bytes })
+    }
+
+    /// The unit address.
+    pub fn unit(&self) -> u8 {
+        self.bytes.first().copied().unwrap_or_default()
+    }
+
+    /// The PDU, function code first.
+    pub fn pdu(&self) -> &'a [u8] {
+        self.bytes.get(1..self.bytes.len().saturating_sub(2)).unwrap_or_default()
+    }
+
+    /// The whole frame.
+    pub fn as_bytes(&self) -> &'a [u8] {
+        self.bytes
+    }
+}
+
+/// What the bytes from one candidate start say.
+#[derive(Clone, Copy, PartialEq, Eq, Debug)]
+enum Verdict {
+    /// A frame of this many bytes starts here.
+    Complete(usize, Direction),
+    /// It could still become a frame; `known` when some layout knows how long it will be.
+    Wait { known: bool },
+    /// No frame starts here.
+    Reject(DiscardReason),
+}
+
+/// A frame found and not yet consumed.
+#[derive(Clone, Copy, Debug)]
+struct Found {
+    len: usize,
+    direction: Direction,
+    end: Instant,
+    handed_out: bool,
+}
+
+/// A run of dropped bytes not yet reported.
+#[derive(Clone, Copy, Debug)]
+struct Noise {
+    bytes: usize,
+    reason: DiscardReason,
+    at: Instant,
+}
+
+/// The incremental RTU receiver and encoder. See the [module docs](self) for how it finds
+/// frames.
+#[derive(Clone, Debug)]
+pub struct RtuCodec {
+    timing: LineTiming,
+    expect: Expect,
+    strict_t1_5: bool,
+    incomplete_timeout: Duration,
+    buf: [u8; BUF_LEN],
+    /// Where the candidate frame starts.
+    start: usize,
+    /// End of the buffered bytes.
+    len: usize,
+    /// Whether `start` follows a frame or a gap, rather than dropped bytes: frames of unknown
+    /// length are only accepted from a clean start.
+    clean: bool,
+    last_rx: Option<Instant>,
+    found: Option<Found>,
+    noise: Option<Noise>,
+    report: Option<Noise>,
+    stats: RxStats,
+}
+
+impl RtuCodec {
+    /// A receiver for a line with `timing`, looking for `expect` frames.
+    pub fn new(timing: LineTiming, expect: Expect) -> Self {
+        RtuCodec {
+            timing,
+            expect,
+            strict_t1_5: false,
+            incomplete_timeout: timing.t3_5(),
+            buf: [0; BUF_LEN],
+            start: 0,
+            len: 0,
+            clean: true,
+            last_rx: None,
+            found: None,
+            noise: None,
+            report: None,
+            stats: RxStats::default(),
+        }
+    }
+
+    /// Discard a frame in progress when a gap longer than t1.5 interrupts it, as the spec
+    /// says. Only sensible where byte timestamps are exact.
+    #[must_use]
+    pub fn with_strict_t1_5(mut self, strict: bool) -> Self {
+        self.strict_t1_5 = strict;
+        self
+    }
+
+    /// How long to wait for the rest of a frame whose length is already known before giving
+    /// up on it (at least t3.5, the default). A PC behind a USB adapter sees gaps of several
+    /// milliseconds inside a frame; a longer wait keeps such frames whole, and costs nothing
+    /// on noise, which is resynced past anyway.
+    #[must_use]
+    pub fn with_incomplete_timeout(mut self, timeout: Duration) -> Self {
+        self.incomplete_timeout = timeout.max(self.timing.t3_5());
+        self
+    }
+
+    /// The line timing.
+    pub fn timing(&self) -> &LineTiming {
+        &self.timing
+    }
+
+    fn candidate(&self) -> &[u8] {
+        self.buf.get(self.start..self.len).unwrap_or_default()
+    }
+
+    fn has_pending(&self) -> bool {
+        self.start < self.len || self.noise.is_some()
+    }
+
+    /// Consumes a frame handed out by `poll_event`.
+    fn release(&mut self) {
+        if let Some(found) = self.found {
+            if found.handed_out {
+                self.start = self.start.saturating_add(found.len).min(self.len);
+                self.clean = true;
+                self.found = None;
+            }
+        }
+    }
+
+    fn assess(&self, cand: &[u8], at_gap: bool) -> Verdict {
+        let (Some(&fc), Some(body)) = (cand.get(1), cand.get(2..)) else {
+            return if at_gap { Verdict::Reject(DiscardReason::TooShort) } else { Verdict::Wait { known: false } };
+        };
+        let mut complete: Option<(usize, Direction)> = None;
+        let mut wait = false;
+        let mut known = false;
+        let mut reason = DiscardReason::Noise;
+        let roles = [
+            (self.expect.requests() && fc != 0 && fc < 0x80, Direction::Request),
+            (self.expect.responses() && fc != 0 && fc != 0x80, Direction::Response),
+        ];
+        for (possible, direction) in roles {
+            if !possible {
+                continue;
+            }
+            let wire = match direction {
+                Direction::Request => Request::wire_len(fc, body),
+                _ => Response::wire_len(fc, body),
+            };
+            let outcome = match wire {
+                WireLen::Known(n) => {
+                    let total = n.saturating_add(MIN_ADU_LEN);
+                    if total > MAX_ADU_LEN {
+                        Err(DiscardReason::TooLong)
+                    } else if cand.len() < total {
+                        if at_gap {
+                            Err(DiscardReason::TooShort)
+                        } else {
+                            known = true;
+                            Ok(None)
+                        }
+                    } else if cand.get(..total).is_some_and(crc_ok) {
+                        Ok(Some(total))
+                    } else {
+                        Err(DiscardReason::ChecksumMismatch)
+                    }
+                }
+                WireLen::NeedMore if at_gap => Err(DiscardReason::TooShort),
+                WireLen::NeedMore if cand.len() >= MAX_ADU_LEN => Err(DiscardReason::TooLong),
+                WireLen::NeedMore => {
+                    known = true;
+                    Ok(None)
+                }
+                WireLen::Probable(n) if cand.len() == n.saturating_add(MIN_ADU_LEN) && crc_ok(cand) => {
+                    Ok(Some(cand.len()))
+                }
+                WireLen::Probable(_) | WireLen::Unknown => {
+                    if cand.len() > MAX_ADU_LEN {
+                        Err(DiscardReason::TooLong)
+                    } else if !at_gap {
+                        Ok(None)
+                    } else if self.clean && cand.len() >= MIN_ADU_LEN && crc_ok(cand) {
+                        Ok(Some(cand.len()))
+                    } else if cand.len() < MIN_ADU_LEN {
+                        Err(DiscardReason::TooShort)
+                    } else {
+                        Err(DiscardReason::ChecksumMismatch)
+                    }
+                }
+            };
+            match outcome {
+                Ok(Some(total)) => {
+                    complete = Some(match complete {
+                        Some((other, _)) if other == total => (total, Direction::Either),
+                        Some((other, d)) if other < total => (other, d),
+                        _ => (total, direction),
+                    });
+                }
+                Ok(None) => wait = true,
+                Err(r) => {
+                    // The most telling reason wins: a checksum over a plausible length.
+                    if reason == DiscardReason::Noise || r == DiscardReason::ChecksumMismatch {
+                        reason = r;
+                    }
+                }
+            }
+        }
+        match complete {
+            Some((total, direction)) => Verdict::Complete(total, direction),
+            None if wait => Verdict::Wait { known },
+            None => Verdict::Reject(reason),
+        }
+    }
+
+    /// Examines the buffered bytes: finds a frame, waits for more, or drops bytes until one
+    /// of those. At a gap, nothing waits: every byte ends up in a frame or dropped.
+    fn evaluate(&mut self, now: Instant, at_gap: bool) {
+        while self.found.is_none() && self.start < self.len {
+            match self.assess(self.candidate(), at_gap) {
+                Verdict::Complete(len, direction) => {
+                    if let Some(noise) = self.noise.take() {
+                        self.report_noise(noise);
+                    }
+                    self.stats.frames = self.stats.frames.wrapping_add(1);
+                    self.found = Some(Found { len, direction, end: now, handed_out: false });
+                }
+                Verdict::Wait { .. } => return,
+                Verdict::Reject(reason) => self.drop_bytes(1, reason, now),
+            }
+        }
+        if at_gap && self.found.is_none() {
+            if let Some(noise) = self.noise.take() {
+                self.report_noise(noise);
+            }
+            self.start = 0;
+            self.len = 0;
+            self.clean = true;
+        }
+    }
+
+    fn drop_bytes(&mut self, n: usize, reason: DiscardReason, at: Instant) {
+        let n = n.min(self.len.saturating_sub(self.start));
+        self.start = self.start.saturating_add(n);
+        self.clean = false;
+        match &mut self.noise {
+            Some(noise) => noise.bytes = noise.bytes.saturating_add(n),
+            None => self.noise = Some(Noise { bytes: n, reason, at }),
+        }
+    }
+
+    fn report_noise(&mut self, noise: Noise) {
+        self.stats.count_discard(noise.bytes, noise.reason);
+        self.report = Some(match self.report {
+            // Two runs before anyone polled: report them as one.
+            Some(prev) => Noise { bytes: prev.bytes.saturating_add(noise.bytes), ..prev },
+            None => noise,
+        });
+    }
+
+    fn append(&mut self, byte: u8) {
+        if self.len >= BUF_LEN {
+            self.buf.copy_within(self.start..self.len, 0);
+            self.len = self.len.saturating_sub(self.start);
+            self.start = 0;
+        }
+        if let Some(slot) = self.buf.get_mut(self.len) {
+            *slot = byte;
+            self.len = self.len.saturating_add(1);
+        }
+    }
+
+    /// The instant the current partial frame or noise run is settled by silence.
+    fn gap_deadline(&self) -> Option<Instant> {
+        if !self.has_pending() || self.found.is_some() {
+            return None;
+        }
+        let last = self.last_rx?;
+        let known = matches!(self.assess(self.candidate(), false), Verdict::Wait { known: true });
+        let wait = if known { self.incomplete_timeout } else { self.timing.t3_5() };
+        Some(last.saturating_add(wait))
+    }
+}
+
+impl Framing for RtuCodec {
+    fn encode(&self, header: AduHeader, pdu: &[u8], out: &mut [u8]) -> Result<usize, BufferTooSmall> {
+        encode_pdu(header.unit, pdu, out)
+    }
+
+    fn push(&mut self, now: Instant, bytes: &[u8]) -> usize {
+        self.release();
+        if self.found.is_some() {
+            return 0;
+        }
+        if self.gap_deadline().is_some_and(|deadline| now >= deadline) {
+            self.evaluate(now, true);
+            if self.found.is_some() {
+                return 0;
+            }
+        }
+        if bytes.is_empty() {
+            self.evaluate(now, false);
+            return 0;
+        }
+        if self.strict_t1_5 && self.start < self.len {
+            if let Some(last) = self.last_rx {
+                if now.saturating_duration_since(last) > self.timing.t1_5() {
+                    let n = self.len.saturating_sub(self.start);
+                    self.drop_bytes(n, DiscardReason::InterCharacterGap, now);
+                }
+            }
+        }
+        self.last_rx = Some(now);
+        let mut consumed = 0usize;
+        for &byte in bytes {
+            self.append(byte);
+            consumed = consumed.saturating_add(1);
+            self.evaluate(now, false);
+            if self.found.is_some() {
+                break;
+            }
+        }
+        consumed
+    }
+
+    fn poll_event(&mut self) -> Option<RxEvent<'_>> {
+        if let Some(noise) = self.report.take() {
+            return Some(RxEvent::Discarded { bytes: noise.bytes, reason: noise.reason, at: noise.at });
+        }
+        let found = self.found.as_mut().filter(|f| !f.handed_out)?;
+        found.handed_out = true;
+        let found = *found;
+        let frame = self.buf.get(self.start..self.start.saturating_add(found.len))?;
+        let (&unit, rest) = frame.split_first()?;
+        let pdu = rest.get(..rest.len().saturating_sub(2))?;
+        Some(RxEvent::Frame(Adu { header: AduHeader::unit(unit), pdu, end: found.end, direction: found.direction }))
+    }
+
+    fn poll_timeout(&self) -> Option<Instant> {
+        self.gap_deadline()
+    }
+
+    fn handle_timeout(&mut self, now: Instant) {
+        self.release();
+        if self.gap_deadline().is_some_and(|deadline| now >= deadline) {
+            self.evaluate(now, true);
+        }
+    }
+
+    fn inter_frame_gap(&self) -> Duration {
+        self.timing.t3_5()
+    }
+
+    fn transmit_time(&self, n: usize) -> Duration {
+        self.timing.transmit_time(n)
+    }
+
+    fn reset(&mut self) {
+        self.start = 0;
+        self.len = 0;
+        self.clean = true;
+        self.found = None;
+        self.noise = None;
+        self.report = None;
+    }
+
+    fn stats(&self) -> RxStats {
+        self.stats
+    }
+}
+
+#[cfg(test)]
+mod tests;

@@ -1,0 +1,591 @@
+//! The master (client) engine: one request in flight on a shared line.
+//!
+//! Spec: MODBUS over Serial Line V1.02 §2.4.1 (master state diagram) and §2.5.1.1 (t3.5).
+//!
+//! ```text
+//!  submit ─▶ Queued ──(line silent for t3.5)──▶ poll_transmit ─┬─ unicast ─▶ AwaitingReply ─┬─ reply ───▶ Response / Exception
+//!                                                              │                            └─ timeout ─▶ Failed(Timeout)
+//!                                                              └─ broadcast ─▶ Turnaround ──(delay)───▶ BroadcastSent
+//! ```
+//!
+//! - **Gaps.** A request goes out only after the line has been silent for the framing's
+//!   inter-frame gap (t3.5 on a serial line) since the last byte heard or sent — the rule
+//!   drives such as the 3G3RX enforce by not answering. Bytes heard while waiting push the
+//!   transmission back.
+//! - **Matching.** While waiting, a frame from another unit, with another function code, from
+//!   another transaction, or that is a request (our own echo, another master) is ignored and
+//!   counted; only the reply can end the wait. A reply that does not answer the request (wrong
+//!   byte count, a write echo that differs) fails it.
+//! - **Outcomes.** An exception reply is a [`Completion::Exception`], a result like any other;
+//!   [`Completion::Failed`] means no usable reply came.
+//! - **Time.** The response timeout runs from the end of our transmission. A reply still
+//!   arriving when it expires is given the time a whole frame takes to finish.
+
+use core::fmt;
+use core::time::Duration;
+
+use crate::codes::{DiagnosticCode, ExceptionCode, FunctionCode, unit};
+use crate::error::{BufferTooSmall, PduError};
+use crate::frame::{Adu, AduHeader, Direction, Framing, RxEvent, ascii, expire, feed, rtu};
+use crate::pdu::{BitValues, MAX_PDU_LEN, MeiRequest, MeiResponse, Request, Response};
+use crate::time::{Instant, earliest};
+
+/// The largest frame the master transmits, in any framing (an ASCII frame of a 253-byte PDU).
+pub const MAX_TX_LEN: usize = ascii::MAX_FRAME_CHARS;
+
+/// Settings of the master engine.
+#[derive(Clone, Copy, PartialEq, Eq, Debug)]
+pub struct MasterConfig {
+    /// How long to wait for a reply once the request has left. The spec's typical values are
+    /// one to several seconds at 9600 baud; a drive's response wait (3G3RX C078, up to 1 s)
+    /// comes on top of the reply's own transmission time.
+    pub response_timeout: Duration,
+    /// How long to keep the line quiet after a broadcast, which gets no reply, so that every
+    /// slave can act on it (the spec's typical 100–200 ms).
+    pub turnaround_delay: Duration,
+    /// Drop our own transmission when it comes back: RS-485 adapters that do not disable
+    /// their receiver while transmitting hear every byte they send.
+    pub echo_suppression: bool,
+}
+
+impl Default for MasterConfig {
+    fn default() -> Self {
+        MasterConfig {
+            response_timeout: Duration::from_secs(1),
+            turnaround_delay: Duration::from_millis(100),
+            echo_suppression: false,
+        }
+    }
+}
+
+/// Why a request got no usable reply.
+#[derive(Clone, Copy, PartialEq, Eq, Debug)]
+pub enum MasterError {
+    /// No reply came within the response timeout.
+    Timeout {
+        /// The time waited after the request had left.
+        waited: Duration,
+    },
+    /// A frame from the right unit with the right function code, but a malformed PDU.
+    BadResponse(PduError),
+    /// A well-formed reply that does not answer the request.
+    Mismatch {
+        /// The field that differs, e.g. `"byte count"`.
+        field: &'static str,
+        /// What the request called for.
+        expected: u16,
+        /// What the reply said.
+        received: u16,
+    },
+    /// The buffer handed to [`Master::poll_transmit`] could not hold the request.
+    TransmitBuffer(BufferTooSmall),
+}
+
+impl fmt::Display for MasterError {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        match self {
+            MasterError::Timeout { waited } => {
+                write!(f, "no reply within {} ms", waited.as_millis())
+            }
+            MasterError::BadResponse(e) => write!(f, "malformed reply: {e}"),
+            MasterError::Mismatch { field, expected, received } => {
+                write!(f, "reply does not answer the request: {field} {received}, expected {expected}")
+            }
+            MasterError::TransmitBuffer(e) => write!(f, "transmit {e}"),
+        }
+    }
+}
+
+impl core::error::Error for MasterError {}
+
+/// Why [`Master::submit`] refused a request.
+#[derive(Clone, Copy, PartialEq, Eq, Debug)]
+pub enum SubmitError {
+    /// A request is in flight, or its completion has not been polled yet.
+    Busy,
+    /// The request does not fit the framing's buffer (cannot happen with the built-in codecs).
+    Encode(BufferTooSmall),
+}
+
+impl fmt::Display for SubmitError {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        match self {
+            SubmitError::Busy => f.write_str("a request is already in flight"),
+            SubmitError::Encode(e) => write!(f, "cannot encode the request: {e}"),
+        }
+    }
+}
+
+impl core::error::Error for SubmitError {}
+
+/// How a request ended.
+#[derive(Clone, Copy, PartialEq, Eq, Debug)]
+pub enum Completion<'a> {
+    /// The reply. For 0x01/0x02 it carries exactly the bits requested.
+    Response(Response<'a>),
+    /// The slave refused with this exception code.
+    Exception(ExceptionCode),
+    /// A broadcast went out and the turnaround delay has passed.
+    BroadcastSent,
+    /// No usable reply.
+    Failed(MasterError),
+}
+
+/// What the master has done since it was made. Counters wrap at 2³².
+#[derive(Clone, Copy, PartialEq, Eq, Hash, Debug, Default)]
+pub struct MasterStats {
+    /// Requests transmitted.
+    pub requests: u32,
+    /// Normal replies accepted.
+    pub responses: u32,
+    /// Exception replies.
+    pub exceptions: u32,
+    /// Broadcasts transmitted.
+    pub broadcasts: u32,
+    /// Requests that timed out.
+    pub timeouts: u32,
+    /// Replies that were malformed or did not answer the request.
+    pub bad_replies: u32,
+    /// Frames heard that were not the awaited reply.
+    pub ignored_frames: u32,
+    /// Bytes of our own transmission dropped by echo suppression.
+    pub echo_bytes: u32,
+}
+
+#[derive(Clone, Copy, PartialEq, Eq, Debug)]
+enum State {
+    Idle,
+    /// Waiting for the line to be silent; not before `not_before`.
+    Queued {
+        not_before: Instant,
+    },
+    /// Sent to a unit; waiting for its reply until `deadline`.
+    AwaitingReply {
+        sent: Instant,
+        deadline: Instant,
+    },
+    /// Sent as broadcast; quiet until `until`.
+    Turnaround {
+        until: Instant,
+    },
+}
+
+#[derive(Clone, Copy, PartialEq, Eq, Debug)]
+enum Outcome {
+    /// The reply PDU is in `reply`; for bit reads, trim it to this many bits.
+    Response {
+        bits: Option<u16>,
+    },
+    Exception(ExceptionCode),
+    BroadcastSent,
+    Failed(MasterError),
+}
+
+/// The master engine over a framing `F` ([`RtuCodec`](crate::frame::rtu::RtuCodec),
+/// [`AsciiCodec`](crate::frame::ascii::AsciiCodec) or [`MbapCodec`](crate::frame::mbap::MbapCodec)).
+///
+/// # Driving it
+///
+/// ```text
+/// loop {
+///     if let Some(n) = master.poll_transmit(now, &mut buf) { write(&buf[..n]) }
+///     while let Some(c) = master.poll_event() { deliver(c) }
+///     wait for bytes or until master.poll_timeout();
+///     on bytes:   master.on_bytes(now, &bytes)
+///     on timeout: master.handle_timeout(now)
+/// }
+/// ```
+#[derive(Clone, Debug)]
+pub struct Master<F> {
+    framing: F,
+    core: Core,
+}
+
+/// Everything but the framing, so that frames borrowed from the framing can be examined
+/// while it is borrowed.
+#[derive(Clone, Debug)]
+struct Core {
+    config: MasterConfig,
+    /// Whether the framing is a serial one (broadcast exists, no transaction ids).
+    serial: bool,
+    state: State,
+    unit: u8,
+    transaction: u16,
+    request: [u8; MAX_PDU_LEN],
+    request_len: usize,
+    tx: [u8; MAX_TX_LEN],
+    tx_len: usize,
+    /// The part of our last transmission that may still come back as echo.
+    echo_pos: usize,
+    echo_len: usize,
+    reply: [u8; MAX_PDU_LEN],
+    reply_len: usize,
+    outcome: Option<Outcome>,
+    last_activity: Option<Instant>,
+    stats: MasterStats,
+}
+
+impl<F: Framing> Master<F> {
+    /// A master over `framing`.
+    pub fn new(framing: F, config: MasterConfig) -> Self {
+        let serial = framing.supports_broadcast();
+        Master {
+            framing,
+            core: Core {
+                config,
+                serial,
+                state: State::Idle,
+                unit: 0,
+                transaction: 0,
+                request: [0; MAX_PDU_LEN],
+                request_len: 0,
+                tx: [0; MAX_TX_LEN],
+                tx_len: 0,
+                echo_pos: 0,
+                echo_len: 0,
+                reply: [0; MAX_PDU_LEN],
+                reply_len: 0,
+                outcome: None,
+                last_activity: None,
+                stats: MasterStats::default(),
+            },
+        }
+    }
+
+    /// The settings.
+    pub fn config(&self) -> &MasterConfig {
+        &self.core.config
+    }
+
+    /// Changes the settings; a request in flight keeps the deadline it has.
+    pub fn set_config(&mut self, config: MasterConfig) {
+        self.core.config = config;
+    }
+
+    /// The framing (for its statistics).
+    pub fn framing(&self) -> &F {
+        &self.framing
+    }
+
+    /// What the master has done.
+    pub fn stats(&self) -> MasterStats {
+        self.core.stats
+    }
+
+    /// Whether a new request can be submitted.
+    pub fn is_idle(&self) -> bool {
+        self.core.state == State::Idle && self.core.outcome.is_none()
+    }
+
+    /// Queues `request` for `unit`; it goes out once the line has been silent long enough.
+    /// Unit 0 on a serial line is a broadcast: nothing is awaited but the turnaround delay.
+    pub fn submit(&mut self, now: Instant, unit: u8, request: &Request<'_>) -> Result<(), SubmitError> {
+        if !self.is_idle() {
+            return Err(SubmitError::Busy);
+        }
+        let core = &mut self.core;
+        let len = request.emit(&mut core.request).map_err(SubmitError::Encode)?;
+        let pdu = core.request.get(..len).unwrap_or_default();
+        let transaction = core.transaction.wrapping_add(1);
+        let header = AduHeader { unit, transaction };
+        core.tx_len = self.framing.encode(header, pdu, &mut core.tx).map_err(SubmitError::Encode)?;
+        core.transaction = transaction;
+        core.request_len = len;
+        core.unit = unit;
+        core.state = State::Queued { not_before: now };
+        Ok(())
+    }
+
+    /// Drops the request in flight, if any, and any completion not yet polled.
+    pub fn abort(&mut self) {
+        self.core.state = State::Idle;
+        self.core.outcome = None;
+    }
+
+    /// When a queued request may go out: after its submission and after the gap.
+    fn transmit_at(&self, not_before: Instant) -> Instant {
+        let gap = self.framing.inter_frame_gap();
+        let quiet = self.core.last_activity.map_or(not_before, |t| t.saturating_add(gap));
+        not_before.max(quiet)
+    }
+
+    /// The bytes to write now, if a request is due: copies them into `buf` (which should hold
+    /// [`MAX_TX_LEN`] bytes) and returns their length.
+    pub fn poll_transmit(&mut self, now: Instant, buf: &mut [u8]) -> Option<usize> {
+        let State::Queued { not_before } = self.core.state else {
+            return None;
+        };
+        if now < self.transmit_at(not_before) {
+            return None;
+        }
+        let core = &mut self.core;
+        let n = core.tx_len;
+        let (Some(dst), Some(src)) = (buf.get_mut(..n), core.tx.get(..n)) else {
+            let e = BufferTooSmall { needed: n, available: buf.len() };
+            core.finish(Outcome::Failed(MasterError::TransmitBuffer(e)));
+            return None;
+        };
+        dst.copy_from_slice(src);
+        // Anything heard before our request cannot be its reply.
+        self.framing.reset();
+        let sent = now.saturating_add(self.framing.transmit_time(n));
+        core.last_activity = Some(sent);
+        core.echo_pos = 0;
+        core.echo_len = if core.config.echo_suppression { n } else { 0 };
+        if core.serial && core.unit == unit::BROADCAST {
+            core.stats.broadcasts = core.stats.broadcasts.wrapping_add(1);
+            core.state = State::Turnaround { until: sent.saturating_add(core.config.turnaround_delay) };
+        } else {
+            core.stats.requests = core.stats.requests.wrapping_add(1);
+            core.state = State::AwaitingReply { sent, deadline: sent.saturating_add(core.config.response_timeout) };
+        }
+        Some(n)
+    }
+
+    /// Bytes arrived at `now`.
+    pub fn on_bytes(&mut self, now: Instant, bytes: &[u8]) {
+        if bytes.is_empty() {
+            return;
+        }
+        self.core.last_activity = Some(now);
+        let bytes = self.core.strip_echo(bytes);
+        let Master { framing, core } = self;
+        feed(framing, now, bytes, |event| core.on_event(&event));
+    }
+
+    /// The next instant [`Master::handle_timeout`] must be called.
+    pub fn poll_timeout(&self) -> Option<Instant> {
+        let rx = self.framing.poll_timeout();
+        let own = match self.core.state {
+            State::Idle => None,
+            State::Queued { not_before } => Some(self.transmit_at(not_before)),
+            State::AwaitingReply { deadline, .. } => match rx {
+                // A reply in progress gets the time a whole frame takes to finish.
+                Some(rx) if rx > deadline => Some(rx.min(self.grace_end(deadline))),
+                _ => Some(deadline),
+            },
+            State::Turnaround { until } => Some(until),
+        };
+        earliest(own, rx)
+    }
+
+    fn grace_end(&self, deadline: Instant) -> Instant {
+        deadline.saturating_add(self.framing.transmit_time(rtu::MAX_ADU_LEN))
+    }
+
+    /// `now` has come: ends silent intervals, turnarounds and timeouts that are due. Spurious
+    /// calls do nothing.
+    pub fn handle_timeout(&mut self, now: Instant) {
+        let Master { framing, core } = self;
+        expire(framing, now, |event| core.on_event(&event));
+        match self.core.state {
+            State::Turnaround { until } if now >= until => self.core.finish(Outcome::BroadcastSent),
+            State::AwaitingReply { sent, deadline } if now >= deadline => {
+                let in_progress = self.framing.poll_timeout().is_some_and(|rx| rx > now);
+                if !in_progress || now >= self.grace_end(deadline) {
+                    let waited = now.saturating_duration_since(sent);
+                    self.core.finish(Outcome::Failed(MasterError::Timeout { waited }));
+                }
+            }
+            _ => {}
+        }
+    }
+
+    /// How the last request ended, once. The reply borrows the master until the next call.
+    pub fn poll_event(&mut self) -> Option<Completion<'_>> {
+        let core = &mut self.core;
+        let outcome = core.outcome.take()?;
+        Some(match outcome {
+            Outcome::Exception(exception) => Completion::Exception(exception),
+            Outcome::BroadcastSent => Completion::BroadcastSent,
+            Outcome::Failed(e) => Completion::Failed(e),
+            Outcome::Response { bits } => {
+                let pdu = core.reply.get(..core.reply_len).unwrap_or_default();
+                match Response::parse(pdu) {
+                    Ok(response) => Completion::Response(trim_bits(response, bits)),
+                    Err(e) => Completion::Failed(MasterError::BadResponse(e)),
+                }
+            }
+        })
+    }
+}
+
+impl Core {
+    /// Removes the part of `bytes` that repeats our own transmission.
+    fn strip_echo<'b>(&mut self, bytes: &'b [u8]) -> &'b [u8] {
+        let pending = self.tx.get(self.echo_pos..self.echo_len).unwrap_or_default();
+        let same = pending.iter().zip(bytes).take_while(|(a, b)| a == b).count();
+        if same == 0 {
+            // The echo is over, or something else is talking: stop looking for it.
+            self.echo_len = 0;
+            return bytes;
+        }
+        self.echo_pos = self.echo_pos.saturating_add(same);
+        self.stats.echo_bytes = self.stats.echo_bytes.wrapping_add(u32::try_from(same).unwrap_or(u32::MAX));
+        bytes.get(same..).unwrap_or_default()
+    }
+
+    fn on_event(&mut self, event: &RxEvent<'_>) {
+        let RxEvent::Frame(frame) = event else { return };
+        if !matches!(self.state, State::AwaitingReply { .. })
+            || frame.direction == Direction::Request
+            || !self.is_ours(frame)
+        {
+            self.stats.ignored_frames = self.stats.ignored_frames.wrapping_add(1);
+            return;
+        }
+        let request = Request::parse(self.request.get(..self.request_len).unwrap_or_default());
+        let outcome = match (request, Response::parse(frame.pdu)) {
+            (_, Err(e)) | (Err(e), _) => Outcome::Failed(MasterError::BadResponse(e)),
+            (_, Ok(Response::Exception(e))) => Outcome::Exception(e.code),
+            (Ok(request), Ok(response)) => match check_reply(&request, &response) {
+                Ok(bits) => Outcome::Response { bits },
+                Err(e) => Outcome::Failed(e),
+            },
+        };
+        if let (Outcome::Response { .. }, Some(dst)) = (outcome, self.reply.get_mut(..frame.pdu.len())) {
+            dst.copy_from_slice(frame.pdu);
+            self.reply_len = frame.pdu.len();
+        }
+        self.finish(outcome);
+    }
+
+    /// Whether `frame` comes from the unit asked, in the transaction asked (TCP), with the
+    /// function code asked (or its exception).
+    fn is_ours(&self, frame: &Adu<'_>) -> bool {
+        let function = frame.pdu.first().map(|fc| fc & !FunctionCode::EXCEPTION_BIT);
+        frame.header.unit == self.unit
+            && (self.serial || frame.header.transaction == self.transaction)
+            && function.is_some()
+            && function == self.request.first().copied()
+    }
+
+    fn finish(&mut self, outcome: Outcome) {
+        let stats = &mut self.stats;
+        let counter = match outcome {
+            Outcome::Response { .. } => Some(&mut stats.responses),
+            Outcome::Exception(_) => Some(&mut stats.exceptions),
+            Outcome::BroadcastSent => None,
+            Outcome::Failed(MasterError::Timeout { .. }) => Some(&mut stats.timeouts),
+            Outcome::Failed(_) => Some(&mut stats.bad_replies),
+        };
+        if let Some(counter) = counter {
+            *counter = counter.wrapping_add(1);
+        }
+        self.outcome = Some(outcome);
+        self.state = State::Idle;
+    }
+}
+
+/// Trims a bit-read reply to the quantity requested.
+fn trim_bits(response: Response<'_>, bits: Option<u16>) -> Response<'_> {
+    fn trimmed(v: BitValues<'_>, bits: Option<u16>) -> BitValues<'_> {
+        let bits = bits.and_then(|q| v.values().truncated(usize::from(q)));
+        bits.and_then(|b| BitValues::new(b).ok()).unwrap_or(v)
+    }
+    match response {
+        Response::ReadCoils(v) => Response::ReadCoils(trimmed(v, bits)),
+        Response::ReadDiscreteInputs(v) => Response::ReadDiscreteInputs(trimmed(v, bits)),
+        other => other,
+    }
+}
+
+fn mismatch(field: &'static str, expected: usize, received: usize) -> MasterError {
+    MasterError::Mismatch {
+        field,
+        expected: u16::try_from(expected).unwrap_or(u16::MAX),
+        received: u16::try_from(received).unwrap_or(u16::MAX),
+    }
+}
+
+/// Fails unless a field of the reply equals the request's.
+fn field(field: &'static str, expected: u16, received: u16) -> Result<(), MasterError> {
+    if expected == received { Ok(()) } else { Err(MasterError::Mismatch { field, expected, received }) }
+}
+
+/// Checks that `response` answers `request`; for bit reads, returns the quantity to trim to.
+fn check_reply(request: &Request<'_>, response: &Response<'_>) -> Result<Option<u16>, MasterError> {
+    match (request, response) {
+        (Request::ReadCoils(q), Response::ReadCoils(r))
+        | (Request::ReadDiscreteInputs(q), Response::ReadDiscreteInputs(r)) => {
+            let got = r.values().byte_len();
+            if got != q.response_byte_count() {
+                return Err(mismatch("byte count", q.response_byte_count(), got));
+            }
+            return Ok(Some(q.quantity()));
+        }
+        (Request::ReadHoldingRegisters(q), Response::ReadHoldingRegisters(r))
+        | (Request::ReadInputRegisters(q), Response::ReadInputRegisters(r)) => {
+            if r.values().len() != usize::from(q.quantity()) {
+                return Err(mismatch("register count", usize::from(q.quantity()), r.values().len()));
+            }
+        }
+        (Request::ReadWriteMultipleRegisters(q), Response::ReadWriteMultipleRegisters(r)) => {
+            let want = usize::from(q.read().quantity());
+            if r.values().len() != want {
+                return Err(mismatch("register count", want, r.values().len()));
+            }
+        }
+        (Request::WriteSingleCoil(q), Response::WriteSingleCoil(r)) => {
+            field("address", q.address, r.address)?;
+            field("coil value", u16::from(q.value), u16::from(r.value))?;
+        }
+        (Request::WriteSingleRegister(q), Response::WriteSingleRegister(r)) => {
+            field("address", q.address, r.address)?;
+            field("value", q.value, r.value)?;
+        }
+        (Request::MaskWriteRegister(q), Response::MaskWriteRegister(r)) => {
+            field("address", q.address, r.address)?;
+            field("AND mask", q.and_mask, r.and_mask)?;
+            field("OR mask", q.or_mask, r.or_mask)?;
+        }
+        (Request::WriteMultipleCoils(q), Response::WriteMultipleCoils(r)) => {
+            field("start address", q.start(), r.start)?;
+            field("quantity", q.quantity(), r.quantity)?;
+        }
+        (Request::WriteMultipleRegisters(q), Response::WriteMultipleRegisters(r)) => {
+            field("start address", q.start(), r.start)?;
+            field("quantity", q.quantity(), r.quantity)?;
+        }
+        (Request::WriteFileRecord(q), Response::WriteFileRecord(r)) => {
+            if q != r {
+                return Err(mismatch("file record echo (sub-requests)", q.len(), r.len()));
+            }
+        }
+        (Request::Diagnostics(q), Response::Diagnostics(r)) => {
+            field("sub-function", q.sub_function().value(), r.sub_function().value())?;
+            if q.sub_function() == DiagnosticCode::ReturnQueryData && q.data() != r.data() {
+                return Err(mismatch("echoed data (bytes)", q.data().len(), r.data().len()));
+            }
+        }
+        (Request::ReadFileRecord(q), Response::ReadFileRecord(r)) => {
+            if q.len() != r.len() {
+                return Err(mismatch("sub-responses", q.len(), r.len()));
+            }
+            for (want, got) in q.iter().zip(r.iter()) {
+                if usize::from(want.length) != got.len() {
+                    return Err(mismatch("record length", usize::from(want.length), got.len()));
+                }
+            }
+        }
+        (Request::EncapsulatedInterface(q), Response::EncapsulatedInterface(r)) => match (q, r) {
+            (MeiRequest::ReadDeviceId(q), MeiResponse::ReadDeviceId(r)) => {
+                field("read device id code", u16::from(q.code().value()), u16::from(r.code().value()))?;
+            }
+            (MeiRequest::Other(q), MeiResponse::Other(r)) => {
+                field("MEI type", u16::from(q.mei_type().value()), u16::from(r.mei_type().value()))?;
+            }
+            (MeiRequest::ReadDeviceId(_), MeiResponse::Other(r)) => {
+                field("MEI type", 0x0E, u16::from(r.mei_type().value()))?;
+            }
+            (MeiRequest::Other(q), MeiResponse::ReadDeviceId(_)) => {
+                field("MEI type", u16::from(q.mei_type().value()), 0x0E)?;
+            }
+        },
+        (q, r) => field("function code", u16::from(q.function().value()), u16::from(r.function().value()))?,
+    }
+    Ok(None)
+}
+
+#[cfg(test)]
+mod tests;

@@ -1,0 +1,621 @@
+//! The slave (server) engine: answers its unit addresses on a shared line.
+//!
+//! Spec: MODBUS over Serial Line V1.02 §2.4.2 (slave state diagram), MODBUS Application
+//! Protocol V1.1b3 §6.8–6.10 (diagnostics) and §7 (exceptions). Drive timing: the 3G3RX and
+//! SJ700 manuals ("the inverter waits for the sum of the silent interval … and the
+//! communication wait time (C078) before sending a response").
+//!
+//! - **Who it answers.** Only requests to one of its units. It stays silent on a frame with a
+//!   bad checksum (the receiver never delivers one), on frames for other units, on other
+//!   slaves' responses, and on broadcast — whose writes it still executes, once per unit.
+//! - **When.** A reply is due t3.5 after the request's last byte plus the response wait
+//!   (per unit: [`Handler::response_wait`], else [`SlaveConfig::response_wait`]), and never
+//!   earlier: [`Slave::poll_transmit`] holds it until then.
+//! - **What.** Data comes from one [`Handler`]; malformed requests get exception 03 (or 02, 01
+//!   as the spec says), unsupported functions 01. The engine itself serves 0x08 Diagnostics,
+//!   0x0B and 0x0C from its [`Counters`] and [`EventLog`], and keeps listen-only mode: after
+//!   0x08/0x04 it answers nothing until 0x08/0x01.
+
+mod diag;
+mod handler;
+mod serve;
+#[cfg(test)]
+mod tests;
+
+use core::time::Duration;
+
+pub use diag::{Counters, EventLog, event};
+pub use handler::{Admission, Handler};
+
+use crate::codes::{DiagnosticCode, ExceptionCode, FunctionCode, unit};
+use crate::error::DiscardReason;
+use crate::frame::{Adu, AduHeader, Direction, Framing, RxEvent, expire, feed};
+use crate::master::MAX_TX_LEN;
+use crate::pdu::{CommEventCounter, CommEventLog, Diagnostic, ExceptionResponse, MAX_PDU_LEN, Request, Response};
+use crate::time::{Instant, earliest};
+use diag::bump;
+
+/// A set of unit addresses.
+#[derive(Clone, Copy, PartialEq, Eq, Hash, Debug, Default)]
+pub struct UnitSet {
+    bits: [u64; 4],
+}
+
+impl UnitSet {
+    /// No units.
+    pub const EMPTY: UnitSet = UnitSet { bits: [0; 4] };
+
+    /// Just `unit`.
+    pub fn single(unit: u8) -> Self {
+        let mut set = UnitSet::EMPTY;
+        set.insert(unit);
+        set
+    }
+
+    /// Adds `unit`.
+    pub fn insert(&mut self, unit: u8) {
+        if let Some(word) = self.bits.get_mut(usize::from(unit / 64)) {
+            *word |= 1u64 << (unit % 64);
+        }
+    }
+
+    /// Whether `unit` is in the set.
+    pub fn contains(&self, unit: u8) -> bool {
+        self.bits.get(usize::from(unit / 64)).is_some_and(|word| word & (1u64 << (unit % 64)) != 0)
+    }
+
+    /// Whether the set is empty.
+    pub fn is_empty(&self) -> bool {
+        self.bits == [0; 4]
+    }
+
+    /// The units in ascending order.
+    pub fn iter(&self) -> impl Iterator<Item = u8> + '_ {
+        (0..=u8::MAX).filter(|&u| self.contains(u))
+    }
+}
+
+impl FromIterator<u8> for UnitSet {
+    fn from_iter<I: IntoIterator<Item = u8>>(iter: I) -> Self {
+        let mut set = UnitSet::EMPTY;
+        for u in iter {
+            set.insert(u);
+        }
+        set
+    }
+}
+
+/// Settings of the slave engine.
+#[derive(Clone, Copy, PartialEq, Eq, Debug)]
+pub struct SlaveConfig {
+    /// The unit addresses answered (unit 0, broadcast, is always listened to).
+    pub units: UnitSet,
+    /// The wait before a reply, on top of the t3.5 silent interval (3G3RX C078: 0–1000 ms).
+    pub response_wait: Duration,
+}
+
+impl SlaveConfig {
+    /// A slave answering `unit` with no extra wait.
+    pub fn unit(unit: u8) -> Self {
+        SlaveConfig { units: UnitSet::single(unit), response_wait: Duration::ZERO }
+    }
+}
+
+/// What happened to a request addressed to this slave.
+#[derive(Clone, Copy, PartialEq, Eq, Debug)]
+pub enum Disposition {
+    /// A normal reply is due at this instant.
+    Replied(Instant),
+    /// An exception reply is due at this instant.
+    Refused(ExceptionCode, Instant),
+    /// Executed without a reply (broadcast).
+    Executed,
+    /// Neither served nor answered: listen-only mode, the handler's [`Admission::Ignore`], a
+    /// request arriving while a reply is still pending, or a broadcast that is not executed.
+    Silent,
+}
+
+/// Why a frame on the bus was not for this slave.
+#[derive(Clone, Copy, PartialEq, Eq, Debug)]
+pub enum Ignored {
+    /// A request to another unit.
+    OtherUnit,
+    /// Another slave's response.
+    Response,
+}
+
+/// What the slave saw, for logs and monitors.
+#[derive(Clone, Copy, PartialEq, Eq, Debug)]
+pub enum SlaveEvent {
+    /// A request to one of our units or to all.
+    Request {
+        /// The unit addressed (0 for broadcast).
+        unit: u8,
+        /// Its function code.
+        function: FunctionCode,
+        /// When its last byte arrived.
+        end: Instant,
+        /// What became of it.
+        disposition: Disposition,
+    },
+    /// A frame that was not for us.
+    Ignored {
+        /// The unit in the frame.
+        unit: u8,
+        /// Its function code.
+        function: FunctionCode,
+        /// Why it was ignored.
+        why: Ignored,
+    },
+    /// Bytes the receiver dropped.
+    Discarded {
+        /// How many.
+        bytes: usize,
+        /// Why.
+        reason: DiscardReason,
+        /// When.
+        at: Instant,
+    },
+    /// 0x08/0x01 restarted communications; an IO layer may reopen its port.
+    Restart {
+        /// Whether the event log was cleared too (data 0xFF00).
+        clear_log: bool,
+    },
+}
+
+/// A reply built from a request, waiting to be framed.
+#[derive(Clone, Copy, Debug)]
+struct Reply {
+    header: AduHeader,
+    pdu: [u8; MAX_PDU_LEN],
+    len: usize,
+    due: Instant,
+    exception: Option<ExceptionCode>,
+}
+
+const EVENT_QUEUE: usize = 8;
+
+/// The slave engine over a framing `F`.
+///
+/// # Driving it
+///
+/// ```text
+/// loop {
+///     if let Some(n) = slave.poll_transmit(now, &mut buf) { write(&buf[..n]) }
+///     wait for bytes or until slave.poll_timeout();
+///     on bytes:   slave.on_bytes(now, &bytes, &mut handler)
+///     on timeout: slave.handle_timeout(now, &mut handler)
+/// }
+/// ```
+#[derive(Clone, Debug)]
+pub struct Slave<F> {
+    framing: F,
+    core: Core,
+}
+
+#[derive(Clone, Debug)]
+struct Core {
+    config: SlaveConfig,
+    /// Whether unit 0 is a broadcast (a serial framing).
+    serial: bool,
+    /// The silent interval before a reply (t3.5).
+    gap: Duration,
+    counters: Counters,
+    /// The comm event counter of 0x0B.
+    comm_events: u16,
+    log: EventLog,
+    listen_only: bool,
+    diagnostic_register: u16,
+    reply: Option<Reply>,
+    tx: [u8; MAX_TX_LEN],
+    tx_len: usize,
+    tx_due: Option<Instant>,
+    tx_exception: Option<ExceptionCode>,
+    /// Actions on the framing decided while it was borrowed.
+    new_delimiter: Option<u8>,
+    restart: bool,
+    events: [Option<SlaveEvent>; EVENT_QUEUE],
+    events_head: usize,
+    events_len: usize,
+    events_dropped: u32,
+}
+
+impl<F: Framing> Slave<F> {
+    /// A slave over `framing`.
+    pub fn new(framing: F, config: SlaveConfig) -> Self {
+        let serial = framing.supports_broadcast();
+        let gap = framing.inter_frame_gap();
+        Slave {
+            framing,
+            core: Core {
+                config,
+                serial,
+                gap,
+                counters: Counters::default(),
+                comm_events: 0,
+                log: EventLog::default(),
+                listen_only: false,
+                diagnostic_register: 0,
+                reply: None,
+                tx: [0; MAX_TX_LEN],
+                tx_len: 0,
+                tx_due: None,
+                tx_exception: None,
+                new_delimiter: None,
+                restart: false,
+                events: [None; EVENT_QUEUE],
+                events_head: 0,
+                events_len: 0,
+                events_dropped: 0,
+            },
+        }
+    }
+
+    /// The settings.
+    pub fn config(&self) -> &SlaveConfig {
+        &self.core.config
+    }
+
+    /// Changes the settings (for the next request).
+    pub fn set_config(&mut self, config: SlaveConfig) {
+        self.core.config = config;
+    }
+
+    /// The diagnostic counters.
+    pub fn counters(&self) -> Counters {
+        self.core.counters
+    }
+
+    /// The comm event log.
+    pub fn event_log(&self) -> &EventLog {
+        &self.core.log
+    }
+
+    /// Whether the slave is in listen-only mode.
+    pub fn is_listen_only(&self) -> bool {
+        self.core.listen_only
+    }
+
+    /// The framing (for its statistics).
+    pub fn framing(&self) -> &F {
+        &self.framing
+    }
+
+    /// Events dropped because nobody polled them (the queue holds eight).
+    pub fn dropped_events(&self) -> u32 {
+        self.core.events_dropped
+    }
+
+    /// Bytes arrived at `now`.
+    pub fn on_bytes<H: Handler + ?Sized>(&mut self, now: Instant, bytes: &[u8], handler: &mut H) {
+        let Slave { framing, core } = self;
+        feed(framing, now, bytes, |event| core.on_event(&event, handler));
+        self.apply();
+    }
+
+    /// The next instant [`Slave::handle_timeout`] must be called.
+    pub fn poll_timeout(&self) -> Option<Instant> {
+        earliest(self.framing.poll_timeout(), self.core.tx_due)
+    }
+
+    /// `now` has come: ends silent intervals. Spurious calls do nothing.
+    pub fn handle_timeout<H: Handler + ?Sized>(&mut self, now: Instant, handler: &mut H) {
+        let Slave { framing, core } = self;
+        expire(framing, now, |event| core.on_event(&event, handler));
+        self.apply();
+    }
+
+    /// The reply to write now, if one is due: copies it into `buf` (which should hold
+    /// [`MAX_TX_LEN`] bytes) and returns its length.
+    pub fn poll_transmit(&mut self, now: Instant, buf: &mut [u8]) -> Option<usize> {
+        let core = &mut self.core;
+        if core.tx_due.is_none_or(|due| now < due) {
+            return None;
+        }
+        core.tx_due = None;
+        let n = core.tx_len;
+        let (Some(dst), Some(src)) = (buf.get_mut(..n), core.tx.get(..n)) else {
+            return None;
+        };
+        dst.copy_from_slice(src);
+        core.log.push(EventLog::send_event(core.tx_exception, core.listen_only));
+        Some(n)
+    }
+
+    /// The next event, if any.
+    pub fn poll_event(&mut self) -> Option<SlaveEvent> {
+        let core = &mut self.core;
+        if core.events_len == 0 {
+            return None;
+        }
+        let event = core.events.get_mut(core.events_head).and_then(Option::take);
+        core.events_head = core.events_head.saturating_add(1) % EVENT_QUEUE;
+        core.events_len = core.events_len.saturating_sub(1);
+        event
+    }
+
+    /// Frames the reply decided while the framing was borrowed, and applies 0x08 actions.
+    fn apply(&mut self) {
+        let core = &mut self.core;
+        if let Some(reply) = core.reply.take() {
+            let pdu = reply.pdu.get(..reply.len).unwrap_or_default();
+            if let Ok(n) = self.framing.encode(reply.header, pdu, &mut core.tx) {
+                core.tx_len = n;
+                core.tx_due = Some(reply.due);
+                core.tx_exception = reply.exception;
+            }
+        }
+        if let Some(delimiter) = core.new_delimiter.take() {
+            self.framing.set_delimiter(delimiter);
+        }
+        if core.restart {
+            core.restart = false;
+            self.framing.reset();
+        }
+    }
+}
+
+impl Core {
+    fn push_event(&mut self, event: SlaveEvent) {
+        if self.events_len == EVENT_QUEUE {
+            // Drop the oldest.
+            self.events_head = self.events_head.saturating_add(1) % EVENT_QUEUE;
+            self.events_len = self.events_len.saturating_sub(1);
+            self.events_dropped = self.events_dropped.wrapping_add(1);
+        }
+        let slot = self.events_head.saturating_add(self.events_len) % EVENT_QUEUE;
+        if let Some(s) = self.events.get_mut(slot) {
+            *s = Some(event);
+            self.events_len = self.events_len.saturating_add(1);
+        }
+    }
+
+    fn on_event<H: Handler + ?Sized>(&mut self, event: &RxEvent<'_>, handler: &mut H) {
+        match *event {
+            RxEvent::Discarded { bytes, reason, at } => {
+                let flag = match reason {
+                    DiscardReason::ChecksumMismatch => {
+                        bump(&mut self.counters.bus_comm_errors);
+                        event::RECEIVE_COMM_ERROR
+                    }
+                    DiscardReason::TooLong => {
+                        bump(&mut self.counters.bus_char_overruns);
+                        event::RECEIVE_OVERRUN
+                    }
+                    _ => 0,
+                };
+                if flag != 0 {
+                    self.log.push(event::RECEIVE | flag | self.listen_flag());
+                }
+                self.push_event(SlaveEvent::Discarded { bytes, reason, at });
+            }
+            RxEvent::Frame(ref frame) => self.on_frame(frame, handler),
+        }
+    }
+
+    fn listen_flag(&self) -> u8 {
+        if self.listen_only { event::RECEIVE_LISTEN_ONLY } else { 0 }
+    }
+
+    fn on_frame<H: Handler + ?Sized>(&mut self, frame: &Adu<'_>, handler: &mut H) {
+        bump(&mut self.counters.bus_messages);
+        let unit = frame.header.unit;
+        let function = FunctionCode::from_u8(frame.pdu.first().copied().unwrap_or_default());
+        let broadcast = self.serial && unit == unit::BROADCAST;
+        if frame.direction == Direction::Response {
+            self.push_event(SlaveEvent::Ignored { unit, function, why: Ignored::Response });
+            return;
+        }
+        if !broadcast && !self.config.units.contains(unit) {
+            self.push_event(SlaveEvent::Ignored { unit, function, why: Ignored::OtherUnit });
+            return;
+        }
+        bump(&mut self.counters.server_messages);
+        let broadcast_flag = if broadcast { event::RECEIVE_BROADCAST } else { 0 };
+        self.log.push(event::RECEIVE | self.listen_flag() | broadcast_flag);
+        let disposition = self.dispatch(frame, broadcast, handler);
+        if matches!(disposition, Disposition::Silent | Disposition::Executed) {
+            bump(&mut self.counters.server_no_response);
+        }
+        self.push_event(SlaveEvent::Request { unit, function, end: frame.end, disposition });
+    }
+
+    fn dispatch<H: Handler + ?Sized>(&mut self, frame: &Adu<'_>, broadcast: bool, handler: &mut H) -> Disposition {
+        let unit = frame.header.unit;
+        let request = Request::parse(frame.pdu);
+        if self.listen_only {
+            // Only 0x08/0x01 is heard; it leaves listen-only mode without a reply.
+            if let Ok(Request::Diagnostics(d)) = request {
+                if d.sub_function() == DiagnosticCode::RestartCommunications && !broadcast {
+                    self.restart(d.word() == Some(0xFF00));
+                }
+            }
+            return Disposition::Silent;
+        }
+        if self.reply.is_some() || self.tx_due.is_some() {
+            // Still answering the previous request: a master that does not wait.
+            return Disposition::Silent;
+        }
+        let request = match request {
+            Ok(request) => request,
+            Err(_) if broadcast => return Disposition::Silent,
+            Err(e) => return self.refuse(frame, e.exception_code(), handler),
+        };
+        if broadcast {
+            return self.broadcast(&request, handler);
+        }
+        match handler.admit(unit, false, &request) {
+            Admission::Serve => {}
+            Admission::Refuse(code) => return self.refuse(frame, code, handler),
+            Admission::Ignore => return Disposition::Silent,
+        }
+        let mut pdu = [0u8; MAX_PDU_LEN];
+        let served = match request {
+            Request::Diagnostics(d) => match self.diagnostics(&d, &mut pdu) {
+                Ok(Some(n)) => Ok(n),
+                Ok(None) => return Disposition::Silent,
+                Err(code) => Err(code),
+            },
+            Request::GetCommEventCounter(_) => {
+                let reply = CommEventCounter { status: 0, event_count: self.comm_events };
+                Response::GetCommEventCounter(reply).emit(&mut pdu).map_err(|_| ExceptionCode::ServerDeviceFailure)
+            }
+            Request::GetCommEventLog(_) => self.event_log_reply(&mut pdu),
+            ref other => serve::serve(handler, unit, other, &mut pdu),
+        };
+        match served {
+            Ok(len) => {
+                if !matches!(request, Request::GetCommEventCounter(_) | Request::GetCommEventLog(_)) {
+                    bump(&mut self.comm_events);
+                }
+                let due = self.due(frame, handler);
+                self.reply = Some(Reply { header: frame.header, pdu, len, due, exception: None });
+                Disposition::Replied(due)
+            }
+            Err(code) => self.refuse(frame, code, handler),
+        }
+    }
+
+    /// When the reply to `frame` is due: t3.5 after its end, plus the unit's wait.
+    fn due<H: Handler + ?Sized>(&self, frame: &Adu<'_>, handler: &H) -> Instant {
+        let wait = handler.response_wait(frame.header.unit).unwrap_or(self.config.response_wait);
+        frame.end.saturating_add(self.gap).saturating_add(wait)
+    }
+
+    fn refuse<H: Handler + ?Sized>(&mut self, frame: &Adu<'_>, code: ExceptionCode, handler: &H) -> Disposition {
+        let function =
+            FunctionCode::from_u8(frame.pdu.first().copied().unwrap_or_default() & !FunctionCode::EXCEPTION_BIT);
+        let mut pdu = [0u8; MAX_PDU_LEN];
+        let Ok(len) = Response::Exception(ExceptionResponse { function, code }).emit(&mut pdu) else {
+            return Disposition::Silent;
+        };
+        self.counters.count_exception(code);
+        let due = self.due(frame, handler);
+        self.reply = Some(Reply { header: frame.header, pdu, len, due, exception: Some(code) });
+        Disposition::Refused(code, due)
+    }
+
+    /// Executes a broadcast on every unit whose handler admits it.
+    fn broadcast<H: Handler + ?Sized>(&mut self, request: &Request<'_>, handler: &mut H) -> Disposition {
+        if matches!(request, Request::Diagnostics(_) | Request::GetCommEventCounter(_) | Request::GetCommEventLog(_)) {
+            return Disposition::Silent;
+        }
+        let mut executed = false;
+        let mut scratch = [0u8; MAX_PDU_LEN];
+        let units = self.config.units;
+        for unit in units.iter() {
+            if handler.admit(unit, true, request) == Admission::Serve {
+                // The outcome of each unit goes nowhere: a broadcast gets no reply.
+                let _ = serve::serve(handler, unit, request, &mut scratch);
+                executed = true;
+            }
+        }
+        if executed {
+            bump(&mut self.comm_events);
+            Disposition::Executed
+        } else {
+            Disposition::Silent
+        }
+    }
+
+    /// Serves 0x08. `Ok(None)` means no reply (0x04 Force Listen Only).
+    fn diagnostics(&mut self, d: &Diagnostic<'_>, out: &mut [u8; MAX_PDU_LEN]) -> Result<Option<usize>, ExceptionCode> {
+        let sub = d.sub_function();
+        let word = d.word();
+        let echo = |out: &mut [u8; MAX_PDU_LEN]| {
+            Response::Diagnostics(*d).emit(out).map(Some).map_err(|_| ExceptionCode::ServerDeviceFailure)
+        };
+        let reply_word = |out: &mut [u8; MAX_PDU_LEN], value: u16| {
+            let reply = Diagnostic::with_word(sub, value);
+            Response::Diagnostics(reply).emit(out).map(Some).map_err(|_| ExceptionCode::ServerDeviceFailure)
+        };
+        match sub {
+            DiagnosticCode::ReturnQueryData => echo(out),
+            DiagnosticCode::RestartCommunications => {
+                let clear_log = match word {
+                    Some(0x0000) => false,
+                    Some(0xFF00) => true,
+                    _ => return Err(ExceptionCode::IllegalDataValue),
+                };
+                // The reply goes out before the restart takes effect.
+                let reply = echo(out);
+                self.restart(clear_log);
+                reply
+            }
+            DiagnosticCode::ForceListenOnly => {
+                Self::require_zero(word)?;
+                self.listen_only = true;
+                self.log.push(event::ENTERED_LISTEN_ONLY);
+                Ok(None)
+            }
+            DiagnosticCode::ChangeAsciiDelimiter => {
+                let [delimiter, 0] = word.ok_or(ExceptionCode::IllegalDataValue)?.to_be_bytes() else {
+                    return Err(ExceptionCode::IllegalDataValue);
+                };
+                self.new_delimiter = Some(delimiter);
+                echo(out)
+            }
+            DiagnosticCode::ReturnDiagnosticRegister => {
+                Self::require_zero(word)?;
+                reply_word(out, self.diagnostic_register)
+            }
+            DiagnosticCode::ClearCounters => {
+                Self::require_zero(word)?;
+                self.counters = Counters::default();
+                self.diagnostic_register = 0;
+                echo(out)
+            }
+            DiagnosticCode::ClearOverrunCounter => {
+                Self::require_zero(word)?;
+                self.counters.bus_char_overruns = 0;
+                echo(out)
+            }
+            other => {
+                let value = self.counters.get(other).ok_or(ExceptionCode::IllegalFunction)?;
+                Self::require_zero(word)?;
+                reply_word(out, value)
+            }
+        }
+    }
+
+    /// Sub-functions other than 0x00 carry one data word, 0x0000 unless they say otherwise.
+    fn require_zero(word: Option<u16>) -> Result<(), ExceptionCode> {
+        if word == Some(0) { Ok(()) } else { Err(ExceptionCode::IllegalDataValue) }
+    }
+
+    fn restart(&mut self, clear_log: bool) {
+        self.listen_only = false;
+        self.counters = Counters::default();
+        self.comm_events = 0;
+        self.diagnostic_register = 0;
+        if clear_log {
+            self.log.clear();
+        }
+        self.log.push(event::RESTART);
+        self.restart = true;
+        self.push_event(SlaveEvent::Restart { clear_log });
+    }
+
+    fn event_log_reply(&self, out: &mut [u8; MAX_PDU_LEN]) -> Result<usize, ExceptionCode> {
+        let mut events = [0u8; EventLog::CAPACITY];
+        let n = self.log.copy_recent_first(&mut events);
+        let log =
+            CommEventLog::new(0, self.comm_events, self.counters.bus_messages, events.get(..n).unwrap_or_default())
+                .map_err(|_| ExceptionCode::ServerDeviceFailure)?;
+        Response::GetCommEventLog(log).emit(out).map_err(|_| ExceptionCode::ServerDeviceFailure)
+    }
+}
+
+#[cfg(test)]
+mod unit_set_tests {
+    use super::UnitSet;
+
+    #[test]
+    fn unit_sets_hold_any_of_the_256_addresses() {
+        let set: UnitSet = [0u8, 1, 63, 64, 247, 255].into_iter().collect();
+        assert!(set.contains(0) && set.contains(64) && set.contains(255));
+        assert!(!set.contains(2) && !set.contains(128));
+        assert_eq!(set.iter().count(), 6);
+        assert!(UnitSet::EMPTY.is_empty());
+    }
+}
