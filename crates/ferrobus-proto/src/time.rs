@@ -36,6 +36,11 @@ impl Instant {
         Instant { nanos: millis.saturating_mul(1_000_000) }
     }
 
+    /// The instant `secs` seconds after the epoch (saturating).
+    pub const fn from_secs(secs: u64) -> Self {
+        Instant { nanos: secs.saturating_mul(1_000_000_000) }
+    }
+
     /// Nanoseconds since the epoch.
     pub const fn as_nanos(self) -> u64 {
         self.nanos

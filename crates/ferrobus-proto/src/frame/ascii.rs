@@ -4,7 +4,8 @@
 //! The LRC is the two's complement of the 8-bit sum of the binary bytes, so the sum of the
 //! bytes and their LRC is zero. A frame starts at `:` wherever it appears: a `:` inside a
 //! frame abandons it and starts a new one (the spec's resync rule). The line feed that ends a
-//! frame can be changed with 0x08/0x03; the character before it must be CR.
+//! received frame can be changed with 0x08/0x03 ("Change ASCII *Input* Delimiter"); the
+//! character before it must be CR. Frames we send always end in CR LF.
 //!
 //! An ASCII frame carries at most 513 characters: `:`, 2 × (1 + 253 + 1) hex digits, CR LF.
 //! Silence longer than the inter-character timeout (one second by default, as the spec
@@ -58,13 +59,9 @@ fn put_hex(w: &mut Writer<'_>, byte: u8) -> Result<(), BufferTooSmall> {
     w.bytes(&[hi, lo])
 }
 
-/// Frames `pdu` for `unit` in ASCII with the default delimiter. `out` needs
+/// Frames `pdu` for `unit` in ASCII. `out` needs
 /// [`MAX_FRAME_CHARS`] bytes at most.
 pub fn encode_pdu(unit: u8, pdu: &[u8], out: &mut [u8]) -> Result<usize, BufferTooSmall> {
-    encode_with_delimiter(unit, pdu, DEFAULT_DELIMITER, out)
-}
-
-fn encode_with_delimiter(unit: u8, pdu: &[u8], delimiter: u8, out: &mut [u8]) -> Result<usize, BufferTooSmall> {
     let mut w = Writer::new(out);
     w.u8(START)?;
     put_hex(&mut w, unit)?;
@@ -73,7 +70,7 @@ fn encode_with_delimiter(unit: u8, pdu: &[u8], delimiter: u8, out: &mut [u8]) ->
     }
     let sum = pdu.iter().fold(unit, |s, &b| s.wrapping_add(b));
     put_hex(&mut w, sum.wrapping_neg())?;
-    w.bytes(&[CR, delimiter])?;
+    w.bytes(&[CR, DEFAULT_DELIMITER])?;
     Ok(w.position())
 }
 
@@ -237,7 +234,7 @@ impl AsciiCodec {
 
 impl Framing for AsciiCodec {
     fn encode(&self, header: AduHeader, pdu: &[u8], out: &mut [u8]) -> Result<usize, BufferTooSmall> {
-        encode_with_delimiter(header.unit, pdu, self.delimiter, out)
+        encode_pdu(header.unit, pdu, out)
     }
 
     fn push(&mut self, now: Instant, bytes: &[u8]) -> usize {

@@ -323,7 +323,9 @@ impl RtuCodec {
                         self.report_noise(noise);
                     }
                     self.stats.frames = self.stats.frames.wrapping_add(1);
-                    self.found = Some(Found { len, direction, end: now, handed_out: false });
+                    // A frame found at a gap ended with the last byte, not at the gap.
+                    let end = if at_gap { self.last_rx.unwrap_or(now) } else { now };
+                    self.found = Some(Found { len, direction, end, handed_out: false });
                 }
                 Verdict::Wait { .. } => return,
                 Verdict::Reject(reason) => self.drop_bytes(1, reason, now),

@@ -1,1 +1,330 @@
+//! Master engine tests with explicit time: gaps before transmitting, matching replies,
+//! timeouts, broadcast, echo.
 
+extern crate std;
+use std::vec::Vec;
+
+use super::*;
+use crate::crc::crc16_wire;
+use crate::frame::mbap::MbapCodec;
+use crate::frame::rtu::RtuCodec;
+use crate::frame::{Expect, LineConfig, LineTiming};
+use crate::pdu::{Bits, ReadBits, ReadRegisters, Registers, WriteRegister, WriteRegisters};
+
+/// t3.5 at 9600 8E1.
+const T3_5: u64 = 4_010_417;
+/// One character at 9600 8E1.
+const CHAR: u64 = 1_145_834;
+
+fn master(config: MasterConfig) -> Master<RtuCodec> {
+    let timing = LineTiming::new(&LineConfig::new(9600).unwrap());
+    Master::new(RtuCodec::new(timing, Expect::Both), config)
+}
+
+fn rtu(unit: u8, pdu: &[u8]) -> Vec<u8> {
+    let mut frame = std::vec![unit];
+    frame.extend_from_slice(pdu);
+    frame.extend_from_slice(&crc16_wire(&frame));
+    frame
+}
+
+fn read_holding(start: u16, quantity: u16) -> Request<'static> {
+    Request::ReadHoldingRegisters(ReadRegisters::new(start, quantity).unwrap())
+}
+
+fn ns(n: u64) -> Instant {
+    Instant::from_nanos(n)
+}
+
+/// Transmits the queued request at `now`, asserting that it goes out then.
+#[track_caller]
+fn transmit(m: &mut Master<RtuCodec>, now: Instant) -> Vec<u8> {
+    let mut buf = [0u8; MAX_TX_LEN];
+    let n = m.poll_transmit(now, &mut buf).expect("the request goes out");
+    buf[..n].to_vec()
+}
+
+/// The completion, as an owned summary.
+#[derive(Debug, PartialEq)]
+enum Done {
+    Registers(Vec<u16>),
+    Bits(Vec<bool>),
+    Other(FunctionCode),
+    Exception(ExceptionCode),
+    Broadcast,
+    Failed(MasterError),
+}
+
+#[track_caller]
+fn done(m: &mut Master<RtuCodec>) -> Option<Done> {
+    Some(match m.poll_event()? {
+        Completion::Response(Response::ReadHoldingRegisters(r)) => Done::Registers(r.values().iter().collect()),
+        Completion::Response(Response::ReadCoils(r)) => Done::Bits(r.values().iter().collect()),
+        Completion::Response(r) => Done::Other(r.function()),
+        Completion::Exception(e) => Done::Exception(e),
+        Completion::BroadcastSent => Done::Broadcast,
+        Completion::Failed(e) => Done::Failed(e),
+    })
+}
+
+// ---- Gaps ---------------------------------------------------------------------------------
+
+#[test]
+fn a_request_waits_for_t3_5_of_silence_after_the_last_byte_heard() {
+    let mut m = master(MasterConfig::default());
+    m.on_bytes(ns(1_000_000), &[0x00, 0x11]); // someone else talking
+    m.submit(ns(2_000_000), 1, &read_holding(0, 1)).unwrap();
+    assert_eq!(m.poll_timeout(), Some(ns(1_000_000 + T3_5)));
+    let mut buf = [0u8; MAX_TX_LEN];
+    assert_eq!(m.poll_transmit(ns(1_000_000 + T3_5 - 1), &mut buf), None);
+    assert_eq!(transmit(&mut m, ns(1_000_000 + T3_5)), rtu(1, &[0x03, 0, 0, 0, 1]));
+}
+
+#[test]
+fn bytes_heard_while_queued_push_the_request_back() {
+    let mut m = master(MasterConfig::default());
+    m.submit(ns(0), 1, &read_holding(0, 1)).unwrap();
+    m.on_bytes(ns(0), &[0xFF]);
+    m.on_bytes(ns(3_000_000), &[0xFF]);
+    let mut buf = [0u8; MAX_TX_LEN];
+    assert_eq!(m.poll_transmit(ns(3_000_000 + T3_5 - 1), &mut buf), None);
+    assert!(m.poll_transmit(ns(3_000_000 + T3_5), &mut buf).is_some());
+}
+
+#[test]
+fn on_a_quiet_line_the_first_request_goes_out_at_once() {
+    let mut m = master(MasterConfig::default());
+    m.submit(ns(5), 1, &read_holding(0, 1)).unwrap();
+    assert_eq!(m.poll_timeout(), Some(ns(5)));
+    transmit(&mut m, ns(5));
+}
+
+#[test]
+fn the_next_request_waits_t3_5_after_the_reply_and_after_our_own_frame() {
+    let mut m = master(MasterConfig::default());
+    m.submit(ns(0), 1, &read_holding(0, 1)).unwrap();
+    transmit(&mut m, ns(0));
+    m.on_bytes(ns(20_000_000), &rtu(1, &[0x03, 0x02, 0x12, 0x34]));
+    assert_eq!(done(&mut m), Some(Done::Registers(std::vec![0x1234])));
+    m.submit(ns(20_000_001), 1, &read_holding(0, 1)).unwrap();
+    assert_eq!(m.poll_timeout(), Some(ns(20_000_000 + T3_5)));
+    // A broadcast occupies the line for its own 8 characters, then the turnaround.
+    let mut m = master(MasterConfig::default());
+    m.submit(ns(0), 0, &Request::WriteSingleRegister(WriteRegister { address: 1, value: 2 })).unwrap();
+    transmit(&mut m, ns(0));
+    assert_eq!(m.poll_timeout(), Some(ns(8 * CHAR + 100_000_000)));
+}
+
+// ---- Replies -----------------------------------------------------------------------------
+
+#[test]
+fn only_the_asked_units_reply_with_the_asked_function_ends_the_wait() {
+    let mut m = master(MasterConfig::default());
+    m.submit(ns(0), 5, &read_holding(0, 1)).unwrap();
+    transmit(&mut m, ns(0));
+    m.on_bytes(ns(15_000_000), &rtu(6, &[0x03, 0x02, 0xDE, 0xAD])); // another unit
+    m.on_bytes(ns(25_000_000), &rtu(5, &[0x04, 0x02, 0xDE, 0xAD])); // another function
+    m.on_bytes(ns(35_000_000), &rtu(5, &[0x03, 0, 0, 0, 1])); // a request (another master, an echo)
+    assert_eq!(done(&mut m), None);
+    m.on_bytes(ns(45_000_000), &rtu(5, &[0x03, 0x02, 0x00, 0x2A]));
+    assert_eq!(done(&mut m), Some(Done::Registers(std::vec![42])));
+    assert_eq!(m.stats().ignored_frames, 3);
+    assert_eq!(m.stats().responses, 1);
+}
+
+#[test]
+fn a_reply_in_pieces_and_behind_noise_is_found() {
+    let mut m = master(MasterConfig::default());
+    m.submit(ns(0), 1, &read_holding(0, 2)).unwrap();
+    transmit(&mut m, ns(0));
+    let reply = rtu(1, &[0x03, 0x04, 0x00, 0x01, 0x00, 0x02]);
+    m.on_bytes(ns(10_000_000), &[0x00]);
+    m.on_bytes(ns(10_500_000), &reply[..4]);
+    m.on_bytes(ns(11_000_000), &reply[4..]);
+    assert_eq!(done(&mut m), Some(Done::Registers(std::vec![1, 2])));
+}
+
+#[test]
+fn an_exception_is_a_result_not_a_failure() {
+    let mut m = master(MasterConfig::default());
+    m.submit(ns(0), 1, &read_holding(0, 1)).unwrap();
+    transmit(&mut m, ns(0));
+    m.on_bytes(ns(10_000_000), &rtu(1, &[0x83, 0x21]));
+    assert_eq!(done(&mut m), Some(Done::Exception(ExceptionCode::Vendor(0x21))));
+    assert_eq!(m.stats().exceptions, 1);
+    assert!(m.is_idle());
+}
+
+#[test]
+fn a_reply_that_does_not_answer_the_request_fails_it() {
+    let mut m = master(MasterConfig::default());
+    m.submit(ns(0), 1, &read_holding(0, 2)).unwrap();
+    transmit(&mut m, ns(0));
+    m.on_bytes(ns(10_000_000), &rtu(1, &[0x03, 0x02, 0x00, 0x01]));
+    assert_eq!(
+        done(&mut m),
+        Some(Done::Failed(MasterError::Mismatch { field: "register count", expected: 2, received: 1 }))
+    );
+    let mut m = master(MasterConfig::default());
+    m.submit(ns(0), 1, &Request::WriteSingleRegister(WriteRegister { address: 7, value: 9 })).unwrap();
+    transmit(&mut m, ns(0));
+    m.on_bytes(ns(10_000_000), &rtu(1, &[0x06, 0x00, 0x07, 0x00, 0x08]));
+    assert_eq!(done(&mut m), Some(Done::Failed(MasterError::Mismatch { field: "value", expected: 9, received: 8 })));
+    assert_eq!(m.stats().bad_replies, 1);
+}
+
+#[test]
+fn a_malformed_reply_fails_the_request_with_the_parse_error() {
+    let mut m = master(MasterConfig::default());
+    m.submit(ns(0), 1, &read_holding(0, 1)).unwrap();
+    transmit(&mut m, ns(0));
+    // Byte count 3: the frame is complete by its length, but 3 bytes are not registers.
+    m.on_bytes(ns(10_000_000), &rtu(1, &[0x03, 0x03, 0x00, 0x01, 0x02]));
+    assert_eq!(
+        done(&mut m),
+        Some(Done::Failed(MasterError::BadResponse(PduError::ByteCountMismatch { declared: 3, expected: 4 })))
+    );
+}
+
+#[test]
+fn coil_replies_carry_exactly_the_bits_asked_for() {
+    let mut m = master(MasterConfig::default());
+    m.submit(ns(0), 8, &Request::ReadCoils(ReadBits::new(6, 6).unwrap())).unwrap();
+    assert_eq!(transmit(&mut m, ns(0)), [0x08, 0x01, 0x00, 0x06, 0x00, 0x06, 0x5C, 0x90]);
+    // 3G3RX p.4-168: coils 7..12 = 1,1,1,0,1,0 in one byte 0x17.
+    m.on_bytes(ns(10_000_000), &[0x08, 0x01, 0x01, 0x17, 0x12, 0x1A]);
+    assert_eq!(done(&mut m), Some(Done::Bits(std::vec![true, true, true, false, true, false])));
+}
+
+// ---- Timeouts ----------------------------------------------------------------------------
+
+#[test]
+fn no_reply_times_out_exactly_the_timeout_after_the_request_left() {
+    let config = MasterConfig { response_timeout: Duration::from_millis(200), ..MasterConfig::default() };
+    let mut m = master(config);
+    m.submit(ns(0), 1, &read_holding(0, 1)).unwrap();
+    transmit(&mut m, ns(0));
+    let left = 8 * CHAR;
+    assert_eq!(m.poll_timeout(), Some(ns(left + 200_000_000)));
+    m.handle_timeout(ns(left + 199_999_999));
+    assert_eq!(done(&mut m), None);
+    m.handle_timeout(ns(left + 200_000_000));
+    assert_eq!(done(&mut m), Some(Done::Failed(MasterError::Timeout { waited: Duration::from_millis(200) })));
+    assert_eq!(m.stats().timeouts, 1);
+    assert!(m.is_idle());
+}
+
+#[test]
+fn a_reply_still_arriving_at_the_deadline_is_given_time_to_finish() {
+    let config = MasterConfig { response_timeout: Duration::from_millis(20), ..MasterConfig::default() };
+    let mut m = master(config);
+    m.submit(ns(0), 1, &read_holding(0, 2)).unwrap();
+    transmit(&mut m, ns(0));
+    let deadline = 8 * CHAR + 20_000_000;
+    let reply = rtu(1, &[0x03, 0x04, 0x00, 0x01, 0x00, 0x02]);
+    m.on_bytes(ns(deadline - 1_000_000), &reply[..5]);
+    m.handle_timeout(ns(deadline));
+    assert_eq!(done(&mut m), None, "still receiving");
+    m.on_bytes(ns(deadline + 2_000_000), &reply[5..]);
+    assert_eq!(done(&mut m), Some(Done::Registers(std::vec![1, 2])));
+}
+
+// ---- Broadcast ---------------------------------------------------------------------------
+
+#[test]
+fn a_broadcast_awaits_no_reply_only_the_turnaround_delay() {
+    let mut m = master(MasterConfig::default());
+    let values = [1, 2];
+    let write = Request::WriteMultipleRegisters(WriteRegisters::new(0, Registers::from_values(&values)).unwrap());
+    m.submit(ns(0), 0, &write).unwrap();
+    let frame = transmit(&mut m, ns(0));
+    let until = frame.len() as u64 * CHAR + 100_000_000;
+    assert_eq!(m.poll_timeout(), Some(ns(until)));
+    m.handle_timeout(ns(until - 1));
+    assert_eq!(done(&mut m), None);
+    m.handle_timeout(ns(until));
+    assert_eq!(done(&mut m), Some(Done::Broadcast));
+    assert_eq!(m.stats().broadcasts, 1);
+    assert_eq!(m.stats().requests, 0);
+}
+
+// ---- Echo --------------------------------------------------------------------------------
+
+#[test]
+fn with_echo_suppression_our_own_write_coming_back_is_not_taken_for_the_reply() {
+    let config = MasterConfig { echo_suppression: true, ..MasterConfig::default() };
+    let mut m = master(config);
+    let write = Request::WriteSingleRegister(WriteRegister { address: 1, value: 0x1234 });
+    m.submit(ns(0), 1, &write).unwrap();
+    let frame = transmit(&mut m, ns(0));
+    // The echo arrives in two pieces, then a reply that differs (the device refuses).
+    m.on_bytes(ns(5_000_000), &frame[..3]);
+    m.on_bytes(ns(9_000_000), &frame[3..]);
+    assert_eq!(done(&mut m), None);
+    m.on_bytes(ns(30_000_000), &rtu(1, &[0x86, 0x02]));
+    assert_eq!(done(&mut m), Some(Done::Exception(ExceptionCode::IllegalDataAddress)));
+    assert_eq!(m.stats().echo_bytes, 8);
+}
+
+#[test]
+fn without_echo_suppression_a_read_requests_echo_is_ignored_as_a_request() {
+    let mut m = master(MasterConfig::default());
+    m.submit(ns(0), 1, &read_holding(0, 1)).unwrap();
+    let frame = transmit(&mut m, ns(0));
+    m.on_bytes(ns(9_200_000), &frame);
+    m.on_bytes(ns(20_000_000), &rtu(1, &[0x03, 0x02, 0x00, 0x07]));
+    assert_eq!(done(&mut m), Some(Done::Registers(std::vec![7])));
+}
+
+// ---- API ---------------------------------------------------------------------------------
+
+#[test]
+fn one_request_at_a_time_until_its_completion_is_polled() {
+    let mut m = master(MasterConfig::default());
+    m.submit(ns(0), 1, &read_holding(0, 1)).unwrap();
+    assert_eq!(m.submit(ns(0), 1, &read_holding(0, 1)), Err(SubmitError::Busy));
+    transmit(&mut m, ns(0));
+    m.on_bytes(ns(10_000_000), &rtu(1, &[0x03, 0x02, 0x00, 0x07]));
+    assert_eq!(m.submit(ns(10_000_000), 1, &read_holding(0, 1)), Err(SubmitError::Busy), "completion not polled");
+    done(&mut m);
+    assert!(m.submit(ns(10_000_000), 1, &read_holding(0, 1)).is_ok());
+    m.abort();
+    assert!(m.is_idle());
+}
+
+#[test]
+fn a_transmit_buffer_too_small_fails_the_request_instead_of_panicking() {
+    let mut m = master(MasterConfig::default());
+    m.submit(ns(0), 1, &read_holding(0, 1)).unwrap();
+    assert_eq!(m.poll_transmit(ns(0), &mut [0u8; 4]), None);
+    assert!(matches!(done(&mut m), Some(Done::Failed(MasterError::TransmitBuffer(_)))));
+}
+
+#[test]
+fn over_mbap_replies_match_by_transaction_and_unit_0_is_an_ordinary_unit() {
+    let mut m = Master::new(MbapCodec::new(), MasterConfig::default());
+    m.submit(ns(0), 0, &read_holding(0, 1)).unwrap();
+    let mut buf = [0u8; MAX_TX_LEN];
+    let n = m.poll_transmit(ns(0), &mut buf).unwrap();
+    assert_eq!(&buf[..n], &[0x00, 0x01, 0x00, 0x00, 0x00, 0x06, 0x00, 0x03, 0x00, 0x00, 0x00, 0x01]);
+    assert_eq!(m.poll_timeout(), Some(ns(1_000_000_000)), "a unit-0 request awaits its reply on TCP");
+    // A stale reply from transaction 0 is ignored; transaction 1 is ours.
+    m.on_bytes(ns(1_000), &[0x00, 0x00, 0x00, 0x00, 0x00, 0x05, 0x00, 0x03, 0x02, 0x00, 0x09]);
+    m.on_bytes(ns(2_000), &[0x00, 0x01, 0x00, 0x00, 0x00, 0x05, 0x00, 0x03, 0x02, 0x00, 0x07]);
+    match m.poll_event() {
+        Some(Completion::Response(Response::ReadHoldingRegisters(r))) => assert_eq!(r.values().get(0), Some(7)),
+        other => panic!("{other:?}"),
+    }
+    assert_eq!(m.stats().ignored_frames, 1);
+}
+
+#[test]
+fn written_coils_are_checked_against_the_echoed_range() {
+    let mut m = master(MasterConfig::default());
+    let bits = [true, false, true];
+    let write = Request::WriteMultipleCoils(crate::pdu::WriteCoils::new(6, Bits::from_values(&bits)).unwrap());
+    m.submit(ns(0), 5, &write).unwrap();
+    transmit(&mut m, ns(0));
+    m.on_bytes(ns(20_000_000), &rtu(5, &[0x0F, 0x00, 0x06, 0x00, 0x03]));
+    assert_eq!(done(&mut m), Some(Done::Other(FunctionCode::WriteMultipleCoils)));
+}

@@ -1,1 +1,574 @@
+//! Slave engine tests with explicit time: who it answers, when, and with what.
 
+extern crate std;
+use std::vec::Vec;
+
+use super::*;
+use crate::crc::crc16_wire;
+use crate::frame::ascii::AsciiCodec;
+use crate::frame::mbap::MbapCodec;
+use crate::frame::rtu::RtuCodec;
+use crate::frame::{Expect, LineConfig, LineTiming};
+use crate::pdu::{Bits, MaskWrite, Registers};
+
+/// A small device: 100 of each table, two files of 100 records, a FIFO, identification.
+struct Device {
+    coils: [bool; 100],
+    discrete: [bool; 100],
+    holding: [u16; 100],
+    input: [u16; 100],
+    files: [[u16; 100]; 2],
+    fifo: Vec<u16>,
+    objects: Vec<(u8, Vec<u8>)>,
+    waits: [(u8, Duration); 1],
+    admission: Option<Admission>,
+    writes: Vec<(u8, u16, u16)>,
+}
+
+impl Device {
+    fn new() -> Self {
+        let mut holding = [0u16; 100];
+        for (i, r) in holding.iter_mut().enumerate() {
+            *r = u16::try_from(i).unwrap() * 7 + 3;
+        }
+        Device {
+            coils: core::array::from_fn(|i| i % 3 == 0),
+            discrete: core::array::from_fn(|i| i % 5 == 0),
+            holding,
+            input: core::array::from_fn(|i| 0x1000 + u16::try_from(i).unwrap()),
+            files: [[0x0F01; 100], [0x0F02; 100]],
+            fifo: std::vec![0x01B8, 0x1284],
+            objects: std::vec![(0, b"ferrobus".to_vec()), (1, b"FB-1".to_vec()), (2, b"1.0".to_vec())],
+            waits: [(9, Duration::from_millis(50))],
+            admission: None,
+            writes: Vec::new(),
+        }
+    }
+}
+
+fn range<T>(table: &mut [T], start: u16, len: usize) -> Result<&mut [T], ExceptionCode> {
+    let start = usize::from(start);
+    table.get_mut(start..start + len).ok_or(ExceptionCode::IllegalDataAddress)
+}
+
+impl Handler for Device {
+    fn admit(&mut self, _: u8, broadcast: bool, request: &Request<'_>) -> Admission {
+        if let Some(a) = self.admission {
+            return a;
+        }
+        if broadcast && !request.function().is_write() { Admission::Ignore } else { Admission::Serve }
+    }
+    fn response_wait(&self, unit: u8) -> Option<Duration> {
+        self.waits.iter().find(|(u, _)| *u == unit).map(|(_, w)| *w)
+    }
+    fn read_coils(&mut self, _: u8, start: u16, out: &mut [bool]) -> Result<(), ExceptionCode> {
+        out.copy_from_slice(range(&mut self.coils, start, out.len())?);
+        Ok(())
+    }
+    fn read_discrete_inputs(&mut self, _: u8, start: u16, out: &mut [bool]) -> Result<(), ExceptionCode> {
+        out.copy_from_slice(range(&mut self.discrete, start, out.len())?);
+        Ok(())
+    }
+    fn read_holding_registers(&mut self, _: u8, start: u16, out: &mut [u16]) -> Result<(), ExceptionCode> {
+        out.copy_from_slice(range(&mut self.holding, start, out.len())?);
+        Ok(())
+    }
+    fn read_input_registers(&mut self, _: u8, start: u16, out: &mut [u16]) -> Result<(), ExceptionCode> {
+        out.copy_from_slice(range(&mut self.input, start, out.len())?);
+        Ok(())
+    }
+    fn write_single_coil(&mut self, _: u8, address: u16, value: bool) -> Result<(), ExceptionCode> {
+        range(&mut self.coils, address, 1)?[0] = value;
+        Ok(())
+    }
+    fn write_single_register(&mut self, unit: u8, address: u16, value: u16) -> Result<(), ExceptionCode> {
+        range(&mut self.holding, address, 1)?[0] = value;
+        self.writes.push((unit, address, value));
+        Ok(())
+    }
+    fn write_multiple_coils(&mut self, _: u8, start: u16, values: Bits<'_>) -> Result<(), ExceptionCode> {
+        values.copy_to(range(&mut self.coils, start, values.len())?);
+        Ok(())
+    }
+    fn write_multiple_registers(&mut self, unit: u8, start: u16, values: Registers<'_>) -> Result<(), ExceptionCode> {
+        values.copy_to(range(&mut self.holding, start, values.len())?);
+        for (i, v) in values.iter().enumerate() {
+            self.writes.push((unit, start + u16::try_from(i).unwrap(), v));
+        }
+        Ok(())
+    }
+    fn read_exception_status(&mut self, _: u8) -> Result<u8, ExceptionCode> {
+        Ok(0x6D)
+    }
+    fn report_server_id(&mut self, _: u8, out: &mut [u8]) -> Result<usize, ExceptionCode> {
+        out[..3].copy_from_slice(&[0x42, 0xFF, 0x01]);
+        Ok(3)
+    }
+    fn read_file_record(&mut self, _: u8, file: u16, record: u16, out: &mut [u16]) -> Result<(), ExceptionCode> {
+        let file = self.files.get_mut(usize::from(file).wrapping_sub(1)).ok_or(ExceptionCode::IllegalDataAddress)?;
+        out.copy_from_slice(range(file, record, out.len())?);
+        Ok(())
+    }
+    fn write_file_record(&mut self, _: u8, file: u16, record: u16, values: Registers<'_>) -> Result<(), ExceptionCode> {
+        let file = self.files.get_mut(usize::from(file).wrapping_sub(1)).ok_or(ExceptionCode::IllegalDataAddress)?;
+        values.copy_to(range(file, record, values.len())?);
+        Ok(())
+    }
+    fn read_fifo_queue(&mut self, _: u8, address: u16, out: &mut [u16; 31]) -> Result<usize, ExceptionCode> {
+        if address != 0x04DE {
+            return Err(ExceptionCode::IllegalDataAddress);
+        }
+        out[..self.fifo.len()].copy_from_slice(&self.fifo);
+        Ok(self.fifo.len())
+    }
+    fn device_object(&self, _: u8, id: u8) -> Option<&[u8]> {
+        self.objects.iter().find(|(i, _)| *i == id).map(|(_, v)| v.as_slice())
+    }
+    fn custom(&mut self, _: u8, function: u8, data: &[u8], out: &mut [u8]) -> Result<usize, ExceptionCode> {
+        if function != 0x41 {
+            return Err(ExceptionCode::IllegalFunction);
+        }
+        out[..data.len()].copy_from_slice(data);
+        out[data.len()] = 0x99;
+        Ok(data.len() + 1)
+    }
+}
+
+fn timing_9600() -> LineTiming {
+    LineTiming::new(&LineConfig::new(9600).unwrap())
+}
+
+fn rtu_slave(config: SlaveConfig) -> Slave<RtuCodec> {
+    Slave::new(RtuCodec::new(timing_9600(), Expect::Both), config)
+}
+
+/// `unit`, `pdu`, CRC.
+fn rtu(unit: u8, pdu: &[u8]) -> Vec<u8> {
+    let mut frame = std::vec![unit];
+    frame.extend_from_slice(pdu);
+    frame.extend_from_slice(&crc16_wire(&frame));
+    frame
+}
+
+/// Feeds `frame` at `at`, then returns the reply the slave sends, if any, with when it is due.
+#[track_caller]
+fn exchange<F: Framing>(
+    slave: &mut Slave<F>,
+    device: &mut Device,
+    at: Instant,
+    frame: &[u8],
+) -> Option<(Vec<u8>, Instant)> {
+    slave.on_bytes(at, frame, device);
+    let mut out = [0xA5u8; MAX_TX_LEN];
+    // Step through the deadlines: the end of a frame of unknown length, then the reply.
+    loop {
+        let due = slave.poll_timeout()?;
+        if due > at {
+            let early = due.saturating_sub(Duration::from_nanos(1));
+            assert!(slave.poll_transmit(early, &mut out).is_none(), "nothing goes out before it is due");
+        }
+        slave.handle_timeout(due, device);
+        if let Some(n) = slave.poll_transmit(due, &mut out) {
+            return Some((out[..n].to_vec(), due));
+        }
+    }
+}
+
+/// The reply PDU to `pdu` sent to unit 1 of a fresh 9600-baud slave.
+#[track_caller]
+fn reply_pdu(pdu: &[u8]) -> Vec<u8> {
+    let mut slave = rtu_slave(SlaveConfig::unit(1));
+    let (frame, _) = exchange(&mut slave, &mut Device::new(), Instant::ZERO, &rtu(1, pdu)).expect("a reply");
+    assert_eq!(frame[0], 1, "the reply comes from the unit asked");
+    assert!(crate::crc::crc_ok(&frame));
+    frame[1..frame.len() - 2].to_vec()
+}
+
+// ---- Timing ----------------------------------------------------------------------------
+
+#[test]
+fn at_9600_8e1_with_a_20_ms_wait_the_reply_goes_out_at_24_011_ms_not_24_010() {
+    let mut slave = rtu_slave(SlaveConfig { response_wait: Duration::from_millis(20), ..SlaveConfig::unit(1) });
+    let mut device = Device::new();
+    slave.on_bytes(Instant::ZERO, &rtu(1, &[0x03, 0x00, 0x00, 0x00, 0x02]), &mut device);
+    let mut out = [0u8; MAX_TX_LEN];
+    // t3.5 = 3.5 × 11 / 9600 s = 4.010417 ms (rounded up), plus 20 ms.
+    assert_eq!(slave.poll_timeout(), Some(Instant::from_nanos(24_010_417)));
+    assert_eq!(slave.poll_transmit(Instant::from_micros(24_010), &mut out), None);
+    assert_eq!(slave.poll_transmit(Instant::from_micros(24_011), &mut out), Some(9));
+    assert_eq!(&out[..9], rtu(1, &[0x03, 0x04, 0x00, 0x03, 0x00, 0x0A]).as_slice());
+    assert_eq!(slave.poll_transmit(Instant::from_millis(30), &mut out), None, "sent once");
+}
+
+#[test]
+fn without_a_wait_the_reply_is_due_t3_5_after_the_request() {
+    let mut slave = rtu_slave(SlaveConfig::unit(1));
+    let (_, due) =
+        exchange(&mut slave, &mut Device::new(), Instant::from_millis(7), &rtu(1, &[0x03, 0, 0, 0, 1])).unwrap();
+    assert_eq!(due, Instant::from_nanos(7_000_000 + 4_010_417));
+}
+
+#[test]
+fn a_units_own_response_wait_overrides_the_engines() {
+    let config = SlaveConfig { units: [1, 9].into_iter().collect(), response_wait: Duration::from_millis(5) };
+    let mut slave = rtu_slave(config);
+    let mut device = Device::new();
+    let (_, due) = exchange(&mut slave, &mut device, Instant::ZERO, &rtu(9, &[0x03, 0, 0, 0, 1])).unwrap();
+    assert_eq!(due, Instant::from_nanos(54_010_417));
+    let (_, due) = exchange(&mut slave, &mut device, Instant::from_secs(1), &rtu(1, &[0x03, 0, 0, 0, 1])).unwrap();
+    assert_eq!(due, Instant::from_nanos(1_009_010_417));
+}
+
+#[test]
+fn a_request_arriving_in_pieces_is_answered_t3_5_after_its_last_piece() {
+    let mut slave = rtu_slave(SlaveConfig::unit(1));
+    let mut device = Device::new();
+    let frame = rtu(1, &[0x03, 0, 0, 0, 1]);
+    slave.on_bytes(Instant::ZERO, &frame[..5], &mut device);
+    let (_, due) = exchange(&mut slave, &mut device, Instant::from_millis(2), &frame[5..]).unwrap();
+    assert_eq!(due, Instant::from_nanos(2_000_000 + 4_010_417));
+}
+
+// ---- Who is answered -------------------------------------------------------------------
+
+#[test]
+fn silent_on_a_bad_crc_and_the_error_is_counted() {
+    let mut slave = rtu_slave(SlaveConfig::unit(1));
+    let mut frame = rtu(1, &[0x03, 0, 0, 0, 1]);
+    frame[7] ^= 0xFF;
+    assert_eq!(exchange(&mut slave, &mut Device::new(), Instant::ZERO, &frame), None);
+    assert_eq!(slave.counters().bus_comm_errors, 1);
+    assert_eq!(slave.counters().bus_messages, 0);
+}
+
+#[test]
+fn silent_on_another_units_request_but_it_counts_as_a_bus_message() {
+    let mut slave = rtu_slave(SlaveConfig::unit(1));
+    assert_eq!(exchange(&mut slave, &mut Device::new(), Instant::ZERO, &rtu(2, &[0x03, 0, 0, 0, 1])), None);
+    assert_eq!(slave.counters().bus_messages, 1);
+    assert_eq!(slave.counters().server_messages, 0);
+    assert_eq!(
+        slave.poll_event(),
+        Some(SlaveEvent::Ignored { unit: 2, function: FunctionCode::ReadHoldingRegisters, why: Ignored::OtherUnit })
+    );
+}
+
+#[test]
+fn another_slaves_response_on_the_bus_is_neither_answered_nor_an_error() {
+    let mut slave = rtu_slave(SlaveConfig::unit(1));
+    // Unit 2 answering a read of two registers: a layout only a response has.
+    let response = rtu(2, &[0x03, 0x04, 0x00, 0x01, 0x00, 0x02]);
+    assert_eq!(exchange(&mut slave, &mut Device::new(), Instant::ZERO, &response), None);
+    assert_eq!(slave.counters().bus_comm_errors, 0);
+    assert_eq!(slave.counters().bus_messages, 1);
+}
+
+#[test]
+fn a_broadcast_write_is_executed_on_every_unit_and_never_answered() {
+    let mut slave = rtu_slave(SlaveConfig { units: [1, 2].into_iter().collect(), ..SlaveConfig::unit(1) });
+    let mut device = Device::new();
+    assert_eq!(exchange(&mut slave, &mut device, Instant::ZERO, &rtu(0, &[0x06, 0x00, 0x05, 0x12, 0x34])), None);
+    assert_eq!(device.writes, [(1, 5, 0x1234), (2, 5, 0x1234)]);
+    assert_eq!(device.holding[5], 0x1234);
+    assert_eq!(slave.counters().server_no_response, 1);
+    assert!(matches!(
+        slave.poll_event(),
+        Some(SlaveEvent::Request { unit: 0, disposition: Disposition::Executed, .. })
+    ));
+}
+
+#[test]
+fn a_broadcast_read_is_neither_executed_nor_answered() {
+    let mut slave = rtu_slave(SlaveConfig::unit(1));
+    assert_eq!(exchange(&mut slave, &mut Device::new(), Instant::ZERO, &rtu(0, &[0x03, 0, 0, 0, 1])), None);
+    assert!(matches!(slave.poll_event(), Some(SlaveEvent::Request { disposition: Disposition::Silent, .. })));
+}
+
+#[test]
+fn a_request_while_a_reply_is_pending_gets_no_answer() {
+    let mut slave = rtu_slave(SlaveConfig { response_wait: Duration::from_millis(100), ..SlaveConfig::unit(1) });
+    let mut device = Device::new();
+    slave.on_bytes(Instant::ZERO, &rtu(1, &[0x03, 0, 0, 0, 1]), &mut device);
+    slave.on_bytes(Instant::from_millis(10), &rtu(1, &[0x03, 0, 1, 0, 1]), &mut device);
+    let mut out = [0u8; MAX_TX_LEN];
+    let n = slave.poll_transmit(Instant::from_millis(200), &mut out).unwrap();
+    assert_eq!(&out[..n], rtu(1, &[0x03, 0x02, 0x00, 0x03]).as_slice(), "the first request's reply");
+    assert_eq!(slave.poll_transmit(Instant::from_millis(300), &mut out), None);
+    assert_eq!(slave.counters().server_no_response, 1);
+}
+
+// ---- Exceptions --------------------------------------------------------------------------
+
+#[test]
+fn malformed_and_unsupported_requests_get_the_spec_exceptions() {
+    // A quantity of zero: 03. Past the end of the map: 02 (from the handler).
+    assert_eq!(reply_pdu(&[0x03, 0x00, 0x00, 0x00, 0x00]), [0x83, 0x03]);
+    assert_eq!(reply_pdu(&[0x03, 0x00, 0x63, 0x00, 0x02]), [0x83, 0x02]);
+    // A coil value that is neither FF00 nor 0000: 03.
+    assert_eq!(reply_pdu(&[0x05, 0x00, 0x01, 0x12, 0x34]), [0x85, 0x03]);
+    // A custom code the device does not know: 01.
+    assert_eq!(reply_pdu(&[0x42, 0x01]), [0xC2, 0x01]);
+    // Read/write with a write byte count that disagrees with the quantity: 03.
+    assert_eq!(reply_pdu(&[0x17, 0, 0, 0, 1, 0, 0, 0, 1, 0x04, 0, 0, 0, 0]), [0x97, 0x03]);
+}
+
+#[test]
+fn the_handler_can_refuse_with_a_vendor_code_or_stay_silent() {
+    let mut slave = rtu_slave(SlaveConfig::unit(1));
+    let mut device = Device { admission: Some(Admission::Refuse(ExceptionCode::Vendor(0x22))), ..Device::new() };
+    let (frame, _) = exchange(&mut slave, &mut device, Instant::ZERO, &rtu(1, &[0x06, 0, 1, 0, 2])).unwrap();
+    assert_eq!(frame, rtu(1, &[0x86, 0x22]));
+    assert!(device.writes.is_empty(), "refused requests are not served");
+    assert_eq!(slave.counters().bus_exceptions, 1);
+    device.admission = Some(Admission::Ignore);
+    assert_eq!(exchange(&mut slave, &mut device, Instant::from_millis(100), &rtu(1, &[0x06, 0, 1, 0, 2])), None);
+}
+
+// ---- Every function code through the handler ---------------------------------------------
+
+#[test]
+fn reads_return_the_handlers_data() {
+    assert_eq!(reply_pdu(&[0x01, 0x00, 0x00, 0x00, 0x0A]), [0x01, 0x02, 0b0100_1001, 0b0000_0010]);
+    assert_eq!(reply_pdu(&[0x02, 0x00, 0x00, 0x00, 0x06]), [0x02, 0x01, 0b0010_0001]);
+    assert_eq!(reply_pdu(&[0x03, 0x00, 0x01, 0x00, 0x02]), [0x03, 0x04, 0x00, 0x0A, 0x00, 0x11]);
+    assert_eq!(reply_pdu(&[0x04, 0x00, 0x02, 0x00, 0x01]), [0x04, 0x02, 0x10, 0x02]);
+    assert_eq!(reply_pdu(&[0x07]), [0x07, 0x6D]);
+    assert_eq!(reply_pdu(&[0x11]), [0x11, 0x03, 0x42, 0xFF, 0x01]);
+    assert_eq!(reply_pdu(&[0x18, 0x04, 0xDE]), [0x18, 0x00, 0x06, 0x00, 0x02, 0x01, 0xB8, 0x12, 0x84]);
+    assert_eq!(
+        reply_pdu(&[0x14, 0x0E, 0x06, 0x00, 0x01, 0x00, 0x00, 0x00, 0x01, 0x06, 0x00, 0x02, 0x00, 0x05, 0x00, 0x02]),
+        [0x14, 0x0A, 0x03, 0x06, 0x0F, 0x01, 0x05, 0x06, 0x0F, 0x02, 0x0F, 0x02]
+    );
+    assert_eq!(reply_pdu(&[0x41, 0x01, 0x02]), [0x41, 0x01, 0x02, 0x99]);
+}
+
+#[test]
+fn writes_echo_the_request_and_change_the_data() {
+    let mut slave = rtu_slave(SlaveConfig::unit(1));
+    let mut device = Device::new();
+    let mut t = Instant::ZERO;
+    let mut send = |pdu: &[u8], device: &mut Device| {
+        t = t.saturating_add(Duration::from_millis(100));
+        let (frame, _) = exchange(&mut slave, device, t, &rtu(1, pdu)).unwrap();
+        frame[1..frame.len() - 2].to_vec()
+    };
+    assert_eq!(send(&[0x05, 0x00, 0x01, 0xFF, 0x00], &mut device), [0x05, 0x00, 0x01, 0xFF, 0x00]);
+    assert!(device.coils[1]);
+    assert_eq!(send(&[0x06, 0x00, 0x02, 0xAB, 0xCD], &mut device), [0x06, 0x00, 0x02, 0xAB, 0xCD]);
+    assert_eq!(device.holding[2], 0xABCD);
+    assert_eq!(send(&[0x0F, 0x00, 0x10, 0x00, 0x03, 0x01, 0b101], &mut device), [0x0F, 0x00, 0x10, 0x00, 0x03]);
+    assert_eq!(device.coils[16..19], [true, false, true]);
+    assert_eq!(
+        send(&[0x10, 0x00, 0x20, 0x00, 0x02, 0x04, 0x0B, 0xB8, 0x00, 0x00], &mut device),
+        [0x10, 0x00, 0x20, 0x00, 0x02]
+    );
+    assert_eq!(device.holding[32..34], [3000, 0]);
+    // Mask write (§6.16 example): current 0x12, AND 0xF2, OR 0x25 → 0x17.
+    device.holding[4] = 0x12;
+    assert_eq!(
+        send(&[0x16, 0x00, 0x04, 0x00, 0xF2, 0x00, 0x25], &mut device),
+        [0x16, 0x00, 0x04, 0x00, 0xF2, 0x00, 0x25]
+    );
+    assert_eq!(device.holding[4], MaskWrite { address: 4, and_mask: 0xF2, or_mask: 0x25 }.apply(0x12));
+    assert_eq!(device.holding[4], 0x17);
+    // Read/write: the write comes first, so the read sees it.
+    assert_eq!(
+        send(&[0x17, 0x00, 0x40, 0x00, 0x01, 0x00, 0x40, 0x00, 0x01, 0x02, 0x55, 0xAA], &mut device),
+        [0x17, 0x02, 0x55, 0xAA]
+    );
+    let write_file = [0x15, 0x0D, 0x06, 0x00, 0x02, 0x00, 0x07, 0x00, 0x03, 0x06, 0xAF, 0x04, 0xBE, 0x10, 0x0D];
+    assert_eq!(send(&write_file, &mut device), write_file);
+    assert_eq!(device.files[1][7..10], [0x06AF, 0x04BE, 0x100D]);
+}
+
+#[test]
+fn device_identification_streams_and_reads_single_objects() {
+    // Basic stream from object 0: three objects, no more follow, conformity 0x81.
+    let mut expected = std::vec![0x2B, 0x0E, 0x01, 0x81, 0x00, 0x00, 0x03];
+    expected.extend_from_slice(&[0x00, 8]);
+    expected.extend_from_slice(b"ferrobus");
+    expected.extend_from_slice(&[0x01, 4]);
+    expected.extend_from_slice(b"FB-1");
+    expected.extend_from_slice(&[0x02, 3]);
+    expected.extend_from_slice(b"1.0");
+    assert_eq!(reply_pdu(&[0x2B, 0x0E, 0x01, 0x00]), expected);
+    // One specific object; a missing one is exception 02.
+    assert_eq!(
+        reply_pdu(&[0x2B, 0x0E, 0x04, 0x01]),
+        [0x2B, 0x0E, 0x04, 0x81, 0x00, 0x00, 0x01, 0x01, 4, b'F', b'B', b'-', b'1']
+    );
+    assert_eq!(reply_pdu(&[0x2B, 0x0E, 0x04, 0x05]), [0xAB, 0x02]);
+    // An invalid read code is exception 03; another MEI type is the handler's (01 here).
+    assert_eq!(reply_pdu(&[0x2B, 0x0E, 0x05, 0x00]), [0xAB, 0x03]);
+    assert_eq!(reply_pdu(&[0x2B, 0x0D, 0x00]), [0xAB, 0x01]);
+}
+
+#[test]
+fn device_identification_that_does_not_fit_says_more_follows() {
+    let mut slave = rtu_slave(SlaveConfig::unit(1));
+    let mut device = Device::new();
+    device.objects = (0..6u8).map(|id| (id, std::vec![b'x'; 100])).collect();
+    let (frame, _) = exchange(&mut slave, &mut device, Instant::ZERO, &rtu(1, &[0x2B, 0x0E, 0x02, 0x00])).unwrap();
+    let pdu = &frame[1..frame.len() - 2];
+    // conformity 0x82 (regular objects), more follows, next object 2, two objects.
+    assert_eq!(&pdu[..7], &[0x2B, 0x0E, 0x02, 0x82, 0xFF, 0x02, 0x02]);
+    let (frame, _) =
+        exchange(&mut slave, &mut device, Instant::from_millis(100), &rtu(1, &[0x2B, 0x0E, 0x02, 0x02])).unwrap();
+    assert_eq!(&frame[1..8], &[0x2B, 0x0E, 0x02, 0x82, 0xFF, 0x04, 0x02]);
+}
+
+#[test]
+fn a_device_without_identification_answers_illegal_function() {
+    let mut slave = rtu_slave(SlaveConfig::unit(1));
+    let mut device = Device { objects: Vec::new(), ..Device::new() };
+    let (frame, _) = exchange(&mut slave, &mut device, Instant::ZERO, &rtu(1, &[0x2B, 0x0E, 0x01, 0x00])).unwrap();
+    assert_eq!(frame, rtu(1, &[0xAB, 0x01]));
+}
+
+// ---- Diagnostics, counters, event log, listen-only ---------------------------------------
+
+/// Sends `pdu` to unit 1 at 100 ms intervals and returns the reply PDU, if any.
+struct Bench {
+    slave: Slave<RtuCodec>,
+    device: Device,
+    t: Instant,
+}
+
+impl Bench {
+    fn new() -> Self {
+        Bench { slave: rtu_slave(SlaveConfig::unit(1)), device: Device::new(), t: Instant::ZERO }
+    }
+
+    #[track_caller]
+    fn send(&mut self, unit: u8, pdu: &[u8]) -> Option<Vec<u8>> {
+        self.raw(&rtu(unit, pdu))
+    }
+
+    #[track_caller]
+    fn raw(&mut self, bytes: &[u8]) -> Option<Vec<u8>> {
+        self.t = self.t.saturating_add(Duration::from_millis(100));
+        let (frame, _) = exchange(&mut self.slave, &mut self.device, self.t, bytes)?;
+        Some(frame[1..frame.len() - 2].to_vec())
+    }
+
+    #[track_caller]
+    fn counter(&mut self, sub: u8) -> u16 {
+        let reply = self.send(1, &[0x08, 0x00, sub, 0x00, 0x00]).expect("a counter");
+        assert_eq!(&reply[..3], &[0x08, 0x00, sub]);
+        u16::from_be_bytes([reply[3], reply[4]])
+    }
+}
+
+#[test]
+fn return_query_data_echoes_any_data() {
+    let mut b = Bench::new();
+    assert_eq!(b.send(1, &[0x08, 0x00, 0x00, 0xA5, 0x37]), Some(std::vec![0x08, 0x00, 0x00, 0xA5, 0x37]));
+    assert_eq!(b.send(1, &[0x08, 0x00, 0x00, 1, 2, 3, 4, 5]), Some(std::vec![0x08, 0x00, 0x00, 1, 2, 3, 4, 5]));
+}
+
+#[test]
+fn counters_count_what_the_spec_says_and_clear_on_0a() {
+    let mut b = Bench::new();
+    b.send(1, &[0x03, 0, 0, 0, 1]); // served
+    b.send(2, &[0x03, 0, 0, 0, 1]); // another unit
+    b.send(1, &[0x03, 0, 0, 0, 0]); // exception 03
+    b.send(0, &[0x06, 0, 1, 0, 1]); // broadcast: no response
+    let mut bad = rtu(1, &[0x03, 0, 0, 0, 1]);
+    bad[3] ^= 1;
+    b.raw(&bad); // CRC error
+    b.raw(&[0x55; 300]); // overrun: noise longer than any frame
+    assert_eq!(b.counter(0x0B), 5, "bus messages: every good frame, this request included");
+    assert_eq!(b.counter(0x0C), 1, "CRC errors");
+    assert_eq!(b.counter(0x0D), 1, "exceptions sent");
+    assert_eq!(b.counter(0x0E), 7, "messages for this slave or broadcast, the counter polls included");
+    assert_eq!(b.counter(0x0F), 1, "no response: the broadcast");
+    assert_eq!(b.counter(0x10), 0, "NAK");
+    assert_eq!(b.counter(0x11), 0, "busy");
+    assert!(b.counter(0x12) >= 1, "overruns");
+    assert_eq!(b.send(1, &[0x08, 0x00, 0x0A, 0x00, 0x00]), Some(std::vec![0x08, 0x00, 0x0A, 0x00, 0x00]));
+    assert_eq!(b.counter(0x0C), 0);
+    assert_eq!(b.counter(0x0B), 2, "counting starts again after the clear");
+    assert_eq!(b.send(1, &[0x08, 0x00, 0x14, 0x00, 0x00]), Some(std::vec![0x08, 0x00, 0x14, 0x00, 0x00]));
+    assert_eq!(b.counter(0x12), 0);
+}
+
+#[test]
+fn listen_only_silences_everything_until_restart() {
+    let mut b = Bench::new();
+    assert_eq!(b.send(1, &[0x08, 0x00, 0x04, 0x00, 0x00]), None, "entering listen-only is not answered");
+    assert!(b.slave.is_listen_only());
+    assert_eq!(b.send(1, &[0x03, 0, 0, 0, 1]), None);
+    assert_eq!(b.send(1, &[0x06, 0, 1, 0, 9]), None);
+    assert_eq!(b.device.holding[1], 10, "nor executed");
+    assert_eq!(b.send(1, &[0x08, 0x00, 0x0B, 0x00, 0x00]), None, "not even diagnostics");
+    assert_eq!(b.send(1, &[0x08, 0x00, 0x01, 0x00, 0x00]), None, "restart leaves listen-only without a reply");
+    assert!(!b.slave.is_listen_only());
+    assert_eq!(b.send(1, &[0x03, 0, 0, 0, 1]), Some(std::vec![0x03, 0x02, 0x00, 0x03]));
+}
+
+#[test]
+fn restart_replies_then_clears_counters_and_with_ff00_the_log() {
+    let mut b = Bench::new();
+    b.send(1, &[0x03, 0, 0, 0, 1]);
+    assert_eq!(b.send(1, &[0x08, 0x00, 0x01, 0xFF, 0x00]), Some(std::vec![0x08, 0x00, 0x01, 0xFF, 0x00]));
+    let mut saw_restart = false;
+    while let Some(e) = b.slave.poll_event() {
+        saw_restart |= e == SlaveEvent::Restart { clear_log: true };
+    }
+    assert!(saw_restart);
+    assert_eq!(b.slave.event_log().len(), 2, "the restart event and the send event of its reply");
+    assert_eq!(b.counter(0x0B), 1);
+    assert_eq!(b.send(1, &[0x08, 0x00, 0x01, 0x12, 0x34]), Some(std::vec![0x88, 0x03]), "data must be 0000 or FF00");
+}
+
+#[test]
+fn unknown_sub_functions_are_illegal_function_and_bad_data_illegal_value() {
+    let mut b = Bench::new();
+    assert_eq!(b.send(1, &[0x08, 0x00, 0x13, 0x00, 0x00]), Some(std::vec![0x88, 0x01]));
+    assert_eq!(b.send(1, &[0x08, 0x00, 0x0B, 0x00, 0x01]), Some(std::vec![0x88, 0x03]));
+    assert_eq!(b.send(1, &[0x08, 0x00, 0x0B]), Some(std::vec![0x88, 0x03]));
+    assert_eq!(b.send(1, &[0x08, 0x00, 0x02, 0x00, 0x00]), Some(std::vec![0x08, 0x00, 0x02, 0x00, 0x00]));
+}
+
+#[test]
+fn comm_event_counter_counts_successes_only_and_the_log_lists_them_newest_first() {
+    let mut b = Bench::new();
+    b.send(1, &[0x03, 0, 0, 0, 1]);
+    b.send(1, &[0x03, 0, 0, 0, 0]); // exception: not counted
+    b.send(0, &[0x06, 0, 1, 0, 1]); // executed broadcast: counted
+    assert_eq!(b.send(1, &[0x0B]), Some(std::vec![0x0B, 0x00, 0x00, 0x00, 0x02]));
+    assert_eq!(b.send(1, &[0x0B]), Some(std::vec![0x0B, 0x00, 0x00, 0x00, 0x02]), "polling the counter is not counted");
+    let log = b.send(1, &[0x0C]).unwrap();
+    // Status 0, event count 2, message count 6 (every frame, this one included), 10 events.
+    assert_eq!(&log[..8], &[0x0C, 6 + 10, 0x00, 0x00, 0x00, 0x02, 0x00, 0x06]);
+    // Newest first: receive of this 0x0C; send and receive of each 0x0B poll; the broadcast's
+    // receive (0x40 flag, no send); the exception's send (read exception) and receive; the
+    // first read's send and receive.
+    assert_eq!(&log[8..], &[0x80, 0x40, 0x80, 0x40, 0x80, 0xC0, 0x41, 0x80, 0x40, 0x80]);
+}
+
+// ---- Other framings ---------------------------------------------------------------------
+
+#[test]
+fn over_mbap_the_transaction_is_echoed_unit_0_is_a_unit_and_there_is_no_gap() {
+    let mut slave = Slave::new(MbapCodec::new(), SlaveConfig::unit(0));
+    let mut device = Device::new();
+    let request = [0x12, 0x34, 0x00, 0x00, 0x00, 0x06, 0x00, 0x03, 0x00, 0x00, 0x00, 0x01];
+    let (frame, due) = exchange(&mut slave, &mut device, Instant::from_millis(3), &request).unwrap();
+    assert_eq!(due, Instant::from_millis(3), "no silent interval on TCP");
+    assert_eq!(frame, [0x12, 0x34, 0x00, 0x00, 0x00, 0x05, 0x00, 0x03, 0x02, 0x00, 0x03]);
+}
+
+#[test]
+fn over_ascii_a_request_is_answered_in_ascii_and_the_input_delimiter_can_change() {
+    let mut slave = Slave::new(AsciiCodec::new(timing_9600()), SlaveConfig::unit(1));
+    let mut device = Device::new();
+    let (frame, _) = exchange(&mut slave, &mut device, Instant::from_millis(10), b":010300000001FB\r\n").unwrap();
+    assert_eq!(frame, b":0103020003F7\r\n");
+    // 0x08/0x03: requests now end in CR '!' (0x21); replies keep CR LF.
+    let (frame, _) = exchange(&mut slave, &mut device, Instant::from_millis(50), b":010800032100D3\r\n").unwrap();
+    assert_eq!(frame, b":010800032100D3\r\n");
+    let (frame, _) = exchange(&mut slave, &mut device, Instant::from_millis(100), b":010300000001FB\r!").unwrap();
+    assert_eq!(frame, b":0103020003F7\r\n");
+    assert_eq!(exchange(&mut slave, &mut device, Instant::from_millis(150), b":010300000001FB\r\n"), None);
+}

@@ -261,7 +261,7 @@ fn endless_noise_never_grows_past_one_frame_and_never_ends_the_receiver() {
         assert!(c.len - c.start <= MAX_ADU_LEN + 1);
     }
     feed(&mut c, Instant::ZERO, SDP_REQUEST, record(&mut events));
-    expire(&mut c, Instant::from_secs_for_tests(1), record(&mut events));
+    expire(&mut c, Instant::from_secs(1), record(&mut events));
     assert_eq!(events.last(), Some(&frame(SDP_REQUEST, Direction::Request)));
 }
 
@@ -313,10 +313,4 @@ fn a_frame_of_256_bytes_is_the_largest_accepted() {
     let n = encode_response(7, &response, &mut out).unwrap();
     assert_eq!(n, 255);
     assert_eq!(run_all_ways(Expect::Responses, &out[..n]), [frame(&out[..n], Direction::Response)]);
-}
-
-impl Instant {
-    fn from_secs_for_tests(s: u64) -> Instant {
-        Instant::from_millis(s * 1000)
-    }
 }
