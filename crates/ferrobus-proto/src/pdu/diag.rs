@@ -2,6 +2,8 @@
 //! 0x0B Get Comm Event Counter, 0x0C Get Comm Event Log, 0x11 Report Server ID
 //! (MODBUS Application Protocol V1.1b3 §6.7–6.10, §6.13).
 
+use core::fmt;
+
 use super::{Body, MAX_DATA_LEN, WireLen, check_quantity, counted_len};
 use crate::codes::DiagnosticCode;
 use crate::cursor::{Reader, Writer};
@@ -33,7 +35,7 @@ impl Body<'_> for ExceptionStatus {
 ///
 /// Every sub-function but 0x00 carries one 16-bit word; 0x00 Return Query Data carries any
 /// data and its response echoes it, so on RTU its length is found by the checksum or the gap.
-#[derive(Clone, Copy, PartialEq, Eq, Debug)]
+#[derive(Clone, Copy, PartialEq, Eq)]
 pub struct Diagnostic<'a> {
     sub_function: DiagnosticCode,
     data: DiagData<'a>,
@@ -94,6 +96,12 @@ impl<'a> Diagnostic<'a> {
             [hi, lo] => Some(u16::from_be_bytes([hi, lo])),
             _ => None,
         }
+    }
+}
+
+impl fmt::Debug for Diagnostic<'_> {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.debug_struct("Diagnostic").field("sub_function", &self.sub_function).field("data", &self.data()).finish()
     }
 }
 
