@@ -5,7 +5,7 @@
 //! ```text
 //!  submit ─▶ Queued ──(line silent for t3.5)──▶ poll_transmit ─┬─ unicast ─▶ AwaitingReply ─┬─ reply ───▶ Response / Exception
 //!                                                              │                            └─ timeout ─▶ Failed(Timeout)
-//!                                                              └─ broadcast ─▶ Turnaround ──(delay)───▶ BroadcastSent
+//!                                                              └─ no reply ──▶ Turnaround ──(delay)───▶ Sent
 //! ```
 //!
 //! - **Gaps.** A request goes out only after the line has been silent for the framing's
@@ -125,8 +125,12 @@ pub enum Completion<'a> {
     Response(Response<'a>),
     /// The slave refused with this exception code.
     Exception(ExceptionCode),
-    /// A broadcast went out and the turnaround delay has passed.
-    BroadcastSent,
+    /// A request that gets no reply went out and the turnaround delay has passed: a
+    /// broadcast, or 0x08/0x04 Force Listen Only.
+    Sent,
+    /// The reply to a request submitted with [`Master::submit_raw`], unparsed (function code
+    /// first). Exceptions still come as [`Completion::Exception`].
+    Raw(&'a [u8]),
     /// No usable reply.
     Failed(MasterError),
 }
@@ -176,8 +180,10 @@ enum Outcome {
     Response {
         bits: Option<u16>,
     },
+    /// The reply PDU to a raw request is in `reply`.
+    Raw,
     Exception(ExceptionCode),
-    BroadcastSent,
+    Sent,
     Failed(MasterError),
 }
 
@@ -213,6 +219,10 @@ struct Core {
     transaction: u16,
     request: [u8; MAX_PDU_LEN],
     request_len: usize,
+    /// Submitted with `submit_raw`: the reply is not checked against the request.
+    raw: bool,
+    /// No reply is expected (broadcast, 0x08/0x04).
+    no_reply: bool,
     tx: [u8; MAX_TX_LEN],
     tx_len: usize,
     /// The part of our last transmission that may still come back as echo.
@@ -239,6 +249,8 @@ impl<F: Framing> Master<F> {
                 transaction: 0,
                 request: [0; MAX_PDU_LEN],
                 request_len: 0,
+                raw: false,
+                no_reply: false,
                 tx: [0; MAX_TX_LEN],
                 tx_len: 0,
                 echo_pos: 0,
@@ -278,20 +290,45 @@ impl<F: Framing> Master<F> {
     }
 
     /// Queues `request` for `unit`; it goes out once the line has been silent long enough.
-    /// Unit 0 on a serial line is a broadcast: nothing is awaited but the turnaround delay.
+    /// Unit 0 on a serial line is a broadcast, and 0x08/0x04 Force Listen Only is never
+    /// answered: for those nothing is awaited but the turnaround delay.
     pub fn submit(&mut self, now: Instant, unit: u8, request: &Request<'_>) -> Result<(), SubmitError> {
         if !self.is_idle() {
             return Err(SubmitError::Busy);
         }
+        let mut pdu = [0u8; MAX_PDU_LEN];
+        let len = request.emit(&mut pdu).map_err(SubmitError::Encode)?;
+        let listen_only =
+            matches!(request, Request::Diagnostics(d) if d.sub_function() == DiagnosticCode::ForceListenOnly);
+        self.queue(now, unit, pdu.get(..len).unwrap_or_default(), false, listen_only)
+    }
+
+    /// Queues any PDU for `unit`, valid or not: for probing devices and testing servers. The
+    /// reply is matched by unit and function code only and handed back unparsed as
+    /// [`Completion::Raw`].
+    pub fn submit_raw(&mut self, now: Instant, unit: u8, pdu: &[u8]) -> Result<(), SubmitError> {
+        if !self.is_idle() {
+            return Err(SubmitError::Busy);
+        }
+        if pdu.is_empty() || pdu.len() > MAX_PDU_LEN {
+            return Err(SubmitError::Encode(BufferTooSmall { needed: pdu.len().max(1), available: MAX_PDU_LEN }));
+        }
+        self.queue(now, unit, pdu, true, false)
+    }
+
+    fn queue(&mut self, now: Instant, unit: u8, pdu: &[u8], raw: bool, no_reply: bool) -> Result<(), SubmitError> {
         let core = &mut self.core;
-        let len = request.emit(&mut core.request).map_err(SubmitError::Encode)?;
-        let pdu = core.request.get(..len).unwrap_or_default();
         let transaction = core.transaction.wrapping_add(1);
         let header = AduHeader { unit, transaction };
         core.tx_len = self.framing.encode(header, pdu, &mut core.tx).map_err(SubmitError::Encode)?;
+        if let Some(dst) = core.request.get_mut(..pdu.len()) {
+            dst.copy_from_slice(pdu);
+        }
+        core.request_len = pdu.len();
         core.transaction = transaction;
-        core.request_len = len;
         core.unit = unit;
+        core.raw = raw;
+        core.no_reply = no_reply || (core.serial && unit == unit::BROADCAST);
         core.state = State::Queued { not_before: now };
         Ok(())
     }
@@ -332,8 +369,10 @@ impl<F: Framing> Master<F> {
         core.last_activity = Some(sent);
         core.echo_pos = 0;
         core.echo_len = if core.config.echo_suppression { n } else { 0 };
-        if core.serial && core.unit == unit::BROADCAST {
-            core.stats.broadcasts = core.stats.broadcasts.wrapping_add(1);
+        if core.no_reply {
+            let counter =
+                if core.unit == unit::BROADCAST { &mut core.stats.broadcasts } else { &mut core.stats.requests };
+            *counter = counter.wrapping_add(1);
             core.state = State::Turnaround { until: sent.saturating_add(core.config.turnaround_delay) };
         } else {
             core.stats.requests = core.stats.requests.wrapping_add(1);
@@ -379,7 +418,7 @@ impl<F: Framing> Master<F> {
         let Master { framing, core } = self;
         expire(framing, now, |event| core.on_event(&event));
         match self.core.state {
-            State::Turnaround { until } if now >= until => self.core.finish(Outcome::BroadcastSent),
+            State::Turnaround { until } if now >= until => self.core.finish(Outcome::Sent),
             State::AwaitingReply { sent, deadline } if now >= deadline => {
                 let in_progress = self.framing.poll_timeout().is_some_and(|rx| rx > now);
                 if !in_progress || now >= self.grace_end(deadline) {
@@ -397,8 +436,9 @@ impl<F: Framing> Master<F> {
         let outcome = core.outcome.take()?;
         Some(match outcome {
             Outcome::Exception(exception) => Completion::Exception(exception),
-            Outcome::BroadcastSent => Completion::BroadcastSent,
+            Outcome::Sent => Completion::Sent,
             Outcome::Failed(e) => Completion::Failed(e),
+            Outcome::Raw => Completion::Raw(core.reply.get(..core.reply_len).unwrap_or_default()),
             Outcome::Response { bits } => {
                 let pdu = core.reply.get(..core.reply_len).unwrap_or_default();
                 match Response::parse(pdu) {
@@ -434,16 +474,25 @@ impl Core {
             self.stats.ignored_frames = self.stats.ignored_frames.wrapping_add(1);
             return;
         }
-        let request = Request::parse(self.request.get(..self.request_len).unwrap_or_default());
-        let outcome = match (request, Response::parse(frame.pdu)) {
-            (_, Err(e)) | (Err(e), _) => Outcome::Failed(MasterError::BadResponse(e)),
-            (_, Ok(Response::Exception(e))) => Outcome::Exception(e.code),
-            (Ok(request), Ok(response)) => match check_reply(&request, &response) {
-                Ok(bits) => Outcome::Response { bits },
-                Err(e) => Outcome::Failed(e),
-            },
+        let outcome = if self.raw {
+            match *frame.pdu {
+                [fc, code, ..] if fc & FunctionCode::EXCEPTION_BIT != 0 => {
+                    Outcome::Exception(ExceptionCode::from_u8(code))
+                }
+                _ => Outcome::Raw,
+            }
+        } else {
+            let request = Request::parse(self.request.get(..self.request_len).unwrap_or_default());
+            match (request, Response::parse(frame.pdu)) {
+                (_, Err(e)) | (Err(e), _) => Outcome::Failed(MasterError::BadResponse(e)),
+                (_, Ok(Response::Exception(e))) => Outcome::Exception(e.code),
+                (Ok(request), Ok(response)) => match check_reply(&request, &response) {
+                    Ok(bits) => Outcome::Response { bits },
+                    Err(e) => Outcome::Failed(e),
+                },
+            }
         };
-        if let (Outcome::Response { .. }, Some(dst)) = (outcome, self.reply.get_mut(..frame.pdu.len())) {
+        if let (Outcome::Response { .. } | Outcome::Raw, Some(dst)) = (outcome, self.reply.get_mut(..frame.pdu.len())) {
             dst.copy_from_slice(frame.pdu);
             self.reply_len = frame.pdu.len();
         }
@@ -463,9 +512,9 @@ impl Core {
     fn finish(&mut self, outcome: Outcome) {
         let stats = &mut self.stats;
         let counter = match outcome {
-            Outcome::Response { .. } => Some(&mut stats.responses),
+            Outcome::Response { .. } | Outcome::Raw => Some(&mut stats.responses),
             Outcome::Exception(_) => Some(&mut stats.exceptions),
-            Outcome::BroadcastSent => None,
+            Outcome::Sent => None,
             Outcome::Failed(MasterError::Timeout { .. }) => Some(&mut stats.timeouts),
             Outcome::Failed(_) => Some(&mut stats.bad_replies),
         };

@@ -159,11 +159,11 @@ impl Line {
         let mut buf = [0u8; MAX_TX_LEN];
         for _ in 0..100_000 {
             if let Some(n) = self.master.poll_transmit(self.now, &mut buf) {
-                self.send(0, &buf[..n].to_vec());
+                self.send(0, &buf[..n]);
             }
             for i in 0..self.slaves.len() {
                 if let Some(n) = self.slaves[i].0.poll_transmit(self.now, &mut buf) {
-                    self.send(i + 1, &buf[..n].to_vec());
+                    self.send(i + 1, &buf[..n]);
                 }
             }
             if let Some(done) = self.master.poll_event() {
@@ -227,7 +227,8 @@ fn summary(done: Completion<'_>) -> String {
     match done {
         Completion::Response(r) => format!("{r:?}"),
         Completion::Exception(e) => format!("exception {e}"),
-        Completion::BroadcastSent => "broadcast".into(),
+        Completion::Sent => "broadcast".into(),
+        Completion::Raw(pdu) => format!("raw {pdu:02X?}"),
         Completion::Failed(e) => format!("failed: {e}"),
     }
 }
@@ -337,7 +338,7 @@ fn on_the_wire_every_gap_between_frames_is_at_least_t3_5_and_the_slave_adds_its_
         let (prev, next) = (&pair[0], &pair[1]);
         // Byte times mark the end of a character; the next frame's first character starts
         // one character time before its time stamp.
-        let silence = next.1.saturating_duration_since(prev.2) - char_time;
+        let silence = next.1.saturating_duration_since(prev.2).checked_sub(char_time).unwrap();
         if next.0 == 0 {
             assert!(silence >= t3_5, "master broke the gap: {silence:?}");
             assert!(silence < t3_5 + Duration::from_micros(1), "master waited too long: {silence:?}");

@@ -150,6 +150,9 @@ pub struct RtuCodec {
     timing: LineTiming,
     expect: Expect,
     strict_t1_5: bool,
+    /// The silence that ends a frame of unknown length (t3.5 unless overridden).
+    frame_gap: Duration,
+    /// How long to wait for the rest of a frame of known length.
     incomplete_timeout: Duration,
     buf: [u8; BUF_LEN],
     /// Where the candidate frame starts.
@@ -173,6 +176,7 @@ impl RtuCodec {
             timing,
             expect,
             strict_t1_5: false,
+            frame_gap: timing.t3_5(),
             incomplete_timeout: timing.t3_5(),
             buf: [0; BUF_LEN],
             start: 0,
@@ -194,13 +198,24 @@ impl RtuCodec {
         self
     }
 
+    /// The silence that ends a frame whose length the function code cannot tell (t3.5 by
+    /// default). A byte stream without a line under it — RTU carried over TCP, an unpaced
+    /// pty — has no t3.5 ([`LineTiming::unpaced`]) but still needs a silence to end such
+    /// frames; a few tens of milliseconds suit it.
+    #[must_use]
+    pub fn with_frame_gap(mut self, gap: Duration) -> Self {
+        self.frame_gap = gap;
+        self.incomplete_timeout = self.incomplete_timeout.max(gap);
+        self
+    }
+
     /// How long to wait for the rest of a frame whose length is already known before giving
-    /// up on it (at least t3.5, the default). A PC behind a USB adapter sees gaps of several
-    /// milliseconds inside a frame; a longer wait keeps such frames whole, and costs nothing
-    /// on noise, which is resynced past anyway.
+    /// up on it (at least the frame gap, the default). A PC behind a USB adapter sees gaps of
+    /// several milliseconds inside a frame; a longer wait keeps such frames whole, and costs
+    /// nothing on noise, which is resynced past anyway.
     #[must_use]
     pub fn with_incomplete_timeout(mut self, timeout: Duration) -> Self {
-        self.incomplete_timeout = timeout.max(self.timing.t3_5());
+        self.incomplete_timeout = timeout.max(self.frame_gap);
         self
     }
 
@@ -379,7 +394,7 @@ impl RtuCodec {
         }
         let last = self.last_rx?;
         let known = matches!(self.assess(self.candidate(), false), Verdict::Wait { known: true });
-        let wait = if known { self.incomplete_timeout } else { self.timing.t3_5() };
+        let wait = if known { self.incomplete_timeout } else { self.frame_gap };
         Some(last.saturating_add(wait))
     }
 }

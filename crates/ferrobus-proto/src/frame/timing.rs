@@ -181,9 +181,10 @@ impl LineTiming {
     }
 
     /// Timing with no silent intervals at all, for byte streams that have no line under them
-    /// (a TCP socket carrying RTU frames, an unpaced pty in a benchmark). Frames are then
-    /// found by length alone; codes of unknown length end only at [`LineTiming::with_t3_5`]'s
-    /// value, so set one.
+    /// (a TCP socket carrying RTU frames, an unpaced pty in a benchmark): nothing waits
+    /// before transmitting. Give the receiver a frame gap
+    /// ([`RtuCodec::with_frame_gap`](super::rtu::RtuCodec::with_frame_gap)) to end frames
+    /// whose length the function code cannot tell.
     pub const fn unpaced() -> Self {
         LineTiming { char_time: Duration::ZERO, t1_5: Duration::ZERO, t3_5: Duration::ZERO }
     }

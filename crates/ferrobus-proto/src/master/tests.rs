@@ -62,7 +62,8 @@ fn done(m: &mut Master<RtuCodec>) -> Option<Done> {
         Completion::Response(Response::ReadCoils(r)) => Done::Bits(r.values().iter().collect()),
         Completion::Response(r) => Done::Other(r.function()),
         Completion::Exception(e) => Done::Exception(e),
-        Completion::BroadcastSent => Done::Broadcast,
+        Completion::Sent => Done::Broadcast,
+        Completion::Raw(pdu) => Done::Other(FunctionCode::from_u8(pdu[0])),
         Completion::Failed(e) => Done::Failed(e),
     })
 }
@@ -327,4 +328,37 @@ fn written_coils_are_checked_against_the_echoed_range() {
     transmit(&mut m, ns(0));
     m.on_bytes(ns(20_000_000), &rtu(5, &[0x0F, 0x00, 0x06, 0x00, 0x03]));
     assert_eq!(done(&mut m), Some(Done::Other(FunctionCode::WriteMultipleCoils)));
+}
+
+#[test]
+fn force_listen_only_is_not_answered_so_it_is_not_awaited() {
+    use crate::pdu::Diagnostic;
+    let mut m = master(MasterConfig::default());
+    let request = Request::Diagnostics(Diagnostic::with_word(DiagnosticCode::ForceListenOnly, 0));
+    m.submit(ns(0), 1, &request).unwrap();
+    transmit(&mut m, ns(0));
+    assert_eq!(m.poll_timeout(), Some(ns(8 * CHAR + 100_000_000)), "the turnaround, not the response timeout");
+    m.handle_timeout(ns(8 * CHAR + 100_000_000));
+    assert_eq!(done(&mut m), Some(Done::Broadcast));
+}
+
+#[test]
+fn a_raw_request_is_sent_as_is_and_its_reply_returned_unparsed() {
+    let mut m = master(MasterConfig::default());
+    // Quantity 0 is invalid; a raw request goes out anyway.
+    m.submit_raw(ns(0), 1, &[0x03, 0x00, 0x00, 0x00, 0x00]).unwrap();
+    assert_eq!(transmit(&mut m, ns(0)), rtu(1, &[0x03, 0x00, 0x00, 0x00, 0x00]));
+    m.on_bytes(ns(10_000_000), &rtu(1, &[0x83, 0x03]));
+    assert_eq!(done(&mut m), Some(Done::Exception(ExceptionCode::IllegalDataValue)));
+    m.submit_raw(ns(20_000_000), 1, &[0x03, 0x00, 0x00, 0x00, 0x01]).unwrap();
+    transmit(&mut m, ns(20_000_000));
+    m.on_bytes(ns(30_000_000), &rtu(1, &[0x03, 0x02, 0xAB, 0xCD]));
+    match m.poll_event() {
+        Some(Completion::Raw(pdu)) => assert_eq!(pdu, [0x03, 0x02, 0xAB, 0xCD]),
+        other => panic!("{other:?}"),
+    }
+    assert_eq!(
+        m.submit_raw(ns(40_000_000), 1, &[]),
+        Err(SubmitError::Encode(BufferTooSmall { needed: 1, available: 253 }))
+    );
 }

@@ -314,3 +314,20 @@ fn a_frame_of_256_bytes_is_the_largest_accepted() {
     assert_eq!(n, 255);
     assert_eq!(run_all_ways(Expect::Responses, &out[..n]), [frame(&out[..n], Direction::Response)]);
 }
+
+#[test]
+fn an_unpaced_stream_finds_frames_by_length_and_ends_unknown_ones_at_the_frame_gap() {
+    let mut c = RtuCodec::new(LineTiming::unpaced(), Expect::Both).with_frame_gap(Duration::from_millis(50));
+    assert_eq!(c.inter_frame_gap(), Duration::ZERO, "nothing to wait before transmitting");
+    let mut got = Vec::new();
+    feed(&mut c, Instant::ZERO, &SDP_REQUEST[..5], record(&mut got));
+    assert_eq!(c.poll_timeout(), Some(Instant::from_millis(50)), "a split frame waits for its rest");
+    feed(&mut c, Instant::from_millis(10), &SDP_REQUEST[5..], record(&mut got));
+    assert_eq!(got, [frame(SDP_REQUEST, Direction::Request)]);
+    let mut custom = std::vec![0x05, 0x41, 0x01];
+    custom.extend_from_slice(&crate::crc::crc16_wire(&custom));
+    feed(&mut c, Instant::from_millis(20), &custom, record(&mut got));
+    assert_eq!(c.poll_timeout(), Some(Instant::from_millis(70)));
+    expire(&mut c, Instant::from_millis(70), record(&mut got));
+    assert_eq!(got.last(), Some(&frame(&custom, Direction::Either)));
+}
