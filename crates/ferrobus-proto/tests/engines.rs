@@ -90,13 +90,15 @@ impl Handler for Memory {
         out[..3].copy_from_slice(&[10, 20, 30]);
         Ok(3)
     }
-    fn device_object(&self, _: u8, id: u8) -> Option<&[u8]> {
-        match id {
-            0 => Some(b"ferrobus"),
-            1 => Some(b"SIM"),
-            2 => Some(b"0.1"),
-            _ => None,
-        }
+    fn device_object(&mut self, _: u8, id: u8, out: &mut [u8]) -> Option<usize> {
+        let value: &[u8] = match id {
+            0 => b"ferrobus",
+            1 => b"SIM",
+            2 => b"0.1",
+            _ => return None,
+        };
+        out[..value.len()].copy_from_slice(value);
+        Some(value.len())
     }
     fn custom(&mut self, _: u8, _: u8, data: &[u8], out: &mut [u8]) -> Result<usize, ExceptionCode> {
         out[..data.len()].copy_from_slice(data);

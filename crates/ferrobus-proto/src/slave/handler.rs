@@ -140,10 +140,11 @@ pub trait Handler {
         Err(ExceptionCode::IllegalFunction)
     }
 
-    /// 0x2B/0x0E: the value of device identification object `id`, or `None` if the device
-    /// does not have it. Objects 0x00–0x02 (vendor, product code, revision) are mandatory: a
-    /// device without object 0x00 answers 0x2B/0x0E with exception 01.
-    fn device_object(&self, unit: u8, id: u8) -> Option<&[u8]> {
+    /// 0x2B/0x0E: copies the value of device identification object `id` into `out` (255
+    /// bytes: longer values are cut) and returns its length, or `None` if the device does not
+    /// have it. Objects 0x00–0x02 (vendor, product code, revision) are mandatory: a device
+    /// without object 0x00 answers 0x2B/0x0E with exception 01.
+    fn device_object(&mut self, unit: u8, id: u8, out: &mut [u8]) -> Option<usize> {
         None
     }
 

@@ -305,6 +305,11 @@ impl<F: Framing> Slave<F> {
         self.apply();
     }
 
+    /// When the pending reply is due, if there is one.
+    pub fn reply_due(&self) -> Option<Instant> {
+        self.core.tx_due
+    }
+
     /// The reply to write now, if one is due: copies it into `buf` (which should hold
     /// [`MAX_TX_LEN`] bytes) and returns its length.
     pub fn poll_transmit(&mut self, now: Instant, buf: &mut [u8]) -> Option<usize> {

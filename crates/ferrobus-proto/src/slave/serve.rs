@@ -188,23 +188,20 @@ fn read_device_id<H: Handler + ?Sized>(
     q: ReadDeviceId,
     out: &mut [u8; MAX_PDU_LEN],
 ) -> Result<usize, ExceptionCode> {
-    let has = |id: u8| handler.device_object(unit, id).is_some();
+    let mut value = [0u8; 255];
+    let mut has = |id: u8| handler.device_object(unit, id, &mut value).is_some();
     if !has(0x00) {
         return Err(ExceptionCode::IllegalFunction);
     }
     // Conformity: the highest category the device has objects in, with bit 7 set because
     // individual access (code 04) is always supported.
-    let level = if (0x80..=0xFF).any(has) {
+    let level = if (0x80..=0xFF).any(&mut has) {
         0x83
-    } else if (0x03..=0x7F).any(has) {
+    } else if (0x03..=0x7F).any(&mut has) {
         0x82
     } else {
         0x81
     };
-    let mut objects = [0u8; DeviceIdentification::MAX_OBJECT_BYTES];
-    let mut w = Writer::new(&mut objects);
-    let mut count = 0u8;
-    let mut next = None;
     let (first, last) = match q.code() {
         ReadDeviceIdCode::Specific => {
             if !has(q.object_id()) {
@@ -218,18 +215,19 @@ fn read_device_id<H: Handler + ?Sized>(
             (first, last)
         }
     };
+    let mut objects = [0u8; DeviceIdentification::MAX_OBJECT_BYTES];
+    let mut w = Writer::new(&mut objects);
+    let mut count = 0u8;
+    let mut next = None;
     for id in first..=last {
-        let Some(value) = handler.device_object(unit, id) else {
-            continue;
-        };
-        let value = value.get(..usize::from(u8::MAX)).unwrap_or(value);
+        let Some(n) = handler.device_object(unit, id, &mut value) else { continue };
+        let value = value.get(..n).unwrap_or(&value);
         let fits = w.position().saturating_add(2).saturating_add(value.len()) <= DeviceIdentification::MAX_OBJECT_BYTES;
         if !fits {
             next = Some(id);
             break;
         }
-        let _ =
-            w.u8(id).and_then(|()| w.u8(u8::try_from(value.len()).unwrap_or(u8::MAX))).and_then(|()| w.bytes(value));
+        let _ = w.u8(id).and_then(|()| w.u8(u8::try_from(value.len()).unwrap_or(u8::MAX))).and_then(|()| w.bytes(value));
         count = count.saturating_add(1);
     }
     let used = w.position();

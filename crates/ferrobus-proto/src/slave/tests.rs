@@ -121,8 +121,10 @@ impl Handler for Device {
         out[..self.fifo.len()].copy_from_slice(&self.fifo);
         Ok(self.fifo.len())
     }
-    fn device_object(&self, _: u8, id: u8) -> Option<&[u8]> {
-        self.objects.iter().find(|(i, _)| *i == id).map(|(_, v)| v.as_slice())
+    fn device_object(&mut self, _: u8, id: u8, out: &mut [u8]) -> Option<usize> {
+        let (_, value) = self.objects.iter().find(|(i, _)| *i == id)?;
+        out[..value.len()].copy_from_slice(value);
+        Some(value.len())
     }
     fn custom(&mut self, _: u8, function: u8, data: &[u8], out: &mut [u8]) -> Result<usize, ExceptionCode> {
         if function != 0x41 {

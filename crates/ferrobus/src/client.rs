@@ -1,0 +1,483 @@
+//! The client: a cheap, cloneable handle to one bus.
+//!
+//! Every clone talks to the same driver task, which puts one request on the bus at a time, in
+//! the order they come: many tasks can poll many devices through one port. Each request has a
+//! timeout and a number of retries (from the client's defaults, or [`Client::with_timeout`]
+//! and [`Client::with_retries`]); unit 0 on a serial line is a broadcast and returns as soon
+//! as the turnaround delay has passed.
+//!
+//! ```no_run
+//! # async fn demo() -> Result<(), ferrobus::Error> {
+//! use ferrobus::{Client, ClientConfig, SerialConfig, Transport};
+//! use ferrobus_proto::frame::LineConfig;
+//!
+//! let line = LineConfig::new(9600).expect("a baud rate");
+//! let client = Client::connect(Transport::rtu(SerialConfig::new("/dev/ttyUSB0", line)), ClientConfig::default()).await?;
+//! let status = client.read_holding_registers(1, 0x0002, 2).await?;
+//! client.write_single_coil(1, 0x0000, true).await?;
+//! # Ok(()) }
+//! ```
+
+use std::time::Duration;
+
+use ferrobus_proto::codes::{DiagnosticCode, ReadDeviceIdCode};
+use ferrobus_proto::frame::ascii::AsciiCodec;
+use ferrobus_proto::master::{Master, MasterConfig};
+use ferrobus_proto::pdu::{
+    Bits, CommEventCounter, Custom, Diagnostic, FileRecordReads, FileRecordRef, FileRecordWrite, FileRecordWrites,
+    MAX_PDU_LEN, MaskWrite, MeiRequest, MeiResponse, NoData, ReadBits, ReadDeviceId, ReadFifo, ReadRegisters,
+    ReadWriteRegisters, Registers, Request, Response, WriteCoil, WriteCoils, WriteRegister, WriteRegisters,
+};
+use ferrobus_proto::{FunctionCode, PduError};
+use tokio::sync::{mpsc, oneshot};
+
+use crate::driver::{Command, Driver, Reply, parse_reply};
+use crate::error::Error;
+use crate::port::{Framing, Transport};
+
+/// How a unit that stops answering is skipped, so that it does not stall the others.
+#[derive(Clone, Copy, PartialEq, Eq, Debug)]
+pub struct Backoff {
+    /// Consecutive timed-out requests before the unit is skipped.
+    pub after: u32,
+    /// How long it is skipped the first time; each failed probe doubles it.
+    pub initial: Duration,
+    /// The longest it is skipped.
+    pub max: Duration,
+}
+
+impl Default for Backoff {
+    fn default() -> Self {
+        Backoff { after: 3, initial: Duration::from_secs(1), max: Duration::from_secs(30) }
+    }
+}
+
+/// Settings of a client.
+#[derive(Clone, Copy, PartialEq, Eq, Debug)]
+pub struct ClientConfig {
+    /// How long to wait for each reply once the request has left.
+    pub timeout: Duration,
+    /// How many times to resend a request that got no usable reply.
+    pub retries: u32,
+    /// The quiet time after a broadcast.
+    pub turnaround_delay: Duration,
+    /// Drop our own transmission when the adapter echoes it.
+    pub echo_suppression: bool,
+    /// Skip units that stop answering; `None` never skips.
+    pub backoff: Option<Backoff>,
+    /// Requests that may wait for the bus before `request` calls wait themselves.
+    pub queue: usize,
+}
+
+impl Default for ClientConfig {
+    fn default() -> Self {
+        let master = MasterConfig::default();
+        ClientConfig {
+            timeout: master.response_timeout,
+            retries: 0,
+            turnaround_delay: master.turnaround_delay,
+            echo_suppression: false,
+            backoff: Some(Backoff::default()),
+            queue: 64,
+        }
+    }
+}
+
+/// The timeout and retries of a request.
+#[derive(Clone, Copy, PartialEq, Eq, Debug)]
+pub struct RequestOptions {
+    /// How long to wait for the reply once the request has left.
+    pub timeout: Duration,
+    /// How many times to resend it.
+    pub retries: u32,
+}
+
+/// A device identification, read object by object until the device says no more follow.
+#[derive(Clone, PartialEq, Eq, Debug)]
+pub struct DeviceInfo {
+    /// The device's conformity level (0x01–0x03, 0x81–0x83).
+    pub conformity: u8,
+    /// The objects, by id.
+    pub objects: Vec<(u8, Vec<u8>)>,
+}
+
+/// A comm event log (0x0C).
+#[derive(Clone, PartialEq, Eq, Debug)]
+pub struct EventLog {
+    /// 0xFFFF while the device is busy.
+    pub status: u16,
+    /// The comm event counter.
+    pub event_count: u16,
+    /// The bus message count.
+    pub message_count: u16,
+    /// The events, most recent first.
+    pub events: Vec<u8>,
+}
+
+/// A handle to one bus. Clone it freely.
+#[derive(Clone, Debug)]
+pub struct Client {
+    commands: mpsc::Sender<Command>,
+    options: RequestOptions,
+    framing: Framing,
+}
+
+impl Client {
+    /// Opens the transport (so that a wrong port or an unreachable host fails here, with a
+    /// clear error) and starts the driver on the current tokio runtime.
+    pub async fn connect(transport: Transport, config: ClientConfig) -> Result<Client, Error> {
+        let port = transport
+            .connector()
+            .connect()
+            .await
+            .map_err(|e| Error::io(format!("opening {}", transport.describe()), e))?;
+        Ok(Self::start(transport, config, Some(port)))
+    }
+
+    /// Starts the driver without opening the transport: it is opened on the first request.
+    pub fn spawn(transport: Transport, config: ClientConfig) -> Client {
+        Self::start(transport, config, None)
+    }
+
+    fn start(transport: Transport, config: ClientConfig, port: Option<crate::port::BoxPort>) -> Client {
+        let (tx, rx) = mpsc::channel(config.queue.max(1));
+        let options = RequestOptions { timeout: config.timeout, retries: config.retries };
+        let framing = transport.framing();
+        let master = MasterConfig {
+            response_timeout: config.timeout,
+            turnaround_delay: config.turnaround_delay,
+            echo_suppression: config.echo_suppression,
+        };
+        match framing {
+            Framing::Rtu => {
+                let driver = Driver::new(Master::new(transport.rtu_codec(), master), transport, config, port);
+                tokio::spawn(driver.run(rx));
+            }
+            Framing::Ascii => {
+                let codec: AsciiCodec = transport.ascii_codec();
+                let driver = Driver::new(Master::new(codec, master), transport, config, port);
+                tokio::spawn(driver.run(rx));
+            }
+            Framing::Mbap => {
+                let driver = Driver::new(Master::new(Transport::mbap_codec(), master), transport, config, port);
+                tokio::spawn(driver.run(rx));
+            }
+        }
+        Client { commands: tx, options, framing }
+    }
+
+    /// The same client with another timeout for its requests.
+    #[must_use]
+    pub fn with_timeout(&self, timeout: Duration) -> Client {
+        Client { options: RequestOptions { timeout, ..self.options }, ..self.clone() }
+    }
+
+    /// The same client with another number of retries.
+    #[must_use]
+    pub fn with_retries(&self, retries: u32) -> Client {
+        Client { options: RequestOptions { retries, ..self.options }, ..self.clone() }
+    }
+
+    /// The timeout and retries of this handle's requests.
+    pub fn options(&self) -> RequestOptions {
+        self.options
+    }
+
+    /// Whether unit 0 is a broadcast here (serial framings).
+    fn broadcasts(&self, unit: u8) -> bool {
+        unit == ferrobus_proto::codes::unit::BROADCAST && self.framing != Framing::Mbap
+    }
+
+    async fn send(&self, unit: u8, pdu: Vec<u8>, raw: bool) -> Result<Reply, Error> {
+        let (reply, rx) = oneshot::channel();
+        let command = Command { unit, pdu, raw, options: self.options, reply };
+        self.commands.send(command).await.map_err(|_| Error::Closed)?;
+        rx.await.map_err(|_| Error::Closed)?
+    }
+
+    /// Sends `request` to `unit` and returns the reply PDU (function code first), checked
+    /// against the request; `None` for a request that gets no reply (a broadcast).
+    pub async fn request(&self, unit: u8, request: &Request<'_>) -> Result<Option<Vec<u8>>, Error> {
+        let mut pdu = vec![0u8; MAX_PDU_LEN];
+        let n =
+            request.emit(&mut pdu).map_err(|_| Error::InvalidRequest(PduError::TooLong { len: MAX_PDU_LEN + 1 }))?;
+        pdu.truncate(n);
+        match self.send(unit, pdu, false).await? {
+            Reply::Pdu(pdu) => Ok(Some(pdu)),
+            Reply::Sent => Ok(None),
+        }
+    }
+
+    /// Sends any PDU, valid or not, and returns the reply PDU unchecked: for probing devices.
+    /// An exception reply is still [`Error::Exception`].
+    pub async fn raw(&self, unit: u8, pdu: &[u8]) -> Result<Option<Vec<u8>>, Error> {
+        if pdu.is_empty() || pdu.len() > MAX_PDU_LEN {
+            return Err(Error::InvalidRequest(PduError::TooLong { len: pdu.len() }));
+        }
+        match self.send(unit, pdu.to_vec(), true).await? {
+            Reply::Pdu(pdu) => Ok(Some(pdu)),
+            Reply::Sent => Ok(None),
+        }
+    }
+
+    /// Sends a request that must be answered and hands its parsed reply to `read`.
+    async fn query<T>(
+        &self,
+        unit: u8,
+        request: &Request<'_>,
+        read: impl FnOnce(Response<'_>) -> Option<T>,
+    ) -> Result<T, Error> {
+        if self.broadcasts(unit) {
+            return Err(Error::InvalidRequest(PduError::InvalidField {
+                field: "unit (a broadcast gets no reply to read)",
+                value: 0,
+            }));
+        }
+        let pdu = self.request(unit, request).await?.ok_or(Error::Closed)?;
+        let response = parse_reply(&pdu)?;
+        let function = response.function();
+        read(response).ok_or(Error::BadReply {
+            unit,
+            error: ferrobus_proto::master::MasterError::Mismatch {
+                field: "function code",
+                expected: u16::from(request.function().value()),
+                received: u16::from(function.value()),
+            },
+        })
+    }
+
+    /// Sends a write; a broadcast returns once the turnaround has passed.
+    async fn execute(&self, unit: u8, request: &Request<'_>) -> Result<(), Error> {
+        self.request(unit, request).await.map(|_| ())
+    }
+
+    /// 0x01: `count` coils from `start`.
+    pub async fn read_coils(&self, unit: u8, start: u16, count: u16) -> Result<Vec<bool>, Error> {
+        let request = Request::ReadCoils(ReadBits::new(start, count)?);
+        self.query(unit, &request, |r| match r {
+            Response::ReadCoils(v) => Some(v.values().iter().take(usize::from(count)).collect()),
+            _ => None,
+        })
+        .await
+    }
+
+    /// 0x02: `count` discrete inputs from `start`.
+    pub async fn read_discrete_inputs(&self, unit: u8, start: u16, count: u16) -> Result<Vec<bool>, Error> {
+        let request = Request::ReadDiscreteInputs(ReadBits::new(start, count)?);
+        self.query(unit, &request, |r| match r {
+            Response::ReadDiscreteInputs(v) => Some(v.values().iter().take(usize::from(count)).collect()),
+            _ => None,
+        })
+        .await
+    }
+
+    /// 0x03: `count` holding registers from `start`.
+    pub async fn read_holding_registers(&self, unit: u8, start: u16, count: u16) -> Result<Vec<u16>, Error> {
+        let request = Request::ReadHoldingRegisters(ReadRegisters::new(start, count)?);
+        self.query(unit, &request, |r| match r {
+            Response::ReadHoldingRegisters(v) => Some(v.values().iter().collect()),
+            _ => None,
+        })
+        .await
+    }
+
+    /// 0x04: `count` input registers from `start`.
+    pub async fn read_input_registers(&self, unit: u8, start: u16, count: u16) -> Result<Vec<u16>, Error> {
+        let request = Request::ReadInputRegisters(ReadRegisters::new(start, count)?);
+        self.query(unit, &request, |r| match r {
+            Response::ReadInputRegisters(v) => Some(v.values().iter().collect()),
+            _ => None,
+        })
+        .await
+    }
+
+    /// 0x05: sets one coil.
+    pub async fn write_single_coil(&self, unit: u8, address: u16, value: bool) -> Result<(), Error> {
+        self.execute(unit, &Request::WriteSingleCoil(WriteCoil { address, value })).await
+    }
+
+    /// 0x06: sets one register.
+    pub async fn write_single_register(&self, unit: u8, address: u16, value: u16) -> Result<(), Error> {
+        self.execute(unit, &Request::WriteSingleRegister(WriteRegister { address, value })).await
+    }
+
+    /// 0x0F: sets coils from `start` (1–1968).
+    pub async fn write_multiple_coils(&self, unit: u8, start: u16, values: &[bool]) -> Result<(), Error> {
+        let request = Request::WriteMultipleCoils(WriteCoils::new(start, Bits::from_values(values))?);
+        self.execute(unit, &request).await
+    }
+
+    /// 0x10: sets registers from `start` (1–123).
+    pub async fn write_multiple_registers(&self, unit: u8, start: u16, values: &[u16]) -> Result<(), Error> {
+        let request = Request::WriteMultipleRegisters(WriteRegisters::new(start, Registers::from_values(values))?);
+        self.execute(unit, &request).await
+    }
+
+    /// 0x16: `register = (register AND and_mask) OR (or_mask AND NOT and_mask)`.
+    pub async fn mask_write_register(&self, unit: u8, address: u16, and_mask: u16, or_mask: u16) -> Result<(), Error> {
+        self.execute(unit, &Request::MaskWriteRegister(MaskWrite { address, and_mask, or_mask })).await
+    }
+
+    /// 0x17: writes `values` from `write_start`, then reads `read_count` from `read_start`.
+    pub async fn read_write_multiple_registers(
+        &self,
+        unit: u8,
+        read_start: u16,
+        read_count: u16,
+        write_start: u16,
+        values: &[u16],
+    ) -> Result<Vec<u16>, Error> {
+        let request = Request::ReadWriteMultipleRegisters(ReadWriteRegisters::new(
+            read_start,
+            read_count,
+            write_start,
+            Registers::from_values(values),
+        )?);
+        self.query(unit, &request, |r| match r {
+            Response::ReadWriteMultipleRegisters(v) => Some(v.values().iter().collect()),
+            _ => None,
+        })
+        .await
+    }
+
+    /// 0x07: the eight exception status bits.
+    pub async fn read_exception_status(&self, unit: u8) -> Result<u8, Error> {
+        self.query(unit, &Request::ReadExceptionStatus(NoData), |r| match r {
+            Response::ReadExceptionStatus(s) => Some(s.status),
+            _ => None,
+        })
+        .await
+    }
+
+    /// 0x08: a diagnostics sub-function with its data; returns the data of the reply.
+    /// 0x04 (Force Listen Only) gets no reply and returns empty data.
+    pub async fn diagnostics(&self, unit: u8, sub: DiagnosticCode, data: &[u8]) -> Result<Vec<u8>, Error> {
+        let request = Request::Diagnostics(Diagnostic::with_data(sub, data)?);
+        let Some(pdu) = self.request(unit, &request).await? else { return Ok(Vec::new()) };
+        match parse_reply(&pdu)? {
+            Response::Diagnostics(d) => Ok(d.data().to_vec()),
+            _ => Err(Error::Closed),
+        }
+    }
+
+    /// 0x08 with a sub-function that returns a counter (0x0B–0x12), or any that takes a word.
+    pub async fn diagnostic_word(&self, unit: u8, sub: DiagnosticCode, word: u16) -> Result<u16, Error> {
+        let data = self.diagnostics(unit, sub, &word.to_be_bytes()).await?;
+        match *data {
+            [hi, lo] => Ok(u16::from_be_bytes([hi, lo])),
+            _ => Err(Error::BadReply {
+                unit,
+                error: ferrobus_proto::master::MasterError::Mismatch {
+                    field: "diagnostic data (bytes)",
+                    expected: 2,
+                    received: u16::try_from(data.len()).unwrap_or(u16::MAX),
+                },
+            }),
+        }
+    }
+
+    /// 0x0B: the comm event counter and status.
+    pub async fn get_comm_event_counter(&self, unit: u8) -> Result<CommEventCounter, Error> {
+        self.query(unit, &Request::GetCommEventCounter(NoData), |r| match r {
+            Response::GetCommEventCounter(c) => Some(c),
+            _ => None,
+        })
+        .await
+    }
+
+    /// 0x0C: the comm event log.
+    pub async fn get_comm_event_log(&self, unit: u8) -> Result<EventLog, Error> {
+        self.query(unit, &Request::GetCommEventLog(NoData), |r| match r {
+            Response::GetCommEventLog(l) => Some(EventLog {
+                status: l.status(),
+                event_count: l.event_count(),
+                message_count: l.message_count(),
+                events: l.events().to_vec(),
+            }),
+            _ => None,
+        })
+        .await
+    }
+
+    /// 0x11: the server id, run indicator and additional data, as the device sends them.
+    pub async fn report_server_id(&self, unit: u8) -> Result<Vec<u8>, Error> {
+        self.query(unit, &Request::ReportServerId(NoData), |r| match r {
+            Response::ReportServerId(id) => Some(id.data().to_vec()),
+            _ => None,
+        })
+        .await
+    }
+
+    /// 0x14: reads each of `refs`; one register list per sub-request.
+    pub async fn read_file_record(&self, unit: u8, refs: &[FileRecordRef]) -> Result<Vec<Vec<u16>>, Error> {
+        let request = Request::ReadFileRecord(FileRecordReads::new(refs)?);
+        self.query(unit, &request, |r| match r {
+            Response::ReadFileRecord(subs) => Some(subs.iter().map(|regs| regs.iter().collect()).collect()),
+            _ => None,
+        })
+        .await
+    }
+
+    /// 0x15: writes `values` from `record` of `file`.
+    pub async fn write_file_record(&self, unit: u8, file: u16, record: u16, values: &[u16]) -> Result<(), Error> {
+        let writes = [FileRecordWrite { file, record, data: Registers::from_values(values) }];
+        self.execute(unit, &Request::WriteFileRecord(FileRecordWrites::new(&writes)?)).await
+    }
+
+    /// 0x18: the FIFO queue behind the pointer register `address`.
+    pub async fn read_fifo_queue(&self, unit: u8, address: u16) -> Result<Vec<u16>, Error> {
+        self.query(unit, &Request::ReadFifoQueue(ReadFifo { address }), |r| match r {
+            Response::ReadFifoQueue(f) => Some(f.values().iter().collect()),
+            _ => None,
+        })
+        .await
+    }
+
+    /// 0x2B/0x0E: every object of the category `code` (basic, regular, extended), following
+    /// "more follows" across as many transactions as the device needs; or, with
+    /// [`ReadDeviceIdCode::Specific`], the one object `object_id`.
+    pub async fn read_device_identification(
+        &self,
+        unit: u8,
+        code: ReadDeviceIdCode,
+        object_id: u8,
+    ) -> Result<DeviceInfo, Error> {
+        let mut info = DeviceInfo { conformity: 0, objects: Vec::new() };
+        let mut next = object_id;
+        // At most one transaction per object id: a device that keeps saying "more follows"
+        // without moving on cannot hold us forever.
+        for _ in 0..=u8::MAX {
+            let request = Request::EncapsulatedInterface(MeiRequest::ReadDeviceId(ReadDeviceId::new(code, next)?));
+            let (more, next_id) = self
+                .query(unit, &request, |r| match r {
+                    Response::EncapsulatedInterface(MeiResponse::ReadDeviceId(id)) => {
+                        info.conformity = id.conformity();
+                        info.objects.extend(id.objects().iter().map(|o| (o.id, o.value.to_vec())));
+                        Some((id.more_follows(), id.next_object_id()))
+                    }
+                    _ => None,
+                })
+                .await?;
+            if !more || code == ReadDeviceIdCode::Specific || next_id <= next {
+                break;
+            }
+            next = next_id;
+        }
+        Ok(info)
+    }
+
+    /// A custom function code with its data; returns the reply's data.
+    pub async fn custom(&self, unit: u8, function: u8, data: &[u8]) -> Result<Vec<u8>, Error> {
+        let request = Request::Custom(Custom::new(function, data)?);
+        self.query(unit, &request, |r| match r {
+            Response::Custom(c) if c.function() == function => Some(c.data().to_vec()),
+            _ => None,
+        })
+        .await
+    }
+
+    /// The function code of a request PDU, for messages.
+    pub fn function_of(pdu: &[u8]) -> FunctionCode {
+        FunctionCode::from_u8(pdu.first().copied().unwrap_or_default())
+    }
+}

@@ -1,0 +1,275 @@
+//! The client's driver task: runs the core master engine over a port.
+//!
+//! It knows no Modbus. It feeds the engine the bytes it reads with the time they arrived,
+//! sleeps until the engine's next deadline, writes what the engine hands it, and reopens the
+//! port after an IO error. Everything else — gaps, matching, timeouts — is the engine's.
+//! On top it adds what needs more than one transaction: retries, and per-unit backoff so
+//! that a dead device costs one timeout per backoff period instead of one per poll.
+
+use std::collections::HashMap;
+use std::time::Duration;
+
+use ferrobus_proto::FunctionCode;
+use ferrobus_proto::frame::Framing;
+use ferrobus_proto::master::{Completion, MAX_TX_LEN, Master, MasterConfig, MasterError};
+use ferrobus_proto::pdu::{MAX_PDU_LEN, Request, Response};
+use tokio::io::{AsyncReadExt, AsyncWriteExt};
+use tokio::sync::{mpsc, oneshot};
+
+use crate::client::{Backoff, ClientConfig, RequestOptions};
+use crate::clock::Clock;
+use crate::error::Error;
+use crate::port::{BoxPort, Rs485, Transport};
+
+/// One request for the driver.
+pub(crate) struct Command {
+    pub(crate) unit: u8,
+    /// The request PDU, function code first.
+    pub(crate) pdu: Vec<u8>,
+    /// Send as is and return the reply unparsed.
+    pub(crate) raw: bool,
+    pub(crate) options: RequestOptions,
+    pub(crate) reply: oneshot::Sender<Result<Reply, Error>>,
+}
+
+/// A successful outcome.
+#[derive(Debug)]
+pub(crate) enum Reply {
+    /// The reply PDU.
+    Pdu(Vec<u8>),
+    /// Sent; no reply is expected (broadcast, 0x08/0x04).
+    Sent,
+}
+
+/// How a unit has been answering.
+#[derive(Debug, Default)]
+struct Health {
+    failures: u32,
+    skip_until: Option<tokio::time::Instant>,
+    period: Duration,
+}
+
+pub(crate) struct Driver<F> {
+    master: Master<F>,
+    transport: Transport,
+    config: ClientConfig,
+    port: Option<BoxPort>,
+    clock: Clock,
+    health: HashMap<u8, Health>,
+    rx: Box<[u8; 1024]>,
+    tx: Box<[u8; MAX_TX_LEN]>,
+}
+
+impl<F: Framing + Send + 'static> Driver<F> {
+    pub(crate) fn new(master: Master<F>, transport: Transport, config: ClientConfig, port: Option<BoxPort>) -> Self {
+        Driver {
+            master,
+            transport,
+            config,
+            port,
+            clock: Clock::new(),
+            health: HashMap::new(),
+            rx: Box::new([0; 1024]),
+            tx: Box::new([0; MAX_TX_LEN]),
+        }
+    }
+
+    pub(crate) async fn run(mut self, mut commands: mpsc::Receiver<Command>) {
+        loop {
+            // Between requests, keep reading: the engine must know when the line was last
+            // busy, and stale bytes must not be taken for the next reply.
+            let command = match self.port.as_mut() {
+                Some(port) => tokio::select! {
+                    command = commands.recv() => command,
+                    read = port.read(&mut self.rx[..]) => {
+                        self.on_read(read);
+                        continue;
+                    }
+                },
+                None => commands.recv().await,
+            };
+            let Some(command) = command else { return };
+            let result = self.serve(&command).await;
+            let _ = command.reply.send(result);
+        }
+    }
+
+    fn on_read(&mut self, read: std::io::Result<usize>) {
+        match read {
+            Ok(0) => {
+                tracing::warn!(port = %self.transport.describe(), "the port closed; it will be reopened");
+                self.port = None;
+            }
+            Ok(n) => self.master.on_bytes(self.clock.now(), self.rx.get(..n).unwrap_or_default()),
+            Err(e) => {
+                tracing::warn!(port = %self.transport.describe(), "read failed, reopening on the next request: {e}");
+                self.port = None;
+            }
+        }
+    }
+
+    async fn serve(&mut self, command: &Command) -> Result<Reply, Error> {
+        let unit = command.unit;
+        let probe = self.check_health(unit)?;
+        let retries = if probe { 0 } else { command.options.retries };
+        let function = FunctionCode::from_u8(command.pdu.first().copied().unwrap_or_default());
+        let mut attempts = 0;
+        loop {
+            attempts += 1;
+            let result = self.transact(command).await;
+            let retry = matches!(result, Err(Error::Timeout { .. } | Error::BadReply { .. }));
+            if retry && attempts <= retries {
+                tracing::debug!(unit, %function, attempts, "retrying: {:?}", result);
+                continue;
+            }
+            self.record_health(unit, &result);
+            return match result {
+                Err(Error::Timeout { unit, waited, .. }) => Err(Error::Timeout { unit, waited, attempts }),
+                other => other,
+            };
+        }
+    }
+
+    /// One request on the line: open the port if needed, submit, drive the engine until it
+    /// completes.
+    async fn transact(&mut self, command: &Command) -> Result<Reply, Error> {
+        if self.port.is_none() {
+            let port = self.transport.connector().connect().await;
+            self.port = Some(port.map_err(|e| Error::io(format!("opening {}", self.transport.describe()), e))?);
+            self.master.abort();
+        }
+        self.master.set_config(MasterConfig {
+            response_timeout: command.options.timeout,
+            turnaround_delay: self.config.turnaround_delay,
+            echo_suppression: self.config.echo_suppression,
+        });
+        // Nothing is in flight between requests; make sure of it.
+        self.master.abort();
+        let now = self.clock.now();
+        let submitted = if command.raw {
+            self.master.submit_raw(now, command.unit, &command.pdu)
+        } else {
+            let request = Request::parse(&command.pdu)?;
+            self.master.submit(now, command.unit, &request)
+        };
+        if submitted.is_err() {
+            // Only a PDU longer than 253 bytes cannot be framed.
+            return Err(Error::InvalidRequest(ferrobus_proto::PduError::TooLong { len: command.pdu.len() }));
+        }
+        loop {
+            if let Some(n) = self.master.poll_transmit(self.clock.now(), &mut self.tx[..]) {
+                if let Err(e) = self.write(n).await {
+                    self.master.abort();
+                    self.port = None;
+                    return Err(Error::io(format!("writing to {}", self.transport.describe()), e));
+                }
+            }
+            if let Some(completion) = self.master.poll_event() {
+                return convert(command.unit, &command.pdu, completion);
+            }
+            let deadline = self.master.poll_timeout().map(|t| self.clock.to_tokio(t));
+            let Some(port) = self.port.as_mut() else {
+                return Err(Error::Closed);
+            };
+            tokio::select! {
+                read = port.read(&mut self.rx[..]) => match read {
+                    Ok(n) if n > 0 => self.master.on_bytes(self.clock.now(), self.rx.get(..n).unwrap_or_default()),
+                    Ok(_) => {
+                        self.master.abort();
+                        self.port = None;
+                        return Err(Error::io(
+                            format!("reading from {}", self.transport.describe()),
+                            std::io::ErrorKind::UnexpectedEof.into(),
+                        ));
+                    }
+                    Err(e) => {
+                        self.master.abort();
+                        self.port = None;
+                        return Err(Error::io(format!("reading from {}", self.transport.describe()), e));
+                    }
+                },
+                () = self.transport.timer().sleep_until(deadline) => self.master.handle_timeout(self.clock.now()),
+            }
+        }
+    }
+
+    /// Writes the engine's frame, switching the transmitter by RTS if asked to.
+    async fn write(&mut self, n: usize) -> std::io::Result<()> {
+        let Some(port) = self.port.as_mut() else { return Err(std::io::ErrorKind::NotConnected.into()) };
+        let bytes = self.tx.get(..n).unwrap_or_default();
+        let rts = self.transport.rs485() == Rs485::Rts;
+        if rts {
+            port.set_rts(true)?;
+        }
+        port.write_all(bytes).await?;
+        port.flush().await?;
+        if rts {
+            // The OS buffers the frame; hold RTS until its last character has left.
+            let timing = self.transport.timing();
+            tokio::time::sleep(timing.transmit_time(n).saturating_add(timing.char_time())).await;
+            port.set_rts(false)?;
+        }
+        Ok(())
+    }
+
+    /// Fails fast for a unit in backoff; returns whether this request is its probe.
+    fn check_health(&mut self, unit: u8) -> Result<bool, Error> {
+        let Some(health) = self.health.get(&unit) else { return Ok(false) };
+        match health.skip_until {
+            Some(until) => {
+                let now = tokio::time::Instant::now();
+                if now < until {
+                    return Err(Error::Backoff { unit, retry_in: until - now });
+                }
+                Ok(true)
+            }
+            None => Ok(false),
+        }
+    }
+
+    fn record_health(&mut self, unit: u8, result: &Result<Reply, Error>) {
+        let Some(Backoff { after, initial, max }) = self.config.backoff else { return };
+        if unit == ferrobus_proto::codes::unit::BROADCAST {
+            return;
+        }
+        match result {
+            // A reply, even an exception, shows the unit is alive.
+            Ok(_) | Err(Error::Exception { .. }) => {
+                self.health.remove(&unit);
+            }
+            Err(Error::Timeout { .. }) => {
+                let health = self.health.entry(unit).or_default();
+                health.failures += 1;
+                if health.failures >= after {
+                    health.period = if health.skip_until.is_some() { (health.period * 2).min(max) } else { initial };
+                    health.skip_until = Some(tokio::time::Instant::now() + health.period);
+                    tracing::info!(unit, period = ?health.period, "unit not answering; backing off");
+                }
+            }
+            Err(_) => {}
+        }
+    }
+}
+
+/// Turns the engine's completion into the driver's result.
+fn convert(unit: u8, pdu: &[u8], completion: Completion<'_>) -> Result<Reply, Error> {
+    let function = FunctionCode::from_u8(pdu.first().copied().unwrap_or_default());
+    match completion {
+        Completion::Response(response) => {
+            let mut buf = vec![0u8; MAX_PDU_LEN];
+            let n = response.emit(&mut buf).map_err(|_| Error::Closed)?;
+            buf.truncate(n);
+            Ok(Reply::Pdu(buf))
+        }
+        Completion::Raw(bytes) => Ok(Reply::Pdu(bytes.to_vec())),
+        Completion::Exception(code) => Err(Error::Exception { unit, function, code }),
+        Completion::Sent => Ok(Reply::Sent),
+        Completion::Failed(MasterError::Timeout { waited }) => Err(Error::Timeout { unit, waited, attempts: 1 }),
+        Completion::Failed(error) => Err(Error::BadReply { unit, error }),
+    }
+}
+
+/// Parses a reply PDU the driver returned; the engine has checked it already.
+pub(crate) fn parse_reply(pdu: &[u8]) -> Result<Response<'_>, Error> {
+    Response::parse(pdu).map_err(|e| Error::BadReply { unit: 0, error: MasterError::BadResponse(e) })
+}

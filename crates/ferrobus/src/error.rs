@@ -1,0 +1,114 @@
+//! The one error type of the async layer.
+//!
+//! It is flat on purpose: match on it once. "The device answered with an exception" is
+//! [`Error::Exception`], kept apart from everything that means "no usable answer came" —
+//! timeouts, broken frames, IO failures — so a caller can tell a refusing device from a
+//! silent one.
+
+use std::io;
+use std::sync::Arc;
+use std::time::Duration;
+
+use ferrobus_proto::master::MasterError;
+use ferrobus_proto::{ExceptionCode, FunctionCode, PduError};
+
+/// Everything that can go wrong with a request.
+#[derive(Clone, Debug, thiserror::Error)]
+pub enum Error {
+    /// The device refused the request with an exception code.
+    #[error("unit {unit} answered {function} with exception {code}")]
+    Exception {
+        /// The unit that answered.
+        unit: u8,
+        /// The function code of the request.
+        function: FunctionCode,
+        /// The exception code (named, or a vendor code such as 0x21).
+        code: ExceptionCode,
+    },
+    /// No reply came in time, after every retry.
+    #[error("no reply from unit {unit} within {} ms ({attempts} attempt{s})", waited.as_millis(), s = if *.attempts == 1 { "" } else { "s" })]
+    Timeout {
+        /// The unit asked.
+        unit: u8,
+        /// How long each attempt waited after the request had left.
+        waited: Duration,
+        /// How many times the request was sent.
+        attempts: u32,
+    },
+    /// A reply came but it was malformed, or did not answer the request.
+    #[error("bad reply from unit {unit}: {error}")]
+    BadReply {
+        /// The unit that answered.
+        unit: u8,
+        /// What was wrong with it.
+        error: MasterError,
+    },
+    /// The request itself is not valid Modbus (a quantity out of range, a value too big).
+    #[error("invalid request: {0}")]
+    InvalidRequest(PduError),
+    /// The unit failed repeatedly and is being skipped for a while so that it does not stall
+    /// the others; a probe goes out again when the time has passed.
+    #[error("unit {unit} is not answering; skipped for another {} ms", retry_in.as_millis())]
+    Backoff {
+        /// The unit.
+        unit: u8,
+        /// When the next probe may go out.
+        retry_in: Duration,
+    },
+    /// The port or connection failed (it is reopened on the next request).
+    #[error("{context}: {source}")]
+    Io {
+        /// What was being done, e.g. `"opening /dev/ttyUSB0"`.
+        context: String,
+        /// The OS error.
+        #[source]
+        source: Arc<io::Error>,
+    },
+    /// The client's driver has stopped (its runtime shut down).
+    #[error("the connection task has stopped")]
+    Closed,
+}
+
+impl Error {
+    /// The exception code, if the device refused the request.
+    pub fn exception(&self) -> Option<ExceptionCode> {
+        match self {
+            Error::Exception { code, .. } => Some(*code),
+            _ => None,
+        }
+    }
+
+    /// Whether the error is a timeout.
+    pub fn is_timeout(&self) -> bool {
+        matches!(self, Error::Timeout { .. })
+    }
+
+    pub(crate) fn io(context: impl Into<String>, source: io::Error) -> Self {
+        Error::Io { context: context.into(), source: Arc::new(source) }
+    }
+}
+
+impl From<PduError> for Error {
+    fn from(e: PduError) -> Self {
+        Error::InvalidRequest(e)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn messages_name_the_unit_and_what_happened() {
+        let e = Error::Exception {
+            unit: 5,
+            function: FunctionCode::ReadHoldingRegisters,
+            code: ExceptionCode::from_u8(0x21),
+        };
+        assert_eq!(e.to_string(), "unit 5 answered 0x03 Read Holding Registers with exception 0x21 (vendor-specific)");
+        assert_eq!(e.exception(), Some(ExceptionCode::Vendor(0x21)));
+        let t = Error::Timeout { unit: 1, waited: Duration::from_millis(500), attempts: 3 };
+        assert_eq!(t.to_string(), "no reply from unit 1 within 500 ms (3 attempts)");
+        assert!(t.is_timeout());
+    }
+}

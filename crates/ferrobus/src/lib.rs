@@ -1,0 +1,35 @@
+//! # ferrobus: Modbus on real ports, with tokio
+//!
+//! The async layer over [`ferrobus_proto`]'s engines. The engines decide everything that can
+//! be decided from bytes and time; this crate owns what they cannot: ports, sleeping,
+//! reconnecting, and sharing one bus between tasks.
+//!
+//! ```text
+//!   Client (clone it) ──requests──▶ driver task ─┬─ Master engine (ferrobus-proto)
+//!                                                └─ port: serial (serial2), TCP, pty, your stream
+//!   server::serve(Slave engine, port, Handler)        the same, for the other side
+//! ```
+//!
+//! - [`Client`]: typed async calls for every public function code and raw PDUs, per-request
+//!   timeout and retries, broadcast without waiting, per-unit backoff, echo suppression, and a
+//!   port that is reopened after it fails.
+//! - [`server`]: runs a slave engine over a port, or over each connection of a TCP listener,
+//!   with precise reply timing and a hook for fault injection.
+//! - [`port`]: serial ports (RS-485 by the adapter, the kernel or RTS; the USB latency timer),
+//!   TCP, RTU over TCP, and ptys made in-process.
+//!
+//! Errors are one flat [`Error`], where a device's exception is kept apart from timeouts and
+//! IO failures.
+
+pub mod client;
+pub mod clock;
+mod driver;
+pub mod error;
+pub mod port;
+pub mod server;
+pub mod timer;
+
+pub use client::{Backoff, Client, ClientConfig, DeviceInfo, EventLog, RequestOptions};
+pub use error::Error;
+pub use port::{Framing, Pty, Rs485, SerialConfig, Transport};
+pub use timer::Timer;

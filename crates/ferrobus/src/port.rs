@@ -1,0 +1,470 @@
+//! Byte streams and how to open them: serial ports (any tty, a socat pty included), TCP,
+//! and streams a program provides (the virtual line, tests).
+//!
+//! A [`Transport`] says which framing runs over which stream and how to (re)open it. The
+//! drivers open it when they start and again after an IO error: a lost port is reopened, not
+//! fatal.
+
+use std::fmt;
+use std::future::Future;
+use std::io;
+use std::path::{Path, PathBuf};
+use std::pin::Pin;
+use std::sync::Arc;
+use std::time::Duration;
+
+use ferrobus_proto::frame::ascii::AsciiCodec;
+use ferrobus_proto::frame::mbap::MbapCodec;
+use ferrobus_proto::frame::rtu::RtuCodec;
+use ferrobus_proto::frame::{DataBits, Expect, LineConfig, LineTiming, Parity, StopBits};
+use tokio::io::{AsyncRead, AsyncWrite};
+use tokio::net::TcpStream;
+
+use crate::timer::Timer;
+
+/// A byte stream a driver runs an engine over.
+pub trait Port: AsyncRead + AsyncWrite + Unpin + Send + 'static {
+    /// Drives the RS-485 transmitter by RTS: `true` just before a transmission, `false` once
+    /// it has left the wire. Streams without the line do nothing.
+    fn set_rts(&mut self, _on: bool) -> io::Result<()> {
+        Ok(())
+    }
+}
+
+impl Port for TcpStream {}
+impl Port for tokio::io::DuplexStream {}
+
+/// A serial port.
+impl Port for serial2_tokio::SerialPort {
+    fn set_rts(&mut self, on: bool) -> io::Result<()> {
+        serial2_tokio::SerialPort::set_rts(self, on)
+    }
+}
+
+/// A boxed port.
+pub type BoxPort = Box<dyn Port>;
+
+/// A future that opens a port.
+pub type Connecting = Pin<Box<dyn Future<Output = io::Result<BoxPort>> + Send>>;
+
+/// Opens a port, as many times as the driver needs it.
+pub trait Connector: Send + Sync + 'static {
+    /// Opens the port.
+    fn connect(&self) -> Connecting;
+    /// What is being opened, for errors and logs (`/dev/ttyUSB0`, `127.0.0.1:502`).
+    fn describe(&self) -> String;
+}
+
+/// How the RS-485 transmitter is switched on and off.
+#[derive(Clone, Copy, PartialEq, Eq, Debug, Default)]
+pub enum Rs485 {
+    /// The adapter does it (most USB RS-485 adapters).
+    #[default]
+    Auto,
+    /// The kernel's RS-485 mode (`TIOCSRS485`) switches RTS around each transmission.
+    Kernel,
+    /// ferrobus raises RTS before writing and drops it once the last character has left.
+    Rts,
+}
+
+/// A serial port and its settings.
+#[derive(Clone, PartialEq, Eq, Debug)]
+pub struct SerialConfig {
+    /// The tty, e.g. `/dev/ttyUSB0`, or a socat pty link.
+    pub path: PathBuf,
+    /// Baud, data bits, parity, stop bits.
+    pub line: LineConfig,
+    /// Transmitter direction control.
+    pub rs485: Rs485,
+    /// Lower the USB adapter's latency timer to 1 ms (FTDI adapters deliver received bytes
+    /// every 16 ms by default, which splits frames and slows every transaction).
+    pub low_latency: bool,
+}
+
+impl SerialConfig {
+    /// `path` at `line`, with the adapter driving RS-485 and the latency left alone.
+    pub fn new(path: impl Into<PathBuf>, line: LineConfig) -> Self {
+        SerialConfig { path: path.into(), line, rs485: Rs485::Auto, low_latency: false }
+    }
+}
+
+/// Opens a serial port with `config`.
+///
+/// A pseudo-terminal cannot always hold a parity setting (Linux refuses it on a pty opened a
+/// second time); the port is then opened without parity and a warning is logged — a pty has
+/// no wire for parity to protect.
+pub fn open_serial(config: &SerialConfig) -> io::Result<serial2_tokio::SerialPort> {
+    let port = match serial2_tokio::SerialPort::open(&config.path, settings(config.line)) {
+        Err(e) if e.raw_os_error() == Some(22) && config.line.parity != Parity::None && is_pty(&config.path) => {
+            tracing::warn!(path = %config.path.display(), "this pty refuses parity {:?}; using none", config.line.parity);
+            serial2_tokio::SerialPort::open(&config.path, settings(config.line.with_parity(Parity::None)))?
+        }
+        other => other?,
+    };
+    match config.rs485 {
+        Rs485::Kernel => port.set_rs4xx_mode(serial2_tokio::rs4xx::Rs485Config::new())?,
+        Rs485::Rts => port.set_rts(false)?,
+        Rs485::Auto => {}
+    }
+    if config.low_latency {
+        set_low_latency(&config.path);
+    }
+    Ok(port)
+}
+
+fn settings(line: LineConfig) -> impl FnOnce(serial2_tokio::Settings) -> io::Result<serial2_tokio::Settings> {
+    move |mut s| {
+        s.set_raw();
+        s.set_baud_rate(line.baud())?;
+        s.set_char_size(match line.data_bits {
+            DataBits::Seven => serial2_tokio::CharSize::Bits7,
+            DataBits::Eight => serial2_tokio::CharSize::Bits8,
+        });
+        s.set_parity(match line.parity {
+            Parity::None => serial2_tokio::Parity::None,
+            Parity::Even => serial2_tokio::Parity::Even,
+            Parity::Odd => serial2_tokio::Parity::Odd,
+        });
+        s.set_stop_bits(match line.stop_bits {
+            StopBits::One => serial2_tokio::StopBits::One,
+            StopBits::Two => serial2_tokio::StopBits::Two,
+        });
+        s.set_flow_control(serial2_tokio::FlowControl::None);
+        Ok(s)
+    }
+}
+
+fn is_pty(path: &Path) -> bool {
+    std::fs::canonicalize(path).is_ok_and(|p| p.starts_with("/dev/pts"))
+}
+
+/// Sets the latency timer of a USB serial adapter to 1 ms through sysfs, if it has one.
+fn set_low_latency(path: &Path) {
+    let Some(name) = std::fs::canonicalize(path).ok().and_then(|p| p.file_name().map(ToOwned::to_owned)) else {
+        return;
+    };
+    let timer = Path::new("/sys/class/tty").join(&name).join("device/latency_timer");
+    match std::fs::write(&timer, b"1") {
+        Ok(()) => tracing::debug!(path = %timer.display(), "latency timer set to 1 ms"),
+        Err(e) => tracing::warn!(path = %timer.display(), "cannot set the adapter's latency timer: {e}"),
+    }
+}
+
+/// Which framing runs over the stream.
+#[derive(Clone, Copy, PartialEq, Eq, Debug)]
+pub enum Framing {
+    /// RTU: binary frames with a CRC, separated by silence.
+    Rtu,
+    /// ASCII: `:` hex LRC CR LF.
+    Ascii,
+    /// Modbus/TCP: MBAP header, no CRC.
+    Mbap,
+}
+
+/// A framing over a stream, with its line timing.
+#[derive(Clone)]
+pub struct Transport {
+    framing: Framing,
+    rs485: Rs485,
+    timer: Timer,
+    timing: LineTiming,
+    frame_gap: Duration,
+    incomplete_timeout: Duration,
+    connector: Arc<dyn Connector>,
+}
+
+/// How long a PC waits for the rest of an RTU frame of known length: OS serial stacks and USB
+/// adapters deliver a frame in bursts separated by milliseconds, well above t3.5 at high
+/// baud rates. Noise costs nothing extra: the receiver resyncs past it anyway.
+pub const PC_INCOMPLETE_TIMEOUT: Duration = Duration::from_millis(20);
+
+/// The silence that ends an RTU frame of unknown length on a stream without a line (TCP).
+pub const STREAM_FRAME_GAP: Duration = Duration::from_millis(50);
+
+impl Transport {
+    /// RTU over a serial port.
+    pub fn rtu(config: SerialConfig) -> Self {
+        let timing = LineTiming::new(&config.line);
+        Transport {
+            framing: Framing::Rtu,
+            rs485: config.rs485,
+            timer: Timer::Precise,
+            timing,
+            frame_gap: timing.t3_5(),
+            incomplete_timeout: PC_INCOMPLETE_TIMEOUT,
+            connector: Arc::new(config),
+        }
+    }
+
+    /// ASCII over a serial port.
+    pub fn ascii(config: SerialConfig) -> Self {
+        let timing = LineTiming::new(&config.line);
+        Transport {
+            framing: Framing::Ascii,
+            rs485: config.rs485,
+            timer: Timer::Precise,
+            timing,
+            frame_gap: timing.t3_5(),
+            incomplete_timeout: PC_INCOMPLETE_TIMEOUT,
+            connector: Arc::new(config),
+        }
+    }
+
+    /// Modbus/TCP to `addr` (`host:port`).
+    pub fn tcp(addr: impl Into<String>) -> Self {
+        Transport {
+            framing: Framing::Mbap,
+            rs485: Rs485::Auto,
+            timer: Timer::Tokio,
+            timing: LineTiming::unpaced(),
+            frame_gap: STREAM_FRAME_GAP,
+            incomplete_timeout: STREAM_FRAME_GAP,
+            connector: Arc::new(TcpTarget(addr.into())),
+        }
+    }
+
+    /// RTU frames carried over TCP to `addr` (a serial gateway or a device that speaks it).
+    pub fn rtu_over_tcp(addr: impl Into<String>) -> Self {
+        Transport { framing: Framing::Rtu, ..Transport::tcp(addr) }
+    }
+
+    /// `framing` over streams opened by `connector`, with `timing` (exact: nothing is
+    /// stretched for OS latency — right for the virtual line and for tests), waiting with
+    /// tokio's timer (see [`Transport::with_timer`]).
+    pub fn custom(framing: Framing, timing: LineTiming, connector: impl Connector) -> Self {
+        Transport {
+            framing,
+            rs485: Rs485::Auto,
+            timer: Timer::Tokio,
+            timing,
+            frame_gap: timing.t3_5(),
+            incomplete_timeout: timing.t3_5(),
+            connector: Arc::new(connector),
+        }
+    }
+
+    /// Overrides t1.5.
+    #[must_use]
+    pub fn with_t1_5(mut self, t1_5: Duration) -> Self {
+        self.timing = self.timing.with_t1_5(t1_5);
+        self
+    }
+
+    /// Overrides t3.5: the silence before each transmission and the one that ends a frame of
+    /// unknown length.
+    #[must_use]
+    pub fn with_t3_5(mut self, t3_5: Duration) -> Self {
+        self.timing = self.timing.with_t3_5(t3_5);
+        self.frame_gap = t3_5;
+        self
+    }
+
+    /// Changes how deadlines are waited for: [`Timer::Precise`] for a real line,
+    /// [`Timer::Tokio`] for a paused test clock.
+    #[must_use]
+    pub fn with_timer(mut self, timer: Timer) -> Self {
+        self.timer = timer;
+        self
+    }
+
+    /// How deadlines are waited for.
+    pub fn timer(&self) -> Timer {
+        self.timer
+    }
+
+    /// Overrides how long to wait for the rest of a frame of known length.
+    #[must_use]
+    pub fn with_incomplete_timeout(mut self, timeout: Duration) -> Self {
+        self.incomplete_timeout = timeout;
+        self
+    }
+
+    /// The framing.
+    pub fn framing(&self) -> Framing {
+        self.framing
+    }
+
+    /// The line timing.
+    pub fn timing(&self) -> &LineTiming {
+        &self.timing
+    }
+
+    /// The RS-485 direction control.
+    pub fn rs485(&self) -> Rs485 {
+        self.rs485
+    }
+
+    /// What is being opened.
+    pub fn describe(&self) -> String {
+        self.connector.describe()
+    }
+
+    pub(crate) fn connector(&self) -> &Arc<dyn Connector> {
+        &self.connector
+    }
+
+    pub(crate) fn rtu_codec(&self) -> RtuCodec {
+        RtuCodec::new(self.timing, Expect::Both)
+            .with_frame_gap(self.frame_gap)
+            .with_incomplete_timeout(self.incomplete_timeout)
+    }
+
+    pub(crate) fn ascii_codec(&self) -> AsciiCodec {
+        AsciiCodec::new(self.timing)
+    }
+
+    pub(crate) fn mbap_codec() -> MbapCodec {
+        MbapCodec::new()
+    }
+}
+
+impl fmt::Debug for Transport {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.debug_struct("Transport")
+            .field("framing", &self.framing)
+            .field("target", &self.connector.describe())
+            .field("timing", &self.timing)
+            .finish_non_exhaustive()
+    }
+}
+
+impl Connector for SerialConfig {
+    fn connect(&self) -> Connecting {
+        let config = self.clone();
+        Box::pin(async move { open_serial(&config).map(|p| Box::new(p) as BoxPort) })
+    }
+
+    fn describe(&self) -> String {
+        format!("{} at {}", self.path.display(), self.line)
+    }
+}
+
+struct TcpTarget(String);
+
+impl Connector for TcpTarget {
+    fn connect(&self) -> Connecting {
+        let addr = self.0.clone();
+        Box::pin(async move {
+            let stream = TcpStream::connect(&addr).await?;
+            stream.set_nodelay(true)?;
+            Ok(Box::new(stream) as BoxPort)
+        })
+    }
+
+    fn describe(&self) -> String {
+        self.0.clone()
+    }
+}
+
+/// A connector from a closure, for streams a program makes itself.
+pub struct ConnectWith<F> {
+    open: F,
+    name: String,
+}
+
+impl<F> ConnectWith<F>
+where
+    F: Fn() -> Connecting + Send + Sync + 'static,
+{
+    /// A connector named `name` that calls `open`.
+    pub fn new(name: impl Into<String>, open: F) -> Self {
+        ConnectWith { open, name: name.into() }
+    }
+}
+
+impl<F> Connector for ConnectWith<F>
+where
+    F: Fn() -> Connecting + Send + Sync + 'static,
+{
+    fn connect(&self) -> Connecting {
+        (self.open)()
+    }
+
+    fn describe(&self) -> String {
+        self.name.clone()
+    }
+}
+
+/// A pseudo-terminal pair made in this process: a port for us, and the path of its other
+/// end for another program (a client, a peer stack) to open, as a serial port would be.
+#[derive(Debug)]
+pub struct Pty {
+    /// Our end (the pty master).
+    pub port: PtyPort,
+    /// The path of the other end, e.g. `/dev/pts/7`.
+    pub path: PathBuf,
+    /// The other end, kept open so that the pty survives its user closing it.
+    _peer: serial2::SerialPort,
+}
+
+impl Pty {
+    /// Makes a pty pair. Needs a tokio runtime.
+    pub fn open() -> io::Result<Pty> {
+        use std::os::fd::{AsRawFd, OwnedFd};
+        let (ours, peer) = serial2::SerialPort::pair()?;
+        let path = std::fs::read_link(format!("/proc/self/fd/{}", peer.as_raw_fd()))?;
+        // serial2 opens the master non-blocking, as AsyncFd needs.
+        let file = std::fs::File::from(OwnedFd::from(ours));
+        // SAFETY: `file` moves into the AsyncFd, which owns it until the AsyncFd is dropped;
+        // no other handle to the descriptor exists (serial2's port was consumed), so it
+        // cannot be closed or reused while it is registered. The one unsafe line of the
+        // workspace: tokio has no safe way to register an owned descriptor.
+        #[allow(unsafe_code)]
+        let fd = unsafe { tokio::io::unix::AsyncFd::register(file) }?;
+        Ok(Pty { port: PtyPort { fd }, path, _peer: peer })
+    }
+}
+
+/// The master side of a [`Pty`], as an async port.
+#[derive(Debug)]
+pub struct PtyPort {
+    fd: tokio::io::unix::AsyncFd<std::fs::File>,
+}
+
+impl Port for PtyPort {}
+
+impl AsyncRead for PtyPort {
+    fn poll_read(
+        self: Pin<&mut Self>,
+        cx: &mut std::task::Context<'_>,
+        buf: &mut tokio::io::ReadBuf<'_>,
+    ) -> std::task::Poll<io::Result<()>> {
+        use std::io::Read;
+        loop {
+            let mut guard = std::task::ready!(self.fd.poll_read_ready(cx))?;
+            let unfilled = buf.initialize_unfilled();
+            match guard.try_io(|fd| fd.get_ref().read(unfilled)) {
+                Ok(Ok(n)) => {
+                    buf.advance(n);
+                    return std::task::Poll::Ready(Ok(()));
+                }
+                Ok(Err(e)) => return std::task::Poll::Ready(Err(e)),
+                Err(_would_block) => {}
+            }
+        }
+    }
+}
+
+impl AsyncWrite for PtyPort {
+    fn poll_write(
+        self: Pin<&mut Self>,
+        cx: &mut std::task::Context<'_>,
+        data: &[u8],
+    ) -> std::task::Poll<io::Result<usize>> {
+        use std::io::Write;
+        loop {
+            let mut guard = std::task::ready!(self.fd.poll_write_ready(cx))?;
+            if let Ok(result) = guard.try_io(|fd| fd.get_ref().write(data)) {
+                return std::task::Poll::Ready(result);
+            }
+        }
+    }
+
+    fn poll_flush(self: Pin<&mut Self>, _: &mut std::task::Context<'_>) -> std::task::Poll<io::Result<()>> {
+        std::task::Poll::Ready(Ok(()))
+    }
+
+    fn poll_shutdown(self: Pin<&mut Self>, _: &mut std::task::Context<'_>) -> std::task::Poll<io::Result<()>> {
+        std::task::Poll::Ready(Ok(()))
+    }
+}
