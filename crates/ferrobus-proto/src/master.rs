@@ -485,7 +485,7 @@ impl Core {
             let request = Request::parse(self.request.get(..self.request_len).unwrap_or_default());
             match (request, Response::parse(frame.pdu)) {
                 (_, Err(e)) | (Err(e), _) => Outcome::Failed(MasterError::BadResponse(e)),
-                (_, Ok(Response::Exception(e))) => Outcome::Exception(e.code),
+                (_, Ok(Response::Exception(e))) => Outcome::Exception(e.code()),
                 (Ok(request), Ok(response)) => match check_reply(&request, &response) {
                     Ok(bits) => Outcome::Response { bits },
                     Err(e) => Outcome::Failed(e),
@@ -589,12 +589,12 @@ fn check_reply(request: &Request<'_>, response: &Response<'_>) -> Result<Option<
             field("OR mask", q.or_mask, r.or_mask)?;
         }
         (Request::WriteMultipleCoils(q), Response::WriteMultipleCoils(r)) => {
-            field("start address", q.start(), r.start)?;
-            field("quantity", q.quantity(), r.quantity)?;
+            field("start address", q.start(), r.start())?;
+            field("quantity", q.quantity(), r.quantity())?;
         }
         (Request::WriteMultipleRegisters(q), Response::WriteMultipleRegisters(r)) => {
-            field("start address", q.start(), r.start)?;
-            field("quantity", q.quantity(), r.quantity)?;
+            field("start address", q.start(), r.start())?;
+            field("quantity", q.quantity(), r.quantity())?;
         }
         (Request::WriteFileRecord(q), Response::WriteFileRecord(r)) => {
             if q != r {

@@ -274,11 +274,11 @@ fn every_function_code_round_trips_between_master_and_slave() {
         (Request::GetCommEventCounter(NoData), "GetCommEventCounter(CommEventCounter { status: 0, event_count: 9 })"),
         (
             Request::WriteMultipleCoils(WriteCoils::new(10, Bits::from_values(&coils)).unwrap()),
-            "WriteMultipleCoils(WrittenRange { start: 10, quantity: 4 })",
+            "WriteMultipleCoils(WrittenCoils { start: 10, quantity: 4 })",
         ),
         (
             Request::WriteMultipleRegisters(WriteRegisters::new(0x0112, Registers::from_values(&regs)).unwrap()),
-            "WriteMultipleRegisters(WrittenRange { start: 274, quantity: 2 })",
+            "WriteMultipleRegisters(WrittenRegisters { start: 274, quantity: 2 })",
         ),
         (Request::ReportServerId(NoData), "ReportServerId(ServerId { data: [1, 255] })"),
         (Request::WriteFileRecord(FileRecordWrites::new(&file_writes).unwrap()), "WriteFileRecord([FileRecordWrite"),
@@ -318,7 +318,7 @@ fn the_seed_frames_cross_the_line_byte_for_byte() {
         1,
         &Request::WriteMultipleRegisters(WriteRegisters::new(0x0112, Registers::from_values(&regs)).unwrap()),
     );
-    assert_eq!(reply, "WriteMultipleRegisters(WrittenRange { start: 274, quantity: 2 })");
+    assert_eq!(reply, "WriteMultipleRegisters(WrittenRegisters { start: 274, quantity: 2 })");
     let frames = line.frames();
     assert_eq!(frames[0].3, [0x01, 0x10, 0x01, 0x12, 0x00, 0x02, 0x04, 0x0B, 0xB8, 0x00, 0x00, 0xFC, 0xEB]);
     assert_eq!(frames[1].3, [0x01, 0x10, 0x01, 0x12, 0x00, 0x02, 0xE0, 0x31]);

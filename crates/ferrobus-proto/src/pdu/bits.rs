@@ -96,7 +96,8 @@ impl Body<'_> for WriteCoil {
     }
 }
 
-/// 0x0F Write Multiple Coils: 1–1968 coils from `start` (§6.11).
+/// 0x0F Write Multiple Coils: 1–1968 coils from `start` (§6.11). Parsing also accepts the
+/// word-padded byte count of the Hitachi/Omron inverters; emitting always uses the spec's.
 #[derive(Clone, Copy, PartialEq, Eq, Debug)]
 pub struct WriteCoils<'a> {
     start: u16,
@@ -138,10 +139,14 @@ impl<'a> Body<'a> for WriteCoils<'a> {
         check_quantity(usize::from(quantity), 1, usize::from(Self::MAX))?;
         let byte_count = usize::from(r.u8()?);
         let expected = usize::from(quantity).div_ceil(8);
-        if byte_count != expected {
+        // The Hitachi/Omron inverters pad coil data to whole 16-bit words (3G3RX p.4-172:
+        // six coils with byte count 2). Accept that one padding byte and drop it.
+        let padded = expected % 2 == 1 && byte_count == expected.saturating_add(1);
+        if byte_count != expected && !padded {
             return Err(PduError::ByteCountMismatch { declared: byte_count, expected });
         }
-        let values = Bits::from_wire(r.bytes(byte_count)?, usize::from(quantity))?;
+        let data = r.bytes(byte_count)?;
+        let values = Bits::from_wire(data.get(..expected).unwrap_or_default(), usize::from(quantity))?;
         WriteCoils::new(start, values)
     }
     fn emit(&self, w: &mut Writer<'_>) -> Result<(), BufferTooSmall> {

@@ -235,7 +235,18 @@ impl<'a> Bits<'a> {
 
     pub(crate) fn emit(&self, w: &mut Writer<'_>) -> Result<(), BufferTooSmall> {
         match self.repr {
-            BitsRepr::Wire { bytes, .. } => w.bytes(bytes),
+            BitsRepr::Wire { bytes, count } => {
+                // Bits past `count` in the last byte (left over from a longer view that was
+                // truncated) go out as zeros, as the spec pads.
+                let (last, whole) = bytes.split_last().map_or((None, bytes), |(l, w)| (Some(*l), w));
+                w.bytes(whole)?;
+                let used = u32::try_from(count % 8).unwrap_or(0);
+                match last {
+                    Some(l) if used == 0 => w.u8(l),
+                    Some(l) => w.u8(l & 1u8.checked_shl(used).unwrap_or(0).wrapping_sub(1)),
+                    None => Ok(()),
+                }
+            }
             BitsRepr::Values(v) => v.chunks(8).try_for_each(|chunk| {
                 let byte = chunk.iter().enumerate().fold(0u8, |acc, (i, &on)| if on { acc | (1 << i) } else { acc });
                 w.u8(byte)

@@ -33,8 +33,9 @@ impl Body<'_> for ExceptionStatus {
 
 /// A 0x08 Diagnostics request or response (§6.8): a sub-function and its data.
 ///
-/// Every sub-function but 0x00 carries one 16-bit word; 0x00 Return Query Data carries any
-/// data and its response echoes it, so on RTU its length is found by the checksum or the gap.
+/// Every named sub-function but 0x00 carries one 16-bit word; 0x00 Return Query Data (and a
+/// sub-function the spec does not name) carries any data, and its response echoes it, so on
+/// RTU its length is found by the checksum or the gap.
 #[derive(Clone, Copy, PartialEq, Eq)]
 pub struct Diagnostic<'a> {
     sub_function: DiagnosticCode,
@@ -73,8 +74,16 @@ impl<'a> Diagnostic<'a> {
         Diagnostic { sub_function, data: DiagData::Word(word.to_be_bytes()) }
     }
 
-    /// A sub-function with arbitrary data (at most 250 bytes), as 0x00 Return Query Data takes.
+    /// A sub-function with its data: any data (at most 250 bytes) for 0x00 Return Query Data
+    /// and for sub-functions the spec does not name; exactly one word for the others.
     pub fn with_data(sub_function: DiagnosticCode, data: &'a [u8]) -> Result<Self, PduError> {
+        if takes_one_word(sub_function) && data.len() != 2 {
+            return Err(if data.len() < 2 {
+                PduError::Truncated { needed: 5, available: data.len().saturating_add(3) }
+            } else {
+                PduError::TrailingBytes { extra: data.len().saturating_sub(2) }
+            });
+        }
         check_quantity(data.len(), 0, Self::MAX_DATA)
             .map_err(|_| PduError::TooLong { len: data.len().saturating_add(3) })?;
         Ok(Diagnostic { sub_function, data: DiagData::Bytes(data) })
@@ -117,9 +126,20 @@ impl<'a> Body<'a> for Diagnostic<'a> {
     fn body_len(&self) -> usize {
         2usize.saturating_add(self.data().len())
     }
-    fn wire_len(_: &[u8]) -> WireLen {
-        WireLen::Probable(4)
+    fn wire_len(head: &[u8]) -> WireLen {
+        match head {
+            [hi, lo, ..] if takes_one_word(DiagnosticCode::from_u16(u16::from_be_bytes([*hi, *lo]))) => {
+                WireLen::Known(4)
+            }
+            [_, _, ..] => WireLen::Probable(4),
+            _ => WireLen::NeedMore,
+        }
     }
+}
+
+/// Whether a sub-function carries exactly one data word: every one the spec names but 0x00.
+fn takes_one_word(sub: DiagnosticCode) -> bool {
+    sub.name().is_some() && sub != DiagnosticCode::ReturnQueryData
 }
 
 /// The response to 0x0B Get Comm Event Counter (§6.9).

@@ -179,10 +179,12 @@ enum SubResponsesRepr<'a> {
 }
 
 impl<'a> FileSubResponses<'a> {
-    /// A response carrying one register list per sub-request, within 245 bytes in all.
+    /// A response carrying one register list (of at least one register) per sub-request,
+    /// within 245 bytes in all.
     pub fn new(records: &'a [Registers<'a>]) -> Result<Self, PduError> {
         let mut total = 0usize;
         for r in records {
+            check_quantity(r.len(), 1, MAX_READ_BYTES)?;
             total = total.saturating_add(2).saturating_add(r.byte_len());
         }
         check_quantity(total, 2, MAX_READ_BYTES)?;
@@ -251,8 +253,9 @@ impl<'a> Body<'a> for FileSubResponses<'a> {
         let mut check = Reader::new(bytes, 2);
         while check.remaining() > 0 {
             let len = usize::from(check.u8()?);
-            if len % 2 == 0 {
-                return Err(PduError::ByteCountMismatch { declared: len, expected: len.saturating_add(1) });
+            // Reference type + at least one register: an odd length of 3 or more.
+            if len % 2 == 0 || len < 3 {
+                return Err(PduError::ByteCountMismatch { declared: len, expected: len.max(2).saturating_add(1) });
             }
             reference_type(&mut check)?;
             check.bytes(len.saturating_sub(1))?;

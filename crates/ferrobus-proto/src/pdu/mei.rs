@@ -296,6 +296,9 @@ impl<'a> Body<'a> for MeiResponse<'a> {
             return Ok(MeiResponse::Other(RawMei::parse(mei, r)?));
         }
         let code = ReadDeviceIdCode::from_u8(r.u8()?);
+        if let ReadDeviceIdCode::Other(v) = code {
+            return Err(PduError::InvalidField { field: "read device id code", value: u16::from(v) });
+        }
         let conformity = r.u8()?;
         let more_follows = match r.u8()? {
             0x00 => false,

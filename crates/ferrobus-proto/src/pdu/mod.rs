@@ -44,7 +44,7 @@ pub use file::{
 pub use mei::{DeviceIdentification, DeviceObject, DeviceObjects, MeiRequest, MeiResponse, RawMei, ReadDeviceId};
 pub use registers::{
     BitValues, MaskWrite, ReadRegisters, ReadWriteRegisters, RegisterValues, WriteRegister, WriteRegisters,
-    WrittenRange,
+    WrittenCoils, WrittenRegisters,
 };
 
 use crate::codes::{ExceptionCode, FunctionCode};
@@ -167,10 +167,28 @@ impl<'a> Custom<'a> {
 /// set, then one exception code.
 #[derive(Clone, Copy, PartialEq, Eq, Debug)]
 pub struct ExceptionResponse {
+    function: FunctionCode,
+    code: ExceptionCode,
+}
+
+impl ExceptionResponse {
+    /// A refusal of a request with `function` (0x01–0x7F).
+    pub fn new(function: FunctionCode, code: ExceptionCode) -> Result<Self, PduError> {
+        if !function.is_valid_request_code() {
+            return Err(PduError::InvalidFunctionCode(function.value()));
+        }
+        Ok(ExceptionResponse { function, code })
+    }
+
     /// The function code of the request (without the exception bit).
-    pub function: FunctionCode,
+    pub fn function(&self) -> FunctionCode {
+        self.function
+    }
+
     /// Why the server refused.
-    pub code: ExceptionCode,
+    pub fn code(&self) -> ExceptionCode {
+        self.code
+    }
 }
 
 impl fmt::Display for ExceptionResponse {
@@ -276,7 +294,7 @@ macro_rules! pdu_table {
                 let mut r = Reader::new(body, 1);
                 let response = if fc & FunctionCode::EXCEPTION_BIT != 0 {
                     let function = FunctionCode::from_u8(fc & !FunctionCode::EXCEPTION_BIT);
-                    if function.value() == 0 {
+                    if !function.is_valid_request_code() {
                         return Err(PduError::InvalidFunctionCode(fc));
                     }
                     Response::Exception(ExceptionResponse { function, code: ExceptionCode::from_u8(r.u8()?) })
@@ -357,9 +375,9 @@ pdu_table! { 'a;
     /// 0x0C Get Comm Event Log.
     GetCommEventLog = GetCommEventLog => NoData, CommEventLog<'a>;
     /// 0x0F Write Multiple Coils.
-    WriteMultipleCoils = WriteMultipleCoils => WriteCoils<'a>, WrittenRange;
+    WriteMultipleCoils = WriteMultipleCoils => WriteCoils<'a>, WrittenCoils;
     /// 0x10 Write Multiple Registers.
-    WriteMultipleRegisters = WriteMultipleRegisters => WriteRegisters<'a>, WrittenRange;
+    WriteMultipleRegisters = WriteMultipleRegisters => WriteRegisters<'a>, WrittenRegisters;
     /// 0x11 Report Server ID.
     ReportServerId = ReportServerId => NoData, ServerId<'a>;
     /// 0x14 Read File Record.

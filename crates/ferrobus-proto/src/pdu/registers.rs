@@ -95,8 +95,9 @@ impl<'a> Body<'a> for RegisterValues<'a> {
 ///
 /// The response carries whole bytes; which of the bits count depends on the request. A parsed
 /// response therefore holds `8 × byte count` bits, and the master trims it to the quantity it
-/// asked for (see [`Bits::truncated`]).
-#[derive(Clone, Copy, PartialEq, Eq, Debug)]
+/// asked for (see [`Bits::truncated`]). Two values are equal when they put the same bytes on
+/// the wire: three bits `101` equal the eight bits `10100000` they are sent as.
+#[derive(Clone, Copy, Debug)]
 pub struct BitValues<'a> {
     values: Bits<'a>,
 }
@@ -113,6 +114,16 @@ impl<'a> BitValues<'a> {
         self.values
     }
 }
+
+impl PartialEq for BitValues<'_> {
+    fn eq(&self, other: &Self) -> bool {
+        let (a, b) = (self.values, other.values);
+        let bits = a.byte_len().saturating_mul(8);
+        a.byte_len() == b.byte_len() && (0..bits).all(|i| a.get(i).unwrap_or(false) == b.get(i).unwrap_or(false))
+    }
+}
+
+impl Eq for BitValues<'_> {}
 
 impl<'a> Body<'a> for BitValues<'a> {
     fn parse(r: &mut Reader<'a>) -> Result<Self, PduError> {
@@ -220,30 +231,67 @@ impl<'a> Body<'a> for WriteRegisters<'a> {
     }
 }
 
-/// The response to 0x0F and 0x10: the start address and quantity written (§6.11, §6.12).
-#[derive(Clone, Copy, PartialEq, Eq, Debug)]
-pub struct WrittenRange {
-    /// First address written.
-    pub start: u16,
-    /// Number of items written.
-    pub quantity: u16,
+/// Generates the response of a multiple write: the start address and quantity written,
+/// checked against the function's limit.
+macro_rules! written {
+    ($(#[$meta:meta])* $name:ident, $max:expr) => {
+        $(#[$meta])*
+        #[derive(Clone, Copy, PartialEq, Eq, Debug)]
+        pub struct $name {
+            start: u16,
+            quantity: u16,
+        }
+
+        impl $name {
+            /// The range written: `quantity` items from `start`, within the function's limit
+            /// and the address space.
+            pub fn new(start: u16, quantity: u16) -> Result<Self, PduError> {
+                check_quantity(usize::from(quantity), 1, usize::from($max))?;
+                check_range(start, quantity)?;
+                Ok($name { start, quantity })
+            }
+
+            /// First address written.
+            pub fn start(&self) -> u16 {
+                self.start
+            }
+
+            /// Number of items written.
+            pub fn quantity(&self) -> u16 {
+                self.quantity
+            }
+        }
+
+        impl Body<'_> for $name {
+            fn parse(r: &mut Reader<'_>) -> Result<Self, PduError> {
+                let start = r.u16()?;
+                $name::new(start, r.u16()?)
+            }
+            fn emit(&self, w: &mut Writer<'_>) -> Result<(), BufferTooSmall> {
+                w.u16(self.start)?;
+                w.u16(self.quantity)
+            }
+            fn body_len(&self) -> usize {
+                4
+            }
+            fn wire_len(_: &[u8]) -> WireLen {
+                WireLen::Known(4)
+            }
+        }
+    };
 }
 
-impl Body<'_> for WrittenRange {
-    fn parse(r: &mut Reader<'_>) -> Result<Self, PduError> {
-        Ok(WrittenRange { start: r.u16()?, quantity: r.u16()? })
-    }
-    fn emit(&self, w: &mut Writer<'_>) -> Result<(), BufferTooSmall> {
-        w.u16(self.start)?;
-        w.u16(self.quantity)
-    }
-    fn body_len(&self) -> usize {
-        4
-    }
-    fn wire_len(_: &[u8]) -> WireLen {
-        WireLen::Known(4)
-    }
-}
+written!(
+    /// The response to 0x0F Write Multiple Coils (§6.11): 1–1968 coils from `start`.
+    WrittenCoils,
+    super::WriteCoils::MAX
+);
+
+written!(
+    /// The response to 0x10 Write Multiple Registers (§6.12): 1–123 registers from `start`.
+    WrittenRegisters,
+    WriteRegisters::MAX
+);
 
 /// 0x16 Mask Write Register (§6.16): `result = (current AND and_mask) OR (or_mask AND NOT
 /// and_mask)`. The response echoes the request.

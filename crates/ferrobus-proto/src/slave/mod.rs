@@ -491,9 +491,8 @@ impl Core {
         let function =
             FunctionCode::from_u8(frame.pdu.first().copied().unwrap_or_default() & !FunctionCode::EXCEPTION_BIT);
         let mut pdu = [0u8; MAX_PDU_LEN];
-        let Ok(len) = Response::Exception(ExceptionResponse { function, code }).emit(&mut pdu) else {
-            return Disposition::Silent;
-        };
+        let Ok(exception) = ExceptionResponse::new(function, code) else { return Disposition::Silent };
+        let Ok(len) = Response::Exception(exception).emit(&mut pdu) else { return Disposition::Silent };
         self.counters.count_exception(code);
         let due = self.due(frame, handler);
         self.reply = Some(Reply { header: frame.header, pdu, len, due, exception: Some(code) });

@@ -6,9 +6,9 @@ use crate::codes::{ExceptionCode, ReadDeviceIdCode};
 use crate::cursor::Writer;
 use crate::error::PduError;
 use crate::pdu::{
-    BitValues, Bits, Custom, DeviceIdentification, DeviceObjects, ExceptionStatus, FifoValues, FileSubResponses,
-    MAX_DATA_LEN, MAX_PDU_LEN, MeiRequest, MeiResponse, RawMei, ReadBits, ReadDeviceId, ReadRegisters, RegisterValues,
-    Registers, Request, Response, ServerId, WrittenRange,
+    BitValues, Bits, Custom, DeviceIdentification, DeviceObjects, ExceptionStatus, FifoValues, FileRecordReads,
+    FileSubResponses, MAX_DATA_LEN, MAX_PDU_LEN, MeiRequest, MeiResponse, RawMei, ReadBits, ReadDeviceId,
+    ReadRegisters, RegisterValues, Registers, Request, Response, ServerId, WrittenCoils, WrittenRegisters,
 };
 
 /// Exceptions for a response that cannot be built: the request asked for more than fits.
@@ -50,11 +50,13 @@ pub(super) fn serve<H: Handler + ?Sized>(
         }
         Request::WriteMultipleCoils(q) => {
             handler.write_multiple_coils(unit, q.start(), q.values())?;
-            emit(&Response::WriteMultipleCoils(WrittenRange { start: q.start(), quantity: q.quantity() }), out)
+            let written = WrittenCoils::new(q.start(), q.quantity()).map_err(too_big)?;
+            emit(&Response::WriteMultipleCoils(written), out)
         }
         Request::WriteMultipleRegisters(q) => {
             handler.write_multiple_registers(unit, q.start(), q.values())?;
-            emit(&Response::WriteMultipleRegisters(WrittenRange { start: q.start(), quantity: q.quantity() }), out)
+            let written = WrittenRegisters::new(q.start(), q.quantity()).map_err(too_big)?;
+            emit(&Response::WriteMultipleRegisters(written), out)
         }
         Request::MaskWriteRegister(q) => {
             handler.mask_write_register(unit, *q)?;
@@ -78,26 +80,7 @@ pub(super) fn serve<H: Handler + ?Sized>(
                 .map_err(|_| ExceptionCode::ServerDeviceFailure)?;
             emit(&Response::ReportServerId(id), out)
         }
-        Request::ReadFileRecord(q) => {
-            // Validated at parse: at most 35 sub-requests whose responses fit in 245 bytes.
-            let mut regs = [0u16; MAX_DATA_LEN / 2];
-            let mut spans = [(0usize, 0usize); 35];
-            let mut at = 0usize;
-            for (sub, span) in q.iter().zip(spans.iter_mut()) {
-                let len = usize::from(sub.length);
-                let end = at.checked_add(len).ok_or(ExceptionCode::IllegalDataValue)?;
-                let dst = regs.get_mut(at..end).ok_or(ExceptionCode::IllegalDataValue)?;
-                handler.read_file_record(unit, sub.file, sub.record, dst)?;
-                *span = (at, end);
-                at = end;
-            }
-            let mut records = [Registers::EMPTY; 35];
-            for (slot, &(a, b)) in records.iter_mut().zip(spans.iter()).take(q.len()) {
-                *slot = Registers::from_values(regs.get(a..b).unwrap_or_default());
-            }
-            let subs = FileSubResponses::new(records.get(..q.len()).unwrap_or_default()).map_err(too_big)?;
-            emit(&Response::ReadFileRecord(subs), out)
-        }
+        Request::ReadFileRecord(q) => read_file_record(handler, unit, q, out),
         Request::WriteFileRecord(q) => {
             for sub in q.iter() {
                 handler.write_file_record(unit, sub.file, sub.record, sub.data)?;
@@ -139,6 +122,33 @@ pub(super) fn serve<H: Handler + ?Sized>(
 enum Table {
     Coils,
     Inputs,
+}
+
+/// 0x14: one handler call per sub-request, the registers of all of them in one buffer.
+fn read_file_record<H: Handler + ?Sized>(
+    handler: &mut H,
+    unit: u8,
+    q: &FileRecordReads<'_>,
+    out: &mut [u8; MAX_PDU_LEN],
+) -> Result<usize, ExceptionCode> {
+    // Validated at parse: at most 35 sub-requests whose responses fit in 245 bytes.
+    let mut regs = [0u16; MAX_DATA_LEN / 2];
+    let mut spans = [(0usize, 0usize); 35];
+    let mut at = 0usize;
+    for (sub, span) in q.iter().zip(spans.iter_mut()) {
+        let len = usize::from(sub.length);
+        let end = at.checked_add(len).ok_or(ExceptionCode::IllegalDataValue)?;
+        let dst = regs.get_mut(at..end).ok_or(ExceptionCode::IllegalDataValue)?;
+        handler.read_file_record(unit, sub.file, sub.record, dst)?;
+        *span = (at, end);
+        at = end;
+    }
+    let mut records = [Registers::EMPTY; 35];
+    for (slot, &(a, b)) in records.iter_mut().zip(spans.iter()).take(q.len()) {
+        *slot = Registers::from_values(regs.get(a..b).unwrap_or_default());
+    }
+    let subs = FileSubResponses::new(records.get(..q.len()).unwrap_or_default()).map_err(too_big)?;
+    emit(&Response::ReadFileRecord(subs), out)
 }
 
 fn read_bits(
@@ -227,7 +237,8 @@ fn read_device_id<H: Handler + ?Sized>(
             next = Some(id);
             break;
         }
-        let _ = w.u8(id).and_then(|()| w.u8(u8::try_from(value.len()).unwrap_or(u8::MAX))).and_then(|()| w.bytes(value));
+        let _ =
+            w.u8(id).and_then(|()| w.u8(u8::try_from(value.len()).unwrap_or(u8::MAX))).and_then(|()| w.bytes(value));
         count = count.saturating_add(1);
     }
     let used = w.position();

@@ -528,7 +528,9 @@ fn unknown_sub_functions_are_illegal_function_and_bad_data_illegal_value() {
     let mut b = Bench::new();
     assert_eq!(b.send(1, &[0x08, 0x00, 0x13, 0x00, 0x00]), Some(std::vec![0x88, 0x01]));
     assert_eq!(b.send(1, &[0x08, 0x00, 0x0B, 0x00, 0x01]), Some(std::vec![0x88, 0x03]));
-    assert_eq!(b.send(1, &[0x08, 0x00, 0x0B]), Some(std::vec![0x88, 0x03]));
+    // A counter request without its data word is shorter than its function code says: the
+    // receiver takes it for a frame cut short, and nothing answers it.
+    assert_eq!(b.send(1, &[0x08, 0x00, 0x0B]), None);
     assert_eq!(b.send(1, &[0x08, 0x00, 0x02, 0x00, 0x00]), Some(std::vec![0x08, 0x00, 0x02, 0x00, 0x00]));
 }
 

@@ -280,7 +280,7 @@ fn strict_t1_5_drops_a_frame_with_a_gap_inside() {
 
 #[test]
 fn encoders_reproduce_the_seed_frames() {
-    use crate::pdu::{Registers, WriteRegisters, WrittenRange};
+    use crate::pdu::{Registers, WriteRegisters, WrittenRegisters};
     let values = [0x0BB8, 0x0000];
     let request =
         Request::WriteMultipleRegisters(WriteRegisters::new(0x0112, Registers::from_values(&values)).unwrap());
@@ -288,7 +288,7 @@ fn encoders_reproduce_the_seed_frames() {
     let n = encode_request(1, &request, &mut out).unwrap();
     assert_eq!(&out[..n], SDP_REQUEST);
     assert_eq!(out[n], 0xA5);
-    let response = Response::WriteMultipleRegisters(WrittenRange { start: 0x0112, quantity: 2 });
+    let response = Response::WriteMultipleRegisters(WrittenRegisters::new(0x0112, 2).unwrap());
     let n = encode_response(1, &response, &mut out).unwrap();
     assert_eq!(&out[..n], SDP_RESPONSE);
     assert_eq!(encode_pdu(1, &[0x03], &mut [0u8; 3]), Err(BufferTooSmall { needed: 4, available: 3 }));
