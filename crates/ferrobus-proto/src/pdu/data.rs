@@ -28,7 +28,7 @@ impl<'a> Registers<'a> {
 
     /// A view of big-endian register bytes; fails on an odd length.
     pub fn from_wire(bytes: &'a [u8]) -> Result<Self, PduError> {
-        if bytes.len() % 2 != 0 {
+        if !bytes.len().is_multiple_of(2) {
             return Err(PduError::ByteCountMismatch { declared: bytes.len(), expected: bytes.len().saturating_add(1) });
         }
         Ok(Registers { repr: RegistersRepr::Wire(bytes) })

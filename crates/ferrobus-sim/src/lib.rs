@@ -1,0 +1,26 @@
+//! # ferrobus-sim: whole drives on a simulated bus
+//!
+//! Device models for the `ferrobus` slave engine, described by profile files: register and
+//! coil maps with names, units, ranges and access; function codes, per-request limits,
+//! response wait, broadcast rules and vendor exception codes; and physics — an inverter whose
+//! output frequency ramps, a servo whose position integrates its speed.
+//!
+//! ```text
+//!   Profile (TOML) ──▶ Device: Memory (the map) + Model (physics) + the profile's rules
+//!   Sim: devices by unit ──implements──▶ slave::Handler ──▶ ferrobus::server::serve
+//!   FaultFilter ──▶ drops and corrupts replies on their way out
+//! ```
+//!
+//! Built-in profiles: `omron-3g3rx`, `sdp-servo`, `generic` (see [`profile::BUILTIN`]).
+
+pub mod device;
+pub mod fault;
+pub mod memory;
+pub mod model;
+pub mod profile;
+pub mod sim;
+
+pub use device::Device;
+pub use fault::Faults;
+pub use profile::Profile;
+pub use sim::{FaultFilter, Sim, SimClock, tokio_clock};

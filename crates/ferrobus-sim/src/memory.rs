@@ -1,0 +1,495 @@
+//! The device's data: four tables of the whole 16-bit address space, and the named items a
+//! profile lays over them.
+//!
+//! Every address either belongs to an item — a named coil, a register, a 32-bit pair, a plain
+//! table — or to nothing, and then reading or writing it is exception 02. Writes are checked
+//! whole before any value changes: a request that fails changes nothing.
+//!
+//! Addresses are `u16` on the wire and `usize` or `u32` while they are computed; the profile
+//! was checked to stay inside the 65536 addresses, and requests are too (a quantity cannot run
+//! past 0xFFFF), so narrowing them back cannot truncate.
+#![allow(clippy::cast_possible_truncation)]
+
+use std::collections::HashMap;
+
+use crate::profile::{Access, BitDef, Profile, RegisterDef, WordOrder};
+
+/// The four tables of the data model.
+#[derive(Clone, Copy, PartialEq, Eq, Hash, Debug)]
+pub enum Table {
+    /// Coils (read/write bits).
+    Coils,
+    /// Discrete inputs (read-only bits).
+    DiscreteInputs,
+    /// Holding registers (read/write words).
+    Holding,
+    /// Input registers (read-only words).
+    Input,
+}
+
+/// Why an access is refused; the device turns it into its exception code.
+#[derive(Clone, Copy, PartialEq, Eq, Debug)]
+pub enum Refusal {
+    /// No item at the address (exception 02).
+    Unmapped,
+    /// The item is read-only.
+    ReadOnly,
+    /// The value is outside the item's range.
+    OutOfRange,
+    /// Not allowed in the device's present state (e.g. while running).
+    NotAllowed,
+}
+
+/// One named item.
+#[derive(Clone, Debug)]
+pub struct Item {
+    /// Its table.
+    pub table: Table,
+    /// Wire address of its first register or bit.
+    pub address: u16,
+    /// Registers per item: 1, or 2 for a 32-bit pair (1 for bits).
+    pub size: u16,
+    /// Word order of a pair.
+    pub word_order: WordOrder,
+    /// Name (unique within the profile, or shared by a run of plain registers).
+    pub name: String,
+    /// Description.
+    pub description: String,
+    /// Engineering unit.
+    pub unit: Option<String>,
+    /// Engineering value = raw × scale.
+    pub scale: Option<f64>,
+    /// Range of raw values a write may set.
+    pub min: Option<i64>,
+    /// Range of raw values a write may set.
+    pub max: Option<i64>,
+    /// Whether raw values are signed.
+    pub signed: bool,
+    /// Access.
+    pub access: Access,
+    /// Whether it may change while the drive runs.
+    pub while_running: bool,
+}
+
+impl Item {
+    /// Decodes the raw value from its registers (`words` in address order).
+    pub fn decode(&self, words: &[u16]) -> i64 {
+        let raw: u32 = match (self.size, words) {
+            (2, [a, b, ..]) => match self.word_order {
+                WordOrder::HighFirst => (u32::from(*a) << 16) | u32::from(*b),
+                WordOrder::LowFirst => (u32::from(*b) << 16) | u32::from(*a),
+            },
+            (_, [a, ..]) => u32::from(*a),
+            _ => 0,
+        };
+        match (self.signed, self.size) {
+            (true, 2) => i64::from(raw.cast_signed()),
+            (true, _) => i64::from((raw as u16).cast_signed()),
+            (false, _) => i64::from(raw),
+        }
+    }
+
+    /// Encodes a raw value into its registers, in address order.
+    pub fn encode(&self, value: i64) -> [u16; 2] {
+        // Two's complement in 32 bits: -1 is 0xFFFF_FFFF.
+        let raw = u32::try_from(value & 0xFFFF_FFFF).unwrap_or_default();
+        let (hi, lo) = ((raw >> 16) as u16, raw as u16);
+        match (self.size, self.word_order) {
+            (2, WordOrder::HighFirst) => [hi, lo],
+            (2, WordOrder::LowFirst) => [lo, hi],
+            _ => [lo, 0],
+        }
+    }
+
+    fn in_range(&self, value: i64) -> bool {
+        self.min.is_none_or(|m| value >= m) && self.max.is_none_or(|m| value <= m)
+    }
+}
+
+const NONE: u32 = u32::MAX;
+
+/// A table's values and which item owns each address.
+#[derive(Clone, Debug)]
+struct Space<T> {
+    values: Vec<T>,
+    owner: Vec<u32>,
+}
+
+impl<T: Copy + Default> Space<T> {
+    fn new() -> Self {
+        Space { values: vec![T::default(); 0x1_0000], owner: vec![NONE; 0x1_0000] }
+    }
+}
+
+/// All of a device's data.
+#[derive(Clone, Debug)]
+pub struct Memory {
+    coils: Space<bool>,
+    discrete: Space<bool>,
+    holding: Space<u16>,
+    input: Space<u16>,
+    items: Vec<Item>,
+    by_name: HashMap<String, usize>,
+}
+
+impl Memory {
+    /// The data of a device described by `profile`, at its start values.
+    pub fn new(profile: &Profile) -> Self {
+        let mut m = Memory {
+            coils: Space::new(),
+            discrete: Space::new(),
+            holding: Space::new(),
+            input: Space::new(),
+            items: Vec::new(),
+            by_name: HashMap::new(),
+        };
+        let base = u32::from(profile.addressing.base);
+        let tables = [
+            (Table::Coils, profile.tables.coils),
+            (Table::DiscreteInputs, profile.tables.discrete_inputs),
+            (Table::Holding, profile.tables.holding_registers),
+            (Table::Input, profile.tables.input_registers),
+        ];
+        for (table, size) in tables {
+            if let Some(size) = size {
+                // A discrete input or input register is read-only on the bus, but the plain
+                // tables of the generic device let a program set them.
+                let access = Access::Rw;
+                let item = m.push_item(Item::plain(table, "table", access));
+                for a in 0..size.min(0x1_0000) {
+                    m.own(table, a, item);
+                }
+            }
+        }
+        for def in &profile.coils {
+            m.add_bits(Table::Coils, def, base);
+        }
+        for def in &profile.discrete_inputs {
+            m.add_bits(Table::DiscreteInputs, def, base);
+        }
+        for def in &profile.registers {
+            m.add_registers(Table::Holding, def, base);
+        }
+        for def in &profile.inputs {
+            m.add_registers(Table::Input, def, base);
+        }
+        m
+    }
+
+    fn push_item(&mut self, item: Item) -> u32 {
+        self.items.push(item);
+        u32::try_from(self.items.len() - 1).unwrap_or(NONE)
+    }
+
+    fn own(&mut self, table: Table, address: u32, item: u32) {
+        let slot = match table {
+            Table::Coils => self.coils.owner.get_mut(address as usize),
+            Table::DiscreteInputs => self.discrete.owner.get_mut(address as usize),
+            Table::Holding => self.holding.owner.get_mut(address as usize),
+            Table::Input => self.input.owner.get_mut(address as usize),
+        };
+        if let Some(slot) = slot {
+            *slot = item;
+        }
+    }
+
+    fn add_bits(&mut self, table: Table, def: &BitDef, base: u32) {
+        for i in 0..def.count {
+            let address = def.number - base + i;
+            let mut item = Item::plain(table, &def.name, def.access);
+            item.address = address as u16;
+            item.description.clone_from(&def.description);
+            let index = self.push_item(item);
+            if def.count == 1 {
+                self.by_name.insert(def.name.clone(), index as usize);
+            }
+            self.own(table, address, index);
+            self.set_bit_raw(table, address as u16, def.default);
+        }
+    }
+
+    fn add_registers(&mut self, table: Table, def: &RegisterDef, base: u32) {
+        for i in 0..def.count {
+            let address = def.number - base + i * def.size;
+            let item = Item {
+                table,
+                address: address as u16,
+                size: def.size as u16,
+                word_order: def.word_order,
+                name: def.name.clone(),
+                description: def.description.clone(),
+                unit: def.unit.clone(),
+                scale: def.scale,
+                min: def.min,
+                max: def.max,
+                signed: def.signed,
+                access: def.access,
+                while_running: def.while_running,
+            };
+            let words = item.encode(def.default);
+            let index = self.push_item(item);
+            if def.count == 1 {
+                self.by_name.insert(def.name.clone(), index as usize);
+            }
+            for w in 0..def.size {
+                self.own(table, address + w, index);
+                if let Some(v) = self.words_mut(table).get_mut((address + w) as usize) {
+                    *v = words[w as usize];
+                }
+            }
+        }
+    }
+
+    fn words(&self, table: Table) -> &Space<u16> {
+        if table == Table::Input { &self.input } else { &self.holding }
+    }
+
+    fn words_mut(&mut self, table: Table) -> &mut Vec<u16> {
+        if table == Table::Input { &mut self.input.values } else { &mut self.holding.values }
+    }
+
+    fn bits(&self, table: Table) -> &Space<bool> {
+        if table == Table::DiscreteInputs { &self.discrete } else { &self.coils }
+    }
+
+    fn bits_mut(&mut self, table: Table) -> &mut Space<bool> {
+        if table == Table::DiscreteInputs { &mut self.discrete } else { &mut self.coils }
+    }
+
+    /// The item at `address` of `table`.
+    pub fn item_at(&self, table: Table, address: u16) -> Option<&Item> {
+        let owner = match table {
+            Table::Coils | Table::DiscreteInputs => self.bits(table).owner.get(usize::from(address)),
+            Table::Holding | Table::Input => self.words(table).owner.get(usize::from(address)),
+        };
+        owner.copied().filter(|&o| o != NONE).and_then(|o| self.items.get(o as usize))
+    }
+
+    /// Every named item, in profile order.
+    pub fn items(&self) -> &[Item] {
+        &self.items
+    }
+
+    /// Reads bits; every address must belong to an item.
+    pub fn read_bits(&self, table: Table, start: u16, out: &mut [bool]) -> Result<(), Refusal> {
+        let space = self.bits(table);
+        for (i, slot) in out.iter_mut().enumerate() {
+            let a = usize::from(start) + i;
+            if space.owner.get(a).is_none_or(|&o| o == NONE) {
+                return Err(Refusal::Unmapped);
+            }
+            let wo = self.item_at(table, a as u16).is_some_and(|it| it.access == Access::Wo);
+            *slot = !wo && space.values.get(a).copied().unwrap_or_default();
+        }
+        Ok(())
+    }
+
+    /// Reads registers; every address must belong to an item.
+    pub fn read_registers(&self, table: Table, start: u16, out: &mut [u16]) -> Result<(), Refusal> {
+        let space = self.words(table);
+        for (i, slot) in out.iter_mut().enumerate() {
+            let a = usize::from(start) + i;
+            let Some(item) = self.item_at(table, a as u16) else { return Err(Refusal::Unmapped) };
+            *slot = if item.access == Access::Wo { 0 } else { space.values.get(a).copied().unwrap_or_default() };
+        }
+        Ok(())
+    }
+
+    /// Checks a write of coils from `start` without changing anything.
+    pub fn check_write_bits(&self, start: u16, count: usize) -> Result<(), Refusal> {
+        for i in 0..count {
+            let a = (usize::from(start) + i) as u16;
+            match self.item_at(Table::Coils, a) {
+                None => return Err(Refusal::Unmapped),
+                Some(item) if item.access == Access::Ro => return Err(Refusal::ReadOnly),
+                Some(_) => {}
+            }
+        }
+        Ok(())
+    }
+
+    /// Writes coils (after [`Memory::check_write_bits`]).
+    pub fn write_bits(&mut self, start: u16, values: impl IntoIterator<Item = bool>) {
+        for (i, v) in values.into_iter().enumerate() {
+            self.set_bit_raw(Table::Coils, (usize::from(start) + i) as u16, v);
+        }
+    }
+
+    /// The items a register write touches, with the raw value each would have afterwards,
+    /// checked for access and range. Nothing changes.
+    pub fn check_write_registers(&self, start: u16, values: &[u16]) -> Result<Vec<(usize, i64)>, Refusal> {
+        let mut touched: Vec<(usize, i64)> = Vec::new();
+        let mut a = usize::from(start);
+        let end = a + values.len();
+        while a < end {
+            let owner = self.holding.owner.get(a).copied().unwrap_or(NONE);
+            let Some(item) = self.items.get(owner as usize) else { return Err(Refusal::Unmapped) };
+            if item.access == Access::Ro {
+                return Err(Refusal::ReadOnly);
+            }
+            // The item's registers after the write: new values where written, old elsewhere
+            // (a write of one half of a pair keeps the other half).
+            let first = usize::from(item.address);
+            let mut words = [0u16; 2];
+            for (w, word) in words.iter_mut().enumerate().take(usize::from(item.size)) {
+                let addr = first + w;
+                *word = if (usize::from(start)..end).contains(&addr) {
+                    values[addr - usize::from(start)]
+                } else {
+                    self.holding.values.get(addr).copied().unwrap_or_default()
+                };
+            }
+            let value = item.decode(&words);
+            if !item.in_range(value) {
+                return Err(Refusal::OutOfRange);
+            }
+            touched.push((owner as usize, value));
+            a = first + usize::from(item.size);
+        }
+        Ok(touched)
+    }
+
+    /// Writes registers (after [`Memory::check_write_registers`]).
+    pub fn write_registers(&mut self, start: u16, values: &[u16]) {
+        for (i, v) in values.iter().enumerate() {
+            if let Some(slot) = self.holding.values.get_mut(usize::from(start) + i) {
+                *slot = *v;
+            }
+        }
+    }
+
+    /// The item named `name`.
+    pub fn item(&self, name: &str) -> Option<&Item> {
+        self.by_name.get(name).and_then(|&i| self.items.get(i))
+    }
+
+    /// The index of the item named `name`.
+    pub fn index_of(&self, name: &str) -> Option<usize> {
+        self.by_name.get(name).copied()
+    }
+
+    /// The item at `index`.
+    pub fn item_by_index(&self, index: usize) -> Option<&Item> {
+        self.items.get(index)
+    }
+
+    /// The raw value of a named register or bit (0 if the profile has none by that name).
+    pub fn get(&self, name: &str) -> i64 {
+        let Some(item) = self.item(name) else { return 0 };
+        match item.table {
+            Table::Coils | Table::DiscreteInputs => {
+                i64::from(self.bits(item.table).values.get(usize::from(item.address)).copied().unwrap_or_default())
+            }
+            Table::Holding | Table::Input => {
+                let a = usize::from(item.address);
+                let space = &self.words(item.table).values;
+                let words = [space.get(a).copied().unwrap_or_default(), space.get(a + 1).copied().unwrap_or_default()];
+                item.decode(&words)
+            }
+        }
+    }
+
+    /// Sets a named register or bit, whatever its access (the device's own outputs).
+    pub fn set(&mut self, name: &str, value: i64) {
+        let Some(item) = self.item(name) else { return };
+        let (table, address, size, words) =
+            (item.table, usize::from(item.address), usize::from(item.size), item.encode(value));
+        match table {
+            Table::Coils | Table::DiscreteInputs => self.set_bit_raw(table, address as u16, value != 0),
+            Table::Holding | Table::Input => {
+                let space = self.words_mut(table);
+                for (slot, word) in space.iter_mut().skip(address).zip(words).take(size) {
+                    *slot = word;
+                }
+            }
+        }
+    }
+
+    fn set_bit_raw(&mut self, table: Table, address: u16, value: bool) {
+        if let Some(slot) = self.bits_mut(table).values.get_mut(usize::from(address)) {
+            *slot = value;
+        }
+    }
+
+    /// Sets any register of `table`, mapped or not (the FIFO, tests).
+    pub fn poke(&mut self, table: Table, address: u16, value: u16) {
+        if let Some(slot) = self.words_mut(table).get_mut(usize::from(address)) {
+            *slot = value;
+        }
+    }
+
+    /// Reads any register of `table`, mapped or not.
+    pub fn peek(&self, table: Table, address: u16) -> u16 {
+        self.words(table).values.get(usize::from(address)).copied().unwrap_or_default()
+    }
+}
+
+impl Item {
+    fn plain(table: Table, name: &str, access: Access) -> Item {
+        Item {
+            table,
+            address: 0,
+            size: 1,
+            word_order: WordOrder::HighFirst,
+            name: name.to_string(),
+            description: String::new(),
+            unit: None,
+            scale: None,
+            min: None,
+            max: None,
+            signed: false,
+            access,
+            while_running: true,
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn rx() -> Memory {
+        Memory::new(&Profile::load("omron-3g3rx").unwrap())
+    }
+
+    #[test]
+    fn manual_numbers_become_wire_addresses_one_less() {
+        let m = rx();
+        // F001 is registers 0001h/0002h in the manual: frame addresses 0 and 1.
+        assert_eq!(m.item_at(Table::Holding, 0).unwrap().name, "F001");
+        assert_eq!(m.item_at(Table::Holding, 1).unwrap().name, "F001");
+        assert_eq!(m.item_at(Table::Holding, 0x1102).unwrap().name, "F002");
+        assert_eq!(m.item_at(Table::Coils, 0).unwrap().name, "run");
+        assert!(m.item_at(Table::Holding, 0x0004).is_none(), "0005h is not in the map");
+    }
+
+    #[test]
+    fn a_32_bit_pair_is_checked_as_one_value() {
+        let m = rx();
+        // F001 = 40000 (0x9C40) is the maximum; 40001 is out of range.
+        assert!(m.check_write_registers(0, &[0x0000, 0x9C40]).is_ok());
+        assert_eq!(m.check_write_registers(0, &[0x0000, 0x9C41]), Err(Refusal::OutOfRange));
+        assert_eq!(m.check_write_registers(0, &[0x0001, 0x0000]), Err(Refusal::OutOfRange), "the high word alone");
+        assert_eq!(m.check_write_registers(2, &[1]), Err(Refusal::ReadOnly), "status A");
+        assert_eq!(m.check_write_registers(4, &[1]), Err(Refusal::Unmapped));
+    }
+
+    #[test]
+    fn word_order_is_per_item() {
+        let m = Memory::new(&Profile::load("sdp-servo").unwrap());
+        let item = m.item("speed-command").unwrap();
+        assert_eq!(item.encode(3000), [0x0BB8, 0x0000], "low word first, as the manual's example");
+        assert_eq!(item.decode(&[0xFC18, 0xFFFF]), -1000);
+        let rx = rx();
+        assert_eq!(rx.item("F002").unwrap().encode(300_000), [0x0004, 0x93E0], "3G3RX: high word first");
+    }
+
+    #[test]
+    fn named_items_start_at_their_defaults() {
+        let m = rx();
+        assert_eq!(m.get("F002"), 1000);
+        assert_eq!(m.get("status-a"), 2);
+        assert_eq!(m.get("ready"), 1);
+        assert_eq!(m.get("no-such-thing"), 0);
+    }
+}

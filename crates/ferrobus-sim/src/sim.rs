@@ -1,0 +1,234 @@
+//! The simulator: several devices on one line, each at its unit address, served through one
+//! [`Handler`] — and the faults injected into their replies.
+
+use std::collections::BTreeMap;
+use std::sync::Arc;
+use std::time::Duration;
+
+use ferrobus::Framing;
+use ferrobus::server::{Fate, ReplyFilter, Shared};
+use ferrobus_proto::ExceptionCode;
+use ferrobus_proto::pdu::{Bits, MaskWrite, Registers, Request};
+use ferrobus_proto::slave::{Admission, Handler, UnitSet};
+use rand::rngs::SmallRng;
+use rand::{RngExt, SeedableRng};
+
+use crate::device::Device;
+use crate::fault::Faults;
+use crate::memory::Table;
+
+/// Where the simulation's time comes from: the time since it started.
+pub type SimClock = Arc<dyn Fn() -> Duration + Send + Sync>;
+
+/// A clock that follows tokio's (and so a paused test clock).
+pub fn tokio_clock() -> SimClock {
+    let start = tokio::time::Instant::now();
+    Arc::new(move || start.elapsed())
+}
+
+/// One unit on the line.
+pub struct Unit {
+    /// The device.
+    pub device: Device,
+    /// What goes wrong with it.
+    pub faults: Faults,
+    tripped: bool,
+}
+
+/// Devices by unit address.
+pub struct Sim {
+    units: BTreeMap<u8, Unit>,
+    clock: SimClock,
+    rng: SmallRng,
+}
+
+impl Sim {
+    /// An empty line with `clock`; `seed` makes fault injection repeatable.
+    pub fn new(clock: SimClock, seed: u64) -> Self {
+        Sim { units: BTreeMap::new(), clock, rng: SmallRng::seed_from_u64(seed) }
+    }
+
+    /// Puts `device` at `unit`.
+    pub fn add(&mut self, unit: u8, device: Device, faults: Faults) {
+        self.units.insert(unit, Unit { device, faults, tripped: false });
+    }
+
+    /// The unit addresses served.
+    pub fn unit_set(&self) -> UnitSet {
+        self.units.keys().copied().collect()
+    }
+
+    /// The units.
+    pub fn units(&self) -> impl Iterator<Item = (u8, &Unit)> {
+        self.units.iter().map(|(u, d)| (*u, d))
+    }
+
+    /// The device at `unit`, advanced to now.
+    pub fn device(&mut self, unit: u8) -> Option<&mut Device> {
+        let now = (self.clock)();
+        let u = self.units.get_mut(&unit)?;
+        u.device.advance_to(now);
+        if let Some(after) = u.faults.trip_after {
+            if !u.tripped && now >= after {
+                u.tripped = true;
+                // E07, overvoltage: an arbitrary but recognisable trip.
+                u.device.trip(7);
+            }
+        }
+        Some(&mut u.device)
+    }
+
+    fn with<T>(
+        &mut self,
+        unit: u8,
+        f: impl FnOnce(&mut Device) -> Result<T, ExceptionCode>,
+    ) -> Result<T, ExceptionCode> {
+        // The engine only asks for units it serves; an unknown one is a device failure.
+        self.device(unit).map_or(Err(ExceptionCode::ServerDeviceFailure), f)
+    }
+
+    /// Draws whether a reply from `unit` is dropped, and if not whether it is corrupted.
+    fn draw(&mut self, unit: u8) -> (bool, bool) {
+        let Some(u) = self.units.get(&unit) else { return (false, false) };
+        let (drop, corrupt) = (u.faults.drop, u.faults.corrupt);
+        // Shares are checked when parsed, but the fields are public: clamp, never panic.
+        let dropped = drop > 0.0 && self.rng.random_bool(drop.clamp(0.0, 1.0));
+        let corrupted = !dropped && corrupt > 0.0 && self.rng.random_bool(corrupt.clamp(0.0, 1.0));
+        (dropped, corrupted)
+    }
+}
+
+impl Handler for Sim {
+    fn admit(&mut self, unit: u8, broadcast: bool, request: &Request<'_>) -> Admission {
+        let Some(device) = self.device(unit) else { return Admission::Ignore };
+        let admission = device.admit(broadcast, request);
+        let faults = &self.units[&unit].faults;
+        if faults.silent {
+            return Admission::Ignore;
+        }
+        if let (Some(code), false) = (faults.exception, broadcast) {
+            return Admission::Refuse(ExceptionCode::from_u8(code));
+        }
+        admission
+    }
+
+    fn response_wait(&self, unit: u8) -> Option<Duration> {
+        let u = self.units.get(&unit)?;
+        Some(u.device.response_wait() + u.faults.delay)
+    }
+
+    fn read_coils(&mut self, unit: u8, start: u16, out: &mut [bool]) -> Result<(), ExceptionCode> {
+        self.with(unit, |d| d.read_bits(Table::Coils, start, out))
+    }
+    fn read_discrete_inputs(&mut self, unit: u8, start: u16, out: &mut [bool]) -> Result<(), ExceptionCode> {
+        self.with(unit, |d| d.read_bits(Table::DiscreteInputs, start, out))
+    }
+    fn read_holding_registers(&mut self, unit: u8, start: u16, out: &mut [u16]) -> Result<(), ExceptionCode> {
+        self.with(unit, |d| d.read_registers(Table::Holding, start, out))
+    }
+    fn read_input_registers(&mut self, unit: u8, start: u16, out: &mut [u16]) -> Result<(), ExceptionCode> {
+        self.with(unit, |d| d.read_registers(Table::Input, start, out))
+    }
+    fn write_single_coil(&mut self, unit: u8, address: u16, value: bool) -> Result<(), ExceptionCode> {
+        self.with(unit, |d| d.write_coils(address, Bits::from_values(&[value])))
+    }
+    fn write_single_register(&mut self, unit: u8, address: u16, value: u16) -> Result<(), ExceptionCode> {
+        self.with(unit, |d| d.write_registers(address, Registers::from_values(&[value])))
+    }
+    fn write_multiple_coils(&mut self, unit: u8, start: u16, values: Bits<'_>) -> Result<(), ExceptionCode> {
+        self.with(unit, |d| d.write_coils(start, values))
+    }
+    fn write_multiple_registers(&mut self, unit: u8, start: u16, values: Registers<'_>) -> Result<(), ExceptionCode> {
+        self.with(unit, |d| d.write_registers(start, values))
+    }
+    fn mask_write_register(&mut self, unit: u8, mask: MaskWrite) -> Result<(), ExceptionCode> {
+        self.with(unit, |d| {
+            let mut current = [0u16];
+            d.read_registers(Table::Holding, mask.address, &mut current)?;
+            d.write_registers(mask.address, Registers::from_values(&[mask.apply(current[0])]))
+        })
+    }
+    fn read_exception_status(&mut self, unit: u8) -> Result<u8, ExceptionCode> {
+        self.with(unit, |_| Ok(0))
+    }
+    fn report_server_id(&mut self, unit: u8, out: &mut [u8]) -> Result<usize, ExceptionCode> {
+        self.with(unit, |d| Ok(d.server_id(out)))
+    }
+    fn read_file_record(&mut self, unit: u8, file: u16, record: u16, out: &mut [u16]) -> Result<(), ExceptionCode> {
+        self.with(unit, |d| d.read_file(file, record, out))
+    }
+    fn write_file_record(
+        &mut self,
+        unit: u8,
+        file: u16,
+        record: u16,
+        values: Registers<'_>,
+    ) -> Result<(), ExceptionCode> {
+        self.with(unit, |d| d.write_file(file, record, values))
+    }
+    fn read_fifo_queue(&mut self, unit: u8, address: u16, out: &mut [u16; 31]) -> Result<usize, ExceptionCode> {
+        self.with(unit, |d| d.read_fifo(address, out))
+    }
+    fn device_object(&mut self, unit: u8, id: u8, out: &mut [u8]) -> Option<usize> {
+        let value = self.units.get(&unit)?.device.device_object(id)?;
+        let n = value.len().min(out.len());
+        out[..n].copy_from_slice(&value[..n]);
+        Some(n)
+    }
+}
+
+/// Injects each unit's reply faults (drops, broken checksums) on the way out.
+pub struct FaultFilter {
+    sim: Shared<Sim>,
+    framing: Framing,
+}
+
+impl FaultFilter {
+    /// A filter for replies framed with `framing` from the units of `sim`.
+    pub fn new(sim: Shared<Sim>, framing: Framing) -> Self {
+        FaultFilter { sim, framing }
+    }
+
+    /// The unit a framed reply comes from.
+    fn unit_of(&self, frame: &[u8]) -> Option<u8> {
+        match self.framing {
+            Framing::Rtu => frame.first().copied(),
+            Framing::Mbap => frame.get(6).copied(),
+            Framing::Ascii => std::str::from_utf8(frame.get(1..3)?).ok().and_then(|h| u8::from_str_radix(h, 16).ok()),
+        }
+    }
+}
+
+impl ReplyFilter for FaultFilter {
+    fn filter(&mut self, frame: &mut [u8]) -> Fate {
+        let Some(unit) = self.unit_of(frame) else { return Fate::Send };
+        let (dropped, corrupted) = self.sim.lock().draw(unit);
+        if dropped {
+            return Fate::Drop;
+        }
+        if corrupted {
+            corrupt_checksum(self.framing, frame);
+        }
+        Fate::Send
+    }
+}
+
+/// Breaks the checksum of a framed reply: the CRC's high byte (RTU), the LRC's first digit
+/// (ASCII). Modbus/TCP has no checksum to break; its frames pass unchanged.
+fn corrupt_checksum(framing: Framing, frame: &mut [u8]) {
+    let n = frame.len();
+    match framing {
+        Framing::Rtu => {
+            if let Some(b) = frame.last_mut() {
+                *b ^= 0x5A;
+            }
+        }
+        Framing::Ascii => {
+            // `… L L CR LF`: change the LRC's high digit to another hex digit.
+            if let Some(c) = n.checked_sub(4).and_then(|i| frame.get_mut(i)) {
+                *c = if *c == b'0' { b'1' } else { b'0' };
+            }
+        }
+        Framing::Mbap => {}
+    }
+}
