@@ -100,7 +100,10 @@ impl<F: Framing + Send + 'static> Driver<F> {
                 tracing::warn!(port = %self.transport.describe(), "the port closed; it will be reopened");
                 self.port = None;
             }
-            Ok(n) => self.master.on_bytes(self.clock.now(), self.rx.get(..n).unwrap_or_default()),
+            Ok(n) => {
+                let at = self.arrival();
+                self.master.on_bytes(at, self.rx.get(..n).unwrap_or_default());
+            }
             Err(e) => {
                 tracing::warn!(port = %self.transport.describe(), "read failed, reopening on the next request: {e}");
                 self.port = None;
@@ -173,7 +176,10 @@ impl<F: Framing + Send + 'static> Driver<F> {
             };
             tokio::select! {
                 read = port.read(&mut self.rx[..]) => match read {
-                    Ok(n) if n > 0 => self.master.on_bytes(self.clock.now(), self.rx.get(..n).unwrap_or_default()),
+                    Ok(n) if n > 0 => {
+                        let at = self.arrival();
+                        self.master.on_bytes(at, self.rx.get(..n).unwrap_or_default());
+                    }
                     Ok(_) => {
                         self.master.abort();
                         self.port = None;
@@ -191,6 +197,12 @@ impl<F: Framing + Send + 'static> Driver<F> {
                 () = self.transport.timer().sleep_until(deadline) => self.master.handle_timeout(self.clock.now()),
             }
         }
+    }
+
+    /// When the bytes just read arrived: the port's own time stamp if it has one, else now.
+    fn arrival(&self) -> ferrobus_proto::Instant {
+        let stamped = self.port.as_ref().and_then(|p| p.last_arrival());
+        stamped.map_or_else(|| self.clock.now(), |t| self.clock.from_tokio(t))
     }
 
     /// Writes the engine's frame, switching the transmitter by RTS if asked to.

@@ -29,6 +29,13 @@ pub trait Port: AsyncRead + AsyncWrite + Unpin + Send + 'static {
     fn set_rts(&mut self, _on: bool) -> io::Result<()> {
         Ok(())
     }
+
+    /// When the bytes of the last read arrived, if the port knows better than the moment the
+    /// reading task got them (the virtual line knows the instant they left the wire). The
+    /// engines time silent intervals from it.
+    fn last_arrival(&self) -> Option<tokio::time::Instant> {
+        None
+    }
 }
 
 impl Port for TcpStream {}
@@ -394,7 +401,7 @@ pub struct Pty {
     /// The path of the other end, e.g. `/dev/pts/7`.
     pub path: PathBuf,
     /// The other end, kept open so that the pty survives its user closing it.
-    _peer: serial2::SerialPort,
+    pub(crate) _peer: serial2::SerialPort,
 }
 
 impl Pty {

@@ -179,6 +179,12 @@ pub struct ServerOptions {
 }
 
 impl ServerOptions {
+    /// Options for a line with `timing`, waiting with `timer`: no direction control, no
+    /// filter, no observer.
+    pub fn new(timing: LineTiming, timer: Timer) -> Self {
+        ServerOptions { timer, rs485: Rs485::Auto, timing, filter: None, observer: None }
+    }
+
     /// Options fitting `transport`: its timer, RS-485 mode and timing.
     pub fn for_transport(transport: &Transport) -> Self {
         ServerOptions {
@@ -241,7 +247,10 @@ pub async fn serve<F: Framing, H: Handler + Send>(
         tokio::select! {
             read = port.read(&mut rx) => match read {
                 Ok(0) => return (slave, Ok(())),
-                Ok(n) => slave.on_bytes(clock.now(), rx.get(..n).unwrap_or_default(), handler),
+                Ok(n) => {
+                    let at = port.last_arrival().map_or_else(|| clock.now(), |t| clock.from_tokio(t));
+                    slave.on_bytes(at, rx.get(..n).unwrap_or_default(), handler);
+                }
                 Err(e) => return (slave, Err(e)),
             },
             () = options.timer.sleep_until(deadline) => {

@@ -1,14 +1,24 @@
 //! Sleeping until an engine's deadline, to the precision the deadline needs.
 //!
 //! Tokio's timer wheel fires on 1 ms ticks, rounding every sleep up to the next tick: a reply
-//! due in 4.01 ms goes out after 5, and a 115200-baud transaction of 3 ms loses a third of its
-//! speed to waiting. [`Timer::Precise`] sleeps with tokio until 2 ms before the deadline, then
-//! blocks the worker thread for the rest with the OS's high-resolution sleep (tens of
-//! microseconds late at most). That briefly holds one runtime worker — the price of honest
-//! line timing. [`Timer::Tokio`] is for streams without a line (TCP), and for tests that run
-//! on tokio's paused, virtual clock, which a thread sleep would not follow.
+//! due in 4.01 ms goes out after 5, and a 115200-baud transaction of 6 ms loses a sixth of its
+//! speed to waiting. The precise timers hand their deadlines to one background thread that
+//! sleeps with the OS's high-resolution timer and wakes the waiting task at the instant —
+//! without ever blocking a runtime worker.
+//!
+//! - [`Timer::Precise`]: the thread sleeps to the deadline (tens of microseconds late).
+//! - [`Timer::Spin`]: the thread sleeps to 150 µs before it, then spins (a microsecond or
+//!   two late): for the virtual line, where 2 % of a 115200-baud transaction is 127 µs.
+//! - [`Timer::Tokio`]: tokio's timer alone, for streams without a line (TCP) and for tests on
+//!   tokio's paused, virtual clock, which the thread's real clock would not follow.
 
-use std::time::Duration;
+use std::cmp::Reverse;
+use std::collections::BinaryHeap;
+use std::future::Future;
+use std::pin::Pin;
+use std::sync::{Arc, Condvar, Mutex, OnceLock, PoisonError};
+use std::task::{Context, Poll, Waker};
+use std::time::{Duration, Instant};
 
 /// How drivers wait for deadlines.
 #[derive(Clone, Copy, PartialEq, Eq, Debug, Default)]
@@ -16,12 +26,12 @@ pub enum Timer {
     /// Tokio's timer alone: up to 1 ms late; follows a paused clock.
     #[default]
     Tokio,
-    /// Tokio's timer, then a thread sleep for the last stretch: tens of microseconds late.
+    /// The timer thread's OS sleep: tens of microseconds late.
     Precise,
+    /// The timer thread's OS sleep, then a busy wait for the last 150 µs: about a
+    /// microsecond late, at the price of the timer thread spinning for those microseconds.
+    Spin,
 }
-
-/// Below this, the last stretch of a precise sleep is a thread sleep.
-const COARSE: Duration = Duration::from_millis(2);
 
 impl Timer {
     /// Sleeps until `deadline`, or forever for `None`.
@@ -31,16 +41,118 @@ impl Timer {
         };
         match self {
             Timer::Tokio => tokio::time::sleep_until(deadline).await,
-            Timer::Precise => {
-                if deadline.saturating_duration_since(tokio::time::Instant::now()) > COARSE {
-                    tokio::time::sleep_until(deadline - COARSE).await;
-                }
-                let rest = deadline.saturating_duration_since(tokio::time::Instant::now());
-                if !rest.is_zero() {
-                    std::thread::sleep(rest);
-                }
+            Timer::Precise | Timer::Spin => {
+                PreciseSleep { deadline: deadline.into_std(), spin: self == Timer::Spin, registered: false }.await;
             }
         }
+    }
+}
+
+/// Spinning starts this long before a [`Timer::Spin`] deadline.
+const SPIN: Duration = Duration::from_micros(150);
+
+/// A deadline registered with the timer thread.
+struct Entry {
+    wake_at: Instant,
+    spin: bool,
+    waker: Waker,
+}
+
+impl PartialEq for Entry {
+    fn eq(&self, other: &Self) -> bool {
+        self.wake_at == other.wake_at
+    }
+}
+impl Eq for Entry {}
+impl PartialOrd for Entry {
+    fn partial_cmp(&self, other: &Self) -> Option<std::cmp::Ordering> {
+        Some(self.cmp(other))
+    }
+}
+impl Ord for Entry {
+    fn cmp(&self, other: &Self) -> std::cmp::Ordering {
+        self.wake_at.cmp(&other.wake_at)
+    }
+}
+
+/// The background thread's queue of deadlines.
+struct Wheel {
+    queue: Mutex<BinaryHeap<Reverse<Entry>>>,
+    changed: Condvar,
+}
+
+fn wheel() -> &'static Arc<Wheel> {
+    static WHEEL: OnceLock<Arc<Wheel>> = OnceLock::new();
+    WHEEL.get_or_init(|| {
+        let wheel = Arc::new(Wheel { queue: Mutex::new(BinaryHeap::new()), changed: Condvar::new() });
+        let shared = Arc::clone(&wheel);
+        std::thread::Builder::new()
+            .name("ferrobus-timer".into())
+            .spawn(move || shared.run())
+            .expect("the OS refused to start the timer thread");
+        wheel
+    })
+}
+
+impl Wheel {
+    fn register(&self, entry: Entry) {
+        self.queue.lock().unwrap_or_else(PoisonError::into_inner).push(Reverse(entry));
+        self.changed.notify_one();
+    }
+
+    /// Wakes each deadline at its instant, earliest first.
+    fn run(&self) {
+        let mut queue = self.queue.lock().unwrap_or_else(PoisonError::into_inner);
+        loop {
+            let Some(Reverse(next)) = queue.peek() else {
+                queue = self.changed.wait(queue).unwrap_or_else(PoisonError::into_inner);
+                continue;
+            };
+            let (wake_at, spin) = (next.wake_at, next.spin);
+            let now = Instant::now();
+            let sleep_to = if spin { wake_at.checked_sub(SPIN).unwrap_or(wake_at) } else { wake_at };
+            if sleep_to > now {
+                // Sleep until then, or until an earlier deadline arrives.
+                queue = self.changed.wait_timeout(queue, sleep_to - now).unwrap_or_else(PoisonError::into_inner).0;
+                continue;
+            }
+            if spin && Instant::now() < wake_at {
+                // Let new deadlines in while spinning; they are looked at on the next turn.
+                drop(queue);
+                while Instant::now() < wake_at {
+                    std::hint::spin_loop();
+                }
+                queue = self.queue.lock().unwrap_or_else(PoisonError::into_inner);
+                continue;
+            }
+            if let Some(Reverse(due)) = queue.pop() {
+                due.waker.wake();
+            }
+        }
+    }
+}
+
+/// A future that completes at `deadline`, woken by the timer thread.
+struct PreciseSleep {
+    deadline: Instant,
+    spin: bool,
+    registered: bool,
+}
+
+impl Future for PreciseSleep {
+    type Output = ();
+
+    fn poll(mut self: Pin<&mut Self>, cx: &mut Context<'_>) -> Poll<()> {
+        if Instant::now() >= self.deadline {
+            return Poll::Ready(());
+        }
+        if !self.registered {
+            // One registration per sleep: a spurious poll before the deadline keeps waiting on
+            // the same entry (its waker is the task's, which does not change under tokio).
+            self.registered = true;
+            wheel().register(Entry { wake_at: self.deadline, spin: self.spin, waker: cx.waker().clone() });
+        }
+        Poll::Pending
     }
 }
 
@@ -48,21 +160,41 @@ impl Timer {
 mod tests {
     use super::*;
 
-    #[tokio::test]
-    async fn a_precise_sleep_is_never_early_and_usually_well_under_a_tick_late() {
+    async fn lateness(timer: Timer) -> Vec<Duration> {
         let mut late = Vec::new();
         for i in 0..21u64 {
             // Deadlines spread across tokio's 1 ms ticks.
-            let deadline = tokio::time::Instant::now() + Duration::from_micros(3_000 + i * 137);
-            Timer::Precise.sleep_until(Some(deadline)).await;
+            let deadline = tokio::time::Instant::now() + Duration::from_micros(2_500 + i * 137);
+            timer.sleep_until(Some(deadline)).await;
             let now = tokio::time::Instant::now();
             assert!(now >= deadline, "woke early");
             late.push(now - deadline);
         }
         late.sort();
-        // Tokio's timer alone is ~500 µs late at the median; a thread sleep, tens of µs. The
-        // bound leaves room for a loaded CI machine.
+        late
+    }
+
+    #[tokio::test]
+    async fn a_precise_sleep_is_never_early_and_usually_well_under_a_tick_late() {
+        // Tokio's timer alone is ~500 µs late at the median; the timer thread, tens of µs.
+        // The bound leaves room for a loaded CI machine.
+        let late = lateness(Timer::Precise).await;
         assert!(late[10] < Duration::from_micros(400), "median lateness {:?}", late[10]);
+    }
+
+    #[tokio::test]
+    async fn a_spinning_sleep_is_never_early_and_late_by_microseconds_at_the_median() {
+        let late = lateness(Timer::Spin).await;
+        assert!(late[10] < Duration::from_micros(100), "median lateness {:?}", late[10]);
+    }
+
+    #[tokio::test(flavor = "current_thread")]
+    async fn precise_sleeps_do_not_block_the_runtime() {
+        // Two sleeps on a single-threaded runtime finish together, not one after the other.
+        let start = tokio::time::Instant::now();
+        let deadline = Some(start + Duration::from_millis(20));
+        tokio::join!(Timer::Precise.sleep_until(deadline), Timer::Spin.sleep_until(deadline));
+        assert!(start.elapsed() < Duration::from_millis(30), "{:?}", start.elapsed());
     }
 
     #[tokio::test(start_paused = true)]
