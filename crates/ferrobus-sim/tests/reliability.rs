@@ -1,0 +1,134 @@
+//! Transactions through a faulty virtual line: characters corrupted and lost at random. No
+//! wrong value may ever be accepted, every failure must be a typed error that comes within
+//! its timeout, and a fault must not spill over into the transactions after it.
+//!
+//! CI runs a few thousand transactions; `FERROBUS_RELIABILITY_TRANSACTIONS=100000` runs the
+//! full test by hand (the closing note of issue 5 reports it).
+
+use std::time::Duration;
+
+use ferrobus::line::{Line, LineFaults, LineOptions};
+use ferrobus::server::{ServerOptions, Shared, serve};
+use ferrobus::{Client, ClientConfig, Error, Timer};
+use ferrobus_proto::frame::rtu::RtuCodec;
+use ferrobus_proto::frame::{Expect, LineConfig};
+use ferrobus_proto::slave::{Slave, SlaveConfig};
+use ferrobus_sim::memory::Table;
+use ferrobus_sim::{Device, Faults, Profile, Sim, tokio_clock};
+use rand::rngs::SmallRng;
+use rand::{RngExt, SeedableRng};
+
+/// The value every holding register holds: a hash of its address.
+fn pattern(address: u16) -> u16 {
+    address.wrapping_mul(40_503).rotate_left(5) ^ 0x5A5A
+}
+
+#[derive(Debug, Default)]
+struct Tally {
+    ok: u64,
+    timeouts: u64,
+    bad_replies: u64,
+    exceptions: u64,
+    /// Transactions right after a failed one, and how many of them failed.
+    after_fault: u64,
+    after_fault_failed: u64,
+    /// The longest a failed transaction took.
+    slowest: Duration,
+}
+
+async fn run(paced: bool, baud: u32, transactions: u64, seed: u64) -> Tally {
+    let faults = LineFaults { corrupt_rate: 0.01, drop_rate: 0.005, ..LineFaults::default() };
+    let options = LineOptions { paced, faults, seed, ..LineOptions::new(LineConfig::new(baud).unwrap()) };
+    let line = Line::start(options);
+    let timing = line.timing();
+
+    let mut device = Device::new(Profile::load("generic").unwrap());
+    for a in 0..2000u16 {
+        device.memory_mut().poke(Table::Holding, a, pattern(a));
+    }
+    let mut sim = Sim::new(tokio_clock(), seed);
+    sim.add(1, device, Faults::default());
+    let units = sim.unit_set();
+    let mut sim = Shared::new(sim);
+    let server_port = line.endpoint("sim").await.unwrap();
+    let timer = if paced { Timer::Spin } else { Timer::Tokio };
+    tokio::spawn(async move {
+        // On an unpaced line the whole frame arrives at once; the receiver still needs a
+        // silence to end what noise leaves, and tokio's timer is plenty for that.
+        let codec = RtuCodec::new(timing, Expect::Both).with_frame_gap(Duration::from_millis(2));
+        let slave = Slave::new(codec, SlaveConfig { units, response_wait: Duration::ZERO });
+        serve(slave, Box::new(server_port), &mut sim, &mut ServerOptions::new(timing, timer)).await
+    });
+
+    let timeout = Duration::from_millis(if paced { 40 } else { 20 });
+    let config = ClientConfig { timeout, backoff: None, ..ClientConfig::default() };
+    let transport = line.transport("client").with_t3_5(timing.t3_5()).with_incomplete_timeout(Duration::from_millis(2));
+    let client = Client::connect(transport, config).await.unwrap();
+    let mut rng = SmallRng::seed_from_u64(seed);
+    let mut tally = Tally::default();
+    let mut failed_before = false;
+    for _ in 0..transactions {
+        let start = rng.random_range(0..1990u16);
+        let began = tokio::time::Instant::now();
+        let result = client.read_holding_registers(1, start, 10).await;
+        let took = began.elapsed();
+        let failed = match result {
+            Ok(values) => {
+                let expected: Vec<u16> = (start..start + 10).map(pattern).collect();
+                assert_eq!(values, expected, "a wrong value was accepted from address {start}");
+                tally.ok += 1;
+                false
+            }
+            Err(e) => {
+                // A typed failure when its timeout expires: never early, and not a second
+                // timeout later (the margin is for a loaded machine's scheduling, not for
+                // the protocol).
+                if let Error::Timeout { waited, .. } = e {
+                    assert!(waited >= timeout, "{e}: early");
+                }
+                assert!(took < timeout * 2 + Duration::from_millis(200), "{e} after {took:?}");
+                tally.slowest = tally.slowest.max(took);
+                match e {
+                    Error::Timeout { .. } => tally.timeouts += 1,
+                    Error::BadReply { .. } => tally.bad_replies += 1,
+                    // A corrupted request can reach the device as another, valid one.
+                    Error::Exception { .. } => tally.exceptions += 1,
+                    other => panic!("an untyped or unexpected failure: {other}"),
+                }
+                true
+            }
+        };
+        if failed_before {
+            tally.after_fault += 1;
+            tally.after_fault_failed += u64::from(failed);
+        }
+        failed_before = failed;
+    }
+    let stats = line.stats();
+    eprintln!("{transactions} transactions ({}): {tally:?}; line: {stats:?}", if paced { "paced" } else { "unpaced" });
+    tally
+}
+
+fn transactions(default: u64) -> u64 {
+    std::env::var("FERROBUS_RELIABILITY_TRANSACTIONS").ok().and_then(|v| v.parse().ok()).unwrap_or(default)
+}
+
+/// One test, so that its timed parts do not run beside each other.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn through_a_faulty_line_no_wrong_value_is_ever_accepted_and_faults_do_not_spill_over() {
+    let n = transactions(3000);
+    let tally = run(false, 115_200, n, 7).await;
+    let failed = tally.timeouts + tally.bad_replies + tally.exceptions;
+    assert_eq!(tally.ok + failed, n);
+    // 1.5 % of 33 characters per transaction are hit: about 40 % of transactions fail.
+    assert!(tally.ok > n / 3, "{tally:?}");
+    // A fault ends with its transaction: the next one fails no more often than any other.
+    let base = failed as f64 / n as f64;
+    let after = tally.after_fault_failed as f64 / tally.after_fault.max(1) as f64;
+    assert!(after < base + 0.06, "failures cascade: {after:.3} after a fault against {base:.3} overall");
+
+    // The same on the paced line, with real character timing: fewer transactions, as each
+    // takes its time on the wire.
+    let tally = run(true, 115_200, transactions(300).min(3000), 11).await;
+    assert!(tally.ok > 0, "{tally:?}");
+}
