@@ -67,6 +67,8 @@ pub struct ClientConfig {
     pub backoff: Option<Backoff>,
     /// Requests that may wait for the bus before `request` calls wait themselves.
     pub queue: usize,
+    /// How long opening the port or connecting may take.
+    pub connect_timeout: Duration,
 }
 
 impl Default for ClientConfig {
@@ -79,6 +81,7 @@ impl Default for ClientConfig {
             echo_suppression: false,
             backoff: Some(Backoff::default()),
             queue: 64,
+            connect_timeout: Duration::from_secs(5),
         }
     }
 }
@@ -126,11 +129,7 @@ impl Client {
     /// Opens the transport (so that a wrong port or an unreachable host fails here, with a
     /// clear error) and starts the driver on the current tokio runtime.
     pub async fn connect(transport: Transport, config: ClientConfig) -> Result<Client, Error> {
-        let port = transport
-            .connector()
-            .connect()
-            .await
-            .map_err(|e| Error::io(format!("opening {}", transport.describe()), e))?;
+        let port = crate::port::open(&transport, config.connect_timeout).await?;
         Ok(Self::start(transport, config, Some(port)))
     }
 
@@ -234,7 +233,7 @@ impl Client {
             }));
         }
         let pdu = self.request(unit, request).await?.ok_or(Error::Closed)?;
-        let response = parse_reply(&pdu)?;
+        let response = parse_reply(unit, &pdu)?;
         let function = response.function();
         read(response).ok_or(Error::BadReply {
             unit,
@@ -354,9 +353,16 @@ impl Client {
     pub async fn diagnostics(&self, unit: u8, sub: DiagnosticCode, data: &[u8]) -> Result<Vec<u8>, Error> {
         let request = Request::Diagnostics(Diagnostic::with_data(sub, data)?);
         let Some(pdu) = self.request(unit, &request).await? else { return Ok(Vec::new()) };
-        match parse_reply(&pdu)? {
+        match parse_reply(unit, &pdu)? {
             Response::Diagnostics(d) => Ok(d.data().to_vec()),
-            _ => Err(Error::Closed),
+            other => Err(Error::BadReply {
+                unit,
+                error: ferrobus_proto::master::MasterError::Mismatch {
+                    field: "function code",
+                    expected: 0x08,
+                    received: u16::from(other.function().value()),
+                },
+            }),
         }
     }
 

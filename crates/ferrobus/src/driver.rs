@@ -127,7 +127,7 @@ impl<F: Framing + Send + 'static> Driver<F> {
             }
             self.record_health(unit, &result);
             return match result {
-                Err(Error::Timeout { unit, waited, .. }) => Err(Error::Timeout { unit, waited, attempts }),
+                Err(Error::Timeout { unit, timeout, .. }) => Err(Error::Timeout { unit, timeout, attempts }),
                 other => other,
             };
         }
@@ -137,8 +137,7 @@ impl<F: Framing + Send + 'static> Driver<F> {
     /// completes.
     async fn transact(&mut self, command: &Command) -> Result<Reply, Error> {
         if self.port.is_none() {
-            let port = self.transport.connector().connect().await;
-            self.port = Some(port.map_err(|e| Error::io(format!("opening {}", self.transport.describe()), e))?);
+            self.port = Some(crate::port::open(&self.transport, self.config.connect_timeout).await?);
             self.master.abort();
         }
         self.master.set_config(MasterConfig {
@@ -168,7 +167,7 @@ impl<F: Framing + Send + 'static> Driver<F> {
                 }
             }
             if let Some(completion) = self.master.poll_event() {
-                return convert(command.unit, &command.pdu, completion);
+                return convert(command, completion);
             }
             let deadline = self.master.poll_timeout().map(|t| self.clock.to_tokio(t));
             let Some(port) = self.port.as_mut() else {
@@ -264,8 +263,9 @@ impl<F: Framing + Send + 'static> Driver<F> {
 }
 
 /// Turns the engine's completion into the driver's result.
-fn convert(unit: u8, pdu: &[u8], completion: Completion<'_>) -> Result<Reply, Error> {
-    let function = FunctionCode::from_u8(pdu.first().copied().unwrap_or_default());
+fn convert(command: &Command, completion: Completion<'_>) -> Result<Reply, Error> {
+    let unit = command.unit;
+    let function = FunctionCode::from_u8(command.pdu.first().copied().unwrap_or_default());
     match completion {
         Completion::Response(response) => {
             let mut buf = vec![0u8; MAX_PDU_LEN];
@@ -276,12 +276,14 @@ fn convert(unit: u8, pdu: &[u8], completion: Completion<'_>) -> Result<Reply, Er
         Completion::Raw(bytes) => Ok(Reply::Pdu(bytes.to_vec())),
         Completion::Exception(code) => Err(Error::Exception { unit, function, code }),
         Completion::Sent => Ok(Reply::Sent),
-        Completion::Failed(MasterError::Timeout { waited }) => Err(Error::Timeout { unit, waited, attempts: 1 }),
+        Completion::Failed(MasterError::Timeout { .. }) => {
+            Err(Error::Timeout { unit, timeout: command.options.timeout, attempts: 1 })
+        }
         Completion::Failed(error) => Err(Error::BadReply { unit, error }),
     }
 }
 
-/// Parses a reply PDU the driver returned; the engine has checked it already.
-pub(crate) fn parse_reply(pdu: &[u8]) -> Result<Response<'_>, Error> {
-    Response::parse(pdu).map_err(|e| Error::BadReply { unit: 0, error: MasterError::BadResponse(e) })
+/// Parses a reply PDU from `unit` that the driver returned; the engine has checked it already.
+pub(crate) fn parse_reply(unit: u8, pdu: &[u8]) -> Result<Response<'_>, Error> {
+    Response::parse(pdu).map_err(|e| Error::BadReply { unit, error: MasterError::BadResponse(e) })
 }

@@ -26,12 +26,12 @@ pub enum Error {
         code: ExceptionCode,
     },
     /// No reply came in time, after every retry.
-    #[error("no reply from unit {unit} within {} ms ({attempts} attempt{s})", waited.as_millis(), s = if *.attempts == 1 { "" } else { "s" })]
+    #[error("no reply from unit {unit} within {} ms ({attempts} attempt{s})", timeout.as_millis(), s = if *.attempts == 1 { "" } else { "s" })]
     Timeout {
         /// The unit asked.
         unit: u8,
-        /// How long each attempt waited after the request had left.
-        waited: Duration,
+        /// The timeout of each attempt, counted from the end of the request.
+        timeout: Duration,
         /// How many times the request was sent.
         attempts: u32,
     },
@@ -107,7 +107,7 @@ mod tests {
         };
         assert_eq!(e.to_string(), "unit 5 answered 0x03 Read Holding Registers with exception 0x21 (vendor-specific)");
         assert_eq!(e.exception(), Some(ExceptionCode::Vendor(0x21)));
-        let t = Error::Timeout { unit: 1, waited: Duration::from_millis(500), attempts: 3 };
+        let t = Error::Timeout { unit: 1, timeout: Duration::from_millis(500), attempts: 3 };
         assert_eq!(t.to_string(), "no reply from unit 1 within 500 ms (3 attempts)");
         assert!(t.is_timeout());
     }

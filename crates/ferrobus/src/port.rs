@@ -97,14 +97,15 @@ impl SerialConfig {
 
 /// Opens a serial port with `config`.
 ///
-/// A pseudo-terminal cannot always hold a parity setting (Linux refuses it on a pty opened a
-/// second time); the port is then opened without parity and a warning is logged — a pty has
-/// no wire for parity to protect.
+/// A pseudo-terminal cannot always hold a parity setting or 7 data bits (Linux refuses them on
+/// a pty opened a second time); the port is then opened at 8 data bits without parity and a
+/// warning is logged — a pty has no wire for parity to protect, and passes 8-bit bytes.
 pub fn open_serial(config: &SerialConfig) -> io::Result<serial2_tokio::SerialPort> {
+    let plain = config.line.with_parity(Parity::None).with_data_bits(DataBits::Eight);
     let port = match serial2_tokio::SerialPort::open(&config.path, settings(config.line)) {
-        Err(e) if e.raw_os_error() == Some(22) && config.line.parity != Parity::None && is_pty(&config.path) => {
-            tracing::warn!(path = %config.path.display(), "this pty refuses parity {:?}; using none", config.line.parity);
-            serial2_tokio::SerialPort::open(&config.path, settings(config.line.with_parity(Parity::None)))?
+        Err(e) if plain != config.line && is_pty(&config.path) => {
+            tracing::warn!(path = %config.path.display(), "this pty refuses {} ({e}); using 8 data bits, no parity", config.line);
+            serial2_tokio::SerialPort::open(&config.path, settings(plain))?
         }
         other => other?,
     };
@@ -360,6 +361,19 @@ impl Connector for TcpTarget {
 
     fn describe(&self) -> String {
         self.0.clone()
+    }
+}
+
+/// Opens `transport`'s port, giving up after `timeout`.
+pub(crate) async fn open(transport: &Transport, timeout: Duration) -> Result<BoxPort, crate::Error> {
+    let context = || format!("opening {}", transport.describe());
+    match tokio::time::timeout(timeout, transport.connector().connect()).await {
+        Ok(Ok(port)) => Ok(port),
+        Ok(Err(e)) => Err(crate::Error::io(context(), e)),
+        Err(_) => Err(crate::Error::io(
+            context(),
+            io::Error::new(io::ErrorKind::TimedOut, format!("no connection after {} ms", timeout.as_millis())),
+        )),
     }
 }
 

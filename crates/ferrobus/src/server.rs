@@ -281,6 +281,26 @@ async fn write(port: &mut BoxPort, frame: &[u8], rs485: Rs485, timing: LineTimin
     Ok(())
 }
 
+/// Runs a slave engine for `config` over `port` with the framing and timing of `transport`,
+/// serving through `handler`, until the port fails or closes.
+pub async fn serve_transport<H: Handler + Send>(
+    transport: &Transport,
+    port: BoxPort,
+    config: SlaveConfig,
+    handler: &mut H,
+    options: &mut ServerOptions,
+) -> io::Result<()> {
+    match transport.framing() {
+        crate::port::Framing::Mbap => {
+            serve(Slave::new(Transport::mbap_codec(), config), port, handler, options).await.1
+        }
+        crate::port::Framing::Rtu => serve(Slave::new(transport.rtu_codec(), config), port, handler, options).await.1,
+        crate::port::Framing::Ascii => {
+            serve(Slave::new(transport.ascii_codec(), config), port, handler, options).await.1
+        }
+    }
+}
+
 /// Serves Modbus/TCP (or RTU over TCP, per `transport`'s framing) on `listener`: one engine
 /// per connection, all sharing `handler`. Runs until the listener fails.
 pub async fn serve_tcp<H: Handler + Send + 'static>(
@@ -296,20 +316,8 @@ pub async fn serve_tcp<H: Handler + Send + 'static>(
         let transport = transport.clone();
         let mut handler = handler.clone();
         tokio::spawn(async move {
-            let port: BoxPort = Box::new(stream);
             let mut options = ServerOptions::for_transport(&transport);
-            let result = match transport.framing() {
-                crate::port::Framing::Mbap => {
-                    serve(Slave::new(Transport::mbap_codec(), config), port, &mut handler, &mut options).await.1
-                }
-                crate::port::Framing::Rtu => {
-                    serve(Slave::new(transport.rtu_codec(), config), port, &mut handler, &mut options).await.1
-                }
-                crate::port::Framing::Ascii => {
-                    serve(Slave::new(transport.ascii_codec(), config), port, &mut handler, &mut options).await.1
-                }
-            };
-            match result {
+            match serve_transport(&transport, Box::new(stream), config, &mut handler, &mut options).await {
                 Ok(()) => tracing::debug!(%peer, "connection closed"),
                 Err(e) => tracing::debug!(%peer, "connection failed: {e}"),
             }

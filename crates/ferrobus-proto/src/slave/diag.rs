@@ -97,6 +97,8 @@ pub mod event {
     pub const SEND_BUSY_EXCEPTION: u8 = 0x04;
     /// Send: a negative acknowledge (code 7) was sent.
     pub const SEND_NAK_EXCEPTION: u8 = 0x08;
+    /// Send: a write timeout error occurred.
+    pub const SEND_WRITE_TIMEOUT: u8 = 0x10;
     /// Send: the slave is in listen-only mode.
     pub const SEND_LISTEN_ONLY: u8 = 0x20;
     /// The slave entered listen-only mode.

@@ -1,0 +1,299 @@
+//! Addresses as typed: wire addresses, a manual's 1-based numbers, Modicon references.
+//!
+//! The frame carries a 0-based address (the "wire address"). Drive manuals number registers
+//! from 1 and the frame carries number − 1 (reference §4.6: "the holding register start
+//! address is 0011h, which is smaller by 1 than the register number 0012h"). PLC tools use
+//! Modicon references, where the leading digit names the table: 0xxxx coils, 1xxxx discrete
+//! inputs, 3xxxx input registers, 4xxxx holding registers, each 1-based (5 digits up to
+//! 9999, 6 digits up to 65536).
+
+use std::fmt;
+
+use clap::{Args, ValueEnum};
+use ferrobus_proto::FunctionCode;
+
+use crate::exit::CliError;
+
+/// The one-line explanation shown in `--help`.
+pub(crate) const ADDRESS_HELP: &str = "ADDRESS is the wire address (0-based, as on the bus; decimal or 0x hex); \
+     use --one-based for a manual's register numbers, or a Modicon reference like 40001";
+
+/// A Modbus data table.
+#[derive(ValueEnum, Clone, Copy, PartialEq, Eq, Debug)]
+pub(crate) enum Table {
+    // Coils: read/write bits (FC01, FC05, FC0F).
+    Coils,
+    // Discrete inputs: read-only bits (FC02).
+    Discrete,
+    // Holding registers: read/write words (FC03, FC06, FC10).
+    Holding,
+    // Input registers: read-only words (FC04).
+    Input,
+}
+
+impl Table {
+    /// Whether the table holds bits.
+    pub(crate) fn is_bits(self) -> bool {
+        matches!(self, Table::Coils | Table::Discrete)
+    }
+
+    /// The function code that reads it.
+    pub(crate) fn read_function(self) -> FunctionCode {
+        match self {
+            Table::Coils => FunctionCode::ReadCoils,
+            Table::Discrete => FunctionCode::ReadDiscreteInputs,
+            Table::Holding => FunctionCode::ReadHoldingRegisters,
+            Table::Input => FunctionCode::ReadInputRegisters,
+        }
+    }
+
+    /// The spec's most items per read request (§6.1–6.4).
+    pub(crate) fn max_read(self) -> usize {
+        if self.is_bits() { 2000 } else { 125 }
+    }
+
+    /// The leading digit of a Modicon reference.
+    fn modicon_digit(self) -> u32 {
+        match self {
+            Table::Coils => 0,
+            Table::Discrete => 1,
+            Table::Input => 3,
+            Table::Holding => 4,
+        }
+    }
+
+    fn from_modicon_digit(digit: u32) -> Option<Table> {
+        match digit {
+            0 => Some(Table::Coils),
+            1 => Some(Table::Discrete),
+            3 => Some(Table::Input),
+            4 => Some(Table::Holding),
+            _ => None,
+        }
+    }
+
+    /// The name used on the command line and in JSON.
+    pub(crate) fn name(self) -> &'static str {
+        match self {
+            Table::Coils => "coils",
+            Table::Discrete => "discrete",
+            Table::Holding => "holding",
+            Table::Input => "input",
+        }
+    }
+
+    /// One item, in words.
+    pub(crate) fn item(self) -> &'static str {
+        match self {
+            Table::Coils => "coil",
+            Table::Discrete => "discrete input",
+            Table::Holding => "holding register",
+            Table::Input => "input register",
+        }
+    }
+}
+
+impl fmt::Display for Table {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.write_str(self.name())
+    }
+}
+
+/// The `--one-based` option of the commands that take addresses.
+#[derive(Args, Clone, Copy, Debug, Default)]
+pub(crate) struct AddressArgs {
+    /// ADDRESS is a manual's 1-based register number (frame address = number - 1)
+    #[arg(long = "one-based", short = '1')]
+    pub(crate) one_based: bool,
+}
+
+/// How an address was written, so that output can show it the same way.
+#[derive(Clone, Copy, PartialEq, Eq, Debug)]
+pub(crate) enum Style {
+    /// A wire address.
+    Wire,
+    /// A 1-based number (`--one-based`).
+    OneBased,
+    /// A Modicon reference with this many digits (5 or 6).
+    Modicon(u8),
+}
+
+/// An address resolved to the wire.
+#[derive(Clone, Copy, PartialEq, Eq, Debug)]
+pub(crate) struct Address {
+    /// The address in the frame.
+    pub(crate) wire: u16,
+    /// The table it is in.
+    pub(crate) table: Table,
+    /// How it was written.
+    pub(crate) style: Style,
+}
+
+impl Address {
+    /// Resolves `text` for `table`.
+    pub(crate) fn parse(text: &str, table: Table, args: AddressArgs) -> Result<Address, CliError> {
+        let cleaned: String = text.trim().chars().filter(|&c| c != '_').collect();
+        let bad = || CliError::Usage(format!("'{text}' is not an address: use decimal, 0x hex or a Modicon reference"));
+        let (value, digits) = if let Some(hex) = cleaned.strip_prefix("0x").or_else(|| cleaned.strip_prefix("0X")) {
+            (u32::from_str_radix(hex, 16).map_err(|_| bad())?, None)
+        } else {
+            if cleaned.is_empty() || !cleaned.bytes().all(|b| b.is_ascii_digit()) {
+                return Err(bad());
+            }
+            (cleaned.parse::<u32>().map_err(|_| bad())?, Some(cleaned.len()))
+        };
+        if let Some(address) = modicon(value, digits) {
+            return address.matching(table, text);
+        }
+        if args.one_based {
+            return match value {
+                0 => Err(CliError::Usage(
+                    "with --one-based, register numbers start at 1 (frame address = number - 1); 0 is not one".into(),
+                )),
+                1..=65536 => {
+                    Ok(Address { wire: u16::try_from(value - 1).unwrap_or(u16::MAX), table, style: Style::OneBased })
+                }
+                _ => Err(CliError::Usage(format!("register number {text} is out of range (1-65536)"))),
+            };
+        }
+        match u16::try_from(value) {
+            Ok(wire) => Ok(Address { wire, table, style: Style::Wire }),
+            Err(_) => Err(CliError::Usage(format!("address {text} is out of range (0-65535)"))),
+        }
+    }
+
+    fn matching(self, table: Table, text: &str) -> Result<Address, CliError> {
+        if self.table == table {
+            return Ok(self);
+        }
+        let as_wire = match text.trim().parse::<u16>() {
+            Ok(wire) => format!("; for wire address {wire} write 0x{wire:X}"),
+            Err(_) => String::new(),
+        };
+        Err(CliError::Usage(format!(
+            "{text} is a Modicon reference to {} {}, but the command addresses {}{as_wire}",
+            self.table.item(),
+            u32::from(self.wire) + 1,
+            table.name(),
+        )))
+    }
+
+    /// How `wire` (an address of the same request) is written in this address's style: the
+    /// 1-based number or the Modicon reference; `None` for plain wire addresses.
+    pub(crate) fn reference(self, wire: u16) -> Option<String> {
+        let number = u32::from(wire) + 1;
+        let digit = self.table.modicon_digit();
+        match self.style {
+            Style::Wire => None,
+            Style::OneBased => Some(number.to_string()),
+            Style::Modicon(5) if number <= 9999 => Some(format!("{digit}{number:04}")),
+            Style::Modicon(_) => Some(format!("{digit}{number:05}")),
+        }
+    }
+
+    /// Checks that `count` items from here stay within the 65536 addresses.
+    pub(crate) fn check_span(self, count: usize) -> Result<(), CliError> {
+        if usize::from(self.wire) + count > 0x1_0000 {
+            return Err(CliError::Usage(format!(
+                "{count} {}s from address {} run past the last address, 65535",
+                self.table.item(),
+                self.wire
+            )));
+        }
+        Ok(())
+    }
+}
+
+/// A Modicon reference, if `value` written with `digits` digits is one.
+fn modicon(value: u32, digits: Option<usize>) -> Option<Address> {
+    let (scale, max, width) = match digits? {
+        5 => (10_000, 9_999, 5),
+        6 => (100_000, 65_536, 6),
+        _ => return None,
+    };
+    let table = Table::from_modicon_digit(value / scale)?;
+    let offset = value % scale;
+    if offset == 0 || offset > max {
+        return None;
+    }
+    Some(Address { wire: u16::try_from(offset - 1).ok()?, table, style: Style::Modicon(width) })
+}
+
+/// Splits `total` items from `start` into requests of at most `max` items, cutting only at
+/// multiples of `width` (a 32-bit value is never split across two requests). Returns
+/// (start, count) pairs. `max` must be at least `width`.
+pub(crate) fn split(start: u16, total: usize, width: usize, max: usize) -> Vec<(u16, usize)> {
+    let per = (max / width.max(1)).max(1) * width.max(1);
+    let mut out = Vec::new();
+    let mut done = 0;
+    while done < total {
+        let n = per.min(total - done);
+        let at = usize::from(start) + done;
+        out.push((u16::try_from(at).unwrap_or(u16::MAX), n));
+        done += n;
+    }
+    out
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn parse(text: &str, table: Table, one_based: bool) -> Result<Address, CliError> {
+        Address::parse(text, table, AddressArgs { one_based })
+    }
+
+    #[test]
+    fn wire_addresses_are_decimal_or_hex() {
+        assert_eq!(parse("16", Table::Holding, false).unwrap().wire, 16);
+        assert_eq!(parse("0x0011", Table::Holding, false).unwrap().wire, 0x11);
+        assert_eq!(parse("65535", Table::Holding, false).unwrap().wire, 65535);
+        assert!(parse("65536", Table::Holding, false).is_err());
+        assert!(parse("70000", Table::Holding, false).is_err());
+        assert!(parse("-1", Table::Holding, false).is_err());
+        assert!(parse("0x", Table::Holding, false).is_err());
+        assert!(parse("", Table::Holding, false).is_err());
+        assert!(parse("99999999999999", Table::Holding, false).is_err());
+    }
+
+    #[test]
+    fn one_based_numbers_are_one_more_than_the_wire() {
+        let a = parse("0x0012", Table::Holding, true).unwrap();
+        assert_eq!((a.wire, a.style), (0x11, Style::OneBased));
+        assert_eq!(a.reference(0x11).as_deref(), Some("18"));
+        assert_eq!(parse("65536", Table::Holding, true).unwrap().wire, 65535);
+        assert!(parse("0", Table::Holding, true).is_err());
+    }
+
+    #[test]
+    fn modicon_references_name_table_and_number() {
+        let a = parse("40001", Table::Holding, false).unwrap();
+        assert_eq!((a.wire, a.style), (0, Style::Modicon(5)));
+        assert_eq!(a.reference(1).as_deref(), Some("40002"));
+        assert_eq!(parse("00001", Table::Coils, false).unwrap().wire, 0);
+        assert_eq!(parse("10010", Table::Discrete, false).unwrap().wire, 9);
+        assert_eq!(parse("30002", Table::Input, false).unwrap().wire, 1);
+        let six = parse("465536", Table::Holding, false).unwrap();
+        assert_eq!((six.wire, six.style), (65535, Style::Modicon(6)));
+        assert_eq!(six.reference(65535).as_deref(), Some("465536"));
+        // Not references: 5 digits of another table digit, or offset 0.
+        assert_eq!(parse("20001", Table::Holding, false).unwrap().style, Style::Wire);
+        assert_eq!(parse("40000", Table::Holding, false).unwrap().wire, 40000);
+    }
+
+    #[test]
+    fn a_modicon_reference_to_another_table_is_refused() {
+        let CliError::Usage(msg) = parse("40001", Table::Coils, false).unwrap_err() else { panic!() };
+        assert!(msg.contains("holding register 1"), "{msg}");
+        assert!(msg.contains("0x9C41"), "{msg}");
+    }
+
+    #[test]
+    fn splits_cut_only_at_value_boundaries() {
+        assert_eq!(split(0, 10, 2, 4), vec![(0, 4), (4, 4), (8, 2)]);
+        assert_eq!(split(0, 10, 2, 5), vec![(0, 4), (4, 4), (8, 2)]);
+        assert_eq!(split(100, 250, 1, 125), vec![(100, 125), (225, 125)]);
+        assert_eq!(split(0, 0, 1, 125), vec![]);
+        assert_eq!(split(65534, 2, 2, 125), vec![(65534, 2)]);
+    }
+}

@@ -1,0 +1,336 @@
+//! Connection options shared by every client command, and opening the client.
+//!
+//! One of `--port` (serial RTU, or ASCII with `--ascii`), `--tcp` (Modbus/TCP) or `--rtu-tcp`
+//! (RTU frames over TCP) names the bus; the rest tune the line and the requests.
+
+use std::fmt;
+use std::time::Duration;
+
+use clap::{Args, ValueEnum};
+use ferrobus::{Client, ClientConfig, Rs485, SerialConfig, Transport};
+use ferrobus_proto::frame::{DataBits, LineConfig, Parity, StopBits};
+
+use crate::exit::CliError;
+
+/// Options that say how to reach the device.
+#[derive(Args, Clone, Debug)]
+#[command(next_help_heading = "Connection")]
+pub(crate) struct ConnectArgs {
+    /// Serial port, e.g. /dev/ttyUSB0 (RTU unless --ascii)
+    #[arg(long, global = true, value_name = "PATH", conflicts_with_all = ["tcp", "rtu_tcp"])]
+    pub(crate) port: Option<String>,
+
+    /// Modbus/TCP server, HOST[:PORT] (port 502 if omitted)
+    #[arg(long, global = true, value_name = "HOST:PORT", conflicts_with = "rtu_tcp")]
+    pub(crate) tcp: Option<String>,
+
+    /// RTU frames over TCP (a serial gateway), HOST:PORT
+    #[arg(long = "rtu-tcp", global = true, value_name = "HOST:PORT")]
+    pub(crate) rtu_tcp: Option<String>,
+
+    /// Modbus ASCII framing on the serial port (usually with --data-bits 7)
+    #[arg(long, global = true)]
+    pub(crate) ascii: bool,
+
+    /// Baud rate
+    #[arg(long, global = true, default_value_t = 19_200, value_parser = clap::value_parser!(u32).range(1..))]
+    pub(crate) baud: u32,
+
+    /// Parity (8E1 is the spec's default; many drives ship 8N1)
+    #[arg(long, global = true, value_enum, default_value_t = ParityArg::Even)]
+    pub(crate) parity: ParityArg,
+
+    /// Data bits (7 only with --ascii)
+    #[arg(long = "data-bits", global = true, default_value_t = 8, value_parser = clap::value_parser!(u8).range(7..=8))]
+    pub(crate) data_bits: u8,
+
+    /// Stop bits
+    #[arg(long = "stop-bits", global = true, default_value_t = 1, value_parser = clap::value_parser!(u8).range(1..=2))]
+    pub(crate) stop_bits: u8,
+
+    /// RS-485 direction control: by the adapter, the kernel (TIOCSRS485) or RTS
+    #[arg(long, global = true, value_enum, default_value_t = Rs485Arg::Auto)]
+    pub(crate) rs485: Rs485Arg,
+
+    /// Set the USB adapter's latency timer to 1 ms (FTDI default: 16 ms)
+    #[arg(long = "low-latency", global = true)]
+    pub(crate) low_latency: bool,
+
+    /// Unit (slave) address; 0 = broadcast on serial lines
+    #[arg(long, short = 'u', global = true, default_value_t = 1)]
+    pub(crate) unit: u8,
+
+    /// Reply timeout per attempt: 500ms, 1.5s, 2s (a plain number is ms)
+    #[arg(long, global = true, value_name = "DURATION", default_value = "1s", value_parser = parse_duration)]
+    pub(crate) timeout: Duration,
+
+    /// Resend a request this many times when no usable reply comes
+    #[arg(long, global = true, default_value_t = 0)]
+    pub(crate) retries: u32,
+
+    /// Override t1.5, the longest gap inside a frame
+    #[arg(long, global = true, value_name = "DURATION", value_parser = parse_duration)]
+    pub(crate) t15: Option<Duration>,
+
+    /// Override t3.5, the silence between frames (some servos want 10ms)
+    #[arg(long, global = true, value_name = "DURATION", value_parser = parse_duration)]
+    pub(crate) t35: Option<Duration>,
+
+    /// Drop the echo of our own transmission (adapters that hear themselves)
+    #[arg(long, global = true)]
+    pub(crate) echo: bool,
+
+    /// Quiet time after a broadcast
+    #[arg(long, global = true, value_name = "DURATION", value_parser = parse_duration)]
+    pub(crate) turnaround: Option<Duration>,
+}
+
+/// Parity, as typed. (Plain comments on the variants keep `--help` compact.)
+#[derive(ValueEnum, Clone, Copy, PartialEq, Eq, Debug)]
+pub(crate) enum ParityArg {
+    // Even parity: the spec's default, 8E1.
+    Even,
+    // Odd parity.
+    Odd,
+    // No parity: the spec then asks for two stop bits; many drives ship 8N1.
+    None,
+}
+
+/// RS-485 direction control, as typed.
+#[derive(ValueEnum, Clone, Copy, PartialEq, Eq, Debug)]
+pub(crate) enum Rs485Arg {
+    // The adapter switches the transmitter itself.
+    Auto,
+    // The kernel's RS-485 mode.
+    Kernel,
+    // ferrobus drives RTS around each transmission.
+    Rts,
+}
+
+/// Which kind of bus the options name.
+#[derive(Clone, PartialEq, Eq, Debug)]
+pub(crate) enum Target {
+    /// A serial port and its line settings.
+    Serial {
+        /// The path.
+        path: String,
+        /// Baud, data bits, parity, stop bits.
+        line: LineConfig,
+        /// ASCII framing instead of RTU.
+        ascii: bool,
+    },
+    /// Modbus/TCP to `host:port`.
+    Tcp(String),
+    /// RTU over TCP to `host:port`.
+    RtuTcp(String),
+}
+
+impl fmt::Display for Target {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        match self {
+            Target::Serial { path, line, ascii } => {
+                write!(f, "{path} at {line} ({})", if *ascii { "ASCII" } else { "RTU" })
+            }
+            Target::Tcp(addr) => write!(f, "{addr} (Modbus/TCP)"),
+            Target::RtuTcp(addr) => write!(f, "{addr} (RTU over TCP)"),
+        }
+    }
+}
+
+impl ConnectArgs {
+    /// The bus the options name, or a usage error if they name none or a bad one.
+    pub(crate) fn target(&self) -> Result<Target, CliError> {
+        if self.data_bits == 7 && !self.ascii {
+            return Err(CliError::Usage("--data-bits 7 only works with --ascii (RTU needs 8 data bits)".into()));
+        }
+        if let Some(path) = &self.port {
+            return Ok(Target::Serial { path: path.clone(), line: self.line(), ascii: self.ascii });
+        }
+        if self.ascii && (self.tcp.is_some() || self.rtu_tcp.is_some()) {
+            return Err(CliError::Usage("--ascii applies to a serial --port only".into()));
+        }
+        if let Some(addr) = &self.tcp {
+            return Ok(Target::Tcp(with_default_port(addr)?));
+        }
+        if let Some(addr) = &self.rtu_tcp {
+            if !has_port(addr) {
+                return Err(CliError::Usage(format!(
+                    "--rtu-tcp needs HOST:PORT (gateways listen on e.g. 4001 or 502), got '{addr}'"
+                )));
+            }
+            return Ok(Target::RtuTcp(addr.clone()));
+        }
+        Err(CliError::MissingTarget)
+    }
+
+    /// The serial line settings.
+    pub(crate) fn line(&self) -> LineConfig {
+        let parity = match self.parity {
+            ParityArg::Even => Parity::Even,
+            ParityArg::Odd => Parity::Odd,
+            ParityArg::None => Parity::None,
+        };
+        // The value parser keeps baud >= 1; the fallback is never used.
+        LineConfig::new(self.baud)
+            .unwrap_or_default()
+            .with_parity(parity)
+            .with_data_bits(if self.data_bits == 7 { DataBits::Seven } else { DataBits::Eight })
+            .with_stop_bits(if self.stop_bits == 2 { StopBits::Two } else { StopBits::One })
+    }
+
+    /// The transport for `target`, with the timing overrides applied.
+    pub(crate) fn transport(&self, target: &Target) -> Transport {
+        let mut transport = match target {
+            Target::Serial { path, line, ascii } => {
+                let mut config = SerialConfig::new(path.clone(), *line);
+                config.rs485 = match self.rs485 {
+                    Rs485Arg::Auto => Rs485::Auto,
+                    Rs485Arg::Kernel => Rs485::Kernel,
+                    Rs485Arg::Rts => Rs485::Rts,
+                };
+                config.low_latency = self.low_latency;
+                if *ascii { Transport::ascii(config) } else { Transport::rtu(config) }
+            }
+            Target::Tcp(addr) => Transport::tcp(addr.clone()),
+            Target::RtuTcp(addr) => Transport::rtu_over_tcp(addr.clone()),
+        };
+        if let Some(t15) = self.t15 {
+            transport = transport.with_t1_5(t15);
+        }
+        if let Some(t35) = self.t35 {
+            transport = transport.with_t3_5(t35);
+        }
+        transport
+    }
+
+    /// The client settings: timeout, retries, turnaround, echo; no backoff (one-shot commands
+    /// should report every timeout, not skip the unit).
+    pub(crate) fn client_config(&self) -> ClientConfig {
+        let mut config =
+            ClientConfig { timeout: self.timeout, retries: self.retries, backoff: None, ..Default::default() };
+        config.echo_suppression = self.echo;
+        config.connect_timeout = self.timeout.max(Duration::from_secs(1));
+        if let Some(turnaround) = self.turnaround {
+            config.turnaround_delay = turnaround;
+        }
+        config
+    }
+
+    /// Opens the bus. A TCP connect waits at most the reply timeout (at least one second).
+    pub(crate) async fn open(&self) -> Result<Session, CliError> {
+        let target = self.target()?;
+        let transport = self.transport(&target);
+        tracing::info!(%target, unit = self.unit, "opening");
+        let wait = self.timeout.max(Duration::from_secs(1));
+        let client = match tokio::time::timeout(wait, Client::connect(transport, self.client_config())).await {
+            Ok(result) => result.map_err(|error| CliError::Modbus { error })?,
+            Err(_) => return Err(CliError::ConnectTimeout { target: target.to_string(), waited: wait }),
+        };
+        Ok(Session { client, unit: self.unit, target })
+    }
+}
+
+/// An open bus and the unit the commands talk to.
+#[derive(Clone, Debug)]
+pub(crate) struct Session {
+    /// The client.
+    pub(crate) client: Client,
+    /// The unit address from `--unit`.
+    pub(crate) unit: u8,
+    /// What was opened.
+    pub(crate) target: Target,
+}
+
+impl Session {
+    /// Whether requests to the unit are broadcasts (unit 0 on a serial framing).
+    pub(crate) fn is_broadcast(&self) -> bool {
+        self.unit == 0 && !matches!(self.target, Target::Tcp(_))
+    }
+}
+
+impl ConnectArgs {
+    /// A usage error for reading from a broadcast address (unit 0 on a serial framing), found
+    /// before the bus is opened.
+    pub(crate) fn refuse_broadcast_read(&self) -> Result<(), CliError> {
+        if self.unit == 0 && self.tcp.is_none() {
+            return Err(CliError::Usage(
+                "unit 0 is a broadcast: no device answers it, so there is nothing to read; use --unit 1-247".into(),
+            ));
+        }
+        Ok(())
+    }
+}
+
+fn has_port(addr: &str) -> bool {
+    match addr.strip_prefix('[') {
+        Some(rest) => rest.contains("]:"),
+        None => addr.matches(':').count() == 1,
+    }
+}
+
+/// `host` → `host:502`; `::1` → `[::1]:502`.
+fn with_default_port(addr: &str) -> Result<String, CliError> {
+    if addr.is_empty() {
+        return Err(CliError::Usage("--tcp needs a host, e.g. 192.168.1.10 or plc:502".into()));
+    }
+    if has_port(addr) {
+        return Ok(addr.to_string());
+    }
+    if addr.starts_with('[') {
+        return Ok(format!("{addr}:502"));
+    }
+    if addr.contains(':') {
+        return Ok(format!("[{addr}]:502"));
+    }
+    Ok(format!("{addr}:502"))
+}
+
+/// Parses `500ms`, `1.5s`, `2s`, `250us`, or a plain number of milliseconds.
+pub(crate) fn parse_duration(text: &str) -> Result<Duration, String> {
+    let text = text.trim();
+    let split = text.find(|c: char| !(c.is_ascii_digit() || c == '.')).unwrap_or(text.len());
+    let (number, unit) = text.split_at(split);
+    let value: f64 = number.parse().map_err(|_| format!("'{text}' is not a duration (e.g. 500ms, 1.5s, 2s)"))?;
+    let seconds = match unit.trim() {
+        "" | "ms" => value / 1e3,
+        "s" => value,
+        "us" | "µs" => value / 1e6,
+        "ns" => value / 1e9,
+        "m" | "min" => value * 60.0,
+        other => return Err(format!("unknown unit '{other}' in '{text}'; use ms, s or us")),
+    };
+    if seconds > 3600.0 {
+        return Err(format!("'{text}' is longer than an hour"));
+    }
+    Duration::try_from_secs_f64(seconds).map_err(|_| format!("'{text}' is not a duration"))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn durations_take_units_and_plain_numbers_are_milliseconds() {
+        assert_eq!(parse_duration("500ms"), Ok(Duration::from_millis(500)));
+        assert_eq!(parse_duration("1.5s"), Ok(Duration::from_millis(1500)));
+        assert_eq!(parse_duration("2s"), Ok(Duration::from_secs(2)));
+        assert_eq!(parse_duration("250"), Ok(Duration::from_millis(250)));
+        assert_eq!(parse_duration("750us"), Ok(Duration::from_micros(750)));
+        assert!(parse_duration("-1s").is_err());
+        assert!(parse_duration("fast").is_err());
+        assert!(parse_duration("1.2.3s").is_err());
+        assert!(parse_duration("5h").is_err());
+        assert!(parse_duration("99999999999999999999s").is_err());
+        assert!(parse_duration("").is_err());
+    }
+
+    #[test]
+    fn tcp_addresses_get_port_502_unless_they_have_one() {
+        assert_eq!(with_default_port("plc").unwrap(), "plc:502");
+        assert_eq!(with_default_port("10.0.0.5:1502").unwrap(), "10.0.0.5:1502");
+        assert_eq!(with_default_port("::1").unwrap(), "[::1]:502");
+        assert_eq!(with_default_port("[::1]").unwrap(), "[::1]:502");
+        assert_eq!(with_default_port("[::1]:5020").unwrap(), "[::1]:5020");
+        assert!(with_default_port("").is_err());
+    }
+}

@@ -1,0 +1,377 @@
+//! `ferrobus diag`: serial line diagnostics (FC08 sub-functions, FC0B, FC0C).
+//!
+//! Spec: MODBUS Application Protocol V1.1b3 §6.8–6.10. Most drives answer only the echo
+//! (sub-function 00); the Hitachi/Omron inverters say so in their manuals.
+
+use clap::{Args, Subcommand, ValueEnum};
+use ferrobus_proto::codes::DiagnosticCode;
+use ferrobus_proto::slave::event;
+use serde_json::json;
+
+use crate::connect::{ConnectArgs, Session};
+use crate::exit::CliError;
+use crate::hex;
+use crate::output::{self, Align, Format, OutputArgs, Rows};
+
+/// `diag SUBCOMMAND`.
+#[derive(Args, Debug)]
+pub(crate) struct DiagArgs {
+    /// Which diagnostic.
+    #[command(subcommand)]
+    pub(crate) what: DiagCommand,
+
+    /// Output format (counters and event-log).
+    #[command(flatten)]
+    pub(crate) output: OutputArgs,
+}
+
+/// The diagnostics.
+#[derive(Subcommand, Debug)]
+pub(crate) enum DiagCommand {
+    /// Loopback: the device echoes the data (FC08/00)
+    Echo {
+        /// Data to echo, in hex
+        #[arg(long, default_value = "A537")]
+        data: String,
+    },
+    /// Restart communications; the only way out of listen-only mode (FC08/01)
+    Restart {
+        /// Also clear the comm event log
+        #[arg(long = "clear-log")]
+        clear_log: bool,
+    },
+    /// The 16-bit diagnostic register (FC08/02)
+    Register,
+    /// Change the ASCII end-of-frame character (default LF) (FC08/03)
+    Delimiter {
+        /// The new delimiter: one character, \n, \r, or 0xNN
+        #[arg(long)]
+        delimiter: String,
+    },
+    /// Force listen-only mode: the device stops answering until `diag restart` (FC08/04)
+    ListenOnly,
+    /// Clear the counters and the diagnostic register (FC08/0A)
+    Clear,
+    /// One counter (FC08/0B-12)
+    Counter {
+        /// Which counter: bus-messages (0B), comm-errors (0C), exceptions (0D), server-messages (0E),
+        /// no-response (0F), nak (10), busy (11), overruns (12)
+        #[arg(value_enum, hide_possible_values = true)]
+        which: Counter,
+    },
+    /// All counters FC08/0B-12, as a table
+    Counters,
+    /// Clear the overrun counter and flag (FC08/14)
+    ClearOverrun,
+    /// Any sub-function, with optional data (FC08/xx)
+    Sub {
+        /// Sub-function code, e.g. 0x0B
+        code: String,
+        /// Data in hex [default: 0000]
+        #[arg(long)]
+        data: Option<String>,
+    },
+    /// The comm event counter and status (FC0B)
+    EventCounter,
+    /// The comm event log, each event decoded (FC0C)
+    EventLog,
+}
+
+/// The counters of sub-functions 0x0B–0x12.
+#[derive(ValueEnum, Clone, Copy, PartialEq, Eq, Debug)]
+pub(crate) enum Counter {
+    // 0B: messages seen on the bus.
+    BusMessages,
+    // 0C: CRC errors seen on the bus.
+    CommErrors,
+    // 0D: exception replies sent.
+    Exceptions,
+    // 0E: messages addressed to the device.
+    ServerMessages,
+    // 0F: messages the device did not answer.
+    NoResponse,
+    // 10: negative acknowledgements sent.
+    Nak,
+    // 11: busy replies sent.
+    Busy,
+    // 12: messages lost to character overrun.
+    Overruns,
+}
+
+impl Counter {
+    const ALL: [Counter; 8] = [
+        Counter::BusMessages,
+        Counter::CommErrors,
+        Counter::Exceptions,
+        Counter::ServerMessages,
+        Counter::NoResponse,
+        Counter::Nak,
+        Counter::Busy,
+        Counter::Overruns,
+    ];
+
+    fn code(self) -> DiagnosticCode {
+        match self {
+            Counter::BusMessages => DiagnosticCode::BusMessageCount,
+            Counter::CommErrors => DiagnosticCode::BusCommErrorCount,
+            Counter::Exceptions => DiagnosticCode::BusExceptionErrorCount,
+            Counter::ServerMessages => DiagnosticCode::ServerMessageCount,
+            Counter::NoResponse => DiagnosticCode::ServerNoResponseCount,
+            Counter::Nak => DiagnosticCode::ServerNakCount,
+            Counter::Busy => DiagnosticCode::ServerBusyCount,
+            Counter::Overruns => DiagnosticCode::BusCharacterOverrunCount,
+        }
+    }
+
+    fn name(self) -> &'static str {
+        match self {
+            Counter::BusMessages => "bus-messages",
+            Counter::CommErrors => "comm-errors",
+            Counter::Exceptions => "exceptions",
+            Counter::ServerMessages => "server-messages",
+            Counter::NoResponse => "no-response",
+            Counter::Nak => "nak",
+            Counter::Busy => "busy",
+            Counter::Overruns => "overruns",
+        }
+    }
+}
+
+/// An event byte of the comm event log in words (§6.10).
+pub(crate) fn describe_event(byte: u8) -> String {
+    let flags = |bits: &[(u8, &'static str)]| -> Vec<&'static str> {
+        bits.iter().filter(|(bit, _)| byte & bit != 0).map(|&(_, name)| name).collect()
+    };
+    let (kind, words) = if byte & event::RECEIVE != 0 {
+        let words = flags(&[
+            (event::RECEIVE_BROADCAST, "broadcast"),
+            (event::RECEIVE_COMM_ERROR, "communication error"),
+            (event::RECEIVE_OVERRUN, "character overrun"),
+            (event::RECEIVE_LISTEN_ONLY, "in listen-only mode"),
+        ]);
+        ("receive", words)
+    } else if byte & event::SEND != 0 {
+        let words = flags(&[
+            (event::SEND_READ_EXCEPTION, "read exception"),
+            (event::SEND_ABORT_EXCEPTION, "abort exception"),
+            (event::SEND_BUSY_EXCEPTION, "busy exception"),
+            (event::SEND_NAK_EXCEPTION, "NAK exception"),
+            (event::SEND_WRITE_TIMEOUT, "write timeout"),
+            (event::SEND_LISTEN_ONLY, "in listen-only mode"),
+        ]);
+        ("send", words)
+    } else if byte == event::ENTERED_LISTEN_ONLY {
+        return "entered listen-only".into();
+    } else if byte == event::RESTART {
+        return "restart".into();
+    } else {
+        return "unknown event".into();
+    };
+    if words.is_empty() { kind.to_string() } else { format!("{kind}: {}", words.join(", ")) }
+}
+
+/// A byte from `c`, `\n`, `\r`, `\t` or `0xNN`.
+fn delimiter_byte(text: &str) -> Result<u8, CliError> {
+    let byte = match text {
+        "\\n" => Some(b'\n'),
+        "\\r" => Some(b'\r'),
+        "\\t" => Some(b'\t'),
+        t if t.starts_with("0x") || t.starts_with("0X") => u8::from_str_radix(&t[2..], 16).ok(),
+        t if t.len() == 1 && t.is_ascii() => t.bytes().next(),
+        _ => None,
+    };
+    byte.ok_or_else(|| CliError::Usage(format!("delimiter '{text}' must be one ASCII character, \\n, \\r or 0xNN")))
+}
+
+fn sub_code(text: &str) -> Result<DiagnosticCode, CliError> {
+    let t = text.trim();
+    let parsed = match t.strip_prefix("0x").or_else(|| t.strip_prefix("0X")) {
+        Some(h) => u16::from_str_radix(h, 16),
+        None => t.parse(),
+    };
+    parsed
+        .map(DiagnosticCode::from_u16)
+        .map_err(|_| CliError::Usage(format!("sub-function '{text}' must be 0-65535 (decimal or 0x hex)")))
+}
+
+/// Runs `diag`.
+pub(crate) async fn run(connection: &ConnectArgs, args: &DiagArgs) -> Result<(), CliError> {
+    if !matches!(args.what, DiagCommand::ListenOnly | DiagCommand::Restart { .. }) {
+        connection.refuse_broadcast_read()?;
+    }
+    // Every input is checked before the bus is opened.
+    let data = match &args.what {
+        DiagCommand::Echo { data } | DiagCommand::Sub { data: Some(data), .. } => {
+            hex::parse_args(&[data]).map_err(|e| CliError::Usage(format!("--data: {e}")))?
+        }
+        _ => vec![0, 0],
+    };
+    let delimiter = match &args.what {
+        DiagCommand::Delimiter { delimiter } => delimiter_byte(delimiter)?,
+        _ => b'\n',
+    };
+    let sub = match &args.what {
+        DiagCommand::Sub { code, .. } => sub_code(code)?,
+        _ => DiagnosticCode::ReturnQueryData,
+    };
+    let session = &connection.open().await?;
+    let client = &session.client;
+    let unit = session.unit;
+    let text = match &args.what {
+        DiagCommand::Echo { .. } => {
+            let echoed = client.diagnostics(unit, DiagnosticCode::ReturnQueryData, &data).await?;
+            if echoed != data {
+                return Err(CliError::BadData(format!(
+                    "unit {unit} echoed {} instead of {}",
+                    hex::format(&echoed),
+                    hex::format(&data)
+                )));
+            }
+            format!("unit {unit}: echo OK (FC08/00): {}\n", hex::format(&echoed))
+        }
+        DiagCommand::Restart { clear_log } => {
+            let word = if *clear_log { 0xFF00 } else { 0x0000 };
+            client.diagnostics(unit, DiagnosticCode::RestartCommunications, &u16::to_be_bytes(word)).await?;
+            let log = if *clear_log { "; event log cleared" } else { "" };
+            format!("unit {unit}: communications restarted (FC08/01){log}\n")
+        }
+        DiagCommand::Register => {
+            let v = client.diagnostic_word(unit, DiagnosticCode::ReturnDiagnosticRegister, 0).await?;
+            format!("unit {unit}: diagnostic register 0x{v:04X} (0b{v:016b})\n")
+        }
+        DiagCommand::Delimiter { .. } => {
+            client.diagnostics(unit, DiagnosticCode::ChangeAsciiDelimiter, &[delimiter, 0]).await?;
+            format!("unit {unit}: ASCII delimiter set to 0x{delimiter:02X} (FC08/03)\n")
+        }
+        DiagCommand::ListenOnly => {
+            eprintln!(
+                "warning: unit {unit} will stop answering (this tool included) until `ferrobus diag restart` \
+                 or a power cycle"
+            );
+            client.diagnostics(unit, DiagnosticCode::ForceListenOnly, &[0, 0]).await?;
+            format!("unit {unit}: listen-only mode forced (FC08/04); no reply expected\n")
+        }
+        DiagCommand::Clear => {
+            client.diagnostic_word(unit, DiagnosticCode::ClearCounters, 0).await?;
+            format!("unit {unit}: counters and diagnostic register cleared (FC08/0A)\n")
+        }
+        DiagCommand::Counter { which } => {
+            let v = client.diagnostic_word(unit, which.code(), 0).await?;
+            format!("unit {unit}: {}: {v}\n", which.code())
+        }
+        DiagCommand::Counters => counters(session, args.output.format()).await?,
+        DiagCommand::ClearOverrun => {
+            client.diagnostic_word(unit, DiagnosticCode::ClearOverrunCounter, 0).await?;
+            format!("unit {unit}: overrun counter and flag cleared (FC08/14)\n")
+        }
+        DiagCommand::Sub { .. } => {
+            let reply = client.diagnostics(unit, sub, &data).await?;
+            match *reply.as_slice() {
+                [hi, lo] => {
+                    format!("unit {unit}: {sub}: {} (word {})\n", hex::format(&reply), u16::from_be_bytes([hi, lo]))
+                }
+                _ => format!("unit {unit}: {sub}: {}\n", hex::format(&reply)),
+            }
+        }
+        DiagCommand::EventCounter => {
+            let c = client.get_comm_event_counter(unit).await?;
+            let status = if c.status == 0xFFFF { "busy" } else { "ready" };
+            match args.output.format() {
+                Format::Json => output::json_line(&json!({
+                    "unit": unit, "function": 0x0B, "status": c.status, "event_count": c.event_count,
+                })),
+                _ => format!("unit {unit}: status 0x{:04X} ({status}), event count {}\n", c.status, c.event_count),
+            }
+        }
+        DiagCommand::EventLog => event_log(session, args.output.format()).await?,
+    };
+    output::print(&text);
+    Ok(())
+}
+
+/// Reads every counter; one the device refuses shows its exception (many drives answer only
+/// the echo), and only if it refuses them all is that an error.
+async fn counters(session: &Session, format: Format) -> Result<String, CliError> {
+    let mut rows = Rows::new(&[("sub", Align::Left), ("counter", Align::Left), ("count", Align::Right)]);
+    let mut doc = json!({ "unit": session.unit, "function": 0x08, "counters": {} });
+    let mut refused = None;
+    for counter in Counter::ALL {
+        let code = counter.code();
+        let (cell, value) = match session.client.diagnostic_word(session.unit, code, 0).await {
+            Ok(v) => (v.to_string(), v.into()),
+            Err(e @ ferrobus::Error::Exception { code: exception, .. }) => {
+                refused.get_or_insert(e);
+                (format!("exception {exception}"), serde_json::Value::Null)
+            }
+            Err(e) => return Err(e.into()),
+        };
+        rows.push(vec![format!("0x{:02X}", code.value()), code.name().unwrap_or_default().to_string(), cell]);
+        doc["counters"][counter.name()] = value;
+    }
+    if let (Some(e), true) =
+        (refused, doc["counters"].as_object().is_some_and(|c| c.values().all(serde_json::Value::is_null)))
+    {
+        return Err(e.into());
+    }
+    Ok(match format {
+        Format::Json => output::json_line(&doc),
+        other => rows.render(other),
+    })
+}
+
+async fn event_log(session: &Session, format: Format) -> Result<String, CliError> {
+    let log = session.client.get_comm_event_log(session.unit).await?;
+    let status = if log.status == 0xFFFF { "busy" } else { "ready" };
+    if format == Format::Json {
+        let events: Vec<_> = log.events.iter().map(|&e| json!({ "byte": e, "event": describe_event(e) })).collect();
+        return Ok(output::json_line(&json!({
+            "unit": session.unit, "function": 0x0C, "status": log.status, "event_count": log.event_count,
+            "message_count": log.message_count, "events": events,
+        })));
+    }
+    let mut rows = Rows::new(&[("age", Align::Right), ("byte", Align::Left), ("event", Align::Left)]);
+    for (age, &e) in log.events.iter().enumerate() {
+        rows.push(vec![age.to_string(), format!("0x{e:02X}"), describe_event(e)]);
+    }
+    let body = rows.render(format);
+    if format == Format::Csv {
+        return Ok(body);
+    }
+    Ok(format!(
+        "unit {}: status 0x{:04X} ({status}), event count {}, message count {}, {} event(s), most recent first\n{body}",
+        session.unit,
+        log.status,
+        log.event_count,
+        log.message_count,
+        log.events.len(),
+    ))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn event_bytes_are_decoded_into_words() {
+        assert_eq!(describe_event(0xC0), "receive: broadcast");
+        assert_eq!(describe_event(0x80), "receive");
+        assert_eq!(describe_event(0x41), "send: read exception");
+        assert_eq!(describe_event(0x40), "send");
+        assert_eq!(describe_event(0x04), "entered listen-only");
+        assert_eq!(describe_event(0x00), "restart");
+        assert_eq!(describe_event(0xA2), "receive: communication error, in listen-only mode");
+        assert_eq!(describe_event(0x01), "unknown event");
+    }
+
+    #[test]
+    fn delimiters_and_sub_codes_parse() {
+        assert_eq!(delimiter_byte("\\n").unwrap(), b'\n');
+        assert_eq!(delimiter_byte("0x0D").unwrap(), 0x0D);
+        assert_eq!(delimiter_byte(";").unwrap(), b';');
+        assert!(delimiter_byte("ab").is_err());
+        assert!(delimiter_byte("0xZZ").is_err());
+        assert_eq!(sub_code("0x0B").unwrap(), DiagnosticCode::BusMessageCount);
+        assert_eq!(sub_code("11").unwrap(), DiagnosticCode::BusMessageCount);
+        assert!(sub_code("70000").is_err());
+    }
+}

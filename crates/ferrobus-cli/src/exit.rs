@@ -1,0 +1,314 @@
+//! Errors as the user sees them, and the exit codes scripts rely on.
+//!
+//! Every failure ends as a [`CliError`], which keeps the library's typed error, and is
+//! rendered once, in [`report`], with what to check next. The codes:
+//!
+//! | code | meaning |
+//! |---|---|
+//! | 0 | success |
+//! | 1 | the device answered with an exception |
+//! | 2 | usage error (bad option, value, address or count) |
+//! | 3 | timeout: no reply |
+//! | 4 | IO error opening or using the port |
+//! | 5 | bad reply (malformed, or not answering the request); `crc --check` on a bad CRC |
+
+use std::io;
+use std::time::Duration;
+
+use ferrobus::Error;
+use ferrobus_proto::{ExceptionCode, FunctionCode, PduError};
+
+use crate::connect::Target;
+
+/// The exit codes, as listed in `ferrobus --help`.
+pub(crate) const EXIT_CODES_HELP: &str = "\
+Exit codes:
+  0  success
+  1  the device answered with an exception (e.g. 0x02 Illegal Data Address)
+  2  usage error: bad option, value, address or count
+  3  timeout: no reply from the device
+  4  IO error opening or using the port or connection
+  5  bad reply: malformed, or not answering the request (also: crc --check on a bad CRC)";
+
+/// Why the process exits, as a code.
+#[derive(Clone, Copy, PartialEq, Eq, Debug)]
+#[repr(u8)]
+pub(crate) enum Exit {
+    /// 0.
+    Success = 0,
+    /// 1: the device answered with an exception.
+    Exception = 1,
+    /// 2: the command line is wrong.
+    Usage = 2,
+    /// 3: no reply.
+    Timeout = 3,
+    /// 4: the port or connection failed.
+    Io = 4,
+    /// 5: a reply came but was wrong.
+    BadReply = 5,
+}
+
+impl From<Exit> for std::process::ExitCode {
+    fn from(exit: Exit) -> Self {
+        std::process::ExitCode::from(exit as u8)
+    }
+}
+
+/// Everything a command can fail with.
+#[derive(Debug)]
+pub(crate) enum CliError {
+    /// An error from the library: exception, timeout, IO, bad reply, invalid request.
+    Modbus {
+        /// The error.
+        error: Error,
+    },
+    /// A request that the spec does not allow, refused before it was sent.
+    Pdu(PduError),
+    /// Something on the command line that cannot work.
+    Usage(String),
+    /// None of --port, --tcp, --rtu-tcp.
+    MissingTarget,
+    /// The TCP connection did not open in time.
+    ConnectTimeout {
+        /// What was being opened.
+        target: String,
+        /// How long we waited.
+        waited: Duration,
+    },
+    /// A reply that parsed but is wrong (an echo that differs), or a frame with a bad CRC.
+    BadData(String),
+}
+
+impl From<Error> for CliError {
+    fn from(error: Error) -> Self {
+        match error {
+            Error::InvalidRequest(e) => CliError::Pdu(e),
+            error => CliError::Modbus { error },
+        }
+    }
+}
+
+impl From<PduError> for CliError {
+    fn from(e: PduError) -> Self {
+        CliError::Pdu(e)
+    }
+}
+
+impl CliError {
+    /// The exit code.
+    pub(crate) fn exit(&self) -> Exit {
+        match self {
+            CliError::Modbus { error } => match error {
+                Error::Exception { .. } => Exit::Exception,
+                Error::Timeout { .. } | Error::Backoff { .. } => Exit::Timeout,
+                Error::BadReply { .. } => Exit::BadReply,
+                Error::InvalidRequest(_) => Exit::Usage,
+                Error::Io { .. } | Error::Closed => Exit::Io,
+            },
+            CliError::Pdu(_) | CliError::Usage(_) | CliError::MissingTarget => Exit::Usage,
+            CliError::ConnectTimeout { .. } => Exit::Io,
+            CliError::BadData(_) => Exit::BadReply,
+        }
+    }
+}
+
+/// The message and the hints for an error.
+#[derive(Clone, PartialEq, Eq, Debug)]
+pub(crate) struct Report {
+    /// One line saying what went wrong.
+    pub(crate) message: String,
+    /// What to check, one item per line.
+    pub(crate) hints: Vec<String>,
+}
+
+impl Report {
+    /// Prints the report to stderr.
+    pub(crate) fn print(&self) {
+        eprintln!("error: {}", self.message);
+        match self.hints.as_slice() {
+            [] => {}
+            [one] => eprintln!("hint: {one}"),
+            many => {
+                eprintln!("check:");
+                for hint in many {
+                    eprintln!("  - {hint}");
+                }
+            }
+        }
+    }
+}
+
+/// The report for `error`; `target` and `unit` (if a bus was named) sharpen the hints.
+pub(crate) fn report(error: &CliError, target: Option<&Target>, unit: u8) -> Report {
+    match error {
+        CliError::Modbus { error } => modbus_report(error, target, unit),
+        CliError::Pdu(e) => Report { message: format!("invalid request: {}", pdu_words(e)), hints: Vec::new() },
+        CliError::Usage(message) | CliError::BadData(message) => Report { message: message.clone(), hints: Vec::new() },
+        CliError::MissingTarget => Report {
+            message: "no bus given: use one of --port PATH, --tcp HOST[:PORT] or --rtu-tcp HOST:PORT".into(),
+            hints: Vec::new(),
+        },
+        CliError::ConnectTimeout { target, waited } => Report {
+            message: format!("connecting to {target} timed out after {} ms", waited.as_millis()),
+            hints: vec!["check that the host is reachable (ping) and the port is right (Modbus/TCP: 502)".into()],
+        },
+    }
+}
+
+/// A request error in plain words.
+pub(crate) fn pdu_words(e: &PduError) -> String {
+    match *e {
+        PduError::QuantityOutOfRange { quantity, min, max } => {
+            format!("a count of {quantity} is out of range: one request carries {min} to {max}")
+        }
+        PduError::AddressOverflow { start, quantity } => {
+            format!("{quantity} items from address {start} run past the last address, 65535")
+        }
+        PduError::TooLong { len } => format!("the request would be {len} bytes; a Modbus PDU holds at most 253"),
+        other => other.to_string(),
+    }
+}
+
+fn modbus_report(error: &Error, target: Option<&Target>, unit: u8) -> Report {
+    let on = target.map(|t| format!(" on {t}")).unwrap_or_default();
+    match error {
+        Error::Exception { function, code, .. } => {
+            Report { message: error.to_string(), hints: exception_hint(*function, *code).into_iter().collect() }
+        }
+        Error::Timeout { .. } | Error::Backoff { .. } => {
+            Report { message: format!("{error}{on}"), hints: timeout_hints(target, unit) }
+        }
+        Error::BadReply { .. } => Report {
+            message: format!("{error}{on}"),
+            hints: vec![
+                "another master on the bus, two devices with the same address, or a wrong baud rate garbling frames"
+                    .into(),
+                "USB adapters split frames: try --low-latency or a longer --t35".into(),
+                "`ferrobus raw` shows the reply bytes as they came".into(),
+            ],
+        },
+        Error::Io { source, .. } => Report { message: error.to_string(), hints: io_hint(source, target) },
+        Error::InvalidRequest(e) => Report { message: format!("invalid request: {}", pdu_words(e)), hints: Vec::new() },
+        Error::Closed => Report { message: error.to_string(), hints: Vec::new() },
+    }
+}
+
+/// What a timeout usually means on a drive bus.
+fn timeout_hints(target: Option<&Target>, unit: u8) -> Vec<String> {
+    let mut hints = Vec::new();
+    if let Some(Target::Serial { line, .. }) = target {
+        hints.push(format!("the unit address: --unit {unit} must match the device's station number"));
+        hints.push(format!("baud rate and parity: this is {line}; the device must use the same (e.g. 8E1 vs 8N1)"));
+        hints.push("wiring: swap A and B if unsure; common ground".into());
+        hints.push("termination: 120 ohm at both ends of a long line".into());
+    } else {
+        hints.push(format!(
+            "the unit id: --unit {unit}; a gateway passes it on as the serial address (some devices want 255 or 0)"
+        ));
+        hints.push("behind a gateway: its baud rate and parity (e.g. 8E1 vs 8N1), wiring A/B, termination".into());
+    }
+    hints.push("the device's response wait time (3G3RX C078, up to 1000 ms): raise --timeout above it".into());
+    hints
+}
+
+fn exception_hint(function: FunctionCode, code: ExceptionCode) -> Option<String> {
+    let hint = match code.value() {
+        0x01 if function == FunctionCode::WriteSingleRegister => {
+            "the device does not support FC06; try --multiple to write with FC10 (as the SDP servos need)"
+        }
+        0x01 => "the device does not support this function code",
+        0x02 => {
+            "the address, or address + count, is not on the device; if the manual numbers registers from 1, \
+             add --one-based (frame address = number - 1)"
+        }
+        0x03 => {
+            "the device refused a value or a count; some take only a few registers per request \
+             (3G3RX: 4) - try --max-per-request"
+        }
+        0x04 => "the device failed while executing the request",
+        0x05 | 0x06 => "the device is busy with a long operation; retry later",
+        0x0A | 0x0B => "a gateway could not reach the unit: check --unit and the serial line behind the gateway",
+        0x21 => "Hitachi/Omron inverters: value out of the inverter's range",
+        0x22 => "Hitachi/Omron inverters: not allowed in this state (e.g. while running, or a read-only register)",
+        0x23 => "Hitachi/Omron inverters: the parameter is read-only",
+        0x25 => "Hitachi/Omron inverters: the parameter belongs to the other mode (VT/CT)",
+        0x26 => "Hitachi/Omron inverters: busy saving to EEPROM or initialising; retry",
+        0x27 => "Hitachi inverters: only half of a 2-register parameter was accessed; use both (--type u32)",
+        _ => return None,
+    };
+    Some(hint.to_string())
+}
+
+fn io_hint(source: &io::Error, target: Option<&Target>) -> Vec<String> {
+    let path = match target {
+        Some(Target::Serial { path, .. }) => Some(path.as_str()),
+        _ => None,
+    };
+    let hint = match (source.kind(), source.raw_os_error(), path) {
+        (io::ErrorKind::PermissionDenied, _, _) => {
+            "add yourself to the dialout group (sudo usermod -aG dialout $USER), then log in again".to_string()
+        }
+        (io::ErrorKind::NotFound, _, Some(_)) => {
+            "check the path; is the adapter plugged in? (ls /dev/serial/by-id/)".to_string()
+        }
+        (_, Some(16), Some(path)) => format!("another program has the port open (fuser {path})"),
+        (_, Some(25), Some(_)) => "this is not a serial port".to_string(),
+        (io::ErrorKind::InvalidInput | io::ErrorKind::Other, _, Some(_)) => {
+            "the port refused these settings: check that it supports the baud rate, data bits and parity \
+             (a pty takes neither parity nor 7 data bits)"
+                .to_string()
+        }
+        (io::ErrorKind::ConnectionRefused, _, _) => {
+            "nothing listens there: check the host and port (Modbus/TCP uses 502) and that the server runs".to_string()
+        }
+        (io::ErrorKind::UnexpectedEof | io::ErrorKind::ConnectionReset, _, _) => {
+            "the server closed the connection (it may take one client at a time)".to_string()
+        }
+        (io::ErrorKind::HostUnreachable | io::ErrorKind::NetworkUnreachable | io::ErrorKind::TimedOut, _, _) => {
+            "check that the host is reachable (ping) and on the same network".to_string()
+        }
+        _ => return Vec::new(),
+    };
+    vec![hint]
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use std::sync::Arc;
+
+    #[test]
+    fn exit_codes_follow_the_error_kind() {
+        let exception = CliError::from(Error::Exception {
+            unit: 1,
+            function: FunctionCode::ReadHoldingRegisters,
+            code: ExceptionCode::IllegalDataAddress,
+        });
+        assert_eq!(exception.exit(), Exit::Exception);
+        let timeout = CliError::from(Error::Timeout { unit: 1, timeout: Duration::from_millis(5), attempts: 1 });
+        assert_eq!(timeout.exit(), Exit::Timeout);
+        let io = CliError::from(Error::Io { context: "x".into(), source: Arc::new(io::ErrorKind::NotFound.into()) });
+        assert_eq!(io.exit(), Exit::Io);
+        assert_eq!(CliError::from(PduError::Empty).exit(), Exit::Usage);
+        assert_eq!(CliError::from(Error::InvalidRequest(PduError::Empty)).exit(), Exit::Usage);
+        assert_eq!(CliError::BadData("x".into()).exit(), Exit::BadReply);
+    }
+
+    #[test]
+    fn vendor_exceptions_get_the_inverter_hints() {
+        let e = Error::Exception {
+            unit: 1,
+            function: FunctionCode::WriteSingleRegister,
+            code: ExceptionCode::from_u8(0x21),
+        };
+        let r = report(&CliError::from(e), None, 1);
+        assert!(r.message.contains("exception 0x21 (vendor-specific)"));
+        assert!(r.hints[0].contains("value out of the inverter's range"));
+    }
+
+    #[test]
+    fn plain_words_for_counts() {
+        let e = PduError::QuantityOutOfRange { quantity: 0, min: 1, max: 125 };
+        assert_eq!(pdu_words(&e), "a count of 0 is out of range: one request carries 1 to 125");
+    }
+}

@@ -1,0 +1,177 @@
+//! # ferrobus: the command line
+//!
+//! A thin dispatcher over the `ferrobus` library. Each command lives in its own file, checks
+//! its arguments, then opens the bus through [`connect::ConnectArgs::open`] (offline
+//! commands such as `crc` never do); the shared pieces are:
+//!
+//! - [`connect`]: the connection options (`--port`, `--tcp`, `--rtu-tcp`, line settings,
+//!   timeouts) and opening the client;
+//! - [`address`]: wire addresses, `--one-based` numbers and Modicon references;
+//! - [`value`]: typed values (`--type`, `--word-order`);
+//! - [`output`]: tables, `--csv` and `--json`;
+//! - [`exit`]: error reports with hints, and the exit codes;
+//! - [`hex`]: hex input as people type it.
+//!
+//! To add a command: a file with an `Args` struct and an `async fn run(&ConnectArgs, &Args)`,
+//! a variant in [`Command`], and an arm in [`dispatch`] (and in [`Command::needs_bus`] if it
+//! works offline).
+
+mod address;
+mod connect;
+mod crc;
+mod diag;
+mod exit;
+mod hex;
+mod info;
+mod mask;
+mod output;
+mod raw;
+mod read;
+mod readwrite;
+mod value;
+mod write;
+
+use std::io::IsTerminal;
+use std::process::ExitCode;
+
+use clap::{CommandFactory, Parser, Subcommand};
+
+use crate::connect::ConnectArgs;
+use crate::exit::{CliError, Exit};
+
+/// Long help shown after the options of `ferrobus --help`.
+const AFTER_HELP: &str = concat!(
+    "ADDRESS is the wire address (0-based, as on the bus); use --one-based for a manual's register numbers, \
+     or a Modicon reference like 40001.\n\n",
+    "Examples:\n",
+    "  ferrobus --port /dev/ttyUSB0 --baud 9600 --unit 5 read holding 0x0011 --count 2\n",
+    "  ferrobus --tcp 192.168.1.10 write register --one-based 0x1203 50\n",
+    "  ferrobus --port /dev/ttyUSB0 read holding 0x1102 --type u32 --max-per-request 4\n",
+    "  ferrobus crc 01 10 01 12 00 02\n\n",
+);
+
+/// Modbus toolkit for commissioning drives and field devices over RS-485 and TCP.
+#[derive(Parser, Debug)]
+#[command(name = "ferrobus", version)]
+#[command(about = "Modbus toolkit for commissioning drives and field devices over RS-485 and TCP")]
+#[command(after_help = format!("{AFTER_HELP}{}", exit::EXIT_CODES_HELP))]
+pub(crate) struct Cli {
+    /// The bus and how to talk on it.
+    #[command(flatten)]
+    connection: ConnectArgs,
+
+    /// More logging on stderr: -v info, -vv debug, -vvv trace (RUST_LOG overrides)
+    #[arg(short, long, action = clap::ArgAction::Count, global = true)]
+    verbose: u8,
+
+    /// What to do.
+    #[command(subcommand)]
+    command: Command,
+}
+
+/// The commands.
+#[derive(Subcommand, Debug)]
+enum Command {
+    /// Read coils, discrete inputs, holding or input registers (FC01-04)
+    Read(read::ReadArgs),
+    /// Write coils or registers (FC05, FC0F, FC06, FC10)
+    Write(write::WriteArgs),
+    /// Mask-write a holding register: (value AND and) OR (or AND NOT and) (FC16)
+    Mask(mask::MaskArgs),
+    /// Write registers, then read registers, in one transaction (FC17)
+    #[command(name = "readwrite")]
+    ReadWrite(readwrite::ReadWriteArgs),
+    /// Serial line diagnostics: echo, counters, event log (FC08, FC0B, FC0C)
+    Diag(diag::DiagArgs),
+    /// Device identification (FC2B/0E), or the server id (FC11)
+    Info(info::InfoArgs),
+    /// Send any PDU and show the reply
+    Raw(raw::RawArgs),
+    /// CRC-16 and LRC of bytes, and the framed RTU and ASCII frames (offline)
+    Crc(crc::CrcArgs),
+}
+
+impl Command {
+    /// Whether the command talks to a device.
+    fn needs_bus(&self) -> bool {
+        !matches!(self, Command::Crc(_))
+    }
+}
+
+/// Runs a command.
+async fn dispatch(cli: &Cli) -> Result<(), CliError> {
+    if let Command::Crc(args) = &cli.command {
+        return crc::run(args);
+    }
+    // Each command checks its own arguments, then opens the bus with `connection.open()`.
+    let connection = &cli.connection;
+    match &cli.command {
+        Command::Read(args) => read::run(connection, args).await,
+        Command::Write(args) => write::run(connection, args).await,
+        Command::Mask(args) => mask::run(connection, args).await,
+        Command::ReadWrite(args) => readwrite::run(connection, args).await,
+        Command::Diag(args) => diag::run(connection, args).await,
+        Command::Info(args) => info::run(connection, args).await,
+        Command::Raw(args) => raw::run(connection, args).await,
+        Command::Crc(args) => crc::run(args),
+    }
+}
+
+fn init_logging(verbose: u8) {
+    let level = match verbose {
+        0 => "warn",
+        1 => "info",
+        2 => "debug",
+        _ => "trace",
+    };
+    let filter = tracing_subscriber::EnvFilter::try_from_default_env()
+        .unwrap_or_else(|_| tracing_subscriber::EnvFilter::new(level));
+    tracing_subscriber::fmt()
+        .with_env_filter(filter)
+        .with_writer(std::io::stderr)
+        .with_ansi(std::io::stderr().is_terminal())
+        .with_target(false)
+        .init();
+}
+
+fn main() -> ExitCode {
+    let cli = Cli::parse();
+    init_logging(cli.verbose);
+    if cli.command.needs_bus()
+        && cli.connection.port.is_none()
+        && cli.connection.tcp.is_none()
+        && cli.connection.rtu_tcp.is_none()
+    {
+        Cli::command()
+            .error(
+                clap::error::ErrorKind::MissingRequiredArgument,
+                "one of --port PATH, --tcp HOST[:PORT] or --rtu-tcp HOST:PORT is required",
+            )
+            .exit();
+    }
+    let runtime = match tokio::runtime::Builder::new_current_thread().enable_all().build() {
+        Ok(runtime) => runtime,
+        Err(e) => {
+            eprintln!("error: cannot start the async runtime: {e}");
+            return Exit::Io.into();
+        }
+    };
+    match runtime.block_on(dispatch(&cli)) {
+        Ok(()) => Exit::Success.into(),
+        Err(error) => {
+            let target = cli.connection.target().ok();
+            exit::report(&error, target.as_ref(), cli.connection.unit).print();
+            error.exit().into()
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_command_line_definition_is_consistent() {
+        Cli::command().debug_assert();
+    }
+}

@@ -1,0 +1,281 @@
+//! Output: aligned tables for people, `--csv` and `--json` for scripts.
+//!
+//! Results go to stdout and nothing else does; notes and errors go to stderr. The columns of
+//! a table and of its CSV are the same, so a script can switch between them.
+
+use clap::Args;
+use serde_json::{Value, json};
+
+use crate::address::{Address, Style};
+use crate::value::{Decoded, ValueArgs, ValueType};
+
+/// The output format options.
+#[derive(Args, Clone, Copy, Debug, Default)]
+#[command(next_help_heading = "Output")]
+pub(crate) struct OutputArgs {
+    /// One JSON document on stdout
+    #[arg(long, global = true, conflicts_with = "csv")]
+    pub(crate) json: bool,
+
+    /// CSV with a header row on stdout
+    #[arg(long, global = true)]
+    pub(crate) csv: bool,
+}
+
+/// The format chosen.
+#[derive(Clone, Copy, PartialEq, Eq, Debug)]
+pub(crate) enum Format {
+    /// An aligned table.
+    Table,
+    /// One JSON document.
+    Json,
+    /// CSV with a header row.
+    Csv,
+}
+
+impl OutputArgs {
+    /// The format chosen.
+    pub(crate) fn format(self) -> Format {
+        if self.json {
+            Format::Json
+        } else if self.csv {
+            Format::Csv
+        } else {
+            Format::Table
+        }
+    }
+}
+
+/// How a column is aligned in a table.
+#[derive(Clone, Copy, PartialEq, Eq, Debug)]
+pub(crate) enum Align {
+    /// Text.
+    Left,
+    /// Numbers.
+    Right,
+}
+
+/// Rows of text under a header.
+#[derive(Clone, Debug, Default)]
+pub(crate) struct Rows {
+    headers: Vec<(String, Align)>,
+    rows: Vec<Vec<String>>,
+}
+
+impl Rows {
+    /// Rows with these columns.
+    pub(crate) fn new(headers: &[(&str, Align)]) -> Self {
+        Rows { headers: headers.iter().map(|(h, a)| ((*h).to_string(), *a)).collect(), rows: Vec::new() }
+    }
+
+    /// Adds a row (one cell per column).
+    pub(crate) fn push(&mut self, row: Vec<String>) {
+        self.rows.push(row);
+    }
+
+    /// The table with aligned columns, two spaces apart, no trailing spaces.
+    pub(crate) fn table(&self) -> String {
+        let mut widths: Vec<usize> = self.headers.iter().map(|(h, _)| h.chars().count()).collect();
+        for row in &self.rows {
+            for (w, cell) in widths.iter_mut().zip(row) {
+                *w = (*w).max(cell.chars().count());
+            }
+        }
+        let mut out = String::new();
+        let header: Vec<String> = self.headers.iter().map(|(h, _)| h.clone()).collect();
+        for row in std::iter::once(&header).chain(&self.rows) {
+            let mut line = String::new();
+            for (i, ((cell, width), (_, align))) in row.iter().zip(&widths).zip(&self.headers).enumerate() {
+                if i > 0 {
+                    line.push_str("  ");
+                }
+                let pad = width.saturating_sub(cell.chars().count());
+                match align {
+                    Align::Right => {
+                        line.push_str(&" ".repeat(pad));
+                        line.push_str(cell);
+                    }
+                    Align::Left => {
+                        line.push_str(cell);
+                        line.push_str(&" ".repeat(pad));
+                    }
+                }
+            }
+            out.push_str(line.trim_end());
+            out.push('\n');
+        }
+        out
+    }
+
+    /// CSV (RFC 4180): a header row, then the rows, CRLF-free.
+    pub(crate) fn csv(&self) -> String {
+        let mut out = String::new();
+        let header: Vec<String> = self.headers.iter().map(|(h, _)| h.clone()).collect();
+        for row in std::iter::once(&header).chain(&self.rows) {
+            let cells: Vec<String> = row.iter().map(|c| csv_field(c)).collect();
+            out.push_str(&cells.join(","));
+            out.push('\n');
+        }
+        out
+    }
+
+    /// The rows in `format` (JSON is built by the caller).
+    pub(crate) fn render(&self, format: Format) -> String {
+        match format {
+            Format::Csv => self.csv(),
+            _ => self.table(),
+        }
+    }
+}
+
+/// A CSV field, quoted if it holds a comma, a quote or a line break (RFC 4180).
+pub(crate) fn csv_field(cell: &str) -> String {
+    if cell.contains([',', '"', '\n', '\r']) { format!("\"{}\"", cell.replace('"', "\"\"")) } else { cell.to_string() }
+}
+
+/// The header of the reference column, if the address style has one.
+fn ref_header(address: Address) -> Option<&'static str> {
+    match address.style {
+        Style::Wire => None,
+        Style::OneBased => Some("number"),
+        Style::Modicon(_) => Some("ref"),
+    }
+}
+
+/// The address cells of a row: wire decimal, wire hex, and the reference if any.
+fn address_cells(address: Address, wire: u16) -> Vec<String> {
+    let mut cells = vec![wire.to_string(), format!("0x{wire:04X}")];
+    cells.extend(address.reference(wire));
+    cells
+}
+
+fn address_headers(address: Address) -> Vec<(&'static str, Align)> {
+    let mut headers = vec![("address", Align::Right), ("addr_hex", Align::Left)];
+    headers.extend(ref_header(address).map(|h| (h, Align::Right)));
+    headers
+}
+
+/// Rows for registers read from `start`: one per register, or one per 32-bit value with
+/// both registers shown.
+pub(crate) fn register_rows(address: Address, start: u16, registers: &[u16], values: ValueArgs) -> Rows {
+    let kind = values.kind;
+    let typed = !matches!(kind, ValueType::U16 | ValueType::Hex);
+    let mut headers = address_headers(address);
+    headers.extend([("hex", Align::Left), ("dec", Align::Right)]);
+    if typed {
+        headers.push((kind.name(), Align::Right));
+    }
+    let mut rows = Rows::new(&headers);
+    let width = kind.width();
+    for (i, (regs, decoded)) in registers.chunks_exact(width).zip(values.decode_all(registers)).enumerate() {
+        let wire = u16::try_from(usize::from(start) + i * width).unwrap_or(u16::MAX);
+        let mut row = address_cells(address, wire);
+        row.push(regs.iter().map(|r| format!("0x{r:04X}")).collect::<Vec<_>>().join(" "));
+        row.push(regs.iter().map(u16::to_string).collect::<Vec<_>>().join(" "));
+        if typed {
+            row.push(decoded.to_string());
+        }
+        rows.push(row);
+    }
+    rows
+}
+
+/// Rows for bits read from `start`: 0/1 and ON/OFF.
+pub(crate) fn bit_rows(address: Address, start: u16, bits: &[bool]) -> Rows {
+    let mut headers = address_headers(address);
+    headers.extend([("value", Align::Right), ("state", Align::Left)]);
+    let mut rows = Rows::new(&headers);
+    for (i, &bit) in bits.iter().enumerate() {
+        let wire = u16::try_from(usize::from(start) + i).unwrap_or(u16::MAX);
+        let mut row = address_cells(address, wire);
+        row.push(u8::from(bit).to_string());
+        row.push(if bit { "ON" } else { "OFF" }.to_string());
+        rows.push(row);
+    }
+    rows
+}
+
+/// The data of a read, for JSON.
+#[derive(Clone, Copy, Debug)]
+pub(crate) enum ReadData<'a> {
+    /// Register values.
+    Registers(&'a [u16], ValueArgs),
+    /// Bits.
+    Bits(&'a [bool]),
+}
+
+/// The JSON document of a read: unit, function, start, values (and decoded values for typed
+/// registers), and how many requests it took.
+pub(crate) fn read_json(unit: u8, function: u8, address: Address, data: ReadData<'_>, requests: usize) -> Value {
+    let mut doc = json!({
+        "unit": unit,
+        "function": function,
+        "table": address.table.name(),
+        "start": address.wire,
+        "requests": requests,
+    });
+    if let Some(reference) = address.reference(address.wire) {
+        doc["start_ref"] = reference.into();
+    }
+    match data {
+        ReadData::Registers(registers, values) => {
+            doc["count"] = registers.len().into();
+            doc["values"] = registers.to_vec().into();
+            if values.kind != ValueType::U16 {
+                doc["type"] = values.kind.name().into();
+                if values.kind.width() == 2 {
+                    doc["word_order"] = values.order().name().into();
+                }
+                doc["decoded"] = values.decode_all(registers).into_iter().map(Decoded::to_json).collect();
+            }
+        }
+        ReadData::Bits(bits) => {
+            doc["count"] = bits.len().into();
+            doc["values"] = bits.to_vec().into();
+        }
+    }
+    doc
+}
+
+/// Writes `text` to stdout. A closed pipe (`| head`) is not an error worth a panic.
+pub(crate) fn print(text: &str) {
+    use std::io::Write;
+    let mut stdout = std::io::stdout().lock();
+    let _ = stdout.write_all(text.as_bytes()).and_then(|()| stdout.flush());
+}
+
+/// A JSON document on one line, as printed.
+pub(crate) fn json_line(doc: &Value) -> String {
+    format!("{doc}\n")
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::address::Table;
+
+    #[test]
+    fn csv_quotes_only_what_needs_it() {
+        assert_eq!(csv_field("plain"), "plain");
+        assert_eq!(csv_field("a,b"), "\"a,b\"");
+        assert_eq!(csv_field("say \"hi\""), "\"say \"\"hi\"\"\"");
+    }
+
+    #[test]
+    fn tables_align_numbers_right_and_text_left() {
+        let mut rows = Rows::new(&[("n", Align::Right), ("name", Align::Left)]);
+        rows.push(vec!["1".into(), "a".into()]);
+        rows.push(vec!["100".into(), "bb".into()]);
+        assert_eq!(rows.table(), "  n  name\n  1  a\n100  bb\n");
+        assert_eq!(rows.csv(), "n,name\n1,a\n100,bb\n");
+    }
+
+    #[test]
+    fn thirty_two_bit_rows_show_both_registers() {
+        let address = Address { wire: 0x10, table: Table::Holding, style: Style::OneBased };
+        let values = ValueArgs { kind: ValueType::U32, ..Default::default() };
+        let rows = register_rows(address, 0x10, &[0x0004, 0x93E0], values);
+        let csv = rows.csv();
+        assert_eq!(csv, "address,addr_hex,number,hex,dec,u32\n16,0x0010,17,0x0004 0x93E0,4 37856,300000\n");
+    }
+}

@@ -1,0 +1,153 @@
+//! Exit codes and error messages: exceptions, timeouts, IO, bad replies, bad usage, and that
+//! no input makes the binary panic.
+
+use crate::server::{Server, closed_port, ferrobus, misbehaving_server, offline, pty_server, stderr};
+use assert_cmd::assert::OutputAssertExt;
+use predicates::prelude::*;
+
+#[test]
+fn an_exception_exits_1_with_its_name_and_a_hint() {
+    let server = Server::start();
+    server
+        .run(&["read", "holding", "999", "--count", "2"])
+        .code(1)
+        .stdout(predicate::str::is_empty())
+        .stderr(predicate::str::contains(
+            "unit 1 answered 0x03 Read Holding Registers with exception 0x02 Illegal Data Address",
+        ))
+        .stderr(predicate::str::contains("--one-based"));
+}
+
+#[test]
+fn a_silent_unit_exits_3_saying_how_long_and_what_to_check() {
+    let server = Server::start();
+    let assert =
+        ferrobus().args(server.target()).args(["--unit", "2", "--timeout", "100ms", "read", "holding", "0"]).assert();
+    let err = stderr(&assert.code(3));
+    // The library reports the time it measured: at least the timeout.
+    assert!(err.contains("no reply from unit 2 within 1"), "{err}");
+    assert!(err.contains(" ms (1 attempt)"), "{err}");
+    assert!(err.contains("check:"), "{err}");
+    assert!(err.contains("--unit 2"), "{err}");
+    assert!(err.contains("8E1 vs 8N1"), "{err}");
+    assert!(err.contains("--timeout"), "{err}");
+}
+
+#[test]
+fn a_silent_unit_on_a_serial_line_names_the_line_settings() {
+    let path = pty_server(false);
+    let assert = ferrobus()
+        .args(["--port", &path, "--parity", "none", "--baud", "9600", "--unit", "7", "--timeout", "100ms"])
+        .args(["read", "holding", "0"])
+        .assert();
+    let err = stderr(&assert.code(3));
+    assert!(err.contains(&format!("on {path} at 9600 8N1 (RTU)")), "{err}");
+    assert!(err.contains("--unit 7 must match the device's station number"), "{err}");
+    assert!(err.contains("this is 9600 8N1; the device must use the same (e.g. 8E1 vs 8N1)"), "{err}");
+    assert!(err.contains("swap A and B"), "{err}");
+    assert!(err.contains("termination"), "{err}");
+}
+
+#[test]
+fn retries_are_counted_in_the_timeout_message() {
+    let server = Server::start();
+    let assert = ferrobus()
+        .args(server.target())
+        .args(["--unit", "9", "--timeout", "50ms", "--retries", "1", "read", "input", "0"])
+        .assert();
+    let err = stderr(&assert.code(3));
+    assert!(err.contains("no reply from unit 9 within") && err.contains(" ms (2 attempts)"), "{err}");
+}
+
+#[test]
+fn an_unreachable_server_exits_4_naming_it() {
+    let port = closed_port().to_string();
+    let target = format!("127.0.0.1:{port}");
+    let err = stderr(&ferrobus().args(["--tcp", &target, "read", "holding", "0"]).assert().code(4));
+    assert!(err.contains(&format!("opening {target}")), "{err}");
+    assert!(err.contains("nothing listens there"), "{err}");
+}
+
+#[test]
+fn a_missing_serial_port_exits_4_with_a_path_hint() {
+    let err = stderr(&offline(&["--port", "/dev/ferrobus-test-nonexistent", "read", "holding", "0"]).code(4));
+    assert!(err.contains("/dev/ferrobus-test-nonexistent"), "{err}");
+    assert!(err.contains("is the adapter plugged in?"), "{err}");
+}
+
+#[test]
+fn a_reply_that_does_not_answer_the_request_exits_5() {
+    // Two registers asked, one given.
+    let port = misbehaving_server(&[0x03, 0x02, 0x00, 0x01]).to_string();
+    let target = format!("127.0.0.1:{port}");
+    let err =
+        stderr(&offline(&["--tcp", &target, "--timeout", "300ms", "read", "holding", "0", "--count", "2"]).code(5));
+    assert!(err.contains("bad reply from unit 1"), "{err}");
+}
+
+#[test]
+fn usage_errors_exit_2() {
+    let none = stderr(&offline(&["read", "holding", "0"]).code(2));
+    assert!(none.contains("one of --port PATH, --tcp HOST[:PORT] or --rtu-tcp HOST:PORT is required"), "{none}");
+    offline(&["--tcp", "a:1", "--port", "/dev/null", "read", "holding", "0"]).code(2);
+    offline(&["read", "registers", "0"]).code(2);
+    offline(&["--tcp", "a:1", "read", "holding", "0", "--bogus"]).code(2);
+    offline(&["--timeout", "soon", "--tcp", "a:1", "read", "holding", "0"]).code(2);
+    offline(&["--rtu-tcp", "gateway", "read", "holding", "0"]).code(2);
+    offline(&["--port", "/dev/null", "--data-bits", "7", "read", "holding", "0"]).code(2);
+}
+
+#[test]
+fn arguments_are_checked_before_the_port_is_opened() {
+    let err = stderr(&offline(&["--port", "/dev/ferrobus-test-nonexistent", "read", "holding", "70000"]).code(2));
+    assert!(err.contains("address 70000 is out of range"), "{err}");
+    offline(&["--port", "/dev/ferrobus-test-nonexistent", "write", "register", "0", "x"]).code(2);
+    offline(&["--port", "/dev/ferrobus-test-nonexistent", "diag", "echo", "--data", "1"]).code(2);
+}
+
+#[test]
+fn no_input_panics() {
+    let server = Server::start();
+    let cases: &[&[&str]] = &[
+        &["read", "holding", "0", "--count", "0"],
+        &["read", "holding", "0", "--count", "70000"],
+        &["read", "holding", "70000"],
+        &["read", "holding", "65535", "--count", "2"],
+        &["read", "holding", "0", "--type", "u32", "--count", "40000"],
+        &["read", "holding", "0", "--count", "200", "--max-per-request", "200"],
+        &["read", "holding", "0", "--type", "u32", "--max-per-request", "1"],
+        &["read", "holding", "0", "--max-per-request", "0"],
+        &["read", "coils", "0", "--type", "u32"],
+        &["read", "holding", "0x"],
+        &["read", "holding", "-5"],
+        &["read", "holding", "4294967296"],
+        &["write", "register", "0", "banana"],
+        &["write", "register", "0", "70000"],
+        &["write", "register", "0", "-1"],
+        &["write", "register", "0", "1e99", "--type", "f32"],
+        &["write", "registers", "65535", "1", "2"],
+        &["write", "coil", "0", "maybe"],
+        &["write", "coils", "65535", "1", "1"],
+        &["mask", "0", "0x1FFFF", "0"],
+        &["readwrite", "--read", "0", "--count", "0", "--write", "0", "1"],
+        &["diag", "echo", "--data", "zz"],
+        &["diag", "sub", "0x1FFFF"],
+        &["diag", "delimiter", "--delimiter", "too long"],
+        &["raw", "g"],
+    ];
+    for case in cases {
+        let assert = server.run(case).code(2);
+        let err = stderr(&assert);
+        assert!(!err.contains("panicked"), "{case:?}: {err}");
+        assert!(err.starts_with("error"), "{case:?}: {err}");
+    }
+    let zero = stderr(&server.run(&["read", "holding", "0", "--count", "0"]).code(2));
+    assert!(zero.contains("a count of 0 is out of range: one request carries 1 to 125"), "{zero}");
+    let max = stderr(&server.run(&["read", "holding", "0", "--count", "200", "--max-per-request", "200"]).code(2));
+    assert!(max.contains("--max-per-request 200 is above the spec's 125 per request"), "{max}");
+    // Checked by the library's request constructors (PduError), in plain words.
+    let fc17 = stderr(&server.run(&["readwrite", "--read", "0", "--count", "200", "--write", "0", "1"]).code(2));
+    assert!(fc17.contains("invalid request: a count of 200 is out of range: one request carries 1 to 125"), "{fc17}");
+    assert!(server.take_requests().is_empty(), "nothing invalid reached the device");
+    let _ = ferrobus().arg("--version").assert().success();
+}

@@ -1,0 +1,10 @@
+//! End-to-end tests of the `ferrobus` binary: each test starts a real Modbus server in this
+//! process (`ferrobus::server::serve_tcp` over a small handler) and runs the binary against
+//! it, checking stdout, stderr, exit codes and the requests the server saw.
+
+mod errors;
+mod offline;
+mod read;
+mod server;
+mod service;
+mod write;
