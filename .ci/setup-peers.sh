@@ -1,0 +1,191 @@
+#!/usr/bin/env bash
+# .ci/setup-peers.sh - install and build the peer fixtures of tests/peers/.
+#
+# Installs what the peers need (apt: socat, libmodbus-dev, mbpoll, libudev-dev,
+# pkg-config, gcc; pip: pymodbus==3.16.1, pyserial==3.5), compiles the
+# libmodbus fixtures into target/peers/ and builds tokio-modbus-peer (release,
+# its own target dir target/peers/tokio-modbus-peer, --locked). Prints a
+# one-line version summary at the end.
+#
+# Idempotent and non-interactive: installed packages are left alone, the
+# fixtures are rebuilt every run (that takes seconds). Runs as root, or via
+# sudo for apt-get when not root.
+#
+# With CI=true every missing piece is a hard failure (exit 1) at the point it
+# is found. Without CI a missing piece is reported as WARNING, the rest is
+# still set up, and the script exits 0 after saying what is missing - so a
+# developer without sudo can still build the fixtures that do not need it.
+#
+# The Rust toolchain (cargo) is expected to be there already (rustup, or the
+# CI's Rust setup step); python3 and pip are installed with apt if missing.
+# Environment: PYTHON (default python3), CARGO (default cargo).
+set -euo pipefail
+
+ROOT="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
+PEERS_SRC="$ROOT/tests/peers"
+OUT="$ROOT/target/peers"
+PYTHON="${PYTHON:-python3}"
+CARGO="${CARGO:-cargo}"
+PYMODBUS_VERSION="3.16.1"
+PYSERIAL_VERSION="3.5"
+APT_PACKAGES=(socat libmodbus-dev mbpoll libudev-dev pkg-config gcc)
+export DEBIAN_FRONTEND=noninteractive
+
+IN_CI=false
+case "${CI:-}" in true | TRUE | True | 1 | yes) IN_CI=true ;; esac
+
+MISSING=()
+log() { printf 'setup-peers: %s\n' "$*" >&2; }
+# missing NAME MESSAGE...: a piece could not be installed or built.
+missing() {
+    local what="$1"
+    shift
+    if $IN_CI; then
+        log "ERROR: $* (CI=true: failing)"
+        exit 1
+    fi
+    log "WARNING: $* (continuing; CI would fail here)"
+    MISSING+=("$what")
+}
+have() { command -v "$1" >/dev/null 2>&1; }
+
+# ---- privileges --------------------------------------------------------------
+# Never prompt: sudo -n fails instead of asking for a password.
+SUDO=()
+if [ "$(id -u)" -ne 0 ]; then
+    if have sudo && sudo -n true 2>/dev/null; then
+        SUDO=(sudo -n)
+    else
+        SUDO=(false) # no way to install system packages
+    fi
+fi
+
+# ---- apt packages ------------------------------------------------------------
+apt_install() { # apt_install PKG...: best effort, the caller checks the result
+    [ "${SUDO[0]:-}" != false ] && have apt-get || return 1
+    "${SUDO[@]}" apt-get update -qq &&
+        "${SUDO[@]}" env DEBIAN_FRONTEND=noninteractive apt-get install -y -qq \
+            --no-install-recommends "$@" >/dev/null
+}
+
+pkg_installed() {
+    dpkg-query -W -f='${Status}' "$1" 2>/dev/null | grep -q 'install ok installed'
+}
+
+if have dpkg-query && have apt-get; then
+    NEED=()
+    for p in "${APT_PACKAGES[@]}"; do
+        pkg_installed "$p" || NEED+=("$p")
+    done
+    if [ "${#NEED[@]}" -gt 0 ]; then
+        log "apt-get install ${NEED[*]}"
+        if [ "${SUDO[0]:-}" = false ]; then
+            missing "${NEED[*]}" "not root and no passwordless sudo: cannot install ${NEED[*]}"
+        elif ! apt_install "${NEED[@]}"; then
+            missing "${NEED[*]}" "apt-get install ${NEED[*]} failed"
+        fi
+    fi
+else
+    for p in "${APT_PACKAGES[@]}"; do
+        # Without apt, accept the tools if they are there anyway.
+        case "$p" in
+        libmodbus-dev) pkg-config --exists libmodbus 2>/dev/null || missing libmodbus-dev "no apt-get and no libmodbus" ;;
+        libudev-dev) ;; # only needed for serial port enumeration, which the peers do not use
+        *) have "$p" || missing "$p" "no apt-get and no $p" ;;
+        esac
+    done
+fi
+
+# ---- python packages ---------------------------------------------------------
+py_versions_ok() {
+    "$PYTHON" - "$PYMODBUS_VERSION" <<'EOF' 2>/dev/null
+import sys
+import pymodbus, serial
+sys.exit(0 if pymodbus.__version__ == sys.argv[1] else 1)
+EOF
+}
+
+if ! py_versions_ok; then
+    # A fresh Debian image may have neither python3 nor pip.
+    if ! have "$PYTHON" || ! "$PYTHON" -m pip --version >/dev/null 2>&1; then
+        log "apt-get install python3 python3-pip"
+        apt_install python3 python3-pip || true
+    fi
+    if ! have "$PYTHON"; then
+        missing python3 "$PYTHON not found and could not be installed"
+    else
+        PIP=("$PYTHON" -m pip install --quiet --disable-pip-version-check
+            "pymodbus==$PYMODBUS_VERSION" "pyserial==$PYSERIAL_VERSION")
+        log "${PIP[*]}"
+        PIP_LOG="$(mktemp)"
+        if ! "${PIP[@]}" >"$PIP_LOG" 2>&1; then
+            # Debian's system Python refuses plain pip installs (PEP 668).
+            if grep -q 'externally-managed-environment' "$PIP_LOG"; then
+                log "pip: externally managed environment, retrying with --break-system-packages"
+                "${PIP[@]}" --break-system-packages >"$PIP_LOG" 2>&1 || true
+            fi
+        fi
+        if ! py_versions_ok; then
+            cat "$PIP_LOG" >&2
+            rm -f "$PIP_LOG"
+            missing pymodbus "cannot install pymodbus==$PYMODBUS_VERSION / pyserial==$PYSERIAL_VERSION for $PYTHON"
+        fi
+        rm -f "$PIP_LOG"
+    fi
+fi
+
+# ---- libmodbus fixtures ------------------------------------------------------
+mkdir -p "$OUT"
+if have gcc && pkg-config --exists libmodbus 2>/dev/null; then
+    read -r -a MODBUS_FLAGS <<<"$(pkg-config --cflags --libs libmodbus)"
+    for f in libmodbus_server libmodbus_client; do
+        # Sources before the libraries: with --as-needed the order matters.
+        if ! gcc -O2 -Wall -Wextra -Werror "$PEERS_SRC/$f.c" "${MODBUS_FLAGS[@]}" -o "$OUT/$f.tmp"; then
+            missing "$f" "gcc failed for tests/peers/$f.c"
+            continue
+        fi
+        mv -f "$OUT/$f.tmp" "$OUT/$f"
+    done
+else
+    missing libmodbus-fixtures "gcc or libmodbus (pkg-config) missing: C fixtures not built"
+fi
+
+# ---- tokio-modbus-peer -------------------------------------------------------
+if have "$CARGO"; then
+    log "cargo build --release tokio-modbus-peer"
+    if ! "$CARGO" build --quiet --release --locked \
+        --manifest-path "$PEERS_SRC/tokio-modbus-peer/Cargo.toml" \
+        --target-dir "$OUT/tokio-modbus-peer"; then
+        missing tokio-modbus-peer "cargo build of tests/peers/tokio-modbus-peer failed"
+    fi
+else
+    missing tokio-modbus-peer "cargo not found"
+fi
+
+# ---- check and summarise -----------------------------------------------------
+for bin in "$OUT/libmodbus_server" "$OUT/libmodbus_client" "$OUT/tokio-modbus-peer/release/tokio-modbus-peer"; do
+    [ -x "$bin" ] || missing "$(basename "$bin")" "$bin was not built"
+done
+for tool in socat mbpoll; do
+    have "$tool" || missing "$tool" "$tool not installed"
+done
+
+v_libmodbus="$(pkg-config --modversion libmodbus 2>/dev/null || echo missing)"
+v_pymodbus="$("$PYTHON" -c 'import pymodbus; print(pymodbus.__version__)' 2>/dev/null || echo missing)"
+v_pyserial="$("$PYTHON" -c 'import serial; print(serial.__version__)' 2>/dev/null || echo missing)"
+v_python="$("$PYTHON" -c 'import platform; print(platform.python_version())' 2>/dev/null || echo missing)"
+v_tokio_modbus="$(awk '/^name = "tokio-modbus"$/ { getline; gsub(/"/, "", $3); print $3; exit }' \
+    "$PEERS_SRC/tokio-modbus-peer/Cargo.lock" 2>/dev/null)"
+v_socat="$(socat -V 2>/dev/null | awk '/socat version/ { print $3; exit }')"
+v_mbpoll="$(dpkg-query -W -f='${Version}' mbpoll 2>/dev/null || echo '?')"
+v_gcc="$(gcc -dumpfullversion 2>/dev/null || echo missing)"
+v_rustc="$(rustc --version 2>/dev/null | awk '{ print $2 }')"
+
+echo "peers: libmodbus ${v_libmodbus}, pymodbus ${v_pymodbus} (python ${v_python}, pyserial ${v_pyserial})," \
+    "tokio-modbus ${v_tokio_modbus:-?} (rustc ${v_rustc:-missing}), socat ${v_socat:-missing}," \
+    "mbpoll ${v_mbpoll}, gcc ${v_gcc} -> target/peers/"
+
+if [ "${#MISSING[@]}" -gt 0 ]; then
+    log "WARNING: incomplete setup, missing: ${MISSING[*]}"
+fi
+exit 0
