@@ -56,9 +56,9 @@ pub(crate) struct ConnectArgs {
     #[arg(long = "low-latency", global = true)]
     pub(crate) low_latency: bool,
 
-    /// Unit (slave) address; 0 = broadcast on serial lines
-    #[arg(long, short = 'u', global = true, default_value_t = 1)]
-    pub(crate) unit: u8,
+    /// Unit (slave) address; 0 = broadcast on serial lines (`sim`: once per simulated device)
+    #[arg(long, short = 'u', global = true, default_value = "1", action = clap::ArgAction::Append)]
+    pub(crate) unit: Vec<u8>,
 
     /// Reply timeout per attempt: 500ms, 1.5s, 2s (a plain number is ms)
     #[arg(long, global = true, value_name = "DURATION", default_value = "1s", value_parser = parse_duration)]
@@ -220,13 +220,14 @@ impl ConnectArgs {
     pub(crate) async fn open(&self) -> Result<Session, CliError> {
         let target = self.target()?;
         let transport = self.transport(&target);
-        tracing::info!(%target, unit = self.unit, "opening");
+        let unit = self.unit()?;
+        tracing::info!(%target, unit, "opening");
         let wait = self.timeout.max(Duration::from_secs(1));
         let client = match tokio::time::timeout(wait, Client::connect(transport, self.client_config())).await {
             Ok(result) => result.map_err(|error| CliError::Modbus { error })?,
             Err(_) => return Err(CliError::ConnectTimeout { target: target.to_string(), waited: wait }),
         };
-        Ok(Session { client, unit: self.unit, target })
+        Ok(Session { client, unit, target })
     }
 }
 
@@ -249,10 +250,18 @@ impl Session {
 }
 
 impl ConnectArgs {
+    /// The one unit a client command talks to.
+    pub(crate) fn unit(&self) -> Result<u8, CliError> {
+        match self.unit[..] {
+            [unit] => Ok(unit),
+            _ => Err(CliError::Usage("give --unit once: a client command talks to one unit".into())),
+        }
+    }
+
     /// A usage error for reading from a broadcast address (unit 0 on a serial framing), found
     /// before the bus is opened.
     pub(crate) fn refuse_broadcast_read(&self) -> Result<(), CliError> {
-        if self.unit == 0 && self.tcp.is_none() {
+        if self.unit()? == 0 && self.tcp.is_none() {
             return Err(CliError::Usage(
                 "unit 0 is a broadcast: no device answers it, so there is nothing to read; use --unit 1-247".into(),
             ));

@@ -28,6 +28,7 @@ mod output;
 mod raw;
 mod read;
 mod readwrite;
+mod sim;
 mod value;
 mod write;
 
@@ -89,12 +90,14 @@ enum Command {
     Raw(raw::RawArgs),
     /// CRC-16 and LRC of bytes, and the framed RTU and ASCII frames (offline)
     Crc(crc::CrcArgs),
+    /// Simulate drives (Omron 3G3RX, SDP servo, generic) on a serial port, a pty or TCP
+    Sim(sim::SimArgs),
 }
 
 impl Command {
     /// Whether the command talks to a device.
     fn needs_bus(&self) -> bool {
-        !matches!(self, Command::Crc(_))
+        !matches!(self, Command::Crc(_) | Command::Sim(sim::SimArgs { pty: true, .. }))
     }
 }
 
@@ -114,6 +117,7 @@ async fn dispatch(cli: &Cli) -> Result<(), CliError> {
         Command::Info(args) => info::run(connection, args).await,
         Command::Raw(args) => raw::run(connection, args).await,
         Command::Crc(args) => crc::run(args),
+        Command::Sim(args) => sim::run(connection, args).await,
     }
 }
 
@@ -160,7 +164,8 @@ fn main() -> ExitCode {
         Ok(()) => Exit::Success.into(),
         Err(error) => {
             let target = cli.connection.target().ok();
-            exit::report(&error, target.as_ref(), cli.connection.unit).print();
+            let unit = cli.connection.unit.first().copied().unwrap_or(1);
+            exit::report(&error, target.as_ref(), unit).print();
             error.exit().into()
         }
     }

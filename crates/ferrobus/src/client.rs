@@ -129,7 +129,7 @@ impl Client {
     /// Opens the transport (so that a wrong port or an unreachable host fails here, with a
     /// clear error) and starts the driver on the current tokio runtime.
     pub async fn connect(transport: Transport, config: ClientConfig) -> Result<Client, Error> {
-        let port = crate::port::open(&transport, config.connect_timeout).await?;
+        let port = transport.open(config.connect_timeout).await?;
         Ok(Self::start(transport, config, Some(port)))
     }
 

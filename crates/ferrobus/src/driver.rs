@@ -137,7 +137,7 @@ impl<F: Framing + Send + 'static> Driver<F> {
     /// completes.
     async fn transact(&mut self, command: &Command) -> Result<Reply, Error> {
         if self.port.is_none() {
-            self.port = Some(crate::port::open(&self.transport, self.config.connect_timeout).await?);
+            self.port = Some(self.transport.open(self.config.connect_timeout).await?);
             self.master.abort();
         }
         self.master.set_config(MasterConfig {

@@ -83,7 +83,8 @@ impl Error {
         matches!(self, Error::Timeout { .. })
     }
 
-    pub(crate) fn io(context: impl Into<String>, source: io::Error) -> Self {
+    /// An IO error, with what was being done.
+    pub fn io(context: impl Into<String>, source: io::Error) -> Self {
         Error::Io { context: context.into(), source: Arc::new(source) }
     }
 }

@@ -104,7 +104,7 @@ pub fn open_serial(config: &SerialConfig) -> io::Result<serial2_tokio::SerialPor
     let plain = config.line.with_parity(Parity::None).with_data_bits(DataBits::Eight);
     let port = match serial2_tokio::SerialPort::open(&config.path, settings(config.line)) {
         Err(e) if plain != config.line && is_pty(&config.path) => {
-            tracing::warn!(path = %config.path.display(), "this pty refuses {} ({e}); using 8 data bits, no parity", config.line);
+            tracing::info!(path = %config.path.display(), "this pty refuses {} ({e}); using 8 data bits, no parity", config.line);
             serial2_tokio::SerialPort::open(&config.path, settings(plain))?
         }
         other => other?,
@@ -307,8 +307,17 @@ impl Transport {
         self.connector.describe()
     }
 
-    pub(crate) fn connector(&self) -> &Arc<dyn Connector> {
-        &self.connector
+    /// Opens the port, giving up after `timeout`.
+    pub async fn open(&self, timeout: Duration) -> Result<BoxPort, crate::Error> {
+        let context = || format!("opening {}", self.describe());
+        match tokio::time::timeout(timeout, self.connector.connect()).await {
+            Ok(Ok(port)) => Ok(port),
+            Ok(Err(e)) => Err(crate::Error::io(context(), e)),
+            Err(_) => Err(crate::Error::io(
+                context(),
+                io::Error::new(io::ErrorKind::TimedOut, format!("no connection after {} ms", timeout.as_millis())),
+            )),
+        }
     }
 
     pub(crate) fn rtu_codec(&self) -> RtuCodec {
@@ -361,19 +370,6 @@ impl Connector for TcpTarget {
 
     fn describe(&self) -> String {
         self.0.clone()
-    }
-}
-
-/// Opens `transport`'s port, giving up after `timeout`.
-pub(crate) async fn open(transport: &Transport, timeout: Duration) -> Result<BoxPort, crate::Error> {
-    let context = || format!("opening {}", transport.describe());
-    match tokio::time::timeout(timeout, transport.connector().connect()).await {
-        Ok(Ok(port)) => Ok(port),
-        Ok(Err(e)) => Err(crate::Error::io(context(), e)),
-        Err(_) => Err(crate::Error::io(
-            context(),
-            io::Error::new(io::ErrorKind::TimedOut, format!("no connection after {} ms", timeout.as_millis())),
-        )),
     }
 }
 
@@ -433,6 +429,38 @@ impl Pty {
         #[allow(unsafe_code)]
         let fd = unsafe { tokio::io::unix::AsyncFd::register(file) }?;
         Ok(Pty { port: PtyPort { fd }, path, _peer: peer })
+    }
+}
+
+/// A whole pty is a port too: reading and writing go to our end, and the other end stays open
+/// as long as it lives.
+impl Port for Pty {}
+
+impl AsyncRead for Pty {
+    fn poll_read(
+        mut self: Pin<&mut Self>,
+        cx: &mut std::task::Context<'_>,
+        buf: &mut tokio::io::ReadBuf<'_>,
+    ) -> std::task::Poll<io::Result<()>> {
+        Pin::new(&mut self.port).poll_read(cx, buf)
+    }
+}
+
+impl AsyncWrite for Pty {
+    fn poll_write(
+        mut self: Pin<&mut Self>,
+        cx: &mut std::task::Context<'_>,
+        data: &[u8],
+    ) -> std::task::Poll<io::Result<usize>> {
+        Pin::new(&mut self.port).poll_write(cx, data)
+    }
+
+    fn poll_flush(mut self: Pin<&mut Self>, cx: &mut std::task::Context<'_>) -> std::task::Poll<io::Result<()>> {
+        Pin::new(&mut self.port).poll_flush(cx)
+    }
+
+    fn poll_shutdown(mut self: Pin<&mut Self>, cx: &mut std::task::Context<'_>) -> std::task::Poll<io::Result<()>> {
+        Pin::new(&mut self.port).poll_shutdown(cx)
     }
 }
 

@@ -302,21 +302,29 @@ pub async fn serve_transport<H: Handler + Send>(
 }
 
 /// Serves Modbus/TCP (or RTU over TCP, per `transport`'s framing) on `listener`: one engine
-/// per connection, all sharing `handler`. Runs until the listener fails.
-pub async fn serve_tcp<H: Handler + Send + 'static>(
+/// per connection, all sharing `handler`, each with the options `options` makes. Runs until the
+/// listener fails.
+pub async fn serve_tcp<H, O>(
     listener: TcpListener,
     transport: Transport,
     config: SlaveConfig,
     handler: Shared<H>,
-) -> io::Result<()> {
+    options: O,
+) -> io::Result<()>
+where
+    H: Handler + Send + 'static,
+    O: Fn() -> ServerOptions + Send + Sync + 'static,
+{
+    let options = Arc::new(options);
     loop {
         let (stream, peer) = listener.accept().await?;
         stream.set_nodelay(true)?;
         tracing::debug!(%peer, "connection accepted");
         let transport = transport.clone();
         let mut handler = handler.clone();
+        let options = Arc::clone(&options);
         tokio::spawn(async move {
-            let mut options = ServerOptions::for_transport(&transport);
+            let mut options = options();
             match serve_transport(&transport, Box::new(stream), config, &mut handler, &mut options).await {
                 Ok(()) => tracing::debug!(%peer, "connection closed"),
                 Err(e) => tracing::debug!(%peer, "connection failed: {e}"),

@@ -16,6 +16,7 @@ use std::cmp::Reverse;
 use std::collections::BinaryHeap;
 use std::future::Future;
 use std::pin::Pin;
+use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::{Arc, Condvar, Mutex, OnceLock, PoisonError};
 use std::task::{Context, Poll, Waker};
 use std::time::{Duration, Instant};
@@ -42,7 +43,7 @@ impl Timer {
         match self {
             Timer::Tokio => tokio::time::sleep_until(deadline).await,
             Timer::Precise | Timer::Spin => {
-                PreciseSleep { deadline: deadline.into_std(), spin: self == Timer::Spin, registered: false }.await;
+                PreciseSleep { deadline: deadline.into_std(), spin: self == Timer::Spin, entry: None }.await;
             }
         }
     }
@@ -56,6 +57,9 @@ struct Entry {
     wake_at: Instant,
     spin: bool,
     waker: Waker,
+    /// Set when the sleep is dropped before its deadline (a `select!` took another branch):
+    /// the thread then neither spins for it nor wakes anyone.
+    cancelled: Arc<AtomicBool>,
 }
 
 impl PartialEq for Entry {
@@ -108,6 +112,10 @@ impl Wheel {
                 queue = self.changed.wait(queue).unwrap_or_else(PoisonError::into_inner);
                 continue;
             };
+            if next.cancelled.load(Ordering::Relaxed) {
+                queue.pop();
+                continue;
+            }
             let (wake_at, spin) = (next.wake_at, next.spin);
             let now = Instant::now();
             let sleep_to = if spin { wake_at.checked_sub(SPIN).unwrap_or(wake_at) } else { wake_at };
@@ -126,7 +134,9 @@ impl Wheel {
                 continue;
             }
             if let Some(Reverse(due)) = queue.pop() {
-                due.waker.wake();
+                if !due.cancelled.load(Ordering::Relaxed) {
+                    due.waker.wake();
+                }
             }
         }
     }
@@ -136,7 +146,16 @@ impl Wheel {
 struct PreciseSleep {
     deadline: Instant,
     spin: bool,
-    registered: bool,
+    /// The cancellation flag of its registered entry, once registered.
+    entry: Option<Arc<AtomicBool>>,
+}
+
+impl Drop for PreciseSleep {
+    fn drop(&mut self) {
+        if let Some(cancelled) = &self.entry {
+            cancelled.store(true, Ordering::Relaxed);
+        }
+    }
 }
 
 impl Future for PreciseSleep {
@@ -146,11 +165,12 @@ impl Future for PreciseSleep {
         if Instant::now() >= self.deadline {
             return Poll::Ready(());
         }
-        if !self.registered {
+        if self.entry.is_none() {
             // One registration per sleep: a spurious poll before the deadline keeps waiting on
             // the same entry (its waker is the task's, which does not change under tokio).
-            self.registered = true;
-            wheel().register(Entry { wake_at: self.deadline, spin: self.spin, waker: cx.waker().clone() });
+            let cancelled = Arc::new(AtomicBool::new(false));
+            self.entry = Some(Arc::clone(&cancelled));
+            wheel().register(Entry { wake_at: self.deadline, spin: self.spin, waker: cx.waker().clone(), cancelled });
         }
         Poll::Pending
     }

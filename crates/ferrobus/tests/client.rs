@@ -325,8 +325,12 @@ async fn over_tcp_a_server_answers_each_connection() {
     let listener = tokio::net::TcpListener::bind("127.0.0.1:0").await.unwrap();
     let addr = listener.local_addr().unwrap().to_string();
     let device = Shared::new(Device::new());
-    let server =
-        tokio::spawn(ferrobus::server::serve_tcp(listener, Transport::tcp(&addr), SlaveConfig::unit(1), device));
+    let transport = Transport::tcp(&addr);
+    let options = {
+        let transport = transport.clone();
+        move || ServerOptions::for_transport(&transport)
+    };
+    let server = tokio::spawn(ferrobus::server::serve_tcp(listener, transport, SlaveConfig::unit(1), device, options));
     for _ in 0..2 {
         let client = Client::connect(Transport::tcp(&addr), config()).await.unwrap();
         client.write_single_register(1, 2, 77).await.unwrap();

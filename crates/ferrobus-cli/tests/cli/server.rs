@@ -173,7 +173,11 @@ impl Server {
                 let listener = tokio::net::TcpListener::bind("127.0.0.1:0").await.unwrap();
                 tx.send(listener.local_addr().unwrap().port()).unwrap();
                 let transport = if rtu { Transport::rtu_over_tcp("test") } else { Transport::tcp("test") };
-                let _ = serve_tcp(listener, transport, SlaveConfig::unit(1), shared).await;
+                let options = {
+                    let transport = transport.clone();
+                    move || ferrobus::server::ServerOptions::for_transport(&transport)
+                };
+                let _ = serve_tcp(listener, transport, SlaveConfig::unit(1), shared, options).await;
             });
         });
         Server { port: rx.recv().unwrap(), device, rtu }

@@ -1,0 +1,276 @@
+//! `ferrobus sim`: simulated drives on a serial line, a pty, or TCP.
+//!
+//! Each `--profile` is paired with a `--unit`: one profile for every unit, or one per unit in
+//! the order given. The simulator answers exactly as its profile says — function codes, limits,
+//! timing, vendor exceptions — stays silent for other units, bad CRCs and broadcasts, and
+//! injects the faults asked for. It runs until interrupted, then prints its counters (SIGUSR1
+//! prints them at any time), including how late each reply went out after it was due.
+
+use std::sync::{Arc, Mutex, PoisonError};
+use std::time::Duration;
+
+use clap::Args;
+use ferrobus::server::{ServerEvent, ServerOptions, Shared, serve_tcp, serve_transport};
+use ferrobus::{Framing, Pty, Timer, Transport};
+use ferrobus_proto::slave::{Disposition, SlaveConfig, SlaveEvent};
+use ferrobus_sim::{Device, FaultFilter, Faults, Profile, Sim, tokio_clock};
+
+use crate::connect::{ConnectArgs, Target, parse_duration};
+use crate::exit::CliError;
+
+/// Arguments of `ferrobus sim`.
+#[derive(Args, Clone, Debug)]
+pub(crate) struct SimArgs {
+    /// Device profile: omron-3g3rx, sdp-servo, generic, or a .toml file; once for every
+    /// --unit, or once per --unit in order
+    #[arg(long, required = true, value_name = "NAME|FILE")]
+    profile: Vec<String>,
+
+    /// Make a pty, print its path, and serve on it (instead of --port, --tcp or --rtu-tcp)
+    #[arg(long, conflicts_with_all = ["port", "tcp", "rtu_tcp"])]
+    pub(crate) pty: bool,
+
+    /// Fault injection for one unit, e.g. 1:drop=10%,delay=50ms,corrupt=5%,exception=0x06,silent,trip=5s
+    #[arg(long = "fault", value_name = "UNIT:SPEC")]
+    faults: Vec<String>,
+
+    /// Seed of the fault generator (the same seed repeats the same faults)
+    #[arg(long, default_value_t = 1)]
+    seed: u64,
+
+    /// Reply wait on top of t3.5 for every unit, overriding the profiles (3G3RX: C078, 0-1000 ms)
+    #[arg(long = "response-wait", value_name = "DURATION", value_parser = parse_duration)]
+    response_wait: Option<Duration>,
+
+    /// Stop after this long (scripts, tests); default: run until interrupted
+    #[arg(long, value_name = "DURATION", value_parser = parse_duration)]
+    duration: Option<Duration>,
+}
+
+/// What the simulator has done, kept by its observer.
+#[derive(Debug, Default)]
+struct Counters {
+    requests: u64,
+    replies: u64,
+    exceptions: u64,
+    silent: u64,
+    other_units: u64,
+    discarded: u64,
+    dropped_replies: u64,
+    /// How late each reply went out after it was due, in microseconds.
+    lateness_us: Vec<u64>,
+}
+
+impl Counters {
+    fn print(&self) {
+        eprintln!(
+            "sim: {} requests: {} replies ({} exceptions), {} unanswered; {} frames for other units, {} noise discards, {} replies dropped by faults",
+            self.requests,
+            self.replies,
+            self.exceptions,
+            self.silent,
+            self.other_units,
+            self.discarded,
+            self.dropped_replies
+        );
+        if !self.lateness_us.is_empty() {
+            let mut late = self.lateness_us.clone();
+            late.sort_unstable();
+            let at = |q: usize| late[(late.len() - 1) * q / 100];
+            eprintln!(
+                "sim: reply start after its due time (t3.5 + wait): p50 {} µs, p99 {} µs, max {} µs over {} replies",
+                at(50),
+                at(99),
+                late[late.len() - 1],
+                late.len()
+            );
+        }
+    }
+}
+
+/// Runs `ferrobus sim`.
+pub(crate) async fn run(connection: &ConnectArgs, args: &SimArgs) -> Result<(), CliError> {
+    let sim = build(connection, args)?;
+    let units = sim.unit_set();
+    let counters = Arc::new(Mutex::new(Counters::default()));
+    let sim = Shared::new(sim);
+    let (transport, port) = open(connection, args).await?;
+    let framing = transport.framing();
+    let options = {
+        let (sim, counters, transport) = (sim.clone(), Arc::clone(&counters), transport.clone());
+        move || {
+            let mut options = ServerOptions::for_transport(&transport);
+            options.filter = Some(Box::new(FaultFilter::new(sim.clone(), framing)));
+            let counters = Arc::clone(&counters);
+            options.observer = Some(Box::new(move |event| observe(&counters, event)));
+            options
+        }
+    };
+    let config = SlaveConfig { units, response_wait: Duration::ZERO };
+    let serving = async {
+        match port {
+            Served::Port(port) => {
+                let mut handler = sim.clone();
+                serve_transport(&transport, port, config, &mut handler, &mut options()).await
+            }
+            Served::Listener(listener) => serve_tcp(listener, transport.clone(), config, sim.clone(), options).await,
+        }
+    };
+    let stop = async {
+        match args.duration {
+            Some(d) => tokio::time::sleep(d).await,
+            None => interrupted(&counters).await,
+        }
+    };
+    let result = tokio::select! {
+        result = serving => result.map_err(|e| CliError::from(ferrobus::Error::io("serving", e))),
+        () = stop => Ok(()),
+    };
+    counters.lock().unwrap_or_else(PoisonError::into_inner).print();
+    result
+}
+
+/// The devices, paired with their units and faults.
+fn build(connection: &ConnectArgs, args: &SimArgs) -> Result<Sim, CliError> {
+    let units = &connection.unit;
+    let profiles: Vec<&String> = match (args.profile.len(), units.len()) {
+        (1, n) => vec![&args.profile[0]; n],
+        (p, u) if p == u => args.profile.iter().collect(),
+        (p, u) => {
+            return Err(CliError::Usage(format!(
+                "{p} profiles for {u} units: give one --profile for all units, or one per --unit"
+            )));
+        }
+    };
+    let mut faults: Vec<(u8, Faults)> = Vec::new();
+    for spec in &args.faults {
+        let (unit, spec) = spec
+            .split_once(':')
+            .and_then(|(u, s)| Some((u.trim().parse::<u8>().ok()?, s)))
+            .ok_or_else(|| CliError::Usage(format!("--fault {spec:?}: expected UNIT:SPEC, e.g. 1:drop=10%")))?;
+        let parsed: Faults =
+            spec.parse().map_err(|e: ferrobus_sim::fault::FaultError| CliError::Usage(e.to_string()))?;
+        faults.push((unit, parsed));
+    }
+    let mut sim = Sim::new(tokio_clock(), args.seed);
+    for (&unit, name) in units.iter().zip(profiles) {
+        if unit == 0 || unit > 247 {
+            return Err(CliError::Usage(format!("--unit {unit}: a simulated device needs an address from 1 to 247")));
+        }
+        let mut profile = Profile::load(name).map_err(|e| CliError::Usage(e.to_string()))?;
+        if let Some(wait) = args.response_wait {
+            profile.comm.response_wait_ms = u32::try_from(wait.as_millis()).unwrap_or(u32::MAX);
+        }
+        let unit_faults = faults.iter().find(|(u, _)| *u == unit).map(|(_, f)| f.clone()).unwrap_or_default();
+        eprintln!(
+            "sim: unit {unit}: {profile} from {name}, reply wait {} ms, faults: {unit_faults}",
+            profile.comm.response_wait_ms
+        );
+        sim.add(unit, Device::new(profile), unit_faults);
+    }
+    if let Some((unit, _)) = faults.iter().find(|(u, _)| !units.contains(u)) {
+        return Err(CliError::Usage(format!("--fault for unit {unit}, which is not simulated")));
+    }
+    Ok(sim)
+}
+
+/// Where the simulator serves.
+enum Served {
+    Port(ferrobus::port::BoxPort),
+    Listener(tokio::net::TcpListener),
+}
+
+async fn open(connection: &ConnectArgs, args: &SimArgs) -> Result<(Transport, Served), CliError> {
+    if args.pty {
+        let pty = Pty::open().map_err(|e| ferrobus::Error::io("making a pty", e))?;
+        let framing = if connection.ascii { Framing::Ascii } else { Framing::Rtu };
+        let timing = ferrobus_proto::frame::LineTiming::new(&connection.line());
+        let transport = Transport::custom(framing, timing, Unused).with_timer(Timer::Spin);
+        // The path is the one line on stdout, for scripts to read.
+        println!("{}", pty.path.display());
+        return Ok((transport, Served::Port(Box::new(pty))));
+    }
+    let target = connection.target()?;
+    let transport = connection.transport(&target);
+    match &target {
+        Target::Serial { .. } => {
+            let port = transport.open(Duration::from_secs(5)).await?;
+            eprintln!("sim: serving on {}", transport.describe());
+            Ok((transport, Served::Port(port)))
+        }
+        Target::Tcp(addr) | Target::RtuTcp(addr) => {
+            let listener = tokio::net::TcpListener::bind(addr)
+                .await
+                .map_err(|e| ferrobus::Error::io(format!("listening on {addr}"), e))?;
+            eprintln!("sim: listening on {addr} ({:?})", transport.framing());
+            Ok((transport, Served::Listener(listener)))
+        }
+    }
+}
+
+/// The connector of a pty transport: the pty is already open, and is not reopened.
+struct Unused;
+
+impl ferrobus::port::Connector for Unused {
+    fn connect(&self) -> ferrobus::port::Connecting {
+        Box::pin(async { Err(std::io::ErrorKind::Unsupported.into()) })
+    }
+    fn describe(&self) -> String {
+        "pty".into()
+    }
+}
+
+fn observe(counters: &Mutex<Counters>, event: ServerEvent) {
+    let mut c = counters.lock().unwrap_or_else(PoisonError::into_inner);
+    match event {
+        ServerEvent::Slave { event: SlaveEvent::Request { unit, function, disposition, .. }, .. } => {
+            c.requests += 1;
+            match disposition {
+                Disposition::Replied(_) => tracing::info!(unit, %function, "request: reply due"),
+                Disposition::Refused(code, _) => {
+                    c.exceptions += 1;
+                    tracing::info!(unit, %function, %code, "request: exception due");
+                }
+                Disposition::Executed | Disposition::Silent => {
+                    c.silent += 1;
+                    tracing::info!(unit, %function, ?disposition, "request: no reply");
+                }
+            }
+        }
+        ServerEvent::Slave { event: SlaveEvent::Ignored { unit, function, why }, .. } => {
+            c.other_units += 1;
+            tracing::debug!(unit, %function, ?why, "frame not for us");
+        }
+        ServerEvent::Slave { event: SlaveEvent::Discarded { bytes, reason, .. }, .. } => {
+            c.discarded += 1;
+            tracing::info!(bytes, %reason, "discarded");
+        }
+        ServerEvent::Slave { event: SlaveEvent::Restart { clear_log }, .. } => tracing::info!(clear_log, "restart"),
+        ServerEvent::Sent { frame, due, at } => {
+            c.replies += 1;
+            let late = at.saturating_duration_since(due);
+            c.lateness_us.push(u64::try_from(late.as_micros()).unwrap_or(u64::MAX));
+            tracing::info!(frame = %crate::hex::format(&frame), late_us = late.as_micros(), "reply sent");
+        }
+        ServerEvent::Dropped { frame } => {
+            c.dropped_replies += 1;
+            tracing::info!(frame = %crate::hex::format(&frame), "reply dropped (fault)");
+        }
+    }
+}
+
+/// Waits for Ctrl-C or SIGTERM, printing the counters on SIGUSR1 meanwhile.
+async fn interrupted(counters: &Mutex<Counters>) {
+    use tokio::signal::unix::{SignalKind, signal};
+    let (Ok(mut term), Ok(mut usr1)) = (signal(SignalKind::terminate()), signal(SignalKind::user_defined1())) else {
+        let _ = tokio::signal::ctrl_c().await;
+        return;
+    };
+    loop {
+        tokio::select! {
+            _ = tokio::signal::ctrl_c() => return,
+            _ = term.recv() => return,
+            _ = usr1.recv() => counters.lock().unwrap_or_else(PoisonError::into_inner).print(),
+        }
+    }
+}
