@@ -19,10 +19,12 @@
 mod address;
 mod connect;
 mod crc;
+mod demo;
 mod diag;
 mod exit;
 mod hex;
 mod info;
+mod line;
 mod mask;
 mod output;
 mod raw;
@@ -92,12 +94,19 @@ enum Command {
     Crc(crc::CrcArgs),
     /// Simulate drives (Omron 3G3RX, SDP servo, generic) on a serial port, a pty or TCP
     Sim(sim::SimArgs),
+    /// A virtual RS-485 bus of ptys, with real character timing and seeded faults
+    Line(line::LineArgs),
+    /// A tour: a simulated 3G3RX on a virtual line, driven by the client (no hardware needed)
+    Demo(demo::DemoArgs),
 }
 
 impl Command {
     /// Whether the command talks to a device.
     fn needs_bus(&self) -> bool {
-        !matches!(self, Command::Crc(_) | Command::Sim(sim::SimArgs { pty: true, .. }))
+        !matches!(
+            self,
+            Command::Crc(_) | Command::Line(_) | Command::Demo(_) | Command::Sim(sim::SimArgs { pty: true, .. })
+        )
     }
 }
 
@@ -118,6 +127,8 @@ async fn dispatch(cli: &Cli) -> Result<(), CliError> {
         Command::Raw(args) => raw::run(connection, args).await,
         Command::Crc(args) => crc::run(args),
         Command::Sim(args) => sim::run(connection, args).await,
+        Command::Line(args) => line::run(connection, args).await,
+        Command::Demo(args) => demo::run(args).await,
     }
 }
 
