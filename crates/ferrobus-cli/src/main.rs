@@ -37,7 +37,7 @@ mod write;
 use std::io::IsTerminal;
 use std::process::ExitCode;
 
-use clap::{CommandFactory, Parser, Subcommand};
+use clap::{CommandFactory, FromArgMatches, Parser, Subcommand};
 
 use crate::connect::ConnectArgs;
 use crate::exit::{CliError, Exit};
@@ -150,7 +150,11 @@ fn init_logging(verbose: u8) {
 }
 
 fn main() -> ExitCode {
-    let cli = Cli::parse();
+    let matches = Cli::command().get_matches();
+    let mut cli = Cli::from_arg_matches(&matches).unwrap_or_else(|e| e.exit());
+    if let (Command::Sim(args), Some(sim)) = (&mut cli.command, matches.subcommand_matches("sim")) {
+        args.pair_by_position(sim);
+    }
     init_logging(cli.verbose);
     if cli.command.needs_bus()
         && cli.connection.port.is_none()

@@ -21,10 +21,14 @@ use crate::exit::CliError;
 /// Arguments of `ferrobus sim`.
 #[derive(Args, Clone, Debug)]
 pub(crate) struct SimArgs {
-    /// Device profile: omron-3g3rx, sdp-servo, generic, or a .toml file; once for every
-    /// --unit, or once per --unit in order
+    /// Device profile: omron-3g3rx, sdp-servo, generic, or a .toml file; each --unit takes the
+    /// --profile written before it (or the first one)
     #[arg(long, required = true, value_name = "NAME|FILE")]
     profile: Vec<String>,
+
+    /// The profile of each unit, paired by position on the command line.
+    #[arg(skip)]
+    paired: Option<Vec<String>>,
 
     /// Make a pty, print its path, and serve on it (instead of --port, --tcp or --rtu-tcp)
     #[arg(long, conflicts_with_all = ["port", "tcp", "rtu_tcp"])]
@@ -130,18 +134,34 @@ pub(crate) async fn run(connection: &ConnectArgs, args: &SimArgs) -> Result<(), 
     result
 }
 
+impl SimArgs {
+    /// Gives each `--unit` the `--profile` written before it on the command line, or the
+    /// first profile for units written before any.
+    pub(crate) fn pair_by_position(&mut self, matches: &clap::ArgMatches) {
+        let (Some(profile_at), Some(unit_at)) = (matches.indices_of("profile"), matches.indices_of("unit")) else {
+            return;
+        };
+        let profiles: Vec<(usize, &String)> = profile_at.zip(&self.profile).collect();
+        let paired = unit_at
+            .map(|at| {
+                profiles.iter().rev().find(|(p, _)| *p < at).or(profiles.first()).map(|(_, name)| (*name).clone())
+            })
+            .collect::<Option<Vec<String>>>();
+        self.paired = paired;
+    }
+}
+
 /// The devices, paired with their units and faults.
 fn build(connection: &ConnectArgs, args: &SimArgs) -> Result<Sim, CliError> {
     let units = &connection.unit;
-    let profiles: Vec<&String> = match (args.profile.len(), units.len()) {
-        (1, n) => vec![&args.profile[0]; n],
-        (p, u) if p == u => args.profile.iter().collect(),
-        (p, u) => {
-            return Err(CliError::Usage(format!(
-                "{p} profiles for {u} units: give one --profile for all units, or one per --unit"
-            )));
-        }
+    // Without positions (the default --unit 1), the first profile serves every unit.
+    let profiles: Vec<&String> = match &args.paired {
+        Some(paired) if paired.len() == units.len() => paired.iter().collect(),
+        _ => vec![&args.profile[0]; units.len()],
     };
+    if let Some(unused) = args.profile.iter().find(|p| !profiles.contains(p)) {
+        return Err(CliError::Usage(format!("--profile {unused} is given to no --unit")));
+    }
     let mut faults: Vec<(u8, Faults)> = Vec::new();
     for spec in &args.faults {
         let (unit, spec) = spec

@@ -17,7 +17,7 @@
 //!   with precise reply timing and a hook for fault injection.
 //! - [`port`]: serial ports (RS-485 by the adapter, the kernel or RTS; the USB latency timer),
 //!   TCP, RTU over TCP, and ptys made in-process.
-//! - [`line`]: a virtual RS-485 line with real character timing, collisions and seeded
+//! - [`line`](mod@line): a virtual RS-485 line with real character timing, collisions and seeded
 //!   faults, for endpoints in this process or other programs behind ptys.
 //!
 //! Errors are one flat [`Error`], where a device's exception is kept apart from timeouts and

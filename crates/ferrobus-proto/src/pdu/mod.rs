@@ -19,7 +19,7 @@
 //! # Layout of the code
 //!
 //! Each function code's request and response is a type implementing the crate-private
-//! [`Body`] trait (parse, emit, length, and the prediction of its length on the wire for RTU
+//! `Body` trait (parse, emit, length, and the prediction of its length on the wire for RTU
 //! framing). The single table in this file maps function codes to those types and generates
 //! every dispatch from it, so the per-function logic is written exactly once.
 
