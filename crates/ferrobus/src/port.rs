@@ -192,23 +192,18 @@ pub const STREAM_FRAME_GAP: Duration = Duration::from_millis(50);
 impl Transport {
     /// RTU over a serial port.
     pub fn rtu(config: SerialConfig) -> Self {
-        let timing = LineTiming::new(&config.line);
-        Transport {
-            framing: Framing::Rtu,
-            rs485: config.rs485,
-            timer: Timer::Precise,
-            timing,
-            frame_gap: timing.t3_5(),
-            incomplete_timeout: PC_INCOMPLETE_TIMEOUT,
-            connector: Arc::new(config),
-        }
+        Transport::serial(Framing::Rtu, config)
     }
 
     /// ASCII over a serial port.
     pub fn ascii(config: SerialConfig) -> Self {
+        Transport::serial(Framing::Ascii, config)
+    }
+
+    fn serial(framing: Framing, config: SerialConfig) -> Self {
         let timing = LineTiming::new(&config.line);
         Transport {
-            framing: Framing::Ascii,
+            framing,
             rs485: config.rs485,
             timer: Timer::Precise,
             timing,

@@ -1,59 +1,20 @@
 //! Bit access: 0x01 Read Coils, 0x02 Read Discrete Inputs, 0x05 Write Single Coil,
 //! 0x0F Write Multiple Coils (MODBUS Application Protocol V1.1b3 §6.1, §6.2, §6.5, §6.11).
 
-use super::{Bits, Body, WireLen, check_quantity, check_range, counted_len};
+use super::{Bits, Body, WireLen, check_quantity, check_range, counted_len, range_body};
 use crate::cursor::{Reader, Writer};
 use crate::error::{BufferTooSmall, PduError};
 
-/// A read of `quantity` bits from `start` (0x01, 0x02): 1–2000 bits (§6.1).
-#[derive(Clone, Copy, PartialEq, Eq, Debug)]
-pub struct ReadBits {
-    start: u16,
-    quantity: u16,
-}
+range_body!(
+    /// A read of `quantity` bits from `start` (0x01, 0x02): 1–2000 bits (§6.1).
+    ReadBits,
+    2000
+);
 
 impl ReadBits {
-    /// The most bits one request may read.
-    pub const MAX: u16 = 2000;
-
-    /// A read of `quantity` (1–2000) bits from `start`, within the address space.
-    pub fn new(start: u16, quantity: u16) -> Result<Self, PduError> {
-        check_quantity(usize::from(quantity), 1, usize::from(Self::MAX))?;
-        check_range(start, quantity)?;
-        Ok(ReadBits { start, quantity })
-    }
-
-    /// First address.
-    pub fn start(&self) -> u16 {
-        self.start
-    }
-
-    /// Number of bits.
-    pub fn quantity(&self) -> u16 {
-        self.quantity
-    }
-
     /// Bytes of bit data in the response.
     pub fn response_byte_count(&self) -> usize {
         usize::from(self.quantity).div_ceil(8)
-    }
-}
-
-impl Body<'_> for ReadBits {
-    fn parse(r: &mut Reader<'_>) -> Result<Self, PduError> {
-        let start = r.u16()?;
-        let quantity = r.u16()?;
-        ReadBits::new(start, quantity)
-    }
-    fn emit(&self, w: &mut Writer<'_>) -> Result<(), BufferTooSmall> {
-        w.u16(self.start)?;
-        w.u16(self.quantity)
-    }
-    fn body_len(&self) -> usize {
-        4
-    }
-    fn wire_len(_: &[u8]) -> WireLen {
-        WireLen::Known(4)
     }
 }
 

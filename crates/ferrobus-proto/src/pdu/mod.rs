@@ -112,6 +112,59 @@ pub(crate) fn check_quantity(quantity: usize, min: usize, max: usize) -> Result<
     Ok(())
 }
 
+/// Generates a body of a start address and a quantity of 1 to `$max` items within the address
+/// space: the reads of 0x01–0x04 and the responses of 0x0F and 0x10.
+macro_rules! range_body {
+    ($(#[$meta:meta])* $name:ident, $max:literal) => {
+        $(#[$meta])*
+        #[derive(Clone, Copy, PartialEq, Eq, Debug)]
+        pub struct $name {
+            start: u16,
+            quantity: u16,
+        }
+
+        impl $name {
+            #[doc = concat!("The most items one PDU may carry: ", stringify!($max), ".")]
+            pub const MAX: u16 = $max;
+
+            #[doc = concat!("`quantity` (1–", stringify!($max), ") items from `start`, within the address space.")]
+            pub fn new(start: u16, quantity: u16) -> Result<Self, PduError> {
+                check_quantity(usize::from(quantity), 1, usize::from(Self::MAX))?;
+                check_range(start, quantity)?;
+                Ok($name { start, quantity })
+            }
+
+            /// First address.
+            pub fn start(&self) -> u16 {
+                self.start
+            }
+
+            /// Number of items.
+            pub fn quantity(&self) -> u16 {
+                self.quantity
+            }
+        }
+
+        impl Body<'_> for $name {
+            fn parse(r: &mut Reader<'_>) -> Result<Self, PduError> {
+                let start = r.u16()?;
+                $name::new(start, r.u16()?)
+            }
+            fn emit(&self, w: &mut Writer<'_>) -> Result<(), BufferTooSmall> {
+                w.u16(self.start)?;
+                w.u16(self.quantity)
+            }
+            fn body_len(&self) -> usize {
+                4
+            }
+            fn wire_len(_: &[u8]) -> WireLen {
+                WireLen::Known(4)
+            }
+        }
+    };
+}
+pub(crate) use range_body;
+
 /// A body with no data: the requests of 0x07, 0x0B, 0x0C and 0x11.
 #[derive(Clone, Copy, PartialEq, Eq, Debug, Default)]
 pub struct NoData;

@@ -3,56 +3,15 @@
 //! Register, 0x17 Read/Write Multiple Registers, and the data of the 0x01/0x02 responses
 //! (MODBUS Application Protocol V1.1b3 §6.1–6.4, §6.6, §6.11, §6.12, §6.16, §6.17).
 
-use super::{Bits, Body, Registers, WireLen, check_quantity, check_range, counted_len};
+use super::{Bits, Body, Registers, WireLen, check_quantity, check_range, counted_len, range_body};
 use crate::cursor::{Reader, Writer};
 use crate::error::{BufferTooSmall, PduError};
 
-/// A read of `quantity` registers from `start` (0x03, 0x04): 1–125 registers (§6.3).
-#[derive(Clone, Copy, PartialEq, Eq, Debug)]
-pub struct ReadRegisters {
-    start: u16,
-    quantity: u16,
-}
-
-impl ReadRegisters {
-    /// The most registers one request may read.
-    pub const MAX: u16 = 125;
-
-    /// A read of `quantity` (1–125) registers from `start`, within the address space.
-    pub fn new(start: u16, quantity: u16) -> Result<Self, PduError> {
-        check_quantity(usize::from(quantity), 1, usize::from(Self::MAX))?;
-        check_range(start, quantity)?;
-        Ok(ReadRegisters { start, quantity })
-    }
-
-    /// First address.
-    pub fn start(&self) -> u16 {
-        self.start
-    }
-
-    /// Number of registers.
-    pub fn quantity(&self) -> u16 {
-        self.quantity
-    }
-}
-
-impl Body<'_> for ReadRegisters {
-    fn parse(r: &mut Reader<'_>) -> Result<Self, PduError> {
-        let start = r.u16()?;
-        let quantity = r.u16()?;
-        ReadRegisters::new(start, quantity)
-    }
-    fn emit(&self, w: &mut Writer<'_>) -> Result<(), BufferTooSmall> {
-        w.u16(self.start)?;
-        w.u16(self.quantity)
-    }
-    fn body_len(&self) -> usize {
-        4
-    }
-    fn wire_len(_: &[u8]) -> WireLen {
-        WireLen::Known(4)
-    }
-}
+range_body!(
+    /// A read of `quantity` registers from `start` (0x03, 0x04): 1–125 registers (§6.3).
+    ReadRegisters,
+    125
+);
 
 /// The registers of a read response (0x03, 0x04, 0x17): a byte count, then 1–125 registers.
 #[derive(Clone, Copy, PartialEq, Eq, Debug)]
@@ -231,66 +190,16 @@ impl<'a> Body<'a> for WriteRegisters<'a> {
     }
 }
 
-/// Generates the response of a multiple write: the start address and quantity written,
-/// checked against the function's limit.
-macro_rules! written {
-    ($(#[$meta:meta])* $name:ident, $max:expr) => {
-        $(#[$meta])*
-        #[derive(Clone, Copy, PartialEq, Eq, Debug)]
-        pub struct $name {
-            start: u16,
-            quantity: u16,
-        }
-
-        impl $name {
-            /// The range written: `quantity` items from `start`, within the function's limit
-            /// and the address space.
-            pub fn new(start: u16, quantity: u16) -> Result<Self, PduError> {
-                check_quantity(usize::from(quantity), 1, usize::from($max))?;
-                check_range(start, quantity)?;
-                Ok($name { start, quantity })
-            }
-
-            /// First address written.
-            pub fn start(&self) -> u16 {
-                self.start
-            }
-
-            /// Number of items written.
-            pub fn quantity(&self) -> u16 {
-                self.quantity
-            }
-        }
-
-        impl Body<'_> for $name {
-            fn parse(r: &mut Reader<'_>) -> Result<Self, PduError> {
-                let start = r.u16()?;
-                $name::new(start, r.u16()?)
-            }
-            fn emit(&self, w: &mut Writer<'_>) -> Result<(), BufferTooSmall> {
-                w.u16(self.start)?;
-                w.u16(self.quantity)
-            }
-            fn body_len(&self) -> usize {
-                4
-            }
-            fn wire_len(_: &[u8]) -> WireLen {
-                WireLen::Known(4)
-            }
-        }
-    };
-}
-
-written!(
+range_body!(
     /// The response to 0x0F Write Multiple Coils (§6.11): 1–1968 coils from `start`.
     WrittenCoils,
-    super::WriteCoils::MAX
+    1968
 );
 
-written!(
+range_body!(
     /// The response to 0x10 Write Multiple Registers (§6.12): 1–123 registers from `start`.
     WrittenRegisters,
-    WriteRegisters::MAX
+    123
 );
 
 /// 0x16 Mask Write Register (§6.16): `result = (current AND and_mask) OR (or_mask AND NOT
