@@ -294,25 +294,7 @@ fn with_default_port(addr: &str) -> Result<String, CliError> {
     Ok(format!("{addr}:502"))
 }
 
-/// Parses `500ms`, `1.5s`, `2s`, `250us`, or a plain number of milliseconds.
-pub(crate) fn parse_duration(text: &str) -> Result<Duration, String> {
-    let text = text.trim();
-    let split = text.find(|c: char| !(c.is_ascii_digit() || c == '.')).unwrap_or(text.len());
-    let (number, unit) = text.split_at(split);
-    let value: f64 = number.parse().map_err(|_| format!("'{text}' is not a duration (e.g. 500ms, 1.5s, 2s)"))?;
-    let seconds = match unit.trim() {
-        "" | "ms" => value / 1e3,
-        "s" => value,
-        "us" | "µs" => value / 1e6,
-        "ns" => value / 1e9,
-        "m" | "min" => value * 60.0,
-        other => return Err(format!("unknown unit '{other}' in '{text}'; use ms, s or us")),
-    };
-    if seconds > 3600.0 {
-        return Err(format!("'{text}' is longer than an hour"));
-    }
-    Duration::try_from_secs_f64(seconds).map_err(|_| format!("'{text}' is not a duration"))
-}
+pub(crate) use ferrobus_sim::fault::parse_duration;
 
 #[cfg(test)]
 mod tests {

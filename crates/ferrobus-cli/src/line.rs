@@ -65,14 +65,7 @@ pub(crate) struct LineArgs {
     stats_json: Option<std::path::PathBuf>,
 }
 
-fn rate(text: &str) -> Result<f64, String> {
-    let value = match text.strip_suffix('%') {
-        Some(pct) => pct.trim().parse::<f64>().map(|v| v / 100.0),
-        None => text.trim().parse::<f64>(),
-    }
-    .map_err(|_| format!("'{text}' is not a rate (e.g. 0.01 or 1%)"))?;
-    if (0.0..=1.0).contains(&value) { Ok(value) } else { Err(format!("'{text}' is not between 0 and 1 (0% and 100%)")) }
-}
+use ferrobus_sim::fault::parse_share as rate;
 
 fn stretch(text: &str) -> Result<(f64, Duration), String> {
     let (r, d) = text.split_once(':').ok_or_else(|| format!("'{text}': expected RATE:DURATION, e.g. 1%:3ms"))?;

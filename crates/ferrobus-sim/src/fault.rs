@@ -39,30 +39,36 @@ pub struct FaultError {
     problem: String,
 }
 
-fn share(value: &str) -> Option<f64> {
-    let v = match value.strip_suffix('%') {
-        Some(pct) => pct.trim().parse::<f64>().ok()? / 100.0,
-        None => value.parse::<f64>().ok()?,
-    };
-    (0.0..=1.0).contains(&v).then_some(v)
+/// A share from 0 to 1, written `0.05` or `5%`.
+pub fn parse_share(text: &str) -> Result<f64, String> {
+    let text = text.trim();
+    let value = match text.strip_suffix('%') {
+        Some(pct) => pct.trim().parse::<f64>().map(|v| v / 100.0),
+        None => text.parse::<f64>(),
+    }
+    .map_err(|_| format!("'{text}' is not a share (e.g. 0.05 or 5%)"))?;
+    if (0.0..=1.0).contains(&value) { Ok(value) } else { Err(format!("'{text}' is not between 0 and 1 (0% and 100%)")) }
 }
 
-/// `50ms`, `1.5s`, `250us`, or a plain number of milliseconds.
-pub fn parse_duration(value: &str) -> Option<Duration> {
-    let value = value.trim();
-    let (number, scale) = if let Some(v) = value.strip_suffix("ms") {
-        (v, 1e-3)
-    } else if let Some(v) = value.strip_suffix("us").or_else(|| value.strip_suffix("µs")) {
-        (v, 1e-6)
-    } else if let Some(v) = value.strip_suffix('s') {
-        (v, 1.0)
-    } else if let Some(v) = value.strip_suffix("min") {
-        (v, 60.0)
-    } else {
-        (value, 1e-3)
+/// A duration written `50ms`, `1.5s`, `250us`, `2min`, or a plain number of milliseconds; at
+/// most an hour.
+pub fn parse_duration(text: &str) -> Result<Duration, String> {
+    let text = text.trim();
+    let split = text.find(|c: char| !(c.is_ascii_digit() || c == '.')).unwrap_or(text.len());
+    let (number, unit) = text.split_at(split);
+    let value: f64 = number.parse().map_err(|_| format!("'{text}' is not a duration (e.g. 500ms, 1.5s, 2s)"))?;
+    let seconds = match unit.trim() {
+        "" | "ms" => value / 1e3,
+        "s" => value,
+        "us" | "µs" => value / 1e6,
+        "ns" => value / 1e9,
+        "m" | "min" => value * 60.0,
+        other => return Err(format!("unknown unit '{other}' in '{text}'; use ms, s or us")),
     };
-    let seconds = number.trim().parse::<f64>().ok()? * scale;
-    (0.0..1e9).contains(&seconds).then(|| Duration::from_secs_f64(seconds))
+    if seconds > 3600.0 {
+        return Err(format!("'{text}' is longer than an hour"));
+    }
+    Duration::try_from_secs_f64(seconds).map_err(|_| format!("'{text}' is not a duration"))
 }
 
 fn code(value: &str) -> Option<u8> {
@@ -85,8 +91,7 @@ impl FromStr for Faults {
                     ("silent", None) => faults.silent = true,
                     ("trip", None) => faults.trip_after = Some(Duration::ZERO),
                     ("trip", Some(v)) => {
-                        faults.trip_after =
-                            Some(parse_duration(v).ok_or_else(|| err(format!("{part}: a duration like 5s")))?);
+                        faults.trip_after = Some(parse_duration(v).map_err(&err)?);
                     }
                     _ => return Err(err(format!("{key} takes no value"))),
                 }
@@ -96,13 +101,11 @@ impl FromStr for Faults {
                 return Err(err(format!("unknown fault {key:?}")));
             }
             let value = value.ok_or_else(|| err(format!("{key} needs a value")))?;
-            let invalid = |what: &str| err(format!("{part}: {what}"));
+            let invalid = |what: &str| err(format!("{key}: {what}"));
             match key {
-                "drop" => faults.drop = share(value).ok_or_else(|| invalid("a share from 0 to 1 or 0% to 100%"))?,
-                "corrupt" => {
-                    faults.corrupt = share(value).ok_or_else(|| invalid("a share from 0 to 1 or 0% to 100%"))?;
-                }
-                "delay" => faults.delay = parse_duration(value).ok_or_else(|| invalid("a duration like 50ms"))?,
+                "drop" => faults.drop = parse_share(value).map_err(|e| invalid(&e))?,
+                "corrupt" => faults.corrupt = parse_share(value).map_err(|e| invalid(&e))?,
+                "delay" => faults.delay = parse_duration(value).map_err(|e| invalid(&e))?,
                 "exception" => {
                     faults.exception =
                         Some(code(value).filter(|c| *c != 0).ok_or_else(|| invalid("a code from 0x01 to 0xFF"))?);
@@ -158,7 +161,7 @@ mod tests {
     #[test]
     fn mistakes_say_what_was_expected() {
         let e = "drop=150%".parse::<Faults>().unwrap_err();
-        assert!(e.to_string().starts_with("fault \"drop=150%\": drop=150%: a share from 0 to 1"), "{e}");
+        assert!(e.to_string().starts_with("fault \"drop=150%\": drop: '150%' is not between 0 and 1"), "{e}");
         assert!("explode".parse::<Faults>().unwrap_err().to_string().contains("unknown fault \"explode\""));
         assert!("delay".parse::<Faults>().unwrap_err().to_string().contains("delay needs a value"));
         assert!("exception=0".parse::<Faults>().is_err());
@@ -167,10 +170,13 @@ mod tests {
 
     #[test]
     fn durations_take_the_usual_units() {
-        assert_eq!(parse_duration("1.5s"), Some(Duration::from_millis(1500)));
-        assert_eq!(parse_duration("250us"), Some(Duration::from_micros(250)));
-        assert_eq!(parse_duration("20"), Some(Duration::from_millis(20)));
-        assert_eq!(parse_duration("-1s"), None);
-        assert_eq!(parse_duration("soon"), None);
+        assert_eq!(parse_duration("1.5s"), Ok(Duration::from_millis(1500)));
+        assert_eq!(parse_duration("250us"), Ok(Duration::from_micros(250)));
+        assert_eq!(parse_duration("20"), Ok(Duration::from_millis(20)));
+        assert!(parse_duration("-1s").is_err());
+        assert!(parse_duration("soon").is_err());
+        assert!(parse_duration("2h").is_err());
+        assert_eq!(parse_share("5%"), Ok(0.05));
+        assert!(parse_share("150%").is_err());
     }
 }
