@@ -50,6 +50,9 @@ pub struct Profile {
     pub files: Option<Files>,
     /// The FIFO queue (0x18).
     pub fifo: Option<Fifo>,
+    /// Faults every unit of this profile starts with, written as `--fault` takes them:
+    /// `"drop=10%,delay=50ms"`. A `--fault` for a unit replaces them.
+    pub faults: Option<String>,
 }
 
 /// `[device]`
@@ -381,7 +384,13 @@ impl Profile {
         Ok(profile)
     }
 
+    /// The faults the profile asks for.
+    pub fn faults(&self) -> Result<crate::Faults, String> {
+        self.faults.as_deref().map_or(Ok(crate::Faults::default()), |spec| spec.parse().map_err(|e| format!("{e}")))
+    }
+
     fn validate(&self) -> Result<(), String> {
+        self.faults()?;
         if self.comm.response_wait_ms > 60_000 {
             return Err(format!("response_wait_ms = {} is more than a minute", self.comm.response_wait_ms));
         }
@@ -449,6 +458,15 @@ mod tests {
             e.to_string(),
             "no profile named \"omron-3g3xx\": the built-in ones are omron-3g3rx, sdp-servo, generic, or give a path to a .toml file"
         );
+    }
+
+    #[test]
+    fn a_profile_can_ask_for_faults() {
+        let text = "faults = 'drop=10%,silent'\n[device]\nname='x'\nvendor='v'\nproduct_code='p'\nrevision='1'\n";
+        let faults = Profile::parse(text, "mine.toml").unwrap().faults().unwrap();
+        assert!(faults.silent && (faults.drop - 0.1).abs() < 1e-12);
+        let bad = "faults = 'drop=2'\n[device]\nname='x'\nvendor='v'\nproduct_code='p'\nrevision='1'\n";
+        assert!(Profile::parse(bad, "mine.toml").unwrap_err().to_string().contains("drop: '2' is not between 0 and 1"));
     }
 
     #[test]
