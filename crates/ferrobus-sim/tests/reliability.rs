@@ -32,8 +32,16 @@ struct Tally {
     /// Transactions right after a failed one, and how many of them failed.
     after_fault: u64,
     after_fault_failed: u64,
-    /// The longest a failed transaction took.
-    slowest: Duration,
+    /// How long each failed transaction took.
+    failure_times: Vec<Duration>,
+}
+
+impl Tally {
+    /// The median time a failed transaction took.
+    fn median_failure(&mut self) -> Duration {
+        self.failure_times.sort_unstable();
+        self.failure_times.get(self.failure_times.len() / 2).copied().unwrap_or_default()
+    }
 }
 
 async fn run(paced: bool, baud: u32, transactions: u64, seed: u64) -> Tally {
@@ -80,12 +88,12 @@ async fn run(paced: bool, baud: u32, transactions: u64, seed: u64) -> Tally {
                 false
             }
             Err(e) => {
-                // A typed failure when its timeout expires: never early, and not a second
-                // timeout later (the margin is for a loaded machine's scheduling, not for
-                // the protocol).
+                // A typed failure when its timeout expires: never early, never a hang. How
+                // close to the timeout is checked on the median below: one stall of a loaded
+                // machine can delay any single wake-up.
                 assert!(took >= timeout || !e.is_timeout(), "{e} after {took:?}: early");
-                assert!(took < timeout * 2 + Duration::from_millis(200), "{e} after {took:?}");
-                tally.slowest = tally.slowest.max(took);
+                assert!(took < timeout + Duration::from_secs(5), "{e} after {took:?}: a hang");
+                tally.failure_times.push(took);
                 match e {
                     Error::Timeout { .. } => tally.timeouts += 1,
                     Error::BadReply { .. } => tally.bad_replies += 1,
@@ -103,7 +111,23 @@ async fn run(paced: bool, baud: u32, transactions: u64, seed: u64) -> Tally {
         failed_before = failed;
     }
     let stats = line.stats();
-    eprintln!("{transactions} transactions ({}): {tally:?}; line: {stats:?}", if paced { "paced" } else { "unpaced" });
+    let median = tally.median_failure();
+    let slowest = tally.failure_times.last().copied().unwrap_or_default();
+    eprintln!(
+        "{transactions} transactions ({}): {} ok, {} timeouts, {} bad replies, {} exceptions; a failure took {median:?} at the median, {slowest:?} at most; after a fault {}/{} failed; line: {stats:?}",
+        if paced { "paced" } else { "unpaced" },
+        tally.ok,
+        tally.timeouts,
+        tally.bad_replies,
+        tally.exceptions,
+        tally.after_fault_failed,
+        tally.after_fault,
+    );
+    // Failures end when their timeout does, not a timeout later.
+    assert!(
+        median < timeout + timeout / 4 + Duration::from_millis(2),
+        "median failure {median:?} for a {timeout:?} timeout"
+    );
     tally
 }
 
