@@ -88,6 +88,15 @@ impl<'b> Writer<'b> {
         self.pos
     }
 
+    /// The next `n` bytes of the buffer, to fill in place, checked once.
+    pub(crate) fn reserve(&mut self, n: usize) -> Result<&mut [u8], BufferTooSmall> {
+        let needed = self.pos.saturating_add(n);
+        let available = self.buf.len();
+        let dst = self.buf.get_mut(self.pos..needed).ok_or(BufferTooSmall { needed, available })?;
+        self.pos = needed;
+        Ok(dst)
+    }
+
     pub(crate) fn bytes(&mut self, data: &[u8]) -> Result<(), BufferTooSmall> {
         let needed = self.pos.saturating_add(data.len());
         let available = self.buf.len();

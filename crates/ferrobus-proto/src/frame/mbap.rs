@@ -130,7 +130,13 @@ impl Framing for MbapCodec {
         loop {
             self.evaluate(now);
             let rest = bytes.get(consumed..).unwrap_or_default();
-            if self.found.is_some() || rest.is_empty() {
+            if self.found.is_some() {
+                return consumed;
+            }
+            if rest.is_empty() {
+                // Report a run of bad bytes now, not when a good frame finally comes: a stream
+                // that has lost its framing must show it.
+                self.flush_bad();
                 return consumed;
             }
             // Without a frame at the front, `evaluate` leaves less than a full frame buffered.
@@ -245,8 +251,18 @@ mod tests {
         let mut codec = MbapCodec::new();
         let (frames, bad) = run(&mut codec, &input, 3);
         assert_eq!(frames.len(), 1);
-        assert_eq!(bad, [5]);
+        // Fed three bytes at a time, the junk is reported as it is ruled out.
+        assert_eq!(bad.iter().sum::<usize>(), 5);
         assert_eq!(codec.stats().discarded_bytes, 5);
+    }
+
+    #[test]
+    fn noise_is_reported_as_it_comes_not_when_a_frame_follows() {
+        let mut codec = MbapCodec::new();
+        let (frames, bad) = run(&mut codec, &[0xEB; 1000], 100);
+        assert!(frames.is_empty());
+        assert_eq!(bad.iter().sum::<usize>(), 1000 - (HEADER_LEN - 1), "all but a possible header's worth");
+        assert!(codec.stats().discards > 0);
     }
 
     #[test]

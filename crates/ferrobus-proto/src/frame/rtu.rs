@@ -121,7 +121,8 @@ enum Verdict {
     /// A frame of this many bytes starts here.
     Complete(usize, Direction),
     /// It could still become a frame; `known` when some layout knows how long it will be.
-    Wait { known: bool },
+    /// Nothing can be decided before `need` more bytes (at least one) have come.
+    Wait { known: bool, need: usize },
     /// No frame starts here.
     Reject(DiscardReason),
 }
@@ -245,11 +246,19 @@ impl RtuCodec {
 
     fn assess(&self, cand: &[u8], at_gap: bool) -> Verdict {
         let (Some(&fc), Some(body)) = (cand.get(1), cand.get(2..)) else {
-            return if at_gap { Verdict::Reject(DiscardReason::TooShort) } else { Verdict::Wait { known: false } };
+            let need = 2usize.saturating_sub(cand.len()).max(1);
+            return if at_gap {
+                Verdict::Reject(DiscardReason::TooShort)
+            } else {
+                Verdict::Wait { known: false, need }
+            };
         };
         let mut complete: Option<(usize, Direction)> = None;
         let mut wait = false;
         let mut known = false;
+        // The fewest bytes after which some layout's verdict may change; past the largest frame
+        // every layout is settled.
+        let mut need = MAX_ADU_LEN.saturating_add(1).saturating_sub(cand.len()).max(1);
         let mut reason = DiscardReason::Noise;
         let roles = [
             (self.expect.requests() && fc != 0 && fc < 0x80, Direction::Request),
@@ -273,6 +282,7 @@ impl RtuCodec {
                             Err(DiscardReason::TooShort)
                         } else {
                             known = true;
+                            need = need.min(total.saturating_sub(cand.len()));
                             Ok(None)
                         }
                     } else if cand.get(..total).is_some_and(crc_ok) {
@@ -285,16 +295,25 @@ impl RtuCodec {
                 WireLen::NeedMore if cand.len() >= MAX_ADU_LEN => Err(DiscardReason::TooLong),
                 WireLen::NeedMore => {
                     known = true;
+                    need = 1;
                     Ok(None)
                 }
                 WireLen::Probable(n) if cand.len() == n.saturating_add(MIN_ADU_LEN) && crc_ok(cand) => {
                     Ok(Some(cand.len()))
                 }
+                WireLen::Probable(_) | WireLen::Unknown if !at_gap && cand.len() <= MAX_ADU_LEN => {
+                    // Only the silence can end it — but a probable length is worth a look.
+                    if let WireLen::Probable(n) = wire {
+                        let total = n.saturating_add(MIN_ADU_LEN);
+                        if cand.len() < total {
+                            need = need.min(total.saturating_sub(cand.len()));
+                        }
+                    }
+                    Ok(None)
+                }
                 WireLen::Probable(_) | WireLen::Unknown => {
                     if cand.len() > MAX_ADU_LEN {
                         Err(DiscardReason::TooLong)
-                    } else if !at_gap {
-                        Ok(None)
                     } else if self.clean && cand.len() >= MIN_ADU_LEN && crc_ok(cand) {
                         Ok(Some(cand.len()))
                     } else if cand.len() < MIN_ADU_LEN {
@@ -323,7 +342,7 @@ impl RtuCodec {
         }
         match complete {
             Some((total, direction)) => Verdict::Complete(total, direction),
-            None if wait => Verdict::Wait { known },
+            None if wait => Verdict::Wait { known, need },
             None => Verdict::Reject(reason),
         }
     }
@@ -375,15 +394,28 @@ impl RtuCodec {
         });
     }
 
-    fn append(&mut self, byte: u8) {
-        if self.len >= BUF_LEN {
+    /// Buffers as much of `data` as fits (all of it: a candidate never passes 257 bytes, nor
+    /// a run), moving the candidate to the front first if needed. Returns how much.
+    fn append(&mut self, data: &[u8]) -> usize {
+        if self.len.saturating_add(data.len()) > BUF_LEN {
             self.buf.copy_within(self.start..self.len, 0);
             self.len = self.len.saturating_sub(self.start);
             self.start = 0;
         }
-        if let Some(slot) = self.buf.get_mut(self.len) {
-            *slot = byte;
-            self.len = self.len.saturating_add(1);
+        let n = data.len().min(BUF_LEN.saturating_sub(self.len));
+        let (Some(dst), Some(src)) = (self.buf.get_mut(self.len..self.len.saturating_add(n)), data.get(..n)) else {
+            return 0;
+        };
+        dst.copy_from_slice(src);
+        self.len = self.len.saturating_add(n);
+        n
+    }
+
+    /// How many more bytes the candidate needs before its verdict can change.
+    fn need(&self) -> usize {
+        match self.assess(self.candidate(), false) {
+            Verdict::Wait { need, .. } => need,
+            _ => 1,
         }
     }
 
@@ -393,7 +425,7 @@ impl RtuCodec {
             return None;
         }
         let last = self.last_rx?;
-        let known = matches!(self.assess(self.candidate(), false), Verdict::Wait { known: true });
+        let known = matches!(self.assess(self.candidate(), false), Verdict::Wait { known: true, .. });
         let wait = if known { self.incomplete_timeout } else { self.frame_gap };
         Some(last.saturating_add(wait))
     }
@@ -429,13 +461,20 @@ impl Framing for RtuCodec {
         }
         self.last_rx = Some(now);
         let mut consumed = 0usize;
-        for &byte in bytes {
-            self.append(byte);
-            consumed = consumed.saturating_add(1);
-            self.evaluate(now, false);
-            if self.found.is_some() {
+        // Take bytes in runs up to the next point where a verdict can change (a predicted
+        // length, say): the same frames as byte by byte, at one evaluation per run.
+        while self.found.is_none() {
+            let rest = bytes.get(consumed..).unwrap_or_default();
+            if rest.is_empty() {
                 break;
             }
+            let run = rest.get(..self.need().min(rest.len())).unwrap_or_default();
+            let taken = self.append(run);
+            if taken == 0 {
+                break;
+            }
+            consumed = consumed.saturating_add(taken);
+            self.evaluate(now, false);
         }
         consumed
     }

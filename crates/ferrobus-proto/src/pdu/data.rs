@@ -84,7 +84,14 @@ impl<'a> Registers<'a> {
     pub(crate) fn emit(&self, w: &mut Writer<'_>) -> Result<(), BufferTooSmall> {
         match self.repr {
             RegistersRepr::Wire(b) => w.bytes(b),
-            RegistersRepr::Values(v) => v.iter().try_for_each(|&r| w.u16(r)),
+            RegistersRepr::Values(v) => {
+                // One bounds check for the whole list: the hot path of every read response.
+                let dst = w.reserve(v.len().saturating_mul(2))?;
+                for (pair, r) in dst.chunks_exact_mut(2).zip(v) {
+                    pair.copy_from_slice(&r.to_be_bytes());
+                }
+                Ok(())
+            }
         }
     }
 }

@@ -13,7 +13,9 @@
 //!   Emitting fails only when the output buffer is too small ([`BufferTooSmall`]); the length
 //!   to reserve is [`Request::encoded_len`] (at most [`MAX_PDU_LEN`]).
 //! - `parse(emit(x)) == x` for every value; the property tests in `tests.rs` check it for every
-//!   function code.
+//!   function code. The other way round, `emit(parse(bytes)) == bytes` for every accepted PDU
+//!   but 0x0F requests, which are emitted the spec's way: the unused bits of the last coil byte
+//!   as zeros, and without the padding byte some inverters add to the byte count.
 //! - Parsed values borrow their data from the input slice: nothing is copied or allocated.
 //!
 //! # Layout of the code

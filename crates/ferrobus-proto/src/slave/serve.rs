@@ -231,7 +231,8 @@ fn read_device_id<H: Handler + ?Sized>(
     let mut next = None;
     for id in first..=last {
         let Some(n) = handler.device_object(unit, id, &mut value) else { continue };
-        let value = value.get(..n).unwrap_or(&value);
+        // A handler claiming more than the buffer holds gets what it wrote.
+        let value = value.get(..n.min(value.len())).unwrap_or_default();
         let fits = w.position().saturating_add(2).saturating_add(value.len()) <= DeviceIdentification::MAX_OBJECT_BYTES;
         if !fits {
             next = Some(id);

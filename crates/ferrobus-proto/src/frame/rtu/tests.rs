@@ -331,3 +331,44 @@ fn an_unpaced_stream_finds_frames_by_length_and_ends_unknown_ones_at_the_frame_g
     expire(&mut c, Instant::from_millis(70), record(&mut got));
     assert_eq!(got.last(), Some(&frame(&custom, Direction::Either)));
 }
+
+mod chunking {
+    use proptest::prelude::*;
+
+    use super::*;
+
+    const FRAMES: [&[u8]; 6] =
+        [SDP_REQUEST, SDP_RESPONSE, READ_COILS_REQUEST, READ_COILS_RESPONSE, WRITE_COIL, EXCEPTION];
+
+    fn chunked(input: &[u8], size: usize) -> Vec<(u64, &[u8])> {
+        input.chunks(size).zip(0..).map(|(b, t)| (t, b)).collect()
+    }
+
+    proptest! {
+        /// Bytes are taken in runs up to the next point where a verdict can change; that must
+        /// be invisible: any mix of frames and noise gives the same events however it comes.
+        #[test]
+        fn chunking_never_changes_what_is_found(
+            parts in prop::collection::vec(
+                prop_oneof![
+                    (0..FRAMES.len()).prop_map(|i| FRAMES[i].to_vec()),
+                    prop::collection::vec(any::<u8>(), 1..40),
+                ],
+                1..8,
+            ),
+        ) {
+            let input = parts.concat();
+            let whole = run(&mut codec(Expect::Both), &[(0, &input)]);
+            prop_assert_eq!(&run(&mut codec(Expect::Both), &chunked(&input, 1)), &whole, "byte by byte");
+            prop_assert_eq!(&run(&mut codec(Expect::Both), &chunked(&input, 7)), &whole, "in sevens");
+            let accounted: usize = whole
+                .iter()
+                .map(|e| match e {
+                    Ev::Frame(b, _) => b.len(),
+                    Ev::Dropped(n, _) => *n,
+                })
+                .sum();
+            prop_assert_eq!(accounted, input.len(), "every byte is a frame's or a discard's");
+        }
+    }
+}
