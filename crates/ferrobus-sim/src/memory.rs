@@ -328,8 +328,9 @@ impl Memory {
                 return Err(Refusal::ReadOnly);
             }
             // The item's registers after the write: new values where written, old elsewhere
-            // (a write of one half of a pair keeps the other half).
-            let first = usize::from(item.address);
+            // (a write of one half of a pair keeps the other half). A plain table is one item
+            // owning many addresses, each its own register.
+            let first = if item.size == 1 { a } else { usize::from(item.address) };
             let mut words = [0u16; 2];
             for (w, word) in words.iter_mut().enumerate().take(usize::from(item.size)) {
                 let addr = first + w;
@@ -344,7 +345,8 @@ impl Memory {
                 return Err(Refusal::OutOfRange);
             }
             touched.push((owner as usize, value));
-            a = first + usize::from(item.size);
+            // Past the item, and never in place whatever the map says.
+            a = (first + usize::from(item.size)).max(a + 1);
         }
         Ok(touched)
     }
@@ -482,6 +484,18 @@ mod tests {
         assert_eq!(item.decode(&[0xFC18, 0xFFFF]), -1000);
         let rx = rx();
         assert_eq!(rx.item("F002").unwrap().encode(300_000), [0x0004, 0x93E0], "3G3RX: high word first");
+    }
+
+    #[test]
+    fn plain_tables_take_writes_anywhere_in_them() {
+        // One item owns the whole table; each address is still its own register.
+        let mut m = Memory::new(&Profile::load("generic").unwrap());
+        let values: Vec<u16> = (0..123).collect();
+        let touched = m.check_write_registers(100, &values).unwrap();
+        assert_eq!(touched.len(), 123);
+        m.write_registers(100, &values);
+        assert_eq!((m.peek(Table::Holding, 100), m.peek(Table::Holding, 222)), (0, 122));
+        assert_eq!(m.check_write_registers(0xFFFF, &[7]).map(|t| t.len()), Ok(1), "the last address");
     }
 
     #[test]
