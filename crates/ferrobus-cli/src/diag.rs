@@ -20,7 +20,7 @@ pub(crate) struct DiagArgs {
     #[command(subcommand)]
     pub(crate) what: DiagCommand,
 
-    /// Output format (counters and event-log).
+    /// Output format.
     #[command(flatten)]
     pub(crate) output: OutputArgs,
 }
@@ -217,6 +217,7 @@ pub(crate) async fn run(connection: &ConnectArgs, args: &DiagArgs) -> Result<(),
     let session = &connection.open().await?;
     let client = &session.client;
     let unit = session.unit;
+    let format = args.output.format();
     let text = match &args.what {
         DiagCommand::Echo { .. } => {
             let echoed = client.diagnostics(unit, DiagnosticCode::ReturnQueryData, &data).await?;
@@ -227,66 +228,125 @@ pub(crate) async fn run(connection: &ConnectArgs, args: &DiagArgs) -> Result<(),
                     hex::format(&data)
                 )));
             }
-            format!("unit {unit}: echo OK (FC08/00): {}\n", hex::format(&echoed))
+            let said = format!("echo OK (FC08/00): {}", hex::format(&echoed));
+            Outcome::new(unit, DiagnosticCode::ReturnQueryData, said, Some(echoed)).render(format)
         }
         DiagCommand::Restart { clear_log } => {
             let word = if *clear_log { 0xFF00 } else { 0x0000 };
-            client.diagnostics(unit, DiagnosticCode::RestartCommunications, &u16::to_be_bytes(word)).await?;
+            let sub = DiagnosticCode::RestartCommunications;
+            let reply = client.diagnostics(unit, sub, &u16::to_be_bytes(word)).await?;
             let log = if *clear_log { "; event log cleared" } else { "" };
-            format!("unit {unit}: communications restarted (FC08/01){log}\n")
+            Outcome::new(unit, sub, format!("communications restarted (FC08/01){log}"), Some(reply)).render(format)
         }
         DiagCommand::Register => {
-            let v = client.diagnostic_word(unit, DiagnosticCode::ReturnDiagnosticRegister, 0).await?;
-            format!("unit {unit}: diagnostic register 0x{v:04X} (0b{v:016b})\n")
+            let sub = DiagnosticCode::ReturnDiagnosticRegister;
+            let v = client.diagnostic_word(unit, sub, 0).await?;
+            Outcome::word(unit, sub, format!("diagnostic register 0x{v:04X} (0b{v:016b})"), v).render(format)
         }
         DiagCommand::Delimiter { .. } => {
-            client.diagnostics(unit, DiagnosticCode::ChangeAsciiDelimiter, &[delimiter, 0]).await?;
-            format!("unit {unit}: ASCII delimiter set to 0x{delimiter:02X} (FC08/03)\n")
+            let sub = DiagnosticCode::ChangeAsciiDelimiter;
+            let reply = client.diagnostics(unit, sub, &[delimiter, 0]).await?;
+            let said = format!("ASCII delimiter set to 0x{delimiter:02X} (FC08/03)");
+            Outcome::new(unit, sub, said, Some(reply)).render(format)
         }
         DiagCommand::ListenOnly => {
             eprintln!(
                 "warning: unit {unit} will stop answering (this tool included) until `ferrobus diag restart` \
                  or a power cycle"
             );
-            client.diagnostics(unit, DiagnosticCode::ForceListenOnly, &[0, 0]).await?;
-            format!("unit {unit}: listen-only mode forced (FC08/04); no reply expected\n")
+            let sub = DiagnosticCode::ForceListenOnly;
+            client.diagnostics(unit, sub, &[0, 0]).await?;
+            Outcome::new(unit, sub, "listen-only mode forced (FC08/04); no reply expected".into(), None).render(format)
         }
         DiagCommand::Clear => {
-            client.diagnostic_word(unit, DiagnosticCode::ClearCounters, 0).await?;
-            format!("unit {unit}: counters and diagnostic register cleared (FC08/0A)\n")
+            let sub = DiagnosticCode::ClearCounters;
+            let v = client.diagnostic_word(unit, sub, 0).await?;
+            Outcome::word(unit, sub, "counters and diagnostic register cleared (FC08/0A)".into(), v).render(format)
         }
         DiagCommand::Counter { which } => {
             let v = client.diagnostic_word(unit, which.code(), 0).await?;
-            format!("unit {unit}: {}: {v}\n", which.code())
+            Outcome::word(unit, which.code(), format!("{}: {v}", which.code()), v).render(format)
         }
-        DiagCommand::Counters => counters(session, args.output.format()).await?,
+        DiagCommand::Counters => counters(session, format).await?,
         DiagCommand::ClearOverrun => {
-            client.diagnostic_word(unit, DiagnosticCode::ClearOverrunCounter, 0).await?;
-            format!("unit {unit}: overrun counter and flag cleared (FC08/14)\n")
+            let sub = DiagnosticCode::ClearOverrunCounter;
+            let v = client.diagnostic_word(unit, sub, 0).await?;
+            Outcome::word(unit, sub, "overrun counter and flag cleared (FC08/14)".into(), v).render(format)
         }
         DiagCommand::Sub { .. } => {
             let reply = client.diagnostics(unit, sub, &data).await?;
-            match *reply.as_slice() {
-                [hi, lo] => {
-                    format!("unit {unit}: {sub}: {} (word {})\n", hex::format(&reply), u16::from_be_bytes([hi, lo]))
-                }
-                _ => format!("unit {unit}: {sub}: {}\n", hex::format(&reply)),
-            }
+            let said = match *reply.as_slice() {
+                [hi, lo] => format!("{sub}: {} (word {})", hex::format(&reply), u16::from_be_bytes([hi, lo])),
+                _ => format!("{sub}: {}", hex::format(&reply)),
+            };
+            Outcome::new(unit, sub, said, Some(reply)).render(format)
         }
-        DiagCommand::EventCounter => {
-            let c = client.get_comm_event_counter(unit).await?;
-            let status = if c.status == 0xFFFF { "busy" } else { "ready" };
-            match args.output.format() {
-                Format::Json => output::json_line(&json!({
-                    "unit": unit, "function": 0x0B, "status": c.status, "event_count": c.event_count,
-                })),
-                _ => format!("unit {unit}: status 0x{:04X} ({status}), event count {}\n", c.status, c.event_count),
-            }
-        }
-        DiagCommand::EventLog => event_log(session, args.output.format()).await?,
+        DiagCommand::EventCounter => event_counter(session, format).await?,
+        DiagCommand::EventLog => event_log(session, format).await?,
     };
     output::print(&text);
     Ok(())
+}
+
+/// What a single FC08 request found: a sentence for people, a record for scripts.
+struct Outcome {
+    unit: u8,
+    sub: DiagnosticCode,
+    /// What happened, after `unit N: `.
+    said: String,
+    /// The reply's data field; `None` when no reply comes (listen-only).
+    reply: Option<Vec<u8>>,
+}
+
+impl Outcome {
+    fn new(unit: u8, sub: DiagnosticCode, said: String, reply: Option<Vec<u8>>) -> Self {
+        Outcome { unit, sub, said, reply }
+    }
+
+    fn word(unit: u8, sub: DiagnosticCode, said: String, word: u16) -> Self {
+        Outcome::new(unit, sub, said, Some(word.to_be_bytes().to_vec()))
+    }
+
+    /// The reply as one word, when it is one.
+    fn reply_word(&self) -> Option<u16> {
+        match self.reply.as_deref() {
+            Some(&[hi, lo]) => Some(u16::from_be_bytes([hi, lo])),
+            _ => None,
+        }
+    }
+
+    fn render(&self, format: Format) -> String {
+        let name = self.sub.name().unwrap_or_default();
+        let reply = self.reply.as_deref().map(hex::format);
+        match format {
+            Format::Table => format!("unit {}: {}\n", self.unit, self.said),
+            Format::Json => output::json_line(&json!({
+                "unit": self.unit, "function": 0x08, "sub": self.sub.value(), "name": name,
+                "reply": reply, "word": self.reply_word(), "result": self.said,
+            })),
+            Format::Csv => {
+                let mut rows = Rows::new(&[
+                    ("unit", Align::Right),
+                    ("function", Align::Right),
+                    ("sub", Align::Right),
+                    ("name", Align::Left),
+                    ("reply", Align::Left),
+                    ("word", Align::Right),
+                    ("result", Align::Left),
+                ]);
+                rows.push(vec![
+                    self.unit.to_string(),
+                    "8".into(),
+                    self.sub.value().to_string(),
+                    name.to_string(),
+                    reply.unwrap_or_default(),
+                    self.reply_word().map(|w| w.to_string()).unwrap_or_default(),
+                    self.said.clone(),
+                ]);
+                rows.csv()
+            }
+        }
+    }
 }
 
 /// Reads every counter; one the device refuses shows its exception (many drives answer only
@@ -316,6 +376,28 @@ async fn counters(session: &Session, format: Format) -> Result<String, CliError>
     Ok(match format {
         Format::Json => output::json_line(&doc),
         other => rows.render(other),
+    })
+}
+
+async fn event_counter(session: &Session, format: Format) -> Result<String, CliError> {
+    let unit = session.unit;
+    let c = session.client.get_comm_event_counter(unit).await?;
+    let status = if c.status == 0xFFFF { "busy" } else { "ready" };
+    Ok(match format {
+        Format::Json => output::json_line(&json!({
+            "unit": unit, "function": 0x0B, "status": c.status, "event_count": c.event_count,
+        })),
+        Format::Csv => {
+            let mut rows = Rows::new(&[
+                ("unit", Align::Right),
+                ("function", Align::Right),
+                ("status", Align::Right),
+                ("event_count", Align::Right),
+            ]);
+            rows.push(vec![unit.to_string(), "11".into(), c.status.to_string(), c.event_count.to_string()]);
+            rows.csv()
+        }
+        Format::Table => format!("unit {unit}: status 0x{:04X} ({status}), event count {}\n", c.status, c.event_count),
     })
 }
 
