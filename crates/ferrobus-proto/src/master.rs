@@ -12,10 +12,12 @@
 //!   inter-frame gap (t3.5 on a serial line) since the last byte heard or sent — the rule
 //!   drives such as the 3G3RX enforce by not answering. Bytes heard while waiting push the
 //!   transmission back.
-//! - **Matching.** While waiting, a frame from another unit, with another function code, from
-//!   another transaction, or that is a request (our own echo, another master) is ignored and
-//!   counted; only the reply can end the wait. A reply that does not answer the request (wrong
-//!   byte count, a write echo that differs) fails it.
+//! - **Matching.** While waiting, a frame from another unit, from another transaction, or that
+//!   is a request (our own echo, another master) is ignored and counted; so is, on a serial
+//!   line, a frame with another function code (a late reply to an earlier request). Only the
+//!   reply can end the wait. A reply that does not answer the request (wrong byte count, a
+//!   write echo that differs, over TCP another function code under our transaction id) fails
+//!   it.
 //! - **Outcomes.** An exception reply is a [`Completion::Exception`], a result like any other;
 //!   [`Completion::Failed`] means no usable reply came.
 //! - **Time.** The response timeout runs from the end of our transmission. A reply still
@@ -26,7 +28,7 @@ use core::time::Duration;
 
 use crate::codes::{DiagnosticCode, ExceptionCode, FunctionCode, unit};
 use crate::error::{BufferTooSmall, PduError};
-use crate::frame::{Adu, AduHeader, Direction, Framing, RxEvent, ascii, expire, feed, rtu};
+use crate::frame::{AduHeader, Direction, Framing, RxEvent, ascii, expire, feed, rtu};
 use crate::pdu::{BitValues, MAX_PDU_LEN, MeiRequest, MeiResponse, Request, Response};
 use crate::time::{Instant, earliest};
 
@@ -467,20 +469,29 @@ impl Core {
 
     fn on_event(&mut self, event: &RxEvent<'_>) {
         let RxEvent::Frame(frame) = event else { return };
-        if !matches!(self.state, State::AwaitingReply { .. })
-            || frame.direction == Direction::Request
-            || !self.is_ours(frame)
-        {
+        if !matches!(self.state, State::AwaitingReply { .. }) || frame.direction == Direction::Request {
+            self.stats.ignored_frames = self.stats.ignored_frames.wrapping_add(1);
+            return;
+        }
+        let sent = self.request.first().copied();
+        let answers = frame.pdu.first().map(|fc| fc & !FunctionCode::EXCEPTION_BIT) == sent;
+        let addressed = frame.header.unit == self.unit && (self.serial || frame.header.transaction == self.transaction);
+        // Over TCP the transaction id says this is the answer, whatever it holds; on a serial
+        // line another function code may be a late reply to an earlier request: wait on.
+        if !addressed || (self.serial && !answers) {
             self.stats.ignored_frames = self.stats.ignored_frames.wrapping_add(1);
             return;
         }
         let outcome = if self.raw {
             match *frame.pdu {
-                [fc, code, ..] if fc & FunctionCode::EXCEPTION_BIT != 0 => {
+                [fc, code, ..] if answers && fc & FunctionCode::EXCEPTION_BIT != 0 => {
                     Outcome::Exception(ExceptionCode::from_u8(code))
                 }
                 _ => Outcome::Raw,
             }
+        } else if !answers {
+            let received = frame.pdu.first().copied().map_or(0, usize::from);
+            Outcome::Failed(mismatch("function code", sent.map_or(0, usize::from), received))
         } else {
             let request = Request::parse(self.request.get(..self.request_len).unwrap_or_default());
             match (request, Response::parse(frame.pdu)) {
@@ -501,14 +512,6 @@ impl Core {
 
     /// Whether `frame` comes from the unit asked, in the transaction asked (TCP), with the
     /// function code asked (or its exception).
-    fn is_ours(&self, frame: &Adu<'_>) -> bool {
-        let function = frame.pdu.first().map(|fc| fc & !FunctionCode::EXCEPTION_BIT);
-        frame.header.unit == self.unit
-            && (self.serial || frame.header.transaction == self.transaction)
-            && function.is_some()
-            && function == self.request.first().copied()
-    }
-
     fn finish(&mut self, outcome: Outcome) {
         let stats = &mut self.stats;
         let counter = match outcome {

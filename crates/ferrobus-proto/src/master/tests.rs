@@ -320,6 +320,21 @@ fn over_mbap_replies_match_by_transaction_and_unit_0_is_an_ordinary_unit() {
 }
 
 #[test]
+fn over_mbap_another_function_under_our_transaction_fails_the_request() {
+    // pymodbus answers a read of 126 registers with 80 01: that is the answer, and a bad one.
+    let mut m = Master::new(MbapCodec::new(), MasterConfig::default());
+    m.submit(ns(0), 1, &read_holding(0, 1)).unwrap();
+    let mut buf = [0u8; MAX_TX_LEN];
+    m.poll_transmit(ns(0), &mut buf).unwrap();
+    m.on_bytes(ns(1_000), &[0x00, 0x01, 0x00, 0x00, 0x00, 0x03, 0x01, 0x80, 0x01]);
+    match m.poll_event() {
+        Some(Completion::Failed(MasterError::Mismatch { field: "function code", expected: 0x03, received: 0x80 })) => {}
+        other => panic!("{other:?}"),
+    }
+    assert_eq!((m.stats().bad_replies, m.stats().ignored_frames), (1, 0));
+}
+
+#[test]
 fn written_coils_are_checked_against_the_echoed_range() {
     let mut m = master(MasterConfig::default());
     let bits = [true, false, true];
