@@ -113,11 +113,10 @@ pub(crate) async fn run(connection: &ConnectArgs, args: &SimArgs) -> Result<(), 
     let config = SlaveConfig { units, response_wait: Duration::ZERO };
     let serving = async {
         match port {
-            Served::Port(port) => {
-                let mut handler = sim.clone();
-                serve_transport(&transport, port, config, &mut handler, &mut options()).await
-            }
-            Served::Listener(listener) => serve_tcp(listener, transport.clone(), config, sim.clone(), options).await,
+            Served::Port(port) => serve_port(&transport, port, !args.pty, config, &sim, &options).await,
+            Served::Listener(listener) => serve_tcp(listener, transport.clone(), config, sim.clone(), options)
+                .await
+                .map_err(|e| ferrobus::Error::io("serving", e).into()),
         }
     };
     let stop = async {
@@ -127,11 +126,42 @@ pub(crate) async fn run(connection: &ConnectArgs, args: &SimArgs) -> Result<(), 
         }
     };
     let result = tokio::select! {
-        result = serving => result.map_err(|e| CliError::from(ferrobus::Error::io("serving", e))),
+        result = serving => result,
         () = stop => Ok(()),
     };
     counters.lock().unwrap_or_else(PoisonError::into_inner).print();
     result
+}
+
+/// Serves on `port` until it fails. A serial port that fails or closes — a USB adapter
+/// unplugged, the socat of a virtual pair gone — is reopened once a second and served again,
+/// the devices keeping their state, as drives on a bus keep theirs; a pty of our own cannot
+/// come back, and its end is an error.
+async fn serve_port<O: Fn() -> ServerOptions>(
+    transport: &Transport,
+    mut port: ferrobus::port::BoxPort,
+    reopen: bool,
+    config: SlaveConfig,
+    sim: &Shared<Sim>,
+    options: &O,
+) -> Result<(), CliError> {
+    let place = transport.describe();
+    loop {
+        let mut handler = sim.clone();
+        let ended = serve_transport(transport, port, config, &mut handler, &mut options()).await;
+        let why = ended.err().unwrap_or_else(|| std::io::Error::new(std::io::ErrorKind::UnexpectedEof, "port closed"));
+        if !reopen {
+            return Err(ferrobus::Error::io(format!("serving on {place}"), why).into());
+        }
+        eprintln!("sim: {place}: {why}; reopening it every second");
+        port = loop {
+            tokio::time::sleep(Duration::from_secs(1)).await;
+            if let Ok(port) = transport.open(Duration::from_secs(5)).await {
+                break port;
+            }
+        };
+        eprintln!("sim: serving on {place} again");
+    }
 }
 
 impl SimArgs {
