@@ -1,0 +1,22 @@
+//! Interop tests: ferrobus against real peers, and peers against ferrobus.
+//!
+//! The peers are the fixtures of tests/peers/ (libmodbus, pymodbus and tokio-modbus servers
+//! and clients) and mbpoll, built and installed by `.ci/setup-peers.sh`. Serial lines are
+//! socat pty pairs or the simulator's own pty. Outside CI a test whose peer is missing prints
+//! `skipped: ...` and passes; under `CI=true` it fails.
+//!
+//! - [`cli_vs_servers`]: the `ferrobus` binary against each peer server, RTU and TCP.
+//! - [`clients_vs_sim`]: each peer client and mbpoll against `ferrobus sim --profile generic`.
+//! - [`drive_profiles`]: peer clients and raw manual frames against the 3G3RX and SDP profiles.
+//! - [`port_reopen`]: a serial port that disappears and comes back, through `ferrobus::Client`.
+//! - [`reply_timing`]: when the simulator's reply starts, with a 20 ms response wait.
+//!
+//! Run: `cargo test -p ferrobus-cli --test interop`.
+
+mod cli_vs_servers;
+mod clients_vs_sim;
+mod drive_profiles;
+mod mbpoll_vs_sim;
+mod port_reopen;
+mod reply_timing;
+mod support;
