@@ -1,0 +1,56 @@
+#!/usr/bin/env bash
+# The whole test suite: what CI runs (.ci/run calls exactly this), and what to run before a
+# push. Installs what the tests need (apt and pip packages for the peer stacks, the bare-metal
+# Rust target, cargo-fuzz), then runs, stopping at the first failure:
+#
+#   format   cargo fmt --check
+#   lint     cargo clippy --workspace --all-targets -D warnings
+#   tests    cargo test --workspace: unit, property, engine, line, simulator, CLI, and the
+#            interop tests against libmodbus, pymodbus, tokio-modbus and mbpoll
+#   no_std   ferrobus-proto built for a Cortex-M (thumbv7em-none-eabihf)
+#   docs     cargo doc with warnings denied (every public item documented, links resolve)
+#   fuzz     every cargo-fuzz target for FUZZ_SECONDS (default 20) each
+#
+# Under CI=true a missing peer stack is a failure, never a skip.
+#
+#   scripts/test.sh                # everything
+#   SKIP_FUZZ=1 scripts/test.sh    # everything but the fuzz smoke run
+set -euo pipefail
+
+root="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
+cd "$root"
+
+step() {
+    printf '\n=== %s\n' "$*"
+}
+
+started=$SECONDS
+
+step "setup: peer stacks (libmodbus, pymodbus, tokio-modbus, mbpoll, socat)"
+.ci/setup-peers.sh
+
+step "setup: Rust components"
+rustup component add rustfmt clippy >/dev/null 2>&1 || true
+rustup target add thumbv7em-none-eabihf
+
+step "format"
+cargo fmt --all -- --check
+
+step "lint"
+cargo clippy --workspace --all-targets --locked -- -D warnings
+
+step "tests"
+cargo test --workspace --locked
+
+step "no_std: ferrobus-proto for a Cortex-M, without std or alloc"
+cargo build -p ferrobus-proto --target thumbv7em-none-eabihf --locked
+
+step "docs"
+RUSTDOCFLAGS="-D warnings" cargo doc --workspace --no-deps --locked
+
+if [ -z "${SKIP_FUZZ:-}" ]; then
+    step "fuzz smoke run"
+    FUZZ_SECONDS="${FUZZ_SECONDS:-20}" .ci/fuzz-smoke.sh
+fi
+
+step "all passed in $((SECONDS - started)) s"
