@@ -175,6 +175,15 @@ fn modbus_report(error: &Error, target: Option<&Target>, unit: u8) -> Report {
         Error::Exception { function, code, .. } => {
             Report { message: error.to_string(), hints: exception_hint(*function, *code).into_iter().collect() }
         }
+        Error::Timeout { stray: Some(_), .. } => Report {
+            message: format!("{error}{on}"),
+            hints: vec![
+                "the unit is talking but did not answer this request: it may not support the function or the \
+                 quantity asked"
+                    .into(),
+                "-vvv traces every byte sent and received".into(),
+            ],
+        },
         Error::Timeout { .. } | Error::Backoff { .. } => {
             Report { message: format!("{error}{on}"), hints: timeout_hints(target, unit) }
         }
@@ -285,7 +294,8 @@ mod tests {
             code: ExceptionCode::IllegalDataAddress,
         });
         assert_eq!(exception.exit(), Exit::Exception);
-        let timeout = CliError::from(Error::Timeout { unit: 1, timeout: Duration::from_millis(5), attempts: 1 });
+        let timeout =
+            CliError::from(Error::Timeout { unit: 1, timeout: Duration::from_millis(5), attempts: 1, stray: None });
         assert_eq!(timeout.exit(), Exit::Timeout);
         let io = CliError::from(Error::Io { context: "x".into(), source: Arc::new(io::ErrorKind::NotFound.into()) });
         assert_eq!(io.exit(), Exit::Io);

@@ -12,12 +12,12 @@
 //!   inter-frame gap (t3.5 on a serial line) since the last byte heard or sent — the rule
 //!   drives such as the 3G3RX enforce by not answering. Bytes heard while waiting push the
 //!   transmission back.
-//! - **Matching.** While waiting, a frame from another unit, from another transaction, or that
-//!   is a request (our own echo, another master) is ignored and counted; so is, on a serial
-//!   line, a frame with another function code (a late reply to an earlier request). Only the
-//!   reply can end the wait. A reply that does not answer the request (wrong byte count, a
-//!   write echo that differs, over TCP another function code under our transaction id) fails
-//!   it.
+//! - **Matching.** While waiting, a frame from another unit, with another function code, from
+//!   another transaction, or that is a request (our own echo, another master) is ignored and
+//!   counted; only the reply can end the wait. A reply that does not answer the request (wrong
+//!   byte count, a write echo that differs) fails it. If the wait times out after the unit sent
+//!   a frame with another function code, the timeout names that code: a device that answers
+//!   with the wrong function is told apart from a silent one.
 //! - **Outcomes.** An exception reply is a [`Completion::Exception`], a result like any other;
 //!   [`Completion::Failed`] means no usable reply came.
 //! - **Time.** The response timeout runs from the end of our transmission. A reply still
@@ -67,6 +67,9 @@ pub enum MasterError {
     Timeout {
         /// The time waited after the request had left.
         waited: Duration,
+        /// The function code of the last frame the unit sent meanwhile that did not answer
+        /// the request (over TCP: under our transaction id), ignored.
+        stray: Option<u8>,
     },
     /// A frame from the right unit with the right function code, but a malformed PDU.
     BadResponse(PduError),
@@ -86,8 +89,12 @@ pub enum MasterError {
 impl fmt::Display for MasterError {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
         match self {
-            MasterError::Timeout { waited } => {
-                write!(f, "no reply within {} ms", waited.as_millis())
+            MasterError::Timeout { waited, stray } => {
+                write!(f, "no reply within {} ms", waited.as_millis())?;
+                match stray {
+                    Some(fc) => write!(f, " (the unit sent a frame with function code 0x{fc:02X} instead, ignored)"),
+                    None => Ok(()),
+                }
             }
             MasterError::BadResponse(e) => write!(f, "malformed reply: {e}"),
             MasterError::Mismatch { field, expected, received } => {
@@ -233,6 +240,8 @@ struct Core {
     reply: [u8; MAX_PDU_LEN],
     reply_len: usize,
     outcome: Option<Outcome>,
+    /// The function code of a frame from the asked unit that did not answer the request.
+    stray: Option<u8>,
     last_activity: Option<Instant>,
     stats: MasterStats,
 }
@@ -260,6 +269,7 @@ impl<F: Framing> Master<F> {
                 reply: [0; MAX_PDU_LEN],
                 reply_len: 0,
                 outcome: None,
+                stray: None,
                 last_activity: None,
                 stats: MasterStats::default(),
             },
@@ -330,6 +340,7 @@ impl<F: Framing> Master<F> {
         core.transaction = transaction;
         core.unit = unit;
         core.raw = raw;
+        core.stray = None;
         core.no_reply = no_reply || (core.serial && unit == unit::BROADCAST);
         core.state = State::Queued { not_before: now };
         Ok(())
@@ -425,7 +436,8 @@ impl<F: Framing> Master<F> {
                 let in_progress = self.framing.poll_timeout().is_some_and(|rx| rx > now);
                 if !in_progress || now >= self.grace_end(deadline) {
                     let waited = now.saturating_duration_since(sent);
-                    self.core.finish(Outcome::Failed(MasterError::Timeout { waited }));
+                    let stray = self.core.stray;
+                    self.core.finish(Outcome::Failed(MasterError::Timeout { waited, stray }));
                 }
             }
             _ => {}
@@ -473,25 +485,25 @@ impl Core {
             self.stats.ignored_frames = self.stats.ignored_frames.wrapping_add(1);
             return;
         }
-        let sent = self.request.first().copied();
-        let answers = frame.pdu.first().map(|fc| fc & !FunctionCode::EXCEPTION_BIT) == sent;
+        let function = frame.pdu.first().copied();
+        let answers = function.map(|fc| fc & !FunctionCode::EXCEPTION_BIT) == self.request.first().copied();
         let addressed = frame.header.unit == self.unit && (self.serial || frame.header.transaction == self.transaction);
-        // Over TCP the transaction id says this is the answer, whatever it holds; on a serial
-        // line another function code may be a late reply to an earlier request: wait on.
-        if !addressed || (self.serial && !answers) {
+        if !addressed || !answers {
+            if addressed {
+                // Not the reply (on a serial line perhaps a late one to an earlier request),
+                // but worth naming if the wait ends without one.
+                self.stray = function;
+            }
             self.stats.ignored_frames = self.stats.ignored_frames.wrapping_add(1);
             return;
         }
         let outcome = if self.raw {
             match *frame.pdu {
-                [fc, code, ..] if answers && fc & FunctionCode::EXCEPTION_BIT != 0 => {
+                [fc, code, ..] if fc & FunctionCode::EXCEPTION_BIT != 0 => {
                     Outcome::Exception(ExceptionCode::from_u8(code))
                 }
                 _ => Outcome::Raw,
             }
-        } else if !answers {
-            let received = frame.pdu.first().copied().map_or(0, usize::from);
-            Outcome::Failed(mismatch("function code", sent.map_or(0, usize::from), received))
         } else {
             let request = Request::parse(self.request.get(..self.request_len).unwrap_or_default());
             match (request, Response::parse(frame.pdu)) {

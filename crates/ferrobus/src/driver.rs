@@ -117,9 +117,13 @@ impl<F: Framing + Send + 'static> Driver<F> {
         let retries = if probe { 0 } else { command.options.retries };
         let function = FunctionCode::from_u8(command.pdu.first().copied().unwrap_or_default());
         let mut attempts = 0;
+        let mut stray = None;
         loop {
             attempts += 1;
             let result = self.transact(command).await;
+            if let Err(Error::Timeout { stray: Some(fc), .. }) = result {
+                stray = Some(fc);
+            }
             let retry = matches!(result, Err(Error::Timeout { .. } | Error::BadReply { .. }));
             if retry && attempts <= retries {
                 tracing::debug!(unit, %function, attempts, "retrying: {:?}", result);
@@ -127,7 +131,7 @@ impl<F: Framing + Send + 'static> Driver<F> {
             }
             self.record_health(unit, &result);
             return match result {
-                Err(Error::Timeout { unit, timeout, .. }) => Err(Error::Timeout { unit, timeout, attempts }),
+                Err(Error::Timeout { unit, timeout, .. }) => Err(Error::Timeout { unit, timeout, attempts, stray }),
                 other => other,
             };
         }
@@ -177,7 +181,9 @@ impl<F: Framing + Send + 'static> Driver<F> {
                 read = port.read(&mut self.rx[..]) => match read {
                     Ok(n) if n > 0 => {
                         let at = self.arrival();
-                        self.master.on_bytes(at, self.rx.get(..n).unwrap_or_default());
+                        let bytes = self.rx.get(..n).unwrap_or_default();
+                        tracing::trace!(unit = command.unit, "rx {}", Hex(bytes));
+                        self.master.on_bytes(at, bytes);
                     }
                     Ok(_) => {
                         self.master.abort();
@@ -208,6 +214,7 @@ impl<F: Framing + Send + 'static> Driver<F> {
     async fn write(&mut self, n: usize) -> std::io::Result<()> {
         let Some(port) = self.port.as_mut() else { return Err(std::io::ErrorKind::NotConnected.into()) };
         let bytes = self.tx.get(..n).unwrap_or_default();
+        tracing::trace!("tx {}", Hex(bytes));
         let rts = self.transport.rs485() == Rs485::Rts;
         if rts {
             port.set_rts(true)?;
@@ -276,8 +283,8 @@ fn convert(command: &Command, completion: Completion<'_>) -> Result<Reply, Error
         Completion::Raw(bytes) => Ok(Reply::Pdu(bytes.to_vec())),
         Completion::Exception(code) => Err(Error::Exception { unit, function, code }),
         Completion::Sent => Ok(Reply::Sent),
-        Completion::Failed(MasterError::Timeout { .. }) => {
-            Err(Error::Timeout { unit, timeout: command.options.timeout, attempts: 1 })
+        Completion::Failed(MasterError::Timeout { stray, .. }) => {
+            Err(Error::Timeout { unit, timeout: command.options.timeout, attempts: 1, stray })
         }
         Completion::Failed(error) => Err(Error::BadReply { unit, error }),
     }
@@ -286,4 +293,19 @@ fn convert(command: &Command, completion: Completion<'_>) -> Result<Reply, Error
 /// Parses a reply PDU from `unit` that the driver returned; the engine has checked it already.
 pub(crate) fn parse_reply(unit: u8, pdu: &[u8]) -> Result<Response<'_>, Error> {
     Response::parse(pdu).map_err(|e| Error::BadReply { unit, error: MasterError::BadResponse(e) })
+}
+
+/// Bytes as upper-case hex pairs, for the frame trace (`-vvv`).
+struct Hex<'a>(&'a [u8]);
+
+impl std::fmt::Display for Hex<'_> {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        for (i, b) in self.0.iter().enumerate() {
+            if i > 0 {
+                f.write_str(" ")?;
+            }
+            write!(f, "{b:02X}")?;
+        }
+        Ok(())
+    }
 }

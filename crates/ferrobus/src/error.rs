@@ -26,7 +26,12 @@ pub enum Error {
         code: ExceptionCode,
     },
     /// No reply came in time, after every retry.
-    #[error("no reply from unit {unit} within {} ms ({attempts} attempt{s})", timeout.as_millis(), s = if *.attempts == 1 { "" } else { "s" })]
+    #[error(
+        "no reply from unit {unit} within {} ms ({attempts} attempt{s}){}",
+        timeout.as_millis(),
+        stray.map(|fc| format!("; it sent a frame with function code 0x{fc:02X} instead, ignored")).unwrap_or_default(),
+        s = if *.attempts == 1 { "" } else { "s" },
+    )]
     Timeout {
         /// The unit asked.
         unit: u8,
@@ -34,6 +39,9 @@ pub enum Error {
         timeout: Duration,
         /// How many times the request was sent.
         attempts: u32,
+        /// The function code of the last frame the unit sent instead of a reply (a device
+        /// that misreads the request, not a silent one), if any.
+        stray: Option<u8>,
     },
     /// A reply came but it was malformed, or did not answer the request.
     #[error("bad reply from unit {unit}: {error}")]
@@ -108,8 +116,13 @@ mod tests {
         };
         assert_eq!(e.to_string(), "unit 5 answered 0x03 Read Holding Registers with exception 0x21 (vendor-specific)");
         assert_eq!(e.exception(), Some(ExceptionCode::Vendor(0x21)));
-        let t = Error::Timeout { unit: 1, timeout: Duration::from_millis(500), attempts: 3 };
+        let t = Error::Timeout { unit: 1, timeout: Duration::from_millis(500), attempts: 3, stray: None };
         assert_eq!(t.to_string(), "no reply from unit 1 within 500 ms (3 attempts)");
         assert!(t.is_timeout());
+        let t = Error::Timeout { unit: 1, timeout: Duration::from_millis(500), attempts: 1, stray: Some(0x80) };
+        assert_eq!(
+            t.to_string(),
+            "no reply from unit 1 within 500 ms (1 attempt); it sent a frame with function code 0x80 instead, ignored"
+        );
     }
 }
