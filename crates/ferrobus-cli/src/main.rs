@@ -17,6 +17,7 @@
 //! works offline).
 
 mod address;
+mod bench;
 mod connect;
 mod crc;
 mod demo;
@@ -98,6 +99,8 @@ enum Command {
     Line(line::LineArgs),
     /// A tour: a simulated 3G3RX on a virtual line, driven by the client (no hardware needed)
     Demo(demo::DemoArgs),
+    /// FC03 reads back to back: transactions/s, latency and CPU time (the peer benchmark's format)
+    Bench(bench::BenchArgs),
 }
 
 impl Command {
@@ -129,6 +132,7 @@ async fn dispatch(cli: &Cli) -> Result<(), CliError> {
         Command::Sim(args) => sim::run(connection, args).await,
         Command::Line(args) => line::run(connection, args).await,
         Command::Demo(args) => demo::run(args).await,
+        Command::Bench(args) => bench::run(connection, args).await,
     }
 }
 
