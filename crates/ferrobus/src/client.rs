@@ -197,7 +197,7 @@ impl Client {
     /// Sends `request` to `unit` and returns the reply PDU (function code first), checked
     /// against the request; `None` for a request that gets no reply (a broadcast).
     pub async fn request(&self, unit: u8, request: &Request<'_>) -> Result<Option<Vec<u8>>, Error> {
-        let mut pdu = vec![0u8; MAX_PDU_LEN];
+        let mut pdu = vec![0u8; request.encoded_len()];
         let n =
             request.emit(&mut pdu).map_err(|_| Error::InvalidRequest(PduError::TooLong { len: MAX_PDU_LEN + 1 }))?;
         pdu.truncate(n);

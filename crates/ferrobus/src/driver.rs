@@ -12,7 +12,7 @@ use std::time::Duration;
 use ferrobus_proto::FunctionCode;
 use ferrobus_proto::frame::Framing;
 use ferrobus_proto::master::{Completion, MAX_TX_LEN, Master, MasterConfig, MasterError};
-use ferrobus_proto::pdu::{MAX_PDU_LEN, Request, Response};
+use ferrobus_proto::pdu::{Request, Response};
 use tokio::io::{AsyncReadExt, AsyncWriteExt};
 use tokio::sync::{mpsc, oneshot};
 
@@ -20,6 +20,7 @@ use crate::client::{Backoff, ClientConfig, RequestOptions};
 use crate::clock::Clock;
 use crate::error::Error;
 use crate::port::{BoxPort, Rs485, Transport};
+use crate::timer::Sleeper;
 
 /// One request for the driver.
 pub(crate) struct Command {
@@ -58,12 +59,14 @@ pub(crate) struct Driver<F> {
     health: HashMap<u8, Health>,
     rx: Box<[u8; 1024]>,
     tx: Box<[u8; MAX_TX_LEN]>,
+    sleeper: Sleeper,
 }
 
 impl<F: Framing + Send + 'static> Driver<F> {
     pub(crate) fn new(master: Master<F>, transport: Transport, config: ClientConfig, port: Option<BoxPort>) -> Self {
         Driver {
             master,
+            sleeper: transport.timer().sleeper(),
             transport,
             config,
             port,
@@ -199,7 +202,7 @@ impl<F: Framing + Send + 'static> Driver<F> {
                         return Err(Error::io(format!("reading from {}", self.transport.describe()), e));
                     }
                 },
-                () = self.transport.timer().sleep_until(deadline) => self.master.handle_timeout(self.clock.now()),
+                () = self.sleeper.sleep_until(deadline) => self.master.handle_timeout(self.clock.now()),
             }
         }
     }
@@ -275,7 +278,7 @@ fn convert(command: &Command, completion: Completion<'_>) -> Result<Reply, Error
     let function = FunctionCode::from_u8(command.pdu.first().copied().unwrap_or_default());
     match completion {
         Completion::Response(response) => {
-            let mut buf = vec![0u8; MAX_PDU_LEN];
+            let mut buf = vec![0u8; response.encoded_len()];
             let n = response.emit(&mut buf).map_err(|_| Error::Closed)?;
             buf.truncate(n);
             Ok(Reply::Pdu(buf))

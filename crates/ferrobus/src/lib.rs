@@ -31,6 +31,7 @@ pub mod line;
 pub mod port;
 pub mod server;
 pub mod timer;
+mod tty;
 
 pub use client::{Backoff, Client, ClientConfig, DeviceInfo, EventLog, RequestOptions};
 pub use error::Error;

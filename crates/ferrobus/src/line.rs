@@ -200,10 +200,9 @@ impl Line {
         let (inbox, mut rx) = mpsc::unbounded_channel::<Chunk>();
         let id = self.attach(path.display().to_string(), inbox).await?;
         let cmds = self.cmds.clone();
-        let Pty { port, path: _, _peer: peer } = pty;
         tokio::spawn(async move {
-            let _peer = peer;
-            let (mut rd, mut wr) = tokio::io::split(port);
+            // The whole pty, so that its other end stays open while the task runs.
+            let (mut rd, mut wr) = tokio::io::split(pty);
             let mut buf = [0u8; 512];
             loop {
                 tokio::select! {
@@ -365,7 +364,7 @@ impl Bus {
     }
 
     async fn run(mut self, mut cmds: mpsc::UnboundedReceiver<Cmd>) {
-        let timer = if self.options.paced { Timer::Spin } else { Timer::Tokio };
+        let mut sleeper = if self.options.paced { Timer::Spin } else { Timer::Tokio }.sleeper();
         loop {
             let deadline = [self.next_delivery(), self.next_noise].into_iter().flatten().min();
             tokio::select! {
@@ -373,7 +372,7 @@ impl Bus {
                     Some(cmd) => self.command(cmd),
                     None => return,
                 },
-                () = timer.sleep_until(deadline) => {
+                () = sleeper.sleep_until(deadline) => {
                     let now = Instant::now();
                     if self.next_noise.is_some_and(|t| t <= now) {
                         self.noise(now);

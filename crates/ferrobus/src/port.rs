@@ -8,7 +8,7 @@
 use std::fmt;
 use std::future::Future;
 use std::io;
-use std::path::{Path, PathBuf};
+use std::path::PathBuf;
 use std::pin::Pin;
 use std::sync::Arc;
 use std::time::Duration;
@@ -16,11 +16,12 @@ use std::time::Duration;
 use ferrobus_proto::frame::ascii::AsciiCodec;
 use ferrobus_proto::frame::mbap::MbapCodec;
 use ferrobus_proto::frame::rtu::RtuCodec;
-use ferrobus_proto::frame::{DataBits, Expect, LineConfig, LineTiming, Parity, StopBits};
+use ferrobus_proto::frame::{Expect, LineConfig, LineTiming};
 use tokio::io::{AsyncRead, AsyncWrite};
 use tokio::net::TcpStream;
 
 use crate::timer::Timer;
+pub use crate::tty::{Pty, TtyPort, open_serial};
 
 /// A byte stream a driver runs an engine over.
 pub trait Port: AsyncRead + AsyncWrite + Unpin + Send + 'static {
@@ -40,13 +41,6 @@ pub trait Port: AsyncRead + AsyncWrite + Unpin + Send + 'static {
 
 impl Port for TcpStream {}
 impl Port for tokio::io::DuplexStream {}
-
-/// A serial port.
-impl Port for serial2_tokio::SerialPort {
-    fn set_rts(&mut self, on: bool) -> io::Result<()> {
-        serial2_tokio::SerialPort::set_rts(self, on)
-    }
-}
 
 /// A boxed port.
 pub type BoxPort = Box<dyn Port>;
@@ -92,69 +86,6 @@ impl SerialConfig {
     /// `path` at `line`, with the adapter driving RS-485 and the latency left alone.
     pub fn new(path: impl Into<PathBuf>, line: LineConfig) -> Self {
         SerialConfig { path: path.into(), line, rs485: Rs485::Auto, low_latency: false }
-    }
-}
-
-/// Opens a serial port with `config`.
-///
-/// A pseudo-terminal cannot always hold a parity setting or 7 data bits (Linux refuses them on
-/// a pty opened a second time); the port is then opened at 8 data bits without parity and a
-/// warning is logged — a pty has no wire for parity to protect, and passes 8-bit bytes.
-pub fn open_serial(config: &SerialConfig) -> io::Result<serial2_tokio::SerialPort> {
-    let plain = config.line.with_parity(Parity::None).with_data_bits(DataBits::Eight);
-    let port = match serial2_tokio::SerialPort::open(&config.path, settings(config.line)) {
-        Err(e) if plain != config.line && is_pty(&config.path) => {
-            tracing::info!(path = %config.path.display(), "this pty refuses {} ({e}); using 8 data bits, no parity", config.line);
-            serial2_tokio::SerialPort::open(&config.path, settings(plain))?
-        }
-        other => other?,
-    };
-    match config.rs485 {
-        Rs485::Kernel => port.set_rs4xx_mode(serial2_tokio::rs4xx::Rs485Config::new())?,
-        Rs485::Rts => port.set_rts(false)?,
-        Rs485::Auto => {}
-    }
-    if config.low_latency {
-        set_low_latency(&config.path);
-    }
-    Ok(port)
-}
-
-fn settings(line: LineConfig) -> impl FnOnce(serial2_tokio::Settings) -> io::Result<serial2_tokio::Settings> {
-    move |mut s| {
-        s.set_raw();
-        s.set_baud_rate(line.baud())?;
-        s.set_char_size(match line.data_bits {
-            DataBits::Seven => serial2_tokio::CharSize::Bits7,
-            DataBits::Eight => serial2_tokio::CharSize::Bits8,
-        });
-        s.set_parity(match line.parity {
-            Parity::None => serial2_tokio::Parity::None,
-            Parity::Even => serial2_tokio::Parity::Even,
-            Parity::Odd => serial2_tokio::Parity::Odd,
-        });
-        s.set_stop_bits(match line.stop_bits {
-            StopBits::One => serial2_tokio::StopBits::One,
-            StopBits::Two => serial2_tokio::StopBits::Two,
-        });
-        s.set_flow_control(serial2_tokio::FlowControl::None);
-        Ok(s)
-    }
-}
-
-fn is_pty(path: &Path) -> bool {
-    std::fs::canonicalize(path).is_ok_and(|p| p.starts_with("/dev/pts"))
-}
-
-/// Sets the latency timer of a USB serial adapter to 1 ms through sysfs, if it has one.
-fn set_low_latency(path: &Path) {
-    let Some(name) = std::fs::canonicalize(path).ok().and_then(|p| p.file_name().map(ToOwned::to_owned)) else {
-        return;
-    };
-    let timer = Path::new("/sys/class/tty").join(&name).join("device/latency_timer");
-    match std::fs::write(&timer, b"1") {
-        Ok(()) => tracing::debug!(path = %timer.display(), "latency timer set to 1 ms"),
-        Err(e) => tracing::warn!(path = %timer.display(), "cannot set the adapter's latency timer: {e}"),
     }
 }
 
@@ -394,121 +325,5 @@ where
 
     fn describe(&self) -> String {
         self.name.clone()
-    }
-}
-
-/// A pseudo-terminal pair made in this process: a port for us, and the path of its other
-/// end for another program (a client, a peer stack) to open, as a serial port would be.
-#[derive(Debug)]
-pub struct Pty {
-    /// Our end (the pty master).
-    pub port: PtyPort,
-    /// The path of the other end, e.g. `/dev/pts/7`.
-    pub path: PathBuf,
-    /// The other end, kept open so that the pty survives its user closing it.
-    pub(crate) _peer: serial2::SerialPort,
-}
-
-impl Pty {
-    /// Makes a pty pair. Needs a tokio runtime.
-    pub fn open() -> io::Result<Pty> {
-        use std::os::fd::{AsRawFd, OwnedFd};
-        let (ours, peer) = serial2::SerialPort::pair()?;
-        let path = std::fs::read_link(format!("/proc/self/fd/{}", peer.as_raw_fd()))?;
-        // serial2 opens the master non-blocking, as AsyncFd needs.
-        let file = std::fs::File::from(OwnedFd::from(ours));
-        // SAFETY: `file` moves into the AsyncFd, which owns it until the AsyncFd is dropped;
-        // no other handle to the descriptor exists (serial2's port was consumed), so it
-        // cannot be closed or reused while it is registered. The one unsafe line of the
-        // workspace: tokio has no safe way to register an owned descriptor.
-        #[allow(unsafe_code)]
-        let fd = unsafe { tokio::io::unix::AsyncFd::register(file) }?;
-        Ok(Pty { port: PtyPort { fd }, path, _peer: peer })
-    }
-}
-
-/// A whole pty is a port too: reading and writing go to our end, and the other end stays open
-/// as long as it lives.
-impl Port for Pty {}
-
-impl AsyncRead for Pty {
-    fn poll_read(
-        mut self: Pin<&mut Self>,
-        cx: &mut std::task::Context<'_>,
-        buf: &mut tokio::io::ReadBuf<'_>,
-    ) -> std::task::Poll<io::Result<()>> {
-        Pin::new(&mut self.port).poll_read(cx, buf)
-    }
-}
-
-impl AsyncWrite for Pty {
-    fn poll_write(
-        mut self: Pin<&mut Self>,
-        cx: &mut std::task::Context<'_>,
-        data: &[u8],
-    ) -> std::task::Poll<io::Result<usize>> {
-        Pin::new(&mut self.port).poll_write(cx, data)
-    }
-
-    fn poll_flush(mut self: Pin<&mut Self>, cx: &mut std::task::Context<'_>) -> std::task::Poll<io::Result<()>> {
-        Pin::new(&mut self.port).poll_flush(cx)
-    }
-
-    fn poll_shutdown(mut self: Pin<&mut Self>, cx: &mut std::task::Context<'_>) -> std::task::Poll<io::Result<()>> {
-        Pin::new(&mut self.port).poll_shutdown(cx)
-    }
-}
-
-/// The master side of a [`Pty`], as an async port.
-#[derive(Debug)]
-pub struct PtyPort {
-    fd: tokio::io::unix::AsyncFd<std::fs::File>,
-}
-
-impl Port for PtyPort {}
-
-impl AsyncRead for PtyPort {
-    fn poll_read(
-        self: Pin<&mut Self>,
-        cx: &mut std::task::Context<'_>,
-        buf: &mut tokio::io::ReadBuf<'_>,
-    ) -> std::task::Poll<io::Result<()>> {
-        use std::io::Read;
-        loop {
-            let mut guard = std::task::ready!(self.fd.poll_read_ready(cx))?;
-            let unfilled = buf.initialize_unfilled();
-            match guard.try_io(|fd| fd.get_ref().read(unfilled)) {
-                Ok(Ok(n)) => {
-                    buf.advance(n);
-                    return std::task::Poll::Ready(Ok(()));
-                }
-                Ok(Err(e)) => return std::task::Poll::Ready(Err(e)),
-                Err(_would_block) => {}
-            }
-        }
-    }
-}
-
-impl AsyncWrite for PtyPort {
-    fn poll_write(
-        self: Pin<&mut Self>,
-        cx: &mut std::task::Context<'_>,
-        data: &[u8],
-    ) -> std::task::Poll<io::Result<usize>> {
-        use std::io::Write;
-        loop {
-            let mut guard = std::task::ready!(self.fd.poll_write_ready(cx))?;
-            if let Ok(result) = guard.try_io(|fd| fd.get_ref().write(data)) {
-                return std::task::Poll::Ready(result);
-            }
-        }
-    }
-
-    fn poll_flush(self: Pin<&mut Self>, _: &mut std::task::Context<'_>) -> std::task::Poll<io::Result<()>> {
-        std::task::Poll::Ready(Ok(()))
-    }
-
-    fn poll_shutdown(self: Pin<&mut Self>, _: &mut std::task::Context<'_>) -> std::task::Poll<io::Result<()>> {
-        std::task::Poll::Ready(Ok(()))
     }
 }

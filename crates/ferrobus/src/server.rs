@@ -212,6 +212,7 @@ pub async fn serve<F: Framing, H: Handler + Send>(
     options: &mut ServerOptions,
 ) -> (Slave<F>, io::Result<()>) {
     let clock = Clock::new();
+    let mut sleeper = options.timer.sleeper();
     let mut rx = vec![0u8; 1024];
     let mut tx = [0u8; MAX_TX_LEN];
     // A reply held back by the filter: its bytes and when to send them.
@@ -253,7 +254,7 @@ pub async fn serve<F: Framing, H: Handler + Send>(
                 }
                 Err(e) => return (slave, Err(e)),
             },
-            () = options.timer.sleep_until(deadline) => {
+            () = sleeper.sleep_until(deadline) => {
                 slave.handle_timeout(clock.now(), handler);
                 if let Some((frame, at)) = delayed.take_if(|(_, at)| *at <= tokio::time::Instant::now()) {
                     if let Err(e) = write(&mut port, &frame, options.rs485, options.timing).await {

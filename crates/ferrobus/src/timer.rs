@@ -2,15 +2,22 @@
 //!
 //! Tokio's timer wheel fires on 1 ms ticks, rounding every sleep up to the next tick: a reply
 //! due in 4.01 ms goes out after 5, and a 115200-baud transaction of 6 ms loses a sixth of its
-//! speed to waiting. The precise timers hand their deadlines to one background thread that
-//! sleeps with the OS's high-resolution timer and wakes the waiting task at the instant —
-//! without ever blocking a runtime worker.
+//! speed to waiting.
 //!
-//! - [`Timer::Precise`]: the thread sleeps to the deadline (tens of microseconds late).
-//! - [`Timer::Spin`]: the thread sleeps to 150 µs before it, then spins (a microsecond or
-//!   two late): for the virtual line, where 2 % of a 115200-baud transaction is 127 µs.
+//! A driver waits for all its deadlines with one [`Sleeper`]. The far part of a deadline —
+//! all but its last [`NEAR`] — is slept on tokio's wheel, in one entry that is re-armed only
+//! when a deadline comes earlier than the one it holds: a reply timeout that moves on every
+//! pass of the driver costs nothing, and most are cancelled by the reply long before they come.
+//! The near part is slept as the [`Timer`] says:
+//!
+//! - [`Timer::Precise`]: a timerfd in the runtime's own epoll (Linux): the kernel's
+//!   high-resolution timer wakes the runtime thread directly, tens of microseconds late and
+//!   with no thread in between. Elsewhere, or if the timerfd cannot be made, the timer thread.
+//! - [`Timer::Spin`]: a background thread sleeps to 150 µs before the deadline, then spins: a
+//!   microsecond or two late, for the virtual line, where 2 % of a 115200-baud transaction is
+//!   127 µs.
 //! - [`Timer::Tokio`]: tokio's timer alone, for streams without a line (TCP) and for tests on
-//!   tokio's paused, virtual clock, which the thread's real clock would not follow.
+//!   tokio's paused, virtual clock, which the kernel's timers would not follow.
 
 use std::cmp::Reverse;
 use std::collections::BinaryHeap;
@@ -27,23 +34,164 @@ pub enum Timer {
     /// Tokio's timer alone: up to 1 ms late; follows a paused clock.
     #[default]
     Tokio,
-    /// The timer thread's OS sleep: tens of microseconds late.
+    /// The kernel's high-resolution timer: tens of microseconds late.
     Precise,
-    /// The timer thread's OS sleep, then a busy wait for the last 150 µs: about a
-    /// microsecond late, at the price of the timer thread spinning for those microseconds.
+    /// A timer thread's sleep, then a busy wait for the last 150 µs: about a microsecond late,
+    /// at the price of that thread spinning for those microseconds.
     Spin,
 }
 
 impl Timer {
-    /// Sleeps until `deadline`, or forever for `None`.
+    /// A sleeper for the successive deadlines of one task.
+    pub fn sleeper(self) -> Sleeper {
+        Sleeper { timer: self, coarse: None, precise: Precise::Untried }
+    }
+
+    /// Sleeps until `deadline`, or forever for `None`. A task that sleeps again and again
+    /// should keep a [`Sleeper`] instead.
     pub async fn sleep_until(self, deadline: Option<tokio::time::Instant>) {
+        self.sleeper().sleep_until(deadline).await;
+    }
+}
+
+/// The part of a deadline slept precisely; the rest is slept on tokio's wheel.
+pub const NEAR: Duration = Duration::from_millis(3);
+
+/// Waits for one task's deadlines, one after the other (see the module documentation).
+#[derive(Debug)]
+pub struct Sleeper {
+    timer: Timer,
+    /// The far part of every deadline, on tokio's wheel; made on first use (it needs a runtime).
+    coarse: Option<Pin<Box<tokio::time::Sleep>>>,
+    /// The near part, for [`Timer::Precise`].
+    precise: Precise,
+}
+
+/// How [`Timer::Precise`] sleeps on this sleeper.
+#[derive(Debug)]
+enum Precise {
+    /// Its timerfd is made on the first precise sleep.
+    Untried,
+    #[cfg(target_os = "linux")]
+    TimerFd(timerfd::TimerFd),
+    /// No timerfd here: the timer thread.
+    Thread,
+}
+
+impl Sleeper {
+    /// The timer it sleeps with.
+    pub fn timer(&self) -> Timer {
+        self.timer
+    }
+
+    /// Sleeps until `deadline`, or forever for `None`; never returns before it. Dropping the
+    /// future cancels the sleep; the next one may be for any deadline.
+    pub async fn sleep_until(&mut self, deadline: Option<tokio::time::Instant>) {
         let Some(deadline) = deadline else {
             return std::future::pending().await;
         };
-        match self {
-            Timer::Tokio => tokio::time::sleep_until(deadline).await,
-            Timer::Precise | Timer::Spin => {
-                PreciseSleep { deadline: deadline.into_std(), spin: self == Timer::Spin, entry: None }.await;
+        let near = if self.timer == Timer::Tokio { Duration::ZERO } else { NEAR };
+        while let Some(far) = deadline.checked_sub(near).filter(|far| *far > tokio::time::Instant::now()) {
+            self.sleep_coarse(far).await;
+        }
+        match self.timer {
+            Timer::Tokio => {}
+            Timer::Precise => self.sleep_precise(deadline).await,
+            Timer::Spin => ThreadSleep::new(deadline, true).await,
+        }
+    }
+
+    /// Sleeps on tokio's wheel until `far`, or until the time the entry already held, if that
+    /// is earlier: the caller then sleeps again, on an entry re-armed for `far`.
+    async fn sleep_coarse(&mut self, far: tokio::time::Instant) {
+        let coarse = self.coarse.get_or_insert_with(|| Box::pin(tokio::time::sleep_until(far)));
+        if coarse.is_elapsed() || coarse.deadline() > far {
+            coarse.as_mut().reset(far);
+        }
+        coarse.as_mut().await;
+    }
+
+    #[cfg(target_os = "linux")]
+    async fn sleep_precise(&mut self, deadline: tokio::time::Instant) {
+        if matches!(self.precise, Precise::Untried) {
+            self.precise = match timerfd::TimerFd::new() {
+                Ok(fd) => Precise::TimerFd(fd),
+                Err(e) => {
+                    tracing::info!("no timerfd ({e}); precise deadlines go through a timer thread");
+                    Precise::Thread
+                }
+            };
+        }
+        if let Precise::TimerFd(fd) = &mut self.precise {
+            match fd.sleep_until(deadline).await {
+                Ok(()) => return,
+                Err(e) => {
+                    tracing::warn!("the timerfd failed ({e}); precise deadlines go through a timer thread");
+                    self.precise = Precise::Thread;
+                }
+            }
+        }
+        ThreadSleep::new(deadline, false).await;
+    }
+
+    #[cfg(not(target_os = "linux"))]
+    async fn sleep_precise(&mut self, deadline: tokio::time::Instant) {
+        ThreadSleep::new(deadline, false).await;
+    }
+}
+
+#[cfg(target_os = "linux")]
+mod timerfd {
+    use std::io;
+    use std::os::fd::OwnedFd;
+
+    use rustix::time::{ClockId, Itimerspec, TimerfdClockId, TimerfdFlags, TimerfdTimerFlags, Timespec};
+    use tokio::io::Interest;
+    use tokio::io::unix::AsyncFd;
+
+    /// A timerfd watched by the runtime's reactor.
+    #[derive(Debug)]
+    pub(super) struct TimerFd {
+        fd: AsyncFd<OwnedFd>,
+        /// The deadline it is armed for: a sleep that is cancelled and made again for the same
+        /// deadline (bytes arrived meanwhile) costs no system call.
+        armed: Option<tokio::time::Instant>,
+    }
+
+    impl TimerFd {
+        pub(super) fn new() -> io::Result<Self> {
+            let flags = TimerfdFlags::NONBLOCK | TimerfdFlags::CLOEXEC;
+            let fd = rustix::time::timerfd_create(TimerfdClockId::Monotonic, flags)?;
+            Ok(TimerFd { fd: crate::tty::register(fd, Interest::READABLE)?, armed: None })
+        }
+
+        pub(super) async fn sleep_until(&mut self, deadline: tokio::time::Instant) -> io::Result<()> {
+            loop {
+                let left = deadline.saturating_duration_since(tokio::time::Instant::now());
+                if left.is_zero() {
+                    return Ok(());
+                }
+                if self.armed != Some(deadline) {
+                    // Re-arming also clears an expiry nobody read (a cancelled sleep's).
+                    let at = rustix::time::clock_gettime(ClockId::Monotonic)
+                        .checked_add(Timespec::try_from(left).map_err(io::Error::other)?)
+                        .ok_or_else(|| io::Error::other("a deadline past the end of time"))?;
+                    let zero = Timespec { tv_sec: 0, tv_nsec: 0 };
+                    let spec = Itimerspec { it_interval: zero, it_value: at };
+                    rustix::time::timerfd_settime(self.fd.get_ref(), TimerfdTimerFlags::ABSTIME, &spec)?;
+                    self.armed = Some(deadline);
+                }
+                let mut guard = self.fd.readable().await?;
+                let mut expirations = [0u8; 8];
+                match guard.try_io(|fd| rustix::io::read(fd.get_ref(), &mut expirations).map_err(io::Error::from)) {
+                    Ok(Ok(_)) => {
+                        self.armed = None;
+                        return Ok(());
+                    }
+                    Ok(Err(e)) if e.kind() == io::ErrorKind::Interrupted => {}
+                    Ok(Err(e)) => return Err(e),
+                    Err(_would_block) => {}
+                }
             }
         }
     }
@@ -100,8 +248,14 @@ fn wheel() -> &'static Arc<Wheel> {
 
 impl Wheel {
     fn register(&self, entry: Entry) {
-        self.queue.lock().unwrap_or_else(PoisonError::into_inner).push(Reverse(entry));
-        self.changed.notify_one();
+        let mut queue = self.queue.lock().unwrap_or_else(PoisonError::into_inner);
+        // The thread needs waking only when its next deadline moves earlier.
+        let earliest = queue.peek().is_none_or(|Reverse(next)| entry.wake_at < next.wake_at);
+        queue.push(Reverse(entry));
+        drop(queue);
+        if earliest {
+            self.changed.notify_one();
+        }
     }
 
     /// Wakes each deadline at its instant, earliest first.
@@ -143,14 +297,20 @@ impl Wheel {
 }
 
 /// A future that completes at `deadline`, woken by the timer thread.
-struct PreciseSleep {
+struct ThreadSleep {
     deadline: Instant,
     spin: bool,
     /// The cancellation flag of its registered entry, once registered.
     entry: Option<Arc<AtomicBool>>,
 }
 
-impl Drop for PreciseSleep {
+impl ThreadSleep {
+    fn new(deadline: tokio::time::Instant, spin: bool) -> Self {
+        ThreadSleep { deadline: deadline.into_std(), spin, entry: None }
+    }
+}
+
+impl Drop for ThreadSleep {
     fn drop(&mut self) {
         if let Some(cancelled) = &self.entry {
             cancelled.store(true, Ordering::Relaxed);
@@ -158,7 +318,7 @@ impl Drop for PreciseSleep {
     }
 }
 
-impl Future for PreciseSleep {
+impl Future for ThreadSleep {
     type Output = ();
 
     fn poll(mut self: Pin<&mut Self>, cx: &mut Context<'_>) -> Poll<()> {
@@ -180,12 +340,14 @@ impl Future for PreciseSleep {
 mod tests {
     use super::*;
 
+    /// 21 sleeps on one sleeper, near and far (past [`NEAR`]), spread across tokio's 1 ms
+    /// ticks; how late each woke, sorted.
     async fn lateness(timer: Timer) -> Vec<Duration> {
+        let mut sleeper = timer.sleeper();
         let mut late = Vec::new();
         for i in 0..21u64 {
-            // Deadlines spread across tokio's 1 ms ticks.
-            let deadline = tokio::time::Instant::now() + Duration::from_micros(2_500 + i * 137);
-            timer.sleep_until(Some(deadline)).await;
+            let deadline = tokio::time::Instant::now() + Duration::from_micros(1_500 + i * 237);
+            sleeper.sleep_until(Some(deadline)).await;
             let now = tokio::time::Instant::now();
             assert!(now >= deadline, "woke early");
             late.push(now - deadline);
@@ -221,10 +383,55 @@ mod tests {
         assert!(start.elapsed() < Duration::from_millis(95), "one after the other: {:?}", start.elapsed());
     }
 
+    #[tokio::test]
+    async fn a_sleep_cancelled_for_a_later_deadline_does_not_hold_back_an_earlier_one() {
+        // The driver's pattern: a reply timeout armed on every pass, then a near deadline.
+        for timer in [Timer::Tokio, Timer::Precise, Timer::Spin] {
+            let mut sleeper = timer.sleeper();
+            let start = tokio::time::Instant::now();
+            for pass in 1..=3u64 {
+                let far = Some(start + Duration::from_secs(pass));
+                let cancelled = tokio::time::timeout(Duration::from_millis(2), sleeper.sleep_until(far)).await;
+                assert!(cancelled.is_err(), "{timer:?}: a 1 s sleep ended early");
+            }
+            let near = start + Duration::from_millis(20);
+            sleeper.sleep_until(Some(near)).await;
+            let now = tokio::time::Instant::now();
+            assert!(now >= near, "{timer:?} woke early");
+            assert!(now < start + Duration::from_millis(500), "{timer:?} held back: {:?}", now - start);
+        }
+    }
+
+    #[tokio::test]
+    async fn a_precise_sleep_cancelled_and_made_again_for_the_same_deadline_ends_at_it() {
+        // The server's pattern: bytes arrive while a reply is due, and the sleep is made anew.
+        let mut sleeper = Timer::Precise.sleeper();
+        let due = tokio::time::Instant::now() + Duration::from_millis(10);
+        for _ in 0..3 {
+            assert!(tokio::time::timeout(Duration::from_millis(1), sleeper.sleep_until(Some(due))).await.is_err());
+        }
+        sleeper.sleep_until(Some(due)).await;
+        assert!(tokio::time::Instant::now() >= due);
+        // An expiry nobody waited for does not end the next, later sleep early.
+        let first = tokio::time::Instant::now() + Duration::from_millis(5);
+        assert!(tokio::time::timeout(Duration::from_millis(1), sleeper.sleep_until(Some(first))).await.is_err());
+        tokio::time::sleep(Duration::from_millis(10)).await;
+        let later = tokio::time::Instant::now() + Duration::from_millis(15);
+        sleeper.sleep_until(Some(later)).await;
+        assert!(tokio::time::Instant::now() >= later, "woke at the stale expiry");
+    }
+
     #[tokio::test(start_paused = true)]
     async fn the_tokio_timer_follows_a_paused_clock() {
         let start = tokio::time::Instant::now();
         Timer::Tokio.sleep_until(Some(start + Duration::from_secs(3600))).await;
         assert_eq!(tokio::time::Instant::now() - start, Duration::from_secs(3600));
+        // A sleeper too, whose entry was armed for a later deadline first.
+        let mut sleeper = Timer::Tokio.sleeper();
+        let start = tokio::time::Instant::now();
+        let far = Some(start + Duration::from_secs(60));
+        assert!(tokio::time::timeout(Duration::from_secs(1), sleeper.sleep_until(far)).await.is_err());
+        sleeper.sleep_until(Some(start + Duration::from_secs(5))).await;
+        assert_eq!(tokio::time::Instant::now() - start, Duration::from_secs(5));
     }
 }

@@ -9,7 +9,7 @@ use ferrobus::server::{ServerOptions, serve};
 use ferrobus::{Client, ClientConfig, Timer};
 use ferrobus_proto::ExceptionCode;
 use ferrobus_proto::frame::rtu::RtuCodec;
-use ferrobus_proto::frame::{Expect, LineConfig};
+use ferrobus_proto::frame::{Expect, LineConfig, Parity};
 use ferrobus_proto::slave::{Handler, Slave, SlaveConfig};
 use tokio::io::{AsyncReadExt, AsyncWriteExt};
 use tokio::time::Instant;
@@ -120,7 +120,8 @@ async fn another_program_reaches_the_line_through_a_pty() {
     let line = Line::start(LineOptions { paced: false, ..line_9600() });
     let path = line.pty().await.unwrap();
     let mut inside = line.endpoint("inside").await.unwrap();
-    let outside = serial2_tokio::SerialPort::open(&path, 9600).unwrap();
+    let line_config = LineConfig::new(9600).unwrap().with_parity(Parity::None);
+    let mut outside = ferrobus::port::open_serial(&ferrobus::SerialConfig::new(&path, line_config)).unwrap();
     outside.write_all(&[0xAB, 0xCD]).await.unwrap();
     assert_eq!(read_n(&mut inside, 2, Duration::from_secs(1)).await, [0xAB, 0xCD]);
     inside.write_all(&[0x01]).await.unwrap();

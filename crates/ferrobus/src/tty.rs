@@ -1,0 +1,259 @@
+//! Terminals as ports: serial ports and pseudo-terminals, read and written straight through
+//! their file descriptors.
+//!
+//! serial2 opens and configures the tty; tokio's reactor watches it for reading only. A frame
+//! (at most 256 bytes) fits the tty's output buffer, so a write goes straight to the
+//! descriptor. Watching for write readiness as well would wake the runtime each time the other
+//! side drained what was written — for nothing, on 40 % of the transactions measured in
+//! `bench/PROFILE.md`.
+
+use std::future::Future;
+use std::io;
+use std::os::fd::{AsRawFd, OwnedFd};
+use std::path::{Path, PathBuf};
+use std::pin::Pin;
+use std::task::{Context, Poll, ready};
+use std::time::Duration;
+
+use ferrobus_proto::frame::{DataBits, LineConfig, Parity, StopBits};
+use tokio::io::unix::AsyncFd;
+use tokio::io::{AsyncRead, AsyncWrite, Interest, ReadBuf};
+
+use crate::port::{Port, Rs485, SerialConfig};
+
+/// How long a write waits before trying again when the tty's output buffer is full (a line
+/// that does not drain: hardware flow control held, a stuck adapter).
+const WRITE_RETRY: Duration = Duration::from_millis(1);
+
+/// A serial port or the master side of a pseudo-terminal, as an async port.
+#[derive(Debug)]
+pub struct TtyPort {
+    fd: AsyncFd<serial2::SerialPort>,
+    /// Armed when the output buffer was full: the write is tried again when it fires.
+    retry: Option<Pin<Box<tokio::time::Sleep>>>,
+}
+
+impl TtyPort {
+    /// Watches `port` (opened non-blocking, as serial2 does) for reading. Needs a tokio runtime.
+    fn new(port: serial2::SerialPort) -> io::Result<Self> {
+        Ok(TtyPort { fd: register(port, Interest::READABLE)?, retry: None })
+    }
+}
+
+/// Descriptors that stay open and unchanged for as long as their owner lives, as
+/// `AsyncFd::register` requires.
+pub(crate) trait OwnsFd: AsRawFd {}
+impl OwnsFd for serial2::SerialPort {}
+impl OwnsFd for OwnedFd {}
+
+/// Registers `inner` with tokio's reactor for `interest`. Needs a tokio runtime.
+pub(crate) fn register<T: OwnsFd>(inner: T, interest: Interest) -> io::Result<AsyncFd<T>> {
+    // SAFETY: `inner` moves into the AsyncFd, which owns it until the AsyncFd is dropped; its
+    // descriptor (a serial2 port's file, or an OwnedFd) is closed only when `inner` is dropped
+    // and is the same on every `as_raw_fd` call. The one unsafe block of the workspace: this
+    // tokio has no safe way to register an owned descriptor.
+    #[allow(unsafe_code)]
+    let registered = unsafe { AsyncFd::register_with_interest(inner, interest) };
+    Ok(registered?)
+}
+
+impl Port for TtyPort {
+    fn set_rts(&mut self, on: bool) -> io::Result<()> {
+        self.fd.get_ref().set_rts(on)
+    }
+}
+
+impl AsyncRead for TtyPort {
+    fn poll_read(self: Pin<&mut Self>, cx: &mut Context<'_>, buf: &mut ReadBuf<'_>) -> Poll<io::Result<()>> {
+        loop {
+            let mut guard = ready!(self.fd.poll_read_ready(cx))?;
+            let unfilled = buf.initialize_unfilled();
+            match guard.try_io(|fd| retry_interrupted(|| rustix::io::read(fd.get_ref(), &mut *unfilled))) {
+                Ok(Ok(n)) => {
+                    buf.advance(n);
+                    return Poll::Ready(Ok(()));
+                }
+                Ok(Err(e)) => return Poll::Ready(Err(e)),
+                Err(_would_block) => {}
+            }
+        }
+    }
+}
+
+impl AsyncWrite for TtyPort {
+    fn poll_write(mut self: Pin<&mut Self>, cx: &mut Context<'_>, data: &[u8]) -> Poll<io::Result<usize>> {
+        loop {
+            if let Some(retry) = self.retry.as_mut() {
+                ready!(retry.as_mut().poll(cx));
+                self.retry = None;
+            }
+            match retry_interrupted(|| rustix::io::write(self.fd.get_ref(), data)) {
+                Err(e) if e.kind() == io::ErrorKind::WouldBlock => {
+                    self.retry = Some(Box::pin(tokio::time::sleep(WRITE_RETRY)));
+                }
+                done => return Poll::Ready(done),
+            }
+        }
+    }
+
+    fn poll_flush(self: Pin<&mut Self>, _: &mut Context<'_>) -> Poll<io::Result<()>> {
+        Poll::Ready(Ok(()))
+    }
+
+    fn poll_shutdown(self: Pin<&mut Self>, _: &mut Context<'_>) -> Poll<io::Result<()>> {
+        Poll::Ready(Ok(()))
+    }
+}
+
+/// Runs a system call again when a signal interrupted it.
+fn retry_interrupted<T>(mut call: impl FnMut() -> rustix::io::Result<T>) -> io::Result<T> {
+    loop {
+        match call() {
+            Err(rustix::io::Errno::INTR) => {}
+            other => return other.map_err(io::Error::from),
+        }
+    }
+}
+
+/// Opens a serial port with `config`. Needs a tokio runtime.
+///
+/// A pseudo-terminal cannot always hold a parity setting or 7 data bits (Linux refuses them on
+/// a pty opened a second time); the port is then opened at 8 data bits without parity and a
+/// note is logged — a pty has no wire for parity to protect, and passes 8-bit bytes.
+pub fn open_serial(config: &SerialConfig) -> io::Result<TtyPort> {
+    let plain = config.line.with_parity(Parity::None).with_data_bits(DataBits::Eight);
+    let port = match serial2::SerialPort::open(&config.path, settings(config.line)) {
+        Err(e) if plain != config.line && is_pty(&config.path) => {
+            tracing::info!(path = %config.path.display(), "this pty refuses {} ({e}); using 8 data bits, no parity", config.line);
+            serial2::SerialPort::open(&config.path, settings(plain))?
+        }
+        other => other?,
+    };
+    match config.rs485 {
+        Rs485::Kernel => port.set_rs4xx_mode(serial2::rs4xx::Rs485Config::new())?,
+        Rs485::Rts => port.set_rts(false)?,
+        Rs485::Auto => {}
+    }
+    if config.low_latency {
+        set_low_latency(&config.path);
+    }
+    TtyPort::new(port)
+}
+
+fn settings(line: LineConfig) -> impl FnOnce(serial2::Settings) -> io::Result<serial2::Settings> {
+    move |mut s| {
+        s.set_raw();
+        s.set_baud_rate(line.baud())?;
+        s.set_char_size(match line.data_bits {
+            DataBits::Seven => serial2::CharSize::Bits7,
+            DataBits::Eight => serial2::CharSize::Bits8,
+        });
+        s.set_parity(match line.parity {
+            Parity::None => serial2::Parity::None,
+            Parity::Even => serial2::Parity::Even,
+            Parity::Odd => serial2::Parity::Odd,
+        });
+        s.set_stop_bits(match line.stop_bits {
+            StopBits::One => serial2::StopBits::One,
+            StopBits::Two => serial2::StopBits::Two,
+        });
+        s.set_flow_control(serial2::FlowControl::None);
+        Ok(s)
+    }
+}
+
+fn is_pty(path: &Path) -> bool {
+    std::fs::canonicalize(path).is_ok_and(|p| p.starts_with("/dev/pts"))
+}
+
+/// Sets the latency timer of a USB serial adapter to 1 ms through sysfs, if it has one.
+fn set_low_latency(path: &Path) {
+    let Some(name) = std::fs::canonicalize(path).ok().and_then(|p| p.file_name().map(ToOwned::to_owned)) else {
+        return;
+    };
+    let timer = Path::new("/sys/class/tty").join(&name).join("device/latency_timer");
+    match std::fs::write(&timer, b"1") {
+        Ok(()) => tracing::debug!(path = %timer.display(), "latency timer set to 1 ms"),
+        Err(e) => tracing::warn!(path = %timer.display(), "cannot set the adapter's latency timer: {e}"),
+    }
+}
+
+/// A pseudo-terminal pair made in this process: a port for us, and the path of its other
+/// end for another program (a client, a peer stack) to open, as a serial port would be.
+#[derive(Debug)]
+pub struct Pty {
+    /// Our end (the pty master).
+    pub port: TtyPort,
+    /// The path of the other end, e.g. `/dev/pts/7`.
+    pub path: PathBuf,
+    /// The other end, kept open so that the pty survives its user closing it.
+    _peer: serial2::SerialPort,
+}
+
+impl Pty {
+    /// Makes a pty pair. Needs a tokio runtime.
+    pub fn open() -> io::Result<Pty> {
+        let (ours, peer) = serial2::SerialPort::pair()?;
+        let path = std::fs::read_link(format!("/proc/self/fd/{}", peer.as_raw_fd()))?;
+        Ok(Pty { port: TtyPort::new(ours)?, path, _peer: peer })
+    }
+}
+
+/// A whole pty is a port too: reading and writing go to our end, and the other end stays open
+/// as long as it lives.
+impl Port for Pty {}
+
+impl AsyncRead for Pty {
+    fn poll_read(mut self: Pin<&mut Self>, cx: &mut Context<'_>, buf: &mut ReadBuf<'_>) -> Poll<io::Result<()>> {
+        Pin::new(&mut self.port).poll_read(cx, buf)
+    }
+}
+
+impl AsyncWrite for Pty {
+    fn poll_write(mut self: Pin<&mut Self>, cx: &mut Context<'_>, data: &[u8]) -> Poll<io::Result<usize>> {
+        Pin::new(&mut self.port).poll_write(cx, data)
+    }
+
+    fn poll_flush(mut self: Pin<&mut Self>, cx: &mut Context<'_>) -> Poll<io::Result<()>> {
+        Pin::new(&mut self.port).poll_flush(cx)
+    }
+
+    fn poll_shutdown(mut self: Pin<&mut Self>, cx: &mut Context<'_>) -> Poll<io::Result<()>> {
+        Pin::new(&mut self.port).poll_shutdown(cx)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use tokio::io::{AsyncReadExt, AsyncWriteExt};
+
+    use super::*;
+
+    #[tokio::test]
+    async fn a_pty_carries_bytes_both_ways_and_survives_its_user_leaving() {
+        let mut pty = Pty::open().unwrap();
+        let line = LineConfig::new(9600).unwrap().with_parity(Parity::None);
+        let config = SerialConfig::new(&pty.path, line);
+        for round in 0..2u8 {
+            let mut user = open_serial(&config).unwrap();
+            user.write_all(&[0x01, 0x03, round]).await.unwrap();
+            let mut got = [0u8; 3];
+            pty.read_exact(&mut got).await.unwrap();
+            assert_eq!(got, [0x01, 0x03, round]);
+            pty.write_all(&[0xAB; 300]).await.unwrap();
+            let mut back = [0u8; 300];
+            user.read_exact(&mut back).await.unwrap();
+            assert_eq!(back, [0xAB; 300]);
+            // The user closes its end; the pty stays usable for the next one.
+        }
+    }
+
+    #[test]
+    fn a_missing_port_is_not_found() {
+        let runtime = tokio::runtime::Builder::new_current_thread().enable_all().build().unwrap();
+        let _inside = runtime.enter();
+        let config = SerialConfig::new("/dev/ferrobus-no-such-port", LineConfig::new(9600).unwrap());
+        let e = open_serial(&config).unwrap_err();
+        assert_eq!(e.kind(), io::ErrorKind::NotFound);
+    }
+}
