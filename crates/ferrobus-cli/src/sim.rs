@@ -14,6 +14,7 @@ use ferrobus::server::{ServerEvent, ServerOptions, Shared, serve_tcp, serve_tran
 use ferrobus::{Framing, Pty, Timer, Transport};
 use ferrobus_proto::slave::{Disposition, SlaveConfig, SlaveEvent};
 use ferrobus_sim::{Device, FaultFilter, Faults, Profile, Sim, tokio_clock};
+use hdrhistogram::Histogram;
 
 use crate::connect::{ConnectArgs, Target, parse_duration};
 use crate::exit::CliError;
@@ -52,7 +53,7 @@ pub(crate) struct SimArgs {
 }
 
 /// What the simulator has done, kept by its observer.
-#[derive(Debug, Default)]
+#[derive(Debug)]
 struct Counters {
     requests: u64,
     replies: u64,
@@ -61,8 +62,24 @@ struct Counters {
     other_units: u64,
     discarded: u64,
     dropped_replies: u64,
-    /// How late each reply went out after it was due, in microseconds.
-    lateness_us: Vec<u64>,
+    /// How late each reply went out after it was due, in microseconds, to three significant
+    /// digits: a fixed size however long the simulator runs.
+    lateness_us: Histogram<u64>,
+}
+
+impl Default for Counters {
+    fn default() -> Self {
+        Counters {
+            requests: 0,
+            replies: 0,
+            exceptions: 0,
+            silent: 0,
+            other_units: 0,
+            discarded: 0,
+            dropped_replies: 0,
+            lateness_us: Histogram::new(3).expect("3 significant digits are within hdrhistogram's 0 to 5"),
+        }
+    }
 }
 
 impl Counters {
@@ -77,15 +94,13 @@ impl Counters {
             self.discarded,
             self.dropped_replies
         );
-        if !self.lateness_us.is_empty() {
-            let mut late = self.lateness_us.clone();
-            late.sort_unstable();
-            let at = |q: usize| late[(late.len() - 1) * q / 100];
+        let late = &self.lateness_us;
+        if !late.is_empty() {
             eprintln!(
                 "sim: reply start after its due time (t3.5 + wait): p50 {} µs, p99 {} µs, max {} µs over {} replies",
-                at(50),
-                at(99),
-                late[late.len() - 1],
+                late.value_at_quantile(0.50),
+                late.value_at_quantile(0.99),
+                late.max(),
                 late.len()
             );
         }
@@ -111,14 +126,16 @@ pub(crate) async fn run(connection: &ConnectArgs, args: &SimArgs) -> Result<(), 
         }
     };
     let config = SlaveConfig { units, response_wait: Duration::ZERO };
-    let serving = async {
+    let reopen = !args.pty;
+    // Its own task: a request wakes the server alone, not the signal handlers below.
+    let mut serving = tokio::spawn(async move {
         match port {
-            Served::Port(port) => serve_port(&transport, port, !args.pty, config, &sim, &options).await,
+            Served::Port(port) => serve_port(&transport, port, reopen, config, &sim, &options).await,
             Served::Listener(listener) => serve_tcp(listener, transport.clone(), config, sim.clone(), options)
                 .await
                 .map_err(|e| ferrobus::Error::io("serving", e).into()),
         }
-    };
+    });
     let stop = async {
         match args.duration {
             Some(d) => tokio::time::sleep(d).await,
@@ -126,9 +143,10 @@ pub(crate) async fn run(connection: &ConnectArgs, args: &SimArgs) -> Result<(), 
         }
     };
     let result = tokio::select! {
-        result = serving => result,
+        ended = &mut serving => ended.unwrap_or_else(|e| Err(ferrobus::Error::io("serving", std::io::Error::other(e)).into())),
         () = stop => Ok(()),
     };
+    serving.abort();
     counters.lock().unwrap_or_else(PoisonError::into_inner).print();
     result
 }
@@ -300,7 +318,7 @@ fn observe(counters: &Mutex<Counters>, event: ServerEvent) {
         ServerEvent::Sent { frame, due, at } => {
             c.replies += 1;
             let late = at.saturating_duration_since(due);
-            c.lateness_us.push(u64::try_from(late.as_micros()).unwrap_or(u64::MAX));
+            c.lateness_us.saturating_record(u64::try_from(late.as_micros()).unwrap_or(u64::MAX));
             tracing::info!(frame = %crate::hex::format(&frame), late_us = late.as_micros(), "reply sent");
         }
         ServerEvent::Dropped { frame } => {
