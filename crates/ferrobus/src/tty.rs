@@ -68,8 +68,15 @@ impl AsyncRead for TtyPort {
         loop {
             let mut guard = ready!(self.fd.poll_read_ready(cx))?;
             let unfilled = buf.initialize_unfilled();
+            let room = unfilled.len();
             match guard.try_io(|fd| retry_interrupted(|| rustix::io::read(fd.get_ref(), &mut *unfilled))) {
                 Ok(Ok(n)) => {
+                    if n > 0 && n < room {
+                        // The tty is drained: the next read would only say so (EAGAIN). Wait
+                        // for the next edge instead, as tokio's own sockets do; one that came
+                        // meanwhile is kept.
+                        guard.clear_ready();
+                    }
                     buf.advance(n);
                     return Poll::Ready(Ok(()));
                 }
