@@ -12,10 +12,13 @@
 //!
 //! - [`Timer::Precise`]: a timerfd in the runtime's own epoll (Linux): the kernel's
 //!   high-resolution timer wakes the runtime thread directly, tens of microseconds late and
-//!   with no thread in between. Elsewhere, or if the timerfd cannot be made, the timer thread.
-//! - [`Timer::Spin`]: a background thread sleeps to 150 µs before the deadline, then spins: a
-//!   microsecond or two late, for the virtual line, where 2 % of a 115200-baud transaction is
-//!   127 µs.
+//!   with no thread in between. Elsewhere, or if the timerfd cannot be made, a timer thread
+//!   that wakes the task.
+//! - [`Timer::Spin`]: the same to [`SPIN`] before the deadline, then a busy wait on the
+//!   calling thread: a microsecond or two late, for the virtual line, where 2 % of a
+//!   115200-baud transaction is 127 µs, and for a simulator alone on its pty. The thread does
+//!   nothing else meanwhile: other tasks of a single-threaded runtime wait those
+//!   microseconds.
 //! - [`Timer::Tokio`]: tokio's timer alone, for streams without a line (TCP) and for tests on
 //!   tokio's paused, virtual clock, which the kernel's timers would not follow.
 
@@ -36,8 +39,8 @@ pub enum Timer {
     Tokio,
     /// The kernel's high-resolution timer: tens of microseconds late.
     Precise,
-    /// A timer thread's sleep, then a busy wait for the last 150 µs: about a microsecond late,
-    /// at the price of that thread spinning for those microseconds.
+    /// The kernel's timer, then a busy wait on the calling thread for the last
+    /// [`SPIN`]: about a microsecond late, at the price of that thread's time.
     Spin,
 }
 
@@ -97,7 +100,14 @@ impl Sleeper {
         match self.timer {
             Timer::Tokio => {}
             Timer::Precise => self.sleep_precise(deadline).await,
-            Timer::Spin => ThreadSleep::new(deadline, true).await,
+            Timer::Spin => {
+                if let Some(before) = deadline.checked_sub(SPIN) {
+                    self.sleep_precise(before).await;
+                }
+                while tokio::time::Instant::now() < deadline {
+                    std::hint::spin_loop();
+                }
+            }
         }
     }
 
@@ -131,12 +141,12 @@ impl Sleeper {
                 }
             }
         }
-        ThreadSleep::new(deadline, false).await;
+        ThreadSleep::new(deadline).await;
     }
 
     #[cfg(not(target_os = "linux"))]
     async fn sleep_precise(&mut self, deadline: tokio::time::Instant) {
-        ThreadSleep::new(deadline, false).await;
+        ThreadSleep::new(deadline).await;
     }
 }
 
@@ -197,16 +207,20 @@ mod timerfd {
     }
 }
 
-/// Spinning starts this long before a [`Timer::Spin`] deadline.
-const SPIN: Duration = Duration::from_micros(150);
+/// Spinning starts this long before a [`Timer::Spin`] deadline: more than the kernel's timer
+/// is usually late on a loaded virtual machine.
+pub const SPIN: Duration = Duration::from_micros(200);
+
+// The timer thread: precise deadlines where there is no timerfd (not Linux, or the kernel
+// refused one). It sleeps with the OS's high-resolution timer and wakes the waiting task,
+// without ever blocking a runtime worker.
 
 /// A deadline registered with the timer thread.
 struct Entry {
     wake_at: Instant,
-    spin: bool,
     waker: Waker,
     /// Set when the sleep is dropped before its deadline (a `select!` took another branch):
-    /// the thread then neither spins for it nor wakes anyone.
+    /// the thread then does not wake anyone.
     cancelled: Arc<AtomicBool>,
 }
 
@@ -270,21 +284,10 @@ impl Wheel {
                 queue.pop();
                 continue;
             }
-            let (wake_at, spin) = (next.wake_at, next.spin);
-            let now = Instant::now();
-            let sleep_to = if spin { wake_at.checked_sub(SPIN).unwrap_or(wake_at) } else { wake_at };
-            if sleep_to > now {
+            let (wake_at, now) = (next.wake_at, Instant::now());
+            if wake_at > now {
                 // Sleep until then, or until an earlier deadline arrives.
-                queue = self.changed.wait_timeout(queue, sleep_to - now).unwrap_or_else(PoisonError::into_inner).0;
-                continue;
-            }
-            if spin && Instant::now() < wake_at {
-                // Let new deadlines in while spinning; they are looked at on the next turn.
-                drop(queue);
-                while Instant::now() < wake_at {
-                    std::hint::spin_loop();
-                }
-                queue = self.queue.lock().unwrap_or_else(PoisonError::into_inner);
+                queue = self.changed.wait_timeout(queue, wake_at - now).unwrap_or_else(PoisonError::into_inner).0;
                 continue;
             }
             if let Some(Reverse(due)) = queue.pop() {
@@ -299,14 +302,13 @@ impl Wheel {
 /// A future that completes at `deadline`, woken by the timer thread.
 struct ThreadSleep {
     deadline: Instant,
-    spin: bool,
     /// The cancellation flag of its registered entry, once registered.
     entry: Option<Arc<AtomicBool>>,
 }
 
 impl ThreadSleep {
-    fn new(deadline: tokio::time::Instant, spin: bool) -> Self {
-        ThreadSleep { deadline: deadline.into_std(), spin, entry: None }
+    fn new(deadline: tokio::time::Instant) -> Self {
+        ThreadSleep { deadline: deadline.into_std(), entry: None }
     }
 }
 
@@ -330,7 +332,7 @@ impl Future for ThreadSleep {
             // the same entry (its waker is the task's, which does not change under tokio).
             let cancelled = Arc::new(AtomicBool::new(false));
             self.entry = Some(Arc::clone(&cancelled));
-            wheel().register(Entry { wake_at: self.deadline, spin: self.spin, waker: cx.waker().clone(), cancelled });
+            wheel().register(Entry { wake_at: self.deadline, waker: cx.waker().clone(), cancelled });
         }
         Poll::Pending
     }
