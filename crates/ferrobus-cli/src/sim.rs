@@ -263,6 +263,9 @@ async fn open(connection: &ConnectArgs, args: &SimArgs) -> Result<(Transport, Se
     let transport = connection.transport(&target);
     match &target {
         Target::Serial { .. } => {
+            // A device answers on time to the microsecond; the simulator has its thread to
+            // itself, and spins the last 200 µs before each reply for it.
+            let transport = transport.with_timer(Timer::Spin);
             let port = transport.open(Duration::from_secs(5)).await?;
             eprintln!("sim: serving on {}", transport.describe());
             Ok((transport, Served::Port(port)))
