@@ -295,13 +295,15 @@ impl ferrobus::port::Connector for Unused {
 fn observe(counters: &Mutex<Counters>, event: ServerEvent) {
     let mut c = counters.lock().unwrap_or_else(PoisonError::into_inner);
     match event {
-        ServerEvent::Slave { event: SlaveEvent::Request { unit, function, disposition, .. }, .. } => {
+        ServerEvent::Slave { event: SlaveEvent::Request { unit, function, end, disposition }, .. } => {
             c.requests += 1;
+            // How long after the request's last byte the reply is due: t3.5 + the wait.
+            let due_us = |due: ferrobus_proto::Instant| due.saturating_duration_since(end).as_micros();
             match disposition {
-                Disposition::Replied(_) => tracing::info!(unit, %function, "request: reply due"),
-                Disposition::Refused(code, _) => {
+                Disposition::Replied(due) => tracing::info!(unit, %function, due_us = due_us(due), "request: reply due"),
+                Disposition::Refused(code, due) => {
                     c.exceptions += 1;
-                    tracing::info!(unit, %function, %code, "request: exception due");
+                    tracing::info!(unit, %function, %code, due_us = due_us(due), "request: exception due");
                 }
                 Disposition::Executed | Disposition::Silent => {
                     c.silent += 1;
@@ -311,7 +313,7 @@ fn observe(counters: &Mutex<Counters>, event: ServerEvent) {
         }
         ServerEvent::Slave { event: SlaveEvent::Ignored { unit, function, why }, .. } => {
             c.other_units += 1;
-            tracing::debug!(unit, %function, ?why, "frame not for us");
+            tracing::info!(unit, %function, ?why, "frame not for us");
         }
         ServerEvent::Slave { event: SlaveEvent::Discarded { bytes, reason, .. }, .. } => {
             c.discarded += 1;

@@ -299,7 +299,7 @@ pub(crate) fn parse_reply(unit: u8, pdu: &[u8]) -> Result<Response<'_>, Error> {
 }
 
 /// Bytes as upper-case hex pairs, for the frame trace (`-vvv`).
-struct Hex<'a>(&'a [u8]);
+pub(crate) struct Hex<'a>(pub(crate) &'a [u8]);
 
 impl std::fmt::Display for Hex<'_> {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {

@@ -250,7 +250,9 @@ pub async fn serve<F: Framing, H: Handler + Send>(
                 Ok(0) => return (slave, Ok(())),
                 Ok(n) => {
                     let at = port.last_arrival().map_or_else(|| clock.now(), |t| clock.from_tokio(t));
-                    slave.on_bytes(at, rx.get(..n).unwrap_or_default(), handler);
+                    let bytes = rx.get(..n).unwrap_or_default();
+                    tracing::trace!("rx {}", crate::driver::Hex(bytes));
+                    slave.on_bytes(at, bytes, handler);
                 }
                 Err(e) => return (slave, Err(e)),
             },
@@ -268,6 +270,7 @@ pub async fn serve<F: Framing, H: Handler + Send>(
 }
 
 async fn write(port: &mut BoxPort, frame: &[u8], rs485: Rs485, timing: LineTiming) -> io::Result<()> {
+    tracing::trace!("tx {}", crate::driver::Hex(frame));
     let rts = rs485 == Rs485::Rts;
     if rts {
         port.set_rts(true)?;
