@@ -328,92 +328,47 @@ def goals_section(pairs):
     )
     out.append("")
 
-    # 2. Unpaced, client role: against the same server.
-    peers_c = ["libmodbus", "pymodbus", "tokio"]
-    rows = []
-    for s in SERVERS:
-        f = pairs.get(("unpaced", "pty", "ferrobus", s))
-        if not f:
-            continue
-        others = {c: pairs.get(("unpaced", "pty", c, s)) for c in peers_c}
-        best = max((p.tps for p in others.values() if p and p.tps), default=None)
-        lib = others.get("libmodbus")
-        row = [f"against {PEER_NAMES[s]}", fmt(f.tps, "{:.0f}")]
-        row += [fmt(f.tps / others[c].tps if others[c] and others[c].tps else None, "{:.2f}×") for c in peers_c]
-        row.append(ratio_cell(f.tps / best if best else None, GOAL_SPEEDUP))
-        row.append(fmt(f.master_cpu_us, "{:.1f}") + " / " + fmt(lib.master_cpu_us if lib else None, "{:.1f}"))
-        row.append(
-            ratio_cell(
-                f.master_cpu_us / lib.master_cpu_us if lib and lib.master_cpu_us and f.master_cpu_us else None,
-                GOAL_CPU,
-                at_least=False,
-            )
-        )
-        rows.append(row)
-    out.append(
-        "**Unpaced, client role: ferrobus client ≥ 1.3× the fastest peer client against the same server, "
-        "CPU per transaction ≤ 0.6× libmodbus's.**\n"
-    )
-    out.append(
-        table(
-            [
-                "server",
-                "ferrobus tx/s",
-                "÷ libmodbus",
-                "÷ pymodbus",
-                "÷ tokio-modbus",
-                "÷ fastest peer (goal ≥ 1.3)",
-                "CPU µs/tx ferrobus / libmodbus",
-                "CPU ratio (goal ≤ 0.6)",
-            ],
-            rows,
-        )
-    )
-    out.append("")
+    # 2 and 3. Unpaced, each role: ferrobus against the peers in the same role, with the same
+    # other side.
+    out += role_goal_table(pairs, "client")
+    out += role_goal_table(pairs, "server")
+    return "\n".join(out)
 
-    # 3. Unpaced, server role: for the same client.
-    peers_s = ["libmodbus", "pymodbus", "tokio"]
+
+def role_goal_table(pairs, role):
+    """The unpaced goal table for ferrobus as `role` ("client" or "server"): its rate against
+    each peer in that role with the same other side, and its CPU beside libmodbus's."""
+    peers = ["libmodbus", "pymodbus", "tokio"]
+    client = role == "client"
     rows = []
-    for c in CLIENTS:
-        f = pairs.get(("unpaced", "pty", c, "ferrobus"))
-        others = {s: pairs.get(("unpaced", "pty", c, s)) for s in peers_s}
+    for other in SERVERS if client else CLIENTS:
+        key = (lambda us: ("unpaced", "pty", us, other)) if client else (lambda us: ("unpaced", "pty", other, us))
+        f = pairs.get(key("ferrobus"))
+        others = {p: pairs.get(key(p)) for p in peers}
         if not f or not any(others.values()):
             continue
+        cpu = (lambda p: p.master_cpu_us) if client else (lambda p: p.slave_cpu_us)
         best = max((p.tps for p in others.values() if p and p.tps), default=None)
         lib = others.get("libmodbus")
-        row = [f"for {PEER_NAMES[c]}", fmt(f.tps, "{:.0f}")]
-        row += [fmt(f.tps / others[s].tps if others[s] and others[s].tps else None, "{:.2f}×") for s in peers_s]
+        row = [f"{'against' if client else 'for'} {PEER_NAMES[other]}", fmt(f.tps, "{:.0f}")]
+        row += [fmt(f.tps / others[p].tps if others[p] and others[p].tps else None, "{:.2f}×") for p in peers]
         row.append(ratio_cell(f.tps / best if best else None, GOAL_SPEEDUP))
-        row.append(fmt(f.slave_cpu_us, "{:.1f}") + " / " + fmt(lib.slave_cpu_us if lib else None, "{:.1f}"))
+        row.append(fmt(cpu(f), "{:.1f}") + " / " + fmt(cpu(lib) if lib else None, "{:.1f}"))
         row.append(
-            ratio_cell(
-                f.slave_cpu_us / lib.slave_cpu_us if lib and lib.slave_cpu_us and f.slave_cpu_us else None,
-                GOAL_CPU,
-                at_least=False,
-            )
+            ratio_cell(cpu(f) / cpu(lib) if lib and cpu(lib) and cpu(f) else None, GOAL_CPU, at_least=False)
         )
         rows.append(row)
-    out.append(
-        "**Unpaced, server role: ferrobus sim ≥ 1.3× the fastest peer server for the same client, "
-        "CPU per transaction ≤ 0.6× libmodbus's.**\n"
-    )
-    out.append(
-        table(
-            [
-                "client",
-                "ferrobus sim tx/s",
-                "÷ libmodbus",
-                "÷ pymodbus",
-                "÷ tokio-modbus",
-                "÷ fastest peer (goal ≥ 1.3)",
-                "CPU µs/tx ferrobus / libmodbus",
-                "CPU ratio (goal ≤ 0.6)",
-            ],
-            rows,
-        )
-    )
-    out.append("")
-    return "\n".join(out)
+    if client:
+        title = ("**Unpaced, client role: ferrobus client ≥ 1.3× the fastest peer client against the same "
+                 "server, CPU per transaction ≤ 0.6× libmodbus's.**\n")
+        head = ["server", "ferrobus tx/s"]
+    else:
+        title = ("**Unpaced, server role: ferrobus sim ≥ 1.3× the fastest peer server for the same client, "
+                 "CPU per transaction ≤ 0.6× libmodbus's.**\n")
+        head = ["client", "ferrobus sim tx/s"]
+    head += ["÷ libmodbus", "÷ pymodbus", "÷ tokio-modbus", "÷ fastest peer (goal ≥ 1.3)",
+             "CPU µs/tx ferrobus / libmodbus", "CPU ratio (goal ≤ 0.6)"]
+    return [title, table(head, rows), ""]
 
 
 def run(cmd, cwd=None):
