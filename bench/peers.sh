@@ -20,7 +20,7 @@
 # Environment:
 #   FERROBUS=PATH  the ferrobus binary (default: cargo build --release -p ferrobus-cli, in
 #                  $CARGO_TARGET_DIR or target/)
-#   REPS=N         runs per pair on the paced line at 115200 (default 3; 9600 runs once)
+#   REPS=N         runs per pair on the paced line (default 3)
 #   UNPACED_REPS=N runs per pair on the unpaced pty pair (default 5: shared machines are noisy)
 #   QUICK=1        a smoke run: a tenth of the counts, one run per pair (under a minute)
 #   ONLY=REGEX     only the runs whose "mode/line/client/server" matches (e.g. 'unpaced/.*/ferrobus/')
@@ -363,9 +363,10 @@ paced_pairs() { # paced_pairs LINE BAUD PARITY COUNT MBPOLL_SECONDS REPS
         run_pair paced "$line" "$baud" "$parity" libmodbus libmodbus "$count" "$rep" "$seconds"
     done
 }
-# 9600 8E1: 45.8 ms per transaction at best, so one run of 100 per pair (4.6 s);
+# 9600 8E1: 45.8 ms per transaction at best, so REPS runs of 100 per pair (4.6 s each): one
+# run on a shared machine can be a slow one;
 # 115200 8N1: 6.4 ms, so REPS runs of 400 (2.5 s).
-paced_pairs 9600-8E1 9600 E "$(scale 100)" "$(quick_or 1 5)" 1
+paced_pairs 9600-8E1 9600 E "$(scale 100)" "$(quick_or 1 5)" "$REPS"
 paced_pairs 115200-8N1 115200 N "$(scale 400)" "$(quick_or 1 3)" "$REPS"
 
 # Unpaced: every client against every server, UNPACED_REPS times, interleaved so that a noisy
