@@ -300,7 +300,9 @@ fn observe(counters: &Mutex<Counters>, event: ServerEvent) {
             // How long after the request's last byte the reply is due: t3.5 + the wait.
             let due_us = |due: ferrobus_proto::Instant| due.saturating_duration_since(end).as_micros();
             match disposition {
-                Disposition::Replied(due) => tracing::info!(unit, %function, due_us = due_us(due), "request: reply due"),
+                Disposition::Replied(due) => {
+                    tracing::info!(unit, %function, due_us = due_us(due), "request: reply due");
+                }
                 Disposition::Refused(code, due) => {
                     c.exceptions += 1;
                     tracing::info!(unit, %function, %code, due_us = due_us(due), "request: exception due");
