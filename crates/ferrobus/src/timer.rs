@@ -60,17 +60,22 @@ impl Timer {
 /// The part of a deadline slept precisely; the rest is slept on tokio's wheel.
 pub const NEAR: Duration = Duration::from_millis(3);
 
+/// Spinning starts this long before a [`Timer::Spin`] deadline: more than the kernel's timer
+/// is usually late on a loaded virtual machine.
+pub const SPIN: Duration = Duration::from_micros(200);
+
 /// Waits for one task's deadlines, one after the other (see the module documentation).
 #[derive(Debug)]
 pub struct Sleeper {
     timer: Timer,
     /// The far part of every deadline, on tokio's wheel; made on first use (it needs a runtime).
     coarse: Option<Pin<Box<tokio::time::Sleep>>>,
-    /// The near part, for [`Timer::Precise`].
+    /// The kernel timer of the near part ([`Timer::Precise`], and [`Timer::Spin`] up to its
+    /// busy wait).
     precise: Precise,
 }
 
-/// How [`Timer::Precise`] sleeps on this sleeper.
+/// Which kernel timer a sleeper's near part sleeps on.
 #[derive(Debug)]
 enum Precise {
     /// Its timerfd is made on the first precise sleep.
@@ -82,11 +87,6 @@ enum Precise {
 }
 
 impl Sleeper {
-    /// The timer it sleeps with.
-    pub fn timer(&self) -> Timer {
-        self.timer
-    }
-
     /// Sleeps until `deadline`, or forever for `None`; never returns before it. Dropping the
     /// future cancels the sleep; the next one may be for any deadline.
     pub async fn sleep_until(&mut self, deadline: Option<tokio::time::Instant>) {
@@ -104,7 +104,14 @@ impl Sleeper {
                 if let Some(before) = deadline.checked_sub(SPIN) {
                     self.sleep_precise(before).await;
                 }
+                let spinning = Instant::now();
                 while tokio::time::Instant::now() < deadline {
+                    if spinning.elapsed() > 2 * SPIN {
+                        // A clock that does not move with real time (tokio's paused test
+                        // clock): wait on it instead of spinning forever.
+                        tokio::time::sleep_until(deadline).await;
+                        break;
+                    }
                     std::hint::spin_loop();
                 }
             }
@@ -206,10 +213,6 @@ mod timerfd {
         }
     }
 }
-
-/// Spinning starts this long before a [`Timer::Spin`] deadline: more than the kernel's timer
-/// is usually late on a loaded virtual machine.
-pub const SPIN: Duration = Duration::from_micros(200);
 
 // The timer thread: precise deadlines where there is no timerfd (not Linux, or the kernel
 // refused one). It sleeps with the OS's high-resolution timer and wakes the waiting task,
@@ -421,6 +424,13 @@ mod tests {
         let later = tokio::time::Instant::now() + Duration::from_millis(15);
         sleeper.sleep_until(Some(later)).await;
         assert!(tokio::time::Instant::now() >= later, "woke at the stale expiry");
+    }
+
+    #[tokio::test(start_paused = true)]
+    async fn a_spinning_sleep_on_a_paused_clock_ends_instead_of_spinning_forever() {
+        let start = tokio::time::Instant::now();
+        Timer::Spin.sleeper().sleep_until(Some(start + Duration::from_millis(1))).await;
+        assert!(tokio::time::Instant::now() >= start + Duration::from_millis(1));
     }
 
     #[tokio::test(start_paused = true)]
