@@ -402,7 +402,10 @@ def versions(args):
         m = re.search(r'name = "tokio"\nversion = "([^"]+)"', open(main_lock, encoding="utf-8").read())
         tokio = m.group(1) if m else "?"
     rev = run(["git", "rev-parse", "--short", "HEAD"], cwd=root)
-    dirty = run(["git", "status", "--porcelain", "--untracked-files=no"], cwd=root)
+    # The files this report writes are changed by the run itself; they are not local changes.
+    outputs = [os.path.relpath(os.path.abspath(f), root) for f in (args.results, args.markdown, args.plot) if f]
+    outputs = [f":(exclude){f}" for f in outputs if not f.startswith("..")]
+    dirty = run(["git", "status", "--porcelain", "--untracked-files=no", "--", ".", *outputs], cwd=root)
     pymodbus = run([sys.executable, "-c", "import pymodbus; print(pymodbus.__version__)"])
     pyserial = run([sys.executable, "-c", "import serial; print(serial.__version__)"])
     libmodbus = run(["pkg-config", "--modversion", "libmodbus"]) or run(
