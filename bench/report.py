@@ -512,7 +512,7 @@ def report(args: argparse.Namespace) -> int:
     body.append("## Machine and versions\n")
     body.append(table(["", ""], machine() + versions(args)))
     body.append(
-        f"\nThe whole script ran in {args.elapsed} s; runs per pair (paced 115200 / unpaced): {args.reps}. "
+        f"\nThe whole script ran in {args.elapsed} s; runs per pair (paced / unpaced): {args.reps}. "
         f"A 10 ms sleep overshot by {args.overshoot_us} µs here (taken off mbpoll's polls).\n"
     )
     body.append(goals_section(pairs))
