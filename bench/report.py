@@ -526,7 +526,7 @@ def report(args: argparse.Namespace) -> int:
         "A share above 100 % is not faster than the wire: it is the silent intervals that side did not "
         "keep (see the gaps columns). mbpoll's derived time per transaction leaves out the t3.5 before "
         "its next request, which its 10 ms sleep covers, so it can pass 100 % without breaking a gap.\n\n"
-        "² How late ferrobus sim wrote its replies after they were due (t3.5 after the request "
+        "² How late ferrobus sim began to write its replies after they were due (t3.5 after the request "
         "reached it), median of its own count: the timer's and the scheduler's share of the lost rate.\n\n"
         "³ The instrument's floor: libmodbus client and server keep no silent interval, so the time "
         "a libmodbus → libmodbus transaction takes beyond the wire time of its 33 characters is the "

@@ -56,7 +56,9 @@ pub enum ServerEvent {
         frame: Vec<u8>,
         /// When the engine had it due.
         due: tokio::time::Instant,
-        /// When it was written.
+        /// When its write began: the reply's start as far as the server decides it. The
+        /// write itself (the kernel's, and with RTS direction control the frame's whole
+        /// transmission) comes after.
         at: tokio::time::Instant,
     },
     /// A reply was dropped by the filter.
@@ -226,10 +228,10 @@ pub async fn serve<F: Framing, H: Handler + Send>(
             let fate = options.filter.as_mut().map_or(Fate::Send, |f| f.filter(frame));
             match fate {
                 Fate::Send => {
+                    let at = tokio::time::Instant::now();
                     if let Err(e) = write(&mut port, frame, options.rs485, options.timing).await {
                         return (slave, Err(e));
                     }
-                    let at = tokio::time::Instant::now();
                     options.observe(ServerEvent::Sent { frame: frame.to_vec(), due, at });
                 }
                 Fate::Delay(d) => delayed = Some((frame.to_vec(), tokio::time::Instant::now() + d)),
@@ -258,11 +260,12 @@ pub async fn serve<F: Framing, H: Handler + Send>(
             },
             () = sleeper.sleep_until(deadline) => {
                 slave.handle_timeout(clock.now(), handler);
-                if let Some((frame, at)) = delayed.take_if(|(_, at)| *at <= tokio::time::Instant::now()) {
+                if let Some((frame, due)) = delayed.take_if(|(_, at)| *at <= tokio::time::Instant::now()) {
+                    let at = tokio::time::Instant::now();
                     if let Err(e) = write(&mut port, &frame, options.rs485, options.timing).await {
                         return (slave, Err(e));
                     }
-                    options.observe(ServerEvent::Sent { frame, due: at, at: tokio::time::Instant::now() });
+                    options.observe(ServerEvent::Sent { frame, due, at });
                 }
             }
         }
