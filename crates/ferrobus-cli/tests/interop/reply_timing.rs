@@ -8,8 +8,15 @@
 //! the target, and the median lateness must be small; the figures go to stderr
 //! (`--nocapture` shows them) and only a generous bound is asserted, as CI machines are
 //! noisy. The test runs alone.
+//!
+//! Beside them it prints the pty's own floor: the same requests against an echo that sleeps as
+//! the simulator does (a current-thread tokio runtime, the pty in its epoll) and answers by a
+//! busy wait exactly the target after it read the request — as punctual as a program can be.
+//! What the simulator adds to that floor is its own share.
 
-use std::time::Duration;
+use std::time::{Duration, Instant};
+
+use tokio::io::{AsyncReadExt, AsyncWriteExt};
 
 use crate::support::{RawPort, hex, require_alone, show, sim_pty, with_crc};
 
@@ -49,9 +56,7 @@ fn sim_reply_starts_no_earlier_than_t3_5_plus_the_response_wait() {
         if delay < target {
             early.push(delay);
         }
-        let late =
-            i64::try_from(delay.as_micros()).unwrap_or(i64::MAX) - i64::try_from(target.as_micros()).unwrap_or(0);
-        late_us.push(late);
+        late_us.push(lateness_us(delay, target));
         // The master's silence before the next request: the rest of the reply's 9 characters
         // on a real line (10.3 ms), then t3.5.
         std::thread::sleep(Duration::from_millis(15));
@@ -67,6 +72,62 @@ fn sim_reply_starts_no_earlier_than_t3_5_plus_the_response_wait() {
     if let Some(own) = sim.log().lines().find(|l| l.contains("reply start after its due time")) {
         eprintln!("the simulator's own figures:{}", own.trim_start_matches("  [err] sim:"));
     }
+    let mut floor = echo_lateness(&request, target);
+    floor.sort_unstable();
+    eprintln!(
+        "the pty's floor, an echo answering by a busy wait, lateness over {SAMPLES} requests: p50 {} µs, \
+         p99 {} µs, min {} µs",
+        percentile(&floor, 50),
+        percentile(&floor, 99),
+        floor[0]
+    );
     assert!(early.is_empty(), "{} of {SAMPLES} replies started before {target:?}: {early:?}", early.len());
     assert!(p50 < 2000, "median lateness {p50} µs (p99 {p99} µs): more than 2 ms after t3.5 + wait");
+}
+
+/// `delay` minus `target`, in µs.
+fn lateness_us(delay: Duration, target: Duration) -> i64 {
+    i64::try_from(delay.as_micros()).unwrap_or(i64::MAX) - i64::try_from(target.as_micros()).unwrap_or(0)
+}
+
+/// How late, in µs, echoes of `request` came back through a pty, against `target`: the echo
+/// sleeps in a current-thread tokio runtime's epoll, as `ferrobus sim` does, and writes back
+/// what it read `target` after reading it, busy-waiting the last 2 ms.
+fn echo_lateness(request: &[u8], target: Duration) -> Vec<i64> {
+    let (path_tx, path_rx) = std::sync::mpsc::channel();
+    let echo = std::thread::spawn(move || {
+        let runtime = tokio::runtime::Builder::new_current_thread().enable_all().build().expect("a runtime");
+        runtime.block_on(async {
+            let mut pty = ferrobus::Pty::open().expect("a pty");
+            path_tx.send(pty.path.clone()).expect("the test waits for the path");
+            let mut buf = [0u8; 64];
+            // The pty outlives the test's end; the echo ends when requests stop coming.
+            while let Ok(n @ 1..) =
+                tokio::time::timeout(Duration::from_millis(500), pty.read(&mut buf)).await.unwrap_or(Ok(0))
+            {
+                // The echo is the runtime's only task: blocking its thread delays nothing else.
+                let due = Instant::now() + target;
+                std::thread::sleep(target.saturating_sub(Duration::from_millis(2)));
+                while Instant::now() < due {
+                    std::hint::spin_loop();
+                }
+                if pty.write_all(&buf[..n]).await.is_err() {
+                    break;
+                }
+            }
+        });
+    });
+    let path = path_rx.recv().expect("the echo's pty");
+    let port = RawPort::open(&path, 9600);
+    let mut late_us = Vec::with_capacity(SAMPLES);
+    for _ in 0..SAMPLES {
+        let sent = port.send(request);
+        let (echoed, first) = port.receive(request.len());
+        assert_eq!(echoed, request, "the echo");
+        late_us.push(lateness_us(first.expect("a first byte").duration_since(sent), target));
+        std::thread::sleep(Duration::from_millis(15));
+    }
+    drop(port);
+    echo.join().expect("the echo thread");
+    late_us
 }
