@@ -25,6 +25,7 @@ mod diag;
 mod exit;
 mod hex;
 mod info;
+mod interrupt;
 mod line;
 mod mask;
 mod output;
