@@ -161,7 +161,9 @@ pub(crate) async fn run(args: &DemoArgs) -> Result<(), CliError> {
     let broken: u64 = stats.endpoints.iter().map(|e| e.gap_violations).sum();
     say!(
         "The line carried {} frames ({} characters); t3.5 broken {broken} times, {} collisions.",
-        stats.frames, stats.characters, stats.collisions
+        stats.frames,
+        stats.characters,
+        stats.collisions
     );
     say!("\nOn a real drive, the same steps from the command line:");
     say!("  ferrobus --port /dev/ttyUSB0 --baud 19200 --unit 1 diag echo");

@@ -98,7 +98,8 @@ pub(crate) async fn run(connection: &ConnectArgs, args: &LineArgs) -> Result<(),
     // not after hours of running.
     let mut stats_file = match &args.stats_json {
         Some(path) => Some((
-            std::fs::File::create(path).map_err(|source| CliError::Output { what: path.display().to_string(), source })?,
+            std::fs::File::create(path)
+                .map_err(|source| CliError::Output { what: path.display().to_string(), source })?,
             path.display().to_string(),
         )),
         None => None,

@@ -110,7 +110,9 @@ pub(crate) async fn run(connection: &ConnectArgs, args: &ReadArgs) -> Result<(),
             requests += 1;
         }
         let text = match format {
-            Format::Json => output::json_line(&output::read_json(unit, function, address, ReadData::Bits(&bits), requests)),
+            Format::Json => {
+                output::json_line(&output::read_json(unit, function, address, ReadData::Bits(&bits), requests))
+            }
             other => output::bit_rows(address, address.wire, &bits).render(other),
         };
         output::print(&text)?;
