@@ -141,7 +141,7 @@ async fn dispatch(cli: &Cli) -> Result<(), CliError> {
 /// clap's error, or for a missing argument after a `-1`, which clap takes as the flag
 /// `--one-based` even where a negative address or value was meant, one that says so.
 fn explain_parse_error(error: clap::Error) -> clap::Error {
-    if error.kind() != clap::error::ErrorKind::MissingRequiredArgument || !std::env::args().any(|a| a == "-1") {
+    if error.kind() != clap::error::ErrorKind::MissingRequiredArgument || !std::env::args_os().any(|a| a == "-1") {
         return error;
     }
     let missing = match error.get(clap::error::ContextKind::InvalidArg) {
