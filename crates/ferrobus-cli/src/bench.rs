@@ -91,7 +91,7 @@ pub(crate) async fn run(connection: &ConnectArgs, args: &BenchArgs) -> Result<()
         )));
     }
     let mut interrupt = Interrupt::listen()?;
-    let session = connection.open().await?;
+    let session = interrupt.unless(connection.open()).await.ok_or(CliError::Interrupted)??;
     let (client, unit) = (&session.client, session.unit);
     let expected = usize::from(args.quantity);
     let mut latencies = Vec::with_capacity(usize::try_from(args.count).unwrap_or(0));
@@ -103,13 +103,10 @@ pub(crate) async fn run(connection: &ConnectArgs, args: &BenchArgs) -> Result<()
     let mut interrupted = false;
     for _ in 0..args.count {
         let sent = Instant::now();
-        let result = tokio::select! {
-            biased;
-            () = interrupt.wait() => {
-                interrupted = true;
-                break;
-            }
-            result = client.read_holding_registers(unit, args.address, args.quantity) => result,
+        let Some(result) = interrupt.unless(client.read_holding_registers(unit, args.address, args.quantity)).await
+        else {
+            interrupted = true;
+            break;
         };
         latencies.push(sent.elapsed());
         done += 1;

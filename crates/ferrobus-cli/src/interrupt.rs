@@ -31,6 +31,16 @@ impl Interrupt {
         Ok(Interrupt {})
     }
 
+    /// Runs `work` unless SIGINT or SIGTERM comes first; `None` if one did (`work` is then
+    /// dropped, cancelled where it stood).
+    pub(crate) async fn unless<F: Future>(&mut self, work: F) -> Option<F::Output> {
+        tokio::select! {
+            biased;
+            () = self.wait() => None,
+            done = work => Some(done),
+        }
+    }
+
     /// Waits for the next SIGINT or SIGTERM.
     pub(crate) async fn wait(&mut self) {
         #[cfg(unix)]

@@ -82,7 +82,7 @@ pub(crate) async fn run(connection: &ConnectArgs, args: &ReadArgs) -> Result<(),
     let max = per_request(args.max_per_request, table.max_read(), width, args.values.kind)?;
     let pieces = split(address.wire, items, width, max);
     let mut interrupt = Interrupt::listen()?;
-    let session = connection.open().await?;
+    let session = interrupt.unless(connection.open()).await.ok_or(CliError::Interrupted)??;
     let client = &session.client;
     let unit = session.unit;
     let format = args.output.format();
@@ -99,14 +99,11 @@ pub(crate) async fn run(connection: &ConnectArgs, args: &ReadArgs) -> Result<(),
                     _ => client.read_discrete_inputs(unit, start, quantity(n)).await,
                 }
             };
-            tokio::select! {
-                biased;
-                () = interrupt.wait() => {
-                    interrupted = true;
-                    break;
-                }
-                got = read => bits.extend(got?),
-            }
+            let Some(got) = interrupt.unless(read).await else {
+                interrupted = true;
+                break;
+            };
+            bits.extend(got?);
             requests += 1;
         }
         let text = match format {
@@ -129,14 +126,11 @@ pub(crate) async fn run(connection: &ConnectArgs, args: &ReadArgs) -> Result<(),
                 _ => client.read_input_registers(unit, start, quantity(n)).await,
             }
         };
-        tokio::select! {
-            biased;
-            () = interrupt.wait() => {
-                interrupted = true;
-                break;
-            }
-            got = read => registers.extend(got?),
-        }
+        let Some(got) = interrupt.unless(read).await else {
+            interrupted = true;
+            break;
+        };
+        registers.extend(got?);
         requests += 1;
     }
     let text = match format {

@@ -166,6 +166,19 @@ fn ctrl_c_during_a_long_read_prints_the_rows_read_and_exits_130() {
 }
 
 #[test]
+fn ctrl_c_while_the_first_reply_is_awaited_prints_only_the_header_and_exits_130() {
+    let (port, held) = stalling_server(0);
+    let addr = format!("127.0.0.1:{port}");
+    let child = spawn(&["--tcp", &addr, "--timeout", "60s", "read", "coils", "0", "--count", "8", "--csv"]);
+    held.recv().unwrap();
+    signal(&child, "INT");
+    let out = child.wait_with_output().unwrap();
+    assert_eq!(out.status.code(), Some(130), "{}", text(&out.stderr));
+    assert_eq!(text(&out.stdout), "address,addr_hex,value,state\n");
+    assert!(text(&out.stderr).contains("read: interrupted after 0 of 8 coils"), "{}", text(&out.stderr));
+}
+
+#[test]
 fn sigterm_during_a_json_read_prints_the_values_read_and_exits_130() {
     let (port, held) = stalling_server(2);
     let addr = format!("127.0.0.1:{port}");
