@@ -6,6 +6,11 @@
 //! Modicon references, where the leading digit names the table: 0xxxx coils, 1xxxx discrete
 //! inputs, 3xxxx input registers, 4xxxx holding registers, each 1-based (5 digits up to
 //! 9999, 6 digits up to 65536).
+//!
+//! A plain number is always a wire address: SunSpec devices, for one, keep their registers at
+//! wire 40000 and up. A Modicon reference needs `--modicon`; a plain number that reads as a
+//! reference to the command's table (40001 for holding registers) is taken as a wire address,
+//! with a warning that names the other reading.
 
 use std::fmt;
 
@@ -16,7 +21,8 @@ use crate::exit::CliError;
 
 /// The one-line explanation shown in `--help`.
 pub(crate) const ADDRESS_HELP: &str = "ADDRESS is the wire address (0-based, as on the bus; decimal or 0x hex); \
-     use --one-based for a manual's register numbers, or a Modicon reference like 40001";
+     use --one-based for a manual's register numbers, or --modicon for a Modicon reference like 40001 \
+     (= holding register 1, wire 0)";
 
 /// A Modbus data table.
 #[derive(ValueEnum, Clone, Copy, PartialEq, Eq, Debug)]
@@ -99,12 +105,17 @@ impl fmt::Display for Table {
     }
 }
 
-/// The `--one-based` option of the commands that take addresses.
+/// The `--one-based` and `--modicon` options of the commands that take addresses.
 #[derive(Args, Clone, Copy, Debug, Default)]
 pub(crate) struct AddressArgs {
     /// ADDRESS is a manual's 1-based register number (frame address = number - 1)
     #[arg(long = "one-based", short = '1')]
     pub(crate) one_based: bool,
+
+    /// ADDRESS is a Modicon reference: table digit (0 coils, 1 discrete, 3 input, 4 holding),
+    /// then the 1-based number: 40001 or 400001 = holding register 1 = wire 0
+    #[arg(long, conflicts_with = "one_based")]
+    pub(crate) modicon: bool,
 }
 
 /// How an address was written, so that output can show it the same way.
@@ -130,10 +141,24 @@ pub(crate) struct Address {
 }
 
 impl Address {
-    /// Resolves `text` for `table`.
+    /// Resolves `text` for `table`. A plain number that could be meant as a Modicon reference
+    /// is taken as a wire address, with a warning on stderr (see [`modicon_lookalike`]).
     pub(crate) fn parse(text: &str, table: Table, args: AddressArgs) -> Result<Address, CliError> {
+        let address = Self::resolve(text, table, args)?;
+        if let Some(warning) = modicon_lookalike(text, address) {
+            eprintln!("warning: {warning}");
+        }
+        Ok(address)
+    }
+
+    fn resolve(text: &str, table: Table, args: AddressArgs) -> Result<Address, CliError> {
         let cleaned: String = text.trim().chars().filter(|&c| c != '_').collect();
-        let bad = || CliError::Usage(format!("'{text}' is not an address: use decimal, 0x hex or a Modicon reference"));
+        if cleaned.starts_with('-') {
+            return Err(CliError::Usage(format!(
+                "'{text}' is not an address: addresses are 0 to 65535 (register numbers, with --one-based, 1 to 65536)"
+            )));
+        }
+        let bad = || CliError::Usage(format!("'{text}' is not an address: use decimal or 0x hex"));
         let (value, digits) = if let Some(hex) = cleaned.strip_prefix("0x").or_else(|| cleaned.strip_prefix("0X")) {
             (u32::from_str_radix(hex, 16).map_err(|_| bad())?, None)
         } else {
@@ -142,8 +167,14 @@ impl Address {
             }
             (cleaned.parse::<u32>().map_err(|_| bad())?, Some(cleaned.len()))
         };
-        if let Some(address) = modicon(value, digits) {
-            return address.matching(table, text);
+        if args.modicon {
+            return match modicon(value, digits) {
+                Some(address) => address.matching(table, text),
+                None => Err(CliError::Usage(format!(
+                    "with --modicon, '{text}' is not a Modicon reference: write the table digit (0 coils, \
+                     1 discrete, 3 input, 4 holding), then the 1-based number in 4 or 5 digits: 40001, 400001"
+                ))),
+            };
         }
         if args.one_based {
             return match value {
@@ -158,6 +189,9 @@ impl Address {
         }
         match u16::try_from(value) {
             Ok(wire) => Ok(Address { wire, table, style: Style::Wire }),
+            Err(_) if modicon(value, digits).is_some() => Err(CliError::Usage(format!(
+                "address {text} is out of range (0-65535); for a Modicon reference add --modicon"
+            ))),
             Err(_) => Err(CliError::Usage(format!("address {text} is out of range (0-65535)"))),
         }
     }
@@ -167,7 +201,7 @@ impl Address {
             return Ok(self);
         }
         let as_wire = match text.trim().parse::<u16>() {
-            Ok(wire) => format!("; for wire address {wire} write 0x{wire:X}"),
+            Ok(wire) => format!("; without --modicon it is wire address {wire}"),
             Err(_) => String::new(),
         };
         Err(CliError::Usage(format!(
@@ -202,6 +236,27 @@ impl Address {
         }
         Ok(())
     }
+}
+
+/// The warning for a plain decimal wire address that also reads as a Modicon reference to
+/// the same table (40001 for holding registers, 00001 for coils), naming both readings.
+pub(crate) fn modicon_lookalike(text: &str, address: Address) -> Option<String> {
+    if address.style != Style::Wire {
+        return None;
+    }
+    let cleaned: String = text.trim().chars().filter(|&c| c != '_').collect();
+    if !cleaned.bytes().all(|b| b.is_ascii_digit()) {
+        return None;
+    }
+    let reference = modicon(cleaned.parse().ok()?, Some(cleaned.len())).filter(|r| r.table == address.table)?;
+    Some(format!(
+        "{text} is taken as wire address {} (0x{:04X}); for the Modicon reference to {} {} (wire {}) add --modicon",
+        address.wire,
+        address.wire,
+        reference.table.item(),
+        u32::from(reference.wire) + 1,
+        reference.wire,
+    ))
 }
 
 /// A Modicon reference, if `value` written with `digits` digits is one.
@@ -240,7 +295,18 @@ mod tests {
     use super::*;
 
     fn parse(text: &str, table: Table, one_based: bool) -> Result<Address, CliError> {
-        Address::parse(text, table, AddressArgs { one_based })
+        Address::parse(text, table, AddressArgs { one_based, modicon: false })
+    }
+
+    fn reference(text: &str, table: Table) -> Result<Address, CliError> {
+        Address::parse(text, table, AddressArgs { one_based: false, modicon: true })
+    }
+
+    fn usage(result: Result<Address, CliError>) -> String {
+        match result {
+            Err(CliError::Usage(msg)) => msg,
+            other => panic!("expected a usage error, got {other:?}"),
+        }
     }
 
     #[test]
@@ -250,10 +316,19 @@ mod tests {
         assert_eq!(parse("65535", Table::Holding, false).unwrap().wire, 65535);
         assert!(parse("65536", Table::Holding, false).is_err());
         assert!(parse("70000", Table::Holding, false).is_err());
-        assert!(parse("-1", Table::Holding, false).is_err());
         assert!(parse("0x", Table::Holding, false).is_err());
         assert!(parse("", Table::Holding, false).is_err());
         assert!(parse("99999999999999", Table::Holding, false).is_err());
+    }
+
+    #[test]
+    fn a_negative_address_is_refused_with_the_range() {
+        let msg = usage(parse("-1", Table::Holding, false));
+        assert_eq!(
+            msg,
+            "'-1' is not an address: addresses are 0 to 65535 (register numbers, with --one-based, 1 to 65536)"
+        );
+        assert!(parse("-5", Table::Holding, true).is_err());
     }
 
     #[test]
@@ -266,26 +341,64 @@ mod tests {
     }
 
     #[test]
+    fn plain_numbers_in_the_modicon_ranges_are_wire_addresses() {
+        // SunSpec: the "SunS" marker at wire 40000, its first model at 40002.
+        for (text, wire) in [("40000", 40000), ("40001", 40001), ("40002", 40002), ("49999", 49999)] {
+            let a = parse(text, Table::Holding, false).unwrap();
+            assert_eq!((a.wire, a.style), (wire, Style::Wire), "{text}");
+        }
+        assert_eq!(parse("30002", Table::Input, false).unwrap().wire, 30002);
+        assert_eq!(parse("00001", Table::Coils, false).unwrap().wire, 1);
+        let msg = usage(parse("400001", Table::Holding, false));
+        assert!(msg.contains("out of range (0-65535); for a Modicon reference add --modicon"), "{msg}");
+    }
+
+    #[test]
+    fn a_plain_number_that_reads_as_a_reference_to_the_same_table_gets_a_warning() {
+        let warn = |text: &str, table| modicon_lookalike(text, parse(text, table, false).unwrap());
+        assert_eq!(
+            warn("40001", Table::Holding).as_deref(),
+            Some(
+                "40001 is taken as wire address 40001 (0x9C41); for the Modicon reference to holding register 1 \
+                 (wire 0) add --modicon"
+            )
+        );
+        assert!(warn("00010", Table::Coils).unwrap().contains("coil 10 (wire 9)"));
+        // Not a reference (offset 0), another table, hex, or not five or six digits: no warning.
+        assert_eq!(warn("40000", Table::Holding), None);
+        assert_eq!(warn("40001", Table::Input), None);
+        assert_eq!(warn("0x9C41", Table::Holding), None);
+        assert_eq!(warn("4001", Table::Holding), None);
+        assert_eq!(modicon_lookalike("40001", parse("40001", Table::Holding, true).unwrap()), None);
+    }
+
+    #[test]
     fn modicon_references_name_table_and_number() {
-        let a = parse("40001", Table::Holding, false).unwrap();
+        let a = reference("40001", Table::Holding).unwrap();
         assert_eq!((a.wire, a.style), (0, Style::Modicon(5)));
         assert_eq!(a.reference(1).as_deref(), Some("40002"));
-        assert_eq!(parse("00001", Table::Coils, false).unwrap().wire, 0);
-        assert_eq!(parse("10010", Table::Discrete, false).unwrap().wire, 9);
-        assert_eq!(parse("30002", Table::Input, false).unwrap().wire, 1);
-        let six = parse("465536", Table::Holding, false).unwrap();
+        assert_eq!(reference("00001", Table::Coils).unwrap().wire, 0);
+        assert_eq!(reference("10010", Table::Discrete).unwrap().wire, 9);
+        assert_eq!(reference("30002", Table::Input).unwrap().wire, 1);
+        let six = reference("465536", Table::Holding).unwrap();
         assert_eq!((six.wire, six.style), (65535, Style::Modicon(6)));
         assert_eq!(six.reference(65535).as_deref(), Some("465536"));
-        // Not references: 5 digits of another table digit, or offset 0.
-        assert_eq!(parse("20001", Table::Holding, false).unwrap().style, Style::Wire);
-        assert_eq!(parse("40000", Table::Holding, false).unwrap().wire, 40000);
+        assert_eq!(modicon_lookalike("40001", a), None);
+    }
+
+    #[test]
+    fn with_modicon_anything_but_a_reference_is_refused() {
+        for text in ["40000", "20001", "4001", "0x9C41", "1234567"] {
+            let msg = usage(reference(text, Table::Holding));
+            assert!(msg.contains(&format!("with --modicon, '{text}' is not a Modicon reference")), "{msg}");
+        }
     }
 
     #[test]
     fn a_modicon_reference_to_another_table_is_refused() {
-        let CliError::Usage(msg) = parse("40001", Table::Coils, false).unwrap_err() else { panic!() };
+        let msg = usage(reference("40001", Table::Coils));
         assert!(msg.contains("holding register 1"), "{msg}");
-        assert!(msg.contains("0x9C41"), "{msg}");
+        assert!(msg.contains("without --modicon it is wire address 40001"), "{msg}");
     }
 
     #[test]

@@ -13,6 +13,7 @@ use clap::Args;
 
 use crate::connect::ConnectArgs;
 use crate::exit::CliError;
+use crate::interrupt::Interrupt;
 use crate::output;
 
 /// Long help of `ferrobus bench`.
@@ -32,6 +33,8 @@ With --json it prints one line, the same object as the peer fixtures' bench mode
 
 Every read is made whatever the previous ones answered. The exit code is 0 unless every
 read failed; then it is that of the first failure (3 for a timeout, see ferrobus --help).
+Ctrl-C or SIGTERM stops the run: the summary (or JSON) of the reads completed is printed,
+and the exit code is 130.
 No retries unless --retries is given; a unit that stops answering is never skipped.
 
 Examples:
@@ -87,7 +90,8 @@ pub(crate) async fn run(connection: &ConnectArgs, args: &BenchArgs) -> Result<()
             args.address, args.quantity
         )));
     }
-    let session = connection.open().await?;
+    let mut interrupt = Interrupt::listen()?;
+    let session = interrupt.unless(connection.open()).await.ok_or(CliError::Interrupted)??;
     let (client, unit) = (&session.client, session.unit);
     let expected = usize::from(args.quantity);
     let mut latencies = Vec::with_capacity(usize::try_from(args.count).unwrap_or(0));
@@ -95,10 +99,17 @@ pub(crate) async fn run(connection: &ConnectArgs, args: &BenchArgs) -> Result<()
     let mut first_error = None;
     tracing::info!(unit, count = args.count, address = args.address, quantity = args.quantity, "bench");
     let start = Instant::now();
+    let mut done = 0u32;
+    let mut interrupted = false;
     for _ in 0..args.count {
         let sent = Instant::now();
-        let result = client.read_holding_registers(unit, args.address, args.quantity).await;
+        let Some(result) = interrupt.unless(client.read_holding_registers(unit, args.address, args.quantity)).await
+        else {
+            interrupted = true;
+            break;
+        };
         latencies.push(sent.elapsed());
+        done += 1;
         match result {
             Ok(values) if values.len() == expected => {}
             Ok(values) => {
@@ -117,11 +128,16 @@ pub(crate) async fn run(connection: &ConnectArgs, args: &BenchArgs) -> Result<()
     }
     let elapsed = start.elapsed();
     latencies.sort_unstable();
-    let outcome = Outcome { transactions: args.count, errors, elapsed, latencies, cpu: cpu_times() };
+    // Interrupted, the figures are those of the reads completed.
+    let outcome = Outcome { transactions: done, errors, elapsed, latencies, cpu: cpu_times() };
     if args.json {
-        output::print(&output::json_line(&outcome.json()));
+        output::print(&output::json_line(&outcome.json()))?;
     } else {
-        output::print(&format!("{}\n", outcome.summary(&session.target.to_string(), unit, args)));
+        output::print(&format!("{}\n", outcome.summary(&session.target.to_string(), unit, args)))?;
+    }
+    if interrupted {
+        eprintln!("bench: interrupted after {done} of {} reads; the figures are those of the {done}", args.count);
+        return Err(CliError::Interrupted);
     }
     match first_error {
         Some(error) if errors == args.count => Err(error),

@@ -61,7 +61,7 @@ pub(crate) struct ConnectArgs {
     pub(crate) unit: Vec<u8>,
 
     /// Reply timeout per attempt: 500ms, 1.5s, 2s (a plain number is ms)
-    #[arg(long, global = true, value_name = "DURATION", default_value = "1s", value_parser = parse_duration)]
+    #[arg(long, global = true, value_name = "DURATION", default_value = "1s", value_parser = parse_timeout)]
     pub(crate) timeout: Duration,
 
     /// Resend a request this many times when no usable reply comes
@@ -296,6 +296,15 @@ fn with_default_port(addr: &str) -> Result<String, CliError> {
 
 pub(crate) use ferrobus_sim::fault::parse_duration;
 
+/// A reply timeout: a duration above zero (a timeout of 0 gives up before any reply can come).
+fn parse_timeout(text: &str) -> Result<Duration, String> {
+    let timeout = parse_duration(text)?;
+    if timeout.is_zero() {
+        return Err(format!("'{text}': a timeout of 0 gives up before any reply can come; use e.g. 500ms"));
+    }
+    Ok(timeout)
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -313,6 +322,17 @@ mod tests {
         assert!(parse_duration("5h").is_err());
         assert!(parse_duration("99999999999999999999s").is_err());
         assert!(parse_duration("").is_err());
+    }
+
+    #[test]
+    fn a_zero_timeout_is_refused_and_any_other_accepted() {
+        for zero in ["0", "0ms", "0s", "0.0s"] {
+            let err = parse_timeout(zero).unwrap_err();
+            assert!(err.contains("a timeout of 0 gives up before any reply can come"), "{zero}: {err}");
+        }
+        assert_eq!(parse_timeout("1us"), Ok(Duration::from_micros(1)));
+        assert_eq!(parse_timeout("1.5s"), Ok(Duration::from_millis(1500)));
+        assert!(parse_timeout("fast").is_err());
     }
 
     #[test]

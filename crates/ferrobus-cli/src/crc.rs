@@ -44,7 +44,7 @@ pub(crate) fn run(args: &CrcArgs) -> Result<(), CliError> {
          ASCII frame    :{ascii}\\r\\n\n",
         hex::format(&wire),
         hex::format(&frame),
-    ));
+    ))?;
     Ok(())
 }
 
@@ -54,7 +54,7 @@ fn check(frame: &[u8]) -> Result<(), CliError> {
     };
     let expected = crc16_wire(body);
     if *found == expected {
-        output::print(&format!("CRC OK: {} (0x{:04X})\n", hex::format(found), crc16(body)));
+        output::print(&format!("CRC OK: {} (0x{:04X})\n", hex::format(found), crc16(body)))?;
         return Ok(());
     }
     Err(CliError::BadData(format!(

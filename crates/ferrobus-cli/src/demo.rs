@@ -18,6 +18,17 @@ use ferrobus_proto::slave::{Slave, SlaveConfig};
 use ferrobus_sim::{Device, Faults, Profile, Sim, tokio_clock};
 
 use crate::exit::CliError;
+use crate::output;
+
+/// `println!` to stdout, checked: a failed write ends the demo with its error.
+macro_rules! say {
+    () => {
+        output::print("\n")?
+    };
+    ($($arg:tt)*) => {
+        output::print(&format!("{}\n", format_args!($($arg)*)))?
+    };
+}
 
 /// Arguments of `ferrobus demo`.
 #[derive(Args, Clone, Debug)]
@@ -29,6 +40,9 @@ pub(crate) struct DemoArgs {
 
 /// The drive's unit address.
 const UNIT: u8 = 1;
+
+/// The data of the loop-back test.
+const LOOPBACK: [u8; 2] = [0x12, 0x34];
 
 /// Frame addresses on the 3G3RX (the manual's register number − 1).
 mod reg {
@@ -91,79 +105,91 @@ pub(crate) async fn run(args: &DemoArgs) -> Result<(), CliError> {
     });
     let client = Client::connect(line.transport("client"), ClientConfig::default()).await?;
 
-    println!("ferrobus demo: a simulated Omron 3G3RX inverter, unit {UNIT}, on a virtual RS-485 line");
-    println!(
+    say!("ferrobus demo: a simulated Omron 3G3RX inverter, unit {UNIT}, on a virtual RS-485 line");
+    say!(
         "at {config} — every character takes {:.0} µs on the wire, frames are {:.2} ms of silence apart.\n",
         timing.char_time().as_secs_f64() * 1e6,
         timing.t3_5().as_secs_f64() * 1e3
     );
 
-    step("1. Is anyone there? A loop-back test (FC08, sub-function 0000h), as the 3G3RX manual suggests.");
+    step("1. Is anyone there? A loop-back test (FC08, sub-function 0000h), as the 3G3RX manual suggests.")?;
     let started = tokio::time::Instant::now();
-    let echo = client.diagnostics(UNIT, DiagnosticCode::ReturnQueryData, &[0x12, 0x34]).await?;
-    println!("   echoed {:02X?} in {:.1} ms\n", echo, started.elapsed().as_secs_f64() * 1e3);
+    let echo = client.diagnostics(UNIT, DiagnosticCode::ReturnQueryData, &LOOPBACK).await?;
+    say!("   {} in {:.1} ms\n", echo_words(&LOOPBACK, &echo), started.elapsed().as_secs_f64() * 1e3);
 
-    step("2. Who is it? Device identification (FC2B/0E):");
+    step("2. Who is it? Device identification (FC2B/0E):")?;
     match client.read_device_identification(UNIT, ReadDeviceIdCode::Basic, 0).await {
         Err(Error::Exception { code, .. }) => {
-            println!("   exception {code}: the 3G3RX does not implement it, as its manual says.");
+            say!("   exception {code}: the 3G3RX does not implement it, as its manual says.");
             let status = client.read_holding_registers(UNIT, reg::STATUS, 2).await?;
-            println!("   Its status registers (0003h, 0004h) answer instead: {}\n", status_a(status[0]));
+            say!("   Its status registers (0003h, 0004h) answer instead: {}\n", status_a(status[0]));
         }
-        other => println!("   {other:?}\n"),
+        other => say!("   {other:?}\n"),
     }
 
-    step("3. The 3G3RX takes at most 4 registers per request. Asking for 5:");
+    step("3. The 3G3RX takes at most 4 registers per request. Asking for 5:")?;
     if let Err(e) = client.read_holding_registers(UNIT, reg::F001, 5).await {
-        println!("   {e}\n   (ferrobus read --max-per-request 4 splits such reads, never inside a 32-bit value)\n");
+        say!("   {e}\n   (ferrobus read --max-per-request 4 splits such reads, never inside a 32-bit value)\n");
     }
 
-    step("4. Ramp times (F002, F003: 32-bit, high word first, in 0.01 s, from 0 to the maximum 400.00 Hz):");
+    step("4. Ramp times (F002, F003: 32-bit, high word first, in 0.01 s, from 0 to the maximum 400.00 Hz):")?;
     client.write_multiple_registers(UNIT, reg::F002, &words(2000)).await?;
     client.write_multiple_registers(UNIT, reg::F003, &words(1500)).await?;
-    println!("   F002 = 20.00 s, F003 = 15.00 s: 20 Hz/s up, 26.7 Hz/s down\n");
+    say!("   F002 = 20.00 s, F003 = 15.00 s: 20 Hz/s up, 26.7 Hz/s down\n");
 
-    step("5. A frequency of 500.00 Hz is beyond the drive's range:");
+    step("5. A frequency of 500.00 Hz is beyond the drive's range:")?;
     if let Err(e) = client.write_multiple_registers(UNIT, reg::F001, &words(50_000)).await {
-        println!("   {e}: the 3G3RX's vendor code for \"out of range\"\n");
+        say!("   {e}: the 3G3RX's vendor code for \"out of range\"\n");
     }
     client.write_multiple_registers(UNIT, reg::F001, &words(6_000)).await?;
-    println!("   F001 = 60.00 Hz accepted\n");
+    say!("   F001 = 60.00 Hz accepted\n");
 
-    step("6. Run (coil 0001h ON) and watch the output frequency d001 ramp:");
+    step("6. Run (coil 0001h ON) and watch the output frequency d001 ramp:")?;
     client.write_single_coil(UNIT, reg::RUN, true).await?;
     watch(&client, 14).await?;
 
-    step("7. While running, the base frequency A003 cannot change:");
+    step("7. While running, the base frequency A003 cannot change:")?;
     if let Err(e) = client.write_single_register(UNIT, reg::A003, 50).await {
-        println!("   {e}: the 3G3RX's code for \"not allowed in this state\"\n");
+        say!("   {e}: the 3G3RX's code for \"not allowed in this state\"\n");
     }
 
-    step("8. Stop (coil 0001h OFF): the output ramps down with F003.");
+    step("8. Stop (coil 0001h OFF): the output ramps down with F003.")?;
     client.write_single_coil(UNIT, reg::RUN, false).await?;
     watch(&client, 11).await?;
 
     let stats = line.stats();
     let broken: u64 = stats.endpoints.iter().map(|e| e.gap_violations).sum();
-    println!(
+    say!(
         "The line carried {} frames ({} characters); t3.5 broken {broken} times, {} collisions.",
-        stats.frames, stats.characters, stats.collisions
+        stats.frames,
+        stats.characters,
+        stats.collisions
     );
-    println!("\nOn a real drive, the same steps from the command line:");
-    println!("  ferrobus --port /dev/ttyUSB0 --baud 19200 --unit 1 diag echo");
-    println!("  ferrobus --port /dev/ttyUSB0 --unit 1 write registers --one-based 0x0001 6000 --type u32");
-    println!("  ferrobus --port /dev/ttyUSB0 --unit 1 write coil --one-based 1 on");
-    println!("  ferrobus --port /dev/ttyUSB0 --unit 1 read holding --one-based 0x1001 --type u32");
-    println!("and `ferrobus sim --profile omron-3g3rx --pty` puts this simulated drive on a pty for your own tools.");
+    say!("\nOn a real drive, the same steps from the command line:");
+    say!("  ferrobus --port /dev/ttyUSB0 --baud 19200 --unit 1 diag echo");
+    say!("  ferrobus --port /dev/ttyUSB0 --unit 1 write registers --one-based 0x0001 6000 --type u32");
+    say!("  ferrobus --port /dev/ttyUSB0 --unit 1 write coil --one-based 1 on");
+    say!("  ferrobus --port /dev/ttyUSB0 --unit 1 read holding --one-based 0x1001 --type u32");
+    say!("and `ferrobus sim --profile omron-3g3rx --pty` puts this simulated drive on a pty for your own tools.");
     Ok(())
 }
 
-fn step(text: &str) {
-    println!("{text}");
+/// What the loop-back test sent and got back, in hex (the manual writes 1234h).
+fn echo_words(sent: &[u8], echoed: &[u8]) -> String {
+    let hex = |bytes: &[u8]| match bytes {
+        [] => "nothing".to_string(),
+        _ => bytes.iter().map(|b| format!("0x{b:02X}")).collect::<Vec<_>>().join(" "),
+    };
+    format!("sent {}, echoed {}", hex(sent), hex(echoed))
+}
+
+fn step(text: &str) -> Result<(), CliError> {
+    say!("{text}");
+    Ok(())
 }
 
 /// Prints the output frequency and current `samples` times, 250 ms apart, with a bar.
-async fn watch(client: &Client, samples: u32) -> Result<(), Error> {
+async fn watch(client: &Client, samples: u32) -> Result<(), CliError> {
     for _ in 0..samples {
         let monitor = client.read_holding_registers(UNIT, reg::D001, 3).await?;
         let centi_hz = join(&monitor);
@@ -171,9 +197,20 @@ async fn watch(client: &Client, samples: u32) -> Result<(), Error> {
         let status = client.read_holding_registers(UNIT, reg::STATUS, 1).await?;
         // One block per 2 Hz.
         let bar = "█".repeat(usize::try_from(centi_hz / 200).unwrap_or(0));
-        println!("   {hz:6.2} Hz {amps:6.2} A  {:<8} {bar}", status_a(status[0]));
+        say!("   {hz:6.2} Hz {amps:6.2} A  {:<8} {bar}", status_a(status[0]));
         tokio::time::sleep(Duration::from_millis(250)).await;
     }
-    println!();
+    say!();
     Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_loop_back_bytes_are_shown_in_hex_with_a_prefix() {
+        assert_eq!(echo_words(&[0x12, 0x34], &[0x12, 0x34]), "sent 0x12 0x34, echoed 0x12 0x34");
+        assert_eq!(echo_words(&[0x12], &[]), "sent 0x12, echoed nothing");
+    }
 }

@@ -284,7 +284,7 @@ pub(crate) async fn run(connection: &ConnectArgs, args: &DiagArgs) -> Result<(),
         DiagCommand::EventCounter => event_counter(session, format).await?,
         DiagCommand::EventLog => event_log(session, format).await?,
     };
-    output::print(&text);
+    output::print(&text)?;
     Ok(())
 }
 

@@ -11,6 +11,9 @@
 //! | 3 | timeout: no reply |
 //! | 4 | IO error opening or using the port |
 //! | 5 | bad reply (malformed, or not answering the request); `crc --check` on a bad CRC |
+//! | 6 | output error: stdout or an output file could not be written (e.g. disk full) |
+//! | 130 | interrupted (Ctrl-C or SIGTERM), after writing what was done |
+//! | 141 | stdout was closed by its reader (`| head`): the command ends quietly, as if by SIGPIPE |
 
 use std::io;
 use std::time::Duration;
@@ -28,7 +31,10 @@ Exit codes:
   2  usage error: bad option, value, address or count
   3  timeout: no reply from the device
   4  IO error opening or using the port or connection
-  5  bad reply: malformed, or not answering the request (also: crc --check on a bad CRC)";
+  5  bad reply: malformed, or not answering the request (also: crc --check on a bad CRC)
+  6  output error: stdout or an output file could not be written (e.g. disk full)
+  130  interrupted by Ctrl-C (SIGINT) or SIGTERM, after writing what was done
+  141  stdout closed by its reader (e.g. `| head -1`): ends quietly, as if by SIGPIPE";
 
 /// Why the process exits, as a code.
 #[derive(Clone, Copy, PartialEq, Eq, Debug)]
@@ -46,6 +52,12 @@ pub(crate) enum Exit {
     Io = 4,
     /// 5: a reply came but was wrong.
     BadReply = 5,
+    /// 6: stdout or an output file could not be written.
+    Output = 6,
+    /// 130 (128 + SIGINT): interrupted, after writing what was done.
+    Interrupted = 130,
+    /// 141 (128 + SIGPIPE): the reader of stdout went away.
+    BrokenPipe = 141,
 }
 
 impl From<Exit> for std::process::ExitCode {
@@ -77,6 +89,15 @@ pub(crate) enum CliError {
     },
     /// A reply that parsed but is wrong (an echo that differs), or a frame with a bad CRC.
     BadData(String),
+    /// Writing the results failed: stdout (a full disk, a closed pipe) or an output file.
+    Output {
+        /// What was being written: "stdout", or the file.
+        what: String,
+        /// Why it failed.
+        source: io::Error,
+    },
+    /// SIGINT or SIGTERM came; what was done has been written.
+    Interrupted,
 }
 
 impl From<Error> for CliError {
@@ -108,6 +129,9 @@ impl CliError {
             CliError::Pdu(_) | CliError::Usage(_) | CliError::MissingTarget => Exit::Usage,
             CliError::ConnectTimeout { .. } => Exit::Io,
             CliError::BadData(_) => Exit::BadReply,
+            CliError::Output { source, .. } if source.kind() == io::ErrorKind::BrokenPipe => Exit::BrokenPipe,
+            CliError::Output { .. } => Exit::Output,
+            CliError::Interrupted => Exit::Interrupted,
         }
     }
 }
@@ -122,8 +146,11 @@ pub(crate) struct Report {
 }
 
 impl Report {
-    /// Prints the report to stderr.
+    /// Prints the report to stderr; an empty message prints nothing.
     pub(crate) fn print(&self) {
+        if self.message.is_empty() {
+            return;
+        }
         eprintln!("error: {}", self.message);
         match self.hints.as_slice() {
             [] => {}
@@ -152,6 +179,18 @@ pub(crate) fn report(error: &CliError, target: Option<&Target>, unit: u8) -> Rep
             message: format!("connecting to {target} timed out after {} ms", waited.as_millis()),
             hints: vec!["check that the host is reachable (ping) and the port is right (Modbus/TCP: 502)".into()],
         },
+        // The reader of a pipe went away (`| head`): nothing to say, as tools killed by SIGPIPE.
+        CliError::Output { source, .. } if source.kind() == io::ErrorKind::BrokenPipe => {
+            Report { message: String::new(), hints: Vec::new() }
+        }
+        CliError::Output { what, source } => Report {
+            message: format!("cannot write {what}: {source}"),
+            hints: match source.kind() {
+                io::ErrorKind::StorageFull => vec!["the disk is full: free some space or write elsewhere".into()],
+                _ => Vec::new(),
+            },
+        },
+        CliError::Interrupted => Report { message: "interrupted".into(), hints: Vec::new() },
     }
 }
 
@@ -302,6 +341,21 @@ mod tests {
         assert_eq!(CliError::from(PduError::Empty).exit(), Exit::Usage);
         assert_eq!(CliError::from(Error::InvalidRequest(PduError::Empty)).exit(), Exit::Usage);
         assert_eq!(CliError::BadData("x".into()).exit(), Exit::BadReply);
+        let full = CliError::Output { what: "stdout".into(), source: io::ErrorKind::StorageFull.into() };
+        assert_eq!(full.exit(), Exit::Output);
+        let pipe = CliError::Output { what: "stdout".into(), source: io::ErrorKind::BrokenPipe.into() };
+        assert_eq!(pipe.exit(), Exit::BrokenPipe);
+        assert_eq!(CliError::Interrupted.exit(), Exit::Interrupted);
+    }
+
+    #[test]
+    fn a_closed_pipe_is_reported_with_no_message_and_a_full_disk_with_one() {
+        let pipe = CliError::Output { what: "stdout".into(), source: io::ErrorKind::BrokenPipe.into() };
+        assert_eq!(report(&pipe, None, 1).message, "");
+        let full = CliError::Output { what: "stdout".into(), source: io::Error::from_raw_os_error(28) };
+        let r = report(&full, None, 1);
+        assert!(r.message.starts_with("cannot write stdout: No space left on device"), "{}", r.message);
+        assert!(r.hints[0].contains("disk is full"), "{:?}", r.hints);
     }
 
     #[test]

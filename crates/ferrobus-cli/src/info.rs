@@ -103,7 +103,7 @@ pub(crate) async fn run(connection: &ConnectArgs, args: &InfoArgs) -> Result<(),
             }
         }
     };
-    output::print(&text);
+    output::print(&text)?;
     Ok(())
 }
 
@@ -177,7 +177,7 @@ async fn server_id(session: &Session, format: Format) -> Result<(), CliError> {
             out
         }
     };
-    output::print(&text);
+    output::print(&text)?;
     Ok(())
 }
 

@@ -2,8 +2,9 @@
 //!
 //! Prints one pty path per line on stdout, then carries bytes between them — paced at the
 //! character time, colliding when two talk at once, with the faults asked for — until
-//! interrupted. On exit it prints what it saw: characters, frames, collisions, faults, and for
-//! each endpoint the frames it began before the line had been silent for t3.5.
+//! interrupted (Ctrl-C or SIGTERM, its normal end: exit 0) or `--duration` is over. On exit it
+//! prints what it saw: characters, frames, collisions, faults, and for each endpoint the frames
+//! it began before the line had been silent for t3.5.
 
 use std::time::Duration;
 
@@ -12,6 +13,8 @@ use ferrobus::line::{Line, LineFaults, LineOptions, LineStats};
 
 use crate::connect::{ConnectArgs, parse_duration};
 use crate::exit::CliError;
+use crate::interrupt::Interrupt;
+use crate::output;
 
 /// Arguments of `ferrobus line`.
 #[derive(Args, Clone, Debug)]
@@ -48,7 +51,7 @@ pub(crate) struct LineArgs {
     #[arg(long, value_name = "RATE[:LEN]", value_parser = noise)]
     noise: Option<(f64, usize)>,
 
-    /// Make endpoint N (0-based) dead: it neither sends nor hears
+    /// Make endpoint N (0-based, below --drops) dead: it neither sends nor hears
     #[arg(long, value_name = "N")]
     dead: Vec<usize>,
 
@@ -60,7 +63,7 @@ pub(crate) struct LineArgs {
     #[arg(long, value_name = "DURATION", value_parser = parse_duration)]
     duration: Option<Duration>,
 
-    /// Also write the statistics as JSON to this file on exit
+    /// Also write the statistics as JSON to this file on exit (created at the start)
     #[arg(long = "stats-json", value_name = "FILE")]
     stats_json: Option<std::path::PathBuf>,
 }
@@ -84,6 +87,24 @@ fn noise(text: &str) -> Result<(f64, usize), String> {
 
 /// Runs `ferrobus line`.
 pub(crate) async fn run(connection: &ConnectArgs, args: &LineArgs) -> Result<(), CliError> {
+    if let Some(&dead) = args.dead.iter().find(|&&n| n >= usize::from(args.drops)) {
+        return Err(CliError::Usage(format!(
+            "--dead {dead}: there are {} drops, numbered 0 to {}",
+            args.drops,
+            args.drops.saturating_sub(1)
+        )));
+    }
+    // The statistics file is opened now, so that a path that cannot be written fails at once,
+    // not after hours of running.
+    let mut stats_file = match &args.stats_json {
+        Some(path) => Some((
+            std::fs::File::create(path)
+                .map_err(|source| CliError::Output { what: path.display().to_string(), source })?,
+            path.display().to_string(),
+        )),
+        None => None,
+    };
+    let mut interrupt = Interrupt::listen()?;
     let (stretch_rate, stretch_by) = args.stretch.unwrap_or((0.0, Duration::ZERO));
     let (noise_per_second, noise_len) = args.noise.unwrap_or((0.0, 0));
     let options = LineOptions {
@@ -104,14 +125,14 @@ pub(crate) async fn run(connection: &ConnectArgs, args: &LineArgs) -> Result<(),
     let line = Line::start(options);
     for index in 0..args.drops {
         let path = line.pty().await.map_err(|e| ferrobus::Error::io("making a pty", e))?;
-        println!("{}", path.display());
+        output::print(&format!("{}\n", path.display()))?;
         if args.dead.contains(&usize::from(index)) {
             line.set_dead(usize::from(index), true);
         }
     }
     let timing = line.timing();
     eprintln!(
-        "line: {} drops at {}{}: character {:.1} µs, t3.5 {:.1} µs; Ctrl-C prints the statistics",
+        "line: {} drops at {}{}: character {:.1} µs, t3.5 {:.1} µs; Ctrl-C or SIGTERM prints the statistics",
         args.drops,
         connection.line(),
         if args.unpaced { ", unpaced" } else { "" },
@@ -119,16 +140,16 @@ pub(crate) async fn run(connection: &ConnectArgs, args: &LineArgs) -> Result<(),
         timing.t3_5().as_secs_f64() * 1e6
     );
     match args.duration {
-        Some(d) => tokio::time::sleep(d).await,
-        None => {
-            let _ = tokio::signal::ctrl_c().await;
-        }
+        Some(d) => tokio::select! {
+            () = tokio::time::sleep(d) => {}
+            () = interrupt.wait() => {}
+        },
+        None => interrupt.wait().await,
     }
     let stats = line.stats();
     print_stats(&stats);
-    if let Some(file) = &args.stats_json {
-        std::fs::write(file, stats_json(&stats).to_string())
-            .map_err(|e| ferrobus::Error::io(format!("writing {}", file.display()), e))?;
+    if let Some((file, what)) = &mut stats_file {
+        output::write_to(file, what, &stats_json(&stats).to_string())?;
     }
     Ok(())
 }

@@ -6,7 +6,7 @@
 //!
 //! - [`connect`]: the connection options (`--port`, `--tcp`, `--rtu-tcp`, line settings,
 //!   timeouts) and opening the client;
-//! - [`address`]: wire addresses, `--one-based` numbers and Modicon references;
+//! - [`address`]: wire addresses, `--one-based` numbers and `--modicon` references;
 //! - [`value`]: typed values (`--type`, `--word-order`);
 //! - [`output`]: tables, `--csv` and `--json`;
 //! - [`exit`]: error reports with hints, and the exit codes;
@@ -25,6 +25,7 @@ mod diag;
 mod exit;
 mod hex;
 mod info;
+mod interrupt;
 mod line;
 mod mask;
 mod output;
@@ -46,7 +47,8 @@ use crate::exit::{CliError, Exit};
 /// Long help shown after the options of `ferrobus --help`.
 const AFTER_HELP: &str = concat!(
     "ADDRESS is the wire address (0-based, as on the bus); use --one-based for a manual's register numbers, \
-     or a Modicon reference like 40001.\n\n",
+     or --modicon for a Modicon reference like 40001 (= holding register 1, wire 0). A plain 40001 is wire \
+     address 40001 (SunSpec devices live at 40000 and up), with a warning.\n\n",
     "Examples:\n",
     "  ferrobus --port /dev/ttyUSB0 --baud 9600 --unit 5 read holding 0x0011 --count 2\n",
     "  ferrobus --tcp 192.168.1.10 write register --one-based 0x1203 50\n",
@@ -136,6 +138,82 @@ async fn dispatch(cli: &Cli) -> Result<(), CliError> {
     }
 }
 
+/// clap's error, or for a missing argument after a `-1`, which clap takes as the flag
+/// `--one-based` even where a negative address or value was meant, one that says so.
+fn explain_parse_error(error: clap::Error) -> clap::Error {
+    if error.kind() != clap::error::ErrorKind::MissingRequiredArgument || !std::env::args_os().any(|a| a == "-1") {
+        return error;
+    }
+    let missing = match error.get(clap::error::ContextKind::InvalidArg) {
+        Some(clap::error::ContextValue::Strings(args)) => args.join(", "),
+        _ => "an argument".to_string(),
+    };
+    Cli::command().error(
+        clap::error::ErrorKind::MissingRequiredArgument,
+        format!(
+            "{missing} missing: '-1' is the flag -1 (--one-based), not a number; addresses are 0 to 65535, \
+             and a negative value goes after the address (write register 5 -1 --type i16)"
+        ),
+    )
+}
+
+/// The connection options, by clap id (the long option is the id with `-` for `_`).
+const CONNECTION_OPTIONS: [&str; 17] = [
+    "port",
+    "tcp",
+    "rtu_tcp",
+    "ascii",
+    "baud",
+    "parity",
+    "data_bits",
+    "stop_bits",
+    "rs485",
+    "low_latency",
+    "unit",
+    "timeout",
+    "retries",
+    "t15",
+    "t35",
+    "echo",
+    "turnaround",
+];
+
+/// Refuses the connection options that `--help` lists for every command but that a command
+/// opening no bus would ignore: `crc` and `demo` use none, `line` only the line settings.
+fn refuse_ignored_options(matches: &clap::ArgMatches) -> Result<(), CliError> {
+    let Some((name, sub)) = matches.subcommand() else { return Ok(()) };
+    let (used, why): (&[&str], &str) = match name {
+        "crc" => (&[], "crc works offline and opens no bus"),
+        "demo" => (&[], "demo runs its own virtual line (its baud rate is --line-baud)"),
+        // `line --echo` is the line's own option.
+        "line" => (
+            &["baud", "parity", "data_bits", "stop_bits", "echo"],
+            "line makes its own ptys and takes only the line settings --baud, --parity, --data-bits, --stop-bits",
+        ),
+        _ => return Ok(()),
+    };
+    let given: Vec<String> = CONNECTION_OPTIONS
+        .iter()
+        .filter(|id| !used.contains(id))
+        .filter(|id| {
+            [matches, sub].iter().any(|m| {
+                m.try_get_raw(id).is_ok_and(|v| v.is_some())
+                    && m.value_source(id) == Some(clap::parser::ValueSource::CommandLine)
+            })
+        })
+        .map(|id| format!("--{}", id.replace('_', "-")))
+        .collect();
+    if given.is_empty() {
+        return Ok(());
+    }
+    let verb = if given.len() == 1 { "is" } else { "are" };
+    Err(CliError::Usage(format!(
+        "{} {verb} not used by `{name}`: {why}; leave {} out",
+        given.join(", "),
+        if given.len() == 1 { "it" } else { "them" }
+    )))
+}
+
 fn init_logging(verbose: u8) {
     let level = match verbose {
         0 => "warn",
@@ -154,12 +232,16 @@ fn init_logging(verbose: u8) {
 }
 
 fn main() -> ExitCode {
-    let matches = Cli::command().get_matches();
+    let matches = Cli::command().try_get_matches().unwrap_or_else(|e| explain_parse_error(e).exit());
     let mut cli = Cli::from_arg_matches(&matches).unwrap_or_else(|e| e.exit());
     if let (Command::Sim(args), Some(sim)) = (&mut cli.command, matches.subcommand_matches("sim")) {
         args.pair_by_position(sim);
     }
     init_logging(cli.verbose);
+    if let Err(error) = refuse_ignored_options(&matches) {
+        exit::report(&error, None, 1).print();
+        return error.exit().into();
+    }
     if cli.command.needs_bus()
         && cli.connection.port.is_none()
         && cli.connection.tcp.is_none()

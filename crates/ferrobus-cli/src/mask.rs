@@ -44,6 +44,6 @@ pub(crate) async fn run(connection: &ConnectArgs, args: &MaskArgs) -> Result<(),
         "{who}: FC{:02X} masked register at {}: AND 0x{and_mask:04X} OR 0x{or_mask:04X}\n",
         FunctionCode::MaskWriteRegister.value(),
         describe_address(address, address.wire),
-    ));
+    ))?;
     Ok(())
 }

@@ -7,6 +7,7 @@ use clap::Args;
 use serde_json::{Value, json};
 
 use crate::address::{Address, Style};
+use crate::exit::CliError;
 use crate::value::{Decoded, ValueArgs, ValueType};
 
 /// The output format options.
@@ -237,11 +238,17 @@ pub(crate) fn read_json(unit: u8, function: u8, address: Address, data: ReadData
     doc
 }
 
-/// Writes `text` to stdout. A closed pipe (`| head`) is not an error worth a panic.
-pub(crate) fn print(text: &str) {
-    use std::io::Write;
-    let mut stdout = std::io::stdout().lock();
-    let _ = stdout.write_all(text.as_bytes()).and_then(|()| stdout.flush());
+/// Writes `text` to stdout and flushes it. A failure (a full disk, a closed pipe) is an
+/// error: [`CliError::Output`], whose exit code tells a closed pipe (141, quietly) from the rest.
+pub(crate) fn print(text: &str) -> Result<(), CliError> {
+    write_to(&mut std::io::stdout().lock(), "stdout", text)
+}
+
+/// Writes `text` to `out` and flushes it; `what` names `out` in the error.
+pub(crate) fn write_to(out: &mut impl std::io::Write, what: &str, text: &str) -> Result<(), CliError> {
+    out.write_all(text.as_bytes())
+        .and_then(|()| out.flush())
+        .map_err(|source| CliError::Output { what: what.to_string(), source })
 }
 
 /// A JSON document on one line, as printed.

@@ -27,10 +27,10 @@ pub(crate) async fn run(connection: &ConnectArgs, args: &RawArgs) -> Result<(), 
     let function = FunctionCode::from_u8(pdu[0]);
     let session = connection.open().await?;
     match Request::parse(&pdu) {
-        Ok(request) => output::print(&format!("request  {}  ({})\n", hex::format(&pdu), request.function())),
+        Ok(request) => output::print(&format!("request  {}  ({})\n", hex::format(&pdu), request.function()))?,
         Err(e) => {
             eprintln!("note: not a valid {function} request ({e}); sending it as is");
-            output::print(&format!("request  {}\n", hex::format(&pdu)));
+            output::print(&format!("request  {}\n", hex::format(&pdu)))?;
         }
     }
     match session.client.raw(session.unit, &pdu).await {
@@ -39,16 +39,16 @@ pub(crate) async fn run(connection: &ConnectArgs, args: &RawArgs) -> Result<(), 
                 Ok(response) => format!("{response:?}"),
                 Err(e) => format!("(not a valid response: {e})"),
             };
-            output::print(&format!("reply    {}\ndecoded  {decoded}\n", hex::format(&reply)));
+            output::print(&format!("reply    {}\ndecoded  {decoded}\n", hex::format(&reply)))?;
             Ok(())
         }
         Ok(None) => {
-            output::print("sent; no reply expected (broadcast or listen-only)\n");
+            output::print("sent; no reply expected (broadcast or listen-only)\n")?;
             Ok(())
         }
         Err(Error::Exception { unit, function, code }) => {
             let bytes = [function.value() | FunctionCode::EXCEPTION_BIT, code.value()];
-            output::print(&format!("reply    {}\n", hex::format(&bytes)));
+            output::print(&format!("reply    {}\n", hex::format(&bytes)))?;
             Err(Error::Exception { unit, function, code }.into())
         }
         Err(e) => Err(e.into()),

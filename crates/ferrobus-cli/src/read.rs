@@ -6,6 +6,7 @@ use ferrobus_proto::PduError;
 use crate::address::{ADDRESS_HELP, Address, AddressArgs, Table, split};
 use crate::connect::ConnectArgs;
 use crate::exit::CliError;
+use crate::interrupt::Interrupt;
 use crate::output::{self, Format, OutputArgs, ReadData};
 use crate::value::{ValueArgs, ValueType};
 
@@ -80,52 +81,78 @@ pub(crate) async fn run(connection: &ConnectArgs, args: &ReadArgs) -> Result<(),
     address.check_span(items)?;
     let max = per_request(args.max_per_request, table.max_read(), width, args.values.kind)?;
     let pieces = split(address.wire, items, width, max);
-    let session = connection.open().await?;
+    let mut interrupt = Interrupt::listen()?;
+    let session = interrupt.unless(connection.open()).await.ok_or(CliError::Interrupted)??;
     let client = &session.client;
     let unit = session.unit;
     let format = args.output.format();
+    let function = table.read_function().value();
     if table.is_bits() {
         let mut bits = Vec::with_capacity(items);
+        let mut requests = 0;
+        let mut interrupted = false;
         for &(start, n) in &pieces {
             tracing::info!(unit, start, n, "reading {table}");
-            let got = match table {
-                Table::Coils => client.read_coils(unit, start, quantity(n)).await?,
-                _ => client.read_discrete_inputs(unit, start, quantity(n)).await?,
+            let read = async {
+                match table {
+                    Table::Coils => client.read_coils(unit, start, quantity(n)).await,
+                    _ => client.read_discrete_inputs(unit, start, quantity(n)).await,
+                }
             };
-            bits.extend(got);
+            let Some(got) = interrupt.unless(read).await else {
+                interrupted = true;
+                break;
+            };
+            bits.extend(got?);
+            requests += 1;
         }
         let text = match format {
-            Format::Json => output::json_line(&output::read_json(
-                unit,
-                table.read_function().value(),
-                address,
-                ReadData::Bits(&bits),
-                pieces.len(),
-            )),
+            Format::Json => {
+                output::json_line(&output::read_json(unit, function, address, ReadData::Bits(&bits), requests))
+            }
             other => output::bit_rows(address, address.wire, &bits).render(other),
         };
-        output::print(&text);
-        return Ok(());
+        output::print(&text)?;
+        return finish(interrupted, bits.len(), items, table);
     }
     let mut registers = Vec::with_capacity(items);
+    let mut requests = 0;
+    let mut interrupted = false;
     for &(start, n) in &pieces {
         tracing::info!(unit, start, n, "reading {table} registers");
-        let got = match table {
-            Table::Holding => client.read_holding_registers(unit, start, quantity(n)).await?,
-            _ => client.read_input_registers(unit, start, quantity(n)).await?,
+        let read = async {
+            match table {
+                Table::Holding => client.read_holding_registers(unit, start, quantity(n)).await,
+                _ => client.read_input_registers(unit, start, quantity(n)).await,
+            }
         };
-        registers.extend(got);
+        let Some(got) = interrupt.unless(read).await else {
+            interrupted = true;
+            break;
+        };
+        registers.extend(got?);
+        requests += 1;
     }
     let text = match format {
         Format::Json => output::json_line(&output::read_json(
             unit,
-            table.read_function().value(),
+            function,
             address,
             ReadData::Registers(&registers, args.values),
-            pieces.len(),
+            requests,
         )),
         other => output::register_rows(address, address.wire, &registers, args.values).render(other),
     };
-    output::print(&text);
-    Ok(())
+    output::print(&text)?;
+    finish(interrupted, registers.len(), items, table)
+}
+
+/// After the output: [`CliError::Interrupted`] with a note of how much was read, if a signal
+/// cut the read short.
+fn finish(interrupted: bool, done: usize, asked: usize, table: Table) -> Result<(), CliError> {
+    if !interrupted {
+        return Ok(());
+    }
+    eprintln!("read: interrupted after {done} of {asked} {}s; the output holds those read", table.item());
+    Err(CliError::Interrupted)
 }

@@ -70,6 +70,6 @@ pub(crate) async fn run(connection: &ConnectArgs, args: &ReadWriteArgs) -> Resul
         }
         other => output::register_rows(read, read.wire, &got, args.values).render(other),
     };
-    output::print(&text);
+    output::print(&text)?;
     Ok(())
 }

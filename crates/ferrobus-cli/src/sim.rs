@@ -256,7 +256,7 @@ async fn open(connection: &ConnectArgs, args: &SimArgs) -> Result<(Transport, Se
         let timing = ferrobus_proto::frame::LineTiming::new(&connection.line());
         let transport = Transport::custom(framing, timing, Unused).with_timer(Timer::Spin);
         // The path is the one line on stdout, for scripts to read.
-        println!("{}", pty.path.display());
+        crate::output::print(&format!("{}\n", pty.path.display()))?;
         return Ok((transport, Served::Port(Box::new(pty))));
     }
     let target = connection.target()?;

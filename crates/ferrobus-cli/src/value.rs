@@ -128,6 +128,9 @@ impl fmt::Display for Decoded {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
         match *self {
             Decoded::Int(v) => write!(f, "{v}"),
+            // As Python's repr: an exponent for the very large and the very small, so that
+            // -4.9502034e32 does not print as -495020340000000000000000000000000.
+            Decoded::Float(v) if v != 0.0 && v.is_finite() && !(1e-4..1e16).contains(&v.abs()) => write!(f, "{v:e}"),
             Decoded::Float(v) => write!(f, "{v}"),
             Decoded::Hex(v) => write!(f, "0x{v:04X}"),
             Decoded::Bin(v) => {
@@ -355,5 +358,20 @@ mod tests {
         assert!(parse_coil("ON").unwrap());
         assert!(!parse_coil("false").unwrap());
         assert!(parse_coil("2").is_err());
+    }
+
+    #[test]
+    fn floats_use_an_exponent_when_very_large_or_very_small() {
+        let show = |v: f32| Decoded::Float(v).to_string();
+        assert_eq!(show(-4.950_203_4e32), "-4.9502034e32");
+        assert_eq!(show(1e16), "1e16");
+        assert_eq!(show(9_999_999_000_000_000.0), "9999999000000000");
+        assert_eq!(show(1.5e-5), "1.5e-5");
+        assert_eq!(show(0.0001), "0.0001");
+        assert_eq!(show(-2.5), "-2.5");
+        assert_eq!(show(0.0), "0");
+        assert_eq!(show(f32::NAN), "NaN");
+        assert_eq!(show(f32::NEG_INFINITY), "-inf");
+        assert_eq!(show(f32::MIN_POSITIVE), "1.1754944e-38");
     }
 }

@@ -133,7 +133,7 @@ pub(crate) async fn run(connection: &ConnectArgs, args: &WriteArgs) -> Result<()
             let session = &connection.open().await?;
             session.client.write_single_coil(session.unit, address.wire, value).await?;
             let line = report(session, FunctionCode::WriteSingleCoil, "coil", address, address.wire, &on_off(&[value]));
-            output::print(&line);
+            output::print(&line)?;
             Ok(())
         }
         WriteCommand::Coils { address, values, max_per_request, address_args } => {
@@ -154,7 +154,7 @@ pub(crate) async fn run(connection: &ConnectArgs, args: &WriteArgs) -> Result<()
                     address,
                     start,
                     &on_off(chunk),
-                ));
+                ))?;
             }
             Ok(())
         }
@@ -167,7 +167,7 @@ pub(crate) async fn run(connection: &ConnectArgs, args: &WriteArgs) -> Result<()
                 session.client.write_single_register(session.unit, address.wire, registers[0]).await?;
                 let data = hex_words(&registers);
                 let line = report(session, FunctionCode::WriteSingleRegister, "register", address, address.wire, &data);
-                output::print(&line);
+                output::print(&line)?;
                 return Ok(());
             }
             write_registers(session, address, &registers, *values, MAX_WRITE_REGISTERS).await
@@ -205,7 +205,7 @@ async fn write_registers(
             data = format!("{data} ({} {})", values.kind.name(), decoded.join(" "));
         }
         let what = plural(n, "register");
-        output::print(&report(session, FunctionCode::WriteMultipleRegisters, &what, address, start, &data));
+        output::print(&report(session, FunctionCode::WriteMultipleRegisters, &what, address, start, &data))?;
     }
     Ok(())
 }

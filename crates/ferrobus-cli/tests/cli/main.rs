@@ -4,6 +4,7 @@
 
 mod errors;
 mod offline;
+mod output;
 mod read;
 mod server;
 mod service;

@@ -64,9 +64,14 @@ fn help_explains_addresses_and_exit_codes() {
         "3  timeout",
         "4  IO error",
         "5  bad reply",
+        "6  output error",
+        "130  interrupted",
+        "141  stdout closed by its reader",
     ] {
         assert!(out.contains(code), "{code}");
     }
+    assert!(out.contains("--modicon for a Modicon reference like 40001"), "{out}");
     let read = stdout(&offline(&["read", "--help"]).success());
-    assert!(read.contains("Modicon reference like 40001"), "{read}");
+    assert!(read.contains("--modicon for a Modicon reference like 40001"), "{read}");
+    assert!(read.contains("--modicon"), "{read}");
 }

@@ -97,16 +97,17 @@ fn one_based_numbers_are_sent_as_number_minus_one_and_shown_beside_the_wire_addr
 }
 
 #[test]
-fn modicon_references_imply_the_table_and_the_offset() {
+fn modicon_references_with_the_flag_imply_the_table_and_the_offset() {
     let server = Server::start();
-    let out = stdout(&server.run(&["read", "holding", "40001", "--count", "2", "--csv"]).success());
+    let out = stdout(&server.run(&["read", "holding", "--modicon", "40001", "--count", "2", "--csv"]).success());
     assert_eq!(out, "address,addr_hex,ref,hex,dec\n0,0x0000,40001,0x0000,0\n1,0x0001,40002,0x0001,1\n");
-    let input = stdout(&server.run(&["read", "input", "300010", "--csv"]).success());
+    let input = stdout(&server.run(&["read", "input", "300010", "--modicon", "--csv"]).success());
     assert_eq!(input, "address,addr_hex,ref,hex,dec\n9,0x0009,300010,0x03F1,1009\n");
-    let coil = stdout(&server.run(&["read", "coils", "00004", "--csv"]).success());
+    let coil = stdout(&server.run(&["read", "coils", "--modicon", "00004", "--csv"]).success());
     assert_eq!(coil, "address,addr_hex,ref,value,state\n3,0x0003,00004,1,ON\n");
     let json: Value =
-        serde_json::from_str(&stdout(&server.run(&["read", "discrete", "10002", "--json"]).success())).unwrap();
+        serde_json::from_str(&stdout(&server.run(&["read", "discrete", "--modicon", "10002", "--json"]).success()))
+            .unwrap();
     assert_eq!((json["start"].clone(), json["start_ref"].clone()), (1.into(), "10002".into()));
     assert_eq!(requests(&server), [(0x03, 0, 2), (0x04, 9, 1), (0x01, 3, 1), (0x02, 1, 1)]);
 }
@@ -114,12 +115,46 @@ fn modicon_references_imply_the_table_and_the_offset() {
 #[test]
 fn a_modicon_reference_to_another_table_is_a_usage_error() {
     let server = Server::start();
-    let err = stderr(&server.run(&["read", "coils", "40001"]).code(2));
+    let err = stderr(&server.run(&["read", "coils", "--modicon", "40001"]).code(2));
     assert!(
         err.contains("40001 is a Modicon reference to holding register 1, but the command addresses coils"),
         "{err}"
     );
-    assert!(err.contains("0x9C41"), "{err}");
+    assert!(err.contains("without --modicon it is wire address 40001"), "{err}");
+    assert!(server.take_requests().is_empty());
+}
+
+#[test]
+fn a_plain_40001_is_wire_address_40001_with_a_warning_naming_the_modicon_reading() {
+    let server = Server::start();
+    // The test device has 1000 registers: wire 40001 is past them, and the request shows it.
+    let assert = server.run(&["read", "holding", "40001"]).code(1);
+    let err = stderr(&assert);
+    assert!(
+        err.contains(
+            "warning: 40001 is taken as wire address 40001 (0x9C41); for the Modicon reference to holding \
+             register 1 (wire 0) add --modicon"
+        ),
+        "{err}"
+    );
+    assert_eq!(requests(&server), [(0x03, 40001, 1)]);
+    // 40000 (SunSpec's base) is no Modicon reference: no warning.
+    let quiet = stderr(&server.run(&["read", "holding", "40000"]).code(1));
+    assert!(!quiet.contains("warning"), "{quiet}");
+    assert_eq!(requests(&server), [(0x03, 40000, 1)]);
+}
+
+#[test]
+fn a_lone_minus_one_is_explained_as_the_one_based_flag_when_the_address_or_value_is_missing() {
+    let server = Server::start();
+    let err = stderr(&server.run(&["read", "holding", "-1"]).code(2));
+    assert!(err.contains("<ADDRESS> missing: '-1' is the flag -1 (--one-based), not a number"), "{err}");
+    assert!(err.contains("addresses are 0 to 65535"), "{err}");
+    let err = stderr(&server.run(&["write", "register", "-1", "5"]).code(2));
+    assert!(err.contains("<VALUE> missing: '-1' is the flag -1 (--one-based)"), "{err}");
+    // Behind `--` it is an address, and refused as one.
+    let err = stderr(&server.run(&["read", "holding", "--", "-1"]).code(2));
+    assert!(err.contains("'-1' is not an address: addresses are 0 to 65535"), "{err}");
     assert!(server.take_requests().is_empty());
 }
 

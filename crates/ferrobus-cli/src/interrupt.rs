@@ -1,0 +1,56 @@
+//! Ctrl-C (SIGINT) and SIGTERM, for commands that stop early but still write what they did.
+//!
+//! A command that can run long (`read` of many registers, `bench`, `line`) listens before it
+//! starts, so that a signal arriving at any moment is caught, not fatal: it then writes what is
+//! done and ends with [`crate::exit::CliError::Interrupted`] (exit 130), or, for `line`, whose
+//! normal end is an interruption, with its statistics.
+
+use crate::exit::CliError;
+
+/// A listener for SIGINT and SIGTERM, installed when made.
+pub(crate) struct Interrupt {
+    #[cfg(unix)]
+    int: tokio::signal::unix::Signal,
+    #[cfg(unix)]
+    term: tokio::signal::unix::Signal,
+}
+
+impl Interrupt {
+    /// Starts listening. From here on, SIGINT and SIGTERM no longer end the process.
+    pub(crate) fn listen() -> Result<Interrupt, CliError> {
+        #[cfg(unix)]
+        {
+            use tokio::signal::unix::{SignalKind, signal};
+            let failed = |e| CliError::from(ferrobus::Error::io("listening for Ctrl-C and SIGTERM", e));
+            Ok(Interrupt {
+                int: signal(SignalKind::interrupt()).map_err(failed)?,
+                term: signal(SignalKind::terminate()).map_err(failed)?,
+            })
+        }
+        #[cfg(not(unix))]
+        Ok(Interrupt {})
+    }
+
+    /// Runs `work` unless SIGINT or SIGTERM comes first; `None` if one did (`work` is then
+    /// dropped, cancelled where it stood).
+    pub(crate) async fn unless<F: Future>(&mut self, work: F) -> Option<F::Output> {
+        tokio::select! {
+            biased;
+            () = self.wait() => None,
+            done = work => Some(done),
+        }
+    }
+
+    /// Waits for the next SIGINT or SIGTERM.
+    pub(crate) async fn wait(&mut self) {
+        #[cfg(unix)]
+        tokio::select! {
+            _ = self.int.recv() => {}
+            _ = self.term.recv() => {}
+        }
+        #[cfg(not(unix))]
+        if tokio::signal::ctrl_c().await.is_err() {
+            std::future::pending::<()>().await;
+        }
+    }
+}
