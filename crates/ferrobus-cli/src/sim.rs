@@ -295,7 +295,7 @@ impl ferrobus::port::Connector for Unused {
 fn observe(counters: &Mutex<Counters>, event: ServerEvent) {
     let mut c = counters.lock().unwrap_or_else(PoisonError::into_inner);
     match event {
-        ServerEvent::Slave { event: SlaveEvent::Request { unit, function, end, disposition }, .. } => {
+        ServerEvent::Slave { event: SlaveEvent::Request { unit, function, end, disposition, .. }, .. } => {
             c.requests += 1;
             // How long after the request's last byte the reply is due: t3.5 + the wait.
             let due_us = |due: ferrobus_proto::Instant| due.saturating_duration_since(end).as_micros();
