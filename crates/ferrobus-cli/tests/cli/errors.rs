@@ -151,3 +151,46 @@ fn no_input_panics() {
     assert!(server.take_requests().is_empty(), "nothing invalid reached the device");
     let _ = ferrobus().arg("--version").assert().success();
 }
+
+#[test]
+fn sim_refuses_a_unit_given_twice_before_it_listens() {
+    let err = stderr(
+        &offline(&["--tcp", "127.0.0.1:1", "--unit", "1", "--unit", "1", "sim", "--profile", "generic"]).code(2),
+    );
+    assert!(err.contains("--unit 1 is given twice: one simulated device per address"), "{err}");
+}
+
+#[test]
+fn sim_says_no_such_file_for_a_missing_profile_path_and_lists_the_builtins_for_a_bare_name() {
+    let err = stderr(&offline(&["--tcp", "127.0.0.1:1", "sim", "--profile", "./nope.toml"]).code(2));
+    assert!(err.contains("profile ./nope.toml: no such file"), "{err}");
+    let err = stderr(&offline(&["--tcp", "127.0.0.1:1", "sim", "--profile", "omron"]).code(2));
+    assert!(err.contains("no profile named \"omron\": the built-in ones are omron-3g3rx, sdp-servo, generic"), "{err}");
+}
+
+#[test]
+fn sim_names_the_file_and_line_of_overlapping_profile_registers() {
+    let dir = std::env::temp_dir().join(format!("ferrobus-cli-overlap-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let path = dir.join("overlap.toml");
+    std::fs::write(
+        &path,
+        "[device]\nname='x'\nvendor='v'\nproduct_code='p'\nrevision='1'\n\n[[registers]]\nnumber=1\nname='a'\nsize=2\n\n[[registers]]\nnumber=2\nname='b'\n",
+    )
+    .unwrap();
+    let shown = path.display().to_string();
+    let err = stderr(&offline(&["--tcp", "127.0.0.1:1", "sim", "--profile", &shown]).code(2));
+    let _ = std::fs::remove_dir_all(&dir);
+    assert!(err.contains(&format!("in {shown}, line 12: [[registers]] 2 (b) overlaps 1 (a) on line 7")), "{err}");
+}
+
+#[test]
+fn sim_refuses_a_fault_rule_without_an_action_saying_what_it_takes() {
+    let err = stderr(
+        &offline(&["--tcp", "127.0.0.1:1", "sim", "--profile", "generic", "--fault", "1:fc=3,addr=0-9"]).code(2),
+    );
+    assert!(
+        err.contains("a rule needs an action: exception, no-reply, delay, short, malformed, unit, tid or trickle"),
+        "{err}"
+    );
+}
