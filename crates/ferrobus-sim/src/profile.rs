@@ -3,8 +3,13 @@
 //! A profile says which function codes the device answers, how many items it takes per
 //! request, its register and coil map (names, units, scaling, ranges, access, 32-bit pairs and
 //! their word order, the manual's numbering), its response wait, its broadcast rules, its
-//! vendor exception codes and its identification. The built-in profiles are in `profiles/`
-//! and compiled in; users write their own in the same format.
+//! vendor exception codes, its identification, and the faults its units start with (a
+//! `faults` string and `[[fault_rule]]` tables, see [`crate::rule`]). The built-in profiles
+//! are in `profiles/` and compiled in; users write their own in the same format.
+//!
+//! A profile is refused when its entries of one kind overlap (two registers sharing an
+//! address, a 32-bit pair covering the next register), and every error names the file, the
+//! line, and the entry and field at fault.
 
 use std::fmt;
 use std::path::Path;
