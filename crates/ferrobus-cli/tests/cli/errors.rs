@@ -194,3 +194,39 @@ fn sim_refuses_a_fault_rule_without_an_action_saying_what_it_takes() {
         "{err}"
     );
 }
+
+#[test]
+fn sim_takes_fault_rules_from_a_profile_and_a_fault_option_adds_up_with_the_next() {
+    let dir = std::env::temp_dir().join(format!("ferrobus-cli-rules-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let path = dir.join("rules.toml");
+    std::fs::write(
+        &path,
+        "[device]\nname='x'\nvendor='v'\nproduct_code='p'\nrevision='1'\n\n[[fault_rule]]\nfc = 3\naddr = '0x10-0x1F'\nexception = 6\n",
+    )
+    .unwrap();
+    let shown = path.display().to_string();
+    let from_profile =
+        stderr(&offline(&["--tcp", "127.0.0.1:0", "sim", "--profile", &shown, "--duration", "10ms"]).success());
+    assert!(from_profile.contains("faults: exception 0x06 for 0x03 at 0x0010-0x001F"), "{from_profile}");
+    let options = [
+        "--tcp",
+        "127.0.0.1:0",
+        "sim",
+        "--profile",
+        &shown,
+        "--duration",
+        "10ms",
+        "--fault",
+        "1:fc=4,no-reply",
+        "--fault",
+        "1:trickle=2ms",
+    ];
+    let from_options = stderr(&offline(&options).success());
+    let _ = std::fs::remove_dir_all(&dir);
+    // The options replace the profile's faults, and add up in order.
+    assert!(
+        from_options.contains("faults: no reply for 0x04, byte by byte, 2ms apart for every request"),
+        "{from_options}"
+    );
+}
