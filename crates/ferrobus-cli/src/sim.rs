@@ -35,7 +35,11 @@ pub(crate) struct SimArgs {
     #[arg(long, conflicts_with_all = ["port", "tcp", "rtu_tcp"])]
     pub(crate) pty: bool,
 
-    /// Fault injection for one unit, e.g. 1:drop=10%,delay=50ms,corrupt=5%,exception=0x06,silent,trip=5s
+    /// Fault injection for one unit, e.g. 1:drop=10%,delay=50ms,corrupt=5%,exception=0x06,silent,trip=5s;
+    /// or a rule aimed at some requests, e.g. 1:fc=0x03,addr=0x1000-0x100F,share=50%,exception=0x06
+    /// (matchers fc, addr, share; one action: exception=CODE, no-reply, delay=D, short[=N],
+    /// malformed, unit=N, tid=+N|N, trickle=GAP). Repeat it: a unit's rules are tried in order, and
+    /// its --fault options replace its profile's faults
     #[arg(long = "fault", value_name = "UNIT:SPEC")]
     faults: Vec<String>,
 
@@ -210,6 +214,10 @@ fn build(connection: &ConnectArgs, args: &SimArgs) -> Result<Sim, CliError> {
     if let Some(unused) = args.profile.iter().find(|p| !profiles.contains(p)) {
         return Err(CliError::Usage(format!("--profile {unused} is given to no --unit")));
     }
+    if let Some(unit) = units.iter().enumerate().find_map(|(i, u)| units.get(..i)?.contains(u).then_some(u)) {
+        return Err(CliError::Usage(format!("--unit {unit} is given twice: one simulated device per address")));
+    }
+    // Every --fault for a unit, in order: its rules add up.
     let mut faults: Vec<(u8, Faults)> = Vec::new();
     for spec in &args.faults {
         let (unit, spec) = spec
@@ -218,7 +226,10 @@ fn build(connection: &ConnectArgs, args: &SimArgs) -> Result<Sim, CliError> {
             .ok_or_else(|| CliError::Usage(format!("--fault {spec:?}: expected UNIT:SPEC, e.g. 1:drop=10%")))?;
         let parsed: Faults =
             spec.parse().map_err(|e: ferrobus_sim::fault::FaultError| CliError::Usage(e.to_string()))?;
-        faults.push((unit, parsed));
+        match faults.iter_mut().find(|(u, _)| *u == unit) {
+            Some((_, earlier)) => earlier.merge(parsed),
+            None => faults.push((unit, parsed)),
+        }
     }
     let mut sim = Sim::new(tokio_clock(), args.seed);
     for (&unit, name) in units.iter().zip(profiles) {
@@ -295,7 +306,7 @@ impl ferrobus::port::Connector for Unused {
 fn observe(counters: &Mutex<Counters>, event: ServerEvent) {
     let mut c = counters.lock().unwrap_or_else(PoisonError::into_inner);
     match event {
-        ServerEvent::Slave { event: SlaveEvent::Request { unit, function, end, disposition }, .. } => {
+        ServerEvent::Slave { event: SlaveEvent::Request { unit, function, end, disposition, .. }, .. } => {
             c.requests += 1;
             // How long after the request's last byte the reply is due: t3.5 + the wait.
             let due_us = |due: ferrobus_proto::Instant| due.saturating_duration_since(end).as_micros();

@@ -1,11 +1,15 @@
 //! Fault injection, per unit: what goes wrong, and how often.
 //!
 //! Written on the command line as `drop=10%,delay=50ms,corrupt=0.05,exception=0x06,silent,trip=5s`
-//! (any subset, in any order), or in a profile's `[faults]` table with the same keys.
+//! (any subset, in any order), or in a profile's `faults` string with the same keys. A
+//! specification with a matcher (`fc`, `addr`, `share`) or a reply action (`no-reply`, `short`,
+//! `malformed`, `unit`, `tid`, `trickle`) is a [`Rule`] aimed at some requests instead.
 
 use std::fmt;
 use std::str::FromStr;
 use std::time::Duration;
+
+use crate::rule::{RULE_KEYS, Rule};
 
 /// What goes wrong with one unit.
 #[derive(Clone, PartialEq, Debug, Default)]
@@ -22,6 +26,8 @@ pub struct Faults {
     pub silent: bool,
     /// Trip the drive this long after the simulation starts.
     pub trip_after: Option<Duration>,
+    /// Faults aimed at some requests, tried in order.
+    pub rules: Vec<Rule>,
 }
 
 impl Faults {
@@ -29,15 +35,38 @@ impl Faults {
     pub fn any(&self) -> bool {
         *self != Faults::default()
     }
+
+    /// Adds `other` to these: its rules after these', and its unit-wide faults where it sets
+    /// them.
+    pub fn merge(&mut self, other: Faults) {
+        let Faults { drop, delay, corrupt, exception, silent, trip_after, rules } = other;
+        if drop > 0.0 {
+            self.drop = drop;
+        }
+        if !delay.is_zero() {
+            self.delay = delay;
+        }
+        if corrupt > 0.0 {
+            self.corrupt = corrupt;
+        }
+        self.exception = exception.or(self.exception);
+        self.silent |= silent;
+        self.trip_after = trip_after.or(self.trip_after);
+        self.rules.extend(rules);
+    }
 }
 
 /// Why a fault specification could not be read.
 #[derive(Clone, PartialEq, Eq, Debug, thiserror::Error)]
-#[error("fault {spec:?}: {problem} (expected e.g. drop=10%,delay=50ms,corrupt=0.05,exception=0x06,silent,trip=5s)")]
+#[error("fault {spec:?}: {problem} (expected e.g. {example})")]
 pub struct FaultError {
     spec: String,
     problem: String,
+    example: &'static str,
 }
+
+const UNIT_EXAMPLE: &str = "drop=10%,delay=50ms,corrupt=0.05,exception=0x06,silent,trip=5s";
+const RULE_EXAMPLE: &str = "fc=0x03,addr=0x1000-0x100F,share=50%,exception=0x06";
 
 /// A share from 0 to 1, written `0.05` or `5%`.
 pub fn parse_share(text: &str) -> Result<f64, String> {
@@ -82,7 +111,12 @@ impl FromStr for Faults {
     type Err = FaultError;
 
     fn from_str(spec: &str) -> Result<Self, Self::Err> {
-        let err = |problem: String| FaultError { spec: spec.to_string(), problem };
+        let err = |problem: String| FaultError { spec: spec.to_string(), problem, example: UNIT_EXAMPLE };
+        let keys = spec.split(',').map(|p| p.split_once('=').map_or(p, |(k, _)| k).trim());
+        if keys.clone().any(|k| RULE_KEYS.contains(&k)) {
+            let rule = spec.parse::<Rule>().map_err(|problem| FaultError { example: RULE_EXAMPLE, ..err(problem) })?;
+            return Ok(Faults { rules: vec![rule], ..Faults::default() });
+        }
         let mut faults = Faults::default();
         for part in spec.split(',').map(str::trim).filter(|p| !p.is_empty()) {
             let (key, value) = part.split_once('=').map_or((part, None), |(k, v)| (k.trim(), Some(v.trim())));
@@ -138,6 +172,7 @@ impl fmt::Display for Faults {
         if let Some(t) = self.trip_after {
             parts.push(format!("trip after {t:?}"));
         }
+        parts.extend(self.rules.iter().map(Rule::to_string));
         f.write_str(&if parts.is_empty() { "none".to_string() } else { parts.join(", ") })
     }
 }
@@ -166,6 +201,31 @@ mod tests {
         assert!("delay".parse::<Faults>().unwrap_err().to_string().contains("delay needs a value"));
         assert!("exception=0".parse::<Faults>().is_err());
         assert_eq!("".parse::<Faults>().unwrap(), Faults::default());
+    }
+
+    #[test]
+    fn a_specification_with_a_matcher_or_a_reply_action_is_a_rule() {
+        let f: Faults = "fc=3,addr=0x10-0x1F,share=50%,exception=6".parse().unwrap();
+        assert_eq!(f.rules.len(), 1);
+        assert_eq!(Faults { rules: Vec::new(), ..f.clone() }, Faults::default());
+        assert_eq!(f.to_string(), "exception 0x06 for 50% of 0x03 at 0x0010-0x001F");
+        assert_eq!("trickle=2ms".parse::<Faults>().unwrap().rules.len(), 1);
+        // Without a matcher, exception and delay stay the unit's own faults.
+        assert_eq!("exception=6".parse::<Faults>().unwrap().exception, Some(6));
+        let e = "fc=3".parse::<Faults>().unwrap_err().to_string();
+        assert!(e.ends_with("(expected e.g. fc=0x03,addr=0x1000-0x100F,share=50%,exception=0x06)"), "{e}");
+    }
+
+    #[test]
+    fn merged_faults_keep_every_rule_in_order() {
+        let mut f: Faults = "drop=10%".parse().unwrap();
+        f.merge("fc=3,no-reply".parse().unwrap());
+        f.merge("fc=4,short".parse().unwrap());
+        f.merge("delay=5ms".parse().unwrap());
+        assert!((f.drop - 0.1).abs() < 1e-12);
+        assert_eq!(f.delay, Duration::from_millis(5));
+        let functions: Vec<_> = f.rules.iter().map(|r| r.function).collect();
+        assert_eq!(functions, [Some(3), Some(4)]);
     }
 
     #[test]

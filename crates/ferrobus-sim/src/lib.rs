@@ -8,7 +8,7 @@
 //! ```text
 //!   Profile (TOML) ──▶ Device: Memory (the map) + Model (physics) + the profile's rules
 //!   Sim: devices by unit ──implements──▶ slave::Handler ──▶ ferrobus::server::serve
-//!   FaultFilter ──▶ drops and corrupts replies on their way out
+//!   FaultFilter ──▶ drops, corrupts, delays, cuts, re-addresses and trickles replies on their way out
 //! ```
 //!
 //! Built-in profiles: `omron-3g3rx`, `sdp-servo`, `generic` (see [`profile::BUILTIN`]).
@@ -18,9 +18,12 @@ pub mod fault;
 pub mod memory;
 pub mod model;
 pub mod profile;
+mod reframe;
+pub mod rule;
 pub mod sim;
 
 pub use device::Device;
 pub use fault::Faults;
 pub use profile::Profile;
+pub use rule::Rule;
 pub use sim::{FaultFilter, Sim, SimClock, tokio_clock};

@@ -6,9 +6,9 @@ use std::sync::Arc;
 use std::time::Duration;
 
 use ferrobus::Framing;
-use ferrobus::server::{Fate, ReplyFilter, Shared};
+use ferrobus::server::{Answering, Fate, ReplyFilter, Shared};
 use ferrobus_proto::ExceptionCode;
-use ferrobus_proto::pdu::{Bits, MaskWrite, Registers, Request};
+use ferrobus_proto::pdu::{AddressRange, Bits, MaskWrite, Registers, Request};
 use ferrobus_proto::slave::{Admission, Handler, UnitSet};
 use rand::rngs::SmallRng;
 use rand::{RngExt, SeedableRng};
@@ -16,6 +16,8 @@ use rand::{RngExt, SeedableRng};
 use crate::device::Device;
 use crate::fault::Faults;
 use crate::memory::Table;
+use crate::reframe::reframe;
+use crate::rule::Action;
 
 /// Where the simulation's time comes from: the time since it started.
 pub type SimClock = Arc<dyn Fn() -> Duration + Send + Sync>;
@@ -96,6 +98,26 @@ impl Sim {
         let corrupted = !dropped && corrupt > 0.0 && self.rng.random_bool(corrupt.clamp(0.0, 1.0));
         (dropped, corrupted)
     }
+
+    /// Draws the first rule of `unit` for a request with `function` touching `addresses`
+    /// that applies: among those taken when the request arrives if `on_request`, else among
+    /// those taken when its reply leaves.
+    fn draw_rule(
+        &mut self,
+        unit: u8,
+        function: u8,
+        addresses: &[Option<AddressRange>; 2],
+        on_request: bool,
+    ) -> Option<Action> {
+        let Sim { units, rng, .. } = self;
+        let rules = &units.get(&unit)?.faults.rules;
+        rules
+            .iter()
+            .filter(|r| r.action.on_request() == on_request && r.matches(function, addresses))
+            // Shares are checked when parsed, but the fields are public: clamp, never panic.
+            .find(|r| r.share >= 1.0 || (r.share > 0.0 && rng.random_bool(r.share.clamp(0.0, 1.0))))
+            .map(|r| r.action)
+    }
 }
 
 impl Handler for Sim {
@@ -108,6 +130,13 @@ impl Handler for Sim {
         }
         if let (Some(code), false) = (faults.exception, broadcast) {
             return Admission::Refuse(ExceptionCode::from_u8(code));
+        }
+        if !broadcast {
+            match self.draw_rule(unit, request.function().value(), &request.address_ranges(), true) {
+                Some(Action::Exception(code)) => return Admission::Refuse(ExceptionCode::from_u8(code)),
+                Some(Action::NoReply) => return Admission::Ignore,
+                _ => {}
+            }
         }
         admission
     }
@@ -177,7 +206,8 @@ impl Handler for Sim {
     }
 }
 
-/// Injects each unit's reply faults (drops, broken checksums) on the way out.
+/// Injects each unit's reply faults (drops, broken checksums) and its rules' reply actions
+/// (delays, short, malformed or re-addressed replies, trickles) on the way out.
 pub struct FaultFilter {
     sim: Shared<Sim>,
     framing: Framing,
@@ -200,16 +230,53 @@ impl FaultFilter {
 }
 
 impl ReplyFilter for FaultFilter {
-    fn filter(&mut self, frame: &mut [u8]) -> Fate {
-        let Some(unit) = self.unit_of(frame) else { return Fate::Send };
-        let (dropped, corrupted) = self.sim.lock().draw(unit);
+    fn filter(&mut self, answering: Option<&Answering>, frame: &mut Vec<u8>) -> Fate {
+        let Some(unit) = answering.map(|a| a.unit).or_else(|| self.unit_of(frame)) else { return Fate::Send };
+        let (dropped, corrupted, action) = {
+            let mut sim = self.sim.lock();
+            let (dropped, corrupted) = sim.draw(unit);
+            let action = match answering {
+                Some(a) if !dropped => sim.draw_rule(unit, a.function.value(), &a.addresses, false),
+                _ => None,
+            };
+            (dropped, corrupted, action)
+        };
         if dropped {
             return Fate::Drop;
         }
+        let framing = self.framing;
+        let fate = match action {
+            Some(Action::Delay(d)) => Fate::Delay(d),
+            Some(Action::Trickle(gap)) => Fate::Trickle { gap },
+            Some(Action::Short(keep)) => {
+                frame.truncate(keep.unwrap_or(frame.len() / 2).max(1));
+                Fate::Send
+            }
+            Some(Action::Malformed) => {
+                reframe(framing, frame, |_, pdu| {
+                    if pdu.len() > 1 {
+                        pdu.pop();
+                    }
+                });
+                Fate::Send
+            }
+            Some(Action::Unit(to)) => {
+                reframe(framing, frame, |header, _| header.unit = to);
+                Fate::Send
+            }
+            Some(Action::Transaction(id)) => {
+                // Serial frames carry no transaction id; theirs go out unchanged.
+                if framing == Framing::Mbap {
+                    reframe(framing, frame, |header, _| header.transaction = id.apply(header.transaction));
+                }
+                Fate::Send
+            }
+            Some(Action::Exception(_) | Action::NoReply) | None => Fate::Send,
+        };
         if corrupted {
-            corrupt_checksum(self.framing, frame);
+            corrupt_checksum(framing, frame);
         }
-        Fate::Send
+        fate
     }
 }
 

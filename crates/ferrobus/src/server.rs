@@ -7,15 +7,16 @@
 //! it, and reports what happened. A [`ReplyFilter`] may drop, delay or alter replies on
 //! their way out: the simulator's fault injection.
 
+use std::collections::VecDeque;
 use std::io;
 use std::sync::{Arc, Mutex, MutexGuard, PoisonError};
 use std::time::Duration;
 
-use ferrobus_proto::ExceptionCode;
 use ferrobus_proto::frame::{Framing, LineTiming};
 use ferrobus_proto::master::MAX_TX_LEN;
-use ferrobus_proto::pdu::{Bits, MaskWrite, Registers, Request};
-use ferrobus_proto::slave::{Admission, Handler, Slave, SlaveConfig, SlaveEvent};
+use ferrobus_proto::pdu::{AddressRange, Bits, MaskWrite, Registers, Request};
+use ferrobus_proto::slave::{Admission, Disposition, Handler, Slave, SlaveConfig, SlaveEvent};
+use ferrobus_proto::{ExceptionCode, FunctionCode};
 use tokio::io::{AsyncReadExt, AsyncWriteExt};
 use tokio::net::TcpListener;
 
@@ -30,14 +31,49 @@ pub enum Fate {
     Send,
     /// Send it this much later.
     Delay(Duration),
+    /// Send it now, one byte at a time with `gap` between bytes (a slow or stuttering
+    /// device; on a serial line a gap past t1.5 breaks the frame).
+    Trickle {
+        /// The pause after each byte but the last.
+        gap: Duration,
+    },
     /// Never send it.
     Drop,
 }
 
+/// What a reply answers: the request as the engine reported it.
+#[derive(Clone, Copy, PartialEq, Eq, Debug)]
+pub struct Answering {
+    /// The unit the request was for.
+    pub unit: u8,
+    /// Its function code.
+    pub function: FunctionCode,
+    /// The addresses it touches.
+    pub addresses: [Option<AddressRange>; 2],
+}
+
+impl Answering {
+    /// What a reply to the request of `event` answers, if `event` is a request that gets one.
+    pub fn of(event: &SlaveEvent) -> Option<Answering> {
+        match *event {
+            SlaveEvent::Request {
+                unit,
+                function,
+                addresses,
+                disposition: Disposition::Replied(_) | Disposition::Refused(..),
+                ..
+            } => Some(Answering { unit, function, addresses }),
+            _ => None,
+        }
+    }
+}
+
 /// Decides the fate of each reply, and may change its bytes.
 pub trait ReplyFilter: Send {
-    /// `frame` is the reply as framed for the wire.
-    fn filter(&mut self, frame: &mut [u8]) -> Fate;
+    /// `frame` is the reply as framed for the wire; the filter may change it, its length
+    /// included. `answering` is the request it answers, when the engine reported one (the
+    /// replies of one connection are matched to its requests in order).
+    fn filter(&mut self, answering: Option<&Answering>, frame: &mut Vec<u8>) -> Fate;
 }
 
 /// What a server saw and did, for logs and monitors.
@@ -205,6 +241,10 @@ impl ServerOptions {
     }
 }
 
+/// The most requests remembered for replies not yet sent (a peer that pipelines more, with
+/// replies the engine never sends, cannot grow the queue).
+const ANSWERING_MAX: usize = 64;
+
 /// Runs `slave` over `port`, serving through `handler`, until the port fails or closes.
 /// Returns the engine (with its counters) and the error that ended it, if any.
 pub async fn serve<F: Framing, H: Handler + Send>(
@@ -219,27 +259,51 @@ pub async fn serve<F: Framing, H: Handler + Send>(
     let mut tx = [0u8; MAX_TX_LEN];
     // A reply held back by the filter: its bytes and when to send them.
     let mut delayed: Option<(Vec<u8>, tokio::time::Instant)> = None;
+    // The requests whose replies have not gone out yet, oldest first.
+    let mut answering: VecDeque<Answering> = VecDeque::new();
     loop {
         let now = clock.now();
+        // Events first: a request is known before its reply leaves (on TCP, at once).
+        while let Some(event) = slave.poll_event() {
+            if let Some(request) = Answering::of(&event) {
+                if answering.len() == ANSWERING_MAX {
+                    answering.pop_front();
+                }
+                answering.push_back(request);
+            }
+            options.observe(ServerEvent::Slave { event, at: tokio::time::Instant::now() });
+        }
         let due = slave.reply_due().map(|t| clock.to_tokio(t));
         if let Some(n) = slave.poll_transmit(now, &mut tx) {
             let due = due.unwrap_or_else(tokio::time::Instant::now);
-            let frame = tx.get_mut(..n).unwrap_or_default();
-            let fate = options.filter.as_mut().map_or(Fate::Send, |f| f.filter(frame));
+            let mut frame = tx.get(..n).unwrap_or_default().to_vec();
+            let request = answering.pop_front();
+            let fate = options.filter.as_mut().map_or(Fate::Send, |f| f.filter(request.as_ref(), &mut frame));
             match fate {
                 Fate::Send => {
                     let at = tokio::time::Instant::now();
-                    if let Err(e) = write(&mut port, frame, options.rs485, options.timing).await {
+                    if let Err(e) = write(&mut port, &frame, options.rs485, options.timing).await {
                         return (slave, Err(e));
                     }
-                    options.observe(ServerEvent::Sent { frame: frame.to_vec(), due, at });
+                    options.observe(ServerEvent::Sent { frame, due, at });
                 }
-                Fate::Delay(d) => delayed = Some((frame.to_vec(), tokio::time::Instant::now() + d)),
-                Fate::Drop => options.observe(ServerEvent::Dropped { frame: frame.to_vec() }),
+                Fate::Trickle { gap } => {
+                    let at = tokio::time::Instant::now();
+                    for (i, byte) in frame.iter().enumerate() {
+                        if i > 0 {
+                            tokio::time::sleep(gap).await;
+                        }
+                        if let Err(e) =
+                            write(&mut port, std::slice::from_ref(byte), options.rs485, options.timing).await
+                        {
+                            return (slave, Err(e));
+                        }
+                    }
+                    options.observe(ServerEvent::Sent { frame, due, at });
+                }
+                Fate::Delay(d) => delayed = Some((frame, tokio::time::Instant::now() + d)),
+                Fate::Drop => options.observe(ServerEvent::Dropped { frame }),
             }
-        }
-        while let Some(event) = slave.poll_event() {
-            options.observe(ServerEvent::Slave { event, at: tokio::time::Instant::now() });
         }
         let engine = slave.poll_timeout().map(|t| clock.to_tokio(t));
         let deadline = match (&delayed, engine) {

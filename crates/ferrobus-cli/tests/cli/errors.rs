@@ -151,3 +151,82 @@ fn no_input_panics() {
     assert!(server.take_requests().is_empty(), "nothing invalid reached the device");
     let _ = ferrobus().arg("--version").assert().success();
 }
+
+#[test]
+fn sim_refuses_a_unit_given_twice_before_it_listens() {
+    let err = stderr(
+        &offline(&["--tcp", "127.0.0.1:1", "--unit", "1", "--unit", "1", "sim", "--profile", "generic"]).code(2),
+    );
+    assert!(err.contains("--unit 1 is given twice: one simulated device per address"), "{err}");
+}
+
+#[test]
+fn sim_says_no_such_file_for_a_missing_profile_path_and_lists_the_builtins_for_a_bare_name() {
+    let err = stderr(&offline(&["--tcp", "127.0.0.1:1", "sim", "--profile", "./nope.toml"]).code(2));
+    assert!(err.contains("profile ./nope.toml: no such file"), "{err}");
+    let err = stderr(&offline(&["--tcp", "127.0.0.1:1", "sim", "--profile", "omron"]).code(2));
+    assert!(err.contains("no profile named \"omron\": the built-in ones are omron-3g3rx, sdp-servo, generic"), "{err}");
+}
+
+#[test]
+fn sim_names_the_file_and_line_of_overlapping_profile_registers() {
+    let dir = std::env::temp_dir().join(format!("ferrobus-cli-overlap-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let path = dir.join("overlap.toml");
+    std::fs::write(
+        &path,
+        "[device]\nname='x'\nvendor='v'\nproduct_code='p'\nrevision='1'\n\n[[registers]]\nnumber=1\nname='a'\nsize=2\n\n[[registers]]\nnumber=2\nname='b'\n",
+    )
+    .unwrap();
+    let shown = path.display().to_string();
+    let err = stderr(&offline(&["--tcp", "127.0.0.1:1", "sim", "--profile", &shown]).code(2));
+    let _ = std::fs::remove_dir_all(&dir);
+    assert!(err.contains(&format!("in {shown}, line 12: [[registers]] 2 (b) overlaps 1 (a) on line 7")), "{err}");
+}
+
+#[test]
+fn sim_refuses_a_fault_rule_without_an_action_saying_what_it_takes() {
+    let err = stderr(
+        &offline(&["--tcp", "127.0.0.1:1", "sim", "--profile", "generic", "--fault", "1:fc=3,addr=0-9"]).code(2),
+    );
+    assert!(
+        err.contains("a rule needs an action: exception, no-reply, delay, short, malformed, unit, tid or trickle"),
+        "{err}"
+    );
+}
+
+#[test]
+fn sim_takes_fault_rules_from_a_profile_and_a_fault_option_adds_up_with_the_next() {
+    let dir = std::env::temp_dir().join(format!("ferrobus-cli-rules-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let path = dir.join("rules.toml");
+    std::fs::write(
+        &path,
+        "[device]\nname='x'\nvendor='v'\nproduct_code='p'\nrevision='1'\n\n[[fault_rule]]\nfc = 3\naddr = '0x10-0x1F'\nexception = 6\n",
+    )
+    .unwrap();
+    let shown = path.display().to_string();
+    let from_profile =
+        stderr(&offline(&["--tcp", "127.0.0.1:0", "sim", "--profile", &shown, "--duration", "10ms"]).success());
+    assert!(from_profile.contains("faults: exception 0x06 for 0x03 at 0x0010-0x001F"), "{from_profile}");
+    let options = [
+        "--tcp",
+        "127.0.0.1:0",
+        "sim",
+        "--profile",
+        &shown,
+        "--duration",
+        "10ms",
+        "--fault",
+        "1:fc=4,no-reply",
+        "--fault",
+        "1:trickle=2ms",
+    ];
+    let from_options = stderr(&offline(&options).success());
+    let _ = std::fs::remove_dir_all(&dir);
+    // The options replace the profile's faults, and add up in order.
+    assert!(
+        from_options.contains("faults: no reply for 0x04, byte by byte, 2ms apart for every request"),
+        "{from_options}"
+    );
+}

@@ -8,6 +8,7 @@
 //! - [`cli_vs_servers`]: the `ferrobus` binary against each peer server, RTU and TCP.
 //! - [`clients_vs_sim`]: each peer client and mbpoll against `ferrobus sim --profile generic`.
 //! - [`drive_profiles`]: peer clients and raw manual frames against the 3G3RX and SDP profiles.
+//! - [`fault_rules`]: fault rules aimed at requests, each met by pymodbus and libmodbus clients.
 //! - [`port_reopen`]: a serial port that disappears and comes back, through `ferrobus::Client`.
 //! - [`reply_timing`]: when the simulator's reply starts, with a 20 ms response wait.
 //!
@@ -16,6 +17,7 @@
 mod cli_vs_servers;
 mod clients_vs_sim;
 mod drive_profiles;
+mod fault_rules;
 mod mbpoll_vs_sim;
 mod port_reopen;
 mod reply_timing;

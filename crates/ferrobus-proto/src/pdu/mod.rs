@@ -31,6 +31,7 @@ mod diag;
 mod file;
 mod mei;
 mod registers;
+mod span;
 #[cfg(test)]
 mod tests;
 
@@ -48,6 +49,7 @@ pub use registers::{
     BitValues, MaskWrite, ReadRegisters, ReadWriteRegisters, RegisterValues, WriteRegister, WriteRegisters,
     WrittenCoils, WrittenRegisters,
 };
+pub use span::AddressRange;
 
 use crate::codes::{ExceptionCode, FunctionCode};
 use crate::cursor::{Reader, Writer};

@@ -31,7 +31,9 @@ use crate::codes::{DiagnosticCode, ExceptionCode, FunctionCode, unit};
 use crate::error::DiscardReason;
 use crate::frame::{Adu, AduHeader, Direction, Framing, RxEvent, expire, feed};
 use crate::master::MAX_TX_LEN;
-use crate::pdu::{CommEventCounter, CommEventLog, Diagnostic, ExceptionResponse, MAX_PDU_LEN, Request, Response};
+use crate::pdu::{
+    AddressRange, CommEventCounter, CommEventLog, Diagnostic, ExceptionResponse, MAX_PDU_LEN, Request, Response,
+};
 use crate::time::{Instant, earliest};
 use diag::bump;
 
@@ -133,6 +135,8 @@ pub enum SlaveEvent {
         unit: u8,
         /// Its function code.
         function: FunctionCode,
+        /// The addresses it touches ([`Request::address_ranges`]; none if it did not parse).
+        addresses: [Option<AddressRange>; 2],
         /// When its last byte arrived.
         end: Instant,
         /// What became of it.
@@ -422,7 +426,8 @@ impl Core {
         if matches!(disposition, Disposition::Silent | Disposition::Executed) {
             bump(&mut self.counters.server_no_response);
         }
-        self.push_event(SlaveEvent::Request { unit, function, end: frame.end, disposition });
+        let addresses = Request::parse(frame.pdu).map(|r| r.address_ranges()).unwrap_or_default();
+        self.push_event(SlaveEvent::Request { unit, function, addresses, end: frame.end, disposition });
     }
 
     fn dispatch<H: Handler + ?Sized>(&mut self, frame: &Adu<'_>, broadcast: bool, handler: &mut H) -> Disposition {
