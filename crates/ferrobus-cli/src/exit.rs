@@ -295,7 +295,7 @@ mod tests {
         });
         assert_eq!(exception.exit(), Exit::Exception);
         let timeout =
-            CliError::from(Error::Timeout { unit: 1, timeout: Duration::from_millis(5), attempts: 1, stray: None });
+            CliError::from(Error::Timeout { unit: 1, timeout: Duration::from_millis(5), attempts: 1, heard: None });
         assert_eq!(timeout.exit(), Exit::Timeout);
         let io = CliError::from(Error::Io { context: "x".into(), source: Arc::new(io::ErrorKind::NotFound.into()) });
         assert_eq!(io.exit(), Exit::Io);
