@@ -151,3 +151,91 @@ fn no_input_panics() {
     assert!(server.take_requests().is_empty(), "nothing invalid reached the device");
     let _ = ferrobus().arg("--version").assert().success();
 }
+
+/// `ferrobus sim --pty ARGS`, stopped when dropped; `path` is the pty it serves.
+struct Sim {
+    child: std::process::Child,
+    path: String,
+}
+
+impl Sim {
+    fn pty(args: &[&str]) -> Sim {
+        use std::io::BufRead;
+        let mut child = std::process::Command::new(env!("CARGO_BIN_EXE_ferrobus"))
+            .args(["sim", "--pty", "--duration", "60s"])
+            .args(args)
+            .stdout(std::process::Stdio::piped())
+            .stderr(std::process::Stdio::null())
+            .spawn()
+            .expect("ferrobus sim starts");
+        let mut line = String::new();
+        let stdout = child.stdout.take().expect("piped stdout");
+        std::io::BufReader::new(stdout).read_line(&mut line).expect("the sim prints its pty");
+        let path = line.trim().to_string();
+        assert!(path.starts_with('/'), "the sim printed {line:?}, not a pty path");
+        Sim { child, path }
+    }
+}
+
+impl Drop for Sim {
+    fn drop(&mut self) {
+        let _ = self.child.kill();
+        let _ = self.child.wait();
+    }
+}
+
+#[test]
+fn a_reply_with_a_bad_crc_exits_3_saying_the_unit_answered_with_a_wrong_checksum_and_the_line_checklist() {
+    let sim = Sim::pty(&["--profile", "generic", "--unit", "2", "--fault", "2:corrupt=100%"]);
+    let assert = ferrobus()
+        .args(["--port", &sim.path, "--parity", "none", "--unit", "2", "--timeout", "300ms"])
+        .args(["read", "holding", "0"])
+        .assert();
+    let err = stderr(&assert.code(3));
+    assert!(
+        err.contains(
+            "no valid reply from unit 2 within 300 ms (1 attempt): unit 2 answered, but the checksum was wrong \
+             (function code 0x03, as asked)"
+        ),
+        "{err}"
+    );
+    assert!(err.contains("noise") && err.contains("termination"), "{err}");
+    assert!(err.contains("this is 19200 8N1; a device set otherwise (e.g. 8E1 vs 8N1) garbles every frame"), "{err}");
+    // Not the silence checklist: the unit did answer.
+    assert!(!err.contains("no reply from") && !err.contains("swap A and B") && !err.contains("C078"), "{err}");
+}
+
+/// A Modbus/TCP server that answers every request correctly for a one-register read of
+/// holding register 0, but under the request's transaction id plus one.
+fn other_transaction_server() -> u16 {
+    use std::io::{Read, Write};
+    let listener = std::net::TcpListener::bind("127.0.0.1:0").unwrap();
+    let port = listener.local_addr().unwrap().port();
+    std::thread::spawn(move || {
+        for stream in listener.incoming() {
+            let Ok(mut stream) = stream else { return };
+            let mut header = [0u8; 7];
+            while stream.read_exact(&mut header).is_ok() {
+                let len = usize::from(u16::from_be_bytes([header[4], header[5]]));
+                let mut pdu = vec![0u8; len.saturating_sub(1)];
+                if stream.read_exact(&mut pdu).is_err() {
+                    break;
+                }
+                let transaction = u16::from_be_bytes([header[0], header[1]]).wrapping_add(1);
+                let mut frame = transaction.to_be_bytes().to_vec();
+                frame.extend([0x00, 0x00, 0x00, 0x05, header[6], 0x03, 0x02, 0x00, 0x2A]);
+                let _ = stream.write_all(&frame);
+            }
+        }
+    });
+    port
+}
+
+#[test]
+fn a_tcp_reply_under_another_transaction_id_exits_3_naming_both_ids() {
+    let target = format!("127.0.0.1:{}", other_transaction_server());
+    let err = stderr(&offline(&["--tcp", &target, "--timeout", "300ms", "read", "holding", "0"]).code(3));
+    assert!(err.contains("no valid reply from unit 1 within 300 ms (1 attempt)"), "{err}");
+    assert!(err.contains("a reply came under transaction id 2, not 1, ignored"), "{err}");
+    assert!(err.contains("late reply") && err.contains("transaction ids"), "{err}");
+}
