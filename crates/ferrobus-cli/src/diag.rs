@@ -34,7 +34,8 @@ pub(crate) enum DiagCommand {
         #[arg(long, default_value = "A537")]
         data: String,
     },
-    /// Restart communications; the only way out of listen-only mode (FC08/01)
+    /// Restart communications; the only way out of listen-only mode (FC08/01). A device in
+    /// listen-only mode restarts without replying: silence is checked with an echo (FC08/00)
     Restart {
         /// Also clear the comm event log
         #[arg(long = "clear-log")]
@@ -231,13 +232,7 @@ pub(crate) async fn run(connection: &ConnectArgs, args: &DiagArgs) -> Result<(),
             let said = format!("echo OK (FC08/00): {}", hex::format(&echoed));
             Outcome::new(unit, DiagnosticCode::ReturnQueryData, said, Some(echoed)).render(format)
         }
-        DiagCommand::Restart { clear_log } => {
-            let word = if *clear_log { 0xFF00 } else { 0x0000 };
-            let sub = DiagnosticCode::RestartCommunications;
-            let reply = client.diagnostics(unit, sub, &u16::to_be_bytes(word)).await?;
-            let log = if *clear_log { "; event log cleared" } else { "" };
-            Outcome::new(unit, sub, format!("communications restarted (FC08/01){log}"), Some(reply)).render(format)
-        }
+        DiagCommand::Restart { clear_log } => restart(session, *clear_log).await?.render(format),
         DiagCommand::Register => {
             let sub = DiagnosticCode::ReturnDiagnosticRegister;
             let v = client.diagnostic_word(unit, sub, 0).await?;
@@ -347,6 +342,48 @@ impl Outcome {
             }
         }
     }
+}
+
+/// 0x08/0x01. A device in listen-only mode leaves it on this request without replying (§6.8.1);
+/// one not in listen-only mode answers. The tool cannot know which it was, so silence is
+/// expected and checked with an echo (0x08/0x00): an answer there means the restart worked.
+async fn restart(session: &Session, clear_log: bool) -> Result<Outcome, CliError> {
+    let (client, unit) = (&session.client, session.unit);
+    let word: u16 = if clear_log { 0xFF00 } else { 0x0000 };
+    let sub = DiagnosticCode::RestartCommunications;
+    let log = if clear_log { "; event log cleared" } else { "" };
+    match client.diagnostics(unit, sub, &word.to_be_bytes()).await {
+        Ok(reply) => {
+            return Ok(Outcome::new(unit, sub, format!("communications restarted (FC08/01){log}"), Some(reply)));
+        }
+        // Silence, not a broken reply: what a device in listen-only mode does.
+        Err(ferrobus::Error::Timeout { heard: None, .. }) => {}
+        Err(e) => return Err(e.into()),
+    }
+    eprintln!(
+        "note: unit {unit} did not answer the restart (FC08/01), as a device in listen-only mode does; \
+         checking that it answers an echo (FC08/00) now"
+    );
+    let probe = [0xA5, 0x37];
+    let answer = match client.diagnostics(unit, DiagnosticCode::ReturnQueryData, &probe).await {
+        Ok(echoed) if echoed == probe => "it answers the echo (FC08/00) now".to_string(),
+        Ok(echoed) => {
+            return Err(CliError::BadData(format!(
+                "unit {unit} did not answer the restart (FC08/01), and echoed {} instead of {} to the echo \
+                 (FC08/00) after it",
+                hex::format(&echoed),
+                hex::format(&probe)
+            )));
+        }
+        // Refused, but listening: out of listen-only mode all the same.
+        Err(ferrobus::Error::Exception { code, .. }) => {
+            format!("it answers again (the echo, FC08/00, with exception {code})")
+        }
+        // The note above says what this error follows.
+        Err(e) => return Err(e.into()),
+    };
+    let said = format!("communications restarted (FC08/01){log}: no reply, as expected in listen-only mode; {answer}");
+    Ok(Outcome::new(unit, sub, said, None))
 }
 
 /// Reads every counter; one the device refuses shows its exception (many drives answer only

@@ -1,7 +1,7 @@
 //! Exit codes and error messages: exceptions, timeouts, IO, bad replies, bad usage, and that
 //! no input makes the binary panic.
 
-use crate::server::{Server, closed_port, ferrobus, misbehaving_server, offline, pty_server, stderr};
+use crate::server::{Server, Sim, closed_port, ferrobus, misbehaving_server, offline, pty_server, stderr};
 use assert_cmd::assert::OutputAssertExt;
 use predicates::prelude::*;
 
@@ -150,38 +150,6 @@ fn no_input_panics() {
     assert!(fc17.contains("invalid request: a count of 200 is out of range: one request carries 1 to 125"), "{fc17}");
     assert!(server.take_requests().is_empty(), "nothing invalid reached the device");
     let _ = ferrobus().arg("--version").assert().success();
-}
-
-/// `ferrobus sim --pty ARGS`, stopped when dropped; `path` is the pty it serves.
-struct Sim {
-    child: std::process::Child,
-    path: String,
-}
-
-impl Sim {
-    fn pty(args: &[&str]) -> Sim {
-        use std::io::BufRead;
-        let mut child = std::process::Command::new(env!("CARGO_BIN_EXE_ferrobus"))
-            .args(["sim", "--pty", "--duration", "60s"])
-            .args(args)
-            .stdout(std::process::Stdio::piped())
-            .stderr(std::process::Stdio::null())
-            .spawn()
-            .expect("ferrobus sim starts");
-        let mut line = String::new();
-        let stdout = child.stdout.take().expect("piped stdout");
-        std::io::BufReader::new(stdout).read_line(&mut line).expect("the sim prints its pty");
-        let path = line.trim().to_string();
-        assert!(path.starts_with('/'), "the sim printed {line:?}, not a pty path");
-        Sim { child, path }
-    }
-}
-
-impl Drop for Sim {
-    fn drop(&mut self) {
-        let _ = self.child.kill();
-        let _ = self.child.wait();
-    }
 }
 
 #[test]
