@@ -29,13 +29,34 @@ fn diag_echo_and_the_word_sub_functions_answer() {
 fn diag_counters_reads_all_eight_into_a_table() {
     let server = Server::start();
     let table = stdout(&server.run(&["diag", "counters"]).success());
-    assert_eq!(table.lines().count(), 9, "{table}");
+    assert_eq!(table.lines().count(), 10, "{table}");
+    assert!(table.ends_with("(counts as of the first read (0x0B); the tool's own later reads are taken out)\n"));
     assert!(table.lines().next().unwrap().starts_with("sub   counter"), "{table}");
     assert!(table.contains("0x12  Return Bus Character Overrun Count"), "{table}");
     let json: Value = serde_json::from_str(&stdout(&server.run(&["diag", "counters", "--json"]).success())).unwrap();
     let counters = json["counters"].as_object().unwrap();
     assert_eq!(counters.len(), 8);
     assert!(counters.contains_key("bus-messages") && counters.contains_key("overruns"));
+}
+
+#[test]
+fn diag_counters_are_one_snapshot_the_message_counts_agree() {
+    // Every message on this line is addressed to unit 2, so the bus and server message counts
+    // must agree; read raw, the server count would be 3 ahead (the reads of 0C, 0D and 0E).
+    let sim = Sim::pty(&["--profile", "generic", "--unit", "2"]);
+    let run = |args: &[&str]| {
+        ferrobus()
+            .args(["--port", &sim.path, "--parity", "none", "--unit", "2", "--timeout", "300ms"])
+            .args(args)
+            .assert()
+    };
+    run(&["diag", "echo"]).success();
+    let json: Value = serde_json::from_str(&stdout(&run(&["diag", "counters", "--json"]).success())).unwrap();
+    let counters = &json["counters"];
+    assert_eq!(counters["bus-messages"], counters["server-messages"], "{json}");
+    assert!(counters["bus-messages"].as_u64().is_some_and(|n| n >= 1), "{json}");
+    assert_eq!(counters["exceptions"], 0, "{json}");
+    assert!(json["as_of"].as_str().unwrap().contains("as of the first read"), "{json}");
 }
 
 #[test]
