@@ -464,7 +464,7 @@ async fn counters(session: &Session, format: Format) -> Result<String, CliError>
     Ok(match format {
         Format::Json => output::json_line(&doc),
         Format::Table => format!("{}({AS_OF_FIRST_READ})\n", rows.render(Format::Table)),
-        other => rows.render(other),
+        Format::Csv => rows.render(Format::Csv),
     })
 }
 

@@ -82,6 +82,16 @@ enum State {
     Frame,
 }
 
+/// A run of discarded characters not yet reported.
+#[derive(Clone, Copy, Debug)]
+struct Discard {
+    bytes: usize,
+    reason: DiscardReason,
+    at: Instant,
+    /// The address and function code of the frame they began, if they did.
+    head: Option<(u8, u8)>,
+}
+
 /// The incremental ASCII receiver and encoder.
 #[derive(Clone, Debug)]
 pub struct AsciiCodec {
@@ -99,9 +109,7 @@ pub struct AsciiCodec {
     skipped: usize,
     last_rx: Option<Instant>,
     found: Option<(Instant, bool)>,
-    /// A run of discarded characters not yet reported: how many, why, when, and the address
-    /// and function code of the frame they began, if they did.
-    report: Option<(usize, DiscardReason, Instant, Option<(u8, u8)>)>,
+    report: Option<Discard>,
     stats: RxStats,
 }
 
@@ -140,8 +148,8 @@ impl AsciiCodec {
         }
         self.stats.count_discard(bytes, reason);
         self.report = Some(match self.report {
-            Some((n, r, t, h)) => (n.saturating_add(bytes), r, t, h),
-            None => (bytes, reason, at, head),
+            Some(prev) => Discard { bytes: prev.bytes.saturating_add(bytes), ..prev },
+            None => Discard { bytes, reason, at, head },
         });
     }
 
@@ -272,7 +280,7 @@ impl Framing for AsciiCodec {
     }
 
     fn poll_event(&mut self) -> Option<RxEvent<'_>> {
-        if let Some((bytes, reason, at, head)) = self.report.take() {
+        if let Some(Discard { bytes, reason, at, head }) = self.report.take() {
             return Some(RxEvent::Discarded { bytes, reason, at, head });
         }
         let (end, handed_out) = self.found.as_mut()?;
