@@ -432,7 +432,7 @@ mod tests {
                 bytes: 5,
                 reason: DiscardReason::TooShort,
                 at: Instant::from_millis(5),
-                head: None
+                head: Some((0x01, 0x03))
             })
         );
         assert_eq!(c.poll_timeout(), None);
