@@ -355,7 +355,9 @@ fn io_hint(source: &io::Error, target: Option<&Target>) -> Vec<String> {
         (io::ErrorKind::ConnectionRefused, _, _) => {
             "nothing listens there: check the host and port (Modbus/TCP uses 502) and that the server runs".to_string()
         }
-        (io::ErrorKind::UnexpectedEof | io::ErrorKind::ConnectionReset, _, Some(_)) => {
+        // EOF, or EIO / ENXIO / ENODEV: what reading an unplugged USB adapter gives.
+        (io::ErrorKind::UnexpectedEof | io::ErrorKind::ConnectionReset, _, Some(_))
+        | (_, Some(5 | 6 | 19), Some(_)) => {
             "the port went away: was the adapter unplugged? (ls /dev/serial/by-id/)".to_string()
         }
         (io::ErrorKind::UnexpectedEof | io::ErrorKind::ConnectionReset, _, None) => {
@@ -476,6 +478,8 @@ mod tests {
         let serial_hint = report(&eof(), Some(&serial()), 1).hints.join("\n");
         assert!(serial_hint.contains("adapter unplugged") && !serial_hint.contains("server"), "{serial_hint}");
         assert!(report(&eof(), Some(&tcp), 1).hints[0].contains("the server closed the connection"));
+        let eio = CliError::from(Error::io("reading from x", io::Error::from_raw_os_error(5)));
+        assert!(report(&eio, Some(&serial()), 1).hints[0].contains("adapter unplugged"));
     }
 
     #[test]
