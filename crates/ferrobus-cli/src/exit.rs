@@ -435,7 +435,7 @@ mod tests {
 
     #[test]
     fn a_bad_checksum_gets_the_line_checklist_not_the_silence_one() {
-        let heard = Heard::BadChecksum { head: Some((2, 0x03)), unit: 2, function: 0x03 };
+        let heard = Heard::BadChecksum { head: Some((2, 0x03)), expected: (2, 0x03) };
         let r = report(&timeout(Some(heard)), Some(&serial()), 2);
         assert_eq!(timeout(Some(heard)).exit(), Exit::Timeout);
         assert!(r.message.contains("unit 2 answered, but the checksum was wrong"), "{}", r.message);

@@ -116,10 +116,8 @@ pub enum Heard {
         /// The address and function code at its start, when it had them. The damage may be
         /// in these bytes too.
         head: Option<(u8, u8)>,
-        /// The unit asked.
-        unit: u8,
-        /// The function code asked.
-        function: u8,
+        /// The unit and the function code asked.
+        expected: (u8, u8),
     },
     /// Bytes that did not make a frame (a frame cut short, noise, a bad header).
     Garbage {
@@ -159,7 +157,7 @@ impl Heard {
     pub fn weight(&self) -> u8 {
         match *self {
             Heard::OtherTransaction { .. } | Heard::WrongFunction { .. } => 3,
-            Heard::BadChecksum { head: Some((from, _)), unit, .. } if from == unit => 2,
+            Heard::BadChecksum { head: Some((from, _)), expected: (unit, _) } if from == unit => 2,
             Heard::BadChecksum { .. } | Heard::Garbage { .. } => 1,
             Heard::OtherUnit { .. } => 0,
         }
@@ -175,7 +173,7 @@ impl Heard {
 impl fmt::Display for Heard {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
         match *self {
-            Heard::BadChecksum { head: Some((from, fc)), unit, function } if from == unit => {
+            Heard::BadChecksum { head: Some((from, fc)), expected: (unit, function) } if from == unit => {
                 write!(f, "unit {unit} answered, but the checksum was wrong ")?;
                 if fc & !FunctionCode::EXCEPTION_BIT == function {
                     write!(f, "(function code 0x{fc:02X}, as asked)")
@@ -591,9 +589,7 @@ impl Core {
             RxEvent::Discarded { bytes, reason, head, .. } => {
                 if awaiting {
                     self.hear(match reason {
-                        DiscardReason::ChecksumMismatch => {
-                            Heard::BadChecksum { head, unit: self.unit, function: asked }
-                        }
+                        DiscardReason::ChecksumMismatch => Heard::BadChecksum { head, expected: (self.unit, asked) },
                         reason => Heard::Garbage { bytes, reason },
                     });
                 }

@@ -129,7 +129,7 @@ mod tests {
             "no valid reply from unit 1 within 500 ms (1 attempt): the unit sent a frame with function code 0x80 \
              instead of 0x03, ignored"
         );
-        let heard = Some(Heard::BadChecksum { head: Some((2, 0x1E)), unit: 2, function: 0x44 });
+        let heard = Some(Heard::BadChecksum { head: Some((2, 0x1E)), expected: (2, 0x44) });
         let t = Error::Timeout { unit: 2, timeout: Duration::from_millis(300), attempts: 1, heard };
         assert_eq!(
             t.to_string(),

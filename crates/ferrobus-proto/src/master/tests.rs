@@ -433,7 +433,7 @@ fn silence_times_out_with_nothing_heard() {
 #[test]
 fn a_reply_with_a_bad_crc_times_out_saying_the_unit_answered_with_a_wrong_checksum() {
     let (heard, text) = heard_after(2, &[&bad_crc(rtu(2, &[0x03, 0x02, 0x00, 0x07]))]);
-    assert_eq!(heard, Some(Heard::BadChecksum { head: Some((2, 0x03)), unit: 2, function: 0x03 }));
+    assert_eq!(heard, Some(Heard::BadChecksum { head: Some((2, 0x03)), expected: (2, 0x03) }));
     assert_eq!(
         text,
         "no valid reply within 300 ms: unit 2 answered, but the checksum was wrong (function code 0x03, as asked)"
@@ -446,7 +446,7 @@ fn a_bad_crc_over_a_damaged_function_code_names_the_code_seen_and_the_one_expect
     let mut frame = rtu(2, &[0x03, 0x02, 0x00, 0x07]);
     frame[1] = 0x1E;
     let (heard, text) = heard_after(2, &[&frame]);
-    assert_eq!(heard, Some(Heard::BadChecksum { head: Some((2, 0x1E)), unit: 2, function: 0x03 }));
+    assert_eq!(heard, Some(Heard::BadChecksum { head: Some((2, 0x1E)), expected: (2, 0x03) }));
     assert!(
         text.ends_with("unit 2 answered, but the checksum was wrong (function code 0x1E, expected 0x03)"),
         "{text}"
@@ -471,7 +471,7 @@ fn a_frame_from_another_unit_times_out_naming_that_unit() {
 fn what_tells_most_about_the_unit_asked_is_kept_over_later_lesser_things() {
     let reply = bad_crc(rtu(2, &[0x03, 0x02, 0x00, 0x07]));
     let other = rtu(3, &[0x03, 0x02, 0x00, 0x07]);
-    let ours = Heard::BadChecksum { head: Some((2, 0x03)), unit: 2, function: 0x03 };
+    let ours = Heard::BadChecksum { head: Some((2, 0x03)), expected: (2, 0x03) };
     assert_eq!(heard_after(2, &[&reply, &other, &[0xFF]]).0, Some(ours));
     // Garbage outweighs another unit's traffic; the latest of equal weight is kept.
     let garbage = Heard::Garbage { bytes: 1, reason: DiscardReason::TooShort };
@@ -525,7 +525,7 @@ fn an_ascii_reply_with_a_bad_lrc_names_the_unit_and_function_code_it_carried() {
     m.handle_timeout(ns(sent as u64 * CHAR + 300_000_000));
     match m.poll_event() {
         Some(Completion::Failed(MasterError::Timeout { heard, .. })) => {
-            assert_eq!(heard, Some(Heard::BadChecksum { head: Some((5, 0x03)), unit: 5, function: 0x03 }));
+            assert_eq!(heard, Some(Heard::BadChecksum { head: Some((5, 0x03)), expected: (5, 0x03) }));
         }
         other => panic!("{other:?}"),
     }
