@@ -34,7 +34,8 @@ pub(crate) enum DiagCommand {
         #[arg(long, default_value = "A537")]
         data: String,
     },
-    /// Restart communications; the only way out of listen-only mode (FC08/01)
+    /// Restart communications; the only way out of listen-only mode (FC08/01). A device in
+    /// listen-only mode restarts without replying: silence is checked with an echo (FC08/00)
     Restart {
         /// Also clear the comm event log
         #[arg(long = "clear-log")]
@@ -59,7 +60,8 @@ pub(crate) enum DiagCommand {
         #[arg(value_enum, hide_possible_values = true)]
         which: Counter,
     },
-    /// All counters FC08/0B-12, as a table
+    /// All counters FC08/0B-12, as a table, as of the first read: the tool's own later reads,
+    /// which the device counts too, are taken out
     Counters,
     /// Clear the overrun counter and flag (FC08/14)
     ClearOverrun,
@@ -231,13 +233,7 @@ pub(crate) async fn run(connection: &ConnectArgs, args: &DiagArgs) -> Result<(),
             let said = format!("echo OK (FC08/00): {}", hex::format(&echoed));
             Outcome::new(unit, DiagnosticCode::ReturnQueryData, said, Some(echoed)).render(format)
         }
-        DiagCommand::Restart { clear_log } => {
-            let word = if *clear_log { 0xFF00 } else { 0x0000 };
-            let sub = DiagnosticCode::RestartCommunications;
-            let reply = client.diagnostics(unit, sub, &u16::to_be_bytes(word)).await?;
-            let log = if *clear_log { "; event log cleared" } else { "" };
-            Outcome::new(unit, sub, format!("communications restarted (FC08/01){log}"), Some(reply)).render(format)
-        }
+        DiagCommand::Restart { clear_log } => restart(session, *clear_log).await?.render(format),
         DiagCommand::Register => {
             let sub = DiagnosticCode::ReturnDiagnosticRegister;
             let v = client.diagnostic_word(unit, sub, 0).await?;
@@ -349,17 +345,109 @@ impl Outcome {
     }
 }
 
+/// 0x08/0x01. A device in listen-only mode leaves it on this request without replying (§6.8.1);
+/// one not in listen-only mode answers. The tool cannot know which it was, so silence is
+/// expected and checked with an echo (0x08/0x00): an answer there means the restart worked.
+async fn restart(session: &Session, clear_log: bool) -> Result<Outcome, CliError> {
+    let (client, unit) = (&session.client, session.unit);
+    let word: u16 = if clear_log { 0xFF00 } else { 0x0000 };
+    let sub = DiagnosticCode::RestartCommunications;
+    let log = if clear_log { "; event log cleared" } else { "" };
+    match client.diagnostics(unit, sub, &word.to_be_bytes()).await {
+        Ok(reply) => {
+            return Ok(Outcome::new(unit, sub, format!("communications restarted (FC08/01){log}"), Some(reply)));
+        }
+        // Silence, not a broken reply: what a device in listen-only mode does.
+        Err(ferrobus::Error::Timeout { heard: None, .. }) => {}
+        Err(e) => return Err(e.into()),
+    }
+    eprintln!(
+        "note: unit {unit} did not answer the restart (FC08/01), as a device in listen-only mode does; \
+         checking that it answers an echo (FC08/00) now"
+    );
+    let probe = [0xA5, 0x37];
+    let answer = match client.diagnostics(unit, DiagnosticCode::ReturnQueryData, &probe).await {
+        Ok(echoed) if echoed == probe => "it answers the echo (FC08/00) now".to_string(),
+        Ok(echoed) => {
+            return Err(CliError::BadData(format!(
+                "unit {unit} did not answer the restart (FC08/01), and echoed {} instead of {} to the echo \
+                 (FC08/00) after it",
+                hex::format(&echoed),
+                hex::format(&probe)
+            )));
+        }
+        // Refused, but listening: out of listen-only mode all the same.
+        Err(ferrobus::Error::Exception { code, .. }) => {
+            format!("it answers again (the echo, FC08/00, with exception {code})")
+        }
+        // The note above says what this error follows.
+        Err(e) => return Err(e.into()),
+    };
+    let said = format!("communications restarted (FC08/01){log}: no reply, as expected in listen-only mode; {answer}");
+    Ok(Outcome::new(unit, sub, said, None))
+}
+
+/// What the tool's own reads add to each counter: the counters come from eight requests, each
+/// of which the device counts, so each is reported as it stood when the first read arrived.
+#[derive(Default)]
+struct OwnReads {
+    /// Reads the device answered so far (normally or with an exception). Read number `i`
+    /// counts `i` more of them in a message count than the first read did, whether the device
+    /// counts a request on arrival (then the first includes itself) or after answering it.
+    answered: u16,
+    /// Exception replies to our reads so far, in all, and with 06 (busy) and 07 (NAK).
+    exceptions: u16,
+    busy: u16,
+    nak: u16,
+}
+
+impl OwnReads {
+    /// How many of our own requests `counter`, read now, has counted since the first read
+    /// arrived.
+    fn in_count(&self, counter: Counter) -> u16 {
+        match counter {
+            Counter::BusMessages | Counter::ServerMessages => self.answered,
+            Counter::Exceptions => self.exceptions,
+            Counter::Busy => self.busy,
+            Counter::Nak => self.nak,
+            Counter::CommErrors | Counter::NoResponse | Counter::Overruns => 0,
+        }
+    }
+
+    fn record(&mut self, refused: Option<u8>) {
+        self.answered = self.answered.saturating_add(1);
+        if let Some(code) = refused {
+            self.exceptions = self.exceptions.saturating_add(1);
+            match code {
+                0x06 => self.busy = self.busy.saturating_add(1),
+                0x07 => self.nak = self.nak.saturating_add(1),
+                _ => {}
+            }
+        }
+    }
+}
+
+/// What the table says below the counts.
+const AS_OF_FIRST_READ: &str = "counts as of the first read (0x0B); the tool's own later reads are taken out";
+
 /// Reads every counter; one the device refuses shows its exception (many drives answer only
-/// the echo), and only if it refuses them all is that an error.
+/// the echo), and only if it refuses them all is that an error. The counts are made one
+/// snapshot: see [`OwnReads`].
 async fn counters(session: &Session, format: Format) -> Result<String, CliError> {
     let mut rows = Rows::new(&[("sub", Align::Left), ("counter", Align::Left), ("count", Align::Right)]);
-    let mut doc = json!({ "unit": session.unit, "function": 0x08, "counters": {} });
+    let mut doc = json!({ "unit": session.unit, "function": 0x08, "counters": {}, "as_of": AS_OF_FIRST_READ });
     let mut refused = None;
+    let mut own = OwnReads::default();
     for counter in Counter::ALL {
         let code = counter.code();
         let (cell, value) = match session.client.diagnostic_word(session.unit, code, 0).await {
-            Ok(v) => (v.to_string(), v.into()),
+            Ok(v) => {
+                let v = v.saturating_sub(own.in_count(counter));
+                own.record(None);
+                (v.to_string(), v.into())
+            }
             Err(e @ ferrobus::Error::Exception { code: exception, .. }) => {
+                own.record(Some(exception.value()));
                 refused.get_or_insert(e);
                 (format!("exception {exception}"), serde_json::Value::Null)
             }
@@ -375,7 +463,8 @@ async fn counters(session: &Session, format: Format) -> Result<String, CliError>
     }
     Ok(match format {
         Format::Json => output::json_line(&doc),
-        other => rows.render(other),
+        Format::Table => format!("{}({AS_OF_FIRST_READ})\n", rows.render(Format::Table)),
+        Format::Csv => rows.render(Format::Csv),
     })
 }
 
@@ -443,6 +532,41 @@ mod tests {
         assert_eq!(describe_event(0x00), "restart");
         assert_eq!(describe_event(0xA2), "receive: communication error, in listen-only mode");
         assert_eq!(describe_event(0x01), "unknown event");
+    }
+
+    #[test]
+    fn own_reads_are_taken_out_whether_a_device_counts_a_request_on_arrival_or_after() {
+        // Before the first read, 10 messages and 2 exceptions; our reads of 0C and 0D are
+        // refused with 07 (NAK). Each device below reports what it counted when each read came.
+        for counts_itself in [true, false] {
+            let mut own = OwnReads::default();
+            let mut seen = Vec::new();
+            let (mut messages, mut exceptions, mut nak) = (10u16, 2u16, 0u16);
+            for counter in Counter::ALL {
+                if counts_itself {
+                    messages += 1;
+                }
+                let raw = match counter {
+                    Counter::BusMessages | Counter::ServerMessages => messages,
+                    Counter::Exceptions => exceptions,
+                    Counter::Nak => nak,
+                    _ => 0,
+                };
+                seen.push(raw.saturating_sub(own.in_count(counter)));
+                if !counts_itself {
+                    messages += 1;
+                }
+                let refused = matches!(counter, Counter::CommErrors | Counter::Exceptions);
+                if refused {
+                    exceptions += 1;
+                    nak += 1;
+                }
+                own.record(refused.then_some(0x07));
+            }
+            let first = if counts_itself { 11 } else { 10 };
+            // bus, comm errors, exceptions, server, no response, NAK, busy, overruns
+            assert_eq!(seen, [first, 0, 2, first, 0, 0, 0, 0], "counts itself: {counts_itself}");
+        }
     }
 
     #[test]

@@ -19,6 +19,7 @@ use std::io;
 use std::time::Duration;
 
 use ferrobus::Error;
+use ferrobus_proto::master::Heard;
 use ferrobus_proto::{ExceptionCode, FunctionCode, PduError};
 
 use crate::connect::Target;
@@ -214,27 +215,23 @@ fn modbus_report(error: &Error, target: Option<&Target>, unit: u8) -> Report {
         Error::Exception { function, code, .. } => {
             Report { message: error.to_string(), hints: exception_hint(*function, *code).into_iter().collect() }
         }
-        Error::Timeout { stray: Some(_), .. } => Report {
-            message: format!("{error}{on}"),
-            hints: vec![
-                "the unit is talking but did not answer this request: it may not support the function or the \
-                 quantity asked"
-                    .into(),
-                "-vvv traces every byte sent and received".into(),
-            ],
-        },
+        Error::Timeout { heard: Some(heard), .. } => {
+            Report { message: format!("{error}{on}"), hints: heard_hints(heard, target, unit) }
+        }
         Error::Timeout { .. } | Error::Backoff { .. } => {
             Report { message: format!("{error}{on}"), hints: timeout_hints(target, unit) }
         }
-        Error::BadReply { .. } => Report {
-            message: format!("{error}{on}"),
-            hints: vec![
+        Error::BadReply { .. } => {
+            let mut hints = vec![
                 "another master on the bus, two devices with the same address, or a wrong baud rate garbling frames"
-                    .into(),
-                "USB adapters split frames: try --low-latency or a longer --t35".into(),
-                "`ferrobus raw` shows the reply bytes as they came".into(),
-            ],
-        },
+                    .to_string(),
+            ];
+            if let Some(Target::Serial { ascii: false, .. }) = target {
+                hints.push("USB adapters split frames: try --low-latency or a longer --t35".into());
+            }
+            hints.push("`ferrobus raw` shows the reply bytes as they came".into());
+            Report { message: format!("{error}{on}"), hints }
+        }
         Error::Io { source, .. } => Report { message: error.to_string(), hints: io_hint(source, target) },
         Error::InvalidRequest(e) => Report { message: format!("invalid request: {}", pdu_words(e)), hints: Vec::new() },
         Error::Closed => Report { message: error.to_string(), hints: Vec::new() },
@@ -259,6 +256,66 @@ fn timeout_hints(target: Option<&Target>, unit: u8) -> Vec<String> {
     hints
 }
 
+/// What to check when something came instead of the reply: the checklist for what it was.
+fn heard_hints(heard: &Heard, target: Option<&Target>, unit: u8) -> Vec<String> {
+    let trace = "-vvv traces every byte sent and received".to_string();
+    let mut hints = Vec::new();
+    match heard {
+        // Bytes damaged on the way: the line, not the device.
+        Heard::BadChecksum { .. } | Heard::Garbage { .. } => match target {
+            Some(Target::Tcp(_)) => {
+                hints.push(
+                    "what came is not Modbus/TCP: is this an RTU-over-TCP gateway (--rtu-tcp), or another protocol \
+                     on this port?"
+                        .into(),
+                );
+            }
+            Some(Target::Serial { line, ascii, .. }) => {
+                hints.push("noise: shielded twisted pair, common ground, away from motor and power cables".into());
+                hints.push("termination: 120 ohm at both ends of a long line, and only there".into());
+                hints.push(format!(
+                    "baud rate and parity: this is {line}; a device set otherwise (e.g. 8E1 vs 8N1) garbles every frame"
+                ));
+                if !ascii && matches!(heard, Heard::Garbage { .. }) {
+                    hints.push("USB adapters split frames: try --low-latency or a longer --t35".into());
+                }
+            }
+            Some(Target::RtuTcp(_)) | None => {
+                hints.push(
+                    "noise or termination on the serial line, or a baud rate or parity mismatch (e.g. 8E1 vs 8N1) \
+                     between the gateway and the device"
+                        .into(),
+                );
+            }
+        },
+        Heard::OtherUnit { unit: other, .. } => {
+            hints.push(format!(
+                "unit {other} answered while unit {unit} was asked: is the device at address {other} (--unit {other})? \
+                 Two devices with one address, or another master on the bus, look the same"
+            ));
+            if !matches!(target, Some(Target::Serial { .. })) {
+                hints.push("some gateways answer under another unit id (0 or 255)".into());
+            }
+        }
+        Heard::OtherTransaction { .. } => {
+            hints.push(
+                "a late reply to an earlier request: the device answers after --timeout, raise it; or a gateway \
+                 that does not echo transaction ids"
+                    .into(),
+            );
+        }
+        Heard::WrongFunction { .. } => {
+            hints.push(
+                "the unit is talking but did not answer this request: it may not support the function or the \
+                 quantity asked, or the reply is a late one to an earlier request"
+                    .into(),
+            );
+        }
+    }
+    hints.push(trace);
+    hints
+}
+
 fn exception_hint(function: FunctionCode, code: ExceptionCode) -> Option<String> {
     let hint = match code.value() {
         0x01 if function == FunctionCode::WriteSingleRegister => {
@@ -269,10 +326,7 @@ fn exception_hint(function: FunctionCode, code: ExceptionCode) -> Option<String>
             "the address, or address + count, is not on the device; if the manual numbers registers from 1, \
              add --one-based (frame address = number - 1)"
         }
-        0x03 => {
-            "the device refused a value or a count; some take only a few registers per request \
-             (3G3RX: 4) - try --max-per-request"
-        }
+        0x03 => return Some(illegal_value_hint(function)),
         0x04 => "the device failed while executing the request",
         0x05 | 0x06 => "the device is busy with a long operation; retry later",
         0x0A | 0x0B => "a gateway could not reach the unit: check --unit and the serial line behind the gateway",
@@ -285,6 +339,37 @@ fn exception_hint(function: FunctionCode, code: ExceptionCode) -> Option<String>
         _ => return None,
     };
     Some(hint.to_string())
+}
+
+/// Exception 03 means a count for a read and a value (or a count) for a write: the hint
+/// depends on what was asked, with the 3G3RX's limit for that function.
+fn illegal_value_hint(function: FunctionCode) -> String {
+    match function {
+        FunctionCode::ReadCoils | FunctionCode::ReadDiscreteInputs => {
+            "the device refused the count: some read only a few bits per request (3G3RX: 32 coils) - try \
+             --max-per-request"
+        }
+        FunctionCode::ReadHoldingRegisters | FunctionCode::ReadInputRegisters => {
+            "the device refused the count: some read only a few registers per request (3G3RX: 4) - try \
+             --max-per-request"
+        }
+        FunctionCode::WriteSingleCoil | FunctionCode::WriteSingleRegister | FunctionCode::MaskWriteRegister => {
+            "the device refused the value: out of the parameter's range or format (check its limits in the manual)"
+        }
+        FunctionCode::WriteMultipleCoils => {
+            "the device refused a value or the count: some write only a few coils per request (3G3RX: 32) - try \
+             --max-per-request"
+        }
+        FunctionCode::WriteMultipleRegisters | FunctionCode::ReadWriteMultipleRegisters => {
+            "the device refused a value or the count: check the values against the parameter's range; some take \
+             only a few registers per request (3G3RX: 4) - try --max-per-request"
+        }
+        FunctionCode::Diagnostics => {
+            "the device refused the sub-function's data (many drives answer only 08/00, the echo)"
+        }
+        _ => "the device refused a value or a count in the request",
+    }
+    .to_string()
 }
 
 fn io_hint(source: &io::Error, target: Option<&Target>) -> Vec<String> {
@@ -309,7 +394,12 @@ fn io_hint(source: &io::Error, target: Option<&Target>) -> Vec<String> {
         (io::ErrorKind::ConnectionRefused, _, _) => {
             "nothing listens there: check the host and port (Modbus/TCP uses 502) and that the server runs".to_string()
         }
-        (io::ErrorKind::UnexpectedEof | io::ErrorKind::ConnectionReset, _, _) => {
+        // EOF, or EIO / ENXIO / ENODEV: what reading an unplugged USB adapter gives.
+        (io::ErrorKind::UnexpectedEof | io::ErrorKind::ConnectionReset, _, Some(_))
+        | (_, Some(5 | 6 | 19), Some(_)) => {
+            "the port went away: was the adapter unplugged? (ls /dev/serial/by-id/)".to_string()
+        }
+        (io::ErrorKind::UnexpectedEof | io::ErrorKind::ConnectionReset, _, None) => {
             "the server closed the connection (it may take one client at a time)".to_string()
         }
         (io::ErrorKind::HostUnreachable | io::ErrorKind::NetworkUnreachable | io::ErrorKind::TimedOut, _, _) => {
@@ -334,7 +424,7 @@ mod tests {
         });
         assert_eq!(exception.exit(), Exit::Exception);
         let timeout =
-            CliError::from(Error::Timeout { unit: 1, timeout: Duration::from_millis(5), attempts: 1, stray: None });
+            CliError::from(Error::Timeout { unit: 1, timeout: Duration::from_millis(5), attempts: 1, heard: None });
         assert_eq!(timeout.exit(), Exit::Timeout);
         let io = CliError::from(Error::Io { context: "x".into(), source: Arc::new(io::ErrorKind::NotFound.into()) });
         assert_eq!(io.exit(), Exit::Io);
@@ -368,6 +458,82 @@ mod tests {
         let r = report(&CliError::from(e), None, 1);
         assert!(r.message.contains("exception 0x21 (vendor-specific)"));
         assert!(r.hints[0].contains("value out of the inverter's range"));
+    }
+
+    fn serial() -> Target {
+        let line = ferrobus_proto::frame::LineConfig::new(9600).unwrap();
+        Target::Serial { path: "/dev/ttyUSB0".into(), line, ascii: false }
+    }
+
+    fn timeout(heard: Option<Heard>) -> CliError {
+        CliError::from(Error::Timeout { unit: 2, timeout: Duration::from_millis(300), attempts: 1, heard })
+    }
+
+    fn exception_03(function: FunctionCode) -> String {
+        let e = Error::Exception { unit: 1, function, code: ExceptionCode::IllegalDataValue };
+        report(&CliError::from(e), None, 1).hints.join("\n")
+    }
+
+    #[test]
+    fn exception_03_hints_name_the_limit_of_the_function_asked_or_the_value() {
+        assert!(exception_03(FunctionCode::ReadCoils).contains("3G3RX: 32 coils"));
+        assert!(!exception_03(FunctionCode::ReadCoils).contains("registers"));
+        assert!(exception_03(FunctionCode::ReadHoldingRegisters).contains("(3G3RX: 4)"));
+        let single = exception_03(FunctionCode::WriteSingleRegister);
+        assert!(single.contains("refused the value: out of the parameter's range"), "{single}");
+        assert!(!single.contains("3G3RX") && !single.contains("--max-per-request"), "{single}");
+        assert!(exception_03(FunctionCode::WriteMultipleCoils).contains("3G3RX: 32"));
+        assert!(exception_03(FunctionCode::WriteMultipleRegisters).contains("range"));
+        assert!(exception_03(FunctionCode::Diagnostics).contains("08/00"));
+    }
+
+    #[test]
+    fn a_bad_checksum_gets_the_line_checklist_not_the_silence_one() {
+        let heard = Heard::BadChecksum { head: Some((2, 0x03)), expected: (2, 0x03) };
+        let r = report(&timeout(Some(heard)), Some(&serial()), 2);
+        assert_eq!(timeout(Some(heard)).exit(), Exit::Timeout);
+        assert!(r.message.contains("unit 2 answered, but the checksum was wrong"), "{}", r.message);
+        let hints = r.hints.join("\n");
+        assert!(hints.contains("noise") && hints.contains("termination") && hints.contains("9600 8E1"), "{hints}");
+        assert!(!hints.contains("swap A and B") && !hints.contains("C078"), "{hints}");
+        // Silence keeps the wiring, unit and response-wait checklist.
+        let hints = report(&timeout(None), Some(&serial()), 2).hints.join("\n");
+        assert!(hints.contains("swap A and B") && hints.contains("--unit 2") && hints.contains("C078"), "{hints}");
+    }
+
+    #[test]
+    fn what_came_instead_picks_the_hint() {
+        let tcp = Target::Tcp("127.0.0.1:502".into());
+        let garbage = Heard::Garbage { bytes: 9, reason: ferrobus_proto::DiscardReason::BadHeader };
+        let hints = report(&timeout(Some(garbage)), Some(&tcp), 2).hints.join("\n");
+        assert!(hints.contains("--rtu-tcp") && !hints.contains("USB"), "{hints}");
+        let other = Heard::OtherUnit { unit: 3, function: 0x03 };
+        let hints = report(&timeout(Some(other)), Some(&serial()), 2).hints.join("\n");
+        assert!(hints.contains("unit 3 answered while unit 2 was asked") && hints.contains("--unit 3"), "{hints}");
+        let late = Heard::OtherTransaction { transaction: 4, expected: 5 };
+        let hints = report(&timeout(Some(late)), Some(&tcp), 2).hints.join("\n");
+        assert!(hints.contains("late reply") && hints.contains("transaction ids"), "{hints}");
+        let wrong = Heard::WrongFunction { function: 0x80, expected: 0x03 };
+        assert!(report(&timeout(Some(wrong)), Some(&tcp), 2).hints[0].contains("did not answer this request"));
+    }
+
+    #[test]
+    fn usb_and_connection_hints_only_for_their_transport() {
+        let bad = || {
+            CliError::from(Error::BadReply {
+                unit: 1,
+                error: ferrobus_proto::master::MasterError::Mismatch { field: "byte count", expected: 4, received: 2 },
+            })
+        };
+        let tcp = Target::Tcp("127.0.0.1:502".into());
+        assert!(!report(&bad(), Some(&tcp), 1).hints.join("\n").contains("USB"));
+        assert!(report(&bad(), Some(&serial()), 1).hints.join("\n").contains("--low-latency"));
+        let eof = || CliError::from(Error::io("reading from x", io::ErrorKind::UnexpectedEof.into()));
+        let serial_hint = report(&eof(), Some(&serial()), 1).hints.join("\n");
+        assert!(serial_hint.contains("adapter unplugged") && !serial_hint.contains("server"), "{serial_hint}");
+        assert!(report(&eof(), Some(&tcp), 1).hints[0].contains("the server closed the connection"));
+        let eio = CliError::from(Error::io("reading from x", io::Error::from_raw_os_error(5)));
+        assert!(report(&eio, Some(&serial()), 1).hints[0].contains("adapter unplugged"));
     }
 
     #[test]

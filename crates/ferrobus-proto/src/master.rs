@@ -15,9 +15,11 @@
 //! - **Matching.** While waiting, a frame from another unit, with another function code, from
 //!   another transaction, or that is a request (our own echo, another master) is ignored and
 //!   counted; only the reply can end the wait. A reply that does not answer the request (wrong
-//!   byte count, a write echo that differs) fails it. If the wait times out after the unit sent
-//!   a frame with another function code, the timeout names that code: a device that answers
-//!   with the wrong function is told apart from a silent one.
+//!   byte count, a write echo that differs) fails it.
+//! - **What was heard.** A timeout says what came instead of the reply, if anything
+//!   ([`Heard`]): a frame with a broken checksum, bytes that made no frame, a frame from
+//!   another unit, under another transaction id, or with another function code. Silence,
+//!   garbage, a bad CRC and the wrong unit are different diagnoses.
 //! - **Outcomes.** An exception reply is a [`Completion::Exception`], a result like any other;
 //!   [`Completion::Failed`] means no usable reply came.
 //! - **Time.** The response timeout runs from the end of our transmission. A reply still
@@ -27,7 +29,7 @@ use core::fmt;
 use core::time::Duration;
 
 use crate::codes::{DiagnosticCode, ExceptionCode, FunctionCode, unit};
-use crate::error::{BufferTooSmall, PduError};
+use crate::error::{BufferTooSmall, DiscardReason, PduError};
 use crate::frame::{AduHeader, Direction, Framing, RxEvent, ascii, expire, feed, rtu};
 use crate::pdu::{BitValues, MAX_PDU_LEN, MeiRequest, MeiResponse, Request, Response};
 use crate::time::{Instant, earliest};
@@ -67,9 +69,8 @@ pub enum MasterError {
     Timeout {
         /// The time waited after the request had left.
         waited: Duration,
-        /// The function code of the last frame the unit sent meanwhile that did not answer
-        /// the request (over TCP: under our transaction id), ignored.
-        stray: Option<u8>,
+        /// What came instead of the reply, if anything: `None` is silence.
+        heard: Option<Heard>,
     },
     /// A frame from the right unit with the right function code, but a malformed PDU.
     BadResponse(PduError),
@@ -89,12 +90,9 @@ pub enum MasterError {
 impl fmt::Display for MasterError {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
         match self {
-            MasterError::Timeout { waited, stray } => {
-                write!(f, "no reply within {} ms", waited.as_millis())?;
-                match stray {
-                    Some(fc) => write!(f, " (the unit sent a frame with function code 0x{fc:02X} instead, ignored)"),
-                    None => Ok(()),
-                }
+            MasterError::Timeout { waited, heard: None } => write!(f, "no reply within {} ms", waited.as_millis()),
+            MasterError::Timeout { waited, heard: Some(heard) } => {
+                write!(f, "no valid reply within {} ms: {heard}", waited.as_millis())
             }
             MasterError::BadResponse(e) => write!(f, "malformed reply: {e}"),
             MasterError::Mismatch { field, expected, received } => {
@@ -106,6 +104,103 @@ impl fmt::Display for MasterError {
 }
 
 impl core::error::Error for MasterError {}
+
+/// What the master heard while it waited for a reply, instead of the reply: carried by
+/// [`MasterError::Timeout`]. When several things came, the one that tells most about the unit
+/// asked is kept (see [`Heard::weight`]), the latest of equal weight.
+#[derive(Clone, Copy, PartialEq, Eq, Debug)]
+pub enum Heard {
+    /// A frame whose checksum (RTU CRC, ASCII LRC) was wrong: noise on the line, a missing
+    /// termination, or a baud rate or parity that does not match.
+    BadChecksum {
+        /// The address and function code at its start, when it had them. The damage may be
+        /// in these bytes too.
+        head: Option<(u8, u8)>,
+        /// The unit and the function code asked.
+        expected: (u8, u8),
+    },
+    /// Bytes that did not make a frame (a frame cut short, noise, a bad header).
+    Garbage {
+        /// How many.
+        bytes: usize,
+        /// Why they made no frame.
+        reason: DiscardReason,
+    },
+    /// A valid frame from another unit.
+    OtherUnit {
+        /// The unit that sent it.
+        unit: u8,
+        /// Its function code.
+        function: u8,
+    },
+    /// A frame from the unit asked under another transaction id (Modbus/TCP): a late reply to
+    /// an earlier request, or a gateway that does not echo the id.
+    OtherTransaction {
+        /// The transaction id it carried.
+        transaction: u16,
+        /// The transaction id of the request.
+        expected: u16,
+    },
+    /// A frame from the unit asked with a function code that does not answer the request
+    /// (a device that misreads the request, or a late reply to an earlier one).
+    WrongFunction {
+        /// The function code it carried.
+        function: u8,
+        /// The function code asked.
+        expected: u8,
+    },
+}
+
+impl Heard {
+    /// How much it says about the unit asked: a valid frame from it (3), a broken frame that
+    /// names it (2), broken bytes (1), another unit's frame, which may be other traffic (0).
+    pub fn weight(&self) -> u8 {
+        match *self {
+            Heard::OtherTransaction { .. } | Heard::WrongFunction { .. } => 3,
+            Heard::BadChecksum { head: Some((from, _)), expected: (unit, _) } if from == unit => 2,
+            Heard::BadChecksum { .. } | Heard::Garbage { .. } => 1,
+            Heard::OtherUnit { .. } => 0,
+        }
+    }
+
+    /// Whether it is bytes damaged on the way (a bad checksum, or no frame at all): a line
+    /// problem rather than a device one.
+    pub fn is_damage(&self) -> bool {
+        matches!(self, Heard::BadChecksum { .. } | Heard::Garbage { .. })
+    }
+}
+
+impl fmt::Display for Heard {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        match *self {
+            Heard::BadChecksum { head: Some((from, fc)), expected: (unit, function) } if from == unit => {
+                write!(f, "unit {unit} answered, but the checksum was wrong ")?;
+                if fc & !FunctionCode::EXCEPTION_BIT == function {
+                    write!(f, "(function code 0x{fc:02X}, as asked)")
+                } else {
+                    write!(f, "(function code 0x{fc:02X}, expected 0x{function:02X})")
+                }
+            }
+            Heard::BadChecksum { head: Some((from, fc)), .. } => {
+                write!(f, "a frame with a wrong checksum came (address {from}, function code 0x{fc:02X})")
+            }
+            Heard::BadChecksum { head: None, .. } => f.write_str("a frame with a wrong checksum came"),
+            Heard::Garbage { bytes, reason } => {
+                write!(f, "{bytes} byte{} came that made no frame ({reason})", if bytes == 1 { "" } else { "s" })
+            }
+            Heard::OtherUnit { unit, function } => {
+                write!(f, "unit {unit} sent a frame (function code 0x{function:02X}) instead, ignored")
+            }
+            Heard::OtherTransaction { transaction, expected } => {
+                write!(f, "a reply came under transaction id {transaction}, not {expected}, ignored")
+            }
+            Heard::WrongFunction { function, expected } => write!(
+                f,
+                "the unit sent a frame with function code 0x{function:02X} instead of 0x{expected:02X}, ignored"
+            ),
+        }
+    }
+}
 
 /// Why [`Master::submit`] refused a request.
 #[derive(Clone, Copy, PartialEq, Eq, Debug)]
@@ -240,8 +335,8 @@ struct Core {
     reply: [u8; MAX_PDU_LEN],
     reply_len: usize,
     outcome: Option<Outcome>,
-    /// The function code of a frame from the asked unit that did not answer the request.
-    stray: Option<u8>,
+    /// What came instead of the reply during this attempt.
+    heard: Option<Heard>,
     last_activity: Option<Instant>,
     stats: MasterStats,
 }
@@ -269,7 +364,7 @@ impl<F: Framing> Master<F> {
                 reply: [0; MAX_PDU_LEN],
                 reply_len: 0,
                 outcome: None,
-                stray: None,
+                heard: None,
                 last_activity: None,
                 stats: MasterStats::default(),
             },
@@ -340,7 +435,7 @@ impl<F: Framing> Master<F> {
         core.transaction = transaction;
         core.unit = unit;
         core.raw = raw;
-        core.stray = None;
+        core.heard = None;
         core.no_reply = no_reply || (core.serial && unit == unit::BROADCAST);
         core.state = State::Queued { not_before: now };
         Ok(())
@@ -436,8 +531,8 @@ impl<F: Framing> Master<F> {
                 let in_progress = self.framing.poll_timeout().is_some_and(|rx| rx > now);
                 if !in_progress || now >= self.grace_end(deadline) {
                     let waited = now.saturating_duration_since(sent);
-                    let stray = self.core.stray;
-                    self.core.finish(Outcome::Failed(MasterError::Timeout { waited, stray }));
+                    let heard = self.core.heard;
+                    self.core.finish(Outcome::Failed(MasterError::Timeout { waited, heard }));
                 }
             }
             _ => {}
@@ -479,21 +574,46 @@ impl Core {
         bytes.get(same..).unwrap_or_default()
     }
 
+    /// Keeps `heard` unless something that tells more was heard already.
+    fn hear(&mut self, heard: Heard) {
+        if self.heard.is_none_or(|kept| heard.weight() >= kept.weight()) {
+            self.heard = Some(heard);
+        }
+    }
+
     fn on_event(&mut self, event: &RxEvent<'_>) {
-        let RxEvent::Frame(frame) = event else { return };
-        if !matches!(self.state, State::AwaitingReply { .. }) || frame.direction == Direction::Request {
+        let awaiting = matches!(self.state, State::AwaitingReply { .. });
+        let asked = self.request.first().copied().unwrap_or_default();
+        let frame = match *event {
+            RxEvent::Frame(frame) => frame,
+            RxEvent::Discarded { bytes, reason, head, .. } => {
+                if awaiting {
+                    self.hear(match reason {
+                        DiscardReason::ChecksumMismatch => Heard::BadChecksum { head, expected: (self.unit, asked) },
+                        reason => Heard::Garbage { bytes, reason },
+                    });
+                }
+                return;
+            }
+        };
+        if !awaiting || frame.direction == Direction::Request {
             self.stats.ignored_frames = self.stats.ignored_frames.wrapping_add(1);
             return;
         }
-        let function = frame.pdu.first().copied();
-        let answers = function.map(|fc| fc & !FunctionCode::EXCEPTION_BIT) == self.request.first().copied();
-        let addressed = frame.header.unit == self.unit && (self.serial || frame.header.transaction == self.transaction);
-        if !addressed || !answers {
-            if addressed {
-                // Not the reply (on a serial line perhaps a late one to an earlier request),
-                // but worth naming if the wait ends without one.
-                self.stray = function;
-            }
+        let function = frame.pdu.first().copied().unwrap_or_default();
+        let answers = function & !FunctionCode::EXCEPTION_BIT == asked;
+        let from_unit = frame.header.unit == self.unit;
+        let in_transaction = self.serial || frame.header.transaction == self.transaction;
+        if !from_unit || !in_transaction || !answers {
+            // Not the reply (perhaps a late one to an earlier request), but worth naming if
+            // the wait ends without one.
+            self.hear(if !from_unit {
+                Heard::OtherUnit { unit: frame.header.unit, function }
+            } else if !in_transaction {
+                Heard::OtherTransaction { transaction: frame.header.transaction, expected: self.transaction }
+            } else {
+                Heard::WrongFunction { function, expected: asked }
+            });
             self.stats.ignored_frames = self.stats.ignored_frames.wrapping_add(1);
             return;
         }

@@ -11,7 +11,7 @@ use std::time::Duration;
 
 use ferrobus_proto::FunctionCode;
 use ferrobus_proto::frame::Framing;
-use ferrobus_proto::master::{Completion, MAX_TX_LEN, Master, MasterConfig, MasterError};
+use ferrobus_proto::master::{Completion, Heard, MAX_TX_LEN, Master, MasterConfig, MasterError};
 use ferrobus_proto::pdu::{Request, Response};
 use tokio::io::{AsyncReadExt, AsyncWriteExt};
 use tokio::sync::{mpsc, oneshot};
@@ -120,12 +120,15 @@ impl<F: Framing + Send + 'static> Driver<F> {
         let retries = if probe { 0 } else { command.options.retries };
         let function = FunctionCode::from_u8(command.pdu.first().copied().unwrap_or_default());
         let mut attempts = 0;
-        let mut stray = None;
+        let mut heard: Option<Heard> = None;
         loop {
             attempts += 1;
             let result = self.transact(command).await;
-            if let Err(Error::Timeout { stray: Some(fc), .. }) = result {
-                stray = Some(fc);
+            if let Err(Error::Timeout { heard: Some(now), .. }) = result {
+                // What tells most about the unit, over all attempts.
+                if heard.is_none_or(|kept| now.weight() >= kept.weight()) {
+                    heard = Some(now);
+                }
             }
             let retry = matches!(result, Err(Error::Timeout { .. } | Error::BadReply { .. }));
             if retry && attempts <= retries {
@@ -134,7 +137,7 @@ impl<F: Framing + Send + 'static> Driver<F> {
             }
             self.record_health(unit, &result);
             return match result {
-                Err(Error::Timeout { unit, timeout, .. }) => Err(Error::Timeout { unit, timeout, attempts, stray }),
+                Err(Error::Timeout { unit, timeout, .. }) => Err(Error::Timeout { unit, timeout, attempts, heard }),
                 other => other,
             };
         }
@@ -286,8 +289,8 @@ fn convert(command: &Command, completion: Completion<'_>) -> Result<Reply, Error
         Completion::Raw(bytes) => Ok(Reply::Pdu(bytes.to_vec())),
         Completion::Exception(code) => Err(Error::Exception { unit, function, code }),
         Completion::Sent => Ok(Reply::Sent),
-        Completion::Failed(MasterError::Timeout { stray, .. }) => {
-            Err(Error::Timeout { unit, timeout: command.options.timeout, attempts: 1, stray })
+        Completion::Failed(MasterError::Timeout { heard, .. }) => {
+            Err(Error::Timeout { unit, timeout: command.options.timeout, attempts: 1, heard })
         }
         Completion::Failed(error) => Err(Error::BadReply { unit, error }),
     }

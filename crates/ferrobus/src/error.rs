@@ -9,7 +9,7 @@ use std::io;
 use std::sync::Arc;
 use std::time::Duration;
 
-use ferrobus_proto::master::MasterError;
+use ferrobus_proto::master::{Heard, MasterError};
 use ferrobus_proto::{ExceptionCode, FunctionCode, PduError};
 
 /// Everything that can go wrong with a request.
@@ -25,11 +25,14 @@ pub enum Error {
         /// The exception code (named, or a vendor code such as 0x21).
         code: ExceptionCode,
     },
-    /// No reply came in time, after every retry.
+    /// No reply came in time, after every retry. `heard` tells silence from a unit that
+    /// answered with a broken frame, bytes that made no frame, another unit's frame, a reply
+    /// under another transaction id or with another function code.
     #[error(
-        "no reply from unit {unit} within {} ms ({attempts} attempt{s}){}",
+        "no {}reply from unit {unit} within {} ms ({attempts} attempt{s}){}",
+        if heard.is_some() { "valid " } else { "" },
         timeout.as_millis(),
-        stray.map(|fc| format!("; it sent a frame with function code 0x{fc:02X} instead, ignored")).unwrap_or_default(),
+        heard.map(|h| format!(": {h}")).unwrap_or_default(),
         s = if *.attempts == 1 { "" } else { "s" },
     )]
     Timeout {
@@ -39,9 +42,9 @@ pub enum Error {
         timeout: Duration,
         /// How many times the request was sent.
         attempts: u32,
-        /// The function code of the last frame the unit sent instead of a reply (a device
-        /// that misreads the request, not a silent one), if any.
-        stray: Option<u8>,
+        /// What came instead of a reply, over all attempts (the most telling, see
+        /// [`Heard::weight`]); `None` is silence.
+        heard: Option<Heard>,
     },
     /// A reply came but it was malformed, or did not answer the request.
     #[error("bad reply from unit {unit}: {error}")]
@@ -116,13 +119,22 @@ mod tests {
         };
         assert_eq!(e.to_string(), "unit 5 answered 0x03 Read Holding Registers with exception 0x21 (vendor-specific)");
         assert_eq!(e.exception(), Some(ExceptionCode::Vendor(0x21)));
-        let t = Error::Timeout { unit: 1, timeout: Duration::from_millis(500), attempts: 3, stray: None };
+        let t = Error::Timeout { unit: 1, timeout: Duration::from_millis(500), attempts: 3, heard: None };
         assert_eq!(t.to_string(), "no reply from unit 1 within 500 ms (3 attempts)");
         assert!(t.is_timeout());
-        let t = Error::Timeout { unit: 1, timeout: Duration::from_millis(500), attempts: 1, stray: Some(0x80) };
+        let heard = Some(Heard::WrongFunction { function: 0x80, expected: 0x03 });
+        let t = Error::Timeout { unit: 1, timeout: Duration::from_millis(500), attempts: 1, heard };
         assert_eq!(
             t.to_string(),
-            "no reply from unit 1 within 500 ms (1 attempt); it sent a frame with function code 0x80 instead, ignored"
+            "no valid reply from unit 1 within 500 ms (1 attempt): the unit sent a frame with function code 0x80 \
+             instead of 0x03, ignored"
+        );
+        let heard = Some(Heard::BadChecksum { head: Some((2, 0x1E)), expected: (2, 0x44) });
+        let t = Error::Timeout { unit: 2, timeout: Duration::from_millis(300), attempts: 1, heard };
+        assert_eq!(
+            t.to_string(),
+            "no valid reply from unit 2 within 300 ms (1 attempt): unit 2 answered, but the checksum was wrong \
+             (function code 0x1E, expected 0x44)"
         );
     }
 }

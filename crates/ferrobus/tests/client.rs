@@ -211,7 +211,7 @@ async fn a_silent_unit_times_out_after_each_retry_and_the_error_says_so() {
     let client = Client::connect(bench.transport(&[1], false), config()).await.unwrap().with_retries(2);
     let start = Instant::now();
     let err = client.read_holding_registers(9, 0, 1).await.unwrap_err();
-    let Error::Timeout { unit: 9, timeout, attempts: 3, stray: None } = err else { panic!("{err:?}") };
+    let Error::Timeout { unit: 9, timeout, attempts: 3, heard: None } = err else { panic!("{err:?}") };
     assert_eq!(timeout, Duration::from_millis(200));
     let elapsed = start.elapsed();
     assert!(elapsed >= Duration::from_millis(600) && elapsed < Duration::from_millis(650), "{elapsed:?}");

@@ -284,3 +284,37 @@ pub(crate) fn stdout(assert: &Assert) -> String {
 pub(crate) fn stderr(assert: &Assert) -> String {
     String::from_utf8_lossy(&assert.get_output().stderr).into_owned()
 }
+
+/// `ferrobus sim --pty ARGS`, stopped when dropped; `path` is the pty it serves.
+pub(crate) struct Sim {
+    child: std::process::Child,
+    /// The pty.
+    pub(crate) path: String,
+}
+
+impl Sim {
+    /// Starts it with `ARGS` and waits for its pty path.
+    pub(crate) fn pty(args: &[&str]) -> Sim {
+        use std::io::BufRead;
+        let mut child = std::process::Command::new(env!("CARGO_BIN_EXE_ferrobus"))
+            .args(["sim", "--pty", "--duration", "60s"])
+            .args(args)
+            .stdout(std::process::Stdio::piped())
+            .stderr(std::process::Stdio::null())
+            .spawn()
+            .expect("ferrobus sim starts");
+        let mut line = String::new();
+        let stdout = child.stdout.take().expect("piped stdout");
+        std::io::BufReader::new(stdout).read_line(&mut line).expect("the sim prints its pty");
+        let path = line.trim().to_string();
+        assert!(path.starts_with('/'), "the sim printed {line:?}, not a pty path");
+        Sim { child, path }
+    }
+}
+
+impl Drop for Sim {
+    fn drop(&mut self) {
+        let _ = self.child.kill();
+        let _ = self.child.wait();
+    }
+}

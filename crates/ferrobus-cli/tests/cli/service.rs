@@ -1,8 +1,9 @@
 //! `ferrobus diag`, `info`, `raw`.
 
+use assert_cmd::assert::OutputAssertExt;
 use serde_json::Value;
 
-use crate::server::{Server, stderr, stdout};
+use crate::server::{Server, Sim, ferrobus, stderr, stdout};
 
 #[test]
 fn diag_echo_and_the_word_sub_functions_answer() {
@@ -28,13 +29,34 @@ fn diag_echo_and_the_word_sub_functions_answer() {
 fn diag_counters_reads_all_eight_into_a_table() {
     let server = Server::start();
     let table = stdout(&server.run(&["diag", "counters"]).success());
-    assert_eq!(table.lines().count(), 9, "{table}");
+    assert_eq!(table.lines().count(), 10, "{table}");
+    assert!(table.ends_with("(counts as of the first read (0x0B); the tool's own later reads are taken out)\n"));
     assert!(table.lines().next().unwrap().starts_with("sub   counter"), "{table}");
     assert!(table.contains("0x12  Return Bus Character Overrun Count"), "{table}");
     let json: Value = serde_json::from_str(&stdout(&server.run(&["diag", "counters", "--json"]).success())).unwrap();
     let counters = json["counters"].as_object().unwrap();
     assert_eq!(counters.len(), 8);
     assert!(counters.contains_key("bus-messages") && counters.contains_key("overruns"));
+}
+
+#[test]
+fn diag_counters_are_one_snapshot_the_message_counts_agree() {
+    // Every message on this line is addressed to unit 2, so the bus and server message counts
+    // must agree; read raw, the server count would be 3 ahead (the reads of 0C, 0D and 0E).
+    let sim = Sim::pty(&["--profile", "generic", "--unit", "2"]);
+    let run = |args: &[&str]| {
+        ferrobus()
+            .args(["--port", &sim.path, "--parity", "none", "--unit", "2", "--timeout", "300ms"])
+            .args(args)
+            .assert()
+    };
+    run(&["diag", "echo"]).success();
+    let json: Value = serde_json::from_str(&stdout(&run(&["diag", "counters", "--json"]).success())).unwrap();
+    let counters = &json["counters"];
+    assert_eq!(counters["bus-messages"], counters["server-messages"], "{json}");
+    assert!(counters["bus-messages"].as_u64().is_some_and(|n| n >= 1), "{json}");
+    assert_eq!(counters["exceptions"], 0, "{json}");
+    assert!(json["as_of"].as_str().unwrap().contains("as of the first read"), "{json}");
 }
 
 #[test]
@@ -107,4 +129,37 @@ fn raw_sends_any_pdu_and_decodes_the_reply() {
     assert!(stdout(&exception).contains("reply    83 02"), "{}", stdout(&exception));
     assert!(stderr(&exception).contains("exception 0x02 Illegal Data Address"));
     server.run(&["raw", "03 0"]).code(2);
+}
+
+#[test]
+fn diag_restart_after_listen_only_expects_the_silence_and_confirms_by_an_echo() {
+    // Listen-only mode is a serial line's: the simulator on a pty.
+    let sim = Sim::pty(&["--profile", "generic", "--unit", "2"]);
+    let run = |args: &[&str]| {
+        ferrobus()
+            .args(["--port", &sim.path, "--parity", "none", "--unit", "2", "--timeout", "300ms"])
+            .args(args)
+            .assert()
+    };
+    run(&["diag", "listen-only"]).success();
+    run(&["diag", "echo"]).code(3);
+    let assert = run(&["diag", "restart"]).success();
+    assert_eq!(
+        stdout(&assert),
+        "unit 2: communications restarted (FC08/01): no reply, as expected in listen-only mode; it answers the \
+         echo (FC08/00) now\n"
+    );
+    assert!(stderr(&assert).contains("did not answer the restart (FC08/01), as a device in listen-only mode does"));
+    // Out of listen-only mode, the restart is answered.
+    assert_eq!(stdout(&run(&["diag", "restart"]).success()), "unit 2: communications restarted (FC08/01)\n");
+}
+
+#[test]
+fn diag_restart_to_a_silent_unit_still_fails_after_the_echo_with_exit_3() {
+    let server = Server::start();
+    let assert = server.run(&["--unit", "9", "diag", "restart"]).code(3);
+    let err = stderr(&assert);
+    assert!(err.contains("checking that it answers an echo (FC08/00)"), "{err}");
+    assert!(err.contains("no reply from unit 9"), "{err}");
+    assert!(stdout(&assert).is_empty());
 }

@@ -82,6 +82,16 @@ enum State {
     Frame,
 }
 
+/// A run of discarded characters not yet reported.
+#[derive(Clone, Copy, Debug)]
+struct Discard {
+    bytes: usize,
+    reason: DiscardReason,
+    at: Instant,
+    /// The address and function code of the frame they began, if they did.
+    head: Option<(u8, u8)>,
+}
+
 /// The incremental ASCII receiver and encoder.
 #[derive(Clone, Debug)]
 pub struct AsciiCodec {
@@ -99,7 +109,7 @@ pub struct AsciiCodec {
     skipped: usize,
     last_rx: Option<Instant>,
     found: Option<(Instant, bool)>,
-    report: Option<(usize, DiscardReason, Instant)>,
+    report: Option<Discard>,
     stats: RxStats,
 }
 
@@ -132,15 +142,23 @@ impl AsciiCodec {
         self
     }
 
-    fn discard(&mut self, bytes: usize, reason: DiscardReason, at: Instant) {
+    fn discard(&mut self, bytes: usize, reason: DiscardReason, at: Instant, head: Option<(u8, u8)>) {
         if bytes == 0 {
             return;
         }
         self.stats.count_discard(bytes, reason);
         self.report = Some(match self.report {
-            Some((n, r, t)) => (n.saturating_add(bytes), r, t),
-            None => (bytes, reason, at),
+            Some(prev) => Discard { bytes: prev.bytes.saturating_add(bytes), ..prev },
+            None => Discard { bytes, reason, at, head },
         });
+    }
+
+    /// The address and function code decoded so far in the current frame.
+    fn head(&self) -> Option<(u8, u8)> {
+        match *self.buf.get(..self.len).unwrap_or_default() {
+            [unit, function, ..] => Some((unit, function)),
+            _ => None,
+        }
     }
 
     fn start_frame(&mut self) {
@@ -154,14 +172,14 @@ impl AsciiCodec {
 
     fn abandon_frame(&mut self, reason: DiscardReason, at: Instant) {
         if self.state == State::Frame {
-            self.discard(self.chars, reason, at);
+            self.discard(self.chars, reason, at, self.head());
         }
         self.state = State::Idle;
     }
 
     fn flush_skipped(&mut self, at: Instant) {
         let skipped = core::mem::take(&mut self.skipped);
-        self.discard(skipped, DiscardReason::Noise, at);
+        self.discard(skipped, DiscardReason::Noise, at, None);
     }
 
     /// Takes one character; returns whether a frame is complete.
@@ -223,7 +241,7 @@ impl AsciiCodec {
             None
         };
         if let Some(reason) = reason {
-            self.discard(self.chars, reason, now);
+            self.discard(self.chars, reason, now, self.head());
             return false;
         }
         self.stats.frames = self.stats.frames.wrapping_add(1);
@@ -262,8 +280,8 @@ impl Framing for AsciiCodec {
     }
 
     fn poll_event(&mut self) -> Option<RxEvent<'_>> {
-        if let Some((bytes, reason, at)) = self.report.take() {
-            return Some(RxEvent::Discarded { bytes, reason, at });
+        if let Some(Discard { bytes, reason, at, head }) = self.report.take() {
+            return Some(RxEvent::Discarded { bytes, reason, at, head });
         }
         let (end, handed_out) = self.found.as_mut()?;
         if *handed_out {
@@ -410,7 +428,12 @@ mod tests {
         c.handle_timeout(Instant::from_millis(5));
         assert_eq!(
             c.poll_event(),
-            Some(RxEvent::Discarded { bytes: 5, reason: DiscardReason::TooShort, at: Instant::from_millis(5) })
+            Some(RxEvent::Discarded {
+                bytes: 5,
+                reason: DiscardReason::TooShort,
+                at: Instant::from_millis(5),
+                head: Some((0x01, 0x03))
+            })
         );
         assert_eq!(c.poll_timeout(), None);
     }

@@ -153,7 +153,7 @@ impl Framing for MbapCodec {
 
     fn poll_event(&mut self) -> Option<RxEvent<'_>> {
         if let Some((bytes, at)) = self.report.take() {
-            return Some(RxEvent::Discarded { bytes, reason: DiscardReason::BadHeader, at });
+            return Some(RxEvent::Discarded { bytes, reason: DiscardReason::BadHeader, at, head: None });
         }
         let (total, header, end, handed_out) = self.found.as_mut()?;
         if *handed_out {

@@ -98,6 +98,10 @@ pub enum RxEvent<'a> {
         reason: DiscardReason,
         /// When the receiver decided.
         at: Instant,
+        /// The first two bytes of the run as a frame's address and function code, when the
+        /// run began where a frame could (RTU, ASCII): what a frame with a broken checksum
+        /// said it was. Only a hint — the damage may be in these bytes too.
+        head: Option<(u8, u8)>,
     },
 }
 

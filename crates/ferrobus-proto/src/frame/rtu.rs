@@ -142,6 +142,8 @@ struct Noise {
     bytes: usize,
     reason: DiscardReason,
     at: Instant,
+    /// The run's first two bytes.
+    head: Option<(u8, u8)>,
 }
 
 /// The incremental RTU receiver and encoder. See the [module docs](self) for how it finds
@@ -377,11 +379,15 @@ impl RtuCodec {
 
     fn drop_bytes(&mut self, n: usize, reason: DiscardReason, at: Instant) {
         let n = n.min(self.len.saturating_sub(self.start));
+        let head = match *self.candidate() {
+            [unit, function, ..] => Some((unit, function)),
+            _ => None,
+        };
         self.start = self.start.saturating_add(n);
         self.clean = false;
         match &mut self.noise {
             Some(noise) => noise.bytes = noise.bytes.saturating_add(n),
-            None => self.noise = Some(Noise { bytes: n, reason, at }),
+            None => self.noise = Some(Noise { bytes: n, reason, at, head }),
         }
     }
 
@@ -481,7 +487,12 @@ impl Framing for RtuCodec {
 
     fn poll_event(&mut self) -> Option<RxEvent<'_>> {
         if let Some(noise) = self.report.take() {
-            return Some(RxEvent::Discarded { bytes: noise.bytes, reason: noise.reason, at: noise.at });
+            return Some(RxEvent::Discarded {
+                bytes: noise.bytes,
+                reason: noise.reason,
+                at: noise.at,
+                head: noise.head,
+            });
         }
         let found = self.found.as_mut().filter(|f| !f.handed_out)?;
         found.handed_out = true;

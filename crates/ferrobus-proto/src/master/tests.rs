@@ -213,7 +213,7 @@ fn no_reply_times_out_exactly_the_timeout_after_the_request_left() {
     m.handle_timeout(ns(left + 200_000_000));
     assert_eq!(
         done(&mut m),
-        Some(Done::Failed(MasterError::Timeout { waited: Duration::from_millis(200), stray: None }))
+        Some(Done::Failed(MasterError::Timeout { waited: Duration::from_millis(200), heard: None }))
     );
     assert_eq!(m.stats().timeouts, 1);
     assert!(m.is_idle());
@@ -335,10 +335,12 @@ fn a_timeout_names_the_function_code_the_unit_sent_instead_of_a_reply() {
     assert!(m.poll_event().is_none(), "ignored, not accepted");
     m.handle_timeout(ns(1_000_000_000));
     match m.poll_event() {
-        Some(Completion::Failed(e @ MasterError::Timeout { stray: Some(0x80), .. })) => {
+        Some(Completion::Failed(
+            e @ MasterError::Timeout { heard: Some(Heard::WrongFunction { function: 0x80, expected: 0x03 }), .. },
+        )) => {
             assert_eq!(
                 e.to_string(),
-                "no reply within 1000 ms (the unit sent a frame with function code 0x80 instead, ignored)"
+                "no valid reply within 1000 ms: the unit sent a frame with function code 0x80 instead of 0x03, ignored"
             );
         }
         other => panic!("{other:?}"),
@@ -347,7 +349,7 @@ fn a_timeout_names_the_function_code_the_unit_sent_instead_of_a_reply() {
     m.submit(ns(1_000_000_000), 1, &read_holding(0, 1)).unwrap();
     m.poll_transmit(ns(1_000_000_000), &mut buf).unwrap();
     m.handle_timeout(ns(2_000_000_000));
-    assert!(matches!(m.poll_event(), Some(Completion::Failed(MasterError::Timeout { stray: None, .. }))));
+    assert!(matches!(m.poll_event(), Some(Completion::Failed(MasterError::Timeout { heard: None, .. }))));
 }
 
 #[test]
@@ -392,4 +394,139 @@ fn a_raw_request_is_sent_as_is_and_its_reply_returned_unparsed() {
         m.submit_raw(ns(40_000_000), 1, &[]),
         Err(SubmitError::Encode(BufferTooSmall { needed: 1, available: 253 }))
     );
+}
+
+// ---- What a timeout heard ----------------------------------------------------------------
+
+/// Sends a read of one register to `unit` at t = 0, feeds `heard` at 20 ms, and returns what
+/// the timeout 300 ms after the request left says it heard.
+#[track_caller]
+fn heard_after(unit: u8, heard: &[&[u8]]) -> (Option<Heard>, std::string::String) {
+    let config = MasterConfig { response_timeout: Duration::from_millis(300), ..MasterConfig::default() };
+    let mut m = master(config);
+    m.submit(ns(0), unit, &read_holding(0, 1)).unwrap();
+    transmit(&mut m, ns(0));
+    for (i, bytes) in (0u64..).zip(heard) {
+        m.on_bytes(ns(20_000_000 + i * 50_000_000), bytes);
+        m.handle_timeout(ns(20_000_000 + i * 50_000_000 + T3_5));
+        assert_eq!(done(&mut m), None, "nothing heard ends the wait");
+    }
+    m.handle_timeout(ns(8 * CHAR + 300_000_000));
+    match done(&mut m) {
+        Some(Done::Failed(e @ MasterError::Timeout { heard, .. })) => (heard, e.to_string()),
+        other => panic!("expected a timeout, got {other:?}"),
+    }
+}
+
+fn bad_crc(mut frame: Vec<u8>) -> Vec<u8> {
+    if let Some(b) = frame.last_mut() {
+        *b ^= 0x5A;
+    }
+    frame
+}
+
+#[test]
+fn silence_times_out_with_nothing_heard() {
+    assert_eq!(heard_after(2, &[]), (None, "no reply within 300 ms".into()));
+}
+
+#[test]
+fn a_reply_with_a_bad_crc_times_out_saying_the_unit_answered_with_a_wrong_checksum() {
+    let (heard, text) = heard_after(2, &[&bad_crc(rtu(2, &[0x03, 0x02, 0x00, 0x07]))]);
+    assert_eq!(heard, Some(Heard::BadChecksum { head: Some((2, 0x03)), expected: (2, 0x03) }));
+    assert_eq!(
+        text,
+        "no valid reply within 300 ms: unit 2 answered, but the checksum was wrong (function code 0x03, as asked)"
+    );
+    assert!(heard.is_some_and(|h| h.is_damage()));
+}
+
+#[test]
+fn a_bad_crc_over_a_damaged_function_code_names_the_code_seen_and_the_one_expected() {
+    let mut frame = rtu(2, &[0x03, 0x02, 0x00, 0x07]);
+    frame[1] = 0x1E;
+    let (heard, text) = heard_after(2, &[&frame]);
+    assert_eq!(heard, Some(Heard::BadChecksum { head: Some((2, 0x1E)), expected: (2, 0x03) }));
+    assert!(
+        text.ends_with("unit 2 answered, but the checksum was wrong (function code 0x1E, expected 0x03)"),
+        "{text}"
+    );
+}
+
+#[test]
+fn bytes_that_make_no_frame_time_out_as_garbage_not_silence() {
+    let (heard, text) = heard_after(2, &[&[0xFF]]);
+    assert_eq!(heard, Some(Heard::Garbage { bytes: 1, reason: DiscardReason::TooShort }));
+    assert_eq!(text, "no valid reply within 300 ms: 1 byte came that made no frame (frame too short)");
+}
+
+#[test]
+fn a_frame_from_another_unit_times_out_naming_that_unit() {
+    let (heard, text) = heard_after(2, &[&rtu(3, &[0x03, 0x02, 0x00, 0x07])]);
+    assert_eq!(heard, Some(Heard::OtherUnit { unit: 3, function: 0x03 }));
+    assert!(text.ends_with("unit 3 sent a frame (function code 0x03) instead, ignored"), "{text}");
+}
+
+#[test]
+fn what_tells_most_about_the_unit_asked_is_kept_over_later_lesser_things() {
+    let reply = bad_crc(rtu(2, &[0x03, 0x02, 0x00, 0x07]));
+    let other = rtu(3, &[0x03, 0x02, 0x00, 0x07]);
+    let ours = Heard::BadChecksum { head: Some((2, 0x03)), expected: (2, 0x03) };
+    assert_eq!(heard_after(2, &[&reply, &other, &[0xFF]]).0, Some(ours));
+    // Garbage outweighs another unit's traffic; the latest of equal weight is kept.
+    let garbage = Heard::Garbage { bytes: 1, reason: DiscardReason::TooShort };
+    assert_eq!(heard_after(2, &[&other, &[0xFF]]).0, Some(garbage));
+    assert_eq!(
+        heard_after(2, &[&other, &rtu(4, &[0x03, 0x02, 0x00, 0x07])]).0,
+        Some(Heard::OtherUnit { unit: 4, function: 0x03 })
+    );
+    // A valid frame from the unit with another code outweighs a broken one.
+    let wrong = Heard::WrongFunction { function: 0x04, expected: 0x03 };
+    assert_eq!(heard_after(2, &[&rtu(2, &[0x04, 0x02, 0x00, 0x07]), &reply]).0, Some(wrong));
+}
+
+#[test]
+fn a_tcp_reply_under_another_transaction_id_times_out_naming_both_ids() {
+    let config = MasterConfig { response_timeout: Duration::from_millis(300), ..MasterConfig::default() };
+    let mut m = Master::new(MbapCodec::new(), config);
+    m.submit(ns(0), 1, &read_holding(0, 1)).unwrap();
+    let mut buf = [0u8; MAX_TX_LEN];
+    let n = m.poll_transmit(ns(0), &mut buf).unwrap();
+    assert_eq!(&buf[..2], [0x00, 0x01], "the request's transaction id is 1 ({:02X?})", &buf[..n]);
+    // The right unit and function code, under transaction 7.
+    m.on_bytes(ns(1_000_000), &[0x00, 0x07, 0x00, 0x00, 0x00, 0x05, 0x01, 0x03, 0x02, 0x00, 0x2A]);
+    assert!(m.poll_event().is_none(), "ignored, not accepted");
+    m.handle_timeout(ns(300_000_000));
+    match m.poll_event() {
+        Some(Completion::Failed(
+            e @ MasterError::Timeout { heard: Some(Heard::OtherTransaction { transaction: 7, expected: 1 }), .. },
+        )) => assert_eq!(
+            e.to_string(),
+            "no valid reply within 300 ms: a reply came under transaction id 7, not 1, ignored"
+        ),
+        other => panic!("{other:?}"),
+    }
+}
+
+#[test]
+fn an_ascii_reply_with_a_bad_lrc_names_the_unit_and_function_code_it_carried() {
+    use crate::frame::ascii::{AsciiCodec, encode_pdu};
+    let timing = LineTiming::new(&LineConfig::new(9600).unwrap());
+    let config = MasterConfig { response_timeout: Duration::from_millis(300), ..MasterConfig::default() };
+    let mut m = Master::new(AsciiCodec::new(timing), config);
+    m.submit(ns(0), 5, &read_holding(0, 1)).unwrap();
+    let mut buf = [0u8; MAX_TX_LEN];
+    let sent = m.poll_transmit(ns(0), &mut buf).unwrap();
+    let mut reply = [0u8; 64];
+    let n = encode_pdu(5, &[0x03, 0x02, 0x00, 0x07], &mut reply).unwrap();
+    // `… L L CR LF`: another LRC.
+    reply[n - 4] = if reply[n - 4] == b'0' { b'1' } else { b'0' };
+    m.on_bytes(ns(20_000_000), &reply[..n]);
+    m.handle_timeout(ns(sent as u64 * CHAR + 300_000_000));
+    match m.poll_event() {
+        Some(Completion::Failed(MasterError::Timeout { heard, .. })) => {
+            assert_eq!(heard, Some(Heard::BadChecksum { head: Some((5, 0x03)), expected: (5, 0x03) }));
+        }
+        other => panic!("{other:?}"),
+    }
 }

@@ -381,7 +381,7 @@ impl Core {
 
     fn on_event<H: Handler + ?Sized>(&mut self, event: &RxEvent<'_>, handler: &mut H) {
         match *event {
-            RxEvent::Discarded { bytes, reason, at } => {
+            RxEvent::Discarded { bytes, reason, at, .. } => {
                 let flag = match reason {
                     DiscardReason::ChecksumMismatch => {
                         bump(&mut self.counters.bus_comm_errors);

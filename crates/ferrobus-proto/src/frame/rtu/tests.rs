@@ -372,3 +372,30 @@ mod chunking {
         }
     }
 }
+
+#[test]
+fn a_discarded_run_carries_the_address_and_function_code_it_began_with() {
+    let mut bad = SDP_RESPONSE.to_vec();
+    bad[7] ^= 0x5A; // the CRC's high byte
+    let mut c = codec(Expect::Responses);
+    let mut heads = Vec::new();
+    let mut on = |e: RxEvent<'_>| {
+        if let RxEvent::Discarded { reason, head, .. } = e {
+            heads.push((reason, head));
+        }
+    };
+    feed(&mut c, Instant::ZERO, &bad, &mut on);
+    expire(&mut c, Instant::from_millis(10), &mut on);
+    assert_eq!(heads, [(DiscardReason::ChecksumMismatch, Some((0x01, 0x10)))]);
+    // A lone byte is too short to name anything.
+    let mut c = codec(Expect::Responses);
+    let mut heads = Vec::new();
+    let mut on = |e: RxEvent<'_>| {
+        if let RxEvent::Discarded { head, .. } = e {
+            heads.push(head);
+        }
+    };
+    feed(&mut c, Instant::ZERO, &[0xFF], &mut on);
+    expire(&mut c, Instant::from_millis(10), &mut on);
+    assert_eq!(heads, [None]);
+}
