@@ -105,7 +105,7 @@ impl Harness {
             self.lost_track = true;
         }
         while let Some(event) = self.slave.poll_event() {
-            if let SlaveEvent::Request { unit, function, end, disposition } = event {
+            if let SlaveEvent::Request { unit, function, end, disposition, .. } = event {
                 assert!(unit == 0 || unit == 1 || unit == 2, "request event for unit {unit}");
                 assert!(end <= self.t);
                 let (at, exception) = match disposition {
