@@ -23,4 +23,4 @@ pub mod sim;
 pub use device::Device;
 pub use fault::Faults;
 pub use profile::Profile;
-pub use sim::{FaultFilter, Sim, SimClock, tokio_clock};
+pub use sim::{FaultFilter, Sim, SimClock, Unserved, tokio_clock};

@@ -10,6 +10,8 @@
 //! - [`drive_profiles`]: peer clients and raw manual frames against the 3G3RX and SDP profiles.
 //! - [`port_reopen`]: a serial port that disappears and comes back, through `ferrobus::Client`.
 //! - [`reply_timing`]: when the simulator's reply starts, with a 20 ms response wait.
+//! - [`tcp_server`]: `ferrobus sim --tcp` under pipelining, corrupt headers, unit ids over TCP,
+//!   its connection cap and timeouts, and a lowered descriptor limit.
 //!
 //! Run: `cargo test -p ferrobus-cli --test interop`.
 
@@ -20,3 +22,4 @@ mod mbpoll_vs_sim;
 mod port_reopen;
 mod reply_timing;
 mod support;
+mod tcp_server;

@@ -246,6 +246,15 @@ impl Framing for MbapCodec {
     fn supports_broadcast(&self) -> bool {
         false
     }
+
+    fn is_mid_frame(&self) -> bool {
+        let held = match self.found {
+            Some((n, _, _, true)) => self.len.saturating_sub(n),
+            Some(_) => 0,
+            None => self.len,
+        };
+        held > 0 && !self.lost
+    }
 }
 
 #[cfg(test)]
@@ -338,6 +347,17 @@ mod tests {
                 assert_eq!(frames.len(), 1, "a reset receiver frames again");
             }
         }
+    }
+
+    #[test]
+    fn a_receiver_is_mid_frame_from_a_frames_first_byte_until_it_is_complete() {
+        let mut codec = MbapCodec::strict();
+        assert!(!codec.is_mid_frame());
+        let (frames, _) = run(&mut codec, &REQUEST[..3], 3);
+        assert!(frames.is_empty() && codec.is_mid_frame(), "a truncated header");
+        let (frames, _) = run(&mut codec, &REQUEST[3..], 9);
+        assert_eq!(frames.len(), 1);
+        assert!(!codec.is_mid_frame(), "the frame is complete");
     }
 
     #[test]

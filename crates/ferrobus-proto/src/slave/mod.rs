@@ -573,19 +573,16 @@ impl Core {
         let function =
             FunctionCode::from_u8(frame.pdu.first().copied().unwrap_or_default() & !FunctionCode::EXCEPTION_BIT);
         let mut pdu = [0u8; MAX_PDU_LEN];
-        let len = match ExceptionResponse::new(function, code) {
-            Ok(exception) => {
-                let Ok(len) = Response::Exception(exception).emit(&mut pdu) else { return Disposition::Silent };
-                len
-            }
+        let len = if let Ok(exception) = ExceptionResponse::new(function, code) {
+            let Ok(len) = Response::Exception(exception).emit(&mut pdu) else { return Disposition::Silent };
+            len
+        } else {
             // Function code 0x00 is no valid request code, yet it is refused like any unknown
             // one: 0x80, then the exception code.
-            Err(_) => {
-                let [first, second, ..] = &mut pdu;
-                *first = function.value() | FunctionCode::EXCEPTION_BIT;
-                *second = code.value();
-                2
-            }
+            let [first, second, ..] = &mut pdu;
+            *first = function.value() | FunctionCode::EXCEPTION_BIT;
+            *second = code.value();
+            2
         };
         self.counters.count_exception(code);
         let due = self.due(frame, handler);

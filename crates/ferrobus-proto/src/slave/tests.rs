@@ -650,8 +650,8 @@ fn twenty_pipelined_mbap_requests_get_twenty_replies_in_order_each_with_its_tran
     let (replies, events) = drive_pipelined(&mut slave, &mut device, Instant::ZERO, &input[first..]);
     assert_eq!(replies.len(), 20, "every request answered");
     for (t, reply) in (0..20u16).zip(&replies) {
-        let value = device.holding[usize::from(t)];
-        assert_eq!(reply, &mbap(0x0100 + t, 1, &[0x03, 0x02, (value >> 8) as u8, value as u8]), "reply {t}");
+        let [hi, lo] = device.holding[usize::from(t)].to_be_bytes();
+        assert_eq!(reply, &mbap(0x0100 + t, 1, &[0x03, 0x02, hi, lo]), "reply {t}");
     }
     let requests =
         events.iter().filter(|e| matches!(e, SlaveEvent::Request { disposition: Disposition::Replied(_), .. })).count();
