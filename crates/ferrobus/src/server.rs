@@ -18,6 +18,7 @@
 //! driver stops reading the socket, so a client that does not read its replies is slowed by
 //! TCP, not answered out of order or dropped.
 
+use std::collections::VecDeque;
 use std::io;
 use std::sync::atomic::{AtomicU64, Ordering};
 use std::sync::{Arc, Mutex, MutexGuard, PoisonError};
@@ -289,7 +290,9 @@ pub async fn serve<F: Framing, H: Handler + Send>(
     let mut stalled = false;
     let mut tx = [0u8; MAX_TX_LEN];
     // A reply held back by the filter: its bytes and when to send them.
-    let mut delayed: Option<(Vec<u8>, tokio::time::Instant)> = None;
+    // Replies held back by the filter, in order: their bytes and when to send them. Over TCP
+    // several replies may be pending; one sent now waits behind those held, to keep the order.
+    let mut delayed: VecDeque<(Vec<u8>, tokio::time::Instant)> = VecDeque::new();
     let mut last_activity = tokio::time::Instant::now();
     // When the frame now being received began.
     let mut frame_began: Option<tokio::time::Instant> = None;
@@ -300,7 +303,13 @@ pub async fn serve<F: Framing, H: Handler + Send>(
             let due = due.unwrap_or_else(tokio::time::Instant::now);
             let frame = tx.get_mut(..n).unwrap_or_default();
             let fate = options.filter.as_mut().map_or(Fate::Send, |f| f.filter(frame));
+            let behind = delayed.back().map(|(_, at)| *at);
             match fate {
+                Fate::Send | Fate::Delay(_) if behind.is_some() => {
+                    let wait = if let Fate::Delay(d) = fate { d } else { Duration::ZERO };
+                    let at = behind.into_iter().chain([tokio::time::Instant::now() + wait]).max();
+                    delayed.push_back((frame.to_vec(), at.unwrap_or_else(tokio::time::Instant::now)));
+                }
                 Fate::Send => {
                     let at = tokio::time::Instant::now();
                     if let Err(e) = write(&mut port, frame, options.idle_timeout, options.rs485, options.timing).await {
@@ -309,7 +318,7 @@ pub async fn serve<F: Framing, H: Handler + Send>(
                     last_activity = tokio::time::Instant::now();
                     options.observe(ServerEvent::Sent { frame: frame.to_vec(), due, at });
                 }
-                Fate::Delay(d) => delayed = Some((frame.to_vec(), tokio::time::Instant::now() + d)),
+                Fate::Delay(d) => delayed.push_back((frame.to_vec(), tokio::time::Instant::now() + d)),
                 Fate::Drop => options.observe(ServerEvent::Dropped { frame: frame.to_vec() }),
             }
         }
@@ -331,7 +340,7 @@ pub async fn serve<F: Framing, H: Handler + Send>(
         let engine = slave.poll_timeout().map(|t| clock.to_tokio(t));
         let idle_at = options.idle_timeout.map(|d| last_activity + d);
         let unfinished_at = options.frame_timeout.zip(frame_began).map(|(d, began)| began + d);
-        let deadline = [delayed.as_ref().map(|(_, d)| *d), engine, idle_at, unfinished_at].into_iter().flatten().min();
+        let deadline = [delayed.front().map(|(_, d)| *d), engine, idle_at, unfinished_at].into_iter().flatten().min();
         // While the engine is blocked (its replies or events are full) nothing is read: the
         // peer is held back by TCP, and no byte is dropped.
         let reading = !slave.is_blocked() && kept.is_empty();
@@ -366,7 +375,7 @@ pub async fn serve<F: Framing, H: Handler + Send>(
                 }
                 slave.handle_timeout(clock.now(), handler);
                 stalled |= slave.is_blocked();
-                if let Some((frame, due)) = delayed.take_if(|(_, at)| *at <= tokio::time::Instant::now()) {
+                while let Some((frame, due)) = delayed.pop_front_if(|(_, at)| *at <= tokio::time::Instant::now()) {
                     let at = tokio::time::Instant::now();
                     if let Err(e) = write(&mut port, &frame, options.idle_timeout, options.rs485, options.timing).await {
                         return (slave, Err(e));

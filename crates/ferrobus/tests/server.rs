@@ -5,7 +5,7 @@
 use std::time::Duration;
 
 use ferrobus::Timer;
-use ferrobus::server::{Closed, ServerOptions, serve};
+use ferrobus::server::{Closed, Fate, ReplyFilter, ServerOptions, serve};
 use ferrobus_proto::ExceptionCode;
 use ferrobus_proto::frame::mbap::MbapCodec;
 use ferrobus_proto::frame::{LineConfig, LineTiming};
@@ -135,4 +135,29 @@ async fn a_hundred_pipelined_requests_to_a_client_that_reads_late_are_all_answer
     let (ended, device, _) = server.await.unwrap();
     assert!(ended.is_ok(), "{ended:?}");
     assert_eq!(device.writes, 100);
+}
+
+/// Delays the first reply by 100 ms, sends the others at once.
+struct DelayFirst(bool);
+
+impl ReplyFilter for DelayFirst {
+    fn filter(&mut self, _frame: &mut [u8]) -> Fate {
+        if std::mem::replace(&mut self.0, true) { Fate::Send } else { Fate::Delay(Duration::from_millis(100)) }
+    }
+}
+
+#[tokio::test(start_paused = true)]
+async fn replies_behind_a_delayed_one_wait_for_it_and_none_is_lost() {
+    let mut options = options(None, None);
+    options.filter = Some(Box::new(DelayFirst(false)));
+    let (mut client, _server) = start(1024, options);
+    let burst: Vec<u8> = (0..3).flat_map(write_request).collect();
+    client.write_all(&burst).await.unwrap();
+    let began = Instant::now();
+    let mut reply = [0u8; 12];
+    for t in 0..3u16 {
+        client.read_exact(&mut reply).await.unwrap();
+        assert_eq!(reply.as_slice(), write_request(t).as_slice(), "reply {t} in order");
+        assert!(began.elapsed() >= Duration::from_millis(100), "reply {t} before the delayed first one");
+    }
 }
