@@ -362,20 +362,14 @@ pub async fn serve<F: Framing, H: Handler + Send>(
                 Err(e) => return (slave, Err(e)),
             },
             () = sleeper.sleep_until(deadline) => {
-                let now = tokio::time::Instant::now();
-                if let (Some(d), Some(at)) = (options.idle_timeout, idle_at) {
-                    if now >= at {
-                        return (slave, Err(Closed::Idle(d).error()));
-                    }
-                }
-                if let (Some(d), Some(at)) = (options.frame_timeout, unfinished_at) {
-                    if now >= at {
-                        return (slave, Err(Closed::UnfinishedFrame(d).error()));
-                    }
+                if let Some(closed) = overdue(options, idle_at, unfinished_at) {
+                    return (slave, Err(closed.error()));
                 }
                 slave.handle_timeout(clock.now(), handler);
                 stalled |= slave.is_blocked();
-                while let Some((frame, due)) = delayed.pop_front_if(|(_, at)| *at <= tokio::time::Instant::now()) {
+                while let Some((frame, due)) =
+                    delayed.front().is_some_and(|(_, at)| *at <= tokio::time::Instant::now()).then(|| delayed.pop_front()).flatten()
+                {
                     let at = tokio::time::Instant::now();
                     if let Err(e) = write(&mut port, &frame, options.idle_timeout, options.rs485, options.timing).await {
                         return (slave, Err(e));
@@ -385,6 +379,21 @@ pub async fn serve<F: Framing, H: Handler + Send>(
                 }
             }
         }
+    }
+}
+
+/// The close due now, if the idle or the unfinished-frame deadline has passed.
+fn overdue(
+    options: &ServerOptions,
+    idle_at: Option<tokio::time::Instant>,
+    unfinished_at: Option<tokio::time::Instant>,
+) -> Option<Closed> {
+    let now = tokio::time::Instant::now();
+    let passed = |at: Option<tokio::time::Instant>| at.is_some_and(|at| now >= at);
+    match (options.idle_timeout, options.frame_timeout) {
+        (Some(d), _) if passed(idle_at) => Some(Closed::Idle(d)),
+        (_, Some(d)) if passed(unfinished_at) => Some(Closed::UnfinishedFrame(d)),
+        _ => None,
     }
 }
 
