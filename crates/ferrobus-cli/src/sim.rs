@@ -3,7 +3,10 @@
 //! Each `--profile` is paired with a `--unit`: one profile for every unit, or one per unit in
 //! the order given. The simulator answers exactly as its profile says — function codes, limits,
 //! timing, vendor exceptions — stays silent for other units, bad CRCs and broadcasts, and
-//! injects the faults asked for. It runs until interrupted, then prints its counters (SIGUSR1
+//! injects the faults asked for. Over Modbus/TCP a single device also answers units 0xFF and
+//! 0, several units answer a unit not simulated with exception 0x0B, and `--any-unit` answers
+//! them all ([`tcp_units`]); the server's limits are `--max-connections`, `--idle-timeout` and
+//! `--frame-timeout`. It runs until interrupted, then prints its counters (SIGUSR1
 //! prints them at any time), including how late each reply went out after it was due.
 
 use std::sync::{Arc, Mutex, PoisonError};
