@@ -307,7 +307,7 @@ pub async fn serve<F: Framing, H: Handler + Send>(
             match fate {
                 Fate::Send | Fate::Delay(_) if behind.is_some() => {
                     let wait = if let Fate::Delay(d) = fate { d } else { Duration::ZERO };
-                    let at = behind.into_iter().chain([tokio::time::Instant::now() + wait]).max();
+                    let at = behind.into_iter().chain(tokio::time::Instant::now().checked_add(wait)).max();
                     delayed.push_back((frame.to_vec(), at.unwrap_or_else(tokio::time::Instant::now)));
                 }
                 Fate::Send => {
@@ -338,8 +338,9 @@ pub async fn serve<F: Framing, H: Handler + Send>(
         }
         frame_began = if slave.framing().is_mid_frame() { frame_began.or(Some(last_activity)) } else { None };
         let engine = slave.poll_timeout().map(|t| clock.to_tokio(t));
-        let idle_at = options.idle_timeout.map(|d| last_activity + d);
-        let unfinished_at = options.frame_timeout.zip(frame_began).map(|(d, began)| began + d);
+        // A timeout too long to add to an instant is no deadline at all.
+        let idle_at = options.idle_timeout.and_then(|d| last_activity.checked_add(d));
+        let unfinished_at = options.frame_timeout.zip(frame_began).and_then(|(d, began)| began.checked_add(d));
         let deadline = [delayed.front().map(|(_, d)| *d), engine, idle_at, unfinished_at].into_iter().flatten().min();
         // While the engine is blocked (its replies or events are full) nothing is read: the
         // peer is held back by TCP, and no byte is dropped.
