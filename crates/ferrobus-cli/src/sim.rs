@@ -3,17 +3,21 @@
 //! Each `--profile` is paired with a `--unit`: one profile for every unit, or one per unit in
 //! the order given. The simulator answers exactly as its profile says — function codes, limits,
 //! timing, vendor exceptions — stays silent for other units, bad CRCs and broadcasts, and
-//! injects the faults asked for. It runs until interrupted, then prints its counters (SIGUSR1
+//! injects the faults asked for. Over Modbus/TCP a single device also answers units 0xFF and
+//! 0, several units answer a unit not simulated with exception 0x0B, and `--any-unit` answers
+//! them all ([`tcp_units`]); the server's limits are `--max-connections`, `--idle-timeout` and
+//! `--frame-timeout`. It runs until interrupted, then prints its counters (SIGUSR1
 //! prints them at any time), including how late each reply went out after it was due.
 
 use std::sync::{Arc, Mutex, PoisonError};
 use std::time::Duration;
 
 use clap::Args;
-use ferrobus::server::{ServerEvent, ServerOptions, Shared, serve_tcp, serve_transport};
+use ferrobus::server::{ServerEvent, ServerOptions, Shared, TcpCounts, TcpLimits, serve_tcp_with, serve_transport};
 use ferrobus::{Framing, Pty, Timer, Transport};
-use ferrobus_proto::slave::{Disposition, SlaveConfig, SlaveEvent};
-use ferrobus_sim::{Device, FaultFilter, Faults, Profile, Sim, tokio_clock};
+use ferrobus_proto::ExceptionCode;
+use ferrobus_proto::slave::{Disposition, SlaveConfig, SlaveEvent, UnitSet};
+use ferrobus_sim::{Device, FaultFilter, Faults, Profile, Sim, Unserved, tokio_clock};
 use hdrhistogram::Histogram;
 
 use crate::connect::{ConnectArgs, Target, parse_duration};
@@ -54,6 +58,23 @@ pub(crate) struct SimArgs {
     /// Stop after this long (scripts, tests); default: run until interrupted
     #[arg(long, value_name = "DURATION", value_parser = parse_duration)]
     duration: Option<Duration>,
+
+    /// TCP: connections served at once; past it a new connection is accepted and closed at once
+    #[arg(long = "max-connections", value_name = "N", default_value_t = 1000,
+          value_parser = clap::value_parser!(u32).range(1..))]
+    max_connections: u32,
+
+    /// TCP: close a connection when nothing arrives or leaves for this long (0: never)
+    #[arg(long = "idle-timeout", value_name = "DURATION", default_value = "60s", value_parser = parse_duration)]
+    idle_timeout: Duration,
+
+    /// TCP: close a connection when a frame begun is not complete this long after its first byte (0: never)
+    #[arg(long = "frame-timeout", value_name = "DURATION", default_value = "5s", value_parser = parse_duration)]
+    frame_timeout: Duration,
+
+    /// Modbus/TCP: answer every unit id, the units not simulated by the first --unit's device
+    #[arg(long = "any-unit")]
+    any_unit: bool,
 }
 
 /// What the simulator has done, kept by its observer.
@@ -113,12 +134,26 @@ impl Counters {
 
 /// Runs `ferrobus sim`.
 pub(crate) async fn run(connection: &ConnectArgs, args: &SimArgs) -> Result<(), CliError> {
-    let sim = build(connection, args)?;
-    let units = sim.unit_set();
-    let counters = Arc::new(Mutex::new(Counters::default()));
-    let sim = Shared::new(sim);
+    let mut sim = build(connection, args)?;
     let (transport, port) = open(connection, args).await?;
     let framing = transport.framing();
+    let units = if matches!(port, Served::Listener(_)) && framing == Framing::Mbap {
+        tcp_units(&mut sim, args.any_unit)
+    } else {
+        if args.any_unit {
+            return Err(CliError::Usage("--any-unit is for Modbus/TCP (--tcp)".into()));
+        }
+        sim.unit_set()
+    };
+    let counters = Arc::new(Mutex::new(Counters::default()));
+    let sim = Shared::new(sim);
+    let limits = TcpLimits {
+        max_connections: usize::try_from(args.max_connections).unwrap_or(usize::MAX),
+        idle_timeout: Some(args.idle_timeout).filter(|d| !d.is_zero()),
+        frame_timeout: Some(args.frame_timeout).filter(|d| !d.is_zero()),
+        stats: Arc::default(),
+    };
+    let tcp_stats = Arc::clone(&limits.stats);
     let options = {
         let (sim, counters, transport) = (sim.clone(), Arc::clone(&counters), transport.clone());
         move || {
@@ -135,9 +170,11 @@ pub(crate) async fn run(connection: &ConnectArgs, args: &SimArgs) -> Result<(), 
     let mut serving = tokio::spawn(async move {
         match port {
             Served::Port(port) => serve_port(&transport, port, reopen, config, &sim, &options).await,
-            Served::Listener(listener) => serve_tcp(listener, transport.clone(), config, sim.clone(), options)
-                .await
-                .map_err(|e| ferrobus::Error::io("serving", e).into()),
+            Served::Listener(listener) => {
+                serve_tcp_with(listener, transport.clone(), config, sim.clone(), options, limits)
+                    .await
+                    .map_err(|e| ferrobus::Error::io("serving", e).into())
+            }
         }
     });
     let stop = async {
@@ -152,7 +189,50 @@ pub(crate) async fn run(connection: &ConnectArgs, args: &SimArgs) -> Result<(), 
     };
     serving.abort();
     counters.lock().unwrap_or_else(PoisonError::into_inner).print();
+    print_tcp(&tcp_stats.counts());
     result
+}
+
+/// The units the engine passes on over Modbus/TCP, and who answers them. A single device
+/// also answers unit 0xFF (the spec's choice for a device addressed directly over TCP, and
+/// libmodbus's default) and unit 0; with several, a unit not simulated gets exception 0x0B,
+/// as from a gateway whose target does not respond; with `any_unit`, every unit is answered,
+/// those not simulated by the first device.
+fn tcp_units(sim: &mut Sim, any_unit: bool) -> UnitSet {
+    let served = sim.unit_set();
+    let Some(first) = served.iter().next() else { return served };
+    let mut units = served;
+    if any_unit {
+        sim.set_unserved(Unserved::Device(first));
+        return (0..=u8::MAX).collect();
+    }
+    if served.iter().count() == 1 {
+        for unit in [0, 0xFF] {
+            sim.alias(unit, first);
+            units.insert(unit);
+        }
+        return units;
+    }
+    sim.set_unserved(Unserved::Refuse(ExceptionCode::GatewayTargetDeviceFailedToRespond));
+    (0..=u8::MAX).collect()
+}
+
+fn print_tcp(c: &TcpCounts) {
+    if c.accepted == 0 && c.refused == 0 && c.descriptor_waits == 0 && c.accept_errors == 0 {
+        return;
+    }
+    eprintln!(
+        "sim: tcp: {} connections served ({} open), {} refused over --max-connections, {} accept pauses out of file descriptors, {} other accept errors, {} socket-option errors; closed: {} idle, {} unfinished frame, {} bad MBAP header",
+        c.accepted,
+        c.open,
+        c.refused,
+        c.descriptor_waits,
+        c.accept_errors,
+        c.socket_errors,
+        c.closed_idle,
+        c.closed_unfinished,
+        c.closed_bad_header
+    );
 }
 
 /// Serves on `port` until it fails. A serial port that fails or closes — a USB adapter

@@ -171,6 +171,10 @@ impl Line {
             if let Some(done) = self.master.poll_event() {
                 return summary(done);
             }
+            // A slave takes no more bytes while its events wait: poll them, as a driver does.
+            for (slave, _) in &mut self.slaves {
+                while slave.poll_event().is_some() {}
+            }
             // Jump to the next thing that happens: a byte arriving or a deadline.
             let next_byte = self.in_flight.keys().next().map(|k| k.0);
             let deadlines = std::iter::once(self.master.poll_timeout())

@@ -26,4 +26,4 @@ pub use device::Device;
 pub use fault::Faults;
 pub use profile::Profile;
 pub use rule::Rule;
-pub use sim::{FaultFilter, Sim, SimClock, tokio_clock};
+pub use sim::{FaultFilter, Sim, SimClock, Unserved, tokio_clock};

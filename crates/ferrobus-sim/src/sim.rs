@@ -37,9 +37,27 @@ pub struct Unit {
     tripped: bool,
 }
 
+/// What answers a request to a unit no device is at (the engine must pass such units on:
+/// its [`UnitSet`] holds them).
+#[derive(Clone, Copy, PartialEq, Eq, Debug, Default)]
+pub enum Unserved {
+    /// Nothing: the request goes unanswered, as on a serial line.
+    #[default]
+    Silent,
+    /// The device at this unit, as if addressed itself (`--any-unit`, or unit 0 and 0xFF of
+    /// a single device over Modbus/TCP).
+    Device(u8),
+    /// This exception, as a gateway answers for a unit behind it that does not respond
+    /// (0x0B, Gateway Target Device Failed to Respond).
+    Refuse(ExceptionCode),
+}
+
 /// Devices by unit address.
 pub struct Sim {
     units: BTreeMap<u8, Unit>,
+    /// Units answered by another unit's device, and what answers the rest.
+    aliases: BTreeMap<u8, u8>,
+    unserved: Unserved,
     clock: SimClock,
     rng: SmallRng,
 }
@@ -47,7 +65,35 @@ pub struct Sim {
 impl Sim {
     /// An empty line with `clock`; `seed` makes fault injection repeatable.
     pub fn new(clock: SimClock, seed: u64) -> Self {
-        Sim { units: BTreeMap::new(), clock, rng: SmallRng::seed_from_u64(seed) }
+        Sim {
+            units: BTreeMap::new(),
+            aliases: BTreeMap::new(),
+            unserved: Unserved::Silent,
+            clock,
+            rng: SmallRng::seed_from_u64(seed),
+        }
+    }
+
+    /// Has requests to `unit` answered by the device at `device` (unit 0 and 0xFF of a single
+    /// device over Modbus/TCP).
+    pub fn alias(&mut self, unit: u8, device: u8) {
+        self.aliases.insert(unit, device);
+    }
+
+    /// Sets what answers a unit no device (or alias) is at.
+    pub fn set_unserved(&mut self, unserved: Unserved) {
+        self.unserved = unserved;
+    }
+
+    /// The unit whose device answers requests to `unit`, if any.
+    pub fn resolve(&self, unit: u8) -> Option<u8> {
+        if self.units.contains_key(&unit) {
+            return Some(unit);
+        }
+        let ((Some(&target), _) | (None, Unserved::Device(target))) = (self.aliases.get(&unit), self.unserved) else {
+            return None;
+        };
+        self.units.contains_key(&target).then_some(target)
     }
 
     /// Puts `device` at `unit`.
@@ -68,6 +114,7 @@ impl Sim {
     /// The device at `unit`, advanced to now.
     pub fn device(&mut self, unit: u8) -> Option<&mut Device> {
         let now = (self.clock)();
+        let unit = self.resolve(unit)?;
         let u = self.units.get_mut(&unit)?;
         u.device.advance_to(now);
         if let Some(after) = u.faults.trip_after {
@@ -91,7 +138,7 @@ impl Sim {
 
     /// Draws whether a reply from `unit` is dropped, and if not whether it is corrupted.
     fn draw(&mut self, unit: u8) -> (bool, bool) {
-        let Some(u) = self.units.get(&unit) else { return (false, false) };
+        let Some(u) = self.resolve(unit).and_then(|unit| self.units.get(&unit)) else { return (false, false) };
         let (drop, corrupt) = (u.faults.drop, u.faults.corrupt);
         // Shares are checked when parsed, but the fields are public: clamp, never panic.
         let dropped = drop > 0.0 && self.rng.random_bool(drop.clamp(0.0, 1.0));
@@ -122,9 +169,16 @@ impl Sim {
 
 impl Handler for Sim {
     fn admit(&mut self, unit: u8, broadcast: bool, request: &Request<'_>) -> Admission {
-        let Some(device) = self.device(unit) else { return Admission::Ignore };
+        let Some(device) = self.device(unit) else {
+            return match self.unserved {
+                Unserved::Refuse(code) if !broadcast => Admission::Refuse(code),
+                _ => Admission::Ignore,
+            };
+        };
         let admission = device.admit(broadcast, request);
-        let faults = &self.units[&unit].faults;
+        let Some(faults) = self.resolve(unit).and_then(|unit| self.units.get(&unit)).map(|u| &u.faults) else {
+            return Admission::Ignore;
+        };
         if faults.silent {
             return Admission::Ignore;
         }
@@ -142,7 +196,7 @@ impl Handler for Sim {
     }
 
     fn response_wait(&self, unit: u8) -> Option<Duration> {
-        let u = self.units.get(&unit)?;
+        let u = self.units.get(&self.resolve(unit)?)?;
         Some(u.device.response_wait() + u.faults.delay)
     }
 
@@ -199,7 +253,7 @@ impl Handler for Sim {
         self.with(unit, |d| d.read_fifo(address, out))
     }
     fn device_object(&mut self, unit: u8, id: u8, out: &mut [u8]) -> Option<usize> {
-        let value = self.units.get(&unit)?.device.device_object(id)?;
+        let value = self.units.get(&self.resolve(unit)?)?.device.device_object(id)?;
         let n = value.len().min(out.len());
         out[..n].copy_from_slice(&value[..n]);
         Some(n)

@@ -46,6 +46,8 @@ impl Line {
     #[track_caller]
     fn send(&mut self, frame: &[u8]) -> Option<(Vec<u8>, Duration)> {
         let t0 = Instant::from_millis(self.now_ms.load(Ordering::SeqCst));
+        // A slave takes no frame while its event queue is full: poll it, as a driver does.
+        while self.slave.poll_event().is_some() {}
         self.slave.on_bytes(t0, frame, &mut self.sim);
         let mut out = [0u8; MAX_TX_LEN];
         let reply = loop {

@@ -6,17 +6,31 @@
 //! reply due at t3.5 + wait is not a millisecond late), writes the reply the engine hands
 //! it, and reports what happened. A [`ReplyFilter`] may drop, delay or alter replies on
 //! their way out: the simulator's fault injection.
+//!
+//! Over TCP ([`serve_tcp_with`]) a connection's trouble never ends the server: running out of
+//! file descriptors pauses accepting for [`ACCEPT_BACKOFF`] while the open connections are
+//! served; other accept and socket-option errors are logged and counted ([`TcpStats`]).
+//! Past [`TcpLimits::max_connections`] a new connection is accepted and closed at once. A
+//! connection is closed when it is idle for [`ServerOptions::idle_timeout`], when a frame
+//! begun is not finished within [`ServerOptions::frame_timeout`], or when its MBAP framing
+//! is lost (a bad header: nothing after it is executed); each is logged and counted. Requests
+//! written back to back are answered in order; while the engine's reply queue is full the
+//! driver stops reading the socket, so a client that does not read its replies is slowed by
+//! TCP, not answered out of order or dropped.
 
 use std::collections::VecDeque;
 use std::io;
+use std::sync::atomic::{AtomicU64, Ordering};
 use std::sync::{Arc, Mutex, MutexGuard, PoisonError};
 use std::time::Duration;
 
+use ferrobus_proto::error::DiscardReason;
+use ferrobus_proto::frame::mbap::MbapCodec;
 use ferrobus_proto::frame::{Framing, LineTiming};
 use ferrobus_proto::master::MAX_TX_LEN;
 use ferrobus_proto::pdu::{AddressRange, Bits, MaskWrite, Registers, Request};
 use ferrobus_proto::slave::{Admission, Disposition, Handler, Slave, SlaveConfig, SlaveEvent};
-use ferrobus_proto::{ExceptionCode, FunctionCode};
+use ferrobus_proto::{ExceptionCode, FunctionCode, Instant};
 use tokio::io::{AsyncReadExt, AsyncWriteExt};
 use tokio::net::TcpListener;
 
@@ -214,13 +228,63 @@ pub struct ServerOptions {
     pub filter: Option<Box<dyn ReplyFilter>>,
     /// Called with every event.
     pub observer: Option<Box<dyn FnMut(ServerEvent) + Send>>,
+    /// Close the port when nothing arrives or leaves for this long (a TCP connection; `None`:
+    /// never).
+    pub idle_timeout: Option<Duration>,
+    /// Close the port when a frame begun is not complete this long after its first byte
+    /// (framings that end frames by time never are; `None`: never).
+    pub frame_timeout: Option<Duration>,
+}
+
+/// Why the server closed a connection: the payload of the error [`serve`] returns for it.
+#[derive(Clone, Copy, PartialEq, Eq, Debug)]
+pub enum Closed {
+    /// Nothing arrived or left for [`ServerOptions::idle_timeout`].
+    Idle(Duration),
+    /// A frame begun was not complete [`ServerOptions::frame_timeout`] after its first byte.
+    UnfinishedFrame(Duration),
+    /// An MBAP header with a protocol id other than 0 or a length outside 2..=254: the
+    /// stream's framing is lost.
+    BadHeader,
+}
+
+impl std::fmt::Display for Closed {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            Closed::Idle(d) => write!(f, "idle for {d:?}: connection closed"),
+            Closed::UnfinishedFrame(d) => write!(f, "a frame begun was not finished within {d:?}: connection closed"),
+            Closed::BadHeader => f.write_str("invalid MBAP header (framing lost): connection closed"),
+        }
+    }
+}
+
+impl std::error::Error for Closed {}
+
+impl Closed {
+    fn error(self) -> io::Error {
+        let kind = if self == Closed::BadHeader { io::ErrorKind::InvalidData } else { io::ErrorKind::TimedOut };
+        io::Error::new(kind, self)
+    }
+
+    /// The reason behind `error`, if the server closed the connection itself.
+    pub fn of(error: &io::Error) -> Option<Closed> {
+        error.get_ref().and_then(|e| e.downcast_ref::<Closed>()).copied()
+    }
 }
 
 impl ServerOptions {
     /// Options for a line with `timing`, waiting with `timer`: no direction control, no
     /// filter, no observer.
     pub fn new(timing: LineTiming, timer: Timer) -> Self {
-        ServerOptions { timer, rs485: Rs485::Auto, timing, filter: None, observer: None }
+        ServerOptions {
+            timer,
+            rs485: Rs485::Auto,
+            timing,
+            filter: None,
+            observer: None,
+            idle_timeout: None,
+            frame_timeout: None,
+        }
     }
 
     /// Options fitting `transport`: its timer, RS-485 mode and timing.
@@ -231,6 +295,8 @@ impl ServerOptions {
             timing: *transport.timing(),
             filter: None,
             observer: None,
+            idle_timeout: None,
+            frame_timeout: None,
         }
     }
 
@@ -256,87 +322,192 @@ pub async fn serve<F: Framing, H: Handler + Send>(
     let clock = Clock::new();
     let mut sleeper = options.timer.sleeper();
     let mut rx = vec![0u8; 1024];
+    // Bytes read that the engine has not taken yet (it was blocked), with their arrival.
+    let mut kept: Vec<u8> = Vec::new();
+    let mut kept_at = Instant::ZERO;
+    // The engine blocked while taking input: its receiver may hold frames not yet delivered.
+    let mut stalled = false;
     let mut tx = [0u8; MAX_TX_LEN];
-    // A reply held back by the filter: its bytes and when to send them.
-    let mut delayed: Option<(Vec<u8>, tokio::time::Instant)> = None;
+    // Replies held back by the filter, in order, with when to send them. Over TCP several
+    // replies may be pending; one sent now waits behind those held, to keep the order.
+    let mut delayed: VecDeque<(Outgoing, tokio::time::Instant)> = VecDeque::new();
     // The requests whose replies have not gone out yet, oldest first.
     let mut answering: VecDeque<Answering> = VecDeque::new();
+    let mut last_activity = tokio::time::Instant::now();
+    // When the frame now being received began.
+    let mut frame_began: Option<tokio::time::Instant> = None;
     loop {
         let now = clock.now();
         // Events first: a request is known before its reply leaves (on TCP, at once).
-        while let Some(event) = slave.poll_event() {
-            if let Some(request) = Answering::of(&event) {
-                if answering.len() == ANSWERING_MAX {
-                    answering.pop_front();
-                }
-                answering.push_back(request);
-            }
-            options.observe(ServerEvent::Slave { event, at: tokio::time::Instant::now() });
-        }
-        let due = slave.reply_due().map(|t| clock.to_tokio(t));
-        if let Some(n) = slave.poll_transmit(now, &mut tx) {
-            let due = due.unwrap_or_else(tokio::time::Instant::now);
+        let lost = take_events(&mut slave, &mut answering, options);
+        loop {
+            let due = slave.reply_due().map_or_else(tokio::time::Instant::now, |t| clock.to_tokio(t));
+            let Some(n) = slave.poll_transmit(now, &mut tx) else { break };
             let mut frame = tx.get(..n).unwrap_or_default().to_vec();
             let request = answering.pop_front();
             let fate = options.filter.as_mut().map_or(Fate::Send, |f| f.filter(request.as_ref(), &mut frame));
-            match fate {
-                Fate::Send => {
-                    let at = tokio::time::Instant::now();
-                    if let Err(e) = write(&mut port, &frame, options.rs485, options.timing).await {
-                        return (slave, Err(e));
-                    }
-                    options.observe(ServerEvent::Sent { frame, due, at });
+            let (wait, gap) = match fate {
+                Fate::Send => (Duration::ZERO, None),
+                Fate::Delay(d) => (d, None),
+                Fate::Trickle { gap } => (Duration::ZERO, Some(gap)),
+                Fate::Drop => {
+                    options.observe(ServerEvent::Dropped { frame });
+                    continue;
                 }
-                Fate::Trickle { gap } => {
-                    let at = tokio::time::Instant::now();
-                    for (i, byte) in frame.iter().enumerate() {
-                        if i > 0 {
-                            tokio::time::sleep(gap).await;
-                        }
-                        if let Err(e) =
-                            write(&mut port, std::slice::from_ref(byte), options.rs485, options.timing).await
-                        {
-                            return (slave, Err(e));
-                        }
-                    }
-                    options.observe(ServerEvent::Sent { frame, due, at });
+            };
+            let reply = Outgoing { frame, due, gap };
+            let behind = delayed.back().map(|(_, at)| *at);
+            if wait.is_zero() && behind.is_none() {
+                if let Err(e) = send(&mut port, reply, options).await {
+                    return (slave, Err(e));
                 }
-                Fate::Delay(d) => delayed = Some((frame, tokio::time::Instant::now() + d)),
-                Fate::Drop => options.observe(ServerEvent::Dropped { frame }),
+                last_activity = tokio::time::Instant::now();
+                continue;
             }
+            // A delay too long to add to an instant never ends: the reply is as good as dropped.
+            let Some(at) = tokio::time::Instant::now().checked_add(wait) else {
+                options.observe(ServerEvent::Dropped { frame: reply.frame });
+                continue;
+            };
+            delayed.push_back((reply, behind.map_or(at, |behind| behind.max(at))));
         }
+        if lost {
+            // The replies to the requests before the bad header have gone; nothing after it
+            // is executed.
+            return (slave, Err(Closed::BadHeader.error()));
+        }
+        if !slave.is_blocked() && (stalled || !kept.is_empty()) {
+            let taken = slave.on_bytes(kept_at, &kept, handler);
+            kept.drain(..taken.min(kept.len()));
+            stalled = slave.is_blocked();
+            continue;
+        }
+        frame_began = if slave.framing().is_mid_frame() { frame_began.or(Some(last_activity)) } else { None };
         let engine = slave.poll_timeout().map(|t| clock.to_tokio(t));
-        let deadline = match (&delayed, engine) {
-            (Some((_, d)), Some(e)) => Some((*d).min(e)),
-            (Some((_, d)), None) => Some(*d),
-            (None, e) => e,
-        };
+        // A timeout too long to add to an instant is no deadline at all.
+        let idle_at = options.idle_timeout.and_then(|d| last_activity.checked_add(d));
+        let unfinished_at = options.frame_timeout.zip(frame_began).and_then(|(d, began)| began.checked_add(d));
+        let deadline = [delayed.front().map(|(_, d)| *d), engine, idle_at, unfinished_at].into_iter().flatten().min();
+        // While the engine is blocked (its replies or events are full) nothing is read: the
+        // peer is held back by TCP, and no byte is dropped.
+        let reading = !slave.is_blocked() && kept.is_empty();
         tokio::select! {
-            read = port.read(&mut rx) => match read {
+            read = port.read(&mut rx), if reading => match read {
                 Ok(0) => return (slave, Ok(())),
                 Ok(n) => {
                     let at = port.last_arrival().map_or_else(|| clock.now(), |t| clock.from_tokio(t));
                     let bytes = rx.get(..n).unwrap_or_default();
                     tracing::trace!("rx {}", crate::driver::Hex(bytes));
-                    slave.on_bytes(at, bytes, handler);
+                    last_activity = tokio::time::Instant::now();
+                    let taken = slave.on_bytes(at, bytes, handler);
+                    stalled = slave.is_blocked();
+                    kept_at = at;
+                    if let Some(rest) = bytes.get(taken..) {
+                        kept.extend_from_slice(rest);
+                    }
                 }
                 Err(e) => return (slave, Err(e)),
             },
             () = sleeper.sleep_until(deadline) => {
+                if let Some(closed) = overdue(options, idle_at, unfinished_at) {
+                    return (slave, Err(closed.error()));
+                }
                 slave.handle_timeout(clock.now(), handler);
-                if let Some((frame, due)) = delayed.take_if(|(_, at)| *at <= tokio::time::Instant::now()) {
-                    let at = tokio::time::Instant::now();
-                    if let Err(e) = write(&mut port, &frame, options.rs485, options.timing).await {
+                stalled |= slave.is_blocked();
+                while delayed.front().is_some_and(|(_, at)| *at <= tokio::time::Instant::now()) {
+                    let Some((reply, _)) = delayed.pop_front() else { break };
+                    if let Err(e) = send(&mut port, reply, options).await {
                         return (slave, Err(e));
                     }
-                    options.observe(ServerEvent::Sent { frame, due, at });
+                    last_activity = tokio::time::Instant::now();
                 }
             }
         }
     }
 }
 
-async fn write(port: &mut BoxPort, frame: &[u8], rs485: Rs485, timing: LineTiming) -> io::Result<()> {
+/// Reports the engine's events and notes what each reply to come answers. Returns whether
+/// the MBAP framing was lost (a bad header): the connection must close.
+fn take_events<F: Framing>(
+    slave: &mut Slave<F>,
+    answering: &mut VecDeque<Answering>,
+    options: &mut ServerOptions,
+) -> bool {
+    let mut lost = false;
+    while let Some(event) = slave.poll_event() {
+        lost |= matches!(event, SlaveEvent::Discarded { reason: DiscardReason::BadHeader, .. });
+        if let Some(request) = Answering::of(&event) {
+            if answering.len() == ANSWERING_MAX {
+                answering.pop_front();
+            }
+            answering.push_back(request);
+        }
+        options.observe(ServerEvent::Slave { event, at: tokio::time::Instant::now() });
+    }
+    lost
+}
+
+/// A reply on its way out.
+struct Outgoing {
+    frame: Vec<u8>,
+    /// When the engine had it due.
+    due: tokio::time::Instant,
+    /// Written byte by byte with this gap ([`Fate::Trickle`]), or whole.
+    gap: Option<Duration>,
+}
+
+/// Writes `reply` and reports it.
+async fn send(port: &mut BoxPort, reply: Outgoing, options: &mut ServerOptions) -> io::Result<()> {
+    let at = tokio::time::Instant::now();
+    let (idle, rs485, timing) = (options.idle_timeout, options.rs485, options.timing);
+    match reply.gap {
+        None => write(port, &reply.frame, idle, rs485, timing).await?,
+        Some(gap) => {
+            for (i, byte) in reply.frame.iter().enumerate() {
+                if i > 0 {
+                    tokio::time::sleep(gap).await;
+                }
+                write(port, std::slice::from_ref(byte), idle, rs485, timing).await?;
+            }
+        }
+    }
+    options.observe(ServerEvent::Sent { frame: reply.frame, due: reply.due, at });
+    Ok(())
+}
+
+/// The close due now, if the idle or the unfinished-frame deadline has passed.
+fn overdue(
+    options: &ServerOptions,
+    idle_at: Option<tokio::time::Instant>,
+    unfinished_at: Option<tokio::time::Instant>,
+) -> Option<Closed> {
+    let now = tokio::time::Instant::now();
+    let passed = |at: Option<tokio::time::Instant>| at.is_some_and(|at| now >= at);
+    match (options.idle_timeout, options.frame_timeout) {
+        (Some(d), _) if passed(idle_at) => Some(Closed::Idle(d)),
+        (_, Some(d)) if passed(unfinished_at) => Some(Closed::UnfinishedFrame(d)),
+        _ => None,
+    }
+}
+
+/// Writes `frame`; a write that does not finish within the idle timeout (a peer that reads
+/// nothing) fails.
+async fn write(
+    port: &mut BoxPort,
+    frame: &[u8],
+    idle_timeout: Option<Duration>,
+    rs485: Rs485,
+    timing: LineTiming,
+) -> io::Result<()> {
+    match idle_timeout {
+        Some(d) => tokio::time::timeout(d, write_frame(port, frame, rs485, timing))
+            .await
+            .unwrap_or_else(|_| Err(Closed::Idle(d).error())),
+        None => write_frame(port, frame, rs485, timing).await,
+    }
+}
+
+async fn write_frame(port: &mut BoxPort, frame: &[u8], rs485: Rs485, timing: LineTiming) -> io::Result<()> {
     tracing::trace!("tx {}", crate::driver::Hex(frame));
     let rts = rs485 == Rs485::Rts;
     if rts {
@@ -363,7 +534,8 @@ pub async fn serve_transport<H: Handler + Send>(
 ) -> io::Result<()> {
     match transport.framing() {
         crate::port::Framing::Mbap => {
-            serve(Slave::new(Transport::mbap_codec(), config), port, handler, options).await.1
+            // A server's MBAP receiver is strict: a stream whose framing is lost is closed.
+            serve(Slave::new(MbapCodec::strict(), config), port, handler, options).await.1
         }
         crate::port::Framing::Rtu => serve(Slave::new(transport.rtu_codec(), config), port, handler, options).await.1,
         crate::port::Framing::Ascii => {
@@ -372,9 +544,105 @@ pub async fn serve_transport<H: Handler + Send>(
     }
 }
 
-/// Serves Modbus/TCP (or RTU over TCP, per `transport`'s framing) on `listener`: one engine
-/// per connection, all sharing `handler`, each with the options `options` makes. Runs until the
-/// listener fails.
+/// How long accepting pauses when the process (or system) is out of file descriptors.
+pub const ACCEPT_BACKOFF: Duration = Duration::from_millis(100);
+
+/// Limits of a TCP server.
+#[derive(Clone, Debug)]
+pub struct TcpLimits {
+    /// Connections served at once; past it a new connection is accepted and closed at once
+    /// (the client sees the connection closed, not a hang), logged and counted.
+    pub max_connections: usize,
+    /// Close a connection when nothing arrives or leaves for this long, unless its
+    /// [`ServerOptions::idle_timeout`] is set.
+    pub idle_timeout: Option<Duration>,
+    /// Close a connection whose frame begun is unfinished this long, unless its
+    /// [`ServerOptions::frame_timeout`] is set.
+    pub frame_timeout: Option<Duration>,
+    /// Counts what happened, shared with whoever reports it.
+    pub stats: Arc<TcpStats>,
+}
+
+impl Default for TcpLimits {
+    /// 1,000 connections (fits the common descriptor limit of 1,024), 60 s idle, 5 s for a frame.
+    fn default() -> Self {
+        TcpLimits {
+            max_connections: 1000,
+            idle_timeout: Some(Duration::from_secs(60)),
+            frame_timeout: Some(Duration::from_secs(5)),
+            stats: Arc::default(),
+        }
+    }
+}
+
+/// What a TCP server has seen, counted as it runs.
+#[derive(Debug, Default)]
+pub struct TcpStats {
+    accepted: AtomicU64,
+    open: AtomicU64,
+    refused: AtomicU64,
+    descriptor_waits: AtomicU64,
+    accept_errors: AtomicU64,
+    socket_errors: AtomicU64,
+    closed_idle: AtomicU64,
+    closed_unfinished: AtomicU64,
+    closed_bad_header: AtomicU64,
+}
+
+/// A snapshot of [`TcpStats`].
+#[derive(Clone, Copy, PartialEq, Eq, Debug, Default)]
+pub struct TcpCounts {
+    /// Connections accepted and served.
+    pub accepted: u64,
+    /// Connections open now.
+    pub open: u64,
+    /// Connections closed at once because [`TcpLimits::max_connections`] were open.
+    pub refused: u64,
+    /// Times accepting paused because file descriptors ran out (EMFILE, ENFILE).
+    pub descriptor_waits: u64,
+    /// Other accept errors.
+    pub accept_errors: u64,
+    /// Errors setting a socket option on an accepted connection (it is served anyway).
+    pub socket_errors: u64,
+    /// Connections closed for being idle.
+    pub closed_idle: u64,
+    /// Connections closed for a frame begun and never finished.
+    pub closed_unfinished: u64,
+    /// Connections closed for a bad MBAP header.
+    pub closed_bad_header: u64,
+}
+
+impl TcpStats {
+    /// The counts now.
+    pub fn counts(&self) -> TcpCounts {
+        let get = |c: &AtomicU64| c.load(Ordering::Relaxed);
+        TcpCounts {
+            accepted: get(&self.accepted),
+            open: get(&self.open),
+            refused: get(&self.refused),
+            descriptor_waits: get(&self.descriptor_waits),
+            accept_errors: get(&self.accept_errors),
+            socket_errors: get(&self.socket_errors),
+            closed_idle: get(&self.closed_idle),
+            closed_unfinished: get(&self.closed_unfinished),
+            closed_bad_header: get(&self.closed_bad_header),
+        }
+    }
+}
+
+fn bump(counter: &AtomicU64) {
+    counter.fetch_add(1, Ordering::Relaxed);
+}
+
+/// Whether `e` says the process or the system is out of file descriptors.
+fn out_of_descriptors(e: &io::Error) -> bool {
+    const ENFILE: i32 = 23;
+    const EMFILE: i32 = 24;
+    matches!(e.raw_os_error(), Some(ENFILE | EMFILE))
+}
+
+/// Serves Modbus/TCP (or RTU over TCP, per `transport`'s framing) on `listener` with the
+/// default [`TcpLimits`]; see [`serve_tcp_with`].
 pub async fn serve_tcp<H, O>(
     listener: TcpListener,
     transport: Transport,
@@ -386,20 +654,84 @@ where
     H: Handler + Send + 'static,
     O: Fn() -> ServerOptions + Send + Sync + 'static,
 {
+    serve_tcp_with(listener, transport, config, handler, options, TcpLimits::default()).await
+}
+
+/// Serves Modbus/TCP (or RTU over TCP, per `transport`'s framing) on `listener`: one engine
+/// per connection, all sharing `handler`, each with the options `options` makes, within
+/// `limits`. No error of a connection or of accepting one ends it: it runs until dropped.
+pub async fn serve_tcp_with<H, O>(
+    listener: TcpListener,
+    transport: Transport,
+    config: SlaveConfig,
+    handler: Shared<H>,
+    options: O,
+    limits: TcpLimits,
+) -> io::Result<()>
+where
+    H: Handler + Send + 'static,
+    O: Fn() -> ServerOptions + Send + Sync + 'static,
+{
     let options = Arc::new(options);
+    let slots = Arc::new(tokio::sync::Semaphore::new(limits.max_connections));
+    let stats = Arc::clone(&limits.stats);
     loop {
-        let (stream, peer) = listener.accept().await?;
-        stream.set_nodelay(true)?;
+        let (stream, peer) = match listener.accept().await {
+            Ok(accepted) => accepted,
+            Err(e) if out_of_descriptors(&e) => {
+                bump(&stats.descriptor_waits);
+                let open = stats.open.load(Ordering::Relaxed);
+                tracing::warn!("accepting: {e}; pausing {ACCEPT_BACKOFF:?}, still serving the {open} open connections");
+                tokio::time::sleep(ACCEPT_BACKOFF).await;
+                continue;
+            }
+            Err(e) => {
+                bump(&stats.accept_errors);
+                tracing::warn!("accepting: {e}; going on");
+                // Not a spin if the error repeats.
+                tokio::time::sleep(Duration::from_millis(10)).await;
+                continue;
+            }
+        };
+        let Ok(slot) = Arc::clone(&slots).try_acquire_owned() else {
+            bump(&stats.refused);
+            tracing::warn!(%peer, "refused: {} connections open, the most allowed", limits.max_connections);
+            drop(stream);
+            continue;
+        };
+        if let Err(e) = stream.set_nodelay(true) {
+            bump(&stats.socket_errors);
+            tracing::warn!(%peer, "setting TCP_NODELAY: {e}; serving the connection anyway");
+        }
+        bump(&stats.accepted);
+        bump(&stats.open);
         tracing::debug!(%peer, "connection accepted");
         let transport = transport.clone();
         let mut handler = handler.clone();
         let options = Arc::clone(&options);
+        let (stats, idle, unfinished) = (Arc::clone(&stats), limits.idle_timeout, limits.frame_timeout);
         tokio::spawn(async move {
             let mut options = options();
+            options.idle_timeout = options.idle_timeout.or(idle);
+            options.frame_timeout = options.frame_timeout.or(unfinished);
             match serve_transport(&transport, Box::new(stream), config, &mut handler, &mut options).await {
                 Ok(()) => tracing::debug!(%peer, "connection closed"),
-                Err(e) => tracing::debug!(%peer, "connection failed: {e}"),
+                Err(e) => {
+                    match Closed::of(&e) {
+                        Some(Closed::Idle(_)) => bump(&stats.closed_idle),
+                        Some(Closed::UnfinishedFrame(_)) => bump(&stats.closed_unfinished),
+                        Some(Closed::BadHeader) => bump(&stats.closed_bad_header),
+                        None => {}
+                    }
+                    if Closed::of(&e).is_some() {
+                        tracing::info!(%peer, "{e}");
+                    } else {
+                        tracing::debug!(%peer, "connection failed: {e}");
+                    }
+                }
             }
+            stats.open.fetch_sub(1, Ordering::Relaxed);
+            drop(slot);
         });
     }
 }

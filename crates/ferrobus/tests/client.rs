@@ -161,13 +161,7 @@ async fn run_server(
     };
     let config = SlaveConfig { units, response_wait: Duration::ZERO };
     let slave = Slave::new(RtuCodec::new(timing(), Expect::Both), config);
-    let mut options = ServerOptions {
-        timer: ferrobus::Timer::Tokio,
-        rs485: ferrobus::Rs485::Auto,
-        timing: timing(),
-        filter: None,
-        observer: None,
-    };
+    let mut options = ServerOptions::new(timing(), ferrobus::Timer::Tokio);
     let server = serve(slave, Box::new(server_end), &mut device, &mut options);
     tokio::select! {
         () = line => {}

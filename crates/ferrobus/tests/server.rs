@@ -1,104 +1,163 @@
-//! The server's reply filter on an in-memory Modbus/TCP stream, on tokio's paused clock: it is
-//! told which request each reply answers, may change the reply's length, and a trickled reply
-//! leaves one byte at a time, never sooner than its gap.
+//! The server driver over Modbus/TCP framing, with paused time: connections closed when idle,
+//! on an unfinished frame and on a bad MBAP header, and pipelined requests answered in order
+//! to a client that reads nothing until it has written them all.
 
-use std::sync::{Arc, Mutex};
 use std::time::Duration;
 
-use ferrobus::server::{Answering, Fate, ReplyFilter, ServerOptions, serve};
+use ferrobus::Timer;
+use ferrobus::server::{Answering, Closed, Fate, ReplyFilter, ServerOptions, serve};
 use ferrobus_proto::ExceptionCode;
-use ferrobus_proto::FunctionCode;
 use ferrobus_proto::frame::mbap::MbapCodec;
 use ferrobus_proto::frame::{LineConfig, LineTiming};
-use ferrobus_proto::pdu::AddressRange;
-use ferrobus_proto::slave::{Handler, Slave, SlaveConfig, UnitSet};
-use tokio::io::{AsyncReadExt, AsyncWriteExt};
+use ferrobus_proto::slave::{Handler, Slave, SlaveConfig};
+use tokio::io::{AsyncReadExt, AsyncWriteExt, DuplexStream};
 use tokio::time::Instant;
 
-/// Every holding register reads as its address.
-struct Addresses;
+/// 100 holding registers, counting the writes.
+struct Device {
+    registers: [u16; 100],
+    writes: u32,
+}
 
-impl Handler for Addresses {
+impl Handler for Device {
     fn read_holding_registers(&mut self, _: u8, start: u16, out: &mut [u16]) -> Result<(), ExceptionCode> {
-        for (value, address) in out.iter_mut().zip(start..) {
-            *value = address;
-        }
+        let start = usize::from(start);
+        let from = self.registers.get(start..start + out.len()).ok_or(ExceptionCode::IllegalDataAddress)?;
+        out.copy_from_slice(from);
+        Ok(())
+    }
+    fn write_single_register(&mut self, _: u8, address: u16, value: u16) -> Result<(), ExceptionCode> {
+        *self.registers.get_mut(usize::from(address)).ok_or(ExceptionCode::IllegalDataAddress)? = value;
+        self.writes += 1;
         Ok(())
     }
 }
 
-/// Records what each reply answers, then does what it was made to.
-struct Recorder {
-    seen: Arc<Mutex<Vec<Option<Answering>>>>,
-    fate: Fate,
-    keep: Option<usize>,
+fn mbap(t: u16, unit: u8, pdu: &[u8]) -> Vec<u8> {
+    let mut frame = t.to_be_bytes().to_vec();
+    frame.extend_from_slice(&[0, 0]);
+    frame.extend_from_slice(&u16::try_from(pdu.len() + 1).unwrap().to_be_bytes());
+    frame.push(unit);
+    frame.extend_from_slice(pdu);
+    frame
 }
 
-impl ReplyFilter for Recorder {
-    fn filter(&mut self, answering: Option<&Answering>, frame: &mut Vec<u8>) -> Fate {
-        self.seen.lock().unwrap().push(answering.copied());
-        if let Some(keep) = self.keep {
-            frame.truncate(keep);
-        }
-        self.fate
-    }
+fn options(idle: Option<Duration>, frame: Option<Duration>) -> ServerOptions {
+    let mut options = ServerOptions::new(LineTiming::new(&LineConfig::new(19_200).unwrap()), Timer::Tokio);
+    options.idle_timeout = idle;
+    options.frame_timeout = frame;
+    options
 }
 
-/// Serves `Addresses` at unit 1 through a `Recorder`, sends `request`, and returns each byte
-/// that came back within a second with when it came, and what the filter saw.
-async fn exchange(request: &[u8], fate: Fate, keep: Option<usize>) -> (Vec<(u8, Instant)>, Vec<Option<Answering>>) {
-    let (server_end, mut client_end) = tokio::io::duplex(4096);
-    let seen = Arc::new(Mutex::new(Vec::new()));
-    let config = SlaveConfig { units: UnitSet::single(1), response_wait: Duration::ZERO };
-    let timing = LineTiming::new(&LineConfig::default());
-    let mut options = ServerOptions::new(timing, ferrobus::Timer::Tokio);
-    options.filter = Some(Box::new(Recorder { seen: Arc::clone(&seen), fate, keep }));
+/// Serves one connection of `buffer` bytes each way; returns the client's end and the server.
+fn start(
+    buffer: usize,
+    mut options: ServerOptions,
+) -> (DuplexStream, tokio::task::JoinHandle<(std::io::Result<()>, Device, Duration)>) {
+    let (client, server_end) = tokio::io::duplex(buffer);
     let server = tokio::spawn(async move {
-        let mut handler = Addresses;
-        serve(Slave::new(MbapCodec::new(), config), Box::new(server_end), &mut handler, &mut options).await.1
+        let mut device = Device { registers: [0; 100], writes: 0 };
+        let slave = Slave::new(MbapCodec::strict(), SlaveConfig::unit(1));
+        let began = Instant::now();
+        let (_, ended) = serve(slave, Box::new(server_end), &mut device, &mut options).await;
+        (ended, device, began.elapsed())
     });
-    client_end.write_all(request).await.unwrap();
-    let mut got = Vec::new();
-    let deadline = Instant::now() + Duration::from_secs(1);
-    let mut byte = [0u8; 1];
-    while let Ok(Ok(1)) = tokio::time::timeout_at(deadline, client_end.read(&mut byte)).await {
-        got.push((byte[0], Instant::now()));
+    (client, server)
+}
+
+#[tokio::test(start_paused = true)]
+async fn an_idle_connection_is_closed_after_the_idle_timeout_and_not_before() {
+    let (_client, server) = start(1024, options(Some(Duration::from_secs(60)), Some(Duration::from_secs(5))));
+    let (ended, _, after) = server.await.unwrap();
+    let err = ended.expect_err("closed");
+    assert_eq!(Closed::of(&err), Some(Closed::Idle(Duration::from_secs(60))), "{err}");
+    assert!(after >= Duration::from_secs(60) && after < Duration::from_secs(61), "closed after {after:?}");
+}
+
+#[tokio::test(start_paused = true)]
+async fn a_frame_begun_and_never_finished_is_closed_after_the_frame_timeout() {
+    let (mut client, server) = start(1024, options(Some(Duration::from_secs(60)), Some(Duration::from_secs(5))));
+    // One byte a second: never idle, the frame never complete.
+    for byte in [0x00, 0x01, 0x00, 0x00, 0x00, 0x06, 0x01] {
+        if client.write_all(&[byte]).await.is_err() {
+            break;
+        }
+        tokio::time::sleep(Duration::from_secs(1)).await;
     }
-    server.abort();
-    let seen = seen.lock().unwrap().clone();
-    (got, seen)
-}
-
-/// Transaction 0x0102, unit 1, 03: two holding registers from 0x0010.
-const READ: [u8; 12] = [0x01, 0x02, 0x00, 0x00, 0x00, 0x06, 0x01, 0x03, 0x00, 0x10, 0x00, 0x02];
-/// Its reply: 0x0010 and 0x0011.
-const REPLY: [u8; 13] = [0x01, 0x02, 0x00, 0x00, 0x00, 0x07, 0x01, 0x03, 0x04, 0x00, 0x10, 0x00, 0x11];
-
-#[tokio::test(start_paused = true)]
-async fn the_filter_is_told_the_unit_function_and_addresses_its_reply_answers() {
-    let (got, seen) = exchange(&READ, Fate::Send, None).await;
-    assert_eq!(got.iter().map(|(b, _)| *b).collect::<Vec<_>>(), REPLY);
-    let expected = Answering {
-        unit: 1,
-        function: FunctionCode::ReadHoldingRegisters,
-        addresses: [AddressRange::new(0x10, 0x11), None],
-    };
-    assert_eq!(seen, [Some(expected)]);
+    let (ended, _, after) = server.await.unwrap();
+    let err = ended.expect_err("closed");
+    assert_eq!(Closed::of(&err), Some(Closed::UnfinishedFrame(Duration::from_secs(5))), "{err}");
+    assert!(after >= Duration::from_secs(5) && after < Duration::from_secs(6), "closed after {after:?}");
 }
 
 #[tokio::test(start_paused = true)]
-async fn a_filter_may_shorten_the_reply() {
-    let (got, _) = exchange(&READ, Fate::Send, Some(5)).await;
-    assert_eq!(got.iter().map(|(b, _)| *b).collect::<Vec<_>>(), REPLY[..5]);
+async fn a_bad_mbap_header_closes_the_connection_and_the_write_behind_it_is_not_executed() {
+    let (mut client, server) = start(1024, options(None, None));
+    let mut input = vec![0x00, 0x31, 0x00, 0x00, 0xFF, 0xFF, 0x01];
+    input.extend(mbap(0x0032, 1, &[0x06, 0x00, 0x05, 0x12, 0x34]));
+    client.write_all(&input).await.unwrap();
+    let (ended, device, _) = server.await.unwrap();
+    let err = ended.expect_err("closed");
+    assert_eq!(Closed::of(&err), Some(Closed::BadHeader), "{err}");
+    assert_eq!((device.writes, device.registers[5]), (0, 0), "nothing executed");
+    let mut rest = Vec::new();
+    client.read_to_end(&mut rest).await.unwrap();
+    assert!(rest.is_empty(), "nothing answered: {rest:02X?}");
+}
+
+/// Transaction `t` writes 0x4000 + t to register `t`; its reply is its echo.
+fn write_request(t: u16) -> Vec<u8> {
+    let [hi, lo] = (0x4000 + t).to_be_bytes();
+    mbap(t, 1, &[0x06, 0x00, u8::try_from(t).unwrap(), hi, lo])
 }
 
 #[tokio::test(start_paused = true)]
-async fn a_trickled_reply_leaves_byte_by_byte_never_sooner_than_its_gap() {
-    let gap = Duration::from_millis(10);
-    let (got, _) = exchange(&READ, Fate::Trickle { gap }, None).await;
-    assert_eq!(got.iter().map(|(b, _)| *b).collect::<Vec<_>>(), REPLY);
-    for pair in got.windows(2) {
-        let apart = pair[1].1 - pair[0].1;
-        assert!(apart >= gap, "two bytes {apart:?} apart, under the gap of {gap:?}: {got:?}");
+async fn a_hundred_pipelined_requests_to_a_client_that_reads_late_are_all_answered_in_order() {
+    // A 64-byte pipe: the server's replies fill it long before the client reads.
+    let (client, server) = start(64, options(None, None));
+    let (mut rd, mut wr) = tokio::io::split(client);
+    let writer = tokio::spawn(async move {
+        for t in 0..100u16 {
+            wr.write_all(&write_request(t)).await.unwrap();
+        }
+        wr
+    });
+    // Held back by the full pipe, the writer cannot finish until replies are read.
+    tokio::time::sleep(Duration::from_secs(1)).await;
+    assert!(!writer.is_finished(), "the server stopped reading while its replies were not read");
+    let mut reply = [0u8; 12];
+    for t in 0..100u16 {
+        rd.read_exact(&mut reply).await.unwrap();
+        assert_eq!(reply.as_slice(), write_request(t).as_slice(), "reply {t}: the echo of request {t}");
+    }
+    drop(writer.await.unwrap());
+    drop(rd);
+    let (ended, device, _) = server.await.unwrap();
+    assert!(ended.is_ok(), "{ended:?}");
+    assert_eq!(device.writes, 100);
+}
+
+/// Delays the first reply by 100 ms, sends the others at once.
+struct DelayFirst(bool);
+
+impl ReplyFilter for DelayFirst {
+    fn filter(&mut self, _answering: Option<&Answering>, _frame: &mut Vec<u8>) -> Fate {
+        if std::mem::replace(&mut self.0, true) { Fate::Send } else { Fate::Delay(Duration::from_millis(100)) }
+    }
+}
+
+#[tokio::test(start_paused = true)]
+async fn replies_behind_a_delayed_one_wait_for_it_and_none_is_lost() {
+    let mut options = options(None, None);
+    options.filter = Some(Box::new(DelayFirst(false)));
+    let (mut client, _server) = start(1024, options);
+    let burst: Vec<u8> = (0..3).flat_map(write_request).collect();
+    client.write_all(&burst).await.unwrap();
+    let began = Instant::now();
+    let mut reply = [0u8; 12];
+    for t in 0..3u16 {
+        client.read_exact(&mut reply).await.unwrap();
+        assert_eq!(reply.as_slice(), write_request(t).as_slice(), "reply {t} in order");
+        assert!(began.elapsed() >= Duration::from_millis(100), "reply {t} before the delayed first one");
     }
 }

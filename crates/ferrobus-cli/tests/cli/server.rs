@@ -9,7 +9,7 @@ use std::thread;
 
 use assert_cmd::assert::{Assert, OutputAssertExt};
 use ferrobus::server::{ServerOptions, Shared, serve, serve_tcp};
-use ferrobus::{Pty, Rs485, Timer, Transport};
+use ferrobus::{Pty, Timer, Transport};
 use ferrobus_proto::ExceptionCode;
 use ferrobus_proto::frame::ascii::AsciiCodec;
 use ferrobus_proto::frame::rtu::RtuCodec;
@@ -216,8 +216,7 @@ pub(crate) fn pty_server(ascii: bool) -> String {
             tx.send(pty.path.display().to_string()).unwrap();
             // A pty cannot hold parity; the client is run with --parity none.
             let timing = LineTiming::new(&LineConfig::new(19_200).unwrap().with_parity(Parity::None));
-            let mut options =
-                ServerOptions { timer: Timer::Tokio, rs485: Rs485::Auto, timing, filter: None, observer: None };
+            let mut options = ServerOptions::new(timing, Timer::Tokio);
             let mut handler = Shared::new(Device::new(true));
             let config = SlaveConfig::unit(1);
             let port = Box::new(pty.port);

@@ -11,6 +11,8 @@
 //! - [`fault_rules`]: fault rules aimed at requests, each met by pymodbus and libmodbus clients.
 //! - [`port_reopen`]: a serial port that disappears and comes back, through `ferrobus::Client`.
 //! - [`reply_timing`]: when the simulator's reply starts, with a 20 ms response wait.
+//! - [`tcp_server`]: `ferrobus sim --tcp` under pipelining, corrupt headers, unit ids over TCP,
+//!   its connection cap and timeouts, and a lowered descriptor limit.
 //!
 //! Run: `cargo test -p ferrobus-cli --test interop`.
 
@@ -22,3 +24,4 @@ mod mbpoll_vs_sim;
 mod port_reopen;
 mod reply_timing;
 mod support;
+mod tcp_server;

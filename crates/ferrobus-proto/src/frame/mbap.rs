@@ -5,9 +5,13 @@
 //! always 0), length (2: the bytes that follow, unit identifier included), unit identifier
 //! (1). There is no checksum; TCP carries one.
 //!
-//! A stream that breaks this layout has lost its framing. The receiver reports the bad header
-//! as a discard and looks for a plausible header one byte further on; the IO layer may also
-//! decide to close such a connection.
+//! A stream that breaks this layout (a protocol id other than 0, a length outside 2..=254)
+//! has lost its framing, and a TCP stream has no silent interval to find it again by. The
+//! receiver reports the bad header as a [`DiscardReason::BadHeader`] discard, then either
+//! looks for a plausible header one byte further on ([`MbapCodec::new`], for a sniffer or a
+//! client that will not act on a guess), or, made by [`MbapCodec::strict`] (a server),
+//! discards everything after it until [`Framing::reset`]: a request hidden behind a corrupt
+//! header is never executed, and the IO layer closes the connection.
 
 use core::time::Duration;
 
@@ -62,12 +66,45 @@ pub struct MbapCodec {
     bad: Option<(usize, Instant)>,
     report: Option<(usize, Instant)>,
     stats: RxStats,
+    /// Whether a bad header ends the stream's framing ([`MbapCodec::strict`]).
+    strict: bool,
+    /// A strict receiver has seen a bad header: every byte is discarded until reset.
+    lost: bool,
 }
 
 impl MbapCodec {
     /// A fresh receiver.
     pub fn new() -> Self {
-        MbapCodec { buf: [0; MAX_ADU_LEN], len: 0, found: None, bad: None, report: None, stats: RxStats::default() }
+        MbapCodec {
+            buf: [0; MAX_ADU_LEN],
+            len: 0,
+            found: None,
+            bad: None,
+            report: None,
+            stats: RxStats::default(),
+            strict: false,
+            lost: false,
+        }
+    }
+
+    /// A receiver for which a bad header ends the framing: it and every byte after it are
+    /// discarded (reported as [`DiscardReason::BadHeader`]) until [`Framing::reset`].
+    pub fn strict() -> Self {
+        MbapCodec { strict: true, ..MbapCodec::new() }
+    }
+
+    /// Whether a bad header has ended this strict receiver's framing.
+    pub fn is_lost(&self) -> bool {
+        self.lost
+    }
+
+    /// Throws away `n` bytes as part of the current run of bad ones.
+    fn discard(&mut self, n: usize, now: Instant) {
+        if n == 0 {
+            return;
+        }
+        let bad = self.bad.get_or_insert((0, now));
+        bad.0 = bad.0.saturating_add(n);
     }
 
     fn release(&mut self) {
@@ -97,9 +134,15 @@ impl MbapCodec {
                 return;
             };
             let Ok((adu, pdu_len)) = parse_header(header) else {
+                if self.strict {
+                    self.lost = true;
+                    let n = self.len;
+                    self.len = 0;
+                    self.discard(n, now);
+                    return;
+                }
                 self.shift(1);
-                let bad = self.bad.get_or_insert((0, now));
-                bad.0 = bad.0.saturating_add(1);
+                self.discard(1, now);
                 continue;
             };
             let total = HEADER_LEN.saturating_add(pdu_len);
@@ -126,12 +169,22 @@ impl Framing for MbapCodec {
 
     fn push(&mut self, now: Instant, bytes: &[u8]) -> usize {
         self.release();
+        if self.lost {
+            self.discard(bytes.len(), now);
+            self.flush_bad();
+            return bytes.len();
+        }
         let mut consumed = 0usize;
         loop {
             self.evaluate(now);
             let rest = bytes.get(consumed..).unwrap_or_default();
             if self.found.is_some() {
                 return consumed;
+            }
+            if self.lost {
+                self.discard(rest.len(), now);
+                self.flush_bad();
+                return bytes.len();
             }
             if rest.is_empty() {
                 // Report a run of bad bytes now, not when a good frame finally comes: a stream
@@ -183,6 +236,7 @@ impl Framing for MbapCodec {
         self.found = None;
         self.bad = None;
         self.report = None;
+        self.lost = false;
     }
 
     fn stats(&self) -> RxStats {
@@ -191,6 +245,15 @@ impl Framing for MbapCodec {
 
     fn supports_broadcast(&self) -> bool {
         false
+    }
+
+    fn is_mid_frame(&self) -> bool {
+        let held = match self.found {
+            Some((n, _, _, true)) => self.len.saturating_sub(n),
+            Some(_) => 0,
+            None => self.len,
+        };
+        held > 0 && !self.lost
     }
 }
 
@@ -263,6 +326,46 @@ mod tests {
         assert!(frames.is_empty());
         assert_eq!(bad.iter().sum::<usize>(), 1000 - (HEADER_LEN - 1), "all but a possible header's worth");
         assert!(codec.stats().discards > 0);
+    }
+
+    #[test]
+    fn a_strict_receiver_discards_everything_after_a_bad_header_and_finds_no_frame_behind_it() {
+        let mut header_65535 = std::vec![0x00, 0x31, 0x00, 0x00, 0xFF, 0xFF, 0x01];
+        let mut hidden = REQUEST.to_vec();
+        hidden[1] = 0x32; // transaction 0x0032, the request the lenient receiver would find
+        header_65535.extend_from_slice(&hidden);
+        let six_zeros = [&[0u8; 6][..], REQUEST, REQUEST].concat();
+        for input in [header_65535, six_zeros] {
+            for chunk in [1, 5, input.len()] {
+                let mut codec = MbapCodec::strict();
+                let (frames, bad) = run(&mut codec, &input, chunk);
+                assert!(frames.is_empty(), "chunk {chunk}: frames {frames:?} found behind a bad header");
+                assert_eq!(bad.iter().sum::<usize>(), input.len(), "chunk {chunk}: every byte is discarded");
+                assert!(codec.is_lost());
+                codec.reset();
+                let (frames, _) = run(&mut codec, REQUEST, REQUEST.len());
+                assert_eq!(frames.len(), 1, "a reset receiver frames again");
+            }
+        }
+    }
+
+    #[test]
+    fn a_receiver_is_mid_frame_from_a_frames_first_byte_until_it_is_complete() {
+        let mut codec = MbapCodec::strict();
+        assert!(!codec.is_mid_frame());
+        let (frames, _) = run(&mut codec, &REQUEST[..3], 3);
+        assert!(frames.is_empty() && codec.is_mid_frame(), "a truncated header");
+        let (frames, _) = run(&mut codec, &REQUEST[3..], 9);
+        assert_eq!(frames.len(), 1);
+        assert!(!codec.is_mid_frame(), "the frame is complete");
+    }
+
+    #[test]
+    fn a_strict_receiver_frames_good_requests_like_the_lenient_one() {
+        let two = [REQUEST, REQUEST].concat();
+        let (frames, bad) = run(&mut MbapCodec::strict(), &two, 5);
+        assert_eq!(frames.len(), 2);
+        assert!(bad.is_empty());
     }
 
     #[test]

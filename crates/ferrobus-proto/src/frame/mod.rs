@@ -178,6 +178,12 @@ pub trait Framing {
         true
     }
 
+    /// Whether the receiver holds the start of a frame not yet complete: a driver may close a
+    /// stream whose frame never ends. Framings that end frames by time say false.
+    fn is_mid_frame(&self) -> bool {
+        false
+    }
+
     /// Changes the end-of-frame character, as 0x08/0x03 asks of an ASCII device. Other
     /// framings have none and ignore it.
     fn set_delimiter(&mut self, _delimiter: u8) {}

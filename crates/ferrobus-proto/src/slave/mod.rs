@@ -15,9 +15,18 @@
 //!   as the spec says), unsupported functions 01. The engine itself serves 0x08 Diagnostics,
 //!   0x0B and 0x0C from its [`Counters`] and [`EventLog`], and keeps listen-only mode: after
 //!   0x08/0x04 it answers nothing until 0x08/0x01.
+//! - **How many at once.** A serial line carries one request at a time: a request arriving
+//!   while a reply is pending gets none ([`Disposition::Silent`]). Modbus/TCP allows several
+//!   outstanding transactions: up to [`REPLY_QUEUE`] replies wait, each with its own
+//!   transaction id, and go out in the order of their requests. Past that, and whenever the
+//!   event queue ([`EVENT_QUEUE`] events) has no room for what the next frame may report,
+//!   [`Slave::on_bytes`] stops taking bytes and says how many it took: the driver keeps the
+//!   rest, stops reading, and hands them in again once replies are written and events
+//!   polled ([`Slave::is_blocked`]). Nothing is dropped; over TCP that is back-pressure.
 
 mod diag;
 mod handler;
+mod ring;
 mod serve;
 #[cfg(test)]
 mod tests;
@@ -29,13 +38,14 @@ pub use handler::{Admission, Handler};
 
 use crate::codes::{DiagnosticCode, ExceptionCode, FunctionCode, unit};
 use crate::error::DiscardReason;
-use crate::frame::{Adu, AduHeader, Direction, Framing, RxEvent, expire, feed};
+use crate::frame::{Adu, AduHeader, Direction, Framing, RxEvent};
 use crate::master::MAX_TX_LEN;
 use crate::pdu::{
     AddressRange, CommEventCounter, CommEventLog, Diagnostic, ExceptionResponse, MAX_PDU_LEN, Request, Response,
 };
 use crate::time::{Instant, earliest};
 use diag::bump;
+use ring::Ring;
 
 /// A set of unit addresses.
 #[derive(Clone, Copy, PartialEq, Eq, Hash, Debug, Default)]
@@ -177,7 +187,16 @@ struct Reply {
     exception: Option<ExceptionCode>,
 }
 
-const EVENT_QUEUE: usize = 8;
+/// The events the engine holds until they are polled. A frame reports at most two (a
+/// restart and its request); the engine takes no frame without room for both.
+pub const EVENT_QUEUE: usize = 8;
+
+/// The replies that may be pending at once over a framing without broadcast (Modbus/TCP),
+/// the one being sent included. A serial line holds one.
+pub const REPLY_QUEUE: usize = 8;
+
+/// The most events one frame can report.
+const EVENTS_PER_FRAME: usize = 2;
 
 /// The slave engine over a framing `F`.
 ///
@@ -185,9 +204,11 @@ const EVENT_QUEUE: usize = 8;
 ///
 /// ```text
 /// loop {
-///     if let Some(n) = slave.poll_transmit(now, &mut buf) { write(&buf[..n]) }
-///     wait for bytes or until slave.poll_timeout();
-///     on bytes:   slave.on_bytes(now, &bytes, &mut handler)
+///     while let Some(n) = slave.poll_transmit(now, &mut buf) { write(&buf[..n]) }
+///     while let Some(event) = slave.poll_event() { report(event) }
+///     if bytes are kept and !slave.is_blocked(): taken = slave.on_bytes(at, &kept, &mut handler)
+///     wait for bytes (only while !slave.is_blocked()) or until slave.poll_timeout();
+///     on bytes:   taken = slave.on_bytes(now, &bytes, &mut handler); keep bytes[taken..]
 ///     on timeout: slave.handle_timeout(now, &mut handler)
 /// }
 /// ```
@@ -210,7 +231,11 @@ struct Core {
     log: EventLog,
     listen_only: bool,
     diagnostic_register: u16,
+    /// The reply just decided, framed by [`Slave::apply`].
     reply: Option<Reply>,
+    /// Replies waiting behind the one in `tx` (Modbus/TCP only).
+    queued: Ring<Reply, { REPLY_QUEUE - 1 }>,
+    /// The reply framed for sending, due at `tx_due`.
     tx: [u8; MAX_TX_LEN],
     tx_len: usize,
     tx_due: Option<Instant>,
@@ -218,9 +243,7 @@ struct Core {
     /// Actions on the framing decided while it was borrowed.
     new_delimiter: Option<u8>,
     restart: bool,
-    events: [Option<SlaveEvent>; EVENT_QUEUE],
-    events_head: usize,
-    events_len: usize,
+    events: Ring<SlaveEvent, EVENT_QUEUE>,
     events_dropped: u32,
 }
 
@@ -241,15 +264,14 @@ impl<F: Framing> Slave<F> {
                 listen_only: false,
                 diagnostic_register: 0,
                 reply: None,
+                queued: Ring::new(),
                 tx: [0; MAX_TX_LEN],
                 tx_len: 0,
                 tx_due: None,
                 tx_exception: None,
                 new_delimiter: None,
                 restart: false,
-                events: [None; EVENT_QUEUE],
-                events_head: 0,
-                events_len: 0,
+                events: Ring::new(),
                 events_dropped: 0,
             },
         }
@@ -285,16 +307,61 @@ impl<F: Framing> Slave<F> {
         &self.framing
     }
 
-    /// Events dropped because nobody polled them (the queue holds eight).
+    /// Events dropped because nobody polled them. [`Slave::on_bytes`] and
+    /// [`Slave::handle_timeout`] take no frame without room for its events, so this stays 0
+    /// unless an event would otherwise be lost; it is counted, never silent.
     pub fn dropped_events(&self) -> u32 {
         self.core.events_dropped
     }
 
-    /// Bytes arrived at `now`.
-    pub fn on_bytes<H: Handler + ?Sized>(&mut self, now: Instant, bytes: &[u8], handler: &mut H) {
-        let Slave { framing, core } = self;
-        feed(framing, now, bytes, |event| core.on_event(&event, handler));
-        self.apply();
+    /// The replies pending: decided and not yet handed out by [`Slave::poll_transmit`].
+    pub fn pending_replies(&self) -> usize {
+        self.core.pending_replies()
+    }
+
+    /// Whether the engine takes no more bytes until replies are sent ([`Slave::poll_transmit`])
+    /// or events polled ([`Slave::poll_event`]): the reply queue (over Modbus/TCP) or the event
+    /// queue is full.
+    pub fn is_blocked(&self) -> bool {
+        let core = &self.core;
+        core.events.len().saturating_add(EVENTS_PER_FRAME) > EVENT_QUEUE
+            || (!core.serial && core.pending_replies() >= REPLY_QUEUE)
+    }
+
+    /// Bytes arrived at `now`; returns how many were taken. Fewer than `bytes.len()` means the
+    /// engine is blocked ([`Slave::is_blocked`]): hand the rest in again, with the same `now`,
+    /// once replies are sent or events polled. A call with no bytes also delivers frames the
+    /// receiver already holds.
+    pub fn on_bytes<H: Handler + ?Sized>(&mut self, now: Instant, bytes: &[u8], handler: &mut H) -> usize {
+        let mut consumed = 0usize;
+        // Frames a previous call left in the receiver come first.
+        self.drain(handler);
+        loop {
+            if self.is_blocked() {
+                return consumed;
+            }
+            let rest = bytes.get(consumed..).unwrap_or_default();
+            let n = self.framing.push(now, rest);
+            consumed = consumed.saturating_add(n).min(bytes.len());
+            let any = self.drain(handler);
+            if !any && (consumed >= bytes.len() || n == 0) {
+                return consumed;
+            }
+        }
+    }
+
+    /// Hands the receiver's events to the engine while it has room for them; returns whether
+    /// it handed any.
+    fn drain<H: Handler + ?Sized>(&mut self, handler: &mut H) -> bool {
+        let mut any = false;
+        while !self.is_blocked() {
+            let Slave { framing, core } = self;
+            let Some(event) = framing.poll_event() else { break };
+            core.on_event(&event, handler);
+            any = true;
+            self.apply();
+        }
+        any
     }
 
     /// The next instant [`Slave::handle_timeout`] must be called.
@@ -304,9 +371,9 @@ impl<F: Framing> Slave<F> {
 
     /// `now` has come: ends silent intervals. Spurious calls do nothing.
     pub fn handle_timeout<H: Handler + ?Sized>(&mut self, now: Instant, handler: &mut H) {
-        let Slave { framing, core } = self;
-        expire(framing, now, |event| core.on_event(&event, handler));
-        self.apply();
+        self.framing.handle_timeout(now);
+        // A frame found at the gap may leave buffered bytes behind it; let them be examined.
+        self.on_bytes(now, &[], handler);
     }
 
     /// When the pending reply is due, if there is one.
@@ -323,30 +390,23 @@ impl<F: Framing> Slave<F> {
         }
         core.tx_due = None;
         let n = core.tx_len;
-        let (Some(dst), Some(src)) = (buf.get_mut(..n), core.tx.get(..n)) else {
-            return None;
+        let copied = match (buf.get_mut(..n), core.tx.get(..n)) {
+            (Some(dst), Some(src)) => {
+                dst.copy_from_slice(src);
+                core.log.push(EventLog::send_event(core.tx_exception, core.listen_only));
+                Some(n)
+            }
+            _ => None,
         };
-        dst.copy_from_slice(src);
-        core.log.push(EventLog::send_event(core.tx_exception, core.listen_only));
-        Some(n)
+        self.load_next();
+        copied
     }
 
-    /// The next event, if any.
-    pub fn poll_event(&mut self) -> Option<SlaveEvent> {
+    /// Frames the next queued reply into `tx` if nothing is there.
+    fn load_next(&mut self) {
         let core = &mut self.core;
-        if core.events_len == 0 {
-            return None;
-        }
-        let event = core.events.get_mut(core.events_head).and_then(Option::take);
-        core.events_head = core.events_head.saturating_add(1) % EVENT_QUEUE;
-        core.events_len = core.events_len.saturating_sub(1);
-        event
-    }
-
-    /// Frames the reply decided while the framing was borrowed, and applies 0x08 actions.
-    fn apply(&mut self) {
-        let core = &mut self.core;
-        if let Some(reply) = core.reply.take() {
+        while core.tx_due.is_none() {
+            let Some(reply) = core.queued.pop() else { return };
             let pdu = reply.pdu.get(..reply.len).unwrap_or_default();
             if let Ok(n) = self.framing.encode(reply.header, pdu, &mut core.tx) {
                 core.tx_len = n;
@@ -354,6 +414,23 @@ impl<F: Framing> Slave<F> {
                 core.tx_exception = reply.exception;
             }
         }
+    }
+
+    /// The next event, if any.
+    pub fn poll_event(&mut self) -> Option<SlaveEvent> {
+        self.core.events.pop()
+    }
+
+    /// Frames the reply decided while the framing was borrowed, and applies 0x08 actions.
+    fn apply(&mut self) {
+        if let Some(reply) = self.core.reply.take() {
+            // `dispatch` decides no reply without room for it.
+            if self.core.queued.push(reply).is_err() {
+                bump(&mut self.core.counters.server_no_response);
+            }
+            self.load_next();
+        }
+        let core = &mut self.core;
         if let Some(delimiter) = core.new_delimiter.take() {
             self.framing.set_delimiter(delimiter);
         }
@@ -365,18 +442,21 @@ impl<F: Framing> Slave<F> {
 }
 
 impl Core {
+    /// Queues `event`. The engine takes no frame without room for its events, so the queue
+    /// is never full here; if it were, the oldest event goes and is counted.
     fn push_event(&mut self, event: SlaveEvent) {
-        if self.events_len == EVENT_QUEUE {
-            // Drop the oldest.
-            self.events_head = self.events_head.saturating_add(1) % EVENT_QUEUE;
-            self.events_len = self.events_len.saturating_sub(1);
+        if self.events.is_full() {
+            let _ = self.events.pop();
             self.events_dropped = self.events_dropped.wrapping_add(1);
         }
-        let slot = self.events_head.saturating_add(self.events_len) % EVENT_QUEUE;
-        if let Some(s) = self.events.get_mut(slot) {
-            *s = Some(event);
-            self.events_len = self.events_len.saturating_add(1);
-        }
+        let _ = self.events.push(event);
+    }
+
+    /// Replies decided and not yet handed out.
+    fn pending_replies(&self) -> usize {
+        usize::from(self.reply.is_some())
+            .saturating_add(usize::from(self.tx_due.is_some()))
+            .saturating_add(self.queued.len())
     }
 
     fn on_event<H: Handler + ?Sized>(&mut self, event: &RxEvent<'_>, handler: &mut H) {
@@ -442,8 +522,10 @@ impl Core {
             }
             return Disposition::Silent;
         }
-        if self.reply.is_some() || self.tx_due.is_some() {
-            // Still answering the previous request: a master that does not wait.
+        let busy = if self.serial { self.pending_replies() > 0 } else { self.pending_replies() >= REPLY_QUEUE };
+        if busy {
+            // A serial line: still answering the previous request, a master that does not
+            // wait. Over TCP the queue is full, which `Slave::is_blocked` prevents.
             return Disposition::Silent;
         }
         let request = match request {
@@ -496,8 +578,17 @@ impl Core {
         let function =
             FunctionCode::from_u8(frame.pdu.first().copied().unwrap_or_default() & !FunctionCode::EXCEPTION_BIT);
         let mut pdu = [0u8; MAX_PDU_LEN];
-        let Ok(exception) = ExceptionResponse::new(function, code) else { return Disposition::Silent };
-        let Ok(len) = Response::Exception(exception).emit(&mut pdu) else { return Disposition::Silent };
+        let len = if let Ok(exception) = ExceptionResponse::new(function, code) {
+            let Ok(len) = Response::Exception(exception).emit(&mut pdu) else { return Disposition::Silent };
+            len
+        } else {
+            // Function code 0x00 is no valid request code, yet it is refused like any unknown
+            // one: 0x80, then the exception code.
+            let [first, second, ..] = &mut pdu;
+            *first = function.value() | FunctionCode::EXCEPTION_BIT;
+            *second = code.value();
+            2
+        };
         self.counters.count_exception(code);
         let due = self.due(frame, handler);
         self.reply = Some(Reply { header: frame.header, pdu, len, due, exception: Some(code) });

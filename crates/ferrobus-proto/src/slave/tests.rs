@@ -160,10 +160,21 @@ fn exchange<F: Framing>(
     at: Instant,
     frame: &[u8],
 ) -> Option<(Vec<u8>, Instant)> {
-    slave.on_bytes(at, frame, device);
+    let mut taken = 0;
+    loop {
+        taken += slave.on_bytes(at, &frame[taken..], device);
+        if taken == frame.len() {
+            break;
+        }
+        // Blocked: make room as a driver does (the events of a long input are not looked at).
+        while slave.poll_event().is_some() {}
+    }
     let mut out = [0xA5u8; MAX_TX_LEN];
     // Step through the deadlines: the end of a frame of unknown length, then the reply.
     loop {
+        if slave.is_blocked() {
+            while slave.poll_event().is_some() {}
+        }
         let due = slave.poll_timeout()?;
         if due > at {
             let early = due.saturating_sub(Duration::from_nanos(1));
@@ -575,4 +586,122 @@ fn over_ascii_a_request_is_answered_in_ascii_and_the_input_delimiter_can_change(
     let (frame, _) = exchange(&mut slave, &mut device, Instant::from_millis(100), b":010300000001FB\r!").unwrap();
     assert_eq!(frame, b":0103020003F7\r\n");
     assert_eq!(exchange(&mut slave, &mut device, Instant::from_millis(150), b":010300000001FB\r\n"), None);
+}
+
+// ---- Several requests at once -------------------------------------------------------------
+
+/// An MBAP request: transaction `t`, unit `unit`, `pdu`.
+fn mbap(t: u16, unit: u8, pdu: &[u8]) -> Vec<u8> {
+    let mut frame = Vec::new();
+    frame.extend_from_slice(&t.to_be_bytes());
+    frame.extend_from_slice(&[0, 0]);
+    frame.extend_from_slice(&u16::try_from(pdu.len() + 1).unwrap().to_be_bytes());
+    frame.push(unit);
+    frame.extend_from_slice(pdu);
+    frame
+}
+
+/// Feeds `input` as a driver does: what the engine does not take is kept and handed in
+/// again after the replies due at `at` are sent and the events polled. Returns the replies and
+/// the events, in order.
+fn drive_pipelined<F: Framing>(
+    slave: &mut Slave<F>,
+    device: &mut Device,
+    at: Instant,
+    input: &[u8],
+) -> (Vec<Vec<u8>>, Vec<SlaveEvent>) {
+    let mut out = [0xA5u8; MAX_TX_LEN];
+    let (mut replies, mut events) = (Vec::new(), Vec::new());
+    let mut taken = 0;
+    let mut blocked_calls = 0;
+    loop {
+        taken += slave.on_bytes(at, &input[taken..], device);
+        if slave.is_blocked() {
+            blocked_calls += 1;
+        }
+        while let Some(n) = slave.poll_transmit(at, &mut out) {
+            replies.push(out[..n].to_vec());
+        }
+        events.extend(core::iter::from_fn(|| slave.poll_event()));
+        if taken == input.len() && !slave.is_blocked() && slave.pending_replies() == 0 {
+            slave.on_bytes(at, &[], device);
+            let before = events.len();
+            events.extend(core::iter::from_fn(|| slave.poll_event()));
+            if slave.pending_replies() == 0 && events.len() == before {
+                break;
+            }
+        }
+        assert!(blocked_calls < 1000, "the engine makes progress");
+    }
+    (replies, events)
+}
+
+#[test]
+fn twenty_pipelined_mbap_requests_get_twenty_replies_in_order_each_with_its_transaction() {
+    let mut slave = Slave::new(MbapCodec::strict(), SlaveConfig::unit(1));
+    let mut device = Device::new();
+    let input: Vec<u8> =
+        (0..20u16).flat_map(|t| mbap(0x0100 + t, 1, &[0x03, 0, u8::try_from(t).unwrap(), 0, 1])).collect();
+    // More than the reply queue: the engine takes part of the input and blocks.
+    let first = slave.on_bytes(Instant::ZERO, &input, &mut device);
+    // The receiver may hold the rest (it buffers one ADU's worth); none of it is lost.
+    assert!(slave.is_blocked(), "{first} of {} bytes taken, the queue full", input.len());
+    assert!((1..=REPLY_QUEUE).contains(&slave.pending_replies()));
+    let (replies, events) = drive_pipelined(&mut slave, &mut device, Instant::ZERO, &input[first..]);
+    assert_eq!(replies.len(), 20, "every request answered");
+    for (t, reply) in (0..20u16).zip(&replies) {
+        let [hi, lo] = device.holding[usize::from(t)].to_be_bytes();
+        assert_eq!(reply, &mbap(0x0100 + t, 1, &[0x03, 0x02, hi, lo]), "reply {t}");
+    }
+    let requests =
+        events.iter().filter(|e| matches!(e, SlaveEvent::Request { disposition: Disposition::Replied(_), .. })).count();
+    assert_eq!(requests, 20, "one event per request, none dropped");
+    assert_eq!(slave.dropped_events(), 0);
+    assert_eq!(slave.counters().server_no_response, 0);
+}
+
+#[test]
+fn thirty_frames_in_one_chunk_report_thirty_events_and_drop_none() {
+    let mut slave = Slave::new(MbapCodec::strict(), SlaveConfig::unit(1));
+    let mut device = Device::new();
+    // Other units: each frame is one event and no reply, so only the event queue can fill.
+    let input: Vec<u8> = (0..30u16).flat_map(|t| mbap(t, 7, &[0x03, 0, 0, 0, 1])).collect();
+    let first = slave.on_bytes(Instant::ZERO, &input, &mut device);
+    assert!(first < input.len(), "the event queue fills: the engine stops taking bytes");
+    let mut events: Vec<SlaveEvent> = core::iter::from_fn(|| slave.poll_event()).collect();
+    let (replies, more) = drive_pipelined(&mut slave, &mut device, Instant::ZERO, &input[first..]);
+    events.extend(more);
+    assert!(replies.is_empty());
+    assert_eq!(events.len(), 30);
+    assert!(events.iter().all(|e| matches!(e, SlaveEvent::Ignored { unit: 7, why: Ignored::OtherUnit, .. })));
+    assert_eq!(slave.dropped_events(), 0);
+    assert_eq!(slave.counters().bus_messages, 30);
+}
+
+#[test]
+fn twelve_rtu_frames_in_one_read_are_all_counted_and_a_serial_line_still_takes_one_at_a_time() {
+    let mut slave = rtu_slave(SlaveConfig::unit(1));
+    let mut device = Device::new();
+    // Other units' requests: no reply is pending, each frame is an event.
+    let input: Vec<u8> = (0..12).flat_map(|_| rtu(2, &[0x03, 0, 0, 0, 1])).collect();
+    let (_, events) = drive_pipelined(&mut slave, &mut device, Instant::ZERO, &input);
+    let later = Instant::from_millis(100);
+    slave.handle_timeout(later, &mut device);
+    let count = events.len() + core::iter::from_fn(|| slave.poll_event()).count();
+    assert_eq!(count, 12, "every frame reported");
+    assert_eq!(slave.dropped_events(), 0);
+    // Two requests to us back to back: the second is not answered (one at a time).
+    let two = [rtu(1, &[0x03, 0, 0, 0, 1]), rtu(1, &[0x03, 0, 1, 0, 1])].concat();
+    slave.on_bytes(later, &two, &mut device);
+    assert!(!slave.is_blocked(), "a serial line never blocks on replies");
+    assert_eq!(slave.pending_replies(), 1);
+    assert_eq!(slave.counters().server_no_response, 1);
+}
+
+#[test]
+fn over_mbap_function_code_0x00_gets_exception_01_like_any_unknown_code() {
+    // (The RTU receiver never frames a code 0x00: it is noise it resyncs on.)
+    let mut slave = Slave::new(MbapCodec::strict(), SlaveConfig::unit(1));
+    let (frame, _) = exchange(&mut slave, &mut Device::new(), Instant::ZERO, &mbap(5, 1, &[0x00])).unwrap();
+    assert_eq!(frame, mbap(5, 1, &[0x80, 0x01]));
 }

@@ -1,0 +1,254 @@
+//! `ferrobus sim --tcp` as a hardened Modbus/TCP server, driven by raw frames over
+//! `std::net::TcpStream`: pipelined requests, corrupt MBAP headers, unit ids over TCP, the
+//! connection cap, idle and unfinished-frame timeouts, and running out of file descriptors.
+
+use std::io::{ErrorKind, Read, Write};
+use std::net::TcpStream;
+use std::process::Command;
+use std::time::{Duration, Instant};
+
+use crate::support::cli::{Link, Parity};
+use crate::support::env::require;
+use crate::support::peers::{Over, Served, free_port, sim};
+use crate::support::process::{Proc, Stream};
+
+/// A bound on how long any single step may take before the test fails (not a timing claim).
+const STEP: Duration = Duration::from_secs(10);
+
+/// An MBAP frame: transaction `t`, unit `unit`, `pdu`.
+fn mbap(t: u16, unit: u8, pdu: &[u8]) -> Vec<u8> {
+    let mut frame = Vec::new();
+    frame.extend_from_slice(&t.to_be_bytes());
+    frame.extend_from_slice(&[0, 0]);
+    frame.extend_from_slice(&u16::try_from(pdu.len() + 1).unwrap().to_be_bytes());
+    frame.push(unit);
+    frame.extend_from_slice(pdu);
+    frame
+}
+
+fn connect(served: &Served) -> TcpStream {
+    let Link::Tcp(addr) = &served.link else { panic!("a TCP simulator") };
+    connect_to(addr)
+}
+
+fn connect_to(addr: &str) -> TcpStream {
+    let stream = TcpStream::connect(addr).unwrap_or_else(|e| panic!("connecting to {addr}: {e}"));
+    stream.set_read_timeout(Some(STEP)).unwrap();
+    stream
+}
+
+/// Reads one MBAP frame, or `None` if the server closed the connection.
+fn read_frame(stream: &mut TcpStream) -> Option<Vec<u8>> {
+    let mut header = [0u8; 7];
+    match stream.read_exact(&mut header) {
+        Ok(()) => {}
+        Err(e) if matches!(e.kind(), ErrorKind::UnexpectedEof | ErrorKind::ConnectionReset) => return None,
+        Err(e) => panic!("reading a reply: {e}"),
+    }
+    let len = usize::from(u16::from_be_bytes([header[4], header[5]]));
+    let mut rest = vec![0u8; len.saturating_sub(1)];
+    stream.read_exact(&mut rest).unwrap_or_else(|e| panic!("reading the reply after {header:02X?}: {e}"));
+    Some([&header[..], &rest].concat())
+}
+
+/// Sends `pdu` to `unit` and returns the reply PDU (the transaction is checked).
+fn ask(stream: &mut TcpStream, t: u16, unit: u8, pdu: &[u8]) -> Vec<u8> {
+    stream.write_all(&mbap(t, unit, pdu)).unwrap();
+    let reply = read_frame(stream).unwrap_or_else(|| panic!("connection closed instead of a reply to {pdu:02X?}"));
+    assert_eq!(&reply[..2], &t.to_be_bytes(), "the transaction id is echoed");
+    assert_eq!(reply[6], unit, "the reply comes from the unit asked");
+    reply[7..].to_vec()
+}
+
+/// Whether the server closes `stream` without sending anything.
+fn closed_silently(stream: &mut TcpStream) -> bool {
+    let mut byte = [0u8; 1];
+    match stream.read(&mut byte) {
+        Ok(0) => true,
+        Err(e) if e.kind() == ErrorKind::ConnectionReset => true,
+        Ok(_) => false,
+        Err(e) => panic!("waiting for the server to close: {e}"),
+    }
+}
+
+fn generic(extra: &[&str]) -> Served {
+    let mut args = vec!["--profile", "generic"];
+    args.extend_from_slice(extra);
+    sim(Over::Tcp, Parity::None, &args)
+}
+
+#[test]
+fn twenty_pipelined_requests_get_twenty_replies_in_order_each_with_its_transaction() {
+    let Some(_turn) = require(&[]) else { return };
+    let served = generic(&[]);
+    let mut stream = connect(&served);
+    // Ten writes and ten reads back, written back to back in one go.
+    let mut burst = Vec::new();
+    for i in 0..10u16 {
+        burst.extend(mbap(0x0100 + i, 1, &[0x06, 0x00, u8::try_from(i).unwrap(), 0xB0, u8::try_from(i).unwrap()]));
+    }
+    for i in 0..10u16 {
+        burst.extend(mbap(0x0200 + i, 1, &[0x03, 0x00, u8::try_from(i).unwrap(), 0x00, 0x01]));
+    }
+    stream.write_all(&burst).unwrap();
+    for i in 0..10u16 {
+        let reply = read_frame(&mut stream).expect("a reply to each write");
+        let value = u8::try_from(i).unwrap();
+        assert_eq!(reply, mbap(0x0100 + i, 1, &[0x06, 0x00, value, 0xB0, value]), "write {i}");
+    }
+    for i in 0..10u16 {
+        let reply = read_frame(&mut stream).expect("a reply to each read");
+        assert_eq!(reply, mbap(0x0200 + i, 1, &[0x03, 0x02, 0xB0, u8::try_from(i).unwrap()]), "read {i}");
+    }
+}
+
+#[test]
+fn a_corrupt_mbap_header_closes_the_connection_and_executes_nothing_behind_it() {
+    let Some(_turn) = require(&[]) else { return };
+    let served = generic(&[]);
+    // Length 65535, then a write of 0x1234 to register 5 (transaction 0x0032).
+    let mut stream = connect(&served);
+    let mut input = vec![0x00, 0x31, 0x00, 0x00, 0xFF, 0xFF, 0x01];
+    input.extend(mbap(0x0032, 1, &[0x06, 0x00, 0x05, 0x12, 0x34]));
+    stream.write_all(&input).unwrap();
+    assert!(closed_silently(&mut stream), "the connection is closed, nothing answered");
+    // Six zero bytes, then ten requests: none is answered.
+    let mut stream = connect(&served);
+    let mut input = vec![0u8; 6];
+    for t in 0..10 {
+        input.extend(mbap(t, 1, &[0x06, 0x00, 0x06, 0x56, 0x78]));
+    }
+    stream.write_all(&input).unwrap();
+    assert!(closed_silently(&mut stream));
+    let mut fresh = connect(&served);
+    assert_eq!(ask(&mut fresh, 1, 1, &[0x03, 0x00, 0x05, 0x00, 0x02]), [0x03, 0x04, 0, 0, 0, 0], "nothing was written");
+}
+
+#[test]
+fn a_single_device_answers_unit_0xff_and_unit_0_over_tcp() {
+    let Some(_turn) = require(&[]) else { return };
+    let served = generic(&["--unit", "7"]);
+    let mut stream = connect(&served);
+    for unit in [7, 0xFF, 0] {
+        assert_eq!(
+            ask(&mut stream, u16::from(unit), unit, &[0x06, 0x00, 0x09, 0x00, unit]),
+            [0x06, 0x00, 0x09, 0x00, unit]
+        );
+        assert_eq!(
+            ask(&mut stream, 0x100, 7, &[0x03, 0x00, 0x09, 0x00, 0x01]),
+            [0x03, 0x02, 0x00, unit],
+            "the same device"
+        );
+    }
+    // Another unit id is not this device's.
+    stream.write_all(&mbap(9, 8, &[0x03, 0x00, 0x00, 0x00, 0x01])).unwrap();
+    stream.set_read_timeout(Some(Duration::from_millis(300))).unwrap();
+    let mut byte = [0u8; 1];
+    let silent = stream.read(&mut byte).map_err(|e| e.kind());
+    assert!(matches!(silent, Err(ErrorKind::WouldBlock | ErrorKind::TimedOut)), "unit 8 gets no answer: {silent:?}");
+}
+
+#[test]
+fn with_several_units_an_unserved_one_gets_exception_0b_and_any_unit_answers_every_unit() {
+    let Some(_turn) = require(&[]) else { return };
+    let several = generic(&["--unit", "1", "--unit", "2"]);
+    let mut stream = connect(&several);
+    assert_eq!(ask(&mut stream, 1, 2, &[0x03, 0x00, 0x00, 0x00, 0x01]), [0x03, 0x02, 0x00, 0x00]);
+    assert_eq!(
+        ask(&mut stream, 2, 0xFF, &[0x03, 0x00, 0x00, 0x00, 0x01]),
+        [0x83, 0x0B],
+        "gateway: target failed to respond"
+    );
+    drop(several);
+    let any = generic(&["--unit", "1", "--any-unit"]);
+    let mut stream = connect(&any);
+    for unit in [1, 0, 99, 0xFF] {
+        assert_eq!(ask(&mut stream, 3, unit, &[0x03, 0x00, 0x00, 0x00, 0x01]), [0x03, 0x02, 0x00, 0x00], "unit {unit}");
+    }
+}
+
+#[test]
+fn past_max_connections_a_new_connection_is_closed_at_once_and_the_others_are_served() {
+    let Some(_turn) = require(&[]) else { return };
+    let served = generic(&["--max-connections", "2"]);
+    let mut first = connect(&served);
+    let mut second = connect(&served);
+    // Served, so certainly accepted before the third arrives.
+    ask(&mut first, 1, 1, &[0x03, 0x00, 0x00, 0x00, 0x01]);
+    ask(&mut second, 1, 1, &[0x03, 0x00, 0x00, 0x00, 0x01]);
+    let mut third = connect(&served);
+    assert!(closed_silently(&mut third), "the third connection is closed");
+    ask(&mut first, 2, 1, &[0x03, 0x00, 0x00, 0x00, 0x01]);
+    drop(second);
+    // The freed slot is taken by the next connection (once the server has seen the close).
+    let start = Instant::now();
+    loop {
+        let mut fourth = connect(&served);
+        fourth.write_all(&mbap(3, 1, &[0x03, 0x00, 0x00, 0x00, 0x01])).unwrap();
+        if read_frame(&mut fourth).is_some() {
+            break;
+        }
+        assert!(start.elapsed() < STEP, "no connection served after one was closed");
+        std::thread::sleep(Duration::from_millis(20));
+    }
+}
+
+#[test]
+fn an_idle_connection_and_an_unfinished_frame_are_closed_never_early() {
+    let Some(_turn) = require(&[]) else { return };
+    let served = generic(&["--idle-timeout", "400ms", "--frame-timeout", "200ms"]);
+    let mut idle = connect(&served);
+    let start = Instant::now();
+    assert!(closed_silently(&mut idle));
+    let idle_after = start.elapsed();
+    assert!(idle_after >= Duration::from_millis(400), "closed after {idle_after:?}, before the 400 ms idle timeout");
+    let mut truncated = connect(&served);
+    truncated.write_all(&[0x00, 0x01, 0x00]).unwrap();
+    let start = Instant::now();
+    assert!(closed_silently(&mut truncated));
+    let frame_after = start.elapsed();
+    assert!(frame_after >= Duration::from_millis(200), "closed after {frame_after:?}, before the 200 ms frame timeout");
+    eprintln!("idle connection closed after {idle_after:?} (400 ms), unfinished frame after {frame_after:?} (200 ms)");
+}
+
+#[test]
+fn out_of_file_descriptors_the_server_keeps_serving_old_connections_and_new_ones_once_some_close() {
+    let Some(_turn) = require(&[]) else { return };
+    if Command::new("prlimit").arg("--version").output().is_err() {
+        eprintln!("skipped: prlimit (util-linux) is not installed");
+        return;
+    }
+    let addr = format!("127.0.0.1:{}", free_port());
+    let mut command = Command::new("prlimit");
+    command.args(["--nofile=48:48", "--", env!("CARGO_BIN_EXE_ferrobus"), "sim", "--profile", "generic"]);
+    command.args(["--tcp", &addr]);
+    let proc = Proc::spawn("ferrobus sim (48 descriptors)", &mut command);
+    proc.wait_for(Stream::Err, |l| l.starts_with("sim: listening on"), STEP);
+    let mut first = connect_to(&addr);
+    ask(&mut first, 1, 1, &[0x03, 0x00, 0x00, 0x00, 0x01]);
+    // More connections than the server has descriptors: the kernel queues the rest.
+    let mut others: Vec<TcpStream> = (0..60).map(|_| connect_to(&addr)).collect();
+    proc.wait_for(Stream::Err, |l| l.contains("Too many open files"), STEP);
+    assert_eq!(
+        ask(&mut first, 2, 1, &[0x03, 0x00, 0x00, 0x00, 0x01]),
+        [0x03, 0x02, 0x00, 0x00],
+        "an old connection is served"
+    );
+    // Close forty: the queued ones and a new client get descriptors.
+    others.drain(..40);
+    let mut late = connect_to(&addr);
+    assert_eq!(
+        ask(&mut late, 3, 1, &[0x03, 0x00, 0x00, 0x00, 0x01]),
+        [0x03, 0x02, 0x00, 0x00],
+        "a new client is served"
+    );
+    for (i, stream) in others.iter_mut().enumerate() {
+        let t = u16::try_from(i).unwrap();
+        assert_eq!(
+            ask(stream, t, 1, &[0x03, 0x00, 0x00, 0x00, 0x01]),
+            [0x03, 0x02, 0x00, 0x00],
+            "queued connection {i}"
+        );
+    }
+    assert_eq!(ask(&mut first, 4, 1, &[0x03, 0x00, 0x00, 0x00, 0x01]), [0x03, 0x02, 0x00, 0x00]);
+}
