@@ -55,6 +55,8 @@ pub(crate) struct Driver<F> {
     transport: Transport,
     config: ClientConfig,
     port: Option<BoxPort>,
+    /// Whether a port was ever open: a lost one is reopened only if the transport says so.
+    opened: bool,
     clock: Clock,
     health: HashMap<u8, Health>,
     rx: Box<[u8; 1024]>,
@@ -69,6 +71,7 @@ impl<F: Framing + Send + 'static> Driver<F> {
             sleeper: transport.timer().sleeper(),
             transport,
             config,
+            opened: port.is_some(),
             port,
             clock: Clock::new(),
             health: HashMap::new(),
@@ -144,7 +147,14 @@ impl<F: Framing + Send + 'static> Driver<F> {
     /// completes.
     async fn transact(&mut self, command: &Command) -> Result<Reply, Error> {
         if self.port.is_none() {
+            if self.opened && !self.transport.reopens() {
+                return Err(Error::io(
+                    format!("reopening {}", self.transport.describe()),
+                    std::io::Error::new(std::io::ErrorKind::NotConnected, "the port was lost, and reopening is off"),
+                ));
+            }
             self.port = Some(self.transport.open(self.config.connect_timeout).await?);
+            self.opened = true;
             self.master.abort();
         }
         self.master.set_config(MasterConfig {

@@ -27,6 +27,7 @@ pub mod client;
 pub mod clock;
 mod driver;
 pub mod error;
+mod identity;
 pub mod line;
 pub mod port;
 pub mod server;

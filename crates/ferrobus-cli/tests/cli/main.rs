@@ -5,6 +5,7 @@
 mod errors;
 mod offline;
 mod read;
+mod reopen;
 mod server;
 mod service;
 mod write;
