@@ -2,6 +2,7 @@
 //! process (`ferrobus::server::serve_tcp` over a small handler) and runs the binary against
 //! it, checking stdout, stderr, exit codes and the requests the server saw.
 
+mod bench_failures;
 mod errors;
 mod offline;
 mod read;
