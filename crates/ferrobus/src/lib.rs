@@ -33,6 +33,7 @@ pub mod port;
 pub mod server;
 pub mod timer;
 mod tty;
+mod uart;
 
 pub use client::{Backoff, Client, ClientConfig, DeviceInfo, EventLog, RequestOptions};
 pub use error::Error;
