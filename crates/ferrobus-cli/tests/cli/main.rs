@@ -4,6 +4,7 @@
 
 mod bench_failures;
 mod errors;
+mod line_settings;
 mod offline;
 mod read;
 mod reopen;
