@@ -31,11 +31,13 @@ With --json it prints one line, the same object as the peer fixtures' bench mode
   of its threads (/proc/self/task/*/schedstat, in ns) split into user and system in the ratio
   of /proc/self/stat's clock ticks, as getrusage() reports it
 
-Every read is made whatever the previous ones answered. The exit code is 0 unless every
-read failed; then it is that of the first failure (3 for a timeout, see ferrobus --help).
+Every read is made whatever the previous ones answered, until more than half of --count have
+failed: the run is then no measurement, bench stops, reports the reads made, and exits with
+the code of the first failure (3 for a timeout, 4 for the port, see ferrobus --help).
+Otherwise the exit code is 0. No retries unless --retries is given; a unit that stops
+answering is never skipped. A lost port is reopened with a growing wait between attempts.
 Ctrl-C or SIGTERM stops the run: the summary (or JSON) of the reads completed is printed,
 and the exit code is 130.
-No retries unless --retries is given; a unit that stops answering is never skipped.
 
 Examples:
   ferrobus --port /dev/pts/3 --baud 115200 --parity none bench --count 1000
@@ -99,8 +101,9 @@ pub(crate) async fn run(connection: &ConnectArgs, args: &BenchArgs) -> Result<()
     let mut first_error = None;
     tracing::info!(unit, count = args.count, address = args.address, quantity = args.quantity, "bench");
     let start = Instant::now();
-    let mut done = 0u32;
     let mut interrupted = false;
+    // More failures than this and the run has failed, however the rest goes.
+    let most = args.count / 2;
     for _ in 0..args.count {
         let sent = Instant::now();
         let Some(result) = interrupt.unless(client.read_holding_registers(unit, args.address, args.quantity)).await
@@ -109,7 +112,6 @@ pub(crate) async fn run(connection: &ConnectArgs, args: &BenchArgs) -> Result<()
             break;
         };
         latencies.push(sent.elapsed());
-        done += 1;
         match result {
             Ok(values) if values.len() == expected => {}
             Ok(values) => {
@@ -125,8 +127,12 @@ pub(crate) async fn run(connection: &ConnectArgs, args: &BenchArgs) -> Result<()
                 first_error.get_or_insert_with(|| CliError::from(error));
             }
         }
+        if errors > most {
+            break;
+        }
     }
     let elapsed = start.elapsed();
+    let done = u32::try_from(latencies.len()).unwrap_or(u32::MAX);
     latencies.sort_unstable();
     // Interrupted, the figures are those of the reads completed.
     let outcome = Outcome { transactions: done, errors, elapsed, latencies, cpu: cpu_times() };
@@ -140,7 +146,15 @@ pub(crate) async fn run(connection: &ConnectArgs, args: &BenchArgs) -> Result<()
         return Err(CliError::Interrupted);
     }
     match first_error {
-        Some(error) if errors == args.count => Err(error),
+        Some(error) if errors > most => {
+            if !args.json && errors < args.count {
+                eprintln!(
+                    "bench: stopped after {done} of {} reads: {errors} failed, more than half of them",
+                    args.count
+                );
+            }
+            Err(error)
+        }
         Some(error) => {
             if !args.json {
                 let first = crate::exit::report(&error, Some(&session.target), unit).message;

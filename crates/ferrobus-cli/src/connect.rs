@@ -15,6 +15,7 @@ use crate::exit::CliError;
 /// Options that say how to reach the device.
 #[derive(Args, Clone, Debug)]
 #[command(next_help_heading = "Connection")]
+#[expect(clippy::struct_excessive_bools, reason = "each bool is a command-line flag")]
 pub(crate) struct ConnectArgs {
     /// Serial port, e.g. /dev/ttyUSB0 (RTU unless --ascii)
     #[arg(long, global = true, value_name = "PATH", conflicts_with_all = ["tcp", "rtu_tcp"])]
@@ -83,6 +84,11 @@ pub(crate) struct ConnectArgs {
     /// Quiet time after a broadcast
     #[arg(long, global = true, value_name = "DURATION", value_parser = parse_duration)]
     pub(crate) turnaround: Option<Duration>,
+
+    /// Do not reopen a serial port or connection that was lost (by default it is reopened,
+    /// a serial port only while its path names the same device)
+    #[arg(long = "no-reopen", global = true)]
+    pub(crate) no_reopen: bool,
 }
 
 /// Parity, as typed. (Plain comments on the variants keep `--help` compact.)
@@ -200,7 +206,7 @@ impl ConnectArgs {
         if let Some(t35) = self.t35 {
             transport = transport.with_t3_5(t35);
         }
-        transport
+        transport.with_reopen(!self.no_reopen)
     }
 
     /// The client settings: timeout, retries, turnaround, echo; no backoff (one-shot commands

@@ -125,7 +125,7 @@ impl CliError {
                 Error::Timeout { .. } | Error::Backoff { .. } => Exit::Timeout,
                 Error::BadReply { .. } => Exit::BadReply,
                 Error::InvalidRequest(_) => Exit::Usage,
-                Error::Io { .. } | Error::Closed => Exit::Io,
+                Error::Io { .. } | Error::NotSameDevice { .. } | Error::Closed => Exit::Io,
             },
             CliError::Pdu(_) | CliError::Usage(_) | CliError::MissingTarget => Exit::Usage,
             CliError::ConnectTimeout { .. } => Exit::Io,
@@ -234,6 +234,14 @@ fn modbus_report(error: &Error, target: Option<&Target>, unit: u8) -> Report {
         }
         Error::Io { source, .. } => Report { message: error.to_string(), hints: io_hint(source, target) },
         Error::InvalidRequest(e) => Report { message: format!("invalid request: {}", pdu_words(e)), hints: Vec::new() },
+        Error::NotSameDevice { .. } => Report {
+            message: error.to_string(),
+            hints: vec![
+                "a stable name is reopened whatever it leads to: /dev/serial/by-id/..., a udev rule's name, \
+                         socat's link="
+                    .into(),
+            ],
+        },
         Error::Closed => Report { message: error.to_string(), hints: Vec::new() },
     }
 }

@@ -165,7 +165,7 @@ pub(crate) async fn run(connection: &ConnectArgs, args: &SimArgs) -> Result<(), 
         }
     };
     let config = SlaveConfig { units, response_wait: Duration::ZERO };
-    let reopen = !args.pty;
+    let reopen = !args.pty && transport.reopens();
     // Its own task: a request wakes the server alone, not the signal handlers below.
     let mut serving = tokio::spawn(async move {
         match port {
@@ -237,8 +237,9 @@ fn print_tcp(c: &TcpCounts) {
 
 /// Serves on `port` until it fails. A serial port that fails or closes — a USB adapter
 /// unplugged, the socat of a virtual pair gone — is reopened once a second and served again,
-/// the devices keeping their state, as drives on a bus keep theirs; a pty of our own cannot
-/// come back, and its end is an error.
+/// the devices keeping their state, as drives on a bus keep theirs, but only while its path
+/// names the same device (see `ferrobus::port`); a raw `/dev/pts/N`, a pty of our own, or
+/// `--no-reopen` cannot come back, and the port's end is an error.
 async fn serve_port<O: Fn() -> ServerOptions>(
     transport: &Transport,
     mut port: ferrobus::port::BoxPort,
@@ -256,10 +257,21 @@ async fn serve_port<O: Fn() -> ServerOptions>(
             return Err(ferrobus::Error::io(format!("serving on {place}"), why).into());
         }
         eprintln!("sim: {place}: {why}; reopening it every second");
+        let mut refused = None;
         port = loop {
             tokio::time::sleep(Duration::from_secs(1)).await;
-            if let Ok(port) = transport.open(Duration::from_secs(5)).await {
-                break port;
+            match transport.open(Duration::from_secs(5)).await {
+                Ok(port) => break port,
+                Err(e @ ferrobus::Error::NotSameDevice { lasting: true, .. }) => return Err(e.into()),
+                Err(e @ ferrobus::Error::NotSameDevice { .. }) => {
+                    // Another device under the name: say so once, and wait for ours.
+                    let said = e.to_string();
+                    if refused.as_ref() != Some(&said) {
+                        eprintln!("sim: {said}; waiting for the device first opened");
+                        refused = Some(said);
+                    }
+                }
+                Err(_) => {}
             }
         };
         eprintln!("sim: serving on {place} again");

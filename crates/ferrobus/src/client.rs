@@ -57,7 +57,8 @@ impl Default for Backoff {
 pub struct ClientConfig {
     /// How long to wait for each reply once the request has left.
     pub timeout: Duration,
-    /// How many times to resend a request that got no usable reply.
+    /// How many times to resend a request that got no usable reply: a timeout, a bad reply, or
+    /// an IO failure (the port is then reopened, after a backoff that grows with each failure).
     pub retries: u32,
     /// The quiet time after a broadcast.
     pub turnaround_delay: Duration,

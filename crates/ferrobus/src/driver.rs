@@ -3,8 +3,12 @@
 //! It knows no Modbus. It feeds the engine the bytes it reads with the time they arrived,
 //! sleeps until the engine's next deadline, writes what the engine hands it, and reopens the
 //! port after an IO error. Everything else — gaps, matching, timeouts — is the engine's.
-//! On top it adds what needs more than one transaction: retries, and per-unit backoff so
-//! that a dead device costs one timeout per backoff period instead of one per poll.
+//! On top it adds what needs more than one transaction: retries, per-unit backoff so that a
+//! dead device costs one timeout per backoff period instead of one per poll, and a backoff
+//! on IO failures — after each failed open, read or write the next open waits
+//! [`IO_BACKOFF_INITIAL`], doubling up to [`IO_BACKOFF_MAX`], so that a dead port costs a few
+//! attempts a second instead of a busy loop, and retries span time enough to ride out a
+//! short loss.
 
 use std::collections::HashMap;
 use std::time::Duration;
@@ -42,6 +46,12 @@ pub(crate) enum Reply {
     Sent,
 }
 
+/// The wait before reopening after the first IO failure in a row.
+pub(crate) const IO_BACKOFF_INITIAL: Duration = Duration::from_millis(10);
+
+/// The longest wait before reopening, however many IO failures came in a row.
+pub(crate) const IO_BACKOFF_MAX: Duration = Duration::from_millis(500);
+
 /// How a unit has been answering.
 #[derive(Debug, Default)]
 struct Health {
@@ -55,6 +65,12 @@ pub(crate) struct Driver<F> {
     transport: Transport,
     config: ClientConfig,
     port: Option<BoxPort>,
+    /// Whether a port was ever open: a lost one is reopened only if the transport says so.
+    opened: bool,
+    /// IO failures (opening, reading, writing) since the last transaction that got through.
+    io_failures: u32,
+    /// Not to be reopened before this instant (after an IO failure).
+    reopen_at: Option<tokio::time::Instant>,
     clock: Clock,
     health: HashMap<u8, Health>,
     rx: Box<[u8; 1024]>,
@@ -69,6 +85,9 @@ impl<F: Framing + Send + 'static> Driver<F> {
             sleeper: transport.timer().sleeper(),
             transport,
             config,
+            opened: port.is_some(),
+            io_failures: 0,
+            reopen_at: None,
             port,
             clock: Clock::new(),
             health: HashMap::new(),
@@ -102,6 +121,7 @@ impl<F: Framing + Send + 'static> Driver<F> {
             Ok(0) => {
                 tracing::warn!(port = %self.transport.describe(), "the port closed; it will be reopened");
                 self.port = None;
+                self.io_failed();
             }
             Ok(n) => {
                 let at = self.arrival();
@@ -110,8 +130,17 @@ impl<F: Framing + Send + 'static> Driver<F> {
             Err(e) => {
                 tracing::warn!(port = %self.transport.describe(), "read failed, reopening on the next request: {e}");
                 self.port = None;
+                self.io_failed();
             }
         }
+    }
+
+    /// Counts an IO failure and sets when the port may be opened next.
+    fn io_failed(&mut self) {
+        self.io_failures = self.io_failures.saturating_add(1);
+        let doublings = self.io_failures.saturating_sub(1).min(16);
+        let wait = IO_BACKOFF_INITIAL.saturating_mul(1 << doublings).min(IO_BACKOFF_MAX);
+        self.reopen_at = Some(tokio::time::Instant::now() + wait);
     }
 
     async fn serve(&mut self, command: &Command) -> Result<Reply, Error> {
@@ -130,7 +159,12 @@ impl<F: Framing + Send + 'static> Driver<F> {
                     heard = Some(now);
                 }
             }
-            let retry = matches!(result, Err(Error::Timeout { .. } | Error::BadReply { .. }));
+            match result {
+                Err(Error::Io { .. }) => self.io_failed(),
+                Err(Error::NotSameDevice { .. }) => {}
+                _ => self.io_failures = 0,
+            }
+            let retry = matches!(result, Err(Error::Timeout { .. } | Error::BadReply { .. } | Error::Io { .. }));
             if retry && attempts <= retries {
                 tracing::debug!(unit, %function, attempts, "retrying: {:?}", result);
                 continue;
@@ -147,7 +181,17 @@ impl<F: Framing + Send + 'static> Driver<F> {
     /// completes.
     async fn transact(&mut self, command: &Command) -> Result<Reply, Error> {
         if self.port.is_none() {
+            if self.opened && !self.transport.reopens() {
+                return Err(Error::io(
+                    format!("reopening {}", self.transport.describe()),
+                    std::io::Error::new(std::io::ErrorKind::NotConnected, "the port was lost, and reopening is off"),
+                ));
+            }
+            if let Some(at) = self.reopen_at.take() {
+                tokio::time::sleep_until(at).await;
+            }
             self.port = Some(self.transport.open(self.config.connect_timeout).await?);
+            self.opened = true;
             self.master.abort();
         }
         self.master.set_config(MasterConfig {

@@ -75,6 +75,19 @@ pub enum Error {
         #[source]
         source: Arc<io::Error>,
     },
+    /// A lost serial port is not reopened: its path no longer names the device first opened,
+    /// or cannot be shown to (a raw pty's number is reused by the next pty). See
+    /// [`port`](crate::port) for what counts as the same device.
+    #[error("not reopening {port}: {reason}")]
+    NotSameDevice {
+        /// The port, as [`Transport::describe`](crate::Transport::describe) names it.
+        port: String,
+        /// What was first opened and what the path names now.
+        reason: String,
+        /// Whether no later attempt can succeed either (a raw pty), rather than the right
+        /// device possibly coming back (an adapter plugged in again).
+        lasting: bool,
+    },
     /// The client's driver has stopped (its runtime shut down).
     #[error("the connection task has stopped")]
     Closed,

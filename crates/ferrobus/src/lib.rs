@@ -27,11 +27,13 @@ pub mod client;
 pub mod clock;
 mod driver;
 pub mod error;
+mod identity;
 pub mod line;
 pub mod port;
 pub mod server;
 pub mod timer;
 mod tty;
+mod uart;
 
 pub use client::{Backoff, Client, ClientConfig, DeviceInfo, EventLog, RequestOptions};
 pub use error::Error;

@@ -10,6 +10,19 @@
 //! Endpoints are in-process ports ([`Line::endpoint`], for tests and the demo) or ptys that
 //! other programs open like a serial port ([`Line::pty`]: a client, a peer stack, mbpoll).
 //!
+//! A pty endpoint is held to its own settings, as a UART on a real wire would be: the line
+//! reads the baud rate, data bits, parity and stop bits the program set on its pty (Linux
+//! lets the master side read them), and what the program writes is sent at those settings and
+//! received at the line's, what the line carries is received at the program's — both through
+//! a bit-level UART model. An endpoint at the line's settings gets clean bytes; one at the
+//! wrong baud rate or parity gets garbage, with parity and framing errors delivered as its
+//! terminal settings say (`IGNPAR` drops them, `PARMRK` marks them `FF 00`, `INPCK` reads them
+//! as `00`, otherwise the garbled byte). The characters of one write, or of one delivery, are
+//! taken to be back to back. Linux ptys refuse parity (and on some kernels 7 data bits) with
+//! `EINVAL`, and ferrobus opens them without it then: an endpoint that shows no parity, or 8
+//! data bits, on a line with parity or 7 is taken to have the line's — on a pty, only the baud
+//! rate, stop bits and a parity that was accepted can be told.
+//!
 //! Faults are drawn from a seeded generator, so a run can be repeated: bit errors, lost
 //! characters, gaps stretched inside a frame, noise bursts, and endpoints that go dead.
 //!
@@ -27,7 +40,7 @@ use std::task::{Context, Poll};
 use std::time::Duration;
 
 use ferrobus_proto::frame::rtu::RtuCodec;
-use ferrobus_proto::frame::{Expect, LineConfig, LineTiming, RxEvent, feed};
+use ferrobus_proto::frame::{DataBits, Expect, LineConfig, LineTiming, Parity, RxEvent, feed};
 use rand::rngs::SmallRng;
 use rand::{RngExt, SeedableRng};
 use tokio::io::{AsyncRead, AsyncReadExt, AsyncWrite, AsyncWriteExt, ReadBuf};
@@ -37,6 +50,8 @@ use tokio::time::Instant;
 use crate::clock::Clock;
 use crate::port::{BoxPort, ConnectWith, Connecting, Framing, Port, Pty, Transport};
 use crate::timer::Timer;
+use crate::tty::PeerSettings;
+use crate::uart;
 
 /// What goes wrong on the wire, drawn per character from a seeded generator.
 #[derive(Clone, Copy, PartialEq, Debug, Default)]
@@ -193,28 +208,41 @@ impl Line {
     }
 
     /// A new endpoint as a pty for another program to open; returns its path. The pty lives
-    /// as long as the line.
+    /// as long as the line. What crosses it is seen at the settings the program set on the
+    /// pty (see the [module docs](self)).
     pub async fn pty(&self) -> io::Result<PathBuf> {
-        let pty = Pty::open()?;
+        let mut pty = Pty::open()?;
         let path = pty.path.clone();
         let (inbox, mut rx) = mpsc::unbounded_channel::<Chunk>();
         let id = self.attach(path.display().to_string(), inbox).await?;
         let cmds = self.cmds.clone();
+        let wire = self.options.config;
         tokio::spawn(async move {
             // The whole pty, so that its other end stays open while the task runs.
-            let (mut rd, mut wr) = tokio::io::split(pty);
             let mut buf = [0u8; 512];
             loop {
                 tokio::select! {
-                    read = rd.read(&mut buf) => match read {
+                    read = pty.read(&mut buf) => match read {
                         Ok(n) if n > 0 => {
-                            let write = Cmd::Write { from: id, bytes: buf[..n].to_vec(), at: Instant::now() };
+                            let bytes = buf.get(..n).unwrap_or_default();
+                            let sent = match pty.peer_settings() {
+                                Some(peer) => uart_bytes(as_held(peer.line, wire), wire, bytes, None),
+                                None => bytes.to_vec(),
+                            };
+                            if sent.is_empty() { continue; }
+                            let write = Cmd::Write { from: id, bytes: sent, at: Instant::now() };
                             if cmds.send(write).is_err() { return; }
                         }
                         _ => return,
                     },
                     chunk = rx.recv() => match chunk {
-                        Some((bytes, _)) => { if wr.write_all(&bytes).await.is_err() { return; } }
+                        Some((bytes, _)) => {
+                            let heard = match pty.peer_settings() {
+                                Some(peer) => uart_bytes(wire, as_held(peer.line, wire), &bytes, Some(peer)),
+                                None => bytes,
+                            };
+                            if pty.write_all(&heard).await.is_err() { return; }
+                        }
                         None => return,
                     },
                 }
@@ -239,6 +267,35 @@ impl Line {
     pub fn stats(&self) -> LineStats {
         self.stats.lock().unwrap_or_else(PoisonError::into_inner).clone()
     }
+}
+
+/// A pty endpoint's settings with what a pty cannot hold taken from the `wire`: no parity
+/// where the wire has parity, 8 data bits where it has 7.
+fn as_held(peer: LineConfig, wire: LineConfig) -> LineConfig {
+    let mut held = peer;
+    if peer.parity == Parity::None {
+        held = held.with_parity(wire.parity);
+    }
+    if peer.data_bits == DataBits::Eight {
+        held = held.with_data_bits(wire.data_bits);
+    }
+    held
+}
+
+/// What a receiver at `rx` makes of `bytes` sent at `tx`. Characters with an error are
+/// delivered as `terminal` says (see [`PeerSettings`]); without one (the wire's own receiver,
+/// which has no terminal), as the garbled byte.
+fn uart_bytes(tx: LineConfig, rx: LineConfig, bytes: &[u8], terminal: Option<PeerSettings>) -> Vec<u8> {
+    let mut out = Vec::with_capacity(bytes.len());
+    for c in uart::receive(tx, rx, bytes) {
+        match terminal {
+            Some(t) if !c.is_clean() && t.ignore_errors => {}
+            Some(t) if !c.is_clean() && t.mark_errors => out.extend([0xFF, 0x00, c.byte]),
+            Some(t) if !c.is_clean() && t.check_parity => out.push(0x00),
+            _ => out.push(c.byte),
+        }
+    }
+    out
 }
 
 /// An in-process endpoint of a [`Line`]: a port.

@@ -3,14 +3,19 @@
 //!
 //! A [`Transport`] says which framing runs over which stream and how to (re)open it. The
 //! drivers open it when they start and again after an IO error: a lost port is reopened, not
-//! fatal.
+//! fatal ([`Transport::with_reopen`] turns that off). A serial port is reopened only if its
+//! path still names the device first opened: a symlink (`/dev/serial/by-id/...`, a socat
+//! `link=`) is a name chosen for a device and is always reopened; a raw pty (`/dev/pts/N`)
+//! never is, its number going to the next pty made; a USB adapter must have the same vendor,
+//! product and serial number, another device in sysfs the same place in the device tree.
+//! Otherwise opening fails with [`Error::NotSameDevice`](crate::Error::NotSameDevice).
 
 use std::fmt;
 use std::future::Future;
 use std::io;
 use std::path::PathBuf;
 use std::pin::Pin;
-use std::sync::Arc;
+use std::sync::{Arc, Mutex, PoisonError};
 use std::time::Duration;
 
 use ferrobus_proto::frame::ascii::AsciiCodec;
@@ -20,6 +25,7 @@ use ferrobus_proto::frame::{Expect, LineConfig, LineTiming};
 use tokio::io::{AsyncRead, AsyncWrite};
 use tokio::net::TcpStream;
 
+use crate::identity::Identity;
 use crate::timer::Timer;
 pub use crate::tty::{Pty, TtyPort, open_serial};
 
@@ -109,6 +115,7 @@ pub struct Transport {
     timing: LineTiming,
     frame_gap: Duration,
     incomplete_timeout: Duration,
+    reopen: bool,
     connector: Arc<dyn Connector>,
 }
 
@@ -140,7 +147,8 @@ impl Transport {
             timing,
             frame_gap: timing.t3_5(),
             incomplete_timeout: PC_INCOMPLETE_TIMEOUT,
-            connector: Arc::new(config),
+            reopen: true,
+            connector: Arc::new(SerialTarget { config, first: Mutex::new(None) }),
         }
     }
 
@@ -153,6 +161,7 @@ impl Transport {
             timing: LineTiming::unpaced(),
             frame_gap: STREAM_FRAME_GAP,
             incomplete_timeout: STREAM_FRAME_GAP,
+            reopen: true,
             connector: Arc::new(TcpTarget(addr.into())),
         }
     }
@@ -173,6 +182,7 @@ impl Transport {
             timing,
             frame_gap: timing.t3_5(),
             incomplete_timeout: timing.t3_5(),
+            reopen: true,
             connector: Arc::new(connector),
         }
     }
@@ -213,6 +223,19 @@ impl Transport {
         self
     }
 
+    /// Whether a lost port is opened again (the default) or stays lost, every later request
+    /// failing. Clones of a transport share what their serial port was first opened as.
+    #[must_use]
+    pub fn with_reopen(mut self, reopen: bool) -> Self {
+        self.reopen = reopen;
+        self
+    }
+
+    /// Whether a lost port is opened again.
+    pub fn reopens(&self) -> bool {
+        self.reopen
+    }
+
     /// The framing.
     pub fn framing(&self) -> Framing {
         self.framing
@@ -238,7 +261,14 @@ impl Transport {
         let context = || format!("opening {}", self.describe());
         match tokio::time::timeout(timeout, self.connector.connect()).await {
             Ok(Ok(port)) => Ok(port),
-            Ok(Err(e)) => Err(crate::Error::io(context(), e)),
+            Ok(Err(e)) => match e.get_ref().and_then(|inner| inner.downcast_ref::<NotSame>()) {
+                Some(not_same) => Err(crate::Error::NotSameDevice {
+                    port: self.describe(),
+                    reason: not_same.reason.clone(),
+                    lasting: not_same.lasting,
+                }),
+                None => Err(crate::Error::io(context(), e)),
+            },
             Err(_) => Err(crate::Error::io(
                 context(),
                 io::Error::new(io::ErrorKind::TimedOut, format!("no connection after {} ms", timeout.as_millis())),
@@ -279,6 +309,58 @@ impl Connector for SerialConfig {
 
     fn describe(&self) -> String {
         format!("{} at {}", self.path.display(), self.line)
+    }
+}
+
+/// A serial port that remembers what its path named when first opened, and reopens only that.
+struct SerialTarget {
+    config: SerialConfig,
+    first: Mutex<Option<Identity>>,
+}
+
+/// Why a serial port is not reopened, carried through the connector's `io::Error`.
+#[derive(Debug)]
+struct NotSame {
+    reason: String,
+    lasting: bool,
+}
+
+impl fmt::Display for NotSame {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.write_str(&self.reason)
+    }
+}
+
+impl std::error::Error for NotSame {}
+
+impl SerialTarget {
+    fn open(&self) -> io::Result<BoxPort> {
+        let mut first = self.first.lock().unwrap_or_else(PoisonError::into_inner);
+        // Identify before opening: opening a tty can change its settings, and another's line
+        // must not be touched at all.
+        let now = Identity::of(&self.config.path);
+        if let Some(first) = first.as_ref() {
+            if let Err(reason) = first.reopen_check(now.as_ref()) {
+                let lasting = matches!(first, Identity::Pty(_));
+                return Err(io::Error::other(NotSame { reason, lasting }));
+            }
+        }
+        let port = open_serial(&self.config)?;
+        if first.is_none() {
+            *first = now;
+        }
+        Ok(Box::new(port))
+    }
+}
+
+impl Connector for SerialTarget {
+    fn connect(&self) -> Connecting {
+        let opened = self.open();
+        Box::pin(async move { opened })
+    }
+
+    fn describe(&self) -> String {
+        self.config.describe()
     }
 }
 

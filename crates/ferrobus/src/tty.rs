@@ -206,6 +206,52 @@ impl Pty {
     }
 }
 
+/// What the program on the other end of a pty has set: its line settings, and what its
+/// terminal does with a character received with a parity or framing error.
+#[derive(Clone, Copy, PartialEq, Eq, Debug)]
+pub(crate) struct PeerSettings {
+    /// Baud, data bits (5 and 6 read as 7), parity, stop bits.
+    pub(crate) line: LineConfig,
+    /// `IGNPAR`: such a character is dropped.
+    pub(crate) ignore_errors: bool,
+    /// `PARMRK`: it is read as `FF 00 c`.
+    pub(crate) mark_errors: bool,
+    /// `INPCK`: it is read as `00` (without `PARMRK`); without it the garbled byte itself.
+    pub(crate) check_parity: bool,
+}
+
+impl Pty {
+    /// The other end's settings, read from our end (Linux gives a pty master's `tcgetattr`
+    /// the slave's termios). `None` if they cannot be read or the baud rate is 0.
+    pub(crate) fn peer_settings(&self) -> Option<PeerSettings> {
+        use rustix::termios::{ControlModes, InputModes};
+        let termios = rustix::termios::tcgetattr(self.port.fd.get_ref()).ok()?;
+        let control = termios.control_modes;
+        let parity = if !control.contains(ControlModes::PARENB) {
+            Parity::None
+        } else if control.contains(ControlModes::PARODD) {
+            Parity::Odd
+        } else {
+            Parity::Even
+        };
+        let data_bits =
+            if (control & ControlModes::CSIZE) == ControlModes::CS8 { DataBits::Eight } else { DataBits::Seven };
+        let stop_bits = if control.contains(ControlModes::CSTOPB) { StopBits::Two } else { StopBits::One };
+        // The speed set last: termios2 leaves the input speed 0 for "as the output".
+        let line = LineConfig::new(termios.output_speed())?
+            .with_parity(parity)
+            .with_data_bits(data_bits)
+            .with_stop_bits(stop_bits);
+        let input = termios.input_modes;
+        Some(PeerSettings {
+            line,
+            ignore_errors: input.contains(InputModes::IGNPAR),
+            mark_errors: input.contains(InputModes::PARMRK),
+            check_parity: input.contains(InputModes::INPCK),
+        })
+    }
+}
+
 /// A whole pty is a port too: reading and writing go to our end, and the other end stays open
 /// as long as it lives.
 impl Port for Pty {}

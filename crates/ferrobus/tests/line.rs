@@ -172,3 +172,31 @@ async fn a_client_and_a_server_on_the_line_keep_every_gap() {
         100.0 * ideal.as_secs_f64() / elapsed.as_secs_f64()
     );
 }
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_pty_endpoint_at_the_wrong_baud_rate_gets_garbage_and_one_at_the_right_settings_clean_bytes() {
+    let line = Line::start(LineOptions { paced: false, ..line_9600() });
+    let (right, wrong) = (line.pty().await.unwrap(), line.pty().await.unwrap());
+    let mut inside = line.endpoint("inside").await.unwrap();
+    // 9600 8E1 is the line's (the pty refuses the parity; the line takes it as held).
+    let open = |path, baud| {
+        ferrobus::port::open_serial(&ferrobus::SerialConfig::new(path, LineConfig::new(baud).unwrap())).unwrap()
+    };
+    let mut right = open(&right, 9600);
+    let mut wrong = open(&wrong, 38_400);
+    let request = [0x01, 0x03, 0x00, 0x00, 0x00, 0x01, 0x84, 0x0A];
+    inside.write_all(&request).await.unwrap();
+    assert_eq!(read_n(&mut right, 8, Duration::from_secs(1)).await, request, "clean at the line's settings");
+    let garbage = read_n(&mut wrong, 8, Duration::from_millis(300)).await;
+    assert_ne!(garbage, request, "at 38400 on a 9600 line");
+    assert!(!garbage.is_empty(), "a fast receiver sees something: every start bit");
+    // And what it sends reaches the line garbled: 38400 characters are a quarter as long.
+    wrong.write_all(&request).await.unwrap();
+    let heard = read_n(&mut inside, 8, Duration::from_millis(300)).await;
+    assert_ne!(heard, request, "a 38400 transmitter on a 9600 line");
+    right.write_all(&request).await.unwrap();
+    let mut clean = read_n(&mut inside, 8, Duration::from_secs(1)).await;
+    // The garbled bytes may come before; the clean request is what follows them.
+    clean = clean.split_off(clean.len().saturating_sub(8));
+    assert_eq!(clean, request, "the right endpoint's request arrives clean");
+}

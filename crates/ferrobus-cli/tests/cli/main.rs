@@ -2,10 +2,13 @@
 //! process (`ferrobus::server::serve_tcp` over a small handler) and runs the binary against
 //! it, checking stdout, stderr, exit codes and the requests the server saw.
 
+mod bench_failures;
 mod errors;
+mod line_settings;
 mod offline;
 mod output;
 mod read;
+mod reopen;
 mod server;
 mod service;
 mod write;

@@ -23,6 +23,16 @@
 //!    costs only the bad bytes. At a gap, whatever is left is examined the same way and then
 //!    dropped. Each run of dropped bytes is one [`RxEvent::Discarded`], counted in
 //!    [`RxStats`]. Nothing here ends a session.
+//! 4. **The silence has the last word.** A length field can itself be what is wrong: 0x10
+//!    with a byte count that disagrees with its quantity is cut at the wrong length, and its
+//!    CRC fails there. So when bytes from a clean start (after a frame or a gap) are dropped
+//!    for a checksum error, the receiver remembers where they began (a frame cut short, one
+//!    the gap ends before its length, gets no second chance). If no frame is found in them and, at the gap,
+//!    the CRC agrees over the whole silence-delimited run, that run is the frame (not noise),
+//!    with the direction whose length field it contradicts — and a slave answers it with
+//!    exception 03, as over TCP, instead of staying silent on a "checksum error". A run that
+//!    is exactly a frame of the other direction stays noise (a request is not a response with
+//!    a bad byte count).
 //!
 //! Timestamps are per chunk: bytes that arrive together share one `now`, so gaps inside a
 //! chunk are invisible. Strict t1.5 checking ([`RtuCodec::with_strict_t1_5`]) is off by
@@ -169,6 +179,9 @@ pub struct RtuCodec {
     found: Option<Found>,
     noise: Option<Noise>,
     report: Option<Noise>,
+    /// Where the run of bytes being dropped began, when it began at a clean start: at the gap,
+    /// the whole run may still be one frame whose length field is wrong (rule 4).
+    silence_from: Option<usize>,
     stats: RxStats,
 }
 
@@ -189,6 +202,7 @@ impl RtuCodec {
             found: None,
             noise: None,
             report: None,
+            silence_from: None,
             stats: RxStats::default(),
         }
     }
@@ -358,16 +372,34 @@ impl RtuCodec {
                     if let Some(noise) = self.noise.take() {
                         self.report_noise(noise);
                     }
+                    self.silence_from = None;
                     self.stats.frames = self.stats.frames.wrapping_add(1);
                     // A frame found at a gap ended with the last byte, not at the gap.
                     let end = if at_gap { self.last_rx.unwrap_or(now) } else { now };
                     self.found = Some(Found { len, direction, end, handed_out: false });
                 }
                 Verdict::Wait { .. } => return,
-                Verdict::Reject(reason) => self.drop_bytes(1, reason, now),
+                Verdict::Reject(reason) => {
+                    if reason == DiscardReason::ChecksumMismatch && self.clean && self.silence_from.is_none() {
+                        self.silence_from = Some(self.start);
+                    }
+                    self.drop_bytes(1, reason, now);
+                }
             }
         }
         if at_gap && self.found.is_none() {
+            if let Some(from) = self.silence_from.take() {
+                let run = self.buf.get(from..self.len).unwrap_or_default();
+                if let Some(direction) = self.silence_frame(run) {
+                    // The dropped bytes were this frame, not noise: nothing to report.
+                    self.noise = None;
+                    self.stats.frames = self.stats.frames.wrapping_add(1);
+                    let end = self.last_rx.unwrap_or(now);
+                    self.found = Some(Found { len: run.len(), direction, end, handed_out: false });
+                    self.start = from;
+                    return;
+                }
+            }
             if let Some(noise) = self.noise.take() {
                 self.report_noise(noise);
             }
@@ -375,6 +407,43 @@ impl RtuCodec {
             self.len = 0;
             self.clean = true;
         }
+    }
+
+    /// Whether `run`, a whole silence-delimited run from a clean start in which no frame was
+    /// found, is one frame whose length field is wrong (rule 4), and if so in which direction.
+    fn silence_frame(&self, run: &[u8]) -> Option<Direction> {
+        if run.len() < MIN_ADU_LEN || run.len() > MAX_ADU_LEN || !crc_ok(run) {
+            return None;
+        }
+        let (&fc, body) = (run.get(1)?, run.get(2..)?);
+        let mut direction: Option<Direction> = None;
+        let roles = [
+            (self.expect.requests(), fc != 0 && fc < 0x80, Direction::Request),
+            (self.expect.responses(), fc != 0 && fc != 0x80, Direction::Response),
+        ];
+        for (expected, possible, role) in roles {
+            if !possible {
+                continue;
+            }
+            let wire = match role {
+                Direction::Request => Request::wire_len(fc, body),
+                _ => Response::wire_len(fc, body),
+            };
+            if let WireLen::Known(n) = wire {
+                if n.saturating_add(MIN_ADU_LEN) == run.len() {
+                    // A well-formed frame of this layout: if it were expected it would have
+                    // been found, so it is the other direction's, and noise here.
+                    return None;
+                }
+                if expected {
+                    direction = Some(match direction {
+                        Some(_) => Direction::Either,
+                        None => role,
+                    });
+                }
+            }
+        }
+        direction
     }
 
     fn drop_bytes(&mut self, n: usize, reason: DiscardReason, at: Instant) {
@@ -403,10 +472,18 @@ impl RtuCodec {
     /// Buffers as much of `data` as fits (all of it: a candidate never passes 257 bytes, nor
     /// a run), moving the candidate to the front first if needed. Returns how much.
     fn append(&mut self, data: &[u8]) -> usize {
+        if self.silence_from.is_some_and(|from| self.len.saturating_add(data.len()).saturating_sub(from) > MAX_ADU_LEN)
+        {
+            // Longer than any frame: the run being dropped is noise whatever the gap says.
+            self.silence_from = None;
+        }
         if self.len.saturating_add(data.len()) > BUF_LEN {
-            self.buf.copy_within(self.start..self.len, 0);
-            self.len = self.len.saturating_sub(self.start);
-            self.start = 0;
+            // Keep the run being dropped (at most one frame) with the candidate.
+            let from = self.silence_from.map_or(self.start, |from| from.min(self.start));
+            self.buf.copy_within(from..self.len, 0);
+            self.len = self.len.saturating_sub(from);
+            self.start = self.start.saturating_sub(from);
+            self.silence_from = self.silence_from.map(|f| f.saturating_sub(from));
         }
         let n = data.len().min(BUF_LEN.saturating_sub(self.len));
         let (Some(dst), Some(src)) = (self.buf.get_mut(self.len..self.len.saturating_add(n)), data.get(..n)) else {
@@ -460,6 +537,7 @@ impl Framing for RtuCodec {
         if self.strict_t1_5 && self.start < self.len {
             if let Some(last) = self.last_rx {
                 if now.saturating_duration_since(last) > self.timing.t1_5() {
+                    self.silence_from = None;
                     let n = self.len.saturating_sub(self.start);
                     self.drop_bytes(n, DiscardReason::InterCharacterGap, now);
                 }
@@ -529,6 +607,7 @@ impl Framing for RtuCodec {
         self.found = None;
         self.noise = None;
         self.report = None;
+        self.silence_from = None;
     }
 
     fn stats(&self) -> RxStats {

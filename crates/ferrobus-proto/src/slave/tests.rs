@@ -326,6 +326,17 @@ fn malformed_and_unsupported_requests_get_the_spec_exceptions() {
 }
 
 #[test]
+fn a_write_whose_byte_count_disagrees_with_its_quantity_gets_exception_03_over_rtu() {
+    // From the issue: quantity 0, byte count 0, six data bytes, the CRC right over all of it.
+    let frame = [0x11, 0x10, 0x01, 0x60, 0x00, 0x00, 0x00, 0x02, 0x2B, 0x00, 0x01, 0x00, 0x64, 0x8C, 0x88];
+    let mut slave = rtu_slave(SlaveConfig::unit(0x11));
+    let (reply, _) = exchange(&mut slave, &mut Device::new(), Instant::ZERO, &frame).expect("an exception reply");
+    assert_eq!(reply, rtu(0x11, &[0x90, 0x03]));
+    assert_eq!(slave.counters().bus_comm_errors, 0, "not a checksum error");
+    assert_eq!(slave.counters().bus_messages, 1);
+}
+
+#[test]
 fn the_handler_can_refuse_with_a_vendor_code_or_stay_silent() {
     let mut slave = rtu_slave(SlaveConfig::unit(1));
     let mut device = Device { admission: Some(Admission::Refuse(ExceptionCode::Vendor(0x22))), ..Device::new() };

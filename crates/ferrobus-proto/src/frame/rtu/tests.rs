@@ -399,3 +399,77 @@ fn a_discarded_run_carries_the_address_and_function_code_it_began_with() {
     expire(&mut c, Instant::from_millis(10), &mut on);
     assert_eq!(heads, [None]);
 }
+
+/// From the issue: 0x10 to unit 0x11 with quantity 0 and byte count 0 but six data bytes. The
+/// CRC is right over all 15 bytes and wrong over the 9 the byte count implies.
+const COUNT_DISAGREES: &[u8] = &[
+    0x11, // unit
+    0x10, // write multiple registers
+    0x01, 0x60, // start address
+    0x00, 0x00, // quantity 0
+    0x00, // byte count 0
+    0x02, 0x2B, 0x00, 0x01, 0x00, 0x64, // six data bytes nobody counted
+    0x8C, 0x88, // CRC over all of it
+];
+
+#[test]
+fn a_frame_whose_crc_fails_at_its_length_but_agrees_at_the_gap_is_the_silence_delimited_frame() {
+    assert_eq!(run_all_ways(Expect::Requests, COUNT_DISAGREES), [frame(COUNT_DISAGREES, Direction::Request)]);
+    // Both layouts of 0x10 are contradicted; the slave's setting cannot tell which.
+    assert_eq!(run_all_ways(Expect::Both, COUNT_DISAGREES), [frame(COUNT_DISAGREES, Direction::Either)]);
+    let mut c = codec(Expect::Requests);
+    let _ = run(&mut c, &[(0, COUNT_DISAGREES)]);
+    assert_eq!(c.stats().frames, 1);
+    assert_eq!(c.stats().checksum_errors, 0, "not counted as a checksum error");
+    assert_eq!(c.stats().discarded_bytes, 0);
+}
+
+#[test]
+fn the_silence_delimited_frame_is_taken_at_the_gap_and_ends_with_its_last_byte() {
+    let mut c = codec(Expect::Requests);
+    feed(&mut c, Instant::from_micros(100), COUNT_DISAGREES, |ev| panic!("nothing before the gap: {ev:?}"));
+    let gap = Instant::from_micros(100).saturating_add(Duration::from_nanos(4_010_417));
+    assert_eq!(c.poll_timeout(), Some(gap), "t3.5 after the last byte");
+    let mut ends = Vec::new();
+    expire(&mut c, gap, |ev| match ev {
+        RxEvent::Frame(adu) => ends.push((adu.header.unit, adu.pdu.len(), adu.end)),
+        RxEvent::Discarded { .. } => panic!("not noise: {ev:?}"),
+    });
+    assert_eq!(ends, [(0x11, 12, Instant::from_micros(100))]);
+}
+
+#[test]
+fn a_silence_delimited_run_that_fails_its_crc_too_is_one_checksum_error() {
+    let mut bad = COUNT_DISAGREES.to_vec();
+    bad[9] ^= 0x01;
+    let mut c = codec(Expect::Requests);
+    assert_eq!(run(&mut c, &[(0, &bad)]), [Ev::Dropped(15, DiscardReason::ChecksumMismatch)]);
+    assert_eq!(c.stats().checksum_errors, 1);
+    assert_eq!(c.stats().frames, 0);
+}
+
+#[test]
+fn a_frame_found_inside_the_run_wins_over_the_silence_delimited_run() {
+    // A bad frame then a good one without a gap: the good one is found by length at once, and
+    // the run before it is noise even if, by chance, the CRC over both agreed.
+    let mut bad = SDP_REQUEST.to_vec();
+    bad[8] ^= 0x40;
+    let input = cat(&[&bad, READ_COILS_REQUEST]);
+    assert_eq!(
+        run_all_ways(Expect::Requests, &input),
+        [Ev::Dropped(13, DiscardReason::ChecksumMismatch), frame(READ_COILS_REQUEST, Direction::Request)]
+    );
+}
+
+#[test]
+fn the_silence_delimited_frame_needs_a_clean_start_and_the_next_frame_after_the_gap_is_found() {
+    // One byte of noise before it: the run does not start after a frame or a gap.
+    let noisy = cat(&[&[0x00], COUNT_DISAGREES]);
+    let events = run_all_ways(Expect::Requests, &noisy);
+    assert!(events.iter().all(|e| matches!(e, Ev::Dropped(..))), "{events:?}");
+    assert_eq!(events.iter().map(|e| if let Ev::Dropped(n, _) = e { *n } else { 0 }).sum::<usize>(), 16);
+    // After the gap, the next frame is found as usual.
+    let mut c = codec(Expect::Requests);
+    let events = run(&mut c, &[(0, COUNT_DISAGREES), (10_000, READ_COILS_REQUEST)]);
+    assert_eq!(events, [frame(COUNT_DISAGREES, Direction::Request), frame(READ_COILS_REQUEST, Direction::Request)]);
+}
