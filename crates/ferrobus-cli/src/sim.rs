@@ -177,10 +177,17 @@ pub(crate) async fn run(connection: &ConnectArgs, args: &SimArgs) -> Result<(), 
             }
         }
     });
+    // A --duration ends the run early; Ctrl-C and SIGTERM end it too, with the counters.
     let stop = async {
-        match args.duration {
-            Some(d) => tokio::time::sleep(d).await,
-            None => interrupted(&counters).await,
+        let until = async {
+            match args.duration {
+                Some(d) => tokio::time::sleep(d).await,
+                None => std::future::pending().await,
+            }
+        };
+        tokio::select! {
+            () = until => {}
+            () = interrupted(&counters) => {}
         }
     };
     let result = tokio::select! {

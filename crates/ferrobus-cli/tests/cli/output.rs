@@ -243,6 +243,19 @@ fn line_writes_its_statistics_file_on_sigterm_and_exits_0() {
 }
 
 #[test]
+fn sim_with_a_duration_still_prints_its_counters_on_sigterm() {
+    let mut child = spawn(&["--tcp", "127.0.0.1:0", "sim", "--profile", "generic", "--duration", "10min"]);
+    // Its stderr says when it listens; the signal comes after.
+    let mut log = BufReader::new(child.stderr.take().unwrap()).lines();
+    assert!(log.any(|line| line.unwrap().starts_with("sim: listening on")), "the sim listens");
+    signal(&child, "TERM");
+    let status = child.wait().unwrap();
+    let rest: Vec<String> = log.map(Result::unwrap).collect();
+    assert_eq!(status.code(), Some(0), "{rest:?}");
+    assert!(rest.iter().any(|line| line.starts_with("sim: 0 requests")), "the counters: {rest:?}");
+}
+
+#[test]
 fn line_refuses_a_statistics_file_it_cannot_create_before_it_starts() {
     let path = temp_path("no-such-dir").join("stats.json");
     let out =
