@@ -156,6 +156,8 @@ impl Sim {
         addresses: &[Option<AddressRange>; 2],
         on_request: bool,
     ) -> Option<Action> {
+        // A unit answered by another's device (0xFF over TCP, --any-unit) meets that device's rules.
+        let unit = self.resolve(unit)?;
         let Sim { units, rng, .. } = self;
         let rules = &units.get(&unit)?.faults.rules;
         rules

@@ -154,3 +154,15 @@ fn a_reply_without_a_known_request_meets_only_the_unit_wide_faults() {
     assert_eq!(filter.filter(None, &mut frame), Fate::Send);
     assert_eq!(frame, rtu_reply(1, &PDU));
 }
+
+#[test]
+fn a_unit_answered_by_another_units_device_meets_that_devices_rules() {
+    let sim = sim(&["fc=3,exception=0x06", "fc=4,trickle=1ms"]);
+    sim.lock().alias(0xFF, 1);
+    let mut handler = sim.clone();
+    let read = Request::parse(&[0x03, 0x00, 0x00, 0x00, 0x01]).unwrap();
+    assert_eq!(handler.admit(0xFF, false, &read), Admission::Refuse(ExceptionCode::ServerDeviceBusy));
+    let input = Answering { unit: 0xFF, function: FunctionCode::ReadInputRegisters, ..read_holding(0, 1) };
+    let (fate, _) = filtered(&sim, Framing::Mbap, &input, &tcp_reply(1, &[0x04, 0x02, 0x00, 0x01]));
+    assert_eq!(fate, Fate::Trickle { gap: Duration::from_millis(1) });
+}
