@@ -34,6 +34,7 @@ pub mod server;
 pub mod timer;
 mod tty;
 mod uart;
+pub mod wire;
 
 pub use client::{Backoff, Client, ClientConfig, DeviceInfo, EventLog, RequestOptions};
 pub use error::Error;
