@@ -169,9 +169,11 @@ async fn a_client_and_a_server_on_the_line_keep_every_gap() {
     assert_eq!(stats.frames, 40);
     assert_eq!(stats.collisions, 0);
     // The theoretical time: (8 + 25) characters and two t3.5 per transaction. Never faster
-    // than the wire; the share of the theoretical rate is a figure (the benchmark measures it).
+    // than the wire allows — which is that, but the silence after the last reply — and the
+    // share of the theoretical rate is a figure (the benchmark measures it).
     let ideal = (timing.char_time() * 33 + timing.t3_5() * 2) * 20;
-    assert!(elapsed >= ideal, "{elapsed:?}: faster than the wire allows ({ideal:?})");
+    let floor = ideal.saturating_sub(timing.t3_5());
+    assert!(elapsed >= floor, "{elapsed:?}: faster than the wire allows ({floor:?})");
     eprintln!(
         "20 transactions in {elapsed:?}: {:.1}% of the theoretical rate",
         100.0 * ideal.as_secs_f64() / elapsed.as_secs_f64()
