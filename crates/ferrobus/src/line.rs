@@ -231,8 +231,12 @@ impl Bus {
                 },
                 () = sleeper.sleep_until(deadline) => self.deliver(),
             }
-            *self.stats.lock().unwrap_or_else(PoisonError::into_inner) = self.wire.stats().clone();
+            self.publish();
         }
+    }
+
+    fn publish(&self) {
+        *self.stats.lock().unwrap_or_else(PoisonError::into_inner) = self.wire.stats().clone();
     }
 
     fn command(&mut self, cmd: Cmd, paced: bool) {
@@ -256,8 +260,11 @@ impl Bus {
     }
 
     /// Hands out what the wire has delivered by now.
+    /// The stats are published first: an endpoint that has read something finds it counted.
     fn deliver(&mut self) {
-        for delivery in self.wire.advance(self.clock.now()) {
+        let deliveries = self.wire.advance(self.clock.now());
+        self.publish();
+        for delivery in deliveries {
             if let Some(inbox) = self.inboxes.get(delivery.to) {
                 let _ = inbox.send((delivery.bytes, self.clock.to_tokio(delivery.at)));
             }
