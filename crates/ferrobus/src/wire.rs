@@ -49,7 +49,7 @@ pub struct LineFaults {
     pub stretch_rate: f64,
     /// How long a stretched gap is.
     pub stretch_by: Duration,
-    /// Noise bursts per second, at random times.
+    /// Noise bursts per second, at random times (at most one per character time).
     pub noise_per_second: f64,
     /// The most characters in one noise burst (each burst has 1 to this many).
     pub noise_len: usize,
@@ -154,6 +154,9 @@ pub struct Delivery {
 
 /// The sender of injected noise.
 const NOISE: usize = usize::MAX;
+
+/// The least time between two noise bursts on an unpaced wire.
+const MIN_NOISE_GAP: Duration = Duration::from_micros(1);
 
 /// A character on the wire.
 #[derive(Clone, Copy, Debug)]
@@ -410,11 +413,12 @@ impl Wire {
     fn schedule_noise(&mut self, now: Instant) {
         let rate = self.options.faults.noise_per_second;
         self.next_noise = (rate > 0.0).then(|| {
-            // Exponential gaps: a Poisson process of `rate` bursts per second, at least 1 ns
-            // apart and at most an hour.
+            // Exponential gaps: a Poisson process of `rate` bursts per second, at most an hour
+            // apart and at least a character time (1 µs unpaced): however high the rate, a
+            // stretch of time holds a bounded number of bursts.
             let u: f64 = self.rng.random_range(f64::MIN_POSITIVE..1.0);
             let gap = Duration::try_from_secs_f64((-u.ln() / rate).min(3600.0)).unwrap_or(Duration::ZERO);
-            now.saturating_add(gap.max(Duration::from_nanos(1)))
+            now.saturating_add(gap.max(self.char_time).max(MIN_NOISE_GAP))
         });
     }
 }

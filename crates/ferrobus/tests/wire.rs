@@ -227,6 +227,14 @@ fn noise_bursts_come_at_times_drawn_from_the_seed_and_reach_every_endpoint() {
     assert_eq!(run().0, got, "the same seed, the same bursts at the same instants");
 }
 
+#[test]
+fn an_infinite_noise_rate_makes_at_most_one_burst_per_character_time() {
+    let faults = LineFaults { noise_per_second: f64::INFINITY, noise_len: 1, ..LineFaults::default() };
+    let mut w = wire(LineOptions { faults, ..line_9600() });
+    w.advance(at(C * 100));
+    assert_eq!(w.stats().noise, 100, "a burst each character time, from the first");
+}
+
 /// A read request, 01 03 00 00 00 01 84 0A.
 const REQUEST: [u8; 8] = [0x01, 0x03, 0x00, 0x00, 0x00, 0x01, 0x84, 0x0A];
 
