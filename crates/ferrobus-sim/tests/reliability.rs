@@ -1,6 +1,7 @@
 //! Transactions through a faulty virtual line: characters corrupted and lost at random. No
-//! wrong value may ever be accepted, every failure must be a typed error that comes within
-//! its timeout, and a fault must not spill over into the transactions after it.
+//! wrong value may ever be accepted, every failure must be a typed error that comes when its
+//! timeout expires (exactly, on the unpaced line on tokio's paused clock; never early, on the
+//! paced line in real time), and a fault must not spill over into the transactions after it.
 //!
 //! CI runs a few thousand transactions; `FERROBUS_RELIABILITY_TRANSACTIONS=100000` runs the
 //! full test by hand (the closing note of issue 5 reports it).
@@ -88,11 +89,14 @@ async fn run(paced: bool, baud: u32, transactions: u64, seed: u64) -> Tally {
                 false
             }
             Err(e) => {
-                // A typed failure when its timeout expires: never early, never a hang. How
-                // close to the timeout is checked on the median below: one stall of a loaded
-                // machine can delay any single wake-up.
+                // A typed failure when its timeout expires: never early. On the unpaced line,
+                // which runs on the paused clock, exactly then (a bad reply sooner); in real
+                // time, how late is a figure (printed below).
                 assert!(took >= timeout || !e.is_timeout(), "{e} after {took:?}: early");
-                assert!(took < timeout + Duration::from_secs(5), "{e} after {took:?}: a hang");
+                if !paced {
+                    assert!(took <= timeout, "{e} after {took:?}, on virtual time: late");
+                    assert!(took == timeout || !e.is_timeout(), "{e} after {took:?}, on virtual time: early");
+                }
                 tally.failure_times.push(took);
                 match e {
                     Error::Timeout { .. } => tally.timeouts += 1,
@@ -123,11 +127,6 @@ async fn run(paced: bool, baud: u32, transactions: u64, seed: u64) -> Tally {
         tally.after_fault_failed,
         tally.after_fault,
     );
-    // Failures end when their timeout does, not a timeout later.
-    assert!(
-        median < timeout + timeout / 4 + Duration::from_millis(2),
-        "median failure {median:?} for a {timeout:?} timeout"
-    );
     tally
 }
 
@@ -135,8 +134,9 @@ fn transactions(default: u64) -> u64 {
     std::env::var("FERROBUS_RELIABILITY_TRANSACTIONS").ok().and_then(|v| v.parse().ok()).unwrap_or(default)
 }
 
-/// One test, so that its timed parts do not run beside each other.
-#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+/// On tokio's paused clock: the unpaced line, the client and the server all wait on tokio's
+/// timer, so every transaction and every timeout runs on virtual time, exactly.
+#[tokio::test(start_paused = true)]
 async fn through_a_faulty_line_no_wrong_value_is_ever_accepted_and_faults_do_not_spill_over() {
     let n = transactions(3000);
     let tally = run(false, 115_200, n, 7).await;
@@ -151,9 +151,12 @@ async fn through_a_faulty_line_no_wrong_value_is_ever_accepted_and_faults_do_not
     let base = share(failed, n);
     let after = share(tally.after_fault_failed, tally.after_fault);
     assert!(after < base + 0.06, "failures cascade: {after:.3} after a fault against {base:.3} overall");
+}
 
-    // The same on the paced line, with real character timing: fewer transactions, as each
-    // takes its time on the wire.
+/// The same on the paced line, with real character timing (the kernel's timers, which the
+/// paused clock does not drive): fewer transactions, as each takes its time on the wire.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn through_a_faulty_paced_line_in_real_time_no_wrong_value_is_ever_accepted() {
     let tally = run(true, 115_200, transactions(300).min(3000), 11).await;
     assert!(tally.ok > 0, "{tally:?}");
 }

@@ -17,8 +17,11 @@
 //!   with precise reply timing and a hook for fault injection.
 //! - [`port`]: serial ports (RS-485 by the adapter, the kernel or RTS; the USB latency timer),
 //!   TCP, RTU over TCP, and ptys made in-process.
-//! - [`line`](mod@line): a virtual RS-485 line with real character timing, collisions and seeded
-//!   faults, for endpoints in this process or other programs behind ptys.
+//! - [`wire`]: the virtual RS-485 line's model, sans-IO like the engines: it takes `now` in
+//!   every call and says what each endpoint receives and when — character timing, collisions,
+//!   the t3.5 rule, seeded faults, a bit-level UART for endpoints at other settings.
+//! - [`line`](mod@line): the thin adapter that runs the wire on tokio's clock, for endpoints
+//!   in this process or other programs behind ptys.
 //!
 //! Errors are one flat [`Error`], where a device's exception is kept apart from timeouts and
 //! IO failures.
@@ -34,6 +37,7 @@ pub mod server;
 pub mod timer;
 mod tty;
 mod uart;
+pub mod wire;
 
 pub use client::{Backoff, Client, ClientConfig, DeviceInfo, EventLog, RequestOptions};
 pub use error::Error;

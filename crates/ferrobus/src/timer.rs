@@ -361,49 +361,80 @@ mod tests {
         late
     }
 
-    // Lateness is a figure, measured by `ferrobus sim` (its counters) and the benchmarks, not
-    // asserted here: a shared CI machine can delay any thread. What is asserted is the
-    // contract — never early — and a bound that only a broken timer misses.
+    // Lateness is a figure, measured by `ferrobus sim` (its counters) and the benchmarks and
+    // printed here, not asserted: a shared CI machine can delay any thread. What is asserted
+    // is the contract — never early — and, on tokio's paused clock, exact behaviour.
 
     #[tokio::test]
     async fn a_precise_sleep_is_never_early() {
         let late = lateness(Timer::Precise).await;
         eprintln!("precise timer: median lateness {:?}, max {:?}", late[10], late[20]);
-        assert!(late[10] < Duration::from_millis(20), "median lateness {:?}", late[10]);
     }
 
     #[tokio::test]
     async fn a_spinning_sleep_is_never_early() {
         let late = lateness(Timer::Spin).await;
         eprintln!("spinning timer: median lateness {:?}, max {:?}", late[10], late[20]);
-        assert!(late[10] < Duration::from_millis(20), "median lateness {:?}", late[10]);
     }
 
     #[tokio::test(flavor = "current_thread")]
-    async fn precise_sleeps_do_not_block_the_runtime() {
-        // Two sleeps on a single-threaded runtime finish together, not one after the other.
+    async fn a_near_precise_or_spinning_sleep_gives_the_thread_back_instead_of_blocking_it() {
+        // Polled once with its deadline [`NEAR`] ahead (no part of it on tokio's wheel), a sleep
+        // that blocked the runtime's only thread would return ready, at its deadline; one that
+        // waits on a kernel timer returns pending. A stall of the machine past the deadline
+        // makes a trial ready too: one pending trial out of five is the proof.
+        for timer in [Timer::Precise, Timer::Spin] {
+            let mut readies = Vec::new();
+            let pending = (0..5).any(|_| {
+                let deadline = tokio::time::Instant::now() + NEAR;
+                let mut sleep = std::pin::pin!(timer.sleep_until(Some(deadline)));
+                let polled = sleep.as_mut().poll(&mut Context::from_waker(Waker::noop()));
+                readies.push(tokio::time::Instant::now().saturating_duration_since(deadline));
+                polled.is_pending()
+            });
+            assert!(pending, "{timer:?}: ready at every first poll, this long after the deadline: {readies:?}");
+            // And two sleeps on the one thread both end, never early.
+            let deadline = tokio::time::Instant::now() + Duration::from_millis(5);
+            tokio::join!(timer.sleep_until(Some(deadline)), Timer::Precise.sleep_until(Some(deadline)));
+            assert!(tokio::time::Instant::now() >= deadline, "{timer:?} woke early");
+        }
+    }
+
+    #[tokio::test(start_paused = true)]
+    async fn a_sleep_cancelled_for_a_later_deadline_ends_exactly_at_an_earlier_one() {
+        // The driver's pattern: a reply timeout armed on every pass, then a near deadline. The
+        // far part of every timer is this entry on tokio's wheel, exact on the paused clock.
+        let mut sleeper = Timer::Tokio.sleeper();
         let start = tokio::time::Instant::now();
-        let deadline = Some(start + Duration::from_millis(50));
-        tokio::join!(Timer::Precise.sleep_until(deadline), Timer::Spin.sleep_until(deadline));
-        assert!(start.elapsed() < Duration::from_millis(95), "one after the other: {:?}", start.elapsed());
+        for pass in 1..=3u64 {
+            let far = Some(start + Duration::from_secs(pass));
+            let cancelled = tokio::time::timeout(Duration::from_millis(2), sleeper.sleep_until(far)).await;
+            assert!(cancelled.is_err(), "a {pass} s sleep ended within 2 ms");
+        }
+        let near = start + Duration::from_millis(20);
+        sleeper.sleep_until(Some(near)).await;
+        assert_eq!(tokio::time::Instant::now(), near, "held back by a cancelled later deadline");
     }
 
     #[tokio::test]
-    async fn a_sleep_cancelled_for_a_later_deadline_does_not_hold_back_an_earlier_one() {
-        // The driver's pattern: a reply timeout armed on every pass, then a near deadline.
-        for timer in [Timer::Tokio, Timer::Precise, Timer::Spin] {
+    async fn smoke_a_precise_or_spinning_sleep_cancelled_for_later_deadlines_ends_at_an_earlier_one_in_real_time() {
+        // The one real-time smoke test of the timers: the kernel's timers, which the paused
+        // clock does not drive, under the driver's pattern. Held back, a sleep would end at a
+        // far deadline an hour away; the bound, a minute, is one no loaded machine breaks.
+        for timer in [Timer::Precise, Timer::Spin] {
             let mut sleeper = timer.sleeper();
             let start = tokio::time::Instant::now();
-            for pass in 1..=3u64 {
-                let far = Some(start + Duration::from_secs(pass));
+            for pass in 1..=3u32 {
+                let far = Some(start + Duration::from_secs(3600) * pass);
                 let cancelled = tokio::time::timeout(Duration::from_millis(2), sleeper.sleep_until(far)).await;
-                assert!(cancelled.is_err(), "{timer:?}: a 1 s sleep ended early");
+                assert!(cancelled.is_err(), "{timer:?}: a sleep of an hour ended within 2 ms");
             }
             let near = start + Duration::from_millis(20);
-            sleeper.sleep_until(Some(near)).await;
+            let ended = tokio::time::timeout_at(start + Duration::from_secs(60), sleeper.sleep_until(Some(near))).await;
             let now = tokio::time::Instant::now();
+            assert!(ended.is_ok(), "{timer:?} held back by a cancelled later deadline: {:?}", now - start);
             assert!(now >= near, "{timer:?} woke early");
-            assert!(now < start + Duration::from_millis(500), "{timer:?} held back: {:?}", now - start);
+            eprintln!("{timer:?}: 20 ms after three cancelled sleeps, {:?} late", now - near);
         }
     }
 

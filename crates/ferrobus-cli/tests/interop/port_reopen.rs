@@ -56,9 +56,9 @@ fn survives_a_vanishing_port(unit: u8, start: impl Fn(&Path) -> Proc, works: imp
     assert!(!line.a.exists(), "socat left its link {} behind", line.a.display());
     let result = within(&runtime, "the request in flight", in_flight).expect("the request task");
     let took = stopped.elapsed();
-    assert!(matches!(result, Err(Error::Io { .. })), "the request in flight: {result:?}");
-    assert!(took < Duration::from_secs(2), "the request in flight ended after {took:?}: {result:?}");
-    eprintln!("the request in flight: {result:?}");
+    // The IO error, not the 3 s timeout's: it ended when the port went. How soon is a figure.
+    assert!(matches!(result, Err(Error::Io { .. })), "the request in flight after {took:?}: {result:?}");
+    eprintln!("the request in flight, {took:?} after socat was stopped: {result:?}");
     for attempt in 1..=2 {
         let result = within(&runtime, "a request on a vanished port", client.read_holding_registers(unit, 0, 1));
         assert!(matches!(result, Err(Error::Io { .. })), "request {attempt} after the port vanished: {result:?}");

@@ -5,9 +5,9 @@
 //! baud (8E1) are 4.010417 ms, so 24.010417 ms. A pty delivers the request at once, so it is
 //! timed from just before the write (a preempted test thread can then only make a reply look
 //! late, never early) to the read of the first reply byte. Every reply must come at or after
-//! the target, and the median lateness must be small; the figures go to stderr
-//! (`--nocapture` shows them) and only a generous bound is asserted, as CI machines are
-//! noisy. The test runs alone.
+//! the target; how late is a figure, not asserted (a loaded machine can delay any reply):
+//! the percentiles go to stderr (`--nocapture` shows them), and `bench` measures lateness
+//! under load. The test runs alone.
 //!
 //! Beside them it prints the pty's own floor: the same requests against an echo that sleeps as
 //! the simulator does (a current-thread tokio runtime, the pty in its epoll) and answers by a
@@ -82,7 +82,6 @@ fn sim_reply_starts_no_earlier_than_t3_5_plus_the_response_wait() {
         floor[0]
     );
     assert!(early.is_empty(), "{} of {SAMPLES} replies started before {target:?}: {early:?}", early.len());
-    assert!(p50 < 2000, "median lateness {p50} µs (p99 {p99} µs): more than 2 ms after t3.5 + wait");
 }
 
 /// `delay` minus `target`, in µs.

@@ -64,16 +64,15 @@ impl SocatPair {
         let proc = Proc::spawn("socat", Command::new("socat").args(["-d", "-d", &end(&self.a), &end(&self.b)]));
         // socat makes both ptys and their links before it starts moving data.
         proc.wait_for(Stream::Err, |l| l.contains("starting data transfer loop"), Duration::from_secs(10));
-        let deadline = Instant::now() + Duration::from_secs(2);
-        while !(self.a.exists() && self.b.exists()) {
-            assert!(
-                Instant::now() < deadline,
-                "socat links {} and {} did not appear",
-                self.a.display(),
-                self.b.display()
-            );
-            std::thread::sleep(Duration::from_millis(2));
-        }
+        // Looked for a thousand times, 2 ms apart.
+        let appeared = (0..1000).any(|_| {
+            let both = self.a.exists() && self.b.exists();
+            if !both {
+                std::thread::sleep(Duration::from_millis(2));
+            }
+            both
+        });
+        assert!(appeared, "socat links {} and {} did not appear", self.a.display(), self.b.display());
         self.proc = Some(proc);
     }
 
