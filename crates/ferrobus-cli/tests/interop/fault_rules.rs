@@ -18,12 +18,12 @@ use crate::support::{Link, Need, Over, Parity, Stack, check_script, require, sim
 const RULES: &[&str] = &[
     "1:fc=3,addr=100-109,exception=0x06",
     "1:fc=3,addr=110-119,no-reply",
-    "1:fc=0x03,addr=120-129,delay=150ms",
+    "1:fc=0x03,addr=120-129,delay=100ms",
     "1:fc=3,addr=130-139,short",
     "1:fc=3,addr=140-149,malformed",
     "1:fc=3,addr=150-159,unit=7",
     "1:fc=3,addr=160-169,tid=+1",
-    "1:fc=3,addr=170-179,trickle=20ms",
+    "1:fc=3,addr=170-179,trickle=5ms",
     "1:fc=4,share=50%,exception=0x21",
 ];
 
@@ -45,7 +45,7 @@ fn steps(stack: Stack, over: Over) -> Vec<(&'static str, &'static str)> {
         ("read_holding 109 2", "exception 6"),
         ("read_holding 110 2", "timeout"),
         ("read_holding 0 2", "ok 0 0"),
-        // 150 ms late, within the 300 ms timeout.
+        // 100 ms late, well within the 300 ms timeout (a loaded machine adds to it).
         ("read_holding 120 2", "ok 0 0"),
         // Half a frame: the client waits for the rest.
         ("read_holding 130 2", "timeout"),
@@ -74,7 +74,8 @@ fn steps(stack: Stack, over: Over) -> Vec<(&'static str, &'static str)> {
             },
         ),
         ("read_holding 0 1", "ok 0"),
-        // Byte by byte, 20 ms apart: both clients gather the bytes.
+        // Byte by byte, 5 ms apart (50 ms for an MBAP reply, well within the timeout): both
+        // clients gather the bytes.
         ("read_holding 170 2", "ok 0 0"),
         ("read_holding 0 1", "ok 0"),
         // Another function code at a blocked address: no rule for it.
@@ -152,10 +153,10 @@ fn a_pymodbus_client_gets_delayed_and_trickled_replies_never_early_and_a_share_r
         line.get(1).and_then(|v| v.parse().ok()).unwrap_or_else(|| panic!("{name}: {context}"))
     };
     // Never early; how late is the machine's business. The MBAP reply to a read of two
-    // registers is 11 bytes: 10 gaps of 20 ms.
+    // registers is 11 bytes: 10 gaps of 5 ms.
     let (delay, trickle, plain) = (ms("delay"), ms("trickle"), ms("plain"));
-    assert!(delay >= 150.0, "the delayed reply came after {delay} ms, before its 150 ms: {context}");
-    assert!(trickle >= 200.0, "the trickled reply came whole after {trickle} ms, before 10 × 20 ms: {context}");
+    assert!(delay >= 100.0, "the delayed reply came after {delay} ms, before its 100 ms: {context}");
+    assert!(trickle >= 50.0, "the trickled reply came whole after {trickle} ms, before 10 × 5 ms: {context}");
     eprintln!("delay {delay} ms, trickle {trickle} ms, a plain read {plain} ms");
     let share = lines.iter().find(|l| l.first() == Some(&"share")).unwrap_or_else(|| panic!("no share: {context}"));
     let (refused, served): (u32, u32) = (
