@@ -71,6 +71,7 @@ pub mod error;
 pub mod frame;
 pub mod master;
 pub mod pdu;
+pub mod retry;
 pub mod slave;
 pub mod time;
 

@@ -35,22 +35,8 @@ use crate::driver::{Command, Driver, Reply, parse_reply};
 use crate::error::Error;
 use crate::port::{Framing, Transport};
 
-/// How a unit that stops answering is skipped, so that it does not stall the others.
-#[derive(Clone, Copy, PartialEq, Eq, Debug)]
-pub struct Backoff {
-    /// Consecutive timed-out requests before the unit is skipped.
-    pub after: u32,
-    /// How long it is skipped the first time; each failed probe doubles it.
-    pub initial: Duration,
-    /// The longest it is skipped.
-    pub max: Duration,
-}
-
-impl Default for Backoff {
-    fn default() -> Self {
-        Backoff { after: 3, initial: Duration::from_secs(1), max: Duration::from_secs(30) }
-    }
-}
+/// How a unit that stops answering is skipped: the core's policy, which the driver asks.
+pub use ferrobus_proto::retry::Backoff;
 
 /// Settings of a client.
 #[derive(Clone, Copy, PartialEq, Eq, Debug)]
