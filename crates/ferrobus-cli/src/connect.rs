@@ -8,6 +8,7 @@ use std::time::Duration;
 
 use clap::{Args, ValueEnum};
 use ferrobus::{Client, ClientConfig, Rs485, SerialConfig, Transport};
+use ferrobus_proto::codes::unit;
 use ferrobus_proto::frame::{DataBits, LineConfig, Parity, StopBits};
 
 use crate::exit::CliError;
@@ -251,7 +252,7 @@ pub(crate) struct Session {
 impl Session {
     /// Whether requests to the unit are broadcasts (unit 0 on a serial framing).
     pub(crate) fn is_broadcast(&self) -> bool {
-        self.unit == 0 && !matches!(self.target, Target::Tcp(_))
+        unit::is_broadcast(self.unit, !matches!(self.target, Target::Tcp(_)))
     }
 }
 
@@ -267,7 +268,7 @@ impl ConnectArgs {
     /// A usage error for reading from a broadcast address (unit 0 on a serial framing), found
     /// before the bus is opened.
     pub(crate) fn refuse_broadcast_read(&self) -> Result<(), CliError> {
-        if self.unit()? == 0 && self.tcp.is_none() {
+        if unit::is_broadcast(self.unit()?, self.tcp.is_none()) {
             return Err(CliError::Usage(
                 "unit 0 is a broadcast: no device answers it, so there is nothing to read; use --unit 1-247".into(),
             ));

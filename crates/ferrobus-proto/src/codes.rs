@@ -346,6 +346,13 @@ pub mod unit {
     /// The unit id a Modbus/TCP client uses for a directly connected server (Messaging
     /// Implementation Guide V1.0b, p. 23).
     pub const TCP_DIRECT: u8 = 0xFF;
+
+    /// Whether a request to `unit` is a broadcast: address 0 on a serial framing (RTU or
+    /// ASCII, also when carried over TCP). Over Modbus/TCP (MBAP) unit 0 is an ordinary
+    /// address (Messaging Implementation Guide V1.0b §4.4.2.1: a server answers it).
+    pub const fn is_broadcast(unit: u8, serial: bool) -> bool {
+        serial && unit == BROADCAST
+    }
 }
 
 #[cfg(test)]
@@ -353,6 +360,14 @@ mod tests {
     extern crate std;
     use super::*;
     use std::string::ToString;
+
+    #[test]
+    fn only_unit_zero_on_a_serial_framing_is_a_broadcast_over_all_256_values() {
+        for v in 0..=u8::MAX {
+            assert_eq!(unit::is_broadcast(v, true), v == 0x00, "unit {v:#04x} on a serial line");
+            assert!(!unit::is_broadcast(v, false), "unit {v:#04x} over Modbus/TCP");
+        }
+    }
 
     #[test]
     fn function_codes_round_trip_over_all_256_values() {

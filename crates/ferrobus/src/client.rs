@@ -171,7 +171,7 @@ impl Client {
 
     /// Whether unit 0 is a broadcast here (serial framings).
     fn broadcasts(&self, unit: u8) -> bool {
-        unit == ferrobus_proto::codes::unit::BROADCAST && self.framing != Framing::Mbap
+        ferrobus_proto::codes::unit::is_broadcast(unit, self.framing != Framing::Mbap)
     }
 
     async fn send(&self, unit: u8, pdu: Vec<u8>, raw: bool) -> Result<Reply, Error> {
