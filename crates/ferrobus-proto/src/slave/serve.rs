@@ -2,7 +2,7 @@
 //! handler once and emitting the response PDU.
 
 use super::Handler;
-use crate::codes::{ExceptionCode, ReadDeviceIdCode};
+use crate::codes::{ExceptionCode, ReadDeviceIdCode, conformity};
 use crate::cursor::Writer;
 use crate::error::PduError;
 use crate::pdu::{
@@ -205,13 +205,15 @@ fn read_device_id<H: Handler + ?Sized>(
     }
     // Conformity: the highest category the device has objects in, with bit 7 set because
     // individual access (code 04) is always supported.
-    let level = if (0x80..=0xFF).any(&mut has) {
-        0x83
-    } else if (0x03..=0x7F).any(&mut has) {
-        0x82
+    let mut reaches = |c: ReadDeviceIdCode| (c.first_object()..=c.last_object()).any(&mut has);
+    let category = if reaches(ReadDeviceIdCode::Extended) {
+        ReadDeviceIdCode::Extended
+    } else if reaches(ReadDeviceIdCode::Regular) {
+        ReadDeviceIdCode::Regular
     } else {
-        0x81
+        ReadDeviceIdCode::Basic
     };
+    let level = conformity::level(category, true);
     let (first, last) = match q.code() {
         ReadDeviceIdCode::Specific => {
             if !has(q.object_id()) {
