@@ -74,6 +74,7 @@ pub mod pdu;
 pub mod retry;
 pub mod slave;
 pub mod time;
+pub mod words;
 
 pub use codes::{ExceptionCode, FunctionCode};
 pub use error::{BufferTooSmall, DiscardReason, PduError};
