@@ -64,6 +64,7 @@ impl Default for MasterConfig {
 
 /// Why a request got no usable reply.
 #[derive(Clone, Copy, PartialEq, Eq, Debug)]
+#[non_exhaustive]
 pub enum MasterError {
     /// No reply came within the response timeout.
     Timeout {
@@ -204,6 +205,7 @@ impl fmt::Display for Heard {
 
 /// Why [`Master::submit`] refused a request.
 #[derive(Clone, Copy, PartialEq, Eq, Debug)]
+#[non_exhaustive]
 pub enum SubmitError {
     /// A request is in flight, or its completion has not been polled yet.
     Busy,

@@ -213,13 +213,11 @@ impl Client {
         request: &Request<'_>,
         read: impl FnOnce(Response<'_>) -> Option<T>,
     ) -> Result<T, Error> {
+        let function = request.function();
         if self.broadcasts(unit) {
-            return Err(Error::InvalidRequest(PduError::InvalidField {
-                field: "unit (a broadcast gets no reply to read)",
-                value: 0,
-            }));
+            return Err(Error::BroadcastRead { function });
         }
-        let pdu = self.request(unit, request).await?.ok_or(Error::Closed)?;
+        let pdu = self.request(unit, request).await?.ok_or(Error::NoReply { unit, function })?;
         let response = parse_reply(unit, &pdu)?;
         let function = response.function();
         read(response).ok_or(Error::BadReply {

@@ -12,13 +12,13 @@
 
 use std::collections::HashMap;
 
-use ferrobus_proto::FunctionCode;
 use ferrobus_proto::frame::Framing;
 use ferrobus_proto::master::{Completion, Heard, MAX_TX_LEN, Master, MasterConfig, MasterError};
-use ferrobus_proto::pdu::{Request, Response};
+use ferrobus_proto::pdu::{MAX_PDU_LEN, Request, Response};
 use ferrobus_proto::retry::{Admit, IoBackoff, Outcome, UnitHealth, should_retry};
 #[cfg(doc)]
 use ferrobus_proto::retry::{IO_BACKOFF_INITIAL, IO_BACKOFF_MAX};
+use ferrobus_proto::{FunctionCode, PduError};
 use tokio::io::{AsyncReadExt, AsyncWriteExt};
 use tokio::sync::{mpsc, oneshot};
 
@@ -206,7 +206,10 @@ impl<F: Framing + Send + 'static> Driver<F> {
             }
             let deadline = self.master.poll_timeout().map(|t| self.clock.to_tokio(t));
             let Some(port) = self.port.as_mut() else {
-                return Err(Error::Closed);
+                return Err(Error::io(
+                    format!("reading from {}", self.transport.describe()),
+                    std::io::ErrorKind::NotConnected.into(),
+                ));
             };
             tokio::select! {
                 read = port.read(&mut self.rx[..]) => match read {
@@ -306,10 +309,13 @@ fn convert(command: &Command, completion: Completion<'_>) -> Result<Reply, Error
     let function = FunctionCode::from_u8(command.pdu.first().copied().unwrap_or_default());
     match completion {
         Completion::Response(response) => {
-            let mut buf = vec![0u8; response.encoded_len()];
-            let n = response.emit(&mut buf).map_err(|_| Error::Closed)?;
-            buf.truncate(n);
-            Ok(Reply::Pdu(buf))
+            // Every response the engine accepts fits a PDU; one that did not would be too long.
+            let mut buf = [0u8; MAX_PDU_LEN];
+            let n = response.emit(&mut buf).map_err(|e| Error::BadReply {
+                unit,
+                error: MasterError::BadResponse(PduError::TooLong { len: e.needed }),
+            })?;
+            Ok(Reply::Pdu(buf.get(..n).unwrap_or_default().to_vec()))
         }
         Completion::Raw(bytes) => Ok(Reply::Pdu(bytes.to_vec())),
         Completion::Exception(code) => Err(Error::Exception { unit, function, code }),

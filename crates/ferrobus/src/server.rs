@@ -236,6 +236,7 @@ pub struct ServerOptions {
 
 /// Why the server closed a connection: the payload of the error [`serve`] returns for it.
 #[derive(Clone, Copy, PartialEq, Eq, Debug)]
+#[non_exhaustive]
 pub enum Closed {
     /// Nothing arrived or left for [`ServerOptions::idle_timeout`].
     Idle(Duration),

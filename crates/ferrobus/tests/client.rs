@@ -225,7 +225,10 @@ async fn a_broadcast_returns_after_the_turnaround_without_waiting_for_a_reply() 
     assert!(elapsed >= Duration::from_millis(50) && elapsed < Duration::from_millis(60), "{elapsed:?}");
     assert_eq!(client.read_holding_registers(1, 5, 1).await.unwrap(), [1234], "the slave executed it");
     let err = client.read_holding_registers(0, 0, 1).await.unwrap_err();
-    assert!(matches!(err, Error::InvalidRequest(_)), "a broadcast read is refused before it is sent: {err}");
+    assert!(
+        matches!(err, Error::BroadcastRead { function: ferrobus_proto::FunctionCode::ReadHoldingRegisters }),
+        "a broadcast read is refused before it is sent, as a broadcast read: {err}"
+    );
 }
 
 #[tokio::test(start_paused = true)]
