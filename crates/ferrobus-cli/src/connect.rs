@@ -3,7 +3,6 @@
 //! One of `--port` (serial RTU, or ASCII with `--ascii`), `--tcp` (Modbus/TCP) or `--rtu-tcp`
 //! (RTU frames over TCP) names the bus; the rest tune the line and the requests.
 
-use std::fmt;
 use std::time::Duration;
 
 use clap::{Args, ValueEnum};
@@ -114,35 +113,7 @@ pub(crate) enum Rs485Arg {
     Rts,
 }
 
-/// Which kind of bus the options name.
-#[derive(Clone, PartialEq, Eq, Debug)]
-pub(crate) enum Target {
-    /// A serial port and its line settings.
-    Serial {
-        /// The path.
-        path: String,
-        /// Baud, data bits, parity, stop bits.
-        line: LineConfig,
-        /// ASCII framing instead of RTU.
-        ascii: bool,
-    },
-    /// Modbus/TCP to `host:port`.
-    Tcp(String),
-    /// RTU over TCP to `host:port`.
-    RtuTcp(String),
-}
-
-impl fmt::Display for Target {
-    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
-        match self {
-            Target::Serial { path, line, ascii } => {
-                write!(f, "{path} at {line} ({})", if *ascii { "ASCII" } else { "RTU" })
-            }
-            Target::Tcp(addr) => write!(f, "{addr} (Modbus/TCP)"),
-            Target::RtuTcp(addr) => write!(f, "{addr} (RTU over TCP)"),
-        }
-    }
-}
+pub(crate) use crate::target::Target;
 
 impl ConnectArgs {
     /// The bus the options name, or a usage error if they name none or a bad one.

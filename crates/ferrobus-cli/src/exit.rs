@@ -22,7 +22,7 @@ use ferrobus::Error;
 use ferrobus_proto::master::Heard;
 use ferrobus_proto::{ExceptionCode, FunctionCode, PduError};
 
-use crate::connect::Target;
+use crate::target::Target;
 
 /// The exit codes, as listed in `ferrobus --help`.
 pub(crate) const EXIT_CODES_HELP: &str = "\

@@ -22,8 +22,8 @@ use ferrobus_proto::{FunctionCode, PduError};
 use tokio::io::{AsyncReadExt, AsyncWriteExt};
 use tokio::sync::{mpsc, oneshot};
 
-use crate::client::{ClientConfig, RequestOptions};
 use crate::clock::Clock;
+use crate::config::{ClientConfig, RequestOptions};
 use crate::error::Error;
 use crate::port::{BoxPort, Rs485, Transport};
 use crate::timer::Sleeper;

@@ -25,6 +25,7 @@
 
 pub mod client;
 pub mod clock;
+mod config;
 mod driver;
 pub mod error;
 mod identity;
