@@ -6,6 +6,21 @@
 //! driver only sleeps until it. The policy is ferrobus's own; the spec says nothing of retries
 //! (MODBUS over Serial Line V1.02 §2.4.1 only says a master may resend after its response
 //! timeout).
+//!
+//! ```
+//! use core::time::Duration;
+//! use ferrobus_proto::Instant;
+//! use ferrobus_proto::retry::{Admit, Backoff, Outcome, UnitHealth};
+//!
+//! // Skip a unit for 1 s after two timeouts in a row.
+//! let backoff = Backoff { after: 2, initial: Duration::from_secs(1), max: Duration::from_secs(30) };
+//! let mut unit = UnitHealth::default();
+//! let t0 = Instant::from_millis(500);
+//! unit.record(t0, Outcome::Timeout, &backoff);
+//! unit.record(t0, Outcome::Timeout, &backoff);
+//! assert_eq!(unit.check(t0), Admit::Skip { until: Instant::from_millis(1500) });
+//! assert_eq!(unit.check(Instant::from_millis(1500)), Admit::Probe);
+//! ```
 
 use core::time::Duration;
 
