@@ -277,7 +277,8 @@ impl<F: Framing + Send + 'static> Driver<F> {
 
     fn record_health(&mut self, unit: u8, result: &Result<Reply, Error>) {
         let Some(backoff) = self.config.backoff else { return };
-        if unit == ferrobus_proto::codes::unit::BROADCAST {
+        // A broadcast gets no reply, so it says nothing of any unit's health.
+        if ferrobus_proto::codes::unit::is_broadcast(unit, self.transport.framing() != crate::port::Framing::Mbap) {
             return;
         }
         let outcome = outcome(result);

@@ -270,6 +270,30 @@ async fn a_dead_unit_is_backed_off_and_does_not_stall_polling_of_the_others() {
 }
 
 #[tokio::test(start_paused = true)]
+async fn over_modbus_tcp_unit_0_is_an_ordinary_unit_and_is_backed_off_when_it_stops_answering() {
+    // A server that reads every request and answers none.
+    let connector = ConnectWith::new("silent server", || -> Connecting {
+        Box::pin(async {
+            let (client_end, mut server_end) = tokio::io::duplex(4096);
+            tokio::spawn(async move {
+                let mut buf = [0u8; 512];
+                while server_end.read(&mut buf).await.is_ok_and(|n| n > 0) {}
+            });
+            Ok(Box::new(client_end) as BoxPort)
+        })
+    });
+    let backoff = Backoff { after: 2, initial: Duration::from_secs(5), max: Duration::from_secs(60) };
+    let config = ClientConfig { backoff: Some(backoff), ..config() };
+    let client = Client::connect(Transport::custom(Framing::Mbap, timing(), connector), config).await.unwrap();
+    for _ in 0..2 {
+        let err = client.read_holding_registers(0, 0, 1).await.unwrap_err();
+        assert!(err.is_timeout(), "a read from unit 0 over TCP is sent and waits for its reply: {err}");
+    }
+    let err = client.read_holding_registers(0, 0, 1).await.unwrap_err();
+    assert!(matches!(err, Error::Backoff { unit: 0, .. }), "after two timeouts unit 0 is skipped: {err}");
+}
+
+#[tokio::test(start_paused = true)]
 async fn a_lost_port_fails_requests_clearly_and_is_reopened_when_it_returns() {
     let bench = Bench::new();
     let client = Client::connect(bench.transport(&[1], false), config()).await.unwrap();
