@@ -20,7 +20,7 @@ use core::time::Duration;
 use arbitrary::Arbitrary;
 use ferrobus_proto::ExceptionCode;
 use ferrobus_proto::frame::{Adu, Framing, LineConfig, LineTiming, RxEvent, expire, feed};
-use ferrobus_proto::pdu::{Bits, MaskWrite, Registers};
+use ferrobus_proto::pdu::{Bits, MaskWrite, ReadWriteRegisters, Registers};
 use ferrobus_proto::slave::Handler;
 use ferrobus_proto::time::Instant;
 
@@ -289,14 +289,13 @@ impl Handler for MemoryHandler {
     fn read_write_multiple_registers(
         &mut self,
         unit: u8,
-        write_start: u16,
-        values: Registers<'_>,
-        read_start: u16,
+        request: &ReadWriteRegisters<'_>,
         out: &mut [u16],
     ) -> Result<(), ExceptionCode> {
         // Check both ranges before writing, so that a refused request changes nothing.
+        let read_start = request.read().start();
         Self::range(read_start, out.len())?;
-        self.write_multiple_registers(unit, write_start, values)?;
+        self.write_multiple_registers(unit, request.write_start(), request.values())?;
         self.read_holding_registers(unit, read_start, out)
     }
 

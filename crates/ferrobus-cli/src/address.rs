@@ -16,6 +16,7 @@ use std::fmt;
 
 use clap::{Args, ValueEnum};
 use ferrobus_proto::FunctionCode;
+use ferrobus_proto::pdu::{ReadBits, ReadRegisters};
 
 use crate::exit::CliError;
 
@@ -53,9 +54,9 @@ impl Table {
         }
     }
 
-    /// The spec's most items per read request (§6.1–6.4).
+    /// The spec's most items per read request (§6.1–6.4), from the core.
     pub(crate) fn max_read(self) -> usize {
-        if self.is_bits() { 2000 } else { 125 }
+        usize::from(if self.is_bits() { ReadBits::MAX } else { ReadRegisters::MAX })
     }
 
     /// The leading digit of a Modicon reference.
@@ -293,6 +294,14 @@ pub(crate) fn split(start: u16, total: usize, width: usize, max: usize) -> Vec<(
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn the_read_limits_are_the_specs_2000_bits_and_125_registers() {
+        assert_eq!(Table::Coils.max_read(), 0x07D0);
+        assert_eq!(Table::Discrete.max_read(), 0x07D0);
+        assert_eq!(Table::Holding.max_read(), 0x007D);
+        assert_eq!(Table::Input.max_read(), 0x007D);
+    }
 
     fn parse(text: &str, table: Table, one_based: bool) -> Result<Address, CliError> {
         Address::parse(text, table, AddressArgs { one_based, modicon: false })

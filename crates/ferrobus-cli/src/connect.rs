@@ -3,11 +3,11 @@
 //! One of `--port` (serial RTU, or ASCII with `--ascii`), `--tcp` (Modbus/TCP) or `--rtu-tcp`
 //! (RTU frames over TCP) names the bus; the rest tune the line and the requests.
 
-use std::fmt;
 use std::time::Duration;
 
 use clap::{Args, ValueEnum};
 use ferrobus::{Client, ClientConfig, Rs485, SerialConfig, Transport};
+use ferrobus_proto::codes::unit;
 use ferrobus_proto::frame::{DataBits, LineConfig, Parity, StopBits};
 
 use crate::exit::CliError;
@@ -113,35 +113,7 @@ pub(crate) enum Rs485Arg {
     Rts,
 }
 
-/// Which kind of bus the options name.
-#[derive(Clone, PartialEq, Eq, Debug)]
-pub(crate) enum Target {
-    /// A serial port and its line settings.
-    Serial {
-        /// The path.
-        path: String,
-        /// Baud, data bits, parity, stop bits.
-        line: LineConfig,
-        /// ASCII framing instead of RTU.
-        ascii: bool,
-    },
-    /// Modbus/TCP to `host:port`.
-    Tcp(String),
-    /// RTU over TCP to `host:port`.
-    RtuTcp(String),
-}
-
-impl fmt::Display for Target {
-    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
-        match self {
-            Target::Serial { path, line, ascii } => {
-                write!(f, "{path} at {line} ({})", if *ascii { "ASCII" } else { "RTU" })
-            }
-            Target::Tcp(addr) => write!(f, "{addr} (Modbus/TCP)"),
-            Target::RtuTcp(addr) => write!(f, "{addr} (RTU over TCP)"),
-        }
-    }
-}
+pub(crate) use crate::target::Target;
 
 impl ConnectArgs {
     /// The bus the options name, or a usage error if they name none or a bad one.
@@ -251,7 +223,7 @@ pub(crate) struct Session {
 impl Session {
     /// Whether requests to the unit are broadcasts (unit 0 on a serial framing).
     pub(crate) fn is_broadcast(&self) -> bool {
-        self.unit == 0 && !matches!(self.target, Target::Tcp(_))
+        unit::is_broadcast(self.unit, !matches!(self.target, Target::Tcp(_)))
     }
 }
 
@@ -267,7 +239,7 @@ impl ConnectArgs {
     /// A usage error for reading from a broadcast address (unit 0 on a serial framing), found
     /// before the bus is opened.
     pub(crate) fn refuse_broadcast_read(&self) -> Result<(), CliError> {
-        if self.unit()? == 0 && self.tcp.is_none() {
+        if unit::is_broadcast(self.unit()?, self.tcp.is_none()) {
             return Err(CliError::Usage(
                 "unit 0 is a broadcast: no device answers it, so there is nothing to read; use --unit 1-247".into(),
             ));

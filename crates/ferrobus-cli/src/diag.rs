@@ -141,34 +141,14 @@ impl Counter {
 
 /// An event byte of the comm event log in words (§6.10).
 pub(crate) fn describe_event(byte: u8) -> String {
-    let flags = |bits: &[(u8, &'static str)]| -> Vec<&'static str> {
-        bits.iter().filter(|(bit, _)| byte & bit != 0).map(|&(_, name)| name).collect()
+    let kind = match event::kind(byte) {
+        event::Kind::Receive => "receive",
+        event::Kind::Send => "send",
+        event::Kind::EnteredListenOnly => return "entered listen-only".into(),
+        event::Kind::Restart => return "restart".into(),
+        event::Kind::Unknown => return "unknown event".into(),
     };
-    let (kind, words) = if byte & event::RECEIVE != 0 {
-        let words = flags(&[
-            (event::RECEIVE_BROADCAST, "broadcast"),
-            (event::RECEIVE_COMM_ERROR, "communication error"),
-            (event::RECEIVE_OVERRUN, "character overrun"),
-            (event::RECEIVE_LISTEN_ONLY, "in listen-only mode"),
-        ]);
-        ("receive", words)
-    } else if byte & event::SEND != 0 {
-        let words = flags(&[
-            (event::SEND_READ_EXCEPTION, "read exception"),
-            (event::SEND_ABORT_EXCEPTION, "abort exception"),
-            (event::SEND_BUSY_EXCEPTION, "busy exception"),
-            (event::SEND_NAK_EXCEPTION, "NAK exception"),
-            (event::SEND_WRITE_TIMEOUT, "write timeout"),
-            (event::SEND_LISTEN_ONLY, "in listen-only mode"),
-        ]);
-        ("send", words)
-    } else if byte == event::ENTERED_LISTEN_ONLY {
-        return "entered listen-only".into();
-    } else if byte == event::RESTART {
-        return "restart".into();
-    } else {
-        return "unknown event".into();
-    };
+    let words: Vec<&str> = event::flags(byte).collect();
     if words.is_empty() { kind.to_string() } else { format!("{kind}: {}", words.join(", ")) }
 }
 

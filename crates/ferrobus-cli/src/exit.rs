@@ -22,7 +22,7 @@ use ferrobus::Error;
 use ferrobus_proto::master::Heard;
 use ferrobus_proto::{ExceptionCode, FunctionCode, PduError};
 
-use crate::connect::Target;
+use crate::target::Target;
 
 /// The exit codes, as listed in `ferrobus --help`.
 pub(crate) const EXIT_CODES_HELP: &str = "\
@@ -122,10 +122,12 @@ impl CliError {
         match self {
             CliError::Modbus { error } => match error {
                 Error::Exception { .. } => Exit::Exception,
-                Error::Timeout { .. } | Error::Backoff { .. } => Exit::Timeout,
+                Error::Timeout { .. } | Error::Backoff { .. } | Error::NoReply { .. } => Exit::Timeout,
                 Error::BadReply { .. } => Exit::BadReply,
-                Error::InvalidRequest(_) => Exit::Usage,
-                Error::Io { .. } | Error::NotSameDevice { .. } | Error::Closed => Exit::Io,
+                Error::InvalidRequest(_) | Error::BroadcastRead { .. } => Exit::Usage,
+                // Io, NotSameDevice, Closed, and any kind of failure this build does not know
+                // yet: the port's or the connection's.
+                _ => Exit::Io,
             },
             CliError::Pdu(_) | CliError::Usage(_) | CliError::MissingTarget => Exit::Usage,
             CliError::ConnectTimeout { .. } => Exit::Io,
@@ -242,7 +244,10 @@ fn modbus_report(error: &Error, target: Option<&Target>, unit: u8) -> Report {
                     .into(),
             ],
         },
-        Error::Closed => Report { message: error.to_string(), hints: Vec::new() },
+        Error::BroadcastRead { .. } => {
+            Report { message: error.to_string(), hints: vec!["address one device: --unit 1-247".into()] }
+        }
+        _ => Report { message: error.to_string(), hints: Vec::new() },
     }
 }
 

@@ -10,7 +10,7 @@ use std::fmt::Write as _;
 
 use clap::Args;
 use ferrobus::Error;
-use ferrobus_proto::codes::{ReadDeviceIdCode, device_object};
+use ferrobus_proto::codes::{ReadDeviceIdCode, conformity, device_object};
 use ferrobus_proto::{ExceptionCode, FunctionCode};
 use serde_json::json;
 
@@ -125,13 +125,12 @@ fn object_name(id: u8) -> String {
 }
 
 fn describe_conformity(level: u8) -> String {
-    let category = match level & 0x7F {
-        0x01 => "basic",
-        0x02 => "regular",
-        0x03 => "extended",
-        _ => "unknown level",
+    let category = match conformity::category(level) {
+        Some(category) => category.name().unwrap_or("unknown level"),
+        None => "unknown level",
     };
-    let access = if level & 0x80 != 0 { "stream and individual access" } else { "stream access only" };
+    let access =
+        if conformity::individual_access(level) { "stream and individual access" } else { "stream access only" };
     format!("{category}, {access}")
 }
 

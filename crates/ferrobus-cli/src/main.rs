@@ -33,6 +33,7 @@ mod raw;
 mod read;
 mod readwrite;
 mod sim;
+mod target;
 mod value;
 mod write;
 

@@ -332,7 +332,7 @@ fn build(connection: &ConnectArgs, args: &SimArgs) -> Result<Sim, CliError> {
     }
     let mut sim = Sim::new(tokio_clock(), args.seed);
     for (&unit, name) in units.iter().zip(profiles) {
-        if unit == 0 || unit > 247 {
+        if !(ferrobus_proto::codes::unit::MIN..=ferrobus_proto::codes::unit::MAX).contains(&unit) {
             return Err(CliError::Usage(format!("--unit {unit}: a simulated device needs an address from 1 to 247")));
         }
         let mut profile = Profile::load(name).map_err(|e| CliError::Usage(e.to_string()))?;

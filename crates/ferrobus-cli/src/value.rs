@@ -53,24 +53,11 @@ impl ValueType {
     }
 }
 
-/// Which register of a 32-bit value is at the lower address.
-#[derive(ValueEnum, Clone, Copy, PartialEq, Eq, Debug, Default)]
-pub(crate) enum WordOrder {
-    // High word first (big-endian, "ABCD"): Omron/Hitachi drives.
-    #[default]
-    HighFirst,
-    // Low word first ("CDAB"): some servos.
-    LowFirst,
-}
+pub(crate) use ferrobus_proto::words::WordOrder;
 
-impl WordOrder {
-    /// The name, as typed.
-    pub(crate) fn name(self) -> &'static str {
-        match self {
-            WordOrder::HighFirst => "high-first",
-            WordOrder::LowFirst => "low-first",
-        }
-    }
+/// `--word-order`: a name of the core's [`WordOrder`].
+fn parse_word_order(text: &str) -> Result<WordOrder, String> {
+    WordOrder::from_name(text).ok_or_else(|| format!("'{text}' is not a word order: use high-first or low-first"))
 }
 
 /// The options that say how registers are typed.
@@ -82,7 +69,7 @@ pub(crate) struct ValueArgs {
     pub(crate) kind: ValueType,
 
     /// Register order of 32-bit values: high-first (Omron/Hitachi drives) or low-first
-    #[arg(long = "word-order", value_enum, default_value_t = WordOrder::HighFirst, hide_possible_values = true)]
+    #[arg(long = "word-order", value_parser = parse_word_order, default_value = "high-first")]
     pub(crate) word_order: WordOrder,
 
     /// Same as --word-order low-first
@@ -153,21 +140,12 @@ impl Decoded {
 }
 
 fn split_word(value: u32, order: WordOrder) -> [u16; 2] {
-    let hi = u16::try_from(value >> 16).unwrap_or_default();
-    let lo = u16::try_from(value & 0xFFFF).unwrap_or_default();
-    match order {
-        WordOrder::HighFirst => [hi, lo],
-        WordOrder::LowFirst => [lo, hi],
-    }
+    order.split(value)
 }
 
 /// The 32-bit value of two registers in `order`.
 pub(crate) fn join_words(regs: [u16; 2], order: WordOrder) -> u32 {
-    let (hi, lo) = match order {
-        WordOrder::HighFirst => (regs[0], regs[1]),
-        WordOrder::LowFirst => (regs[1], regs[0]),
-    };
-    (u32::from(hi) << 16) | u32::from(lo)
+    order.join(regs)
 }
 
 /// Decodes one value from its registers (`kind.width()` of them).
@@ -291,6 +269,13 @@ pub(crate) fn parse_coil(text: &str) -> Result<bool, CliError> {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn word_order_takes_the_cores_names_and_says_what_a_wrong_one_should_be() {
+        assert_eq!(parse_word_order("high-first"), Ok(WordOrder::HighFirst));
+        assert_eq!(parse_word_order("low-first"), Ok(WordOrder::LowFirst));
+        assert_eq!(parse_word_order("abcd"), Err("'abcd' is not a word order: use high-first or low-first".into()));
+    }
 
     fn enc(kind: ValueType, order: WordOrder, text: &str) -> Vec<u16> {
         encode(kind, order, text).unwrap()

@@ -5,6 +5,7 @@
 //! value boundaries like reads.
 
 use clap::{Args, Subcommand};
+use ferrobus_proto::pdu::{WriteCoils, WriteRegisters};
 use ferrobus_proto::{FunctionCode, PduError};
 
 use crate::address::{ADDRESS_HELP, Address, AddressArgs, Table, split};
@@ -14,10 +15,10 @@ use crate::output;
 use crate::read::{per_request, quantity};
 use crate::value::{ValueArgs, ValueType, parse_coil};
 
-/// The spec's most coils per FC0F request (§6.11).
-const MAX_WRITE_COILS: usize = 1968;
-/// The spec's most registers per FC10 request (§6.12).
-const MAX_WRITE_REGISTERS: usize = 123;
+/// The spec's most coils per FC0F request (§6.11), from the core.
+const MAX_WRITE_COILS: usize = WriteCoils::MAX as usize;
+/// The spec's most registers per FC10 request (§6.12), from the core.
+const MAX_WRITE_REGISTERS: usize = WriteRegisters::MAX as usize;
 
 /// `write coil|coils|register|registers`.
 #[derive(Args, Debug)]
@@ -208,4 +209,15 @@ async fn write_registers(
         output::print(&report(session, FunctionCode::WriteMultipleRegisters, &what, address, start, &data))?;
     }
     Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_write_limits_are_the_specs_1968_coils_and_123_registers() {
+        assert_eq!(MAX_WRITE_COILS, 0x07B0);
+        assert_eq!(MAX_WRITE_REGISTERS, 0x007B);
+    }
 }

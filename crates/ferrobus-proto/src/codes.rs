@@ -292,6 +292,15 @@ code_table! {
 }
 
 impl ReadDeviceIdCode {
+    /// The lowest object id this access category covers.
+    pub const fn first_object(self) -> u8 {
+        match self {
+            ReadDeviceIdCode::Regular => 0x03,
+            ReadDeviceIdCode::Extended => 0x80,
+            _ => 0x00,
+        }
+    }
+
     /// The highest object id this access category covers.
     pub const fn last_object(self) -> u8 {
         match self {
@@ -299,6 +308,45 @@ impl ReadDeviceIdCode {
             ReadDeviceIdCode::Regular => 0x7F,
             _ => 0xFF,
         }
+    }
+}
+
+/// The conformity level byte of a Read Device Identification response (§6.21): the highest
+/// category of objects the device has (0x01 basic, 0x02 regular, 0x03 extended), with bit 7
+/// set when it also supports individual access (code 0x04).
+pub mod conformity {
+    use super::ReadDeviceIdCode;
+
+    /// Bit 7: individual access (code 0x04) is supported as well as stream access.
+    pub const INDIVIDUAL_ACCESS: u8 = 0x80;
+    /// The bits that give the category.
+    pub const CATEGORY_MASK: u8 = 0x7F;
+
+    /// The level byte for a device whose objects reach `category`. A `category` that is not
+    /// one of basic, regular or extended is taken as basic.
+    pub const fn level(category: ReadDeviceIdCode, individual_access: bool) -> u8 {
+        let category = match category {
+            ReadDeviceIdCode::Regular => 0x02,
+            ReadDeviceIdCode::Extended => 0x03,
+            _ => 0x01,
+        };
+        if individual_access { category | INDIVIDUAL_ACCESS } else { category }
+    }
+
+    /// The category a level byte names: basic, regular or extended, or `None` for a level the
+    /// spec does not define.
+    pub const fn category(level: u8) -> Option<ReadDeviceIdCode> {
+        match level & CATEGORY_MASK {
+            0x01 => Some(ReadDeviceIdCode::Basic),
+            0x02 => Some(ReadDeviceIdCode::Regular),
+            0x03 => Some(ReadDeviceIdCode::Extended),
+            _ => None,
+        }
+    }
+
+    /// Whether a level byte says individual access is supported.
+    pub const fn individual_access(level: u8) -> bool {
+        level & INDIVIDUAL_ACCESS != 0
     }
 }
 
@@ -346,6 +394,13 @@ pub mod unit {
     /// The unit id a Modbus/TCP client uses for a directly connected server (Messaging
     /// Implementation Guide V1.0b, p. 23).
     pub const TCP_DIRECT: u8 = 0xFF;
+
+    /// Whether a request to `unit` is a broadcast: address 0 on a serial framing (RTU or
+    /// ASCII, also when carried over TCP). Over Modbus/TCP (MBAP) unit 0 is an ordinary
+    /// address (Messaging Implementation Guide V1.0b §4.4.2.1: a server answers it).
+    pub const fn is_broadcast(unit: u8, serial: bool) -> bool {
+        serial && unit == BROADCAST
+    }
 }
 
 #[cfg(test)]
@@ -353,6 +408,37 @@ mod tests {
     extern crate std;
     use super::*;
     use std::string::ToString;
+
+    #[test]
+    fn only_unit_zero_on_a_serial_framing_is_a_broadcast_over_all_256_values() {
+        for v in 0..=u8::MAX {
+            assert_eq!(unit::is_broadcast(v, true), v == 0x00, "unit {v:#04x} on a serial line");
+            assert!(!unit::is_broadcast(v, false), "unit {v:#04x} over Modbus/TCP");
+        }
+    }
+
+    #[test]
+    fn conformity_levels_read_back_their_category_and_access_over_all_256_values() {
+        for v in 0..=u8::MAX {
+            let category = conformity::category(v);
+            assert_eq!(category.is_some(), matches!(v & 0x7F, 0x01..=0x03), "{v:#04x}");
+            assert_eq!(conformity::individual_access(v), v >= 0x80, "{v:#04x}");
+            if let Some(category) = category {
+                assert_eq!(conformity::level(category, v >= 0x80), v, "{v:#04x}");
+            }
+        }
+        assert_eq!(conformity::level(ReadDeviceIdCode::Basic, true), 0x81);
+        assert_eq!(conformity::level(ReadDeviceIdCode::Regular, true), 0x82);
+        assert_eq!(conformity::level(ReadDeviceIdCode::Extended, false), 0x03);
+    }
+
+    #[test]
+    fn each_access_category_covers_its_object_ids() {
+        let span = |c: ReadDeviceIdCode| (c.first_object(), c.last_object());
+        assert_eq!(span(ReadDeviceIdCode::Basic), (0x00, 0x02));
+        assert_eq!(span(ReadDeviceIdCode::Regular), (0x03, 0x7F));
+        assert_eq!(span(ReadDeviceIdCode::Extended), (0x80, 0xFF));
+    }
 
     #[test]
     fn function_codes_round_trip_over_all_256_values() {

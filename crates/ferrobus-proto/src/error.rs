@@ -11,6 +11,7 @@ use crate::codes::ExceptionCode;
 
 /// Why a PDU could not be parsed or built.
 #[derive(Clone, Copy, PartialEq, Eq, Debug)]
+#[non_exhaustive]
 pub enum PduError {
     /// The PDU is empty: not even a function code.
     Empty,
@@ -134,6 +135,7 @@ impl core::error::Error for BufferTooSmall {}
 
 /// Why a receiver threw bytes away. Never fatal: the receiver counts it and resyncs.
 #[derive(Clone, Copy, PartialEq, Eq, Debug)]
+#[non_exhaustive]
 pub enum DiscardReason {
     /// The CRC (RTU) or LRC (ASCII) did not match.
     ChecksumMismatch,

@@ -6,6 +6,9 @@
 //!
 //! ```text
 //!   bytes + now ──▶ ┌──────────────────────────────────────────────┐ ──▶ bytes to send
+//!                   │ policy    retry.rs  retries, unit backoff,   │
+//!                   │           IO backoff, each at `now`          │
+//!                   ├──────────────────────────────────────────────┤
 //!                   │ engines   master.rs  slave/                  │ ──▶ poll_timeout()
 //!                   │           one request in flight, t3.5 gaps,  │ ──▶ events
 //!                   │           unit filter, counters, reply wait  │
@@ -17,6 +20,7 @@
 //!                   │           parse / emit / encoded_len         │
 //!                   ├──────────────────────────────────────────────┤
 //!                   │ tables    codes.rs crc.rs time.rs error.rs   │
+//!                   │           words.rs (32-bit word orders)      │
 //!                   └──────────────────────────────────────────────┘
 //! ```
 //!
@@ -26,6 +30,9 @@
 //! - [`frame`]: the three ADU formats. The RTU receiver completes a frame as soon as its
 //!   function code tells the length, falls back to the t3.5 silent interval where it cannot,
 //!   and treats line noise as something to count and skip, never as an end.
+//! - [`retry`]: what a master does over many transactions — which outcomes it resends, when it
+//!   skips a unit that stopped answering, how long it waits to reopen a failed port — decided
+//!   from outcomes and `now`, so that a driver only sleeps until the instant it is given.
 //! - [`master`] and [`slave`]: the two engines, in the style of `quinn-proto` and `smoltcp`.
 //!   The caller feeds bytes with the time they arrived, sleeps until `poll_timeout()`, calls
 //!   `handle_timeout(now)`, and writes what `poll_transmit(now, …)` returns. The engines
@@ -71,8 +78,10 @@ pub mod error;
 pub mod frame;
 pub mod master;
 pub mod pdu;
+pub mod retry;
 pub mod slave;
 pub mod time;
+pub mod words;
 
 pub use codes::{ExceptionCode, FunctionCode};
 pub use error::{BufferTooSmall, DiscardReason, PduError};

@@ -64,6 +64,7 @@ impl Default for MasterConfig {
 
 /// Why a request got no usable reply.
 #[derive(Clone, Copy, PartialEq, Eq, Debug)]
+#[non_exhaustive]
 pub enum MasterError {
     /// No reply came within the response timeout.
     Timeout {
@@ -204,6 +205,7 @@ impl fmt::Display for Heard {
 
 /// Why [`Master::submit`] refused a request.
 #[derive(Clone, Copy, PartialEq, Eq, Debug)]
+#[non_exhaustive]
 pub enum SubmitError {
     /// A request is in flight, or its completion has not been polled yet.
     Busy,
@@ -436,7 +438,7 @@ impl<F: Framing> Master<F> {
         core.unit = unit;
         core.raw = raw;
         core.heard = None;
-        core.no_reply = no_reply || (core.serial && unit == unit::BROADCAST);
+        core.no_reply = no_reply || unit::is_broadcast(unit, core.serial);
         core.state = State::Queued { not_before: now };
         Ok(())
     }
@@ -478,8 +480,11 @@ impl<F: Framing> Master<F> {
         core.echo_pos = 0;
         core.echo_len = if core.config.echo_suppression { n } else { 0 };
         if core.no_reply {
-            let counter =
-                if core.unit == unit::BROADCAST { &mut core.stats.broadcasts } else { &mut core.stats.requests };
+            let counter = if unit::is_broadcast(core.unit, core.serial) {
+                &mut core.stats.broadcasts
+            } else {
+                &mut core.stats.requests
+            };
             *counter = counter.wrapping_add(1);
             core.state = State::Turnaround { until: sent.saturating_add(core.config.turnaround_delay) };
         } else {

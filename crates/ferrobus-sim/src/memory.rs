@@ -75,10 +75,7 @@ impl Item {
     /// Decodes the raw value from its registers (`words` in address order).
     pub fn decode(&self, words: &[u16]) -> i64 {
         let raw: u32 = match (self.size, words) {
-            (2, [a, b, ..]) => match self.word_order {
-                WordOrder::HighFirst => (u32::from(*a) << 16) | u32::from(*b),
-                WordOrder::LowFirst => (u32::from(*b) << 16) | u32::from(*a),
-            },
+            (2, [a, b, ..]) => self.word_order.join([*a, *b]),
             (_, [a, ..]) => u32::from(*a),
             _ => 0,
         };
@@ -93,11 +90,9 @@ impl Item {
     pub fn encode(&self, value: i64) -> [u16; 2] {
         // Two's complement in 32 bits: -1 is 0xFFFF_FFFF.
         let raw = u32::try_from(value & 0xFFFF_FFFF).unwrap_or_default();
-        let (hi, lo) = ((raw >> 16) as u16, raw as u16);
-        match (self.size, self.word_order) {
-            (2, WordOrder::HighFirst) => [hi, lo],
-            (2, WordOrder::LowFirst) => [lo, hi],
-            _ => [lo, 0],
+        match self.size {
+            2 => self.word_order.split(raw),
+            _ => [raw as u16, 0],
         }
     }
 

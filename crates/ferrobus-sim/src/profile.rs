@@ -234,15 +234,14 @@ pub enum Access {
     Wo,
 }
 
-/// Word order of a 32-bit pair.
-#[derive(Clone, Copy, PartialEq, Eq, Debug, Default, Deserialize)]
-#[serde(rename_all = "kebab-case")]
-pub enum WordOrder {
-    /// High word at the lower address (Omron).
-    #[default]
-    HighFirst,
-    /// Low word at the lower address (the SDP example).
-    LowFirst,
+/// Word order of a 32-bit pair: the core's, named `high-first` or `low-first` in a profile.
+pub use ferrobus_proto::words::WordOrder;
+
+/// A `word_order` in a profile, by the core's names.
+fn word_order<'de, D: serde::Deserializer<'de>>(deserializer: D) -> Result<WordOrder, D::Error> {
+    let name = String::deserialize(deserializer)?;
+    WordOrder::from_name(&name)
+        .ok_or_else(|| serde::de::Error::invalid_value(serde::de::Unexpected::Str(&name), &"high-first or low-first"))
 }
 
 /// A coil or discrete input, or a run of them.
@@ -280,7 +279,7 @@ pub struct RegisterDef {
     #[serde(default = "one")]
     pub size: u32,
     /// Word order of a 2-register item.
-    #[serde(default)]
+    #[serde(default, deserialize_with = "word_order")]
     pub word_order: WordOrder,
     /// A short name (a parameter code such as `F001`).
     pub name: String,
@@ -333,6 +332,7 @@ pub struct Fifo {
 
 /// Why a profile could not be loaded.
 #[derive(Debug, thiserror::Error)]
+#[non_exhaustive]
 pub enum ProfileError {
     /// No built-in profile by that name (and it does not look like a path).
     #[error("no profile named {name:?}: the built-in ones are {}, or give a path to a .toml file", BUILTIN.iter().map(|(n, _)| *n).collect::<Vec<_>>().join(", "))]
@@ -679,6 +679,18 @@ mod tests {
         assert_eq!(
             error(&format!("{DEVICE}[[registers]]\nnumber=1\nname='r'\nmin=5\nmax=4\n")),
             "in mine.toml, line 10: [[registers]] 1 (r): min = 5 is above max = 4"
+        );
+    }
+
+    #[test]
+    fn a_word_order_is_read_by_the_cores_names_and_a_wrong_one_is_refused_naming_them() {
+        let pair = |order: &str| format!("{DEVICE}[[registers]]\nnumber=1\nname='r'\nsize=2\nword_order='{order}'\n");
+        let low = Profile::parse(&pair("low-first"), "mine.toml").unwrap();
+        assert_eq!(low.registers[0].word_order, WordOrder::LowFirst);
+        let wrong = error(&pair("cdab"));
+        assert!(
+            wrong.starts_with("in mine.toml, line 10 (word_order='cdab'): invalid value: string \"cdab\", expected high-first or low-first"),
+            "{wrong}"
         );
     }
 

@@ -35,6 +35,26 @@ pub(crate) fn unframe(framing: Framing, frame: &[u8]) -> Option<(AduHeader, Vec<
     }
 }
 
+/// The unit a whole framed reply comes from.
+pub(crate) fn unit_of(framing: Framing, frame: &[u8]) -> Option<u8> {
+    unframe(framing, frame).map(|(header, _)| header.unit)
+}
+
+/// Breaks the checksum of a whole framed reply: its CRC (RTU) or LRC (ASCII), through the
+/// core's framing. Modbus/TCP has no checksum to break, and a frame already cut short has none
+/// left: those pass unchanged.
+pub(crate) fn corrupt_checksum(framing: Framing, frame: &mut [u8]) {
+    match framing {
+        Framing::Rtu => {
+            rtu::corrupt_crc(frame);
+        }
+        Framing::Ascii => {
+            ascii::corrupt_lrc(frame);
+        }
+        Framing::Mbap => {}
+    }
+}
+
 /// `pdu` framed for `header`.
 pub(crate) fn encode(framing: Framing, header: AduHeader, pdu: &[u8]) -> Option<Vec<u8>> {
     let mut out = vec![0u8; ascii::MAX_FRAME_CHARS.max(mbap::MAX_ADU_LEN).max(rtu::MAX_ADU_LEN)];
@@ -64,6 +84,22 @@ mod tests {
 
     /// 01 03 02 00 2A: unit 1 answers one register, 42.
     const PDU: [u8; 4] = [0x03, 0x02, 0x00, 0x2A];
+
+    #[test]
+    fn a_corrupted_reply_keeps_its_unit_and_fails_only_its_checksum() {
+        let header = AduHeader { unit: 7, transaction: 0 };
+        for framing in [Framing::Rtu, Framing::Ascii] {
+            let mut frame = encode(framing, header, &PDU).unwrap();
+            assert_eq!(unit_of(framing, &frame), Some(7), "{framing:?}");
+            corrupt_checksum(framing, &mut frame);
+            assert_eq!(unframe(framing, &frame), None, "{framing:?}: the checksum no longer agrees");
+        }
+        let mut frame = encode(Framing::Mbap, header, &PDU).unwrap();
+        let sent = frame.clone();
+        assert_eq!(unit_of(Framing::Mbap, &frame), Some(7));
+        corrupt_checksum(Framing::Mbap, &mut frame);
+        assert_eq!(frame, sent, "Modbus/TCP has no checksum");
+    }
 
     #[test]
     fn every_framing_reads_back_what_it_framed() {

@@ -16,7 +16,7 @@ use rand::{RngExt, SeedableRng};
 use crate::device::Device;
 use crate::fault::Faults;
 use crate::memory::Table;
-use crate::reframe::reframe;
+use crate::reframe::{corrupt_checksum, reframe, unit_of};
 use crate::rule::Action;
 
 /// Where the simulation's time comes from: the time since it started.
@@ -274,20 +274,11 @@ impl FaultFilter {
     pub fn new(sim: Shared<Sim>, framing: Framing) -> Self {
         FaultFilter { sim, framing }
     }
-
-    /// The unit a framed reply comes from.
-    fn unit_of(&self, frame: &[u8]) -> Option<u8> {
-        match self.framing {
-            Framing::Rtu => frame.first().copied(),
-            Framing::Mbap => frame.get(6).copied(),
-            Framing::Ascii => std::str::from_utf8(frame.get(1..3)?).ok().and_then(|h| u8::from_str_radix(h, 16).ok()),
-        }
-    }
 }
 
 impl ReplyFilter for FaultFilter {
     fn filter(&mut self, answering: Option<&Answering>, frame: &mut Vec<u8>) -> Fate {
-        let Some(unit) = answering.map(|a| a.unit).or_else(|| self.unit_of(frame)) else { return Fate::Send };
+        let Some(unit) = answering.map(|a| a.unit).or_else(|| unit_of(self.framing, frame)) else { return Fate::Send };
         let (dropped, corrupted, action) = {
             let mut sim = self.sim.lock();
             let (dropped, corrupted) = sim.draw(unit);
@@ -333,25 +324,5 @@ impl ReplyFilter for FaultFilter {
             corrupt_checksum(framing, frame);
         }
         fate
-    }
-}
-
-/// Breaks the checksum of a framed reply: the CRC's high byte (RTU), the LRC's first digit
-/// (ASCII). Modbus/TCP has no checksum to break; its frames pass unchanged.
-fn corrupt_checksum(framing: Framing, frame: &mut [u8]) {
-    let n = frame.len();
-    match framing {
-        Framing::Rtu => {
-            if let Some(b) = frame.last_mut() {
-                *b ^= 0x5A;
-            }
-        }
-        Framing::Ascii => {
-            // `… L L CR LF`: change the LRC's high digit to another hex digit.
-            if let Some(c) = n.checked_sub(4).and_then(|i| frame.get_mut(i)) {
-                *c = if *c == b'0' { b'1' } else { b'0' };
-            }
-        }
-        Framing::Mbap => {}
     }
 }

@@ -35,66 +35,7 @@ use crate::driver::{Command, Driver, Reply, parse_reply};
 use crate::error::Error;
 use crate::port::{Framing, Transport};
 
-/// How a unit that stops answering is skipped, so that it does not stall the others.
-#[derive(Clone, Copy, PartialEq, Eq, Debug)]
-pub struct Backoff {
-    /// Consecutive timed-out requests before the unit is skipped.
-    pub after: u32,
-    /// How long it is skipped the first time; each failed probe doubles it.
-    pub initial: Duration,
-    /// The longest it is skipped.
-    pub max: Duration,
-}
-
-impl Default for Backoff {
-    fn default() -> Self {
-        Backoff { after: 3, initial: Duration::from_secs(1), max: Duration::from_secs(30) }
-    }
-}
-
-/// Settings of a client.
-#[derive(Clone, Copy, PartialEq, Eq, Debug)]
-pub struct ClientConfig {
-    /// How long to wait for each reply once the request has left.
-    pub timeout: Duration,
-    /// How many times to resend a request that got no usable reply: a timeout, a bad reply, or
-    /// an IO failure (the port is then reopened, after a backoff that grows with each failure).
-    pub retries: u32,
-    /// The quiet time after a broadcast.
-    pub turnaround_delay: Duration,
-    /// Drop our own transmission when the adapter echoes it.
-    pub echo_suppression: bool,
-    /// Skip units that stop answering; `None` never skips.
-    pub backoff: Option<Backoff>,
-    /// Requests that may wait for the bus before `request` calls wait themselves.
-    pub queue: usize,
-    /// How long opening the port or connecting may take.
-    pub connect_timeout: Duration,
-}
-
-impl Default for ClientConfig {
-    fn default() -> Self {
-        let master = MasterConfig::default();
-        ClientConfig {
-            timeout: master.response_timeout,
-            retries: 0,
-            turnaround_delay: master.turnaround_delay,
-            echo_suppression: false,
-            backoff: Some(Backoff::default()),
-            queue: 64,
-            connect_timeout: Duration::from_secs(5),
-        }
-    }
-}
-
-/// The timeout and retries of a request.
-#[derive(Clone, Copy, PartialEq, Eq, Debug)]
-pub struct RequestOptions {
-    /// How long to wait for the reply once the request has left.
-    pub timeout: Duration,
-    /// How many times to resend it.
-    pub retries: u32,
-}
+pub use crate::config::{Backoff, ClientConfig, RequestOptions};
 
 /// A device identification, read object by object until the device says no more follow.
 #[derive(Clone, PartialEq, Eq, Debug)]
@@ -185,7 +126,7 @@ impl Client {
 
     /// Whether unit 0 is a broadcast here (serial framings).
     fn broadcasts(&self, unit: u8) -> bool {
-        unit == ferrobus_proto::codes::unit::BROADCAST && self.framing != Framing::Mbap
+        ferrobus_proto::codes::unit::is_broadcast(unit, self.framing != Framing::Mbap)
     }
 
     async fn send(&self, unit: u8, pdu: Vec<u8>, raw: bool) -> Result<Reply, Error> {
@@ -227,13 +168,11 @@ impl Client {
         request: &Request<'_>,
         read: impl FnOnce(Response<'_>) -> Option<T>,
     ) -> Result<T, Error> {
+        let function = request.function();
         if self.broadcasts(unit) {
-            return Err(Error::InvalidRequest(PduError::InvalidField {
-                field: "unit (a broadcast gets no reply to read)",
-                value: 0,
-            }));
+            return Err(Error::BroadcastRead { function });
         }
-        let pdu = self.request(unit, request).await?.ok_or(Error::Closed)?;
+        let pdu = self.request(unit, request).await?.ok_or(Error::NoReply { unit, function })?;
         let response = parse_reply(unit, &pdu)?;
         let function = response.function();
         read(response).ok_or(Error::BadReply {

@@ -3,25 +3,27 @@
 //! It knows no Modbus. It feeds the engine the bytes it reads with the time they arrived,
 //! sleeps until the engine's next deadline, writes what the engine hands it, and reopens the
 //! port after an IO error. Everything else — gaps, matching, timeouts — is the engine's.
-//! On top it adds what needs more than one transaction: retries, per-unit backoff so that a
-//! dead device costs one timeout per backoff period instead of one per poll, and a backoff
-//! on IO failures — after each failed open, read or write the next open waits
-//! [`IO_BACKOFF_INITIAL`], doubling up to [`IO_BACKOFF_MAX`], so that a dead port costs a few
-//! attempts a second instead of a busy loop, and retries span time enough to ride out a
-//! short loss.
+//! On top it asks the core's [`retry`](ferrobus_proto::retry) policy what needs more than one
+//! transaction: retries, per-unit backoff so that a dead device costs one timeout per backoff
+//! period instead of one per poll, and a backoff on IO failures — after each failed open, read
+//! or write the next open waits [`IO_BACKOFF_INITIAL`], doubling up to [`IO_BACKOFF_MAX`], so
+//! that a dead port costs a few attempts a second instead of a busy loop, and retries span time
+//! enough to ride out a short loss.
 
 use std::collections::HashMap;
-use std::time::Duration;
 
-use ferrobus_proto::FunctionCode;
 use ferrobus_proto::frame::Framing;
 use ferrobus_proto::master::{Completion, Heard, MAX_TX_LEN, Master, MasterConfig, MasterError};
-use ferrobus_proto::pdu::{Request, Response};
+use ferrobus_proto::pdu::{MAX_PDU_LEN, Request, Response};
+use ferrobus_proto::retry::{Admit, IoBackoff, Outcome, UnitHealth, should_retry};
+#[cfg(doc)]
+use ferrobus_proto::retry::{IO_BACKOFF_INITIAL, IO_BACKOFF_MAX};
+use ferrobus_proto::{FunctionCode, PduError};
 use tokio::io::{AsyncReadExt, AsyncWriteExt};
 use tokio::sync::{mpsc, oneshot};
 
-use crate::client::{Backoff, ClientConfig, RequestOptions};
 use crate::clock::Clock;
+use crate::config::{ClientConfig, RequestOptions};
 use crate::error::Error;
 use crate::port::{BoxPort, Rs485, Transport};
 use crate::timer::Sleeper;
@@ -46,20 +48,6 @@ pub(crate) enum Reply {
     Sent,
 }
 
-/// The wait before reopening after the first IO failure in a row.
-pub(crate) const IO_BACKOFF_INITIAL: Duration = Duration::from_millis(10);
-
-/// The longest wait before reopening, however many IO failures came in a row.
-pub(crate) const IO_BACKOFF_MAX: Duration = Duration::from_millis(500);
-
-/// How a unit has been answering.
-#[derive(Debug, Default)]
-struct Health {
-    failures: u32,
-    skip_until: Option<tokio::time::Instant>,
-    period: Duration,
-}
-
 pub(crate) struct Driver<F> {
     master: Master<F>,
     transport: Transport,
@@ -67,12 +55,10 @@ pub(crate) struct Driver<F> {
     port: Option<BoxPort>,
     /// Whether a port was ever open: a lost one is reopened only if the transport says so.
     opened: bool,
-    /// IO failures (opening, reading, writing) since the last transaction that got through.
-    io_failures: u32,
-    /// Not to be reopened before this instant (after an IO failure).
-    reopen_at: Option<tokio::time::Instant>,
+    /// IO failures (opening, reading, writing) and when the port may be reopened.
+    io: IoBackoff,
     clock: Clock,
-    health: HashMap<u8, Health>,
+    health: HashMap<u8, UnitHealth>,
     rx: Box<[u8; 1024]>,
     tx: Box<[u8; MAX_TX_LEN]>,
     sleeper: Sleeper,
@@ -86,8 +72,7 @@ impl<F: Framing + Send + 'static> Driver<F> {
             transport,
             config,
             opened: port.is_some(),
-            io_failures: 0,
-            reopen_at: None,
+            io: IoBackoff::default(),
             port,
             clock: Clock::new(),
             health: HashMap::new(),
@@ -137,10 +122,7 @@ impl<F: Framing + Send + 'static> Driver<F> {
 
     /// Counts an IO failure and sets when the port may be opened next.
     fn io_failed(&mut self) {
-        self.io_failures = self.io_failures.saturating_add(1);
-        let doublings = self.io_failures.saturating_sub(1).min(16);
-        let wait = IO_BACKOFF_INITIAL.saturating_mul(1 << doublings).min(IO_BACKOFF_MAX);
-        self.reopen_at = Some(tokio::time::Instant::now() + wait);
+        self.io.failed(self.clock.now());
     }
 
     async fn serve(&mut self, command: &Command) -> Result<Reply, Error> {
@@ -162,10 +144,9 @@ impl<F: Framing + Send + 'static> Driver<F> {
             match result {
                 Err(Error::Io { .. }) => self.io_failed(),
                 Err(Error::NotSameDevice { .. }) => {}
-                _ => self.io_failures = 0,
+                _ => self.io.succeeded(),
             }
-            let retry = matches!(result, Err(Error::Timeout { .. } | Error::BadReply { .. } | Error::Io { .. }));
-            if retry && attempts <= retries {
+            if should_retry(outcome(&result), attempts, retries) {
                 tracing::debug!(unit, %function, attempts, "retrying: {:?}", result);
                 continue;
             }
@@ -187,8 +168,8 @@ impl<F: Framing + Send + 'static> Driver<F> {
                     std::io::Error::new(std::io::ErrorKind::NotConnected, "the port was lost, and reopening is off"),
                 ));
             }
-            if let Some(at) = self.reopen_at.take() {
-                tokio::time::sleep_until(at).await;
+            if let Some(at) = self.io.take_reopen_at() {
+                tokio::time::sleep_until(self.clock.to_tokio(at)).await;
             }
             self.port = Some(self.transport.open(self.config.connect_timeout).await?);
             self.opened = true;
@@ -225,7 +206,10 @@ impl<F: Framing + Send + 'static> Driver<F> {
             }
             let deadline = self.master.poll_timeout().map(|t| self.clock.to_tokio(t));
             let Some(port) = self.port.as_mut() else {
-                return Err(Error::Closed);
+                return Err(Error::io(
+                    format!("reading from {}", self.transport.describe()),
+                    std::io::ErrorKind::NotConnected.into(),
+                ));
             };
             tokio::select! {
                 read = port.read(&mut self.rx[..]) => match read {
@@ -283,39 +267,40 @@ impl<F: Framing + Send + 'static> Driver<F> {
     /// Fails fast for a unit in backoff; returns whether this request is its probe.
     fn check_health(&mut self, unit: u8) -> Result<bool, Error> {
         let Some(health) = self.health.get(&unit) else { return Ok(false) };
-        match health.skip_until {
-            Some(until) => {
-                let now = tokio::time::Instant::now();
-                if now < until {
-                    return Err(Error::Backoff { unit, retry_in: until - now });
-                }
-                Ok(true)
-            }
-            None => Ok(false),
+        let now = self.clock.now();
+        match health.check(now) {
+            Admit::Send => Ok(false),
+            Admit::Probe => Ok(true),
+            Admit::Skip { until } => Err(Error::Backoff { unit, retry_in: until.saturating_duration_since(now) }),
         }
     }
 
     fn record_health(&mut self, unit: u8, result: &Result<Reply, Error>) {
-        let Some(Backoff { after, initial, max }) = self.config.backoff else { return };
-        if unit == ferrobus_proto::codes::unit::BROADCAST {
+        let Some(backoff) = self.config.backoff else { return };
+        // A broadcast gets no reply, so it says nothing of any unit's health.
+        if ferrobus_proto::codes::unit::is_broadcast(unit, self.transport.framing() != crate::port::Framing::Mbap) {
             return;
         }
-        match result {
-            // A reply, even an exception, shows the unit is alive.
-            Ok(_) | Err(Error::Exception { .. }) => {
-                self.health.remove(&unit);
-            }
-            Err(Error::Timeout { .. }) => {
-                let health = self.health.entry(unit).or_default();
-                health.failures += 1;
-                if health.failures >= after {
-                    health.period = if health.skip_until.is_some() { (health.period * 2).min(max) } else { initial };
-                    health.skip_until = Some(tokio::time::Instant::now() + health.period);
-                    tracing::info!(unit, period = ?health.period, "unit not answering; backing off");
-                }
-            }
-            Err(_) => {}
+        let outcome = outcome(result);
+        let now = self.clock.now();
+        let health = self.health.entry(unit).or_default();
+        if health.record(now, outcome, &backoff) {
+            self.health.remove(&unit);
+        } else if outcome == Outcome::Timeout && matches!(health.check(now), Admit::Skip { .. }) {
+            tracing::info!(unit, period = ?health.period(), "unit not answering; backing off");
         }
+    }
+}
+
+/// What the retry policy sees of a result.
+fn outcome(result: &Result<Reply, Error>) -> Outcome {
+    match result {
+        Ok(_) => Outcome::Reply,
+        Err(Error::Exception { .. }) => Outcome::Exception,
+        Err(Error::Timeout { .. }) => Outcome::Timeout,
+        Err(Error::BadReply { .. }) => Outcome::BadReply,
+        Err(Error::Io { .. }) => Outcome::Io,
+        Err(_) => Outcome::Other,
     }
 }
 
@@ -325,10 +310,13 @@ fn convert(command: &Command, completion: Completion<'_>) -> Result<Reply, Error
     let function = FunctionCode::from_u8(command.pdu.first().copied().unwrap_or_default());
     match completion {
         Completion::Response(response) => {
-            let mut buf = vec![0u8; response.encoded_len()];
-            let n = response.emit(&mut buf).map_err(|_| Error::Closed)?;
-            buf.truncate(n);
-            Ok(Reply::Pdu(buf))
+            // Every response the engine accepts fits a PDU; one that did not would be too long.
+            let mut buf = [0u8; MAX_PDU_LEN];
+            let n = response.emit(&mut buf).map_err(|e| Error::BadReply {
+                unit,
+                error: MasterError::BadResponse(PduError::TooLong { len: e.needed }),
+            })?;
+            Ok(Reply::Pdu(buf.get(..n).unwrap_or_default().to_vec()))
         }
         Completion::Raw(bytes) => Ok(Reply::Pdu(bytes.to_vec())),
         Completion::Exception(code) => Err(Error::Exception { unit, function, code }),

@@ -12,8 +12,9 @@ use std::time::Duration;
 use ferrobus_proto::master::{Heard, MasterError};
 use ferrobus_proto::{ExceptionCode, FunctionCode, PduError};
 
-/// Everything that can go wrong with a request.
+/// Everything that can go wrong with a request. New variants may come: match with a `_` arm.
 #[derive(Clone, Debug, thiserror::Error)]
+#[non_exhaustive]
 pub enum Error {
     /// The device refused the request with an exception code.
     #[error("unit {unit} answered {function} with exception {code}")]
@@ -57,6 +58,23 @@ pub enum Error {
     /// The request itself is not valid Modbus (a quantity out of range, a value too big).
     #[error("invalid request: {0}")]
     InvalidRequest(PduError),
+    /// A read (a request whose answer carries data) to the broadcast address, unit 0 on a
+    /// serial line: every device executes a broadcast and none answers, so there would be
+    /// nothing to read. Refused before anything is sent.
+    #[error("{function} to unit 0 is a broadcast: no device answers it, so there is nothing to read")]
+    BroadcastRead {
+        /// The function code of the request.
+        function: FunctionCode,
+    },
+    /// A request that must be answered went out as one that gets no reply (0x08/0x04 Force
+    /// Listen Only, say), so there is no answer to return.
+    #[error("unit {unit} sends no reply to {function}, so there is nothing to return")]
+    NoReply {
+        /// The unit asked.
+        unit: u8,
+        /// The function code of the request.
+        function: FunctionCode,
+    },
     /// The unit failed repeatedly and is being skipped for a while so that it does not stall
     /// the others; a probe goes out again when the time has passed.
     #[error("unit {unit} is not answering; skipped for another {} ms", retry_in.as_millis())]
@@ -132,6 +150,13 @@ mod tests {
         };
         assert_eq!(e.to_string(), "unit 5 answered 0x03 Read Holding Registers with exception 0x21 (vendor-specific)");
         assert_eq!(e.exception(), Some(ExceptionCode::Vendor(0x21)));
+        let b = Error::BroadcastRead { function: FunctionCode::ReadHoldingRegisters };
+        assert_eq!(
+            b.to_string(),
+            "0x03 Read Holding Registers to unit 0 is a broadcast: no device answers it, so there is nothing to read"
+        );
+        let n = Error::NoReply { unit: 4, function: FunctionCode::Diagnostics };
+        assert_eq!(n.to_string(), "unit 4 sends no reply to 0x08 Diagnostics, so there is nothing to return");
         let t = Error::Timeout { unit: 1, timeout: Duration::from_millis(500), attempts: 3, heard: None };
         assert_eq!(t.to_string(), "no reply from unit 1 within 500 ms (3 attempts)");
         assert!(t.is_timeout());

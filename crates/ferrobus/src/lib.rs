@@ -28,6 +28,7 @@
 
 pub mod client;
 pub mod clock;
+mod config;
 mod driver;
 pub mod error;
 mod identity;

@@ -119,13 +119,8 @@ pub struct Transport {
     connector: Arc<dyn Connector>,
 }
 
-/// How long a PC waits for the rest of an RTU frame of known length: OS serial stacks and USB
-/// adapters deliver a frame in bursts separated by milliseconds, well above t3.5 at high
-/// baud rates. Noise costs nothing extra: the receiver resyncs past it anyway.
-pub const PC_INCOMPLETE_TIMEOUT: Duration = Duration::from_millis(20);
-
-/// The silence that ends an RTU frame of unknown length on a stream without a line (TCP).
-pub const STREAM_FRAME_GAP: Duration = Duration::from_millis(50);
+/// The PC-side RTU timeouts, decided in the core.
+pub use ferrobus_proto::frame::timing::{PC_INCOMPLETE_TIMEOUT, STREAM_FRAME_GAP};
 
 impl Transport {
     /// RTU over a serial port.

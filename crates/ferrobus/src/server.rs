@@ -28,7 +28,7 @@ use ferrobus_proto::error::DiscardReason;
 use ferrobus_proto::frame::mbap::MbapCodec;
 use ferrobus_proto::frame::{Framing, LineTiming};
 use ferrobus_proto::master::MAX_TX_LEN;
-use ferrobus_proto::pdu::{AddressRange, Bits, MaskWrite, Registers, Request};
+use ferrobus_proto::pdu::{AddressRange, Bits, MaskWrite, ReadWriteRegisters, Registers, Request};
 use ferrobus_proto::slave::{Admission, Disposition, Handler, Slave, SlaveConfig, SlaveEvent};
 use ferrobus_proto::{ExceptionCode, FunctionCode, Instant};
 use tokio::io::{AsyncReadExt, AsyncWriteExt};
@@ -177,12 +177,10 @@ impl<H: Handler> Handler for Shared<H> {
     fn read_write_multiple_registers(
         &mut self,
         unit: u8,
-        write_start: u16,
-        values: Registers<'_>,
-        read_start: u16,
+        request: &ReadWriteRegisters<'_>,
         out: &mut [u16],
     ) -> Result<(), ExceptionCode> {
-        self.lock().read_write_multiple_registers(unit, write_start, values, read_start, out)
+        self.lock().read_write_multiple_registers(unit, request, out)
     }
     fn read_exception_status(&mut self, unit: u8) -> Result<u8, ExceptionCode> {
         self.lock().read_exception_status(unit)
@@ -238,6 +236,7 @@ pub struct ServerOptions {
 
 /// Why the server closed a connection: the payload of the error [`serve`] returns for it.
 #[derive(Clone, Copy, PartialEq, Eq, Debug)]
+#[non_exhaustive]
 pub enum Closed {
     /// Nothing arrived or left for [`ServerOptions::idle_timeout`].
     Idle(Duration),

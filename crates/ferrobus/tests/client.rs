@@ -225,7 +225,10 @@ async fn a_broadcast_returns_after_the_turnaround_without_waiting_for_a_reply() 
     assert!(elapsed >= Duration::from_millis(50) && elapsed < Duration::from_millis(60), "{elapsed:?}");
     assert_eq!(client.read_holding_registers(1, 5, 1).await.unwrap(), [1234], "the slave executed it");
     let err = client.read_holding_registers(0, 0, 1).await.unwrap_err();
-    assert!(matches!(err, Error::InvalidRequest(_)), "a broadcast read is refused before it is sent: {err}");
+    assert!(
+        matches!(err, Error::BroadcastRead { function: ferrobus_proto::FunctionCode::ReadHoldingRegisters }),
+        "a broadcast read is refused before it is sent, as a broadcast read: {err}"
+    );
 }
 
 #[tokio::test(start_paused = true)]
@@ -264,6 +267,30 @@ async fn a_dead_unit_is_backed_off_and_does_not_stall_polling_of_the_others() {
     assert!(client.read_holding_registers(7, 0, 1).await.unwrap_err().is_timeout());
     let Err(Error::Backoff { retry_in, .. }) = client.read_holding_registers(7, 0, 1).await else { panic!() };
     assert!(retry_in > Duration::from_secs(9), "{retry_in:?}");
+}
+
+#[tokio::test(start_paused = true)]
+async fn over_modbus_tcp_unit_0_is_an_ordinary_unit_and_is_backed_off_when_it_stops_answering() {
+    // A server that reads every request and answers none.
+    let connector = ConnectWith::new("silent server", || -> Connecting {
+        Box::pin(async {
+            let (client_end, mut server_end) = tokio::io::duplex(4096);
+            tokio::spawn(async move {
+                let mut buf = [0u8; 512];
+                while server_end.read(&mut buf).await.is_ok_and(|n| n > 0) {}
+            });
+            Ok(Box::new(client_end) as BoxPort)
+        })
+    });
+    let backoff = Backoff { after: 2, initial: Duration::from_secs(5), max: Duration::from_secs(60) };
+    let config = ClientConfig { backoff: Some(backoff), ..config() };
+    let client = Client::connect(Transport::custom(Framing::Mbap, timing(), connector), config).await.unwrap();
+    for _ in 0..2 {
+        let err = client.read_holding_registers(0, 0, 1).await.unwrap_err();
+        assert!(err.is_timeout(), "a read from unit 0 over TCP is sent and waits for its reply: {err}");
+    }
+    let err = client.read_holding_registers(0, 0, 1).await.unwrap_err();
+    assert!(matches!(err, Error::Backoff { unit: 0, .. }), "after two timeouts unit 0 is skipped: {err}");
 }
 
 #[tokio::test(start_paused = true)]

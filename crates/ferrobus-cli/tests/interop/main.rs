@@ -2,8 +2,9 @@
 //!
 //! The peers are the fixtures of tests/peers/ (libmodbus, pymodbus and tokio-modbus servers
 //! and clients) and mbpoll, built and installed by `.ci/setup-peers.sh`. Serial lines are
-//! socat pty pairs or the simulator's own pty. Outside CI a test whose peer is missing prints
-//! `skipped: ...` and passes; under `CI=true` it fails.
+//! socat pty pairs or the simulator's own pty. Outside CI a test whose peer is missing passes
+//! with a `SKIPPED ...` line on stderr (shown even for passing tests) naming what installs it;
+//! under `CI=true` it fails ([`skips`] shows both).
 //!
 //! - [`cli_vs_servers`]: the `ferrobus` binary against each peer server, RTU and TCP.
 //! - [`clients_vs_sim`]: each peer client and mbpoll against `ferrobus sim --profile generic`.
@@ -11,6 +12,7 @@
 //! - [`fault_rules`]: fault rules aimed at requests, each met by pymodbus and libmodbus clients.
 //! - [`port_reopen`]: a serial port that disappears and comes back, through `ferrobus::Client`.
 //! - [`reply_timing`]: when the simulator's reply starts, with a 20 ms response wait.
+//! - [`skips`]: what a test whose peer is missing does, in and outside CI.
 //! - [`tcp_server`]: `ferrobus sim --tcp` under pipelining, corrupt headers, unit ids over TCP,
 //!   its connection cap and timeouts, and a lowered descriptor limit.
 //!
@@ -23,5 +25,6 @@ mod fault_rules;
 mod mbpoll_vs_sim;
 mod port_reopen;
 mod reply_timing;
+mod skips;
 mod support;
 mod tcp_server;

@@ -8,7 +8,7 @@ use std::process::Command;
 use std::time::{Duration, Instant};
 
 use crate::support::cli::{Link, Parity};
-use crate::support::env::require;
+use crate::support::env::{require, require_tool};
 use crate::support::peers::{Over, Served, free_port, sim};
 use crate::support::process::{Proc, Stream};
 
@@ -216,8 +216,8 @@ fn an_idle_connection_and_an_unfinished_frame_are_closed_never_early() {
 #[test]
 fn out_of_file_descriptors_the_server_keeps_serving_old_connections_and_new_ones_once_some_close() {
     let Some(_turn) = require(&[]) else { return };
-    if Command::new("prlimit").arg("--version").output().is_err() {
-        eprintln!("skipped: prlimit (util-linux) is not installed");
+    let prlimit = Command::new("prlimit").arg("--version").output().is_ok();
+    if !require_tool(prlimit, "prlimit (not on PATH)", "apt install util-linux") {
         return;
     }
     let addr = format!("127.0.0.1:{}", free_port());

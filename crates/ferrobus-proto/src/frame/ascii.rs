@@ -43,6 +43,24 @@ pub fn lrc(data: &[u8]) -> u8 {
     data.iter().fold(0u8, |sum, &b| sum.wrapping_add(b)).wrapping_neg()
 }
 
+/// Breaks the LRC of the whole ASCII frame `frame` (`:` … LRC CR LF; for fault injection: a
+/// reply a master must discard as a checksum error), leaving its unit and PDU as they are.
+/// The LRC's high digit becomes another hex digit, so the frame still reads as hex. Returns
+/// `false`, and changes nothing, when `frame` does not have that shape.
+pub fn corrupt_lrc(frame: &mut [u8]) -> bool {
+    // `:`, unit, function code and LRC as hex pairs, CR LF.
+    const MIN_FRAME_CHARS: usize = 1 + 2 * 3 + 2;
+    if frame.len() < MIN_FRAME_CHARS || frame.first() != Some(&START) || !frame.ends_with(&[CR, DEFAULT_DELIMITER]) {
+        return false;
+    }
+    let Some(high) = frame.len().checked_sub(4).and_then(|i| frame.get_mut(i)) else { return false };
+    if hex_value(*high).is_none() {
+        return false;
+    }
+    *high = if *high == b'0' { b'1' } else { b'0' };
+    true
+}
+
 fn hex_value(c: u8) -> Option<u8> {
     match c {
         b'0'..=b'9' => Some(c.wrapping_sub(b'0')),
@@ -360,6 +378,25 @@ mod tests {
             });
         }
         (frames, discards)
+    }
+
+    #[test]
+    fn a_corrupted_lrc_is_discarded_as_a_checksum_mismatch_with_unit_and_pdu_kept() {
+        for good in [&b":010302000002F8\r\n"[..], b":011001120002040BB8000013\r\n"] {
+            assert_eq!(run(&mut codec(), good, good.len()).0.len(), 1, "the good frame is read");
+            let mut frame = good.to_vec();
+            assert!(corrupt_lrc(&mut frame));
+            assert_eq!(frame[..frame.len() - 4], good[..good.len() - 4]);
+            assert_ne!(frame, good);
+            let (frames, discards) = run(&mut codec(), &frame, frame.len());
+            assert!(frames.is_empty());
+            assert_eq!(discards, [(frame.len(), DiscardReason::ChecksumMismatch)]);
+        }
+        for not_a_frame in [&b"010302000002F8\r\n"[..], b":010302000002F8", b":01\r\n", b":0103020000G8\r\n", b""] {
+            let mut bytes = not_a_frame.to_vec();
+            assert!(!corrupt_lrc(&mut bytes));
+            assert_eq!(bytes, not_a_frame);
+        }
     }
 
     #[test]

@@ -125,6 +125,23 @@ impl<'a> RtuFrame<'a> {
     }
 }
 
+/// Breaks the CRC of the whole RTU frame `frame` (for fault injection: a reply a master must
+/// discard as a checksum error), leaving its unit and PDU as they are. Returns `false`, and
+/// changes nothing, when `frame` is not a whole frame with a good CRC.
+pub fn corrupt_crc(frame: &mut [u8]) -> bool {
+    if RtuFrame::new_checked(frame).is_err() {
+        return false;
+    }
+    // The CRC's high byte is last (§2.5.1.2); flipping bits in it changes the CRC alone.
+    match frame.last_mut() {
+        Some(high) => {
+            *high ^= 0x5A;
+            true
+        }
+        None => false,
+    }
+}
+
 /// What the bytes from one candidate start say.
 #[derive(Clone, Copy, PartialEq, Eq, Debug)]
 enum Verdict {

@@ -157,6 +157,16 @@ pub const FIXED_T1_5: Duration = Duration::from_micros(750);
 /// t3.5 above 19200 baud (§2.5.1.1).
 pub const FIXED_T3_5: Duration = Duration::from_micros(1750);
 
+/// How long a PC waits for the rest of an RTU frame of known length: OS serial stacks and USB
+/// adapters deliver a frame in bursts separated by milliseconds, well above t3.5 at high
+/// baud rates. Noise costs nothing extra: the receiver resyncs past it anyway. Not from the
+/// spec: ferrobus's choice for hosts that do not see the line itself.
+pub const PC_INCOMPLETE_TIMEOUT: Duration = Duration::from_millis(20);
+
+/// The silence that ends an RTU frame of unknown length on a stream without a line (RTU over
+/// TCP), where no character time exists. Not from the spec: ferrobus's choice.
+pub const STREAM_FRAME_GAP: Duration = Duration::from_millis(50);
+
 /// `numerator_bits × 10⁹ / (denominator × baud)` nanoseconds, rounded up.
 fn ceil_nanos(bits_times_halves: u64, halves: u64, baud: u32) -> Duration {
     let num = bits_times_halves.saturating_mul(1_000_000_000);
@@ -228,6 +238,14 @@ impl LineTiming {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn the_pc_timeouts_outlast_the_spec_gaps_at_9600_baud_and_above() {
+        let at_9600 = LineTiming::new(&LineConfig::new(9600).unwrap());
+        assert!(PC_INCOMPLETE_TIMEOUT > at_9600.t3_5());
+        assert!(PC_INCOMPLETE_TIMEOUT > FIXED_T3_5);
+        assert!(STREAM_FRAME_GAP >= PC_INCOMPLETE_TIMEOUT);
+    }
 
     fn line(baud: u32, parity: Parity, stop: StopBits) -> LineConfig {
         LineConfig::new(baud).unwrap().with_parity(parity).with_stop_bits(stop)

@@ -105,6 +105,65 @@ pub mod event {
     pub const ENTERED_LISTEN_ONLY: u8 = 0x04;
     /// The communications were restarted (0x08/0x01).
     pub const RESTART: u8 = 0x00;
+
+    /// The flag bits of a receive event, with what each says.
+    pub const RECEIVE_FLAGS: [(u8, &str); 4] = [
+        (RECEIVE_BROADCAST, "broadcast"),
+        (RECEIVE_COMM_ERROR, "communication error"),
+        (RECEIVE_OVERRUN, "character overrun"),
+        (RECEIVE_LISTEN_ONLY, "in listen-only mode"),
+    ];
+
+    /// The flag bits of a send event, with what each says.
+    pub const SEND_FLAGS: [(u8, &str); 6] = [
+        (SEND_READ_EXCEPTION, "read exception"),
+        (SEND_ABORT_EXCEPTION, "abort exception"),
+        (SEND_BUSY_EXCEPTION, "busy exception"),
+        (SEND_NAK_EXCEPTION, "NAK exception"),
+        (SEND_WRITE_TIMEOUT, "write timeout"),
+        (SEND_LISTEN_ONLY, "in listen-only mode"),
+    ];
+
+    /// Which of the four kinds of §6.10 an event byte is.
+    #[derive(Clone, Copy, PartialEq, Eq, Debug)]
+    pub enum Kind {
+        /// Bit 7 set: a message was received; its flags are in [`RECEIVE_FLAGS`].
+        Receive,
+        /// Bit 6 set (bit 7 clear): a reply was sent; its flags are in [`SEND_FLAGS`].
+        Send,
+        /// 0x04: the slave entered listen-only mode.
+        EnteredListenOnly,
+        /// 0x00: the communications were restarted.
+        Restart,
+        /// Any other byte: not an event the spec defines.
+        Unknown,
+    }
+
+    /// The kind of event `byte` is.
+    pub const fn kind(byte: u8) -> Kind {
+        if byte & RECEIVE != 0 {
+            Kind::Receive
+        } else if byte & SEND != 0 {
+            Kind::Send
+        } else if byte == ENTERED_LISTEN_ONLY {
+            Kind::EnteredListenOnly
+        } else if byte == RESTART {
+            Kind::Restart
+        } else {
+            Kind::Unknown
+        }
+    }
+
+    /// What the flag bits of event `byte` say, in table order (none for the kinds that have
+    /// no flags).
+    pub fn flags(byte: u8) -> impl Iterator<Item = &'static str> {
+        let table: &'static [(u8, &'static str)] = match kind(byte) {
+            Kind::Receive => &RECEIVE_FLAGS,
+            Kind::Send => &SEND_FLAGS,
+            Kind::EnteredListenOnly | Kind::Restart | Kind::Unknown => &[],
+        };
+        table.iter().filter(move |(bit, _)| byte & bit != 0).map(|&(_, name)| name)
+    }
 }
 
 impl EventLog {
@@ -165,6 +224,31 @@ impl EventLog {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn every_event_byte_has_one_kind_and_names_exactly_its_flag_bits_over_all_256_values() {
+        extern crate std;
+        use std::vec::Vec;
+        for byte in 0..=u8::MAX {
+            let expected = match byte {
+                0x80..=0xFF => event::Kind::Receive,
+                0x40..=0x7F => event::Kind::Send,
+                0x04 => event::Kind::EnteredListenOnly,
+                0x00 => event::Kind::Restart,
+                _ => event::Kind::Unknown,
+            };
+            assert_eq!(event::kind(byte), expected, "{byte:#04x}");
+            let named: Vec<&str> = event::flags(byte).collect();
+            let (table, bits): (&[(u8, &str)], u8) = match expected {
+                event::Kind::Receive => (&event::RECEIVE_FLAGS, 0x72),
+                event::Kind::Send => (&event::SEND_FLAGS, 0x3F),
+                _ => (&[], 0x00),
+            };
+            let wanted: Vec<&str> = table.iter().filter(|(bit, _)| byte & bit != 0).map(|(_, n)| *n).collect();
+            assert_eq!(named, wanted, "{byte:#04x}");
+            assert_eq!(table.iter().fold(0, |all, (bit, _)| all | bit), bits, "the flag bits of {expected:?}");
+        }
+    }
 
     #[test]
     fn the_log_keeps_the_last_64_events_most_recent_first() {

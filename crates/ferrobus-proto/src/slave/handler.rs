@@ -3,7 +3,7 @@
 use core::time::Duration;
 
 use crate::codes::ExceptionCode;
-use crate::pdu::{Bits, MaskWrite, Registers, Request};
+use crate::pdu::{Bits, MaskWrite, ReadWriteRegisters, Registers, Request};
 
 /// What the slave does with a request, as decided by [`Handler::admit`].
 #[derive(Clone, Copy, PartialEq, Eq, Debug)]
@@ -93,18 +93,17 @@ pub trait Handler {
         self.write_single_register(unit, mask.address, mask.apply(value))
     }
 
-    /// 0x17: by default, writes through [`Handler::write_multiple_registers`], then reads
-    /// through [`Handler::read_holding_registers`] — the write comes first (§6.17).
+    /// 0x17: `out` is sized to `request.read()`. By default, writes through
+    /// [`Handler::write_multiple_registers`], then reads through
+    /// [`Handler::read_holding_registers`] — the write comes first (§6.17).
     fn read_write_multiple_registers(
         &mut self,
         unit: u8,
-        write_start: u16,
-        values: Registers<'_>,
-        read_start: u16,
+        request: &ReadWriteRegisters<'_>,
         out: &mut [u16],
     ) -> Result<(), ExceptionCode> {
-        self.write_multiple_registers(unit, write_start, values)?;
-        self.read_holding_registers(unit, read_start, out)
+        self.write_multiple_registers(unit, request.write_start(), request.values())?;
+        self.read_holding_registers(unit, request.read().start(), out)
     }
 
     /// 0x07: the eight exception status bits.

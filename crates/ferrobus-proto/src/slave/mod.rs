@@ -490,7 +490,7 @@ impl Core {
         bump(&mut self.counters.bus_messages);
         let unit = frame.header.unit;
         let function = FunctionCode::from_u8(frame.pdu.first().copied().unwrap_or_default());
-        let broadcast = self.serial && unit == unit::BROADCAST;
+        let broadcast = unit::is_broadcast(unit, self.serial);
         if frame.direction == Direction::Response {
             self.push_event(SlaveEvent::Ignored { unit, function, why: Ignored::Response });
             return;

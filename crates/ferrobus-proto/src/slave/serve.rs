@@ -2,7 +2,7 @@
 //! handler once and emitting the response PDU.
 
 use super::Handler;
-use crate::codes::{ExceptionCode, ReadDeviceIdCode};
+use crate::codes::{ExceptionCode, ReadDeviceIdCode, conformity};
 use crate::cursor::Writer;
 use crate::error::PduError;
 use crate::pdu::{
@@ -30,15 +30,17 @@ pub(super) fn serve<H: Handler + ?Sized>(
     out: &mut [u8; MAX_PDU_LEN],
 ) -> Result<usize, ExceptionCode> {
     match request {
-        Request::ReadCoils(q) => read_bits(*q, out, Table::Coils, |start, bits| handler.read_coils(unit, start, bits)),
+        Request::ReadCoils(q) => {
+            read_bits(*q, out, BitTable::Coils, |start, bits| handler.read_coils(unit, start, bits))
+        }
         Request::ReadDiscreteInputs(q) => {
-            read_bits(*q, out, Table::Inputs, |start, bits| handler.read_discrete_inputs(unit, start, bits))
+            read_bits(*q, out, BitTable::DiscreteInputs, |start, bits| handler.read_discrete_inputs(unit, start, bits))
         }
-        Request::ReadHoldingRegisters(q) => {
-            read_registers(*q, out, Table::Coils, |start, regs| handler.read_holding_registers(unit, start, regs))
-        }
+        Request::ReadHoldingRegisters(q) => read_registers(*q, out, RegisterTable::Holding, |start, regs| {
+            handler.read_holding_registers(unit, start, regs)
+        }),
         Request::ReadInputRegisters(q) => {
-            read_registers(*q, out, Table::Inputs, |start, regs| handler.read_input_registers(unit, start, regs))
+            read_registers(*q, out, RegisterTable::Input, |start, regs| handler.read_input_registers(unit, start, regs))
         }
         Request::WriteSingleCoil(q) => {
             handler.write_single_coil(unit, q.address, q.value)?;
@@ -65,7 +67,7 @@ pub(super) fn serve<H: Handler + ?Sized>(
         Request::ReadWriteMultipleRegisters(q) => {
             let mut regs = [0u16; ReadRegisters::MAX as usize];
             let read = regs.get_mut(..usize::from(q.read().quantity())).ok_or(ExceptionCode::IllegalDataValue)?;
-            handler.read_write_multiple_registers(unit, q.write_start(), q.values(), q.read().start(), read)?;
+            handler.read_write_multiple_registers(unit, q, read)?;
             let values = RegisterValues::new(Registers::from_values(read)).map_err(too_big)?;
             emit(&Response::ReadWriteMultipleRegisters(values), out)
         }
@@ -116,12 +118,22 @@ pub(super) fn serve<H: Handler + ?Sized>(
     }
 }
 
-/// Which of the two tables of a kind a read addresses: coils or holding registers (written
-/// by the master), discrete inputs or input registers (read-only).
+/// The bit table a read addresses.
 #[derive(Clone, Copy)]
-enum Table {
+enum BitTable {
+    /// 0x01: coils, written by the master.
     Coils,
-    Inputs,
+    /// 0x02: discrete inputs, read-only.
+    DiscreteInputs,
+}
+
+/// The register table a read addresses.
+#[derive(Clone, Copy)]
+enum RegisterTable {
+    /// 0x03: holding registers, written by the master.
+    Holding,
+    /// 0x04: input registers, read-only.
+    Input,
 }
 
 /// 0x14: one handler call per sub-request, the registers of all of them in one buffer.
@@ -154,7 +166,7 @@ fn read_file_record<H: Handler + ?Sized>(
 fn read_bits(
     q: ReadBits,
     out: &mut [u8; MAX_PDU_LEN],
-    table: Table,
+    table: BitTable,
     read: impl FnOnce(u16, &mut [bool]) -> Result<(), ExceptionCode>,
 ) -> Result<usize, ExceptionCode> {
     let mut bits = [false; ReadBits::MAX as usize];
@@ -163,8 +175,8 @@ fn read_bits(
     let values = BitValues::new(Bits::from_values(bits)).map_err(too_big)?;
     emit(
         &match table {
-            Table::Coils => Response::ReadCoils(values),
-            Table::Inputs => Response::ReadDiscreteInputs(values),
+            BitTable::Coils => Response::ReadCoils(values),
+            BitTable::DiscreteInputs => Response::ReadDiscreteInputs(values),
         },
         out,
     )
@@ -173,7 +185,7 @@ fn read_bits(
 fn read_registers(
     q: ReadRegisters,
     out: &mut [u8; MAX_PDU_LEN],
-    table: Table,
+    table: RegisterTable,
     read: impl FnOnce(u16, &mut [u16]) -> Result<(), ExceptionCode>,
 ) -> Result<usize, ExceptionCode> {
     let mut regs = [0u16; ReadRegisters::MAX as usize];
@@ -182,8 +194,8 @@ fn read_registers(
     let values = RegisterValues::new(Registers::from_values(regs)).map_err(too_big)?;
     emit(
         &match table {
-            Table::Coils => Response::ReadHoldingRegisters(values),
-            Table::Inputs => Response::ReadInputRegisters(values),
+            RegisterTable::Holding => Response::ReadHoldingRegisters(values),
+            RegisterTable::Input => Response::ReadInputRegisters(values),
         },
         out,
     )
@@ -205,13 +217,15 @@ fn read_device_id<H: Handler + ?Sized>(
     }
     // Conformity: the highest category the device has objects in, with bit 7 set because
     // individual access (code 04) is always supported.
-    let level = if (0x80..=0xFF).any(&mut has) {
-        0x83
-    } else if (0x03..=0x7F).any(&mut has) {
-        0x82
+    let mut reaches = |c: ReadDeviceIdCode| (c.first_object()..=c.last_object()).any(&mut has);
+    let category = if reaches(ReadDeviceIdCode::Extended) {
+        ReadDeviceIdCode::Extended
+    } else if reaches(ReadDeviceIdCode::Regular) {
+        ReadDeviceIdCode::Regular
     } else {
-        0x81
+        ReadDeviceIdCode::Basic
     };
+    let level = conformity::level(category, true);
     let (first, last) = match q.code() {
         ReadDeviceIdCode::Specific => {
             if !has(q.object_id()) {

@@ -2,8 +2,10 @@
 //!
 //! The peers are built by `.ci/setup-peers.sh` into `target/peers/` of the repository (whatever
 //! `CARGO_TARGET_DIR` says: the script does not know about it). Under `CI=true` a missing
-//! peer fails the test that needs it; elsewhere the test prints one `skipped: ...` line and
-//! passes, so that `cargo test` works on a machine without the peers.
+//! peer fails the test that needs it; elsewhere the test passes, so that `cargo test` works on
+//! a machine without the peers, but says so loudly: a `SKIPPED` line on the process's stderr
+//! (past the test harness's capture, so it shows with passing tests) that names what is
+//! missing and what installs it.
 //!
 //! Every test also holds a lock while it runs: shared for ordinary tests, exclusive for the
 //! timing test, so that nothing else loads the two cores while it measures.
@@ -100,6 +102,25 @@ impl Need {
             }
         }
     }
+
+    /// What installs it.
+    fn install(self) -> &'static str {
+        match self {
+            Need::Socat => "apt install socat",
+            Need::Mbpoll => "apt install mbpoll",
+            Need::Libmodbus => "apt install libmodbus-dev pkg-config gcc, then .ci/setup-peers.sh builds the fixtures",
+            Need::Pymodbus => "pip install pymodbus==3.16.1 pyserial==3.5 (or .ci/setup-peers.sh)",
+            Need::TokioModbus => ".ci/setup-peers.sh (cargo builds tests/peers/tokio-modbus-peer)",
+        }
+    }
+}
+
+/// Says on the process's stderr, past the test harness's capture, that `test` did not run
+/// and why. `eprintln!` would be captured and shown only for failing tests, so a skip would
+/// pass in silence.
+pub(crate) fn skipped(test: &str, why: &str) {
+    use std::io::Write as _;
+    let _ = writeln!(std::io::stderr(), "\nSKIPPED {test}: {why}\n");
 }
 
 fn in_ci() -> bool {
@@ -132,13 +153,30 @@ pub(crate) fn require_alone(needs: &[Need]) -> Option<Turn> {
 }
 
 fn check(needs: &[Need]) -> bool {
-    let missing: Vec<String> = needs.iter().flat_map(|n| n.missing()).collect();
-    if missing.is_empty() {
+    let absent: Vec<(Need, Vec<String>)> =
+        needs.iter().map(|&n| (n, n.missing())).filter(|(_, missing)| !missing.is_empty()).collect();
+    if absent.is_empty() {
         return true;
     }
     let test = std::thread::current().name().unwrap_or("this test").to_string();
-    let what = missing.join(", ");
-    assert!(!in_ci(), "{test}: missing {what}; .ci/setup-peers.sh installs it (CI=true: a missing peer is a failure)");
-    eprintln!("skipped: {test}: missing {what}; run .ci/setup-peers.sh to install it");
+    let what = absent.iter().flat_map(|(_, missing)| missing.iter().cloned()).collect::<Vec<_>>().join(", ");
+    let install = absent.iter().map(|(n, _)| n.install()).collect::<Vec<_>>().join("; ");
+    assert!(!in_ci(), "{test}: missing {what}; install: {install} (CI=true: a missing peer is a failure)");
+    skipped(&test, &format!("missing {what}; install: {install}"));
+    false
+}
+
+/// Where a test that needs something outside [`Need`] stops: under `CI=true` a failure naming
+/// `what` and `install`, elsewhere a loud [`skipped`] line and `false`. `true` when `present`.
+///
+/// # Panics
+/// Under `CI=true`, when not `present`.
+pub(crate) fn require_tool(present: bool, what: &str, install: &str) -> bool {
+    if present {
+        return true;
+    }
+    let test = std::thread::current().name().unwrap_or("this test").to_string();
+    assert!(!in_ci(), "{test}: missing {what}; install: {install} (CI=true: a missing tool is a failure)");
+    skipped(&test, &format!("missing {what}; install: {install}"));
     false
 }

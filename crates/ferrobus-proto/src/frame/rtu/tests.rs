@@ -473,3 +473,18 @@ fn the_silence_delimited_frame_needs_a_clean_start_and_the_next_frame_after_the_
     let events = run(&mut c, &[(0, COUNT_DISAGREES), (10_000, READ_COILS_REQUEST)]);
     assert_eq!(events, [frame(COUNT_DISAGREES, Direction::Request), frame(READ_COILS_REQUEST, Direction::Request)]);
 }
+
+#[test]
+fn a_corrupted_crc_is_discarded_as_a_checksum_mismatch_with_unit_and_pdu_kept() {
+    let mut frame = SDP_RESPONSE.to_vec();
+    assert!(corrupt_crc(&mut frame));
+    assert_eq!(frame[..frame.len() - 2], SDP_RESPONSE[..SDP_RESPONSE.len() - 2]);
+    assert_eq!(RtuFrame::new_checked(&frame).err(), Some(DiscardReason::ChecksumMismatch));
+    // Not a whole good frame: left alone.
+    let mut short = std::vec![0x01, 0x03];
+    assert!(!corrupt_crc(&mut short));
+    assert_eq!(short, [0x01, 0x03]);
+    let mut bad = frame.clone();
+    assert!(!corrupt_crc(&mut bad));
+    assert_eq!(bad, frame);
+}

@@ -1,0 +1,53 @@
+//! The settings of a client and of each request: what the client hands its driver, kept apart
+//! from both so that neither depends on the other for them.
+
+use std::time::Duration;
+
+use ferrobus_proto::master::MasterConfig;
+
+/// How a unit that stops answering is skipped: the core's policy, which the driver asks.
+pub use ferrobus_proto::retry::Backoff;
+
+/// Settings of a client.
+#[derive(Clone, Copy, PartialEq, Eq, Debug)]
+pub struct ClientConfig {
+    /// How long to wait for each reply once the request has left.
+    pub timeout: Duration,
+    /// How many times to resend a request that got no usable reply: a timeout, a bad reply, or
+    /// an IO failure (the port is then reopened, after a backoff that grows with each failure).
+    pub retries: u32,
+    /// The quiet time after a broadcast.
+    pub turnaround_delay: Duration,
+    /// Drop our own transmission when the adapter echoes it.
+    pub echo_suppression: bool,
+    /// Skip units that stop answering; `None` never skips.
+    pub backoff: Option<Backoff>,
+    /// Requests that may wait for the bus before `request` calls wait themselves.
+    pub queue: usize,
+    /// How long opening the port or connecting may take.
+    pub connect_timeout: Duration,
+}
+
+impl Default for ClientConfig {
+    fn default() -> Self {
+        let master = MasterConfig::default();
+        ClientConfig {
+            timeout: master.response_timeout,
+            retries: 0,
+            turnaround_delay: master.turnaround_delay,
+            echo_suppression: false,
+            backoff: Some(Backoff::default()),
+            queue: 64,
+            connect_timeout: Duration::from_secs(5),
+        }
+    }
+}
+
+/// The timeout and retries of a request.
+#[derive(Clone, Copy, PartialEq, Eq, Debug)]
+pub struct RequestOptions {
+    /// How long to wait for the reply once the request has left.
+    pub timeout: Duration,
+    /// How many times to resend it.
+    pub retries: u32,
+}
