@@ -1,7 +1,9 @@
 //! Exit codes and error messages: exceptions, timeouts, IO, bad replies, bad usage, and that
 //! no input makes the binary panic.
 
-use crate::server::{Server, Sim, closed_port, ferrobus, misbehaving_server, offline, pty_server, stderr};
+use crate::server::{
+    Server, Sim, closed_port, ferrobus, misbehaving_server, misbehaving_server_with, offline, pty_server, stderr,
+};
 use assert_cmd::assert::OutputAssertExt;
 use predicates::prelude::*;
 
@@ -234,10 +236,7 @@ fn sim_takes_fault_rules_from_a_profile_and_a_fault_option_adds_up_with_the_next
 #[test]
 fn a_reply_with_a_bad_crc_exits_3_saying_the_unit_answered_with_a_wrong_checksum_and_the_line_checklist() {
     let sim = Sim::pty(&["--profile", "generic", "--unit", "2", "--fault", "2:corrupt=100%"]);
-    let assert = ferrobus()
-        .args(["--port", &sim.path, "--parity", "none", "--unit", "2", "--timeout", "300ms"])
-        .args(["read", "holding", "0"])
-        .assert();
+    let assert = sim.run(2, &["read", "holding", "0"]);
     let err = stderr(&assert.code(3));
     assert!(
         err.contains(
@@ -252,35 +251,9 @@ fn a_reply_with_a_bad_crc_exits_3_saying_the_unit_answered_with_a_wrong_checksum
     assert!(!err.contains("no reply from") && !err.contains("swap A and B") && !err.contains("C078"), "{err}");
 }
 
-/// A Modbus/TCP server that answers every request correctly for a one-register read of
-/// holding register 0, but under the request's transaction id plus one.
-fn other_transaction_server() -> u16 {
-    use std::io::{Read, Write};
-    let listener = std::net::TcpListener::bind("127.0.0.1:0").unwrap();
-    let port = listener.local_addr().unwrap().port();
-    std::thread::spawn(move || {
-        for stream in listener.incoming() {
-            let Ok(mut stream) = stream else { return };
-            let mut header = [0u8; 7];
-            while stream.read_exact(&mut header).is_ok() {
-                let len = usize::from(u16::from_be_bytes([header[4], header[5]]));
-                let mut pdu = vec![0u8; len.saturating_sub(1)];
-                if stream.read_exact(&mut pdu).is_err() {
-                    break;
-                }
-                let transaction = u16::from_be_bytes([header[0], header[1]]).wrapping_add(1);
-                let mut frame = transaction.to_be_bytes().to_vec();
-                frame.extend([0x00, 0x00, 0x00, 0x05, header[6], 0x03, 0x02, 0x00, 0x2A]);
-                let _ = stream.write_all(&frame);
-            }
-        }
-    });
-    port
-}
-
 #[test]
 fn a_tcp_reply_under_another_transaction_id_exits_3_naming_both_ids() {
-    let target = format!("127.0.0.1:{}", other_transaction_server());
+    let target = format!("127.0.0.1:{}", misbehaving_server_with(&[0x03, 0x02, 0x00, 0x2A], 1));
     let err = stderr(&offline(&["--tcp", &target, "--timeout", "300ms", "read", "holding", "0"]).code(3));
     assert!(err.contains("no valid reply from unit 1 within 300 ms (1 attempt)"), "{err}");
     assert!(err.contains("a reply came under transaction id 2, not 1, ignored"), "{err}");

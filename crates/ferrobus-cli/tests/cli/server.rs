@@ -245,6 +245,11 @@ pub(crate) fn offline(args: &[&str]) -> Assert {
 /// A Modbus/TCP server that answers every request with `reply` (a PDU), keeping the
 /// transaction id: for replies a real server would never send.
 pub(crate) fn misbehaving_server(reply: &'static [u8]) -> u16 {
+    misbehaving_server_with(reply, 0)
+}
+
+/// [`misbehaving_server`], answering under the request's transaction id plus `shift`.
+pub(crate) fn misbehaving_server_with(reply: &'static [u8], shift: u16) -> u16 {
     let listener = StdListener::bind("127.0.0.1:0").unwrap();
     let port = listener.local_addr().unwrap().port();
     thread::spawn(move || {
@@ -257,7 +262,9 @@ pub(crate) fn misbehaving_server(reply: &'static [u8]) -> u16 {
                 if stream.read_exact(&mut pdu).is_err() {
                     break;
                 }
-                let mut frame = header[..4].to_vec();
+                let transaction = u16::from_be_bytes([header[0], header[1]]).wrapping_add(shift);
+                let mut frame = transaction.to_be_bytes().to_vec();
+                frame.extend(&header[2..4]);
                 frame.extend(u16::try_from(reply.len() + 1).unwrap().to_be_bytes());
                 frame.push(header[6]);
                 frame.extend(reply);
@@ -308,6 +315,15 @@ impl Sim {
         let path = line.trim().to_string();
         assert!(path.starts_with('/'), "the sim printed {line:?}, not a pty path");
         Sim { child, path }
+    }
+
+    /// Runs the CLI with `args` against unit `unit` of this simulator (no parity: a pty takes
+    /// none), with a 300 ms timeout.
+    pub(crate) fn run(&self, unit: u8, args: &[&str]) -> Assert {
+        ferrobus()
+            .args(["--port", &self.path, "--parity", "none", "--unit", &unit.to_string(), "--timeout", "300ms"])
+            .args(args)
+            .assert()
     }
 }
 

@@ -1,9 +1,8 @@
 //! `ferrobus diag`, `info`, `raw`.
 
-use assert_cmd::assert::OutputAssertExt;
 use serde_json::Value;
 
-use crate::server::{Server, Sim, ferrobus, stderr, stdout};
+use crate::server::{Server, Sim, stderr, stdout};
 
 #[test]
 fn diag_echo_and_the_word_sub_functions_answer() {
@@ -44,12 +43,7 @@ fn diag_counters_are_one_snapshot_the_message_counts_agree() {
     // Every message on this line is addressed to unit 2, so the bus and server message counts
     // must agree; read raw, the server count would be 3 ahead (the reads of 0C, 0D and 0E).
     let sim = Sim::pty(&["--profile", "generic", "--unit", "2"]);
-    let run = |args: &[&str]| {
-        ferrobus()
-            .args(["--port", &sim.path, "--parity", "none", "--unit", "2", "--timeout", "300ms"])
-            .args(args)
-            .assert()
-    };
+    let run = |args: &[&str]| sim.run(2, args);
     run(&["diag", "echo"]).success();
     let json: Value = serde_json::from_str(&stdout(&run(&["diag", "counters", "--json"]).success())).unwrap();
     let counters = &json["counters"];
@@ -135,12 +129,7 @@ fn raw_sends_any_pdu_and_decodes_the_reply() {
 fn diag_restart_after_listen_only_expects_the_silence_and_confirms_by_an_echo() {
     // Listen-only mode is a serial line's: the simulator on a pty.
     let sim = Sim::pty(&["--profile", "generic", "--unit", "2"]);
-    let run = |args: &[&str]| {
-        ferrobus()
-            .args(["--port", &sim.path, "--parity", "none", "--unit", "2", "--timeout", "300ms"])
-            .args(args)
-            .assert()
-    };
+    let run = |args: &[&str]| sim.run(2, args);
     run(&["diag", "listen-only"]).success();
     run(&["diag", "echo"]).code(3);
     let assert = run(&["diag", "restart"]).success();
