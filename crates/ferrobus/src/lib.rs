@@ -18,7 +18,12 @@
 //! - [`port`]: serial ports (RS-485 by the adapter, the kernel or RTS; the USB latency timer),
 //!   TCP, RTU over TCP, and ptys made in-process.
 //! - [`line`](mod@line): a virtual RS-485 line with real character timing, collisions and seeded
-//!   faults, for endpoints in this process or other programs behind ptys.
+//!   faults, for endpoints in this process or other programs behind ptys (Unix only).
+//!
+//! Linux, macOS and Windows: what differs between them — ttys and ptys on Unix, COM ports on
+//! Windows, Linux's timerfd and kernel RS-485 — is behind one seam, a folder per platform
+//! (`src/sys/unix/`, `src/sys/windows/`); everything else is shared. Windows has no ptys:
+//! [`Pty`] and the virtual line exist on Unix only.
 //!
 //! Errors are one flat [`Error`], where a device's exception is kept apart from timeouts and
 //! IO failures.
@@ -28,14 +33,19 @@ pub mod clock;
 mod driver;
 pub mod error;
 mod identity;
+#[cfg(unix)]
 pub mod line;
 pub mod port;
+mod serial;
 pub mod server;
+mod sys;
 pub mod timer;
-mod tty;
+#[cfg(unix)]
 mod uart;
 
 pub use client::{Backoff, Client, ClientConfig, DeviceInfo, EventLog, RequestOptions};
 pub use error::Error;
-pub use port::{Framing, Pty, Rs485, SerialConfig, Transport};
+#[cfg(unix)]
+pub use port::Pty;
+pub use port::{Framing, Rs485, SerialConfig, Transport};
 pub use timer::Timer;

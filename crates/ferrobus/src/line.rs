@@ -49,8 +49,8 @@ use tokio::time::Instant;
 
 use crate::clock::Clock;
 use crate::port::{BoxPort, ConnectWith, Connecting, Framing, Port, Pty, Transport};
+use crate::sys::PeerSettings;
 use crate::timer::Timer;
-use crate::tty::PeerSettings;
 use crate::uart;
 
 /// What goes wrong on the wire, drawn per character from a seeded generator.

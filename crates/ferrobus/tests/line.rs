@@ -1,6 +1,7 @@
 //! The virtual RS-485 line, in real time: characters take their character time, collisions
 //! garble, broken gaps are counted against the endpoint that broke them, faults are drawn
 //! from the seed, and a client and a server on the line keep every gap.
+#![cfg(unix)] // the virtual line is made of ptys
 
 use std::time::Duration;
 

@@ -1,0 +1,41 @@
+//! The platform seam: everything that differs between operating systems, one folder per
+//! platform, the same names in each.
+//!
+//! | item | Unix (`unix/`) | Windows (`windows/`) |
+//! |---|---|---|
+//! | [`TtyPort`], [`open_serial`] | a tty through serial2, read on tokio's reactor | a COM port through serial2-tokio (overlapped IO on tokio's IOCP) |
+//! | `Pty`, `PeerSettings` | pseudo-terminals (ptsname; termios of the other end) | none: ptys are Unix's |
+//! | `identify` | symlink, pty, sysfs USB ids, device number | a COM name is the device's |
+//! | `TimerFd` | Linux: a timerfd in the runtime's epoll | none: the timer thread ([`crate::timer`]) |
+//! | [`THREAD_WAIT_GRAIN`] | zero: timed waits are precise | about a tick of the system clock |
+//!
+//! Everything else — settings ([`crate::serial`]), transports, drivers, timing — is shared.
+
+use std::time::Duration;
+
+#[cfg(unix)]
+mod unix;
+#[cfg(target_os = "linux")]
+pub(crate) use unix::TimerFd;
+#[cfg(unix)]
+pub(crate) use unix::{PeerSettings, identify};
+#[cfg(unix)]
+pub use unix::{Pty, TtyPort, open_serial};
+
+#[cfg(windows)]
+mod windows;
+#[cfg(windows)]
+pub(crate) use windows::identify;
+#[cfg(windows)]
+pub use windows::{TtyPort, open_serial};
+
+/// How late the OS may end a thread's timed wait on a condition variable: the timer thread
+/// waits that much less, then finishes with high-resolution sleeps.
+#[cfg(not(windows))]
+pub(crate) const THREAD_WAIT_GRAIN: Duration = Duration::ZERO;
+
+/// How late the OS may end a thread's timed wait on a condition variable: the timer thread
+/// waits that much less, then finishes with high-resolution sleeps. Windows ends such waits
+/// on its clock's ticks, 15.625 ms apart unless a program asked for finer ones.
+#[cfg(windows)]
+pub(crate) const THREAD_WAIT_GRAIN: Duration = Duration::from_millis(16);
