@@ -298,6 +298,38 @@ mod tests {
     }
 
     #[test]
+    fn pty_ends_are_told_from_serial_ports_by_their_canonical_path() {
+        assert!(is_pty_path(Path::new("/dev/pts/7")));
+        assert!(!is_pty_path(Path::new("/dev/ttyUSB0")));
+        assert!(!is_pty_path(Path::new("/dev/ttyS0")));
+        assert!(!is_pty_path(Path::new("/dev/tty.usbserial-A1")));
+        // macOS names the other end of a pty /dev/ttysNNN; elsewhere that is no pty.
+        assert_eq!(is_pty_path(Path::new("/dev/ttys003")), cfg!(target_vendor = "apple"));
+        assert!(!is_pty_path(Path::new("/dev/ttys")));
+    }
+
+    #[tokio::test]
+    async fn a_pty_path_comes_from_ptsname_and_names_the_other_end() {
+        let pty = Pty::open().unwrap();
+        assert!(is_pty_path(&pty.path), "{}", pty.path.display());
+        // The path opens the same terminal that the pair holds open: its termios is the one
+        // read through our end.
+        let line = LineConfig::new(4800).unwrap().with_parity(Parity::None);
+        let _user = open_serial(&SerialConfig::new(&pty.path, line)).unwrap();
+        assert_eq!(pty.peer_settings().map(|s| s.line.baud()), Some(4800));
+    }
+
+    #[cfg(not(target_os = "linux"))]
+    #[tokio::test]
+    async fn kernel_rs485_is_refused_outside_linux() {
+        let pty = Pty::open().unwrap();
+        let line = LineConfig::new(9600).unwrap();
+        let config = SerialConfig { rs485: Rs485::Kernel, ..SerialConfig::new(&pty.path, line) };
+        let e = open_serial(&config).unwrap_err();
+        assert_eq!(e.kind(), io::ErrorKind::Unsupported, "{e}");
+    }
+
+    #[test]
     fn a_missing_port_is_not_found() {
         let runtime = tokio::runtime::Builder::new_current_thread().enable_all().build().unwrap();
         let _inside = runtime.enter();

@@ -35,17 +35,16 @@ impl TtyPort {
 /// Opens the COM port `config.path` (`COM3`, or `\\.\COM12`) with `config`. Needs a tokio
 /// runtime.
 pub fn open_serial(config: &SerialConfig) -> io::Result<TtyPort> {
-    let name = device_name(&config.path);
-    let port = serial2_tokio::SerialPort::open(name, settings(config.line))?;
-    match config.rs485 {
-        Rs485::Kernel => {
-            return Err(io::Error::new(
-                io::ErrorKind::Unsupported,
-                "the kernel's RS-485 mode (TIOCSRS485) is Linux only: use RTS direction control or an adapter that switches itself",
-            ));
-        }
-        Rs485::Rts => port.set_rts(false)?,
-        Rs485::Auto => {}
+    if config.rs485 == Rs485::Kernel {
+        // Refused before the port is touched.
+        return Err(io::Error::new(
+            io::ErrorKind::Unsupported,
+            "the kernel's RS-485 mode (TIOCSRS485) is Linux only: use RTS direction control or an adapter that switches itself",
+        ));
+    }
+    let port = serial2_tokio::SerialPort::open(device_name(&config.path), settings(config.line))?;
+    if config.rs485 == Rs485::Rts {
+        port.set_rts(false)?;
     }
     if config.low_latency {
         tracing::info!(
@@ -98,5 +97,16 @@ mod tests {
         let line = ferrobus_proto::frame::LineConfig::new(9600).unwrap();
         let e = open_serial(&SerialConfig::new("COM250", line)).unwrap_err();
         assert!(matches!(e.kind(), io::ErrorKind::NotFound | io::ErrorKind::PermissionDenied), "{e:?}");
+    }
+
+    #[test]
+    fn kernel_rs485_is_refused_as_linux_only_before_the_port_is_opened() {
+        let runtime = tokio::runtime::Builder::new_current_thread().enable_all().build().unwrap();
+        let _inside = runtime.enter();
+        let line = ferrobus_proto::frame::LineConfig::new(9600).unwrap();
+        let config = SerialConfig { rs485: Rs485::Kernel, ..SerialConfig::new("COM250", line) };
+        let e = open_serial(&config).unwrap_err();
+        assert_eq!(e.kind(), io::ErrorKind::Unsupported, "{e}");
+        assert!(e.to_string().contains("Linux only") && e.to_string().contains("RTS"), "{e}");
     }
 }
