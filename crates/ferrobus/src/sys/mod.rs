@@ -36,6 +36,8 @@ pub(crate) const THREAD_WAIT_GRAIN: Duration = Duration::ZERO;
 
 /// How late the OS may end a thread's timed wait on a condition variable: the timer thread
 /// waits that much less, then finishes with high-resolution sleeps. Windows ends such waits
-/// on its clock's ticks, 15.625 ms apart unless a program asked for finer ones.
+/// on its clock's ticks, 15.625 ms apart unless a program asked for finer ones; the standard
+/// library's `thread::sleep` is a high-resolution waitable timer there (since Rust 1.75, on
+/// Windows 10 1803 and later; before, it falls back to those ticks).
 #[cfg(windows)]
 pub(crate) const THREAD_WAIT_GRAIN: Duration = Duration::from_millis(16);
