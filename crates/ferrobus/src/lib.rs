@@ -23,7 +23,7 @@
 //! Linux, macOS and Windows: what differs between them — ttys and ptys on Unix, COM ports on
 //! Windows, Linux's timerfd and kernel RS-485 — is behind one seam, a folder per platform
 //! (`src/sys/unix/`, `src/sys/windows/`); everything else is shared. Windows has no ptys:
-//! [`Pty`] and the virtual line exist on Unix only.
+//! `Pty` and the virtual line exist on Unix only.
 //!
 //! Errors are one flat [`Error`], where a device's exception is kept apart from timeouts and
 //! IO failures.
