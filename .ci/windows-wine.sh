@@ -4,7 +4,7 @@
 #   1. cargo test for x86_64-pc-windows-gnu of ferrobus-proto, ferrobus-sim and ferrobus's
 #      own unit tests, each executable run by tests/wine/run.sh (wine64, a private prefix,
 #      the bcryptprimitives.dll stand-in of tests/wine/ that wine 8 lacks);
-#   2. the Windows `ferrobus.exe` writing and reading a Linux `ferrobus sim --tcp`.
+#   2. the Windows `ferrobus.exe` writing, reading and benchmarking a Linux `ferrobus sim --tcp`.
 #
 # The runs under wine are bounded: WINE_SECONDS (default 180) for the tests, a minute for the
 # CLI. Honours CARGO_TARGET_DIR.
@@ -53,4 +53,6 @@ win write register 0x0010 4660
 check "FC06 then FC03" 4660 "$(win read holding 0x0010 --csv)"
 win write register --type u32 0x0020 305419896
 check "FC10 then FC03, u32" 305419896 "$(win read holding --type u32 0x0020 --csv)"
-echo "--- the Windows binary wrote and read the Linux simulator"
+bench="$(win bench --count 200 --json)"
+check "bench, 200 FC03 reads" '"errors":0' "$bench"
+echo "--- the Windows binary wrote, read and benchmarked the Linux simulator"
