@@ -51,12 +51,7 @@ pub enum Timer {
 impl Timer {
     /// A sleeper for the successive deadlines of one task.
     pub fn sleeper(self) -> Sleeper {
-        Sleeper {
-            timer: self,
-            coarse: None,
-            #[cfg(target_os = "linux")]
-            precise: Precise::Untried,
-        }
+        Sleeper { timer: self, coarse: None, precise: Precise::Untried }
     }
 
     /// Sleeps until `deadline`, or forever for `None`. A task that sleeps again and again
@@ -66,14 +61,9 @@ impl Timer {
     }
 }
 
-/// The part of a deadline slept precisely; the rest is slept on tokio's wheel.
-#[cfg(not(windows))]
-pub const NEAR: Duration = Duration::from_millis(3);
-
-/// The part of a deadline slept precisely; the rest is slept on tokio's wheel. More than a
-/// tick of Windows' clock (15.625 ms), on which tokio's waits there end.
-#[cfg(windows)]
-pub const NEAR: Duration = Duration::from_millis(20);
+/// The part of a deadline slept precisely; the rest is slept on tokio's wheel: 3 ms, and on
+/// Windows 20 ms, more than a tick of its clock (15.625 ms), on which tokio's waits there end.
+pub const NEAR: Duration = crate::sys::NEAR;
 
 /// The longest high-resolution sleep of the timer thread within [`THREAD_WAIT_GRAIN`] of a
 /// deadline: how late a deadline registered during one may be.
@@ -91,18 +81,16 @@ pub struct Sleeper {
     coarse: Option<Pin<Box<tokio::time::Sleep>>>,
     /// The kernel timer of the near part ([`Timer::Precise`], and [`Timer::Spin`] up to its
     /// busy wait).
-    #[cfg(target_os = "linux")]
     precise: Precise,
 }
 
 /// Which kernel timer a sleeper's near part sleeps on.
-#[cfg(target_os = "linux")]
 #[derive(Debug)]
 enum Precise {
     /// Its timerfd is made on the first precise sleep.
     Untried,
     TimerFd(crate::sys::TimerFd),
-    /// No timerfd here: the timer thread.
+    /// No timerfd here (not Linux, or the kernel refused one): the timer thread.
     Thread,
 }
 
@@ -148,11 +136,12 @@ impl Sleeper {
         coarse.as_mut().await;
     }
 
-    #[cfg(target_os = "linux")]
     async fn sleep_precise(&mut self, deadline: tokio::time::Instant) {
         if matches!(self.precise, Precise::Untried) {
             self.precise = match crate::sys::TimerFd::new() {
                 Ok(fd) => Precise::TimerFd(fd),
+                // Not Linux: the timer thread is the way here, nothing to report.
+                Err(e) if e.kind() == std::io::ErrorKind::Unsupported => Precise::Thread,
                 Err(e) => {
                     tracing::info!("no timerfd ({e}); precise deadlines go through a timer thread");
                     Precise::Thread
@@ -168,11 +157,6 @@ impl Sleeper {
                 }
             }
         }
-        ThreadSleep::new(deadline).await;
-    }
-
-    #[cfg(not(target_os = "linux"))]
-    async fn sleep_precise(&mut self, deadline: tokio::time::Instant) {
         ThreadSleep::new(deadline).await;
     }
 }
