@@ -4,11 +4,14 @@
 # Rust target, cargo-fuzz), then runs, stopping at the first failure:
 #
 #   format   cargo fmt --check
-#   lint     cargo clippy --workspace --all-targets -D warnings
+#   lint     cargo clippy --workspace --all-targets -D warnings, for Linux, Windows
+#            (x86_64-pc-windows-gnu) and macOS (x86_64-apple-darwin)
 #   tests    cargo test --workspace: unit, property, engine, line, simulator, CLI, and the
 #            interop tests against libmodbus, pymodbus, tokio-modbus and mbpoll
 #   no_std   ferrobus-proto built for a Cortex-M (thumbv7em-none-eabihf)
 #   docs     cargo doc with warnings denied (every public item documented, links resolve)
+#   windows  the Windows build under wine: proto, simulator and IO unit tests, and ferrobus.exe
+#            against a Linux `ferrobus sim --tcp` (.ci/windows-wine.sh)
 #   fuzz     every cargo-fuzz target for FUZZ_SECONDS (default 20) each
 #
 # Under CI=true a missing peer stack is a failure, never a skip.
@@ -33,11 +36,23 @@ step "setup: Rust components"
 rustup component add rustfmt clippy >/dev/null 2>&1 || true
 rustup target add thumbv7em-none-eabihf
 
+step "setup: cross targets (mingw-w64, wine, clang; Windows and macOS Rust targets)"
+.ci/setup-cross.sh
+
 step "format"
 cargo fmt --all -- --check
 
 step "lint"
 cargo clippy --workspace --all-targets --locked -- -D warnings
+
+step "lint: Windows (x86_64-pc-windows-gnu)"
+cargo clippy --workspace --all-targets --locked --target x86_64-pc-windows-gnu -- -D warnings
+
+step "lint: macOS (x86_64-apple-darwin)"
+# No SDK here: criterion's one C file (alloca) is compiled by clang, freestanding; a check
+# links nothing.
+CC_x86_64_apple_darwin=clang CFLAGS_x86_64_apple_darwin=-ffreestanding AR_x86_64_apple_darwin=llvm-ar \
+    cargo clippy --workspace --all-targets --locked --target x86_64-apple-darwin -- -D warnings
 
 step "tests"
 cargo test --workspace --locked
@@ -47,6 +62,9 @@ cargo build -p ferrobus-proto --target thumbv7em-none-eabihf --locked
 
 step "docs"
 RUSTDOCFLAGS="-D warnings" cargo doc --workspace --no-deps --locked
+
+step "windows: the Windows build under wine"
+.ci/windows-wine.sh
 
 if [ -z "${SKIP_FUZZ:-}" ]; then
     step "fuzz smoke run"

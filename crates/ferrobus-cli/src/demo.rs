@@ -170,7 +170,13 @@ pub(crate) async fn run(args: &DemoArgs) -> Result<(), CliError> {
     say!("  ferrobus --port /dev/ttyUSB0 --unit 1 write registers --one-based 0x0001 6000 --type u32");
     say!("  ferrobus --port /dev/ttyUSB0 --unit 1 write coil --one-based 1 on");
     say!("  ferrobus --port /dev/ttyUSB0 --unit 1 read holding --one-based 0x1001 --type u32");
-    say!("and `ferrobus sim --profile omron-3g3rx --pty` puts this simulated drive on a pty for your own tools.");
+    if cfg!(unix) {
+        say!("and `ferrobus sim --profile omron-3g3rx --pty` puts this simulated drive on a pty for your own tools.");
+    } else {
+        say!(
+            "and `ferrobus sim --profile omron-3g3rx --tcp 127.0.0.1:5020` serves this simulated drive to your own tools."
+        );
+    }
     Ok(())
 }
 

@@ -13,6 +13,9 @@ pub(crate) struct Interrupt {
     int: tokio::signal::unix::Signal,
     #[cfg(unix)]
     term: tokio::signal::unix::Signal,
+    /// Windows: Ctrl-C (there is no SIGTERM).
+    #[cfg(windows)]
+    ctrl_c: tokio::signal::windows::CtrlC,
 }
 
 impl Interrupt {
@@ -27,8 +30,11 @@ impl Interrupt {
                 term: signal(SignalKind::terminate()).map_err(failed)?,
             })
         }
-        #[cfg(not(unix))]
-        Ok(Interrupt {})
+        #[cfg(windows)]
+        {
+            let failed = |e| CliError::from(ferrobus::Error::io("listening for Ctrl-C", e));
+            Ok(Interrupt { ctrl_c: tokio::signal::windows::ctrl_c().map_err(failed)? })
+        }
     }
 
     /// Runs `work` unless SIGINT or SIGTERM comes first; `None` if one did (`work` is then
@@ -48,8 +54,8 @@ impl Interrupt {
             _ = self.int.recv() => {}
             _ = self.term.recv() => {}
         }
-        #[cfg(not(unix))]
-        if tokio::signal::ctrl_c().await.is_err() {
+        #[cfg(windows)]
+        if self.ctrl_c.recv().await.is_none() {
             std::future::pending::<()>().await;
         }
     }

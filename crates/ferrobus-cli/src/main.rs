@@ -26,6 +26,7 @@ mod exit;
 mod hex;
 mod info;
 mod interrupt;
+#[cfg(unix)]
 mod line;
 mod mask;
 mod output;
@@ -34,8 +35,13 @@ mod read;
 mod readwrite;
 mod sim;
 mod target;
+#[cfg(not(unix))]
+mod unix_only;
 mod value;
 mod write;
+
+#[cfg(not(unix))]
+use unix_only::line;
 
 use std::io::IsTerminal;
 use std::process::ExitCode;
@@ -98,9 +104,9 @@ enum Command {
     Crc(crc::CrcArgs),
     /// Simulate drives (Omron 3G3RX, SDP servo, generic) on a serial port, a pty or TCP
     Sim(sim::SimArgs),
-    /// A virtual RS-485 bus of ptys, with real character timing and seeded faults
+    /// A virtual RS-485 bus of ptys, with real character timing and seeded faults (Unix)
     Line(line::LineArgs),
-    /// A tour: a simulated 3G3RX on a virtual line, driven by the client (no hardware needed)
+    /// A tour: a simulated 3G3RX on a virtual line, driven by the client (no hardware needed; Unix)
     Demo(demo::DemoArgs),
     /// FC03 reads back to back: transactions/s, latency and CPU time (the peer benchmark's format)
     Bench(bench::BenchArgs),

@@ -13,8 +13,10 @@ use std::sync::{Arc, Mutex, PoisonError};
 use std::time::Duration;
 
 use clap::Args;
+#[cfg(unix)]
+use ferrobus::Pty;
 use ferrobus::server::{ServerEvent, ServerOptions, Shared, TcpCounts, TcpLimits, serve_tcp_with, serve_transport};
-use ferrobus::{Framing, Pty, Timer, Transport};
+use ferrobus::{Framing, Timer, Transport};
 use ferrobus_proto::ExceptionCode;
 use ferrobus_proto::slave::{Disposition, SlaveConfig, SlaveEvent, UnitSet};
 use ferrobus_sim::{Device, FaultFilter, Faults, Profile, Sim, Unserved, tokio_clock};
@@ -35,7 +37,7 @@ pub(crate) struct SimArgs {
     #[arg(skip)]
     paired: Option<Vec<String>>,
 
-    /// Make a pty, print its path, and serve on it (instead of --port, --tcp or --rtu-tcp)
+    /// Make a pty, print its path, and serve on it (instead of --port, --tcp or --rtu-tcp; Unix)
     #[arg(long, conflicts_with_all = ["port", "tcp", "rtu_tcp"])]
     pub(crate) pty: bool,
 
@@ -360,6 +362,11 @@ enum Served {
 }
 
 async fn open(connection: &ConnectArgs, args: &SimArgs) -> Result<(Transport, Served), CliError> {
+    #[cfg(not(unix))]
+    if args.pty {
+        return Err(CliError::Usage(format!("--pty needs a Unix pty (Linux, macOS); {}", crate::unix_only::INSTEAD)));
+    }
+    #[cfg(unix)]
     if args.pty {
         let pty = Pty::open().map_err(|e| ferrobus::Error::io("making a pty", e))?;
         let framing = if connection.ascii { Framing::Ascii } else { Framing::Rtu };
@@ -391,8 +398,10 @@ async fn open(connection: &ConnectArgs, args: &SimArgs) -> Result<(Transport, Se
 }
 
 /// The connector of a pty transport: the pty is already open, and is not reopened.
+#[cfg(unix)]
 struct Unused;
 
+#[cfg(unix)]
 impl ferrobus::port::Connector for Unused {
     fn connect(&self) -> ferrobus::port::Connecting {
         Box::pin(async { Err(std::io::ErrorKind::Unsupported.into()) })
@@ -445,7 +454,14 @@ fn observe(counters: &Mutex<Counters>, event: ServerEvent) {
     }
 }
 
+/// Waits for Ctrl-C (Windows has no SIGTERM or SIGUSR1).
+#[cfg(not(unix))]
+async fn interrupted(_: &Mutex<Counters>) {
+    let _ = tokio::signal::ctrl_c().await;
+}
+
 /// Waits for Ctrl-C or SIGTERM, printing the counters on SIGUSR1 meanwhile.
+#[cfg(unix)]
 async fn interrupted(counters: &Mutex<Counters>) {
     use tokio::signal::unix::{SignalKind, signal};
     let (Ok(mut term), Ok(mut usr1)) = (signal(SignalKind::terminate()), signal(SignalKind::user_defined1())) else {

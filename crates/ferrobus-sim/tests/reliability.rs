@@ -5,6 +5,7 @@
 //!
 //! CI runs a few thousand transactions; `FERROBUS_RELIABILITY_TRANSACTIONS=100000` runs the
 //! full test by hand (the closing note of issue 5 reports it).
+#![cfg(unix)] // the virtual line is made of ptys
 
 use std::time::Duration;
 

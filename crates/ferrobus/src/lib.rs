@@ -21,7 +21,12 @@
 //!   every call and says what each endpoint receives and when — character timing, collisions,
 //!   the t3.5 rule, seeded faults, a bit-level UART for endpoints at other settings.
 //! - [`line`](mod@line): the thin adapter that runs the wire on tokio's clock, for endpoints
-//!   in this process or other programs behind ptys.
+//!   in this process or, on Unix, other programs behind ptys.
+//!
+//! Linux, macOS and Windows: what differs between them — ttys and ptys on Unix, COM ports on
+//! Windows, Linux's timerfd and kernel RS-485 — is behind one seam, a folder per platform
+//! (`src/sys/unix/`, `src/sys/windows/`); everything else is shared. Windows has no ptys:
+//! `Pty` and the virtual line's pty endpoints exist on Unix only.
 //!
 //! Errors are one flat [`Error`], where a device's exception is kept apart from timeouts and
 //! IO failures.
@@ -34,13 +39,16 @@ pub mod error;
 mod identity;
 pub mod line;
 pub mod port;
+mod serial;
 pub mod server;
+mod sys;
 pub mod timer;
-mod tty;
 mod uart;
 pub mod wire;
 
 pub use client::{Backoff, Client, ClientConfig, DeviceInfo, EventLog, RequestOptions};
 pub use error::Error;
-pub use port::{Framing, Pty, Rs485, SerialConfig, Transport};
+#[cfg(unix)]
+pub use port::Pty;
+pub use port::{Framing, Rs485, SerialConfig, Transport};
 pub use timer::Timer;

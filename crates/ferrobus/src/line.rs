@@ -46,6 +46,7 @@ use crate::wire::Wire;
 pub use crate::wire::{EndpointStats, LineFaults, LineOptions, LineStats};
 
 /// Pty endpoints (Unix: other platforms have no ptys).
+#[cfg(unix)]
 mod pty;
 
 /// Characters delivered to an endpoint, and when the last of them left the wire.

@@ -13,7 +13,6 @@
 use std::fmt;
 use std::future::Future;
 use std::io;
-use std::path::PathBuf;
 use std::pin::Pin;
 use std::sync::{Arc, Mutex, PoisonError};
 use std::time::Duration;
@@ -21,13 +20,16 @@ use std::time::Duration;
 use ferrobus_proto::frame::ascii::AsciiCodec;
 use ferrobus_proto::frame::mbap::MbapCodec;
 use ferrobus_proto::frame::rtu::RtuCodec;
-use ferrobus_proto::frame::{Expect, LineConfig, LineTiming};
+use ferrobus_proto::frame::{Expect, LineTiming};
 use tokio::io::{AsyncRead, AsyncWrite};
 use tokio::net::TcpStream;
 
 use crate::identity::Identity;
+pub use crate::serial::{Rs485, SerialConfig};
+#[cfg(unix)]
+pub use crate::sys::Pty;
+pub use crate::sys::{TtyPort, open_serial};
 use crate::timer::Timer;
-pub use crate::tty::{Pty, TtyPort, open_serial};
 
 /// A byte stream a driver runs an engine over.
 pub trait Port: AsyncRead + AsyncWrite + Unpin + Send + 'static {
@@ -48,6 +50,18 @@ pub trait Port: AsyncRead + AsyncWrite + Unpin + Send + 'static {
 impl Port for TcpStream {}
 impl Port for tokio::io::DuplexStream {}
 
+/// A serial port drives RTS itself.
+impl Port for TtyPort {
+    fn set_rts(&mut self, on: bool) -> io::Result<()> {
+        TtyPort::set_rts(self, on)
+    }
+}
+
+/// A whole pty is a port too: reading and writing go to our end, and the other end stays open
+/// as long as it lives.
+#[cfg(unix)]
+impl Port for Pty {}
+
 /// A boxed port.
 pub type BoxPort = Box<dyn Port>;
 
@@ -60,39 +74,6 @@ pub trait Connector: Send + Sync + 'static {
     fn connect(&self) -> Connecting;
     /// What is being opened, for errors and logs (`/dev/ttyUSB0`, `127.0.0.1:502`).
     fn describe(&self) -> String;
-}
-
-/// How the RS-485 transmitter is switched on and off.
-#[derive(Clone, Copy, PartialEq, Eq, Debug, Default)]
-pub enum Rs485 {
-    /// The adapter does it (most USB RS-485 adapters).
-    #[default]
-    Auto,
-    /// The kernel's RS-485 mode (`TIOCSRS485`) switches RTS around each transmission.
-    Kernel,
-    /// ferrobus raises RTS before writing and drops it once the last character has left.
-    Rts,
-}
-
-/// A serial port and its settings.
-#[derive(Clone, PartialEq, Eq, Debug)]
-pub struct SerialConfig {
-    /// The tty, e.g. `/dev/ttyUSB0`, or a socat pty link.
-    pub path: PathBuf,
-    /// Baud, data bits, parity, stop bits.
-    pub line: LineConfig,
-    /// Transmitter direction control.
-    pub rs485: Rs485,
-    /// Lower the USB adapter's latency timer to 1 ms (FTDI adapters deliver received bytes
-    /// every 16 ms by default, which splits frames and slows every transaction).
-    pub low_latency: bool,
-}
-
-impl SerialConfig {
-    /// `path` at `line`, with the adapter driving RS-485 and the latency left alone.
-    pub fn new(path: impl Into<PathBuf>, line: LineConfig) -> Self {
-        SerialConfig { path: path.into(), line, rs485: Rs485::Auto, low_latency: false }
-    }
 }
 
 /// Which framing runs over the stream.
@@ -333,7 +314,7 @@ impl SerialTarget {
         let mut first = self.first.lock().unwrap_or_else(PoisonError::into_inner);
         // Identify before opening: opening a tty can change its settings, and another's line
         // must not be touched at all.
-        let now = Identity::of(&self.config.path);
+        let now = crate::sys::identify(&self.config.path);
         if let Some(first) = first.as_ref() {
             if let Err(reason) = first.reopen_check(now.as_ref()) {
                 let lasting = matches!(first, Identity::Pty(_));

@@ -13,7 +13,9 @@
 //! - [`Timer::Precise`]: a timerfd in the runtime's own epoll (Linux): the kernel's
 //!   high-resolution timer wakes the runtime thread directly, tens of microseconds late and
 //!   with no thread in between. Elsewhere, or if the timerfd cannot be made, a timer thread
-//!   that wakes the task.
+//!   that wakes the task. On Windows, whose timed waits end on 15.6 ms clock ticks, the thread
+//!   finishes each wait with high-resolution sleeps (the standard library's sleep uses a
+//!   high-resolution waitable timer there), and [`NEAR`] is longer than a tick.
 //! - [`Timer::Spin`]: the same to [`SPIN`] before the deadline, then a busy wait on the
 //!   calling thread: a microsecond or two late, for the virtual line, where 2 % of a
 //!   115200-baud transaction is 127 µs, and for a simulator alone on its pty. The thread does
@@ -30,6 +32,8 @@ use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::{Arc, Condvar, Mutex, OnceLock, PoisonError};
 use std::task::{Context, Poll, Waker};
 use std::time::{Duration, Instant};
+
+use crate::sys::THREAD_WAIT_GRAIN;
 
 /// How drivers wait for deadlines.
 #[derive(Clone, Copy, PartialEq, Eq, Debug, Default)]
@@ -57,8 +61,13 @@ impl Timer {
     }
 }
 
-/// The part of a deadline slept precisely; the rest is slept on tokio's wheel.
-pub const NEAR: Duration = Duration::from_millis(3);
+/// The part of a deadline slept precisely; the rest is slept on tokio's wheel: 3 ms, and on
+/// Windows 20 ms, more than a tick of its clock (15.625 ms), on which tokio's waits there end.
+pub const NEAR: Duration = crate::sys::NEAR;
+
+/// The longest high-resolution sleep of the timer thread within [`THREAD_WAIT_GRAIN`] of a
+/// deadline: how late a deadline registered during one may be.
+const FINE_STEP: Duration = Duration::from_micros(250);
 
 /// Spinning starts this long before a [`Timer::Spin`] deadline: more than the kernel's timer
 /// is usually late on a loaded virtual machine.
@@ -80,9 +89,8 @@ pub struct Sleeper {
 enum Precise {
     /// Its timerfd is made on the first precise sleep.
     Untried,
-    #[cfg(target_os = "linux")]
-    TimerFd(timerfd::TimerFd),
-    /// No timerfd here: the timer thread.
+    TimerFd(crate::sys::TimerFd),
+    /// No timerfd here (not Linux, or the kernel refused one): the timer thread.
     Thread,
 }
 
@@ -128,11 +136,12 @@ impl Sleeper {
         coarse.as_mut().await;
     }
 
-    #[cfg(target_os = "linux")]
     async fn sleep_precise(&mut self, deadline: tokio::time::Instant) {
         if matches!(self.precise, Precise::Untried) {
-            self.precise = match timerfd::TimerFd::new() {
+            self.precise = match crate::sys::TimerFd::new() {
                 Ok(fd) => Precise::TimerFd(fd),
+                // Not Linux: the timer thread is the way here, nothing to report.
+                Err(e) if e.kind() == std::io::ErrorKind::Unsupported => Precise::Thread,
                 Err(e) => {
                     tracing::info!("no timerfd ({e}); precise deadlines go through a timer thread");
                     Precise::Thread
@@ -149,68 +158,6 @@ impl Sleeper {
             }
         }
         ThreadSleep::new(deadline).await;
-    }
-
-    #[cfg(not(target_os = "linux"))]
-    async fn sleep_precise(&mut self, deadline: tokio::time::Instant) {
-        ThreadSleep::new(deadline).await;
-    }
-}
-
-#[cfg(target_os = "linux")]
-mod timerfd {
-    use std::io;
-    use std::os::fd::OwnedFd;
-
-    use rustix::time::{ClockId, Itimerspec, TimerfdClockId, TimerfdFlags, TimerfdTimerFlags, Timespec};
-    use tokio::io::Interest;
-    use tokio::io::unix::AsyncFd;
-
-    /// A timerfd watched by the runtime's reactor.
-    #[derive(Debug)]
-    pub(super) struct TimerFd {
-        fd: AsyncFd<OwnedFd>,
-        /// The deadline it is armed for: a sleep that is cancelled and made again for the same
-        /// deadline (bytes arrived meanwhile) costs no system call.
-        armed: Option<tokio::time::Instant>,
-    }
-
-    impl TimerFd {
-        pub(super) fn new() -> io::Result<Self> {
-            let flags = TimerfdFlags::NONBLOCK | TimerfdFlags::CLOEXEC;
-            let fd = rustix::time::timerfd_create(TimerfdClockId::Monotonic, flags)?;
-            Ok(TimerFd { fd: crate::tty::register(fd, Interest::READABLE)?, armed: None })
-        }
-
-        pub(super) async fn sleep_until(&mut self, deadline: tokio::time::Instant) -> io::Result<()> {
-            loop {
-                let left = deadline.saturating_duration_since(tokio::time::Instant::now());
-                if left.is_zero() {
-                    return Ok(());
-                }
-                if self.armed != Some(deadline) {
-                    // Re-arming also clears an expiry nobody read (a cancelled sleep's).
-                    let at = rustix::time::clock_gettime(ClockId::Monotonic)
-                        .checked_add(Timespec::try_from(left).map_err(io::Error::other)?)
-                        .ok_or_else(|| io::Error::other("a deadline past the end of time"))?;
-                    let zero = Timespec { tv_sec: 0, tv_nsec: 0 };
-                    let spec = Itimerspec { it_interval: zero, it_value: at };
-                    rustix::time::timerfd_settime(self.fd.get_ref(), TimerfdTimerFlags::ABSTIME, &spec)?;
-                    self.armed = Some(deadline);
-                }
-                let mut guard = self.fd.readable().await?;
-                let mut expirations = [0u8; 8];
-                match guard.try_io(|fd| rustix::io::read(fd.get_ref(), &mut expirations).map_err(io::Error::from)) {
-                    Ok(Ok(_)) => {
-                        self.armed = None;
-                        return Ok(());
-                    }
-                    Ok(Err(e)) if e.kind() == io::ErrorKind::Interrupted => {}
-                    Ok(Err(e)) => return Err(e),
-                    Err(_would_block) => {}
-                }
-            }
-        }
     }
 }
 
@@ -289,8 +236,18 @@ impl Wheel {
             }
             let (wake_at, now) = (next.wake_at, Instant::now());
             if wake_at > now {
-                // Sleep until then, or until an earlier deadline arrives.
-                queue = self.changed.wait_timeout(queue, wake_at - now).unwrap_or_else(PoisonError::into_inner).0;
+                let left = wake_at - now;
+                if let Some(wait) = left.checked_sub(THREAD_WAIT_GRAIN).filter(|wait| !wait.is_zero()) {
+                    // Sleep until then (less what the OS may add to a timed wait), or until an
+                    // earlier deadline arrives.
+                    queue = self.changed.wait_timeout(queue, wait).unwrap_or_else(PoisonError::into_inner).0;
+                } else {
+                    // Closer than a timed wait can aim (Windows): high-resolution sleeps, each
+                    // short enough that an earlier deadline registered meanwhile is on time.
+                    drop(queue);
+                    std::thread::sleep(left.min(FINE_STEP));
+                    queue = self.queue.lock().unwrap_or_else(PoisonError::into_inner);
+                }
                 continue;
             }
             if let Some(Reverse(due)) = queue.pop() {

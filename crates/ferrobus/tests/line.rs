@@ -3,6 +3,7 @@
 //! broken gaps are counted against the endpoint that broke them, faults are drawn from the
 //! seed, ptys reach the line, and a client and a server on the line keep every gap. How late
 //! a delivery is, is a figure (printed here, measured by the benchmarks), not asserted.
+#![cfg(unix)] // its endpoints are ptys
 
 use std::time::Duration;
 

@@ -2,6 +2,7 @@
 //! raw `/dev/pts/N` is never reopened, even when the next pty gets the number; a symlink (a
 //! name chosen for the device, as socat's `link=`) is reopened wherever it leads; and
 //! `with_reopen(false)` reopens nothing.
+#![cfg(unix)] // on ptys and symlinks
 
 use std::path::{Path, PathBuf};
 use std::time::Duration;

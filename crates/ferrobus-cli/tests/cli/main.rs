@@ -1,6 +1,7 @@
 //! End-to-end tests of the `ferrobus` binary: each test starts a real Modbus server in this
 //! process (`ferrobus::server::serve_tcp` over a small handler) and runs the binary against
 //! it, checking stdout, stderr, exit codes and the requests the server saw.
+#![cfg(unix)] // the servers of these tests sit on ptys as well as TCP
 
 mod bench_failures;
 mod errors;

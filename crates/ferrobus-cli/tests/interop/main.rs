@@ -17,6 +17,7 @@
 //!   its connection cap and timeouts, and a lowered descriptor limit.
 //!
 //! Run: `cargo test -p ferrobus-cli --test interop`.
+#![cfg(unix)] // the peers run on Linux, over ptys
 
 mod cli_vs_servers;
 mod clients_vs_sim;

@@ -12,7 +12,7 @@ use tokio::time::Instant;
 
 use super::{Chunk, Cmd, Line};
 use crate::port::Pty;
-use crate::tty::PeerSettings;
+use crate::sys::PeerSettings;
 use crate::wire::{OnError, Receiver};
 
 impl Line {

@@ -1,5 +1,5 @@
-//! Terminals as ports: serial ports and pseudo-terminals, read and written straight through
-//! their file descriptors.
+//! Terminals as ports (Unix): serial ports and pseudo-terminals, read and written straight
+//! through their file descriptors.
 //!
 //! serial2 opens and configures the tty; tokio's reactor watches it for reading only. A frame
 //! (at most 256 bytes) fits the tty's output buffer, so a write goes straight to the
@@ -9,7 +9,7 @@
 
 use std::future::Future;
 use std::io;
-use std::os::fd::{AsRawFd, OwnedFd};
+use std::os::unix::ffi::OsStringExt;
 use std::path::{Path, PathBuf};
 use std::pin::Pin;
 use std::task::{Context, Poll, ready};
@@ -19,7 +19,8 @@ use ferrobus_proto::frame::{DataBits, LineConfig, Parity, StopBits};
 use tokio::io::unix::AsyncFd;
 use tokio::io::{AsyncRead, AsyncWrite, Interest, ReadBuf};
 
-use crate::port::{Port, Rs485, SerialConfig};
+use super::fd::register;
+use crate::serial::{Rs485, SerialConfig, settings};
 
 /// How long a write waits before trying again when the tty's output buffer is full (a line
 /// that does not drain: hardware flow control held, a stuck adapter).
@@ -38,27 +39,9 @@ impl TtyPort {
     fn new(port: serial2::SerialPort) -> io::Result<Self> {
         Ok(TtyPort { fd: register(port, Interest::READABLE)?, retry: None })
     }
-}
 
-/// Descriptors that stay open and unchanged for as long as their owner lives, as
-/// `AsyncFd::register` requires.
-pub(crate) trait OwnsFd: AsRawFd {}
-impl OwnsFd for serial2::SerialPort {}
-impl OwnsFd for OwnedFd {}
-
-/// Registers `inner` with tokio's reactor for `interest`. Needs a tokio runtime.
-pub(crate) fn register<T: OwnsFd>(inner: T, interest: Interest) -> io::Result<AsyncFd<T>> {
-    // SAFETY: `inner` moves into the AsyncFd, which owns it until the AsyncFd is dropped; its
-    // descriptor (a serial2 port's file, or an OwnedFd) is closed only when `inner` is dropped
-    // and is the same on every `as_raw_fd` call. The one unsafe block of the workspace: this
-    // tokio has no safe way to register an owned descriptor.
-    #[allow(unsafe_code)]
-    let registered = unsafe { AsyncFd::register_with_interest(inner, interest) };
-    Ok(registered?)
-}
-
-impl Port for TtyPort {
-    fn set_rts(&mut self, on: bool) -> io::Result<()> {
+    /// Sets the RTS line (RS-485 direction control by RTS).
+    pub(crate) fn set_rts(&self, on: bool) -> io::Result<()> {
         self.fd.get_ref().set_rts(on)
     }
 }
@@ -137,7 +120,7 @@ pub fn open_serial(config: &SerialConfig) -> io::Result<TtyPort> {
         other => other?,
     };
     match config.rs485 {
-        Rs485::Kernel => port.set_rs4xx_mode(serial2::rs4xx::Rs485Config::new())?,
+        Rs485::Kernel => kernel_rs485(&port)?,
         Rs485::Rts => port.set_rts(false)?,
         Rs485::Auto => {}
     }
@@ -147,33 +130,48 @@ pub fn open_serial(config: &SerialConfig) -> io::Result<TtyPort> {
     TtyPort::new(port)
 }
 
-fn settings(line: LineConfig) -> impl FnOnce(serial2::Settings) -> io::Result<serial2::Settings> {
-    move |mut s| {
-        s.set_raw();
-        s.set_baud_rate(line.baud())?;
-        s.set_char_size(match line.data_bits {
-            DataBits::Seven => serial2::CharSize::Bits7,
-            DataBits::Eight => serial2::CharSize::Bits8,
-        });
-        s.set_parity(match line.parity {
-            Parity::None => serial2::Parity::None,
-            Parity::Even => serial2::Parity::Even,
-            Parity::Odd => serial2::Parity::Odd,
-        });
-        s.set_stop_bits(match line.stop_bits {
-            StopBits::One => serial2::StopBits::One,
-            StopBits::Two => serial2::StopBits::Two,
-        });
-        s.set_flow_control(serial2::FlowControl::None);
-        Ok(s)
-    }
+/// Switches the kernel's RS-485 mode on (`TIOCSRS485`), which only Linux has.
+#[cfg(target_os = "linux")]
+fn kernel_rs485(port: &serial2::SerialPort) -> io::Result<()> {
+    port.set_rs4xx_mode(serial2::rs4xx::Rs485Config::new())
+}
+
+/// Switches the kernel's RS-485 mode on (`TIOCSRS485`), which only Linux has.
+#[cfg(not(target_os = "linux"))]
+fn kernel_rs485(_: &serial2::SerialPort) -> io::Result<()> {
+    Err(io::Error::new(
+        io::ErrorKind::Unsupported,
+        "the kernel's RS-485 mode (TIOCSRS485) is Linux only: use RTS direction control or an adapter that switches itself",
+    ))
 }
 
 fn is_pty(path: &Path) -> bool {
-    std::fs::canonicalize(path).is_ok_and(|p| p.starts_with("/dev/pts"))
+    std::fs::canonicalize(path).is_ok_and(|p| is_pty_path(&p))
+}
+
+/// Whether `real` (a canonical path) is the other end of a pseudo-terminal: `/dev/pts/N` on
+/// Linux and the BSDs, `/dev/ttysNNN` on macOS (whose serial ports are `/dev/tty.*` and
+/// `/dev/cu.*`).
+pub(crate) fn is_pty_path(real: &Path) -> bool {
+    if real.starts_with("/dev/pts") {
+        return true;
+    }
+    cfg!(target_vendor = "apple")
+        && real.parent() == Some(Path::new("/dev"))
+        && real.file_name().and_then(|n| n.to_str()).is_some_and(|n| {
+            n.strip_prefix("ttys")
+                .is_some_and(|digits| !digits.is_empty() && digits.bytes().all(|b| b.is_ascii_digit()))
+        })
 }
 
 /// Sets the latency timer of a USB serial adapter to 1 ms through sysfs, if it has one.
+#[cfg(not(target_os = "linux"))]
+fn set_low_latency(path: &Path) {
+    tracing::info!(path = %path.display(), "the latency timer is set through Linux's sysfs; left as it is here");
+}
+
+/// Sets the latency timer of a USB serial adapter to 1 ms through sysfs, if it has one.
+#[cfg(target_os = "linux")]
 fn set_low_latency(path: &Path) {
     let Some(name) = std::fs::canonicalize(path).ok().and_then(|p| p.file_name().map(ToOwned::to_owned)) else {
         return;
@@ -201,7 +199,9 @@ impl Pty {
     /// Makes a pty pair. Needs a tokio runtime.
     pub fn open() -> io::Result<Pty> {
         let (ours, peer) = serial2::SerialPort::pair()?;
-        let path = std::fs::read_link(format!("/proc/self/fd/{}", peer.as_raw_fd()))?;
+        // ptsname asks the kernel (TIOCGPTN on Linux, TIOCPTYGNAME on macOS): no /proc needed.
+        let name = rustix::pty::ptsname(&ours, Vec::new())?;
+        let path = PathBuf::from(std::ffi::OsString::from_vec(name.into_bytes()));
         Ok(Pty { port: TtyPort::new(ours)?, path, _peer: peer })
     }
 }
@@ -221,8 +221,8 @@ pub(crate) struct PeerSettings {
 }
 
 impl Pty {
-    /// The other end's settings, read from our end (Linux gives a pty master's `tcgetattr`
-    /// the slave's termios). `None` if they cannot be read or the baud rate is 0.
+    /// The other end's settings, read from our end (Linux and macOS give a pty master's
+    /// `tcgetattr` the slave's termios). `None` if they cannot be read or the baud rate is 0.
     pub(crate) fn peer_settings(&self) -> Option<PeerSettings> {
         use rustix::termios::{ControlModes, InputModes};
         let termios = rustix::termios::tcgetattr(self.port.fd.get_ref()).ok()?;
@@ -251,10 +251,6 @@ impl Pty {
         })
     }
 }
-
-/// A whole pty is a port too: reading and writing go to our end, and the other end stays open
-/// as long as it lives.
-impl Port for Pty {}
 
 impl AsyncRead for Pty {
     fn poll_read(mut self: Pin<&mut Self>, cx: &mut Context<'_>, buf: &mut ReadBuf<'_>) -> Poll<io::Result<()>> {
@@ -299,6 +295,38 @@ mod tests {
             assert_eq!(back, [0xAB; 300]);
             // The user closes its end; the pty stays usable for the next one.
         }
+    }
+
+    #[test]
+    fn pty_ends_are_told_from_serial_ports_by_their_canonical_path() {
+        assert!(is_pty_path(Path::new("/dev/pts/7")));
+        assert!(!is_pty_path(Path::new("/dev/ttyUSB0")));
+        assert!(!is_pty_path(Path::new("/dev/ttyS0")));
+        assert!(!is_pty_path(Path::new("/dev/tty.usbserial-A1")));
+        // macOS names the other end of a pty /dev/ttysNNN; elsewhere that is no pty.
+        assert_eq!(is_pty_path(Path::new("/dev/ttys003")), cfg!(target_vendor = "apple"));
+        assert!(!is_pty_path(Path::new("/dev/ttys")));
+    }
+
+    #[tokio::test]
+    async fn a_pty_path_comes_from_ptsname_and_names_the_other_end() {
+        let pty = Pty::open().unwrap();
+        assert!(is_pty_path(&pty.path), "{}", pty.path.display());
+        // The path opens the same terminal that the pair holds open: its termios is the one
+        // read through our end.
+        let line = LineConfig::new(4800).unwrap().with_parity(Parity::None);
+        let _user = open_serial(&SerialConfig::new(&pty.path, line)).unwrap();
+        assert_eq!(pty.peer_settings().map(|s| s.line.baud()), Some(4800));
+    }
+
+    #[cfg(not(target_os = "linux"))]
+    #[tokio::test]
+    async fn kernel_rs485_is_refused_outside_linux() {
+        let pty = Pty::open().unwrap();
+        let line = LineConfig::new(9600).unwrap();
+        let config = SerialConfig { rs485: Rs485::Kernel, ..SerialConfig::new(&pty.path, line) };
+        let e = open_serial(&config).unwrap_err();
+        assert_eq!(e.kind(), io::ErrorKind::Unsupported, "{e}");
     }
 
     #[test]

@@ -1,0 +1,71 @@
+//! The platform seam: everything that differs between operating systems, one folder per
+//! platform, the same names in each.
+//!
+//! | item | Unix (`unix/`) | Windows (`windows/`) |
+//! |---|---|---|
+//! | [`TtyPort`], [`open_serial`] | a tty through serial2, read on tokio's reactor | a COM port through serial2-tokio (overlapped IO on tokio's IOCP) |
+//! | `Pty`, `PeerSettings` | pseudo-terminals (ptsname; termios of the other end) | none: ptys are Unix's |
+//! | `identify` | symlink, pty, sysfs USB ids, device number | a COM name is the device's |
+//! | `TimerFd` | Linux: a timerfd in the runtime's epoll; macOS: none | none: the timer thread ([`crate::timer`]) |
+//! | `NEAR` | 3 ms | 20 ms, more than a clock tick |
+//! | [`THREAD_WAIT_GRAIN`] | zero: timed waits are precise | about a tick of the system clock |
+//!
+//! Everything else — settings ([`crate::serial`]), transports, drivers, timing — is shared.
+
+use std::time::Duration;
+
+#[cfg(unix)]
+mod unix;
+#[cfg(target_os = "linux")]
+pub(crate) use unix::TimerFd;
+#[cfg(unix)]
+pub(crate) use unix::{PeerSettings, identify};
+#[cfg(unix)]
+pub use unix::{Pty, TtyPort, open_serial};
+
+#[cfg(windows)]
+mod windows;
+#[cfg(windows)]
+pub(crate) use windows::identify;
+#[cfg(windows)]
+pub use windows::{TtyPort, open_serial};
+
+/// How late the OS may end a thread's timed wait on a condition variable: the timer thread
+/// waits that much less, then finishes with high-resolution sleeps.
+#[cfg(not(windows))]
+pub(crate) const THREAD_WAIT_GRAIN: Duration = Duration::ZERO;
+
+/// How late the OS may end a thread's timed wait on a condition variable: the timer thread
+/// waits that much less, then finishes with high-resolution sleeps. Windows ends such waits
+/// on its clock's ticks, 15.625 ms apart unless a program asked for finer ones; the standard
+/// library's `thread::sleep` is a high-resolution waitable timer there (since Rust 1.75, on
+/// Windows 10 1803 and later; before, it falls back to those ticks).
+#[cfg(windows)]
+pub(crate) const THREAD_WAIT_GRAIN: Duration = Duration::from_millis(16);
+
+/// The part of a deadline slept precisely ([`crate::timer::NEAR`]).
+#[cfg(not(windows))]
+pub(crate) const NEAR: Duration = Duration::from_millis(3);
+
+/// The part of a deadline slept precisely ([`crate::timer::NEAR`]): more than a tick of
+/// Windows' clock (15.625 ms), on which tokio's waits there end.
+#[cfg(windows)]
+pub(crate) const NEAR: Duration = Duration::from_millis(20);
+
+/// No timerfd outside Linux: making one fails, and precise deadlines go through the timer
+/// thread.
+#[cfg(not(target_os = "linux"))]
+#[derive(Debug)]
+pub(crate) enum TimerFd {}
+
+#[cfg(not(target_os = "linux"))]
+impl TimerFd {
+    pub(crate) fn new() -> std::io::Result<Self> {
+        Err(std::io::Error::new(std::io::ErrorKind::Unsupported, "timerfds are Linux's"))
+    }
+
+    #[expect(clippy::unused_async, reason = "the signature of Linux's")]
+    pub(crate) async fn sleep_until(&mut self, _: tokio::time::Instant) -> std::io::Result<()> {
+        match *self {}
+    }
+}

@@ -1,0 +1,112 @@
+//! COM ports as async ports, through serial2-tokio.
+//!
+//! Why serial2-tokio: the Unix backend is serial2 already, so the settings are translated once
+//! for both ([`crate::serial`]); serial2-tokio puts a serial2 port on tokio's own IOCP reactor
+//! with overlapped IO — no thread per port, no polling, and none of our code `unsafe` — and it
+//! is kept up with serial2 by the same maintainer. tokio-serial (mio-serial over serialport)
+//! does the same but brings a second serial stack with its own settings types and, on Linux,
+//! libudev; serialport alone is blocking and would need a thread per port.
+//!
+//! Precise timing needs nothing here: the timer thread ([`crate::timer`]) finishes its waits
+//! with high-resolution sleeps (see [`crate::sys::THREAD_WAIT_GRAIN`]).
+
+use std::io;
+use std::path::Path;
+use std::pin::Pin;
+use std::task::{Context, Poll};
+
+use tokio::io::{AsyncRead, AsyncWrite, ReadBuf};
+
+use crate::serial::{Rs485, SerialConfig, settings};
+
+/// A COM port, as an async port.
+#[derive(Debug)]
+pub struct TtyPort {
+    port: serial2_tokio::SerialPort,
+}
+
+impl TtyPort {
+    /// Sets the RTS line (RS-485 direction control by RTS).
+    pub(crate) fn set_rts(&self, on: bool) -> io::Result<()> {
+        self.port.set_rts(on)
+    }
+}
+
+/// Opens the COM port `config.path` (`COM3`, or `\\.\COM12`) with `config`. Needs a tokio
+/// runtime.
+pub fn open_serial(config: &SerialConfig) -> io::Result<TtyPort> {
+    if config.rs485 == Rs485::Kernel {
+        // Refused before the port is touched.
+        return Err(io::Error::new(
+            io::ErrorKind::Unsupported,
+            "the kernel's RS-485 mode (TIOCSRS485) is Linux only: use RTS direction control or an adapter that switches itself",
+        ));
+    }
+    let port = serial2_tokio::SerialPort::open(device_name(&config.path), settings(config.line))?;
+    if config.rs485 == Rs485::Rts {
+        port.set_rts(false)?;
+    }
+    if config.low_latency {
+        tracing::info!(
+            path = %config.path.display(),
+            "the latency timer is set in the adapter driver's properties on Windows; left as it is"
+        );
+    }
+    Ok(TtyPort { port })
+}
+
+/// The port's name without the device namespace prefix (`\\.\`), which serial2 adds itself.
+fn device_name(path: &Path) -> &Path {
+    path.to_str().and_then(|s| s.strip_prefix(r"\\.\")).map_or(path, Path::new)
+}
+
+impl AsyncRead for TtyPort {
+    fn poll_read(mut self: Pin<&mut Self>, cx: &mut Context<'_>, buf: &mut ReadBuf<'_>) -> Poll<io::Result<()>> {
+        Pin::new(&mut self.port).poll_read(cx, buf)
+    }
+}
+
+impl AsyncWrite for TtyPort {
+    fn poll_write(mut self: Pin<&mut Self>, cx: &mut Context<'_>, data: &[u8]) -> Poll<io::Result<usize>> {
+        Pin::new(&mut self.port).poll_write(cx, data)
+    }
+
+    fn poll_flush(mut self: Pin<&mut Self>, cx: &mut Context<'_>) -> Poll<io::Result<()>> {
+        Pin::new(&mut self.port).poll_flush(cx)
+    }
+
+    fn poll_shutdown(mut self: Pin<&mut Self>, cx: &mut Context<'_>) -> Poll<io::Result<()>> {
+        Pin::new(&mut self.port).poll_shutdown(cx)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_com_name_is_passed_to_serial2_without_the_device_namespace_prefix() {
+        assert_eq!(device_name(Path::new(r"\\.\COM12")), Path::new("COM12"));
+        assert_eq!(device_name(Path::new("COM3")), Path::new("COM3"));
+    }
+
+    #[test]
+    fn a_missing_com_port_fails_to_open_with_an_error_not_a_panic() {
+        let runtime = tokio::runtime::Builder::new_current_thread().enable_all().build().unwrap();
+        let _inside = runtime.enter();
+        let line = ferrobus_proto::frame::LineConfig::new(9600).unwrap();
+        let e = open_serial(&SerialConfig::new("COM250", line)).unwrap_err();
+        assert!(matches!(e.kind(), io::ErrorKind::NotFound | io::ErrorKind::PermissionDenied), "{e:?}");
+    }
+
+    #[test]
+    fn kernel_rs485_is_refused_as_linux_only_before_the_port_is_opened() {
+        let runtime = tokio::runtime::Builder::new_current_thread().enable_all().build().unwrap();
+        let _inside = runtime.enter();
+        let line = ferrobus_proto::frame::LineConfig::new(9600).unwrap();
+        let config = SerialConfig { rs485: Rs485::Kernel, ..SerialConfig::new("COM250", line) };
+        let e = open_serial(&config).unwrap_err();
+        assert_eq!(e.kind(), io::ErrorKind::Unsupported, "{e}");
+        assert!(e.to_string().contains("Linux only") && e.to_string().contains("RTS"), "{e}");
+    }
+}
