@@ -24,6 +24,7 @@ use hdrhistogram::Histogram;
 
 use crate::connect::{ConnectArgs, Target, parse_duration};
 use crate::exit::CliError;
+use crate::interrupt::Interrupt;
 
 /// Arguments of `ferrobus sim`.
 #[derive(Args, Clone, Debug)]
@@ -137,6 +138,8 @@ impl Counters {
 /// Runs `ferrobus sim`.
 pub(crate) async fn run(connection: &ConnectArgs, args: &SimArgs) -> Result<(), CliError> {
     let mut sim = build(connection, args)?;
+    // Listened for before it says where it serves, so that no early signal kills it.
+    let mut signals = Signals::listen()?;
     let (transport, port) = open(connection, args).await?;
     let framing = transport.framing();
     let units = if matches!(port, Served::Listener(_)) && framing == Framing::Mbap {
@@ -189,7 +192,7 @@ pub(crate) async fn run(connection: &ConnectArgs, args: &SimArgs) -> Result<(), 
         };
         tokio::select! {
             () = until => {}
-            () = interrupted(&counters) => {}
+            () = signals.interrupted(&counters) => {}
         }
     };
     let result = tokio::select! {
@@ -454,25 +457,42 @@ fn observe(counters: &Mutex<Counters>, event: ServerEvent) {
     }
 }
 
-/// Waits for Ctrl-C (Windows has no SIGTERM or SIGUSR1).
-#[cfg(not(unix))]
-async fn interrupted(_: &Mutex<Counters>) {
-    let _ = tokio::signal::ctrl_c().await;
+/// The signals the simulator takes: Ctrl-C and SIGTERM end it, SIGUSR1 prints its counters
+/// (Windows has Ctrl-C alone). Listened for from the start: the default action of each would
+/// end the process without its counters.
+struct Signals {
+    interrupt: Interrupt,
+    #[cfg(unix)]
+    usr1: tokio::signal::unix::Signal,
 }
 
-/// Waits for Ctrl-C or SIGTERM, printing the counters on SIGUSR1 meanwhile.
-#[cfg(unix)]
-async fn interrupted(counters: &Mutex<Counters>) {
-    use tokio::signal::unix::{SignalKind, signal};
-    let (Ok(mut term), Ok(mut usr1)) = (signal(SignalKind::terminate()), signal(SignalKind::user_defined1())) else {
-        let _ = tokio::signal::ctrl_c().await;
-        return;
-    };
-    loop {
-        tokio::select! {
-            _ = tokio::signal::ctrl_c() => return,
-            _ = term.recv() => return,
-            _ = usr1.recv() => counters.lock().unwrap_or_else(PoisonError::into_inner).print(),
+impl Signals {
+    fn listen() -> Result<Signals, CliError> {
+        let interrupt = Interrupt::listen()?;
+        #[cfg(unix)]
+        {
+            use tokio::signal::unix::{SignalKind, signal};
+            let usr1 = signal(SignalKind::user_defined1())
+                .map_err(|e| CliError::from(ferrobus::Error::io("listening for SIGUSR1", e)))?;
+            Ok(Signals { interrupt, usr1 })
+        }
+        #[cfg(not(unix))]
+        Ok(Signals { interrupt })
+    }
+
+    /// Waits for Ctrl-C or SIGTERM, printing the counters on each SIGUSR1 meanwhile.
+    async fn interrupted(&mut self, counters: &Mutex<Counters>) {
+        #[cfg(unix)]
+        loop {
+            tokio::select! {
+                () = self.interrupt.wait() => return,
+                _ = self.usr1.recv() => counters.lock().unwrap_or_else(PoisonError::into_inner).print(),
+            }
+        }
+        #[cfg(not(unix))]
+        {
+            let _ = counters;
+            self.interrupt.wait().await;
         }
     }
 }

@@ -9,6 +9,8 @@ use std::fmt;
 use std::str::FromStr;
 use std::time::Duration;
 
+pub use crate::parse::{parse_duration, parse_share};
+
 use crate::rule::{RULE_KEYS, Rule};
 
 /// What goes wrong with one unit.
@@ -67,38 +69,6 @@ pub struct FaultError {
 
 const UNIT_EXAMPLE: &str = "drop=10%,delay=50ms,corrupt=0.05,exception=0x06,silent,trip=5s";
 const RULE_EXAMPLE: &str = "fc=0x03,addr=0x1000-0x100F,share=50%,exception=0x06";
-
-/// A share from 0 to 1, written `0.05` or `5%`.
-pub fn parse_share(text: &str) -> Result<f64, String> {
-    let text = text.trim();
-    let value = match text.strip_suffix('%') {
-        Some(pct) => pct.trim().parse::<f64>().map(|v| v / 100.0),
-        None => text.parse::<f64>(),
-    }
-    .map_err(|_| format!("'{text}' is not a share (e.g. 0.05 or 5%)"))?;
-    if (0.0..=1.0).contains(&value) { Ok(value) } else { Err(format!("'{text}' is not between 0 and 1 (0% and 100%)")) }
-}
-
-/// A duration written `50ms`, `1.5s`, `250us`, `2min`, or a plain number of milliseconds; at
-/// most an hour.
-pub fn parse_duration(text: &str) -> Result<Duration, String> {
-    let text = text.trim();
-    let split = text.find(|c: char| !(c.is_ascii_digit() || c == '.')).unwrap_or(text.len());
-    let (number, unit) = text.split_at(split);
-    let value: f64 = number.parse().map_err(|_| format!("'{text}' is not a duration (e.g. 500ms, 1.5s, 2s)"))?;
-    let seconds = match unit.trim() {
-        "" | "ms" => value / 1e3,
-        "s" => value,
-        "us" | "µs" => value / 1e6,
-        "ns" => value / 1e9,
-        "m" | "min" => value * 60.0,
-        other => return Err(format!("unknown unit '{other}' in '{text}'; use ms, s or us")),
-    };
-    if seconds > 3600.0 {
-        return Err(format!("'{text}' is longer than an hour"));
-    }
-    Duration::try_from_secs_f64(seconds).map_err(|_| format!("'{text}' is not a duration"))
-}
 
 fn code(value: &str) -> Option<u8> {
     match value.strip_prefix("0x").or_else(|| value.strip_prefix("0X")) {

@@ -17,6 +17,7 @@ pub mod device;
 pub mod fault;
 pub mod memory;
 pub mod model;
+pub mod parse;
 pub mod profile;
 mod reframe;
 pub mod rule;

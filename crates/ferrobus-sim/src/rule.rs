@@ -28,7 +28,7 @@ use std::time::Duration;
 
 use ferrobus_proto::pdu::AddressRange;
 
-use crate::fault::{parse_duration, parse_share};
+use crate::parse::{parse_duration, parse_share};
 
 /// The keys that make a fault specification a rule.
 pub(crate) const RULE_KEYS: &[&str] =
