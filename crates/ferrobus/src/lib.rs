@@ -34,6 +34,7 @@ pub mod error;
 mod identity;
 pub mod line;
 pub mod port;
+mod pump;
 pub mod server;
 pub mod timer;
 mod tty;

@@ -1,0 +1,353 @@
+//! The one driver loop: feeds an engine the bytes a port reads with the time they arrived,
+//! sleeps until the earliest of the engine's deadline and the session's own, and writes
+//! what the engine hands out through the one RS-485-aware writer.
+//!
+//! ```text
+//!   port ──read, arrival time──▶ Engine::on_bytes   (what it did not take is kept, in order)
+//!   sleep until min(Engine::poll_timeout, session's deadlines) ──▶ Engine::handle_timeout
+//!   Engine::poll_transmit ──▶ write_frame (RTS raised around the frame) ──▶ port
+//!   Engine::poll_event ──▶ the session: the client's completions, the server's observer
+//! ```
+//!
+//! Every role is an [`Engine`] — the client's [`Master`], the server's [`Slave`] with its
+//! handler ([`Serving`]) — and every role's loop is [`Pump::step`] at its core, so reading,
+//! keeping what a blocked engine did not take, sleeping and waking are written once. The
+//! role-specific parts (the client's command channel and retries, the server's reply filter,
+//! observer and idle timeouts) are the session around it: what it does between steps, and
+//! the deadlines it adds. Which codec a [`Transport`] takes is decided once too
+//! ([`Codec::for_transport`]). Echo suppression is the master engine's own (it counts its
+//! echo off the bytes it is fed), so the pump feeds every byte unchanged.
+
+use std::future::Future;
+use std::io;
+
+use ferrobus_proto::Instant;
+use ferrobus_proto::error::BufferTooSmall;
+use ferrobus_proto::frame::ascii::AsciiCodec;
+use ferrobus_proto::frame::mbap::MbapCodec;
+use ferrobus_proto::frame::rtu::RtuCodec;
+use ferrobus_proto::frame::{AduHeader, Framing, LineTiming, RxEvent, RxStats};
+use ferrobus_proto::master::{Completion, Master};
+use ferrobus_proto::slave::{Handler, Slave, SlaveEvent};
+use tokio::io::{AsyncReadExt, AsyncWriteExt};
+
+use crate::clock::Clock;
+use crate::port::{BoxPort, Rs485, Transport};
+use crate::timer::Sleeper;
+
+/// The contract every engine the pump drives keeps: the five verbs of the sans-IO core.
+pub(crate) trait Engine {
+    /// What the engine reports.
+    type Event<'a>
+    where
+        Self: 'a;
+
+    /// Bytes arrived at `now`; returns how many were taken (fewer only while blocked).
+    fn on_bytes(&mut self, now: Instant, bytes: &[u8]) -> usize;
+    /// The next instant [`Engine::handle_timeout`] is due.
+    fn poll_timeout(&self) -> Option<Instant>;
+    /// That instant has come.
+    fn handle_timeout(&mut self, now: Instant);
+    /// Bytes to write now, if any.
+    fn poll_transmit(&mut self, now: Instant, buf: &mut [u8]) -> Option<usize>;
+    /// The next report for the session.
+    fn poll_event(&mut self) -> Option<Self::Event<'_>>;
+    /// Whether the engine takes no bytes until the session has taken its output.
+    fn is_blocked(&self) -> bool {
+        false
+    }
+}
+
+impl<F: Framing> Engine for Master<F> {
+    type Event<'a>
+        = Completion<'a>
+    where
+        F: 'a;
+
+    fn on_bytes(&mut self, now: Instant, bytes: &[u8]) -> usize {
+        Master::on_bytes(self, now, bytes);
+        bytes.len()
+    }
+    fn poll_timeout(&self) -> Option<Instant> {
+        Master::poll_timeout(self)
+    }
+    fn handle_timeout(&mut self, now: Instant) {
+        Master::handle_timeout(self, now);
+    }
+    fn poll_transmit(&mut self, now: Instant, buf: &mut [u8]) -> Option<usize> {
+        Master::poll_transmit(self, now, buf)
+    }
+    fn poll_event(&mut self) -> Option<Completion<'_>> {
+        Master::poll_event(self)
+    }
+}
+
+/// A slave engine with the handler that serves its requests: the server's engine.
+pub(crate) struct Serving<'h, F, H: ?Sized> {
+    pub(crate) slave: Slave<F>,
+    pub(crate) handler: &'h mut H,
+}
+
+impl<F: Framing, H: Handler + ?Sized> Engine for Serving<'_, F, H> {
+    type Event<'a>
+        = SlaveEvent
+    where
+        Self: 'a;
+
+    fn on_bytes(&mut self, now: Instant, bytes: &[u8]) -> usize {
+        self.slave.on_bytes(now, bytes, self.handler)
+    }
+    fn poll_timeout(&self) -> Option<Instant> {
+        self.slave.poll_timeout()
+    }
+    fn handle_timeout(&mut self, now: Instant) {
+        self.slave.handle_timeout(now, self.handler);
+    }
+    fn poll_transmit(&mut self, now: Instant, buf: &mut [u8]) -> Option<usize> {
+        self.slave.poll_transmit(now, buf)
+    }
+    fn poll_event(&mut self) -> Option<SlaveEvent> {
+        self.slave.poll_event()
+    }
+    fn is_blocked(&self) -> bool {
+        self.slave.is_blocked()
+    }
+}
+
+/// What one [`Pump::step`] saw.
+pub(crate) enum Step<T> {
+    /// Bytes arrived and were handed to the engine (what it did not take is kept).
+    Read,
+    /// The port reached its end.
+    Closed,
+    /// Reading failed.
+    Failed(io::Error),
+    /// The deadline came; the engine has not been told yet ([`Pump::handle_timeout`]), so
+    /// that the session may act first on a deadline of its own.
+    Woke,
+    /// The session's other future finished first.
+    Other(T),
+}
+
+/// The loop's state that does not depend on the role: the clock, the sleeper, the read
+/// buffer and the bytes a blocked engine has not taken yet.
+pub(crate) struct Pump {
+    clock: Clock,
+    sleeper: Sleeper,
+    rx: Box<[u8; 1024]>,
+    /// Bytes read that the engine has not taken yet (it was blocked), with their arrival.
+    kept: Vec<u8>,
+    kept_at: Instant,
+    /// The engine blocked while taking input: its receiver may hold frames not yet delivered.
+    stalled: bool,
+}
+
+impl Pump {
+    /// A pump waiting with `sleeper`.
+    pub(crate) fn new(sleeper: Sleeper) -> Self {
+        Pump {
+            clock: Clock::new(),
+            sleeper,
+            rx: Box::new([0; 1024]),
+            kept: Vec::new(),
+            kept_at: Instant::ZERO,
+            stalled: false,
+        }
+    }
+
+    /// The pump's clock.
+    pub(crate) fn clock(&self) -> &Clock {
+        &self.clock
+    }
+
+    /// The engine's next deadline on tokio's clock.
+    pub(crate) fn deadline<E: Engine>(&self, engine: &E) -> Option<tokio::time::Instant> {
+        engine.poll_timeout().map(|t| self.clock.to_tokio(t))
+    }
+
+    /// Hands the engine the bytes it did not take before, if it takes bytes again; returns
+    /// whether it did (the session then serves the engine's output before the next step).
+    pub(crate) fn feed_kept<E: Engine>(&mut self, engine: &mut E) -> bool {
+        if engine.is_blocked() || (!self.stalled && self.kept.is_empty()) {
+            return false;
+        }
+        let taken = engine.on_bytes(self.kept_at, &self.kept);
+        self.kept.drain(..taken.min(self.kept.len()));
+        self.stalled = engine.is_blocked();
+        true
+    }
+
+    /// Tells the engine that its deadline has come.
+    pub(crate) fn handle_timeout<E: Engine>(&mut self, engine: &mut E) {
+        engine.handle_timeout(self.clock.now());
+        self.stalled |= engine.is_blocked();
+    }
+
+    /// Waits for the first of: bytes from `port` (read only while the engine takes them and
+    /// nothing is kept), `deadline`, and `other`.
+    pub(crate) async fn step<E: Engine, T>(
+        &mut self,
+        port: &mut BoxPort,
+        engine: &mut E,
+        deadline: Option<tokio::time::Instant>,
+        other: impl Future<Output = T>,
+    ) -> Step<T> {
+        // While the engine is blocked (its replies or events are full) nothing is read: the
+        // peer is held back by TCP, and no byte is dropped.
+        let reading = !engine.is_blocked() && self.kept.is_empty();
+        tokio::select! {
+            read = port.read(&mut self.rx[..]), if reading => match read {
+                Ok(0) => Step::Closed,
+                Ok(n) => {
+                    let at = port.last_arrival().map_or_else(|| self.clock.now(), |t| self.clock.from_tokio(t));
+                    let bytes = self.rx.get(..n).unwrap_or_default();
+                    tracing::trace!("rx {}", crate::driver::Hex(bytes));
+                    let taken = engine.on_bytes(at, bytes);
+                    self.stalled = engine.is_blocked();
+                    self.kept_at = at;
+                    if let Some(rest) = bytes.get(taken..) {
+                        self.kept.extend_from_slice(rest);
+                    }
+                    Step::Read
+                }
+                Err(e) => Step::Failed(e),
+            },
+            () = self.sleeper.sleep_until(deadline) => Step::Woke,
+            t = other => Step::Other(t),
+        }
+    }
+}
+
+/// Writes `frame` and flushes it, raising RTS around it for [`Rs485::Rts`]: the one writer
+/// of every role.
+pub(crate) async fn write_frame(port: &mut BoxPort, frame: &[u8], rs485: Rs485, timing: &LineTiming) -> io::Result<()> {
+    tracing::trace!("tx {}", crate::driver::Hex(frame));
+    let rts = rs485 == Rs485::Rts;
+    if rts {
+        port.set_rts(true)?;
+    }
+    port.write_all(frame).await?;
+    port.flush().await?;
+    if rts {
+        // The OS buffers the frame; hold RTS until its last character has left.
+        tokio::time::sleep(timing.transmit_time(frame.len()).saturating_add(timing.char_time())).await;
+        port.set_rts(false)?;
+    }
+    Ok(())
+}
+
+/// Which side of the bus an engine is on: it decides how strict the MBAP receiver is.
+#[derive(Clone, Copy, PartialEq, Eq, Debug)]
+pub(crate) enum Role {
+    /// A master: its MBAP receiver resyncs on a bad header.
+    Client,
+    /// A slave: its MBAP receiver is strict, a stream whose framing is lost is closed.
+    Server,
+}
+
+/// The codec a [`Transport`] takes, chosen once ([`Codec::for_transport`]) for every role.
+#[derive(Debug)]
+#[expect(clippy::large_enum_variant, reason = "one codec per engine, held inline: no indirection on each byte")]
+pub(crate) enum Codec {
+    /// RTU, on a serial line or over TCP.
+    Rtu(RtuCodec),
+    /// ASCII.
+    Ascii(AsciiCodec),
+    /// Modbus/TCP.
+    Mbap(MbapCodec),
+}
+
+impl Codec {
+    /// The codec of `transport`'s framing and timing for `role`.
+    pub(crate) fn for_transport(transport: &Transport, role: Role) -> Codec {
+        match transport.framing() {
+            crate::port::Framing::Rtu => Codec::Rtu(transport.rtu_codec()),
+            crate::port::Framing::Ascii => Codec::Ascii(transport.ascii_codec()),
+            crate::port::Framing::Mbap => Codec::Mbap(match role {
+                Role::Client => Transport::mbap_codec(),
+                Role::Server => MbapCodec::strict(),
+            }),
+        }
+    }
+
+    fn framing(&self) -> &dyn Framing {
+        match self {
+            Codec::Rtu(c) => c,
+            Codec::Ascii(c) => c,
+            Codec::Mbap(c) => c,
+        }
+    }
+
+    fn framing_mut(&mut self) -> &mut dyn Framing {
+        match self {
+            Codec::Rtu(c) => c,
+            Codec::Ascii(c) => c,
+            Codec::Mbap(c) => c,
+        }
+    }
+}
+
+impl Framing for Codec {
+    fn encode(&self, header: AduHeader, pdu: &[u8], out: &mut [u8]) -> Result<usize, BufferTooSmall> {
+        self.framing().encode(header, pdu, out)
+    }
+    fn push(&mut self, now: Instant, bytes: &[u8]) -> usize {
+        self.framing_mut().push(now, bytes)
+    }
+    fn poll_event(&mut self) -> Option<RxEvent<'_>> {
+        self.framing_mut().poll_event()
+    }
+    fn poll_timeout(&self) -> Option<Instant> {
+        self.framing().poll_timeout()
+    }
+    fn handle_timeout(&mut self, now: Instant) {
+        self.framing_mut().handle_timeout(now);
+    }
+    fn inter_frame_gap(&self) -> std::time::Duration {
+        self.framing().inter_frame_gap()
+    }
+    fn transmit_time(&self, n: usize) -> std::time::Duration {
+        self.framing().transmit_time(n)
+    }
+    fn reset(&mut self) {
+        self.framing_mut().reset();
+    }
+    fn stats(&self) -> RxStats {
+        self.framing().stats()
+    }
+    fn supports_broadcast(&self) -> bool {
+        self.framing().supports_broadcast()
+    }
+    fn is_mid_frame(&self) -> bool {
+        self.framing().is_mid_frame()
+    }
+    fn set_delimiter(&mut self, delimiter: u8) {
+        self.framing_mut().set_delimiter(delimiter);
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_server_over_modbus_tcp_takes_the_strict_mbap_codec_and_a_client_the_resyncing_one() {
+        let transport = Transport::tcp("127.0.0.1:502");
+        let Codec::Mbap(server) = Codec::for_transport(&transport, Role::Server) else {
+            panic!("a Modbus/TCP transport took a codec other than MBAP");
+        };
+        let Codec::Mbap(client) = Codec::for_transport(&transport, Role::Client) else {
+            panic!("a Modbus/TCP transport took a codec other than MBAP");
+        };
+        assert_eq!(format!("{server:?}"), format!("{:?}", MbapCodec::strict()));
+        assert_eq!(format!("{client:?}"), format!("{:?}", MbapCodec::new()));
+        assert!(!Codec::Mbap(MbapCodec::new()).supports_broadcast(), "unit 0 is ordinary on Modbus/TCP");
+    }
+
+    #[test]
+    fn rtu_over_tcp_takes_the_rtu_codec_for_both_roles() {
+        let transport = Transport::rtu_over_tcp("127.0.0.1:502");
+        assert!(matches!(Codec::for_transport(&transport, Role::Server), Codec::Rtu(_)));
+        assert!(matches!(Codec::for_transport(&transport, Role::Client), Codec::Rtu(_)));
+    }
+}
