@@ -328,7 +328,144 @@ impl Framing for Codec {
 
 #[cfg(test)]
 mod tests {
+    use std::pin::Pin;
+    use std::sync::{Arc, Mutex};
+    use std::task::{Context, Poll};
+    use std::time::Duration;
+
+    use ferrobus_proto::frame::LineConfig;
+    use tokio::io::{AsyncRead, AsyncWrite, DuplexStream, ReadBuf};
+
     use super::*;
+    use crate::port::Port;
+    use crate::timer::Timer;
+
+    /// A stream that logs each RTS change with its time.
+    struct RtsPort {
+        stream: DuplexStream,
+        rts: Arc<Mutex<Vec<(bool, tokio::time::Instant)>>>,
+    }
+
+    impl AsyncRead for RtsPort {
+        fn poll_read(mut self: Pin<&mut Self>, cx: &mut Context<'_>, buf: &mut ReadBuf<'_>) -> Poll<io::Result<()>> {
+            Pin::new(&mut self.stream).poll_read(cx, buf)
+        }
+    }
+
+    impl AsyncWrite for RtsPort {
+        fn poll_write(mut self: Pin<&mut Self>, cx: &mut Context<'_>, buf: &[u8]) -> Poll<io::Result<usize>> {
+            Pin::new(&mut self.stream).poll_write(cx, buf)
+        }
+        fn poll_flush(mut self: Pin<&mut Self>, cx: &mut Context<'_>) -> Poll<io::Result<()>> {
+            Pin::new(&mut self.stream).poll_flush(cx)
+        }
+        fn poll_shutdown(mut self: Pin<&mut Self>, cx: &mut Context<'_>) -> Poll<io::Result<()>> {
+            Pin::new(&mut self.stream).poll_shutdown(cx)
+        }
+    }
+
+    impl Port for RtsPort {
+        fn set_rts(&mut self, on: bool) -> io::Result<()> {
+            self.rts.lock().unwrap().push((on, tokio::time::Instant::now()));
+            Ok(())
+        }
+    }
+
+    /// An engine that takes at most `room` bytes, and is blocked while it has none.
+    struct Taker {
+        took: Vec<u8>,
+        room: usize,
+    }
+
+    impl Engine for Taker {
+        type Event<'a> = ();
+        fn on_bytes(&mut self, _now: Instant, bytes: &[u8]) -> usize {
+            let n = bytes.len().min(self.room);
+            self.took.extend_from_slice(&bytes[..n]);
+            self.room -= n;
+            n
+        }
+        fn poll_timeout(&self) -> Option<Instant> {
+            None
+        }
+        fn handle_timeout(&mut self, _now: Instant) {}
+        fn poll_transmit(&mut self, _now: Instant, _buf: &mut [u8]) -> Option<usize> {
+            None
+        }
+        fn poll_event(&mut self) -> Option<()> {
+            None
+        }
+        fn is_blocked(&self) -> bool {
+            self.room == 0
+        }
+    }
+
+    #[tokio::test(start_paused = true)]
+    async fn the_writer_raises_rts_before_the_frame_and_drops_it_once_its_last_character_has_left() {
+        let (ours, mut theirs) = tokio::io::duplex(64);
+        let rts = Arc::new(Mutex::new(Vec::new()));
+        let mut port: BoxPort = Box::new(RtsPort { stream: ours, rts: Arc::clone(&rts) });
+        let timing = LineTiming::new(&LineConfig::new(9600).unwrap());
+        let frame = [0x01, 0x03, 0x00, 0x00, 0x00, 0x01, 0x84, 0x0A];
+        let start = tokio::time::Instant::now();
+        write_frame(&mut port, &frame, Rs485::Rts, &timing).await.unwrap();
+        let mut got = [0u8; 8];
+        theirs.read_exact(&mut got).await.unwrap();
+        assert_eq!(got, frame, "the peer got other bytes than the frame");
+        let held = timing.transmit_time(frame.len()) + timing.char_time();
+        let changes = rts.lock().unwrap().clone();
+        let [(true, on), (false, off)] = changes[..] else { panic!("RTS changes (on/off, when): {changes:?}") };
+        assert_eq!(on, start, "RTS was not raised before the frame");
+        // tokio's timer rounds up to the millisecond: never early is the contract.
+        assert!(off >= start + held, "RTS dropped {:?} after the frame began, before {held:?}", off - start);
+    }
+
+    #[tokio::test(start_paused = true)]
+    async fn the_writer_leaves_rts_alone_unless_asked() {
+        let (ours, _theirs) = tokio::io::duplex(64);
+        let rts = Arc::new(Mutex::new(Vec::new()));
+        let mut port: BoxPort = Box::new(RtsPort { stream: ours, rts: Arc::clone(&rts) });
+        let timing = LineTiming::new(&LineConfig::new(9600).unwrap());
+        write_frame(&mut port, &[1, 2, 3], Rs485::Auto, &timing).await.unwrap();
+        assert!(rts.lock().unwrap().is_empty(), "RTS was switched: {:?}", rts.lock().unwrap());
+    }
+
+    #[tokio::test(start_paused = true)]
+    async fn bytes_a_blocked_engine_did_not_take_are_kept_not_read_past_and_fed_in_order_later() {
+        let (ours, mut theirs) = tokio::io::duplex(64);
+        let mut port: BoxPort = Box::new(ours);
+        let mut pump = Pump::new(Timer::Tokio.sleeper());
+        let mut engine = Taker { took: Vec::new(), room: 2 };
+        theirs.write_all(&[1, 2, 3, 4, 5, 6]).await.unwrap();
+        let step = pump.step(&mut port, &mut engine, None, std::future::pending::<()>()).await;
+        assert!(matches!(step, Step::Read), "the first step did not read");
+        assert_eq!(engine.took, [1, 2], "a blocked engine took more than it had room for");
+        // Blocked: the next step reads nothing, even with bytes waiting, and wakes at its deadline.
+        theirs.write_all(&[7, 8]).await.unwrap();
+        assert!(!pump.feed_kept(&mut engine), "bytes were fed to a blocked engine");
+        let deadline = Some(tokio::time::Instant::now() + Duration::from_millis(1));
+        let step = pump.step(&mut port, &mut engine, deadline, std::future::pending::<()>()).await;
+        assert!(matches!(step, Step::Woke), "a step read while the engine was blocked");
+        engine.room = 3;
+        assert!(pump.feed_kept(&mut engine), "kept bytes were not fed once the engine had room");
+        assert_eq!(engine.took, [1, 2, 3, 4, 5], "kept bytes fed out of order");
+        engine.room = 10;
+        assert!(pump.feed_kept(&mut engine), "the last kept byte was not fed");
+        assert_eq!(engine.took, [1, 2, 3, 4, 5, 6]);
+        let step = pump.step(&mut port, &mut engine, None, std::future::pending::<()>()).await;
+        assert!(matches!(step, Step::Read), "the step after the kept bytes did not read");
+        assert_eq!(engine.took, [1, 2, 3, 4, 5, 6, 7, 8], "bytes read after the kept ones came out of order");
+    }
+
+    #[tokio::test(start_paused = true)]
+    async fn a_step_ends_with_the_sessions_future_when_it_finishes_first() {
+        let (ours, _theirs) = tokio::io::duplex(64);
+        let mut port: BoxPort = Box::new(ours);
+        let mut pump = Pump::new(Timer::Tokio.sleeper());
+        let mut engine = Taker { took: Vec::new(), room: 8 };
+        let step = pump.step(&mut port, &mut engine, None, std::future::ready(7)).await;
+        assert!(matches!(step, Step::Other(7)), "the session's future did not end the step");
+    }
 
     #[test]
     fn a_server_over_modbus_tcp_takes_the_strict_mbap_codec_and_a_client_the_resyncing_one() {
