@@ -1,10 +1,10 @@
 //! The server driver: runs the core slave engine over a port, or over every connection a TCP
 //! listener accepts.
 //!
-//! Like the client's driver it knows no Modbus: it feeds bytes with their arrival time,
-//! sleeps until the engine's next deadline ([`Timer::Precise`] on serial lines, so that a
-//! reply due at t3.5 + wait is not a millisecond late), writes the reply the engine hands
-//! it, and reports what happened. A [`ReplyFilter`] may drop, delay or alter replies on
+//! Like the client's driver it knows no Modbus, and runs on the same one driver loop (see the
+//! crate's opening doc): it feeds bytes with their arrival time, sleeps until the engine's
+//! next deadline ([`Timer::Precise`] on serial lines, so that a reply due at t3.5 + wait is
+//! not a millisecond late), writes the reply the engine hands it, and reports what happened. A [`ReplyFilter`] may drop, delay or alter replies on
 //! their way out: the simulator's fault injection.
 //!
 //! Over TCP ([`serve_tcp_with`]) a connection's trouble never ends the server: running out of
