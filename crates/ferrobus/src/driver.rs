@@ -287,18 +287,3 @@ fn convert(command: &Command, completion: Completion<'_>) -> Result<Reply, Error
 pub(crate) fn parse_reply(unit: u8, pdu: &[u8]) -> Result<Response<'_>, Error> {
     Response::parse(pdu).map_err(|e| Error::BadReply { unit, error: MasterError::BadResponse(e) })
 }
-
-/// Bytes as upper-case hex pairs, for the frame trace (`-vvv`).
-pub(crate) struct Hex<'a>(pub(crate) &'a [u8]);
-
-impl std::fmt::Display for Hex<'_> {
-    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        for (i, b) in self.0.iter().enumerate() {
-            if i > 0 {
-                f.write_str(" ")?;
-            }
-            write!(f, "{b:02X}")?;
-        }
-        Ok(())
-    }
-}

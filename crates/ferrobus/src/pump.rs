@@ -201,7 +201,7 @@ impl Pump {
                 Ok(n) => {
                     let at = port.last_arrival().map_or_else(|| self.clock.now(), |t| self.clock.from_tokio(t));
                     let bytes = self.rx.get(..n).unwrap_or_default();
-                    tracing::trace!("rx {}", crate::driver::Hex(bytes));
+                    tracing::trace!("rx {}", Hex(bytes));
                     let taken = engine.on_bytes(at, bytes);
                     self.stalled = engine.is_blocked();
                     self.kept_at = at;
@@ -221,7 +221,7 @@ impl Pump {
 /// Writes `frame` and flushes it, raising RTS around it for [`Rs485::Rts`]: the one writer
 /// of every role.
 pub(crate) async fn write_frame(port: &mut BoxPort, frame: &[u8], rs485: Rs485, timing: &LineTiming) -> io::Result<()> {
-    tracing::trace!("tx {}", crate::driver::Hex(frame));
+    tracing::trace!("tx {}", Hex(frame));
     let rts = rs485 == Rs485::Rts;
     if rts {
         port.set_rts(true)?;
@@ -323,6 +323,21 @@ impl Framing for Codec {
     }
     fn set_delimiter(&mut self, delimiter: u8) {
         self.framing_mut().set_delimiter(delimiter);
+    }
+}
+
+/// Bytes as upper-case hex pairs, for the frame trace (`-vvv`).
+pub(crate) struct Hex<'a>(pub(crate) &'a [u8]);
+
+impl std::fmt::Display for Hex<'_> {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        for (i, b) in self.0.iter().enumerate() {
+            if i > 0 {
+                f.write_str(" ")?;
+            }
+            write!(f, "{b:02X}")?;
+        }
+        Ok(())
     }
 }
 
