@@ -25,7 +25,7 @@ use tokio::sync::{mpsc, oneshot};
 use crate::config::{ClientConfig, RequestOptions};
 use crate::error::Error;
 use crate::port::{BoxPort, Transport};
-use crate::pump::{Engine, Pump, Step, write_frame};
+use crate::pump::{Engine, Pump, Session, Step, write_frame};
 
 /// One request for the driver.
 pub(crate) struct Command {
@@ -179,44 +179,20 @@ impl<F: Framing + Send + 'static> Driver<F> {
             // Only a PDU longer than 253 bytes cannot be framed.
             return Err(Error::InvalidRequest(ferrobus_proto::PduError::TooLong { len: command.pdu.len() }));
         }
-        loop {
-            if let Some(n) = Engine::poll_transmit(&mut self.master, self.pump.clock().now(), &mut self.tx[..]) {
-                if let Err(e) = self.write(n).await {
-                    self.master.abort();
-                    self.port = None;
-                    return Err(Error::io(format!("writing to {}", self.transport.describe()), e));
-                }
-            }
-            if let Some(completion) = Engine::poll_event(&mut self.master) {
-                return convert(command, completion);
-            }
-            let deadline = self.pump.deadline(&self.master);
-            let Some(port) = self.port.as_mut() else {
-                return Err(Error::io(
-                    format!("reading from {}", self.transport.describe()),
-                    std::io::ErrorKind::NotConnected.into(),
-                ));
-            };
-            let error = match self.pump.step(port, &mut self.master, deadline, std::future::pending::<()>()).await {
-                Step::Read | Step::Other(()) => continue,
-                Step::Woke => {
-                    self.pump.handle_timeout(&mut self.master);
-                    continue;
-                }
-                Step::Closed => std::io::ErrorKind::UnexpectedEof.into(),
-                Step::Failed(e) => e,
-            };
+        let Some(port) = self.port.as_mut() else {
+            return Err(Error::io(
+                format!("reading from {}", self.transport.describe()),
+                std::io::ErrorKind::NotConnected.into(),
+            ));
+        };
+        let mut transaction = Transaction { command, tx: &mut self.tx, transport: &self.transport };
+        let result = self.pump.run(port, &mut self.master, &mut transaction).await;
+        if let Err(Error::Io { .. }) = result {
+            // The port failed under the request: nothing more is heard of it.
             self.master.abort();
             self.port = None;
-            return Err(Error::io(format!("reading from {}", self.transport.describe()), error));
         }
-    }
-
-    /// Writes the engine's frame, switching the transmitter by RTS if asked to.
-    async fn write(&mut self, n: usize) -> std::io::Result<()> {
-        let Some(port) = self.port.as_mut() else { return Err(std::io::ErrorKind::NotConnected.into()) };
-        let bytes = self.tx.get(..n).unwrap_or_default();
-        write_frame(port, bytes, self.transport.rs485(), self.transport.timing()).await
+        result
     }
 
     /// Fails fast for a unit in backoff; returns whether this request is its probe.
@@ -244,6 +220,33 @@ impl<F: Framing + Send + 'static> Driver<F> {
         } else if outcome == Outcome::Timeout && matches!(health.check(now), Admit::Skip { .. }) {
             tracing::info!(unit, period = ?health.period(), "unit not answering; backing off");
         }
+    }
+}
+
+/// One request on the line: the client's session around the pump.
+struct Transaction<'a> {
+    command: &'a Command,
+    tx: &'a mut [u8; MAX_TX_LEN],
+    transport: &'a Transport,
+}
+
+impl<F: Framing> Session<Master<F>> for Transaction<'_> {
+    type Output = Result<Reply, Error>;
+
+    /// Writes the request when the engine has it due; ends with the engine's completion.
+    async fn serve(&mut self, pump: &Pump, port: &mut BoxPort, master: &mut Master<F>) -> Option<Self::Output> {
+        if let Some(n) = Engine::poll_transmit(master, pump.clock().now(), &mut self.tx[..]) {
+            let bytes = self.tx.get(..n).unwrap_or_default();
+            if let Err(e) = write_frame(port, bytes, self.transport.rs485(), self.transport.timing()).await {
+                return Some(Err(Error::io(format!("writing to {}", self.transport.describe()), e)));
+            }
+        }
+        Engine::poll_event(master).map(|completion| convert(self.command, completion))
+    }
+
+    fn on_end(&mut self, error: Option<std::io::Error>) -> Self::Output {
+        let error = error.unwrap_or_else(|| std::io::ErrorKind::UnexpectedEof.into());
+        Err(Error::io(format!("reading from {}", self.transport.describe()), error))
     }
 }
 

@@ -114,6 +114,27 @@ impl<F: Framing, H: Handler + ?Sized> Engine for Serving<'_, F, H> {
     }
 }
 
+/// What a role does around the pump, at the loop's fixed points ([`Pump::run`]).
+pub(crate) trait Session<E: Engine> {
+    /// What the loop ends with.
+    type Output;
+    /// Takes the engine's events and writes what it hands out, at the top of every turn;
+    /// `Some` ends the loop.
+    async fn serve(&mut self, pump: &Pump, port: &mut BoxPort, engine: &mut E) -> Option<Self::Output>;
+    /// The session's own earliest deadline, besides the engine's.
+    fn deadline(&mut self, _engine: &E) -> Option<tokio::time::Instant> {
+        None
+    }
+    /// Bytes were read.
+    fn on_read(&mut self) {}
+    /// A deadline came, before the engine is told; `Some` ends the loop.
+    fn on_wake(&mut self) -> Option<Self::Output> {
+        None
+    }
+    /// The port reached its end (`None`) or reading failed.
+    fn on_end(&mut self, error: Option<io::Error>) -> Self::Output;
+}
+
 /// What one [`Pump::step`] saw.
 pub(crate) enum Step<T> {
     /// Bytes arrived and were handed to the engine (what it did not take is kept).
@@ -181,6 +202,38 @@ impl Pump {
     pub(crate) fn handle_timeout<E: Engine>(&mut self, engine: &mut E) {
         engine.handle_timeout(self.clock.now());
         self.stalled |= engine.is_blocked();
+    }
+
+    /// The one driver loop: serves the engine's output through `session`, hands the engine
+    /// the bytes it did not take before, then reads or sleeps until the earliest of the
+    /// engine's and the session's deadlines; until the session or the port ends it.
+    pub(crate) async fn run<E: Engine, S: Session<E>>(
+        &mut self,
+        port: &mut BoxPort,
+        engine: &mut E,
+        session: &mut S,
+    ) -> S::Output {
+        loop {
+            if let Some(output) = session.serve(self, port, engine).await {
+                return output;
+            }
+            if self.feed_kept(engine) {
+                continue;
+            }
+            let deadline = [self.deadline(engine), session.deadline(engine)].into_iter().flatten().min();
+            match self.step(port, engine, deadline, std::future::pending::<()>()).await {
+                Step::Read => session.on_read(),
+                Step::Closed => return session.on_end(None),
+                Step::Failed(e) => return session.on_end(Some(e)),
+                Step::Other(()) => {}
+                Step::Woke => {
+                    if let Some(output) = session.on_wake() {
+                        return output;
+                    }
+                    self.handle_timeout(engine);
+                }
+            }
+        }
     }
 
     /// Waits for the first of: bytes from `port` (read only while the engine takes them and

@@ -33,7 +33,7 @@ use ferrobus_proto::{ExceptionCode, FunctionCode};
 use tokio::net::TcpListener;
 
 use crate::port::{BoxPort, Rs485, Transport};
-use crate::pump::{Codec, Engine, Pump, Role, Serving, Step, write_frame};
+use crate::pump::{Codec, Engine, Pump, Role, Serving, Session, write_frame};
 use crate::timer::Timer;
 
 /// What happens to a reply on its way out.
@@ -318,85 +318,114 @@ pub async fn serve<F: Framing, H: Handler + Send>(
 ) -> (Slave<F>, io::Result<()>) {
     let mut pump = Pump::new(options.timer.sleeper());
     let mut engine = Serving { slave, handler };
-    let mut tx = [0u8; MAX_TX_LEN];
-    // Replies held back by the filter, in order, with when to send them. Over TCP several
-    // replies may be pending; one sent now waits behind those held, to keep the order.
-    let mut delayed: VecDeque<(Outgoing, tokio::time::Instant)> = VecDeque::new();
-    // The requests whose replies have not gone out yet, oldest first.
-    let mut answering: VecDeque<Answering> = VecDeque::new();
-    let mut last_activity = tokio::time::Instant::now();
-    // When the frame now being received began.
-    let mut frame_began: Option<tokio::time::Instant> = None;
-    loop {
+    let mut session = Replies {
+        options,
+        tx: [0u8; MAX_TX_LEN],
+        delayed: VecDeque::new(),
+        answering: VecDeque::new(),
+        last_activity: tokio::time::Instant::now(),
+        frame_began: None,
+        idle_at: None,
+        unfinished_at: None,
+        woke: false,
+    };
+    let ended = pump.run(&mut port, &mut engine, &mut session).await;
+    (engine.slave, ended)
+}
+
+/// The server's session around the pump: reports events, passes replies through the filter
+/// and writes them in order, and closes the port on the idle and unfinished-frame timeouts.
+struct Replies<'o> {
+    options: &'o mut ServerOptions,
+    tx: [u8; MAX_TX_LEN],
+    /// Replies held back by the filter, in order, with when to send them. Over TCP several
+    /// replies may be pending; one sent now waits behind those held, to keep the order.
+    delayed: VecDeque<(Outgoing, tokio::time::Instant)>,
+    /// The requests whose replies have not gone out yet, oldest first.
+    answering: VecDeque<Answering>,
+    last_activity: tokio::time::Instant,
+    /// When the frame now being received began.
+    frame_began: Option<tokio::time::Instant>,
+    /// When the idle and the unfinished-frame timeouts are due, as the last turn set them.
+    idle_at: Option<tokio::time::Instant>,
+    unfinished_at: Option<tokio::time::Instant>,
+    /// A deadline came: held replies now due go out before anything else.
+    woke: bool,
+}
+
+impl<F: Framing, H: Handler + ?Sized> Session<Serving<'_, F, H>> for Replies<'_> {
+    type Output = io::Result<()>;
+
+    async fn serve(&mut self, pump: &Pump, port: &mut BoxPort, engine: &mut Serving<'_, F, H>) -> Option<Self::Output> {
+        if std::mem::take(&mut self.woke) {
+            while self.delayed.front().is_some_and(|(_, at)| *at <= tokio::time::Instant::now()) {
+                let Some((reply, _)) = self.delayed.pop_front() else { break };
+                if let Err(e) = send(port, reply, self.options).await {
+                    return Some(Err(e));
+                }
+                self.last_activity = tokio::time::Instant::now();
+            }
+        }
         let now = pump.clock().now();
         // Events first: a request is known before its reply leaves (on TCP, at once).
-        let lost = take_events(&mut engine, &mut answering, options);
+        let lost = take_events(engine, &mut self.answering, self.options);
         loop {
             let due = engine.slave.reply_due().map_or_else(tokio::time::Instant::now, |t| pump.clock().to_tokio(t));
-            let Some(n) = engine.poll_transmit(now, &mut tx) else { break };
-            let mut frame = tx.get(..n).unwrap_or_default().to_vec();
-            let request = answering.pop_front();
-            let fate = options.filter.as_mut().map_or(Fate::Send, |f| f.filter(request.as_ref(), &mut frame));
+            let Some(n) = engine.poll_transmit(now, &mut self.tx) else { break };
+            let mut frame = self.tx.get(..n).unwrap_or_default().to_vec();
+            let request = self.answering.pop_front();
+            let fate = self.options.filter.as_mut().map_or(Fate::Send, |f| f.filter(request.as_ref(), &mut frame));
             let (wait, gap) = match fate {
                 Fate::Send => (Duration::ZERO, None),
                 Fate::Delay(d) => (d, None),
                 Fate::Trickle { gap } => (Duration::ZERO, Some(gap)),
                 Fate::Drop => {
-                    options.observe(ServerEvent::Dropped { frame });
+                    self.options.observe(ServerEvent::Dropped { frame });
                     continue;
                 }
             };
             let reply = Outgoing { frame, due, gap };
-            let behind = delayed.back().map(|(_, at)| *at);
+            let behind = self.delayed.back().map(|(_, at)| *at);
             if wait.is_zero() && behind.is_none() {
-                if let Err(e) = send(&mut port, reply, options).await {
-                    return (engine.slave, Err(e));
+                if let Err(e) = send(port, reply, self.options).await {
+                    return Some(Err(e));
                 }
-                last_activity = tokio::time::Instant::now();
+                self.last_activity = tokio::time::Instant::now();
                 continue;
             }
             // A delay too long to add to an instant never ends: the reply is as good as dropped.
             let Some(at) = tokio::time::Instant::now().checked_add(wait) else {
-                options.observe(ServerEvent::Dropped { frame: reply.frame });
+                self.options.observe(ServerEvent::Dropped { frame: reply.frame });
                 continue;
             };
-            delayed.push_back((reply, behind.map_or(at, |behind| behind.max(at))));
+            self.delayed.push_back((reply, behind.map_or(at, |behind| behind.max(at))));
         }
-        if lost {
-            // The replies to the requests before the bad header have gone; nothing after it
-            // is executed.
-            return (engine.slave, Err(Closed::BadHeader.error()));
-        }
-        if pump.feed_kept(&mut engine) {
-            continue;
-        }
-        frame_began = if engine.slave.framing().is_mid_frame() { frame_began.or(Some(last_activity)) } else { None };
+        // The replies to the requests before a bad header have gone; nothing after it is
+        // executed.
+        lost.then(|| Err(Closed::BadHeader.error()))
+    }
+
+    fn deadline(&mut self, engine: &Serving<'_, F, H>) -> Option<tokio::time::Instant> {
+        self.frame_began =
+            if engine.slave.framing().is_mid_frame() { self.frame_began.or(Some(self.last_activity)) } else { None };
         // A timeout too long to add to an instant is no deadline at all.
-        let idle_at = options.idle_timeout.and_then(|d| last_activity.checked_add(d));
-        let unfinished_at = options.frame_timeout.zip(frame_began).and_then(|(d, began)| began.checked_add(d));
-        let deadline = [delayed.front().map(|(_, d)| *d), pump.deadline(&engine), idle_at, unfinished_at]
-            .into_iter()
-            .flatten()
-            .min();
-        match pump.step(&mut port, &mut engine, deadline, std::future::pending::<()>()).await {
-            Step::Read => last_activity = tokio::time::Instant::now(),
-            Step::Closed => return (engine.slave, Ok(())),
-            Step::Failed(e) => return (engine.slave, Err(e)),
-            Step::Other(()) => {}
-            Step::Woke => {
-                if let Some(closed) = overdue(options, idle_at, unfinished_at) {
-                    return (engine.slave, Err(closed.error()));
-                }
-                pump.handle_timeout(&mut engine);
-                while delayed.front().is_some_and(|(_, at)| *at <= tokio::time::Instant::now()) {
-                    let Some((reply, _)) = delayed.pop_front() else { break };
-                    if let Err(e) = send(&mut port, reply, options).await {
-                        return (engine.slave, Err(e));
-                    }
-                    last_activity = tokio::time::Instant::now();
-                }
-            }
-        }
+        self.idle_at = self.options.idle_timeout.and_then(|d| self.last_activity.checked_add(d));
+        self.unfinished_at =
+            self.options.frame_timeout.zip(self.frame_began).and_then(|(d, began)| began.checked_add(d));
+        [self.delayed.front().map(|(_, d)| *d), self.idle_at, self.unfinished_at].into_iter().flatten().min()
+    }
+
+    fn on_read(&mut self) {
+        self.last_activity = tokio::time::Instant::now();
+    }
+
+    fn on_wake(&mut self) -> Option<Self::Output> {
+        self.woke = true;
+        overdue(self.options, self.idle_at, self.unfinished_at).map(|closed| Err(closed.error()))
+    }
+
+    fn on_end(&mut self, error: Option<io::Error>) -> Self::Output {
+        error.map_or(Ok(()), Err)
     }
 }
 
