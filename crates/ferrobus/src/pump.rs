@@ -525,6 +525,94 @@ mod tests {
         assert_eq!(engine.took, [1, 2, 3, 4, 5, 6, 7, 8], "bytes read after the kept ones came out of order");
     }
 
+    /// An engine due once at `due`.
+    struct Due {
+        due: Option<Instant>,
+        told: Vec<&'static str>,
+    }
+
+    impl Engine for Due {
+        type Event<'a> = ();
+        fn on_bytes(&mut self, _now: Instant, bytes: &[u8]) -> usize {
+            bytes.len()
+        }
+        fn poll_timeout(&self) -> Option<Instant> {
+            self.due
+        }
+        fn handle_timeout(&mut self, now: Instant) {
+            if self.due.is_some_and(|due| now >= due) {
+                self.due = None;
+                self.told.push("engine woken");
+            }
+        }
+        fn poll_transmit(&mut self, _now: Instant, _buf: &mut [u8]) -> Option<usize> {
+            None
+        }
+        fn poll_event(&mut self) -> Option<()> {
+            None
+        }
+    }
+
+    /// Ends once the engine has been woken, or at its own deadline.
+    struct Until {
+        deadline: Option<tokio::time::Instant>,
+    }
+
+    impl Session<Due> for Until {
+        type Output = &'static str;
+        async fn serve(&mut self, _pump: &Pump, _port: &mut BoxPort, engine: &mut Due) -> Option<&'static str> {
+            engine.due.is_none().then_some("served after the engine's deadline")
+        }
+        fn deadline(&mut self, _engine: &Due) -> Option<tokio::time::Instant> {
+            self.deadline
+        }
+        fn on_wake(&mut self) -> Option<&'static str> {
+            self.deadline.is_some_and(|d| tokio::time::Instant::now() >= d).then_some("the session's deadline")
+        }
+        fn on_end(&mut self, _error: Option<io::Error>) -> &'static str {
+            "the port ended"
+        }
+    }
+
+    #[tokio::test(start_paused = true)]
+    async fn the_loop_wakes_the_engine_at_its_deadline_never_early_and_the_session_serves_after() {
+        let (ours, _theirs) = tokio::io::duplex(64);
+        let mut port: BoxPort = Box::new(ours);
+        let mut pump = Pump::new(Timer::Tokio.sleeper());
+        let due = pump.clock().now().saturating_add(Duration::from_millis(5));
+        let mut engine = Due { due: Some(due), told: Vec::new() };
+        let ended = pump.run(&mut port, &mut engine, &mut Until { deadline: None }).await;
+        assert_eq!(ended, "served after the engine's deadline");
+        assert_eq!(engine.told, ["engine woken"]);
+        assert!(pump.clock().now() >= due, "the engine was woken before its deadline");
+    }
+
+    #[tokio::test(start_paused = true)]
+    async fn a_session_deadline_before_the_engines_ends_the_loop_without_waking_the_engine() {
+        let (ours, _theirs) = tokio::io::duplex(64);
+        let mut port: BoxPort = Box::new(ours);
+        let mut pump = Pump::new(Timer::Tokio.sleeper());
+        let mut engine = Due { due: Some(pump.clock().now().saturating_add(Duration::from_secs(1))), told: Vec::new() };
+        let deadline = tokio::time::Instant::now() + Duration::from_millis(5);
+        let ended = pump.run(&mut port, &mut engine, &mut Until { deadline: Some(deadline) }).await;
+        assert_eq!(ended, "the session's deadline");
+        assert!(engine.told.is_empty(), "the engine was woken: {:?}", engine.told);
+        assert!(tokio::time::Instant::now() >= deadline, "the session's deadline came early");
+    }
+
+    #[tokio::test(start_paused = true)]
+    async fn the_loop_ends_with_the_sessions_word_when_the_port_ends() {
+        let (ours, theirs) = tokio::io::duplex(64);
+        drop(theirs);
+        let mut port: BoxPort = Box::new(ours);
+        let mut pump = Pump::new(Timer::Tokio.sleeper());
+        // Due far off, so that the session does not end the loop first.
+        let mut engine =
+            Due { due: Some(pump.clock().now().saturating_add(Duration::from_secs(3600))), told: Vec::new() };
+        let ended = pump.run(&mut port, &mut engine, &mut Until { deadline: None }).await;
+        assert_eq!(ended, "the port ended");
+    }
+
     #[tokio::test(start_paused = true)]
     async fn a_step_ends_with_the_sessions_future_when_it_finishes_first() {
         let (ours, _theirs) = tokio::io::duplex(64);
