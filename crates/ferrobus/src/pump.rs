@@ -10,11 +10,13 @@
 //! ```
 //!
 //! Every role is an [`Engine`] — the client's [`Master`], the server's [`Slave`] with its
-//! handler ([`Serving`]) — and every role's loop is [`Pump::step`] at its core, so reading,
-//! keeping what a blocked engine did not take, sleeping and waking are written once. The
-//! role-specific parts (the client's command channel and retries, the server's reply filter,
-//! observer and idle timeouts) are the session around it: what it does between steps, and
-//! the deadlines it adds. Which codec a [`Transport`] takes is decided once too
+//! handler ([`Serving`]) — driven by the one loop, [`Pump::run`], so reading, keeping what a
+//! blocked engine did not take, sleeping and waking are written once. The role-specific parts
+//! are a [`Session`] the loop calls at fixed points (serve the engine's output, add deadlines,
+//! note a read, act on a wake before the engine, end with the port): the client's request
+//! (`driver::Transaction`) and the server's replies with their filter, observer and idle
+//! timeouts (`server::Replies`). Between requests the client waits on its command channel
+//! and the port at once with [`Pump::step`], the loop's one turn. Which codec a [`Transport`] takes is decided once too
 //! ([`Codec::for_transport`]). Echo suppression is the master engine's own (it counts its
 //! echo off the bytes it is fed), so the pump feeds every byte unchanged.
 
