@@ -21,7 +21,6 @@
 use std::time::Duration;
 
 use ferrobus_proto::codes::{DiagnosticCode, ReadDeviceIdCode};
-use ferrobus_proto::frame::ascii::AsciiCodec;
 use ferrobus_proto::master::{Master, MasterConfig};
 use ferrobus_proto::pdu::{
     Bits, CommEventCounter, Custom, Diagnostic, FileRecordReads, FileRecordRef, FileRecordWrite, FileRecordWrites,
@@ -34,6 +33,7 @@ use tokio::sync::{mpsc, oneshot};
 use crate::driver::{Command, Driver, Reply, parse_reply};
 use crate::error::Error;
 use crate::port::{Framing, Transport};
+use crate::pump::{Codec, Role};
 
 pub use crate::config::{Backoff, ClientConfig, RequestOptions};
 
@@ -89,21 +89,8 @@ impl Client {
             turnaround_delay: config.turnaround_delay,
             echo_suppression: config.echo_suppression,
         };
-        match framing {
-            Framing::Rtu => {
-                let driver = Driver::new(Master::new(transport.rtu_codec(), master), transport, config, port);
-                tokio::spawn(driver.run(rx));
-            }
-            Framing::Ascii => {
-                let codec: AsciiCodec = transport.ascii_codec();
-                let driver = Driver::new(Master::new(codec, master), transport, config, port);
-                tokio::spawn(driver.run(rx));
-            }
-            Framing::Mbap => {
-                let driver = Driver::new(Master::new(Transport::mbap_codec(), master), transport, config, port);
-                tokio::spawn(driver.run(rx));
-            }
-        }
+        let codec = Codec::for_transport(&transport, Role::Client);
+        tokio::spawn(Driver::new(Master::new(codec, master), transport, config, port).run(rx));
         Client { commands: tx, options, framing }
     }
 

@@ -1,8 +1,9 @@
 //! The client's driver task: runs the core master engine over a port.
 //!
-//! It knows no Modbus. It feeds the engine the bytes it reads with the time they arrived,
-//! sleeps until the engine's next deadline, writes what the engine hands it, and reopens the
-//! port after an IO error. Everything else — gaps, matching, timeouts — is the engine's.
+//! It knows no Modbus. It is the client's session around the one [`pump`](crate::pump): the
+//! pump feeds the engine the bytes it reads with the time they arrived, sleeps until the
+//! engine's next deadline and writes what the engine hands it; the driver takes commands
+//! from the channel, hands back completions, and reopens the port after an IO error. Everything else — gaps, matching, timeouts — is the engine's.
 //! On top it asks the core's [`retry`](ferrobus_proto::retry) policy what needs more than one
 //! transaction: retries, per-unit backoff so that a dead device costs one timeout per backoff
 //! period instead of one per poll, and a backoff on IO failures — after each failed open, read
@@ -19,14 +20,12 @@ use ferrobus_proto::retry::{Admit, IoBackoff, Outcome, UnitHealth, should_retry}
 #[cfg(doc)]
 use ferrobus_proto::retry::{IO_BACKOFF_INITIAL, IO_BACKOFF_MAX};
 use ferrobus_proto::{FunctionCode, PduError};
-use tokio::io::{AsyncReadExt, AsyncWriteExt};
 use tokio::sync::{mpsc, oneshot};
 
-use crate::clock::Clock;
 use crate::config::{ClientConfig, RequestOptions};
 use crate::error::Error;
-use crate::port::{BoxPort, Rs485, Transport};
-use crate::timer::Sleeper;
+use crate::port::{BoxPort, Transport};
+use crate::pump::{Engine, Pump, Session, Step, write_frame};
 
 /// One request for the driver.
 pub(crate) struct Command {
@@ -57,26 +56,22 @@ pub(crate) struct Driver<F> {
     opened: bool,
     /// IO failures (opening, reading, writing) and when the port may be reopened.
     io: IoBackoff,
-    clock: Clock,
     health: HashMap<u8, UnitHealth>,
-    rx: Box<[u8; 1024]>,
     tx: Box<[u8; MAX_TX_LEN]>,
-    sleeper: Sleeper,
+    pump: Pump,
 }
 
 impl<F: Framing + Send + 'static> Driver<F> {
     pub(crate) fn new(master: Master<F>, transport: Transport, config: ClientConfig, port: Option<BoxPort>) -> Self {
         Driver {
             master,
-            sleeper: transport.timer().sleeper(),
+            pump: Pump::new(transport.timer().sleeper()),
             transport,
             config,
             opened: port.is_some(),
             io: IoBackoff::default(),
             port,
-            clock: Clock::new(),
             health: HashMap::new(),
-            rx: Box::new([0; 1024]),
             tx: Box::new([0; MAX_TX_LEN]),
         }
     }
@@ -86,10 +81,20 @@ impl<F: Framing + Send + 'static> Driver<F> {
             // Between requests, keep reading: the engine must know when the line was last
             // busy, and stale bytes must not be taken for the next reply.
             let command = match self.port.as_mut() {
-                Some(port) => tokio::select! {
-                    command = commands.recv() => command,
-                    read = port.read(&mut self.rx[..]) => {
-                        self.on_read(read);
+                // No deadline: between requests the engine has nothing due.
+                Some(port) => match self.pump.step(port, &mut self.master, None, commands.recv()).await {
+                    Step::Other(command) => command,
+                    Step::Read | Step::Woke => continue,
+                    Step::Closed => {
+                        tracing::warn!(port = %self.transport.describe(), "the port closed; it will be reopened");
+                        self.port = None;
+                        self.io_failed();
+                        continue;
+                    }
+                    Step::Failed(e) => {
+                        tracing::warn!(port = %self.transport.describe(), "read failed, reopening on the next request: {e}");
+                        self.port = None;
+                        self.io_failed();
                         continue;
                     }
                 },
@@ -101,28 +106,9 @@ impl<F: Framing + Send + 'static> Driver<F> {
         }
     }
 
-    fn on_read(&mut self, read: std::io::Result<usize>) {
-        match read {
-            Ok(0) => {
-                tracing::warn!(port = %self.transport.describe(), "the port closed; it will be reopened");
-                self.port = None;
-                self.io_failed();
-            }
-            Ok(n) => {
-                let at = self.arrival();
-                self.master.on_bytes(at, self.rx.get(..n).unwrap_or_default());
-            }
-            Err(e) => {
-                tracing::warn!(port = %self.transport.describe(), "read failed, reopening on the next request: {e}");
-                self.port = None;
-                self.io_failed();
-            }
-        }
-    }
-
     /// Counts an IO failure and sets when the port may be opened next.
     fn io_failed(&mut self) {
-        self.io.failed(self.clock.now());
+        self.io.failed(self.pump.clock().now());
     }
 
     async fn serve(&mut self, command: &Command) -> Result<Reply, Error> {
@@ -169,7 +155,7 @@ impl<F: Framing + Send + 'static> Driver<F> {
                 ));
             }
             if let Some(at) = self.io.take_reopen_at() {
-                tokio::time::sleep_until(self.clock.to_tokio(at)).await;
+                tokio::time::sleep_until(self.pump.clock().to_tokio(at)).await;
             }
             self.port = Some(self.transport.open(self.config.connect_timeout).await?);
             self.opened = true;
@@ -182,7 +168,7 @@ impl<F: Framing + Send + 'static> Driver<F> {
         });
         // Nothing is in flight between requests; make sure of it.
         self.master.abort();
-        let now = self.clock.now();
+        let now = self.pump.clock().now();
         let submitted = if command.raw {
             self.master.submit_raw(now, command.unit, &command.pdu)
         } else {
@@ -193,81 +179,26 @@ impl<F: Framing + Send + 'static> Driver<F> {
             // Only a PDU longer than 253 bytes cannot be framed.
             return Err(Error::InvalidRequest(ferrobus_proto::PduError::TooLong { len: command.pdu.len() }));
         }
-        loop {
-            if let Some(n) = self.master.poll_transmit(self.clock.now(), &mut self.tx[..]) {
-                if let Err(e) = self.write(n).await {
-                    self.master.abort();
-                    self.port = None;
-                    return Err(Error::io(format!("writing to {}", self.transport.describe()), e));
-                }
-            }
-            if let Some(completion) = self.master.poll_event() {
-                return convert(command, completion);
-            }
-            let deadline = self.master.poll_timeout().map(|t| self.clock.to_tokio(t));
-            let Some(port) = self.port.as_mut() else {
-                return Err(Error::io(
-                    format!("reading from {}", self.transport.describe()),
-                    std::io::ErrorKind::NotConnected.into(),
-                ));
-            };
-            tokio::select! {
-                read = port.read(&mut self.rx[..]) => match read {
-                    Ok(n) if n > 0 => {
-                        let at = self.arrival();
-                        let bytes = self.rx.get(..n).unwrap_or_default();
-                        tracing::trace!(unit = command.unit, "rx {}", Hex(bytes));
-                        self.master.on_bytes(at, bytes);
-                    }
-                    Ok(_) => {
-                        self.master.abort();
-                        self.port = None;
-                        return Err(Error::io(
-                            format!("reading from {}", self.transport.describe()),
-                            std::io::ErrorKind::UnexpectedEof.into(),
-                        ));
-                    }
-                    Err(e) => {
-                        self.master.abort();
-                        self.port = None;
-                        return Err(Error::io(format!("reading from {}", self.transport.describe()), e));
-                    }
-                },
-                () = self.sleeper.sleep_until(deadline) => self.master.handle_timeout(self.clock.now()),
-            }
+        let Some(port) = self.port.as_mut() else {
+            return Err(Error::io(
+                format!("reading from {}", self.transport.describe()),
+                std::io::ErrorKind::NotConnected.into(),
+            ));
+        };
+        let mut transaction = Transaction { command, tx: &mut self.tx, transport: &self.transport };
+        let result = self.pump.run(port, &mut self.master, &mut transaction).await;
+        if let Err(Error::Io { .. }) = result {
+            // The port failed under the request: nothing more is heard of it.
+            self.master.abort();
+            self.port = None;
         }
-    }
-
-    /// When the bytes just read arrived: the port's own time stamp if it has one, else now.
-    fn arrival(&self) -> ferrobus_proto::Instant {
-        let stamped = self.port.as_ref().and_then(|p| p.last_arrival());
-        stamped.map_or_else(|| self.clock.now(), |t| self.clock.from_tokio(t))
-    }
-
-    /// Writes the engine's frame, switching the transmitter by RTS if asked to.
-    async fn write(&mut self, n: usize) -> std::io::Result<()> {
-        let Some(port) = self.port.as_mut() else { return Err(std::io::ErrorKind::NotConnected.into()) };
-        let bytes = self.tx.get(..n).unwrap_or_default();
-        tracing::trace!("tx {}", Hex(bytes));
-        let rts = self.transport.rs485() == Rs485::Rts;
-        if rts {
-            port.set_rts(true)?;
-        }
-        port.write_all(bytes).await?;
-        port.flush().await?;
-        if rts {
-            // The OS buffers the frame; hold RTS until its last character has left.
-            let timing = self.transport.timing();
-            tokio::time::sleep(timing.transmit_time(n).saturating_add(timing.char_time())).await;
-            port.set_rts(false)?;
-        }
-        Ok(())
+        result
     }
 
     /// Fails fast for a unit in backoff; returns whether this request is its probe.
     fn check_health(&mut self, unit: u8) -> Result<bool, Error> {
         let Some(health) = self.health.get(&unit) else { return Ok(false) };
-        let now = self.clock.now();
+        let now = self.pump.clock().now();
         match health.check(now) {
             Admit::Send => Ok(false),
             Admit::Probe => Ok(true),
@@ -282,13 +213,40 @@ impl<F: Framing + Send + 'static> Driver<F> {
             return;
         }
         let outcome = outcome(result);
-        let now = self.clock.now();
+        let now = self.pump.clock().now();
         let health = self.health.entry(unit).or_default();
         if health.record(now, outcome, &backoff) {
             self.health.remove(&unit);
         } else if outcome == Outcome::Timeout && matches!(health.check(now), Admit::Skip { .. }) {
             tracing::info!(unit, period = ?health.period(), "unit not answering; backing off");
         }
+    }
+}
+
+/// One request on the line: the client's session around the pump.
+struct Transaction<'a> {
+    command: &'a Command,
+    tx: &'a mut [u8; MAX_TX_LEN],
+    transport: &'a Transport,
+}
+
+impl<F: Framing> Session<Master<F>> for Transaction<'_> {
+    type Output = Result<Reply, Error>;
+
+    /// Writes the request when the engine has it due; ends with the engine's completion.
+    async fn serve(&mut self, pump: &Pump, port: &mut BoxPort, master: &mut Master<F>) -> Option<Self::Output> {
+        if let Some(n) = Engine::poll_transmit(master, pump.clock().now(), &mut self.tx[..]) {
+            let bytes = self.tx.get(..n).unwrap_or_default();
+            if let Err(e) = write_frame(port, bytes, self.transport.rs485(), self.transport.timing()).await {
+                return Some(Err(Error::io(format!("writing to {}", self.transport.describe()), e)));
+            }
+        }
+        Engine::poll_event(master).map(|completion| convert(self.command, completion))
+    }
+
+    fn on_end(&mut self, error: Option<std::io::Error>) -> Self::Output {
+        let error = error.unwrap_or_else(|| std::io::ErrorKind::UnexpectedEof.into());
+        Err(Error::io(format!("reading from {}", self.transport.describe()), error))
     }
 }
 
@@ -331,19 +289,4 @@ fn convert(command: &Command, completion: Completion<'_>) -> Result<Reply, Error
 /// Parses a reply PDU from `unit` that the driver returned; the engine has checked it already.
 pub(crate) fn parse_reply(unit: u8, pdu: &[u8]) -> Result<Response<'_>, Error> {
     Response::parse(pdu).map_err(|e| Error::BadReply { unit, error: MasterError::BadResponse(e) })
-}
-
-/// Bytes as upper-case hex pairs, for the frame trace (`-vvv`).
-pub(crate) struct Hex<'a>(pub(crate) &'a [u8]);
-
-impl std::fmt::Display for Hex<'_> {
-    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        for (i, b) in self.0.iter().enumerate() {
-            if i > 0 {
-                f.write_str(" ")?;
-            }
-            write!(f, "{b:02X}")?;
-        }
-        Ok(())
-    }
 }

@@ -5,10 +5,20 @@
 //! reconnecting, and sharing one bus between tasks.
 //!
 //! ```text
-//!   Client (clone it) ──requests──▶ driver task ─┬─ Master engine (ferrobus-proto)
-//!                                                └─ port: serial (serial2), TCP, pty, your stream
-//!   server::serve(Slave engine, port, Handler)        the same, for the other side
+//!   Client (clone it) ──requests──▶ client session ─┐
+//!                                                    ├─▶ pump ─┬─ Engine: Master, or Slave + Handler
+//!   server::serve(Slave engine, port, Handler) ─────┘          └─ port: serial, TCP, pty, your stream
 //! ```
+//!
+//! One driver loop, the pump, runs every role: it reads with the arrival time and hands the
+//! bytes to the engine (keeping what a blocked engine did not take), sleeps until the earliest
+//! of the engine's deadline and the role's own, and writes what the engine hands out through
+//! one writer that raises RTS around each frame when asked. An engine is anything with the
+//! core's five verbs (`on_bytes`, `poll_timeout`, `handle_timeout`, `poll_transmit`,
+//! `poll_event`); the codec a [`Transport`] takes is chosen once for client and server (a
+//! server's MBAP receiver is strict). The roles are thin sessions around the pump: the client's
+//! command channel, retries, backoff and reopening; the server's reply filter, observer and
+//! idle and unfinished-frame timeouts.
 //!
 //! - [`Client`]: typed async calls for every public function code and raw PDUs, per-request
 //!   timeout and retries, broadcast without waiting, per-unit backoff, echo suppression, and a
@@ -39,6 +49,7 @@ pub mod error;
 mod identity;
 pub mod line;
 pub mod port;
+mod pump;
 mod serial;
 pub mod server;
 mod sys;

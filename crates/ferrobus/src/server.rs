@@ -1,10 +1,10 @@
 //! The server driver: runs the core slave engine over a port, or over every connection a TCP
 //! listener accepts.
 //!
-//! Like the client's driver it knows no Modbus: it feeds bytes with their arrival time,
-//! sleeps until the engine's next deadline ([`Timer::Precise`] on serial lines, so that a
-//! reply due at t3.5 + wait is not a millisecond late), writes the reply the engine hands
-//! it, and reports what happened. A [`ReplyFilter`] may drop, delay or alter replies on
+//! Like the client's driver it knows no Modbus, and runs on the same one driver loop (see the
+//! crate's opening doc): it feeds bytes with their arrival time, sleeps until the engine's
+//! next deadline ([`Timer::Precise`] on serial lines, so that a reply due at t3.5 + wait is
+//! not a millisecond late), writes the reply the engine hands it, and reports what happened. A [`ReplyFilter`] may drop, delay or alter replies on
 //! their way out: the simulator's fault injection.
 //!
 //! Over TCP ([`serve_tcp_with`]) a connection's trouble never ends the server: running out of
@@ -25,17 +25,15 @@ use std::sync::{Arc, Mutex, MutexGuard, PoisonError};
 use std::time::Duration;
 
 use ferrobus_proto::error::DiscardReason;
-use ferrobus_proto::frame::mbap::MbapCodec;
 use ferrobus_proto::frame::{Framing, LineTiming};
 use ferrobus_proto::master::MAX_TX_LEN;
 use ferrobus_proto::pdu::{AddressRange, Bits, MaskWrite, ReadWriteRegisters, Registers, Request};
 use ferrobus_proto::slave::{Admission, Disposition, Handler, Slave, SlaveConfig, SlaveEvent};
-use ferrobus_proto::{ExceptionCode, FunctionCode, Instant};
-use tokio::io::{AsyncReadExt, AsyncWriteExt};
+use ferrobus_proto::{ExceptionCode, FunctionCode};
 use tokio::net::TcpListener;
 
-use crate::clock::Clock;
 use crate::port::{BoxPort, Rs485, Transport};
+use crate::pump::{Codec, Engine, Pump, Role, Serving, Session, write_frame};
 use crate::timer::Timer;
 
 /// What happens to a reply on its way out.
@@ -313,127 +311,133 @@ const ANSWERING_MAX: usize = 64;
 /// Runs `slave` over `port`, serving through `handler`, until the port fails or closes.
 /// Returns the engine (with its counters) and the error that ended it, if any.
 pub async fn serve<F: Framing, H: Handler + Send>(
-    mut slave: Slave<F>,
+    slave: Slave<F>,
     mut port: BoxPort,
     handler: &mut H,
     options: &mut ServerOptions,
 ) -> (Slave<F>, io::Result<()>) {
-    let clock = Clock::new();
-    let mut sleeper = options.timer.sleeper();
-    let mut rx = vec![0u8; 1024];
-    // Bytes read that the engine has not taken yet (it was blocked), with their arrival.
-    let mut kept: Vec<u8> = Vec::new();
-    let mut kept_at = Instant::ZERO;
-    // The engine blocked while taking input: its receiver may hold frames not yet delivered.
-    let mut stalled = false;
-    let mut tx = [0u8; MAX_TX_LEN];
-    // Replies held back by the filter, in order, with when to send them. Over TCP several
-    // replies may be pending; one sent now waits behind those held, to keep the order.
-    let mut delayed: VecDeque<(Outgoing, tokio::time::Instant)> = VecDeque::new();
-    // The requests whose replies have not gone out yet, oldest first.
-    let mut answering: VecDeque<Answering> = VecDeque::new();
-    let mut last_activity = tokio::time::Instant::now();
-    // When the frame now being received began.
-    let mut frame_began: Option<tokio::time::Instant> = None;
-    loop {
-        let now = clock.now();
+    let mut pump = Pump::new(options.timer.sleeper());
+    let mut engine = Serving { slave, handler };
+    let mut session = Replies {
+        options,
+        tx: [0u8; MAX_TX_LEN],
+        delayed: VecDeque::new(),
+        answering: VecDeque::new(),
+        last_activity: tokio::time::Instant::now(),
+        frame_began: None,
+        idle_at: None,
+        unfinished_at: None,
+        woke: false,
+    };
+    let ended = pump.run(&mut port, &mut engine, &mut session).await;
+    (engine.slave, ended)
+}
+
+/// The server's session around the pump: reports events, passes replies through the filter
+/// and writes them in order, and closes the port on the idle and unfinished-frame timeouts.
+struct Replies<'o> {
+    options: &'o mut ServerOptions,
+    tx: [u8; MAX_TX_LEN],
+    /// Replies held back by the filter, in order, with when to send them. Over TCP several
+    /// replies may be pending; one sent now waits behind those held, to keep the order.
+    delayed: VecDeque<(Outgoing, tokio::time::Instant)>,
+    /// The requests whose replies have not gone out yet, oldest first.
+    answering: VecDeque<Answering>,
+    last_activity: tokio::time::Instant,
+    /// When the frame now being received began.
+    frame_began: Option<tokio::time::Instant>,
+    /// When the idle and the unfinished-frame timeouts are due, as the last turn set them.
+    idle_at: Option<tokio::time::Instant>,
+    unfinished_at: Option<tokio::time::Instant>,
+    /// A deadline came: held replies now due go out before anything else.
+    woke: bool,
+}
+
+impl<F: Framing, H: Handler + ?Sized> Session<Serving<'_, F, H>> for Replies<'_> {
+    type Output = io::Result<()>;
+
+    async fn serve(&mut self, pump: &Pump, port: &mut BoxPort, engine: &mut Serving<'_, F, H>) -> Option<Self::Output> {
+        if std::mem::take(&mut self.woke) {
+            while self.delayed.front().is_some_and(|(_, at)| *at <= tokio::time::Instant::now()) {
+                let Some((reply, _)) = self.delayed.pop_front() else { break };
+                if let Err(e) = send(port, reply, self.options).await {
+                    return Some(Err(e));
+                }
+                self.last_activity = tokio::time::Instant::now();
+            }
+        }
+        let now = pump.clock().now();
         // Events first: a request is known before its reply leaves (on TCP, at once).
-        let lost = take_events(&mut slave, &mut answering, options);
+        let lost = take_events(engine, &mut self.answering, self.options);
         loop {
-            let due = slave.reply_due().map_or_else(tokio::time::Instant::now, |t| clock.to_tokio(t));
-            let Some(n) = slave.poll_transmit(now, &mut tx) else { break };
-            let mut frame = tx.get(..n).unwrap_or_default().to_vec();
-            let request = answering.pop_front();
-            let fate = options.filter.as_mut().map_or(Fate::Send, |f| f.filter(request.as_ref(), &mut frame));
+            let due = engine.slave.reply_due().map_or_else(tokio::time::Instant::now, |t| pump.clock().to_tokio(t));
+            let Some(n) = engine.poll_transmit(now, &mut self.tx) else { break };
+            let mut frame = self.tx.get(..n).unwrap_or_default().to_vec();
+            let request = self.answering.pop_front();
+            let fate = self.options.filter.as_mut().map_or(Fate::Send, |f| f.filter(request.as_ref(), &mut frame));
             let (wait, gap) = match fate {
                 Fate::Send => (Duration::ZERO, None),
                 Fate::Delay(d) => (d, None),
                 Fate::Trickle { gap } => (Duration::ZERO, Some(gap)),
                 Fate::Drop => {
-                    options.observe(ServerEvent::Dropped { frame });
+                    self.options.observe(ServerEvent::Dropped { frame });
                     continue;
                 }
             };
             let reply = Outgoing { frame, due, gap };
-            let behind = delayed.back().map(|(_, at)| *at);
+            let behind = self.delayed.back().map(|(_, at)| *at);
             if wait.is_zero() && behind.is_none() {
-                if let Err(e) = send(&mut port, reply, options).await {
-                    return (slave, Err(e));
+                if let Err(e) = send(port, reply, self.options).await {
+                    return Some(Err(e));
                 }
-                last_activity = tokio::time::Instant::now();
+                self.last_activity = tokio::time::Instant::now();
                 continue;
             }
             // A delay too long to add to an instant never ends: the reply is as good as dropped.
             let Some(at) = tokio::time::Instant::now().checked_add(wait) else {
-                options.observe(ServerEvent::Dropped { frame: reply.frame });
+                self.options.observe(ServerEvent::Dropped { frame: reply.frame });
                 continue;
             };
-            delayed.push_back((reply, behind.map_or(at, |behind| behind.max(at))));
+            self.delayed.push_back((reply, behind.map_or(at, |behind| behind.max(at))));
         }
-        if lost {
-            // The replies to the requests before the bad header have gone; nothing after it
-            // is executed.
-            return (slave, Err(Closed::BadHeader.error()));
-        }
-        if !slave.is_blocked() && (stalled || !kept.is_empty()) {
-            let taken = slave.on_bytes(kept_at, &kept, handler);
-            kept.drain(..taken.min(kept.len()));
-            stalled = slave.is_blocked();
-            continue;
-        }
-        frame_began = if slave.framing().is_mid_frame() { frame_began.or(Some(last_activity)) } else { None };
-        let engine = slave.poll_timeout().map(|t| clock.to_tokio(t));
+        // The replies to the requests before a bad header have gone; nothing after it is
+        // executed.
+        lost.then(|| Err(Closed::BadHeader.error()))
+    }
+
+    fn deadline(&mut self, engine: &Serving<'_, F, H>) -> Option<tokio::time::Instant> {
+        self.frame_began =
+            if engine.slave.framing().is_mid_frame() { self.frame_began.or(Some(self.last_activity)) } else { None };
         // A timeout too long to add to an instant is no deadline at all.
-        let idle_at = options.idle_timeout.and_then(|d| last_activity.checked_add(d));
-        let unfinished_at = options.frame_timeout.zip(frame_began).and_then(|(d, began)| began.checked_add(d));
-        let deadline = [delayed.front().map(|(_, d)| *d), engine, idle_at, unfinished_at].into_iter().flatten().min();
-        // While the engine is blocked (its replies or events are full) nothing is read: the
-        // peer is held back by TCP, and no byte is dropped.
-        let reading = !slave.is_blocked() && kept.is_empty();
-        tokio::select! {
-            read = port.read(&mut rx), if reading => match read {
-                Ok(0) => return (slave, Ok(())),
-                Ok(n) => {
-                    let at = port.last_arrival().map_or_else(|| clock.now(), |t| clock.from_tokio(t));
-                    let bytes = rx.get(..n).unwrap_or_default();
-                    tracing::trace!("rx {}", crate::driver::Hex(bytes));
-                    last_activity = tokio::time::Instant::now();
-                    let taken = slave.on_bytes(at, bytes, handler);
-                    stalled = slave.is_blocked();
-                    kept_at = at;
-                    if let Some(rest) = bytes.get(taken..) {
-                        kept.extend_from_slice(rest);
-                    }
-                }
-                Err(e) => return (slave, Err(e)),
-            },
-            () = sleeper.sleep_until(deadline) => {
-                if let Some(closed) = overdue(options, idle_at, unfinished_at) {
-                    return (slave, Err(closed.error()));
-                }
-                slave.handle_timeout(clock.now(), handler);
-                stalled |= slave.is_blocked();
-                while delayed.front().is_some_and(|(_, at)| *at <= tokio::time::Instant::now()) {
-                    let Some((reply, _)) = delayed.pop_front() else { break };
-                    if let Err(e) = send(&mut port, reply, options).await {
-                        return (slave, Err(e));
-                    }
-                    last_activity = tokio::time::Instant::now();
-                }
-            }
-        }
+        self.idle_at = self.options.idle_timeout.and_then(|d| self.last_activity.checked_add(d));
+        self.unfinished_at =
+            self.options.frame_timeout.zip(self.frame_began).and_then(|(d, began)| began.checked_add(d));
+        [self.delayed.front().map(|(_, d)| *d), self.idle_at, self.unfinished_at].into_iter().flatten().min()
+    }
+
+    fn on_read(&mut self) {
+        self.last_activity = tokio::time::Instant::now();
+    }
+
+    fn on_wake(&mut self) -> Option<Self::Output> {
+        self.woke = true;
+        overdue(self.options, self.idle_at, self.unfinished_at).map(|closed| Err(closed.error()))
+    }
+
+    fn on_end(&mut self, error: Option<io::Error>) -> Self::Output {
+        error.map_or(Ok(()), Err)
     }
 }
 
 /// Reports the engine's events and notes what each reply to come answers. Returns whether
 /// the MBAP framing was lost (a bad header): the connection must close.
-fn take_events<F: Framing>(
-    slave: &mut Slave<F>,
+fn take_events<F: Framing, H: Handler + ?Sized>(
+    engine: &mut Serving<'_, F, H>,
     answering: &mut VecDeque<Answering>,
     options: &mut ServerOptions,
 ) -> bool {
     let mut lost = false;
-    while let Some(event) = slave.poll_event() {
+    while let Some(event) = engine.poll_event() {
         lost |= matches!(event, SlaveEvent::Discarded { reason: DiscardReason::BadHeader, .. });
         if let Some(request) = Answering::of(&event) {
             if answering.len() == ANSWERING_MAX {
@@ -499,27 +503,11 @@ async fn write(
     timing: LineTiming,
 ) -> io::Result<()> {
     match idle_timeout {
-        Some(d) => tokio::time::timeout(d, write_frame(port, frame, rs485, timing))
+        Some(d) => tokio::time::timeout(d, write_frame(port, frame, rs485, &timing))
             .await
             .unwrap_or_else(|_| Err(Closed::Idle(d).error())),
-        None => write_frame(port, frame, rs485, timing).await,
+        None => write_frame(port, frame, rs485, &timing).await,
     }
-}
-
-async fn write_frame(port: &mut BoxPort, frame: &[u8], rs485: Rs485, timing: LineTiming) -> io::Result<()> {
-    tracing::trace!("tx {}", crate::driver::Hex(frame));
-    let rts = rs485 == Rs485::Rts;
-    if rts {
-        port.set_rts(true)?;
-    }
-    port.write_all(frame).await?;
-    port.flush().await?;
-    if rts {
-        // The OS buffers the frame; hold RTS until its last character has left.
-        tokio::time::sleep(timing.transmit_time(frame.len()).saturating_add(timing.char_time())).await;
-        port.set_rts(false)?;
-    }
-    Ok(())
 }
 
 /// Runs a slave engine for `config` over `port` with the framing and timing of `transport`,
@@ -531,16 +519,9 @@ pub async fn serve_transport<H: Handler + Send>(
     handler: &mut H,
     options: &mut ServerOptions,
 ) -> io::Result<()> {
-    match transport.framing() {
-        crate::port::Framing::Mbap => {
-            // A server's MBAP receiver is strict: a stream whose framing is lost is closed.
-            serve(Slave::new(MbapCodec::strict(), config), port, handler, options).await.1
-        }
-        crate::port::Framing::Rtu => serve(Slave::new(transport.rtu_codec(), config), port, handler, options).await.1,
-        crate::port::Framing::Ascii => {
-            serve(Slave::new(transport.ascii_codec(), config), port, handler, options).await.1
-        }
-    }
+    // A server's MBAP receiver is strict: a stream whose framing is lost is closed.
+    let codec = Codec::for_transport(transport, Role::Server);
+    serve(Slave::new(codec, config), port, handler, options).await.1
 }
 
 /// How long accepting pauses when the process (or system) is out of file descriptors.
