@@ -88,24 +88,14 @@ pub(crate) async fn run(connection: &ConnectArgs, args: &ReadArgs) -> Result<(),
     let format = args.output.format();
     let function = table.read_function().value();
     if table.is_bits() {
-        let mut bits = Vec::with_capacity(items);
-        let mut requests = 0;
-        let mut interrupted = false;
-        for &(start, n) in &pieces {
+        let (bits, requests, interrupted) = gather(&pieces, items, &mut interrupt, |start, n| async move {
             tracing::info!(unit, start, n, "reading {table}");
-            let read = async {
-                match table {
-                    Table::Coils => client.read_coils(unit, start, quantity(n)).await,
-                    _ => client.read_discrete_inputs(unit, start, quantity(n)).await,
-                }
-            };
-            let Some(got) = interrupt.unless(read).await else {
-                interrupted = true;
-                break;
-            };
-            bits.extend(got?);
-            requests += 1;
-        }
+            match table {
+                Table::Coils => client.read_coils(unit, start, n).await,
+                _ => client.read_discrete_inputs(unit, start, n).await,
+            }
+        })
+        .await?;
         let text = match format {
             Format::Json => {
                 output::json_line(&output::read_json(unit, function, address, ReadData::Bits(&bits), requests))
@@ -115,24 +105,14 @@ pub(crate) async fn run(connection: &ConnectArgs, args: &ReadArgs) -> Result<(),
         output::print(&text)?;
         return finish(interrupted, bits.len(), items, table);
     }
-    let mut registers = Vec::with_capacity(items);
-    let mut requests = 0;
-    let mut interrupted = false;
-    for &(start, n) in &pieces {
+    let (registers, requests, interrupted) = gather(&pieces, items, &mut interrupt, |start, n| async move {
         tracing::info!(unit, start, n, "reading {table} registers");
-        let read = async {
-            match table {
-                Table::Holding => client.read_holding_registers(unit, start, quantity(n)).await,
-                _ => client.read_input_registers(unit, start, quantity(n)).await,
-            }
-        };
-        let Some(got) = interrupt.unless(read).await else {
-            interrupted = true;
-            break;
-        };
-        registers.extend(got?);
-        requests += 1;
-    }
+        match table {
+            Table::Holding => client.read_holding_registers(unit, start, n).await,
+            _ => client.read_input_registers(unit, start, n).await,
+        }
+    })
+    .await?;
     let text = match format {
         Format::Json => output::json_line(&output::read_json(
             unit,
@@ -145,6 +125,24 @@ pub(crate) async fn run(connection: &ConnectArgs, args: &ReadArgs) -> Result<(),
     };
     output::print(&text)?;
     finish(interrupted, registers.len(), items, table)
+}
+
+/// Reads each of `pieces` (start, count) with `read`, in order, until all are read or a signal
+/// comes: the items read (room for `capacity`), the requests made, and whether it was cut short.
+async fn gather<T, R: Future<Output = Result<Vec<T>, ferrobus::Error>>>(
+    pieces: &[(u16, usize)],
+    capacity: usize,
+    interrupt: &mut Interrupt,
+    mut read: impl FnMut(u16, u16) -> R,
+) -> Result<(Vec<T>, usize, bool), CliError> {
+    let mut items = Vec::with_capacity(capacity);
+    for (requests, &(start, n)) in pieces.iter().enumerate() {
+        let Some(got) = interrupt.unless(read(start, quantity(n))).await else {
+            return Ok((items, requests, true));
+        };
+        items.extend(got?);
+    }
+    Ok((items, pieces.len(), false))
 }
 
 /// After the output: [`CliError::Interrupted`] with a note of how much was read, if a signal
