@@ -306,6 +306,7 @@ impl<P: Reconfigure> Scanner<P> {
                     report.other_traffic.push((line, unit, heard, function));
                 }
                 a if a.proves_presence() => {
+                    tracing::info!(unit, %line, "unit {unit} answers at {line}");
                     report.devices.push(Device {
                         unit,
                         line,
