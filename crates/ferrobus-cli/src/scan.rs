@@ -181,6 +181,7 @@ pub(crate) async fn run(connection: &ConnectArgs, args: &ScanArgs) -> Result<(),
         identify: !args.no_identify,
         rs485,
         echo_suppression: connection.echo,
+        timer: ferrobus::Timer::Precise,
         t1_5: connection.t15,
         t3_5: connection.t35,
     };

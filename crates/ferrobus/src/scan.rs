@@ -74,6 +74,9 @@ pub struct ScanConfig {
     pub rs485: Rs485,
     /// Drop our own transmission when the adapter hears it.
     pub echo_suppression: bool,
+    /// How deadlines are waited for: [`Timer::Precise`] on a real port, [`Timer::Tokio`]
+    /// under a paused test clock.
+    pub timer: Timer,
     /// t1.5 and t3.5 overrides, for every setting.
     pub t1_5: Option<Duration>,
     /// See `t1_5`.
@@ -472,7 +475,7 @@ impl<P: Reconfigure> Scanner<P> {
         let connector = Lend { home: Arc::clone(&self.home), name: format!("{} at {line}", self.name) };
         let mut transport = Transport::custom(Framing::Rtu, LineTiming::new(&line), connector)
             .with_rs485(self.config.rs485)
-            .with_timer(Timer::Precise)
+            .with_timer(self.config.timer)
             .with_incomplete_timeout(PC_INCOMPLETE_TIMEOUT)
             .with_reopen(false);
         if let Some(t) = self.config.t1_5 {
