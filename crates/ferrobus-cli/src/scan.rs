@@ -418,10 +418,11 @@ fn as_table(path: &str, lines: &[LineConfig], report: &Report, elapsed: Duration
     }
     if !report.other_traffic.is_empty() {
         let _ = writeln!(out, "\nother traffic while probing (another master, or a device answering for another):");
-        for (line, probed, heard, function) in &report.other_traffic {
+        for t in &report.other_traffic {
             let _ = writeln!(
                 out,
-                "  at {line}, probing unit {probed}: a valid frame from unit {heard} (function 0x{function:02X})"
+                "  at {}, probing unit {}: a valid frame from unit {} (function 0x{:02X})",
+                t.line, t.probed, t.unit, t.function
             );
         }
     }
@@ -527,9 +528,7 @@ fn as_json(path: &str, lines: &[LineConfig], report: &Report, elapsed: Duration)
     let other: Vec<Value> = report
         .other_traffic
         .iter()
-        .map(|(line, probed, heard, function)| {
-            json!({ "settings": line.to_string(), "probed": probed, "unit": heard, "function": function })
-        })
+        .map(|t| json!({ "settings": t.line.to_string(), "probed": t.probed, "unit": t.unit, "function": t.function }))
         .collect();
     let noise: Vec<Value> = report
         .noise

@@ -140,6 +140,20 @@ pub struct LeadFound {
     pub second: Option<Answer>,
 }
 
+/// A valid frame from another unit, heard while probing one: another master, or a device that
+/// answers for another address.
+#[derive(Clone, Copy, PartialEq, Eq, Debug)]
+pub struct OtherTraffic {
+    /// The setting.
+    pub line: LineConfig,
+    /// The unit probed.
+    pub probed: u8,
+    /// The unit whose frame came.
+    pub unit: u8,
+    /// Its function code.
+    pub function: u8,
+}
+
 /// Another master heard while listening.
 #[derive(Clone, Copy, PartialEq, Eq, Debug)]
 pub struct OtherMaster {
@@ -156,9 +170,8 @@ pub struct Report {
     pub devices: Vec<Device>,
     /// Leads, in the order found.
     pub leads: Vec<LeadFound>,
-    /// Valid frames from other units heard while probing: (setting, unit probed, unit heard,
-    /// function code).
-    pub other_traffic: Vec<(LineConfig, u8, u8, u8)>,
+    /// Valid frames from other units heard while probing.
+    pub other_traffic: Vec<OtherTraffic>,
     /// Other masters heard while listening.
     pub masters: Vec<OtherMaster>,
     /// Settings where listening heard only bytes that did not frame.
@@ -306,7 +319,7 @@ impl<P: Reconfigure> Scanner<P> {
             match answer {
                 Answer::Lead(lead) => report.leads.push(LeadFound { unit, line, lead, second: None }),
                 Answer::OtherTraffic { unit: heard, function } => {
-                    report.other_traffic.push((line, unit, heard, function));
+                    report.other_traffic.push(OtherTraffic { line, probed: unit, unit: heard, function });
                 }
                 a if a.proves_presence() => {
                     tracing::info!(unit, %line, "unit {unit} answers at {line}");

@@ -10,7 +10,7 @@ use std::task::{Context, Poll};
 use std::time::Duration;
 
 use ferrobus::port::Port;
-use ferrobus::scan::{Reconfigure, Report, ScanConfig, Scanner};
+use ferrobus::scan::{OtherTraffic, Reconfigure, Report, ScanConfig, Scanner};
 use ferrobus::{Rs485, Timer};
 use ferrobus_proto::frame::rtu::encode_pdu;
 use ferrobus_proto::frame::{LineConfig, LineTiming};
@@ -55,6 +55,8 @@ impl Reconfigure for FakePort {
 enum Behaviour {
     Reply,
     CorruptReply,
+    /// Answers under another address.
+    AsUnit(u8),
 }
 
 /// A port and a device task on its other end: `unit` answers 8-byte requests while the port's
@@ -79,7 +81,8 @@ fn fake(unit: u8, at: LineConfig, behaviour: Behaviour, wait: Duration) -> (Fake
                     continue;
                 }
                 let mut reply = [0u8; 16];
-                let len = encode_pdu(unit, &[0x03, 0x02, 0x00, 0x2A], &mut reply).unwrap();
+                let from = if let Behaviour::AsUnit(other) = behaviour { other } else { unit };
+                let len = encode_pdu(from, &[0x03, 0x02, 0x00, 0x2A], &mut reply).unwrap();
                 if let Behaviour::CorruptReply = behaviour {
                     reply[len - 1] ^= 0xFF;
                 }
@@ -208,6 +211,17 @@ async fn traffic_heard_while_listening_stops_the_scan_before_it_transmits() {
     tokio::time::sleep(Duration::from_millis(120)).await;
     assert_eq!(*sent.lock().unwrap(), [0u8; 0], "the scanner transmitted");
     talker.abort();
+}
+
+#[tokio::test(start_paused = true)]
+async fn a_valid_frame_from_another_unit_is_other_traffic_not_a_device() {
+    let (port, _) = fake(3, baud(19_200), Behaviour::AsUnit(9), Duration::ZERO);
+    let mut scanner = Scanner::new(port, "fake", config(&[3], &[baud(19_200)])).unwrap();
+    let mut report = Report::default();
+    scanner.run(&mut report, |_| {}).await.unwrap();
+    assert!(report.devices.is_empty() && report.leads.is_empty());
+    let expected = OtherTraffic { line: baud(19_200), probed: 3, unit: 9, function: 0x03 };
+    assert_eq!(report.other_traffic, [expected]);
 }
 
 #[test]
