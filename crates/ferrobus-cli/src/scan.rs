@@ -60,8 +60,8 @@ pub(crate) struct ScanArgs {
     #[arg(long = "slow-timeout", value_name = "DURATION", default_value = "1s", value_parser = parse_wait)]
     slow_timeout: Duration,
 
-    /// Listen this long at each setting before transmitting (0: don't); valid traffic means
-    /// another master, and then nothing is transmitted unless --force
+    /// Listen this long at each setting, all of them before the first probe (0: don't); valid
+    /// traffic means another master, and then nothing is transmitted unless --force
     #[arg(long, value_name = "DURATION", default_value = "500ms", value_parser = parse_duration)]
     listen: Duration,
 

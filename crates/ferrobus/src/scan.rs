@@ -3,14 +3,15 @@
 //! The decisions — the order of the settings, the probe, its timeouts, what a probe heard,
 //! what listening heard — are made in [`ferrobus_proto::scan`]; this module does the IO:
 //!
-//! 1. For each line setting, in the order given (sort with [`rank`](ferrobus_proto::scan::rank)
+//! 1. For each line setting (each step below), in the order given (sort with [`rank`](ferrobus_proto::scan::rank)
 //!    for the likeliest first), the open port is **reconfigured in place**
 //!    ([`Reconfigure`]): it is never closed and opened again, so its path cannot come to name
 //!    another device halfway through.
-//! 2. **Listen first** (when [`ScanConfig::listen`] is not zero): the port is read without
-//!    transmitting; CRC-valid frames mean another master is active at that setting. It is
-//!    reported with the units it talks to, and nothing is transmitted at any setting from
-//!    then on unless [`ScanConfig::force`].
+//! 2. **Listen first** (when [`ScanConfig::listen`] is not zero): before anything is sent, the
+//!    port is read at every setting in turn without transmitting; CRC-valid frames mean another
+//!    master is active at that setting. It is reported with the units it talks to, and then
+//!    nothing is transmitted at all unless [`ScanConfig::force`]. (Bytes that never frame are
+//!    reported as noise: something talks at other settings.)
 //! 3. Each unit gets the probe through an ordinary [`Client`] (the one driver loop and master
 //!    engine, its t3.5 gaps and its diagnosis of what came instead of a reply), which is lent
 //!    the port for the one setting and gives it back when dropped. Any reply or exception
@@ -176,20 +177,21 @@ pub struct Report {
     pub masters: Vec<OtherMaster>,
     /// Settings where listening heard only bytes that did not frame.
     pub noise: Vec<(LineConfig, Heard)>,
-    /// Settings swept (probed, or listened to and left alone).
+    /// Settings probed.
     pub settings_done: usize,
     /// Probes sent.
     pub probes: u64,
-    /// Whether transmitting stopped because another master was heard.
+    /// Whether nothing was transmitted because another master was heard.
     pub held_back: bool,
-    /// Whether the whole scan ran (false while running, and when stopped early).
+    /// Whether the scan ran to its end, held back or not (false while running, and when
+    /// stopped early).
     pub complete: bool,
 }
 
 /// Progress, for a progress bar or a log.
 #[derive(Clone, Copy, Debug)]
 pub enum Event {
-    /// A setting begins.
+    /// Listening at a setting, or probing there, begins.
     Setting {
         /// It.
         line: LineConfig,
@@ -274,25 +276,27 @@ impl<P: Reconfigure> Scanner<P> {
     /// error on the port ends it (the report keeps what was found).
     pub async fn run(&mut self, report: &mut Report, mut on_event: impl FnMut(&Event)) -> Result<(), Error> {
         let lines = self.config.lines.clone();
-        for (index, &line) in lines.iter().enumerate() {
-            on_event(&Event::Setting { line, index });
-            self.reconfigure(line).await?;
-            if !self.config.listen.is_zero() {
+        if !self.config.listen.is_zero() {
+            for (index, &line) in lines.iter().enumerate() {
+                on_event(&Event::Setting { line, index });
+                self.reconfigure(line).await?;
                 let heard = self.listen(line).await?;
                 on_event(&Event::Listened { line, heard });
                 match heard {
-                    Heard::Traffic { .. } => {
-                        report.masters.push(OtherMaster { line, heard });
-                        if !self.config.force {
-                            report.held_back = true;
-                            report.settings_done = report.settings_done.saturating_add(1);
-                            return Ok(());
-                        }
-                    }
+                    Heard::Traffic { .. } => report.masters.push(OtherMaster { line, heard }),
                     Heard::Noise { .. } => report.noise.push((line, heard)),
                     Heard::Quiet => {}
                 }
             }
+            if !report.masters.is_empty() && !self.config.force {
+                report.held_back = true;
+                report.complete = true;
+                return Ok(());
+            }
+        }
+        for (index, &line) in lines.iter().enumerate() {
+            on_event(&Event::Setting { line, index });
+            self.reconfigure(line).await?;
             self.sweep(line, report, &mut on_event).await?;
             report.settings_done = report.settings_done.saturating_add(1);
         }
