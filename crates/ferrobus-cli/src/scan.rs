@@ -190,7 +190,7 @@ pub(crate) async fn run(connection: &ConnectArgs, args: &ScanArgs) -> Result<(),
     serial.rs485 = rs485;
     serial.low_latency = connection.low_latency;
     let port = open_serial(&serial).map_err(|e| ferrobus::Error::io(format!("opening {path}"), e))?;
-    let mut scanner = Scanner::new(port, path.clone(), config).map_err(CliError::Usage)?;
+    let mut scanner = Scanner::new(port, path.clone(), config).map_err(|e| CliError::Usage(e.to_string()))?;
     let mut interrupt = Interrupt::listen()?;
     let bar = progress_bar(scanner.first_pass_probes());
     let started = std::time::Instant::now();

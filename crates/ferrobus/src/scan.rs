@@ -223,6 +223,24 @@ pub enum Event {
     },
 }
 
+/// Why [`Scanner::new`] refused a configuration.
+#[derive(Clone, Copy, PartialEq, Eq, Debug, thiserror::Error)]
+pub enum ConfigError {
+    /// A unit outside 1–247: 0 is a broadcast, 248–255 are reserved.
+    #[error("unit {0} cannot be scanned: units are 1-247 ({why})", why = unit_refusal(*.0))]
+    Unit(u8),
+    /// No units.
+    #[error("no units to scan")]
+    NoUnits,
+    /// No line settings.
+    #[error("no line settings to scan")]
+    NoLines,
+}
+
+fn unit_refusal(unit: u8) -> &'static str {
+    if unit == unit_codes::BROADCAST { "0 is a broadcast, which nothing answers" } else { "248-255 are reserved" }
+}
+
 /// The open port, lent to one client at a time and given back when the client's driver drops
 /// it.
 struct Home<P> {
@@ -243,19 +261,15 @@ pub struct Scanner<P> {
 impl<P: Reconfigure> Scanner<P> {
     /// A scanner of `port` (named `name` in errors) with `config`. Refuses units outside
     /// 1–247 (0 is a broadcast, 248–255 reserved) and an empty list of units or settings.
-    pub fn new(port: P, name: impl Into<String>, config: ScanConfig) -> Result<Self, String> {
-        if let Some(bad) = config.units.iter().find(|&&u| !(unit_codes::MIN..=unit_codes::MAX).contains(&u)) {
-            return Err(format!(
-                "unit {bad} cannot be scanned: units are {}-{} (0 is a broadcast, which nothing answers)",
-                unit_codes::MIN,
-                unit_codes::MAX
-            ));
+    pub fn new(port: P, name: impl Into<String>, config: ScanConfig) -> Result<Self, ConfigError> {
+        if let Some(&bad) = config.units.iter().find(|&&u| !(unit_codes::MIN..=unit_codes::MAX).contains(&u)) {
+            return Err(ConfigError::Unit(bad));
         }
         if config.units.is_empty() {
-            return Err("no units to scan".into());
+            return Err(ConfigError::NoUnits);
         }
         if config.lines.is_empty() {
-            return Err("no line settings to scan".into());
+            return Err(ConfigError::NoLines);
         }
         let home = Arc::new(Home { slot: Mutex::new(Some(port)), back: Notify::new() });
         Ok(Scanner { config, home, name: name.into() })

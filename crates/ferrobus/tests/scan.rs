@@ -10,7 +10,7 @@ use std::task::{Context, Poll};
 use std::time::Duration;
 
 use ferrobus::port::Port;
-use ferrobus::scan::{OtherTraffic, Reconfigure, Report, ScanConfig, Scanner};
+use ferrobus::scan::{ConfigError, OtherTraffic, Reconfigure, Report, ScanConfig, Scanner};
 use ferrobus::{Rs485, Timer};
 use ferrobus_proto::frame::rtu::encode_pdu;
 use ferrobus_proto::frame::{LineConfig, LineTiming};
@@ -230,9 +230,13 @@ async fn a_valid_frame_from_another_unit_is_other_traffic_not_a_device() {
 #[test]
 fn units_outside_1_to_247_and_empty_lists_are_refused() {
     let port = || FakePort { io: tokio::io::duplex(8).0, settings: Arc::default() };
-    let err = Scanner::new(port(), "fake", config(&[0, 1], &[baud(9600)])).err().unwrap();
-    assert!(err.contains("unit 0 cannot be scanned") && err.contains("broadcast"), "{err}");
-    assert!(Scanner::new(port(), "fake", config(&[248], &[baud(9600)])).is_err());
-    assert_eq!(Scanner::new(port(), "fake", config(&[], &[baud(9600)])).err().unwrap(), "no units to scan");
-    assert_eq!(Scanner::new(port(), "fake", config(&[1], &[])).err().unwrap(), "no line settings to scan");
+    let refused = |units: &[u8], lines: &[LineConfig]| Scanner::new(port(), "fake", config(units, lines)).err();
+    assert_eq!(refused(&[1, 0], &[baud(9600)]), Some(ConfigError::Unit(0)));
+    assert_eq!(refused(&[248], &[baud(9600)]), Some(ConfigError::Unit(248)));
+    assert_eq!(refused(&[], &[baud(9600)]), Some(ConfigError::NoUnits));
+    assert_eq!(refused(&[1], &[]), Some(ConfigError::NoLines));
+    assert!(refused(&[1, 247], &[baud(9600)]).is_none());
+    let text = ConfigError::Unit(0).to_string();
+    assert_eq!(text, "unit 0 cannot be scanned: units are 1-247 (0 is a broadcast, which nothing answers)");
+    assert!(ConfigError::Unit(250).to_string().contains("248-255 are reserved"));
 }
