@@ -33,6 +33,7 @@ mod output;
 mod raw;
 mod read;
 mod readwrite;
+mod scan;
 mod sim;
 mod target;
 #[cfg(not(unix))]
@@ -110,6 +111,8 @@ enum Command {
     Demo(demo::DemoArgs),
     /// FC03 reads back to back: transactions/s, latency and CPU time (the peer benchmark's format)
     Bench(bench::BenchArgs),
+    /// Find every device on a serial bus: unit addresses × baud rates and formats, most likely first
+    Scan(scan::ScanArgs),
 }
 
 impl Command {
@@ -142,6 +145,7 @@ async fn dispatch(cli: &Cli) -> Result<(), CliError> {
         Command::Line(args) => line::run(connection, args).await,
         Command::Demo(args) => demo::run(args).await,
         Command::Bench(args) => bench::run(connection, args).await,
+        Command::Scan(args) => scan::run(connection, args).await,
     }
 }
 
@@ -196,6 +200,11 @@ fn refuse_ignored_options(matches: &clap::ArgMatches) -> Result<(), CliError> {
         "line" => (
             &["baud", "parity", "data_bits", "stop_bits", "echo"],
             "line makes its own ptys and takes only the line settings --baud, --parity, --data-bits, --stop-bits",
+        ),
+        "scan" => (
+            &["port", "rs485", "low_latency", "t15", "t35", "echo"],
+            "scan sweeps its own settings and units (--bauds, --framings, --units, --probe-timeout); \
+             it takes --port, --rs485, --low-latency, --t15, --t35 and --echo",
         ),
         _ => return Ok(()),
     };

@@ -33,6 +33,8 @@
 //! - [`retry`]: what a master does over many transactions — which outcomes it resends, when it
 //!   skips a unit that stopped answering, how long it waits to reopen a failed port — decided
 //!   from outcomes and `now`, so that a driver only sleeps until the instant it is given.
+//! - [`scan`]: the decisions of a bus scanner — which line settings first, the probe and its
+//!   timeouts, what a probe's outcome proves, and what listening to a line heard.
 //! - [`master`] and [`slave`]: the two engines, in the style of `quinn-proto` and `smoltcp`.
 //!   The caller feeds bytes with the time they arrived, sleeps until `poll_timeout()`, calls
 //!   `handle_timeout(now)`, and writes what `poll_transmit(now, …)` returns. The engines
@@ -79,6 +81,7 @@ pub mod frame;
 pub mod master;
 pub mod pdu;
 pub mod retry;
+pub mod scan;
 pub mod slave;
 pub mod time;
 pub mod words;

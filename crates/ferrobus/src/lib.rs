@@ -27,6 +27,8 @@
 //!   with precise reply timing and a hook for fault injection.
 //! - [`port`]: serial ports (RS-485 by the adapter, the kernel or RTS; the USB latency timer),
 //!   TCP, RTU over TCP, and ptys made in-process.
+//! - [`scan`]: the bus scanner — unit addresses × line settings over one port reconfigured
+//!   in place, listening first, a second pass for leads, identification.
 //! - [`wire`]: the virtual RS-485 line's model, sans-IO like the engines: it takes `now` in
 //!   every call and says what each endpoint receives and when — character timing, collisions,
 //!   the t3.5 rule, seeded faults, a bit-level UART for endpoints at other settings.
@@ -50,6 +52,7 @@ mod identity;
 pub mod line;
 pub mod port;
 mod pump;
+pub mod scan;
 mod serial;
 pub mod server;
 mod sys;

@@ -222,6 +222,14 @@ impl Transport {
         &self.timing
     }
 
+    /// Changes the RS-485 direction control (a custom transport over a serial port it opened
+    /// itself: the scanner's).
+    #[must_use]
+    pub fn with_rs485(mut self, rs485: Rs485) -> Self {
+        self.rs485 = rs485;
+        self
+    }
+
     /// The RS-485 direction control.
     pub fn rs485(&self) -> Rs485 {
         self.rs485

@@ -10,6 +10,7 @@ mod offline;
 mod output;
 mod read;
 mod reopen;
+mod scan;
 mod server;
 mod service;
 mod write;

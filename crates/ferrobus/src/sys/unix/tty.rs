@@ -30,14 +30,34 @@ const WRITE_RETRY: Duration = Duration::from_millis(1);
 #[derive(Debug)]
 pub struct TtyPort {
     fd: AsyncFd<serial2::SerialPort>,
+    /// Whether it is a pseudo-terminal, which may refuse parity (see [`open_serial`]).
+    pty: bool,
     /// Armed when the output buffer was full: the write is tried again when it fires.
     retry: Option<Pin<Box<tokio::time::Sleep>>>,
 }
 
 impl TtyPort {
     /// Watches `port` (opened non-blocking, as serial2 does) for reading. Needs a tokio runtime.
-    fn new(port: serial2::SerialPort) -> io::Result<Self> {
-        Ok(TtyPort { fd: register(port, Interest::READABLE)?, retry: None })
+    fn new(port: serial2::SerialPort, pty: bool) -> io::Result<Self> {
+        Ok(TtyPort { fd: register(port, Interest::READABLE)?, pty, retry: None })
+    }
+
+    /// Changes the line settings of the open port, in place: the path is not opened again, so
+    /// it cannot lead to another device meanwhile. Bytes already received are kept. A pty
+    /// that refuses a parity or 7 data bits is set to 8 data bits without parity, as
+    /// [`open_serial`] does.
+    pub fn reconfigure(&mut self, line: LineConfig) -> io::Result<()> {
+        let port = self.fd.get_mut();
+        let wanted = settings(line)(port.get_configuration()?)?;
+        match port.set_configuration(&wanted) {
+            Err(e) if self.pty && (line.parity != Parity::None || line.data_bits != DataBits::Eight) => {
+                let plain = line.with_parity(Parity::None).with_data_bits(DataBits::Eight);
+                tracing::info!("this pty refuses {line} ({e}); using {plain}");
+                let plain = settings(plain)(port.get_configuration()?)?;
+                port.set_configuration(&plain)
+            }
+            other => other,
+        }
     }
 
     /// Sets the RTS line (RS-485 direction control by RTS).
@@ -127,7 +147,7 @@ pub fn open_serial(config: &SerialConfig) -> io::Result<TtyPort> {
     if config.low_latency {
         set_low_latency(&config.path);
     }
-    TtyPort::new(port)
+    TtyPort::new(port, is_pty(&config.path))
 }
 
 /// Switches the kernel's RS-485 mode on (`TIOCSRS485`), which only Linux has.
@@ -202,7 +222,7 @@ impl Pty {
         // ptsname asks the kernel (TIOCGPTN on Linux, TIOCPTYGNAME on macOS): no /proc needed.
         let name = rustix::pty::ptsname(&ours, Vec::new())?;
         let path = PathBuf::from(std::ffi::OsString::from_vec(name.into_bytes()));
-        Ok(Pty { port: TtyPort::new(ours)?, path, _peer: peer })
+        Ok(Pty { port: TtyPort::new(ours, true)?, path, _peer: peer })
     }
 }
 

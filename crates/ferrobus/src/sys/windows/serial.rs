@@ -30,6 +30,13 @@ impl TtyPort {
     pub(crate) fn set_rts(&self, on: bool) -> io::Result<()> {
         self.port.set_rts(on)
     }
+
+    /// Changes the line settings of the open port, in place: the name is not opened again, so
+    /// it cannot lead to another adapter meanwhile.
+    pub fn reconfigure(&mut self, line: ferrobus_proto::frame::LineConfig) -> io::Result<()> {
+        let wanted = settings(line)(self.port.get_configuration()?)?;
+        self.port.set_configuration(&wanted)
+    }
 }
 
 /// Opens the COM port `config.path` (`COM3`, or `\\.\COM12`) with `config`. Needs a tokio
