@@ -177,9 +177,12 @@ fn plans_for_every_table_of_every_builtin_profile_are_valid_and_optimal() {
     }
 }
 
+/// Wanted points, other mapped items, spans, the limit.
+type Scenario = (Vec<Extent>, Vec<Extent>, Vec<(u16, u16)>, u16);
+
 /// A random map of up to `top` addresses: non-overlapping items of width 1, 2 or 4, some of
 /// them wanted, some spans.
-fn scenario(top: u16, max_items: usize) -> impl Strategy<Value = (Vec<Extent>, Vec<Extent>, Vec<(u16, u16)>, u16)> {
+fn scenario(top: u16, max_items: usize) -> impl Strategy<Value = Scenario> {
     (
         proptest::collection::vec((0..top, prop_oneof![Just(1u16), Just(2), Just(4)], any::<bool>()), 1..max_items),
         proptest::collection::vec((0..top, 0..top / 2), 0..3),
