@@ -89,6 +89,34 @@ pub(crate) struct ConnectArgs {
     /// a serial port only while its path names the same device)
     #[arg(long = "no-reopen", global = true)]
     pub(crate) no_reopen: bool,
+
+    /// The device's profile: a built-in name or a TOML file; it sets the device's limits, word
+    /// order and numbering, and names its parameters for get and set
+    #[arg(long, global = true, value_name = "PROFILE")]
+    pub(crate) device: Option<String>,
+}
+
+impl ConnectArgs {
+    /// The `--device` profile, if one was given; a profile that does not load is a usage error
+    /// naming the file and the line.
+    pub(crate) fn profile(&self) -> Result<Option<ferrobus_profile::Profile>, CliError> {
+        self.device.as_deref().map(load_profile).transpose()
+    }
+
+    /// The `--device` profile, which `command` needs.
+    pub(crate) fn require_profile(&self, command: &str) -> Result<ferrobus_profile::Profile, CliError> {
+        self.profile()?.ok_or_else(|| {
+            CliError::Usage(format!(
+                "{command} needs --device PROFILE: a built-in one ({}) or a TOML file",
+                ferrobus_profile::BUILTIN.iter().map(|(n, _)| *n).collect::<Vec<_>>().join(", ")
+            ))
+        })
+    }
+}
+
+/// A profile by built-in name or path, as a usage error when it does not load.
+pub(crate) fn load_profile(name: &str) -> Result<ferrobus_profile::Profile, CliError> {
+    ferrobus_profile::Profile::load(name).map_err(|e| CliError::Usage(e.to_string()))
 }
 
 /// Parity, as typed. (Plain comments on the variants keep `--help` compact.)
