@@ -88,20 +88,19 @@ pub(crate) fn select<'p>(
 pub(crate) fn exception_words(profile: &Profile, error: &ferrobus::Error) -> String {
     match error.exception() {
         Some(code) => {
-            let meaning = profile.exception_meaning(code.value()).map(str::to_string).or_else(|| {
-                // The profile's [exceptions] say what its codes stand for when it gives no words.
-                let e = &profile.exceptions;
-                let what = if code.value() == e.out_of_range {
-                    Some("the value is out of the device's range")
-                } else if code.value() == e.not_allowed {
-                    Some("not allowed in the device's present state")
-                } else if code.value() == e.read_only {
-                    Some("read-only")
-                } else {
-                    None
-                };
-                what.map(str::to_string).or_else(|| code.name().map(str::to_string))
-            });
+            // The profile's words; else the spec's name; else what the profile's [exceptions]
+            // say a vendor code stands for.
+            let e = &profile.exceptions;
+            let vendor = if code.value() == e.out_of_range {
+                Some("the value is out of the device's range")
+            } else if code.value() == e.not_allowed {
+                Some("not allowed in the device's present state")
+            } else if code.value() == e.read_only {
+                Some("read-only")
+            } else {
+                None
+            };
+            let meaning = profile.exception_meaning(code.value()).or(code.name()).or(vendor);
             match meaning {
                 Some(meaning) => format!("exception {:#04x} ({meaning})", code.value()),
                 None => format!("exception {:#04x}", code.value()),
