@@ -751,7 +751,7 @@ impl Profile {
                 origin: origin.to_string(),
                 line,
                 text: source_line.to_string(),
-                message: e.message().trim().to_string(),
+                message: with_migration_hint(e.message().trim()),
             }
         })?;
         // The same text has parsed once; a second reader that fails only loses the lines.
@@ -877,6 +877,20 @@ impl Profile {
             }
         }
         Ok(())
+    }
+}
+
+/// A TOML reader's message, with the new keys named when it refuses an old one.
+fn with_migration_hint(message: &str) -> String {
+    let old =
+        ["`size`", "`signed`", "`word_order`"].iter().any(|key| message.starts_with(&format!("unknown field {key}")));
+    if old {
+        format!(
+            "{message} (size, signed and word_order are now type and order: type = \"u32\" or \"i32\", \
+             order = \"ABCD\" for high-first or \"CDAB\" for low-first)"
+        )
+    } else {
+        message.to_string()
     }
 }
 
@@ -1076,6 +1090,9 @@ mod tests {
         );
         let wrong_type = error(&format!("{DEVICE}[[registers]]\nnumber = 'one'\nname = 'r'\n"));
         assert!(wrong_type.starts_with("in mine.toml, line 7 (number = 'one'): invalid type: string"), "{wrong_type}");
+        let old = error(&format!("{DEVICE}[[registers]]\nnumber=1\nname='r'\nsize=2\n"));
+        assert!(old.starts_with("in mine.toml, line 9 (size=2): unknown field `size`"), "{old}");
+        assert!(old.ends_with("(size, signed and word_order are now type and order: type = \"u32\" or \"i32\", order = \"ABCD\" for high-first or \"CDAB\" for low-first)"), "{old}");
         let bad_type = error(&format!("{DEVICE}[[registers]]\nnumber=1\nname='r'\ntype='u24'\n"));
         assert!(bad_type.starts_with("in mine.toml, line 9 (type='u24'): unknown variant `u24`"), "{bad_type}");
         assert_eq!(
