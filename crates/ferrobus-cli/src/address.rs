@@ -347,13 +347,14 @@ mod tests {
 
     #[test]
     fn one_based_numbers_are_one_more_than_the_wire() {
-        let a = parse("0x0012", Table::Holding, true).unwrap();
+        let a = parse("18", Table::Holding, true).unwrap();
         assert_eq!((a.wire, a.style), (0x11, Style::OneBased));
         assert_eq!(a.reference(0x11).as_deref(), Some("18"));
         // The user's notation is kept: a number typed in hex is shown in hex.
-        let hex = Address::parse("0x1001", Table::Holding, AddressArgs { one_based: true, modicon: false }).unwrap();
-        assert_eq!((hex.wire, hex.style), (0x1000, Style::OneBasedHex));
-        assert_eq!(hex.reference(0x1001).as_deref(), Some("0x1002"));
+        let hex = parse("0x0012", Table::Holding, true).unwrap();
+        assert_eq!((hex.wire, hex.style), (0x11, Style::OneBasedHex));
+        assert_eq!(hex.reference(0x11).as_deref(), Some("0x0012"));
+        assert_eq!(hex.reference(0x1000).as_deref(), Some("0x1001"));
         assert_eq!(parse("65536", Table::Holding, true).unwrap().wire, 65535);
         assert!(parse("0", Table::Holding, true).is_err());
     }
