@@ -45,7 +45,7 @@ fn get_and_set_speak_the_profile(fb: &Ferrobus) {
         ])
         .json();
     assert_eq!(value(&doc, "h0"), "3");
-    assert_eq!(value(&doc, "pair"), (17u32 << 16 | 10).to_string(), "CDAB: register 2 (17) is the high word");
+    assert_eq!(value(&doc, "pair"), "1114122", "CDAB: register 2 (17) is the high word: 17 × 65536 + 10");
     assert_eq!(value(&doc, "voltage"), "2.4 V");
     assert_eq!(value(&doc, "setpoint"), "3.8 bar");
     assert_eq!(value(&doc, "status"), "ready", "0x1000: bit 12");
