@@ -23,6 +23,7 @@ mod crc;
 mod demo;
 mod diag;
 mod exit;
+mod get;
 mod hex;
 mod info;
 mod interrupt;
@@ -30,10 +31,12 @@ mod interrupt;
 mod line;
 mod mask;
 mod output;
+mod profile;
 mod raw;
 mod read;
 mod readwrite;
 mod scan;
+mod set;
 mod sim;
 mod target;
 #[cfg(not(unix))]
@@ -113,6 +116,12 @@ enum Command {
     Bench(bench::BenchArgs),
     /// Find every device on a serial bus: unit addresses × baud rates and formats, most likely first
     Scan(scan::ScanArgs),
+    /// Read named parameters of a --device profile, scaled with their units
+    Get(get::GetArgs),
+    /// Write one named parameter of a --device profile, in its unit, checked first, read back
+    Set(set::SetArgs),
+    /// Device profiles: list the built-in ones, show a parameter table, check a file (offline)
+    Profile(profile::ProfileArgs),
 }
 
 impl Command {
@@ -120,7 +129,11 @@ impl Command {
     fn needs_bus(&self) -> bool {
         !matches!(
             self,
-            Command::Crc(_) | Command::Line(_) | Command::Demo(_) | Command::Sim(sim::SimArgs { pty: true, .. })
+            Command::Crc(_)
+                | Command::Line(_)
+                | Command::Demo(_)
+                | Command::Sim(sim::SimArgs { pty: true, .. })
+                | Command::Profile(_)
         )
     }
 }
@@ -146,6 +159,9 @@ async fn dispatch(cli: &Cli) -> Result<(), CliError> {
         Command::Demo(args) => demo::run(args).await,
         Command::Bench(args) => bench::run(connection, args).await,
         Command::Scan(args) => scan::run(connection, args).await,
+        Command::Get(args) => get::run(connection, args).await,
+        Command::Set(args) => set::run(connection, args).await,
+        Command::Profile(args) => profile::run(args),
     }
 }
 

@@ -1,0 +1,772 @@
+//! The profile file: its sections and entries as written, parsed and checked.
+//!
+//! A profile says which function codes the device answers, how many items it takes per
+//! request, its register and coil map (codes, labels, types, word orders, units, scaling,
+//! ranges, access, enumerations, bit fields, groups, dependencies, the manual's numbering),
+//! the address spans in which it answers reads of unmapped addresses, how to tell that it
+//! runs, its exception codes and their meaning, its response wait, its broadcast rules, its
+//! identification, and the faults a simulated unit starts with. The built-in profiles are in
+//! `profiles/` and compiled in; users write their own in the same format.
+//!
+//! A profile is refused when its entries of one kind overlap (two registers sharing an
+//! address, a 32-bit value covering the next register), and every error names the file, the
+//! line, and the entry and field at fault.
+
+use std::collections::BTreeMap;
+use std::fmt;
+use std::path::Path;
+
+use serde::Deserialize;
+
+use crate::check::{Spans, line_of};
+use crate::point::{self, Point};
+
+/// A device model.
+#[derive(Clone, Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Profile {
+    /// What the device is.
+    pub device: DeviceSection,
+    /// How the manual numbers addresses, and the default word order.
+    #[serde(default)]
+    pub addressing: Addressing,
+    /// Function codes, timing, broadcast.
+    #[serde(default)]
+    pub comm: Comm,
+    /// Items per request.
+    #[serde(default)]
+    pub limits: Limits,
+    /// Vendor exception codes.
+    #[serde(default)]
+    pub exceptions: Exceptions,
+    /// Plain read/write tables covering the address space from 0 (the generic device).
+    #[serde(default)]
+    pub tables: Tables,
+    /// The physics model, if any.
+    pub model: Option<ModelSection>,
+    /// Coils (0x01, 0x05, 0x0F).
+    #[serde(default)]
+    pub coils: Vec<BitDef>,
+    /// Discrete inputs (0x02).
+    #[serde(default)]
+    pub discrete_inputs: Vec<BitDef>,
+    /// Holding registers (0x03, 0x06, 0x10, 0x16, 0x17).
+    #[serde(default)]
+    pub registers: Vec<RegisterDef>,
+    /// Input registers (0x04).
+    #[serde(default)]
+    pub inputs: Vec<RegisterDef>,
+    /// Ranges in which the device answers reads of every address, mapped or not.
+    #[serde(default)]
+    pub span: Vec<SpanDef>,
+    /// How a client tells the device's state (whether it runs).
+    #[serde(default)]
+    pub state: State,
+    /// The device's own words for its exception codes.
+    #[serde(default)]
+    pub exception_meaning: Vec<ExceptionMeaning>,
+    /// File records (0x14, 0x15).
+    pub files: Option<Files>,
+    /// The FIFO queue (0x18).
+    pub fifo: Option<Fifo>,
+    /// Faults every simulated unit of this profile starts with, written as `ferrobus sim
+    /// --fault` takes them: `"drop=10%,delay=50ms"` (the simulator reads them).
+    pub faults: Option<String>,
+    /// Fault rules aimed at requests, tried in order after those of `faults`: `[[fault_rule]]`
+    /// tables with the keys of a `--fault` rule, e.g. `fc = 0x03`, `addr = "0x1000-0x100F"`,
+    /// `share = "50%"`, and one action: `exception = 0x06`, `no-reply = true`,
+    /// `delay = "200ms"`, `short = true` or `short = 3`, `malformed = true`, `unit = 7`,
+    /// `tid = "+1"`, `trickle = "5ms"` (the simulator reads them).
+    #[serde(default)]
+    pub fault_rule: Vec<toml::Table>,
+    /// Where the profile came from (a built-in name or a path), for messages.
+    #[serde(skip)]
+    pub origin: String,
+    /// The line of `faults`, if any (from 1).
+    #[serde(skip)]
+    pub faults_line: Option<usize>,
+    /// The line of each `[[fault_rule]]` (from 1).
+    #[serde(skip)]
+    pub fault_rule_lines: Vec<Option<usize>>,
+    /// Every coil, discrete input and register entry resolved to points, in profile order.
+    #[serde(skip)]
+    points: Vec<Point>,
+}
+
+/// `[device]`
+#[derive(Clone, Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct DeviceSection {
+    /// A human name.
+    pub name: String,
+    /// Identification object 0x00 VendorName.
+    pub vendor: String,
+    /// Identification object 0x01 ProductCode.
+    pub product_code: String,
+    /// Identification object 0x02 MajorMinorRevision.
+    pub revision: String,
+    /// Object 0x03 VendorUrl.
+    pub vendor_url: Option<String>,
+    /// Object 0x04 ProductName.
+    pub product_name: Option<String>,
+    /// Object 0x05 ModelName.
+    pub model_name: Option<String>,
+    /// Object 0x06 UserApplicationName.
+    pub user_application_name: Option<String>,
+    /// Whether the device answers 0x2B/0x0E and 0x11 (else exception 01).
+    #[serde(default = "yes")]
+    pub identification: bool,
+    /// The server id bytes of 0x11, before the run indicator (ASCII).
+    pub server_id: Option<String>,
+}
+
+/// `[addressing]`
+#[derive(Clone, Copy, Debug, Default, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Addressing {
+    /// The number of the first item in the manual: 1 when the frame carries number − 1.
+    #[serde(default)]
+    pub base: u16,
+    /// The order of multi-register values whose entry names none (default ABCD).
+    #[serde(default)]
+    pub order: Order,
+}
+
+/// `[comm]`
+#[derive(Clone, Debug, Default, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Comm {
+    /// The function codes answered; the others get exception 01. Absent: all public codes.
+    pub functions: Option<Vec<u8>>,
+    /// The 0x08 sub-functions answered; absent: all.
+    pub diagnostics: Option<Vec<u16>>,
+    /// Wait before replying, on top of t3.5 (3G3RX C078).
+    #[serde(default)]
+    pub response_wait_ms: u32,
+    /// Whether reads sent by broadcast are executed (they are never answered).
+    #[serde(default)]
+    pub broadcast_reads: bool,
+    /// Whether 0x08 by broadcast is executed.
+    #[serde(default)]
+    pub broadcast_diagnostics: bool,
+}
+
+/// `[limits]`: the most items per request; absent: the spec's limits.
+#[derive(Clone, Copy, Debug, Default, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Limits {
+    /// 0x01 and 0x02 (spec: 2000).
+    pub read_coils: Option<u16>,
+    /// 0x0F (spec: 1968).
+    pub write_coils: Option<u16>,
+    /// 0x03, 0x04 and the read of 0x17 (spec: 125).
+    pub read_registers: Option<u16>,
+    /// 0x10 and the write of 0x17 (spec: 123 and 121).
+    pub write_registers: Option<u16>,
+}
+
+/// `[exceptions]`: which code the device answers for each kind of refusal.
+#[derive(Clone, Copy, Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Exceptions {
+    /// A value outside a register's range (spec: 0x03; 3G3RX: 0x21).
+    #[serde(default = "illegal_value")]
+    pub out_of_range: u8,
+    /// Not allowed in the device's state, e.g. while running (3G3RX: 0x22).
+    #[serde(default = "device_failure")]
+    pub not_allowed: u8,
+    /// A write to a read-only item (spec: 0x02; 3G3RX: 0x22).
+    #[serde(default = "illegal_address")]
+    pub read_only: u8,
+}
+
+impl Default for Exceptions {
+    fn default() -> Self {
+        Exceptions { out_of_range: illegal_value(), not_allowed: device_failure(), read_only: illegal_address() }
+    }
+}
+
+fn yes() -> bool {
+    true
+}
+fn illegal_value() -> u8 {
+    0x03
+}
+fn device_failure() -> u8 {
+    0x04
+}
+fn illegal_address() -> u8 {
+    0x02
+}
+
+/// `[tables]`: plain tables of this many items from address 0 (the generic device).
+#[derive(Clone, Copy, Debug, Default, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Tables {
+    /// Coils.
+    pub coils: Option<u32>,
+    /// Discrete inputs.
+    pub discrete_inputs: Option<u32>,
+    /// Holding registers.
+    pub holding_registers: Option<u32>,
+    /// Input registers.
+    pub input_registers: Option<u32>,
+}
+
+/// `[model]`
+#[derive(Clone, Debug, Deserialize)]
+#[serde(deny_unknown_fields, tag = "kind", rename_all = "kebab-case")]
+pub enum ModelSection {
+    /// A frequency inverter.
+    Inverter {
+        /// Direction coil polarity.
+        #[serde(default)]
+        direction: Polarity,
+        /// A004, 0.01 Hz.
+        max_frequency: u32,
+        /// 0.01 A.
+        rated_current: u32,
+        /// 0.1 V.
+        rated_voltage: u32,
+        /// 0.1 V.
+        dc_bus_voltage: u32,
+    },
+    /// A servo drive.
+    Servo {
+        /// r/min.
+        rated_speed: u32,
+        /// Encoder pulses per revolution.
+        pulses_per_revolution: u32,
+    },
+}
+
+/// How a direction coil reads.
+#[derive(Clone, Copy, PartialEq, Eq, Debug, Default, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum Polarity {
+    /// 1 = reverse (Omron MX2/RX2 tables).
+    #[default]
+    OneIsReverse,
+    /// 1 = forward (Hitachi SJ700-2 table).
+    OneIsForward,
+}
+
+/// Read/write access.
+#[derive(Clone, Copy, PartialEq, Eq, Debug, Default, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum Access {
+    /// Read only.
+    #[default]
+    Ro,
+    /// Read and write.
+    Rw,
+    /// Write only (reads as zero).
+    Wo,
+}
+
+impl Access {
+    /// The name in a profile: `ro`, `rw`, `wo`.
+    pub const fn name(self) -> &'static str {
+        match self {
+            Access::Ro => "ro",
+            Access::Rw => "rw",
+            Access::Wo => "wo",
+        }
+    }
+}
+
+/// The type of a register entry's value.
+#[derive(Clone, Copy, PartialEq, Eq, Hash, Debug, Default, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum ValueType {
+    /// One register, unsigned.
+    #[default]
+    U16,
+    /// One register, two's complement.
+    I16,
+    /// Two registers, unsigned.
+    U32,
+    /// Two registers, two's complement.
+    I32,
+    /// Four registers, unsigned.
+    U64,
+    /// Four registers, two's complement.
+    I64,
+    /// Two registers, IEEE 754 single precision.
+    F32,
+    /// Four registers, IEEE 754 double precision.
+    F64,
+    /// `length` registers of text, two characters per register, high byte first, NUL padded.
+    String,
+    /// A coil or discrete input (not written in a profile: the table says it).
+    #[serde(skip_deserializing)]
+    Bit,
+}
+
+impl ValueType {
+    /// The name in a profile.
+    pub const fn name(self) -> &'static str {
+        match self {
+            ValueType::U16 => "u16",
+            ValueType::I16 => "i16",
+            ValueType::U32 => "u32",
+            ValueType::I32 => "i32",
+            ValueType::U64 => "u64",
+            ValueType::I64 => "i64",
+            ValueType::F32 => "f32",
+            ValueType::F64 => "f64",
+            ValueType::String => "string",
+            ValueType::Bit => "bit",
+        }
+    }
+
+    /// Registers of one value (bits: 1 bit); a string's come from its `length`.
+    pub const fn registers(self) -> u16 {
+        match self {
+            ValueType::U16 | ValueType::I16 | ValueType::Bit | ValueType::String => 1,
+            ValueType::U32 | ValueType::I32 | ValueType::F32 => 2,
+            ValueType::U64 | ValueType::I64 | ValueType::F64 => 4,
+        }
+    }
+
+    /// Whether the type is an integer.
+    pub const fn is_integer(self) -> bool {
+        matches!(
+            self,
+            ValueType::U16 | ValueType::I16 | ValueType::U32 | ValueType::I32 | ValueType::U64 | ValueType::I64
+        )
+    }
+
+    /// Whether the type is a float.
+    pub const fn is_float(self) -> bool {
+        matches!(self, ValueType::F32 | ValueType::F64)
+    }
+
+    /// The smallest and largest raw value of an integer type.
+    pub const fn integer_range(self) -> (i128, i128) {
+        match self {
+            ValueType::U16 => (0, u16::MAX as i128),
+            ValueType::I16 => (i16::MIN as i128, i16::MAX as i128),
+            ValueType::U32 => (0, u32::MAX as i128),
+            ValueType::I32 => (i32::MIN as i128, i32::MAX as i128),
+            ValueType::U64 => (0, u64::MAX as i128),
+            ValueType::I64 => (i64::MIN as i128, i64::MAX as i128),
+            ValueType::Bit => (0, 1),
+            ValueType::F32 | ValueType::F64 | ValueType::String => (0, 0),
+        }
+    }
+}
+
+/// The order of a multi-register value's bytes over its registers, by the names integrators
+/// use. For 64-bit values the same four generalise: ABCD is big-endian, words high first;
+/// CDAB words low first (bytes big-endian in each); BADC bytes swapped in each word, words
+/// high first; DCBA fully little-endian.
+#[derive(Clone, Copy, PartialEq, Eq, Hash, Debug, Default, Deserialize)]
+pub enum Order {
+    /// Big-endian: high word first, high byte first.
+    #[default]
+    #[serde(rename = "ABCD")]
+    Abcd,
+    /// Low word first, high byte first in each word.
+    #[serde(rename = "CDAB")]
+    Cdab,
+    /// High word first, low byte first in each word.
+    #[serde(rename = "BADC")]
+    Badc,
+    /// Little-endian: low word first, low byte first.
+    #[serde(rename = "DCBA")]
+    Dcba,
+}
+
+impl Order {
+    /// All four, the default first.
+    pub const ALL: [Order; 4] = [Order::Abcd, Order::Cdab, Order::Badc, Order::Dcba];
+
+    /// The name in a profile.
+    pub const fn name(self) -> &'static str {
+        match self {
+            Order::Abcd => "ABCD",
+            Order::Cdab => "CDAB",
+            Order::Badc => "BADC",
+            Order::Dcba => "DCBA",
+        }
+    }
+
+    /// The order named `name` (case-insensitive; `high-first` is ABCD, `low-first` CDAB).
+    pub fn from_name(name: &str) -> Option<Order> {
+        match name.to_ascii_lowercase().as_str() {
+            "high-first" => Some(Order::Abcd),
+            "low-first" => Some(Order::Cdab),
+            lower => Order::ALL.into_iter().find(|o| o.name().eq_ignore_ascii_case(lower)),
+        }
+    }
+
+    /// Whether the words run low first.
+    pub const fn words_low_first(self) -> bool {
+        matches!(self, Order::Cdab | Order::Dcba)
+    }
+
+    /// Whether the bytes in each word are swapped.
+    pub const fn bytes_swapped(self) -> bool {
+        matches!(self, Order::Badc | Order::Dcba)
+    }
+}
+
+/// A coil or discrete input, or a run of them.
+#[derive(Clone, Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct BitDef {
+    /// The manual's number of the first.
+    pub number: u32,
+    /// How many (default 1); the items of a run are named NAME1, NAME2, ...
+    #[serde(default = "one")]
+    pub count: u32,
+    /// A short name (the code).
+    pub name: String,
+    /// A short descriptive name shown beside the code.
+    pub label: Option<String>,
+    /// What it is.
+    #[serde(default)]
+    pub description: String,
+    /// Access.
+    #[serde(default)]
+    pub access: Access,
+    /// The value at start (the simulator's).
+    #[serde(default)]
+    pub default: bool,
+    /// A group name for `--group`.
+    pub group: Option<String>,
+    /// Whether a backup saves it (default: when read/write).
+    pub backup: Option<bool>,
+    /// The manual section it comes from.
+    pub source: Option<String>,
+    /// False when the fact could not be confirmed.
+    #[serde(default = "yes")]
+    pub confirmed: bool,
+}
+
+/// A register or multi-register value, or a run of them.
+#[derive(Clone, Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct RegisterDef {
+    /// The manual's number of the first register.
+    pub number: u32,
+    /// How many items (default 1); the items of a run are named NAME1, NAME2, ...
+    #[serde(default = "one")]
+    pub count: u32,
+    /// The value's type (default u16).
+    #[serde(default, rename = "type")]
+    pub value_type: ValueType,
+    /// The order of a multi-register value (default: `[addressing] order`).
+    pub order: Option<Order>,
+    /// Registers of a string.
+    pub length: Option<u16>,
+    /// A short name (a parameter code such as `F001`).
+    pub name: String,
+    /// A short descriptive name shown beside the code.
+    pub label: Option<String>,
+    /// What it is.
+    #[serde(default)]
+    pub description: String,
+    /// Engineering unit.
+    pub unit: Option<String>,
+    /// Engineering value = raw × scale + offset (default 1).
+    pub scale: Option<f64>,
+    /// Engineering value = raw × scale + offset (default 0).
+    pub offset: Option<f64>,
+    /// Lowest raw value accepted by a write.
+    pub min: Option<f64>,
+    /// Highest raw value accepted by a write.
+    pub max: Option<f64>,
+    /// Access.
+    #[serde(default)]
+    pub access: Access,
+    /// Whether it may be written while the drive runs (default yes).
+    #[serde(default = "yes")]
+    pub while_running: bool,
+    /// A group name for `--group`.
+    pub group: Option<String>,
+    /// An enumeration: raw value (as a string key) → meaning.
+    #[serde(default)]
+    pub values: BTreeMap<String, String>,
+    /// A bit field: bit index (as a string key) → meaning.
+    #[serde(default)]
+    pub bits: BTreeMap<String, String>,
+    /// Codes a restore writes before this one.
+    #[serde(default)]
+    pub depends_on: Vec<String>,
+    /// Whether a backup saves it (default: when read/write).
+    pub backup: Option<bool>,
+    /// The manual section it comes from.
+    pub source: Option<String>,
+    /// False when the fact could not be confirmed.
+    #[serde(default = "yes")]
+    pub confirmed: bool,
+    /// The raw value at start (the simulator's): an integer, a float for f32/f64, text for a
+    /// string.
+    pub default: Option<toml::Value>,
+}
+
+fn one() -> u32 {
+    1
+}
+
+/// The four tables of the data model.
+#[derive(Clone, Copy, PartialEq, Eq, Hash, Debug, PartialOrd, Ord, Deserialize)]
+pub enum Table {
+    /// Coils (read/write bits).
+    #[serde(rename = "coils")]
+    Coils,
+    /// Discrete inputs (read-only bits).
+    #[serde(rename = "discrete")]
+    DiscreteInputs,
+    /// Holding registers (read/write words).
+    #[serde(rename = "holding")]
+    Holding,
+    /// Input registers (read-only words).
+    #[serde(rename = "input")]
+    Input,
+}
+
+impl Table {
+    /// All four.
+    pub const ALL: [Table; 4] = [Table::Coils, Table::DiscreteInputs, Table::Holding, Table::Input];
+
+    /// Whether the table holds bits.
+    pub const fn is_bits(self) -> bool {
+        matches!(self, Table::Coils | Table::DiscreteInputs)
+    }
+
+    /// The name in a profile's `[[span]]`.
+    pub const fn name(self) -> &'static str {
+        match self {
+            Table::Coils => "coils",
+            Table::DiscreteInputs => "discrete",
+            Table::Holding => "holding",
+            Table::Input => "input",
+        }
+    }
+}
+
+/// `[[span]]`: a range (manual numbering) in which the device answers reads of every address.
+#[derive(Clone, Copy, Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct SpanDef {
+    /// The table.
+    pub table: Table,
+    /// The first number.
+    pub first: u32,
+    /// The last number.
+    pub last: u32,
+}
+
+/// `[state]`
+#[derive(Clone, Debug, Default, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct State {
+    /// How to tell that the drive runs.
+    pub running: Option<RunningRule>,
+}
+
+/// `[state] running = { point = "running", values = [1] }`
+#[derive(Clone, Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct RunningRule {
+    /// A coil, discrete input or register code.
+    pub point: String,
+    /// The raw values that mean running.
+    pub values: Vec<i64>,
+}
+
+/// `[[exception_meaning]]`
+#[derive(Clone, Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct ExceptionMeaning {
+    /// The exception code.
+    pub code: u8,
+    /// What the device means by it.
+    pub meaning: String,
+}
+
+/// `[files]`
+#[derive(Clone, Copy, Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Files {
+    /// Files 1..=count.
+    pub count: u16,
+    /// Records per file.
+    pub records: u16,
+}
+
+/// `[fifo]`
+#[derive(Clone, Copy, Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Fifo {
+    /// The FIFO pointer address (a holding register holding the count).
+    pub address: u16,
+}
+
+/// Why a profile could not be loaded.
+#[derive(Debug, thiserror::Error)]
+#[non_exhaustive]
+pub enum ProfileError {
+    /// No built-in profile by that name (and it does not look like a path).
+    #[error("no profile named {name:?}: the built-in ones are {}, or give a path to a .toml file", BUILTIN.iter().map(|(n, _)| *n).collect::<Vec<_>>().join(", "))]
+    Unknown {
+        /// What was asked for.
+        name: String,
+    },
+    /// A path that names no file.
+    #[error("profile {path}: no such file")]
+    NoSuchFile {
+        /// The path.
+        path: String,
+    },
+    /// The file could not be read.
+    #[error("reading {path}: {source}")]
+    Read {
+        /// The file.
+        path: String,
+        /// Why.
+        source: std::io::Error,
+    },
+    /// The TOML is malformed, has unknown fields, or a field of the wrong type.
+    #[error("in {origin}{}: {message}", at_line(*line, text))]
+    Parse {
+        /// The profile.
+        origin: String,
+        /// The line where it is wrong (from 1), if known.
+        line: Option<usize>,
+        /// That line's text.
+        text: String,
+        /// What is wrong, from the TOML reader.
+        message: String,
+    },
+    /// The TOML is well formed but does not describe a possible device.
+    #[error("in {origin}{}: {problem}", at_line(*line, ""))]
+    Invalid {
+        /// The profile.
+        origin: String,
+        /// The line of the entry at fault (from 1), if known.
+        line: Option<usize>,
+        /// What is wrong, naming the entry and the field.
+        problem: String,
+    },
+}
+
+fn at_line(line: Option<usize>, text: &str) -> String {
+    match (line, text.trim()) {
+        (None, _) => String::new(),
+        (Some(line), "") => format!(", line {line}"),
+        (Some(line), text) => format!(", line {line} ({text})"),
+    }
+}
+
+/// The profiles compiled into the binary.
+pub const BUILTIN: &[(&str, &str)] = &[
+    ("omron-3g3rx", include_str!("../profiles/omron-3g3rx.toml")),
+    ("sdp-servo", include_str!("../profiles/sdp-servo.toml")),
+    ("generic", include_str!("../profiles/generic.toml")),
+];
+
+impl Profile {
+    /// A built-in profile by name.
+    pub fn builtin(name: &str) -> Result<Profile, ProfileError> {
+        match BUILTIN.iter().find(|(n, _)| *n == name) {
+            Some((name, text)) => Profile::parse(text, name),
+            None => Err(ProfileError::Unknown { name: name.to_string() }),
+        }
+    }
+
+    /// A built-in profile by name, or a profile file by path.
+    pub fn load(name_or_path: &str) -> Result<Profile, ProfileError> {
+        if BUILTIN.iter().any(|(n, _)| *n == name_or_path) {
+            return Profile::builtin(name_or_path);
+        }
+        let path = Path::new(name_or_path);
+        if !path.exists() {
+            let looks_like_a_path = name_or_path.contains(['/', '\\'])
+                || name_or_path.starts_with('.')
+                || path.extension().is_some_and(|e| e.eq_ignore_ascii_case("toml"));
+            return Err(if looks_like_a_path {
+                ProfileError::NoSuchFile { path: name_or_path.to_string() }
+            } else {
+                ProfileError::Unknown { name: name_or_path.to_string() }
+            });
+        }
+        let text = std::fs::read_to_string(path)
+            .map_err(|source| ProfileError::Read { path: path.display().to_string(), source })?;
+        Profile::parse(&text, &path.display().to_string())
+    }
+
+    /// Parses and checks a profile; `origin` names it in errors, with the line at fault.
+    pub fn parse(text: &str, origin: &str) -> Result<Profile, ProfileError> {
+        let mut profile: Profile = toml::from_str(text).map_err(|e| {
+            let line = e.span().map(|span| line_of(text, span.start));
+            let source_line = line.and_then(|l| text.lines().nth(l.saturating_sub(1))).unwrap_or_default();
+            ProfileError::Parse {
+                origin: origin.to_string(),
+                line,
+                text: source_line.to_string(),
+                message: with_migration_hint(e.message().trim()),
+            }
+        })?;
+        // The same text has parsed once; a second reader that fails only loses the lines.
+        let spans: Spans = toml::from_str(text).unwrap_or_default();
+        profile.origin = origin.to_string();
+        profile.faults_line = spans.faults.as_ref().map(|f| line_of(text, f.span().start));
+        profile.fault_rule_lines = spans.fault_rule.iter().map(|e| Some(line_of(text, e.span().start))).collect();
+        profile.validate(text, &spans).map_err(|(line, problem)| ProfileError::Invalid {
+            origin: origin.to_string(),
+            line,
+            problem,
+        })?;
+        profile.points = point::resolve(&profile);
+        Ok(profile)
+    }
+
+    /// Every coil, discrete input and register entry as points, in profile order (coils,
+    /// discrete inputs, holding registers, input registers); a run of `count` items gives
+    /// `count` points.
+    pub fn points(&self) -> &[Point] {
+        &self.points
+    }
+
+    /// The error for a problem found after parsing (e.g. by the simulator in `faults`).
+    pub fn problem(&self, line: Option<usize>, problem: String) -> ProfileError {
+        ProfileError::Invalid { origin: self.origin.clone(), line, problem }
+    }
+}
+
+/// A TOML reader's message, with the new keys named when it refuses an old one.
+fn with_migration_hint(message: &str) -> String {
+    let old =
+        ["`size`", "`signed`", "`word_order`"].iter().any(|key| message.starts_with(&format!("unknown field {key}")));
+    if old {
+        format!(
+            "{message} (size, signed and word_order are now type and order: type = \"u32\" or \"i32\", \
+             order = \"ABCD\" for high-first or \"CDAB\" for low-first)"
+        )
+    } else {
+        message.to_string()
+    }
+}
+
+impl RegisterDef {
+    /// Registers of one item: by its type, or its `length` for a string.
+    pub fn width(&self) -> u16 {
+        match self.value_type {
+            ValueType::String => self.length.unwrap_or(1),
+            other => other.registers(),
+        }
+    }
+}
+
+impl fmt::Display for Profile {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        write!(f, "{} ({} {})", self.device.name, self.device.vendor, self.device.product_code)
+    }
+}
+
+#[cfg(test)]
+mod tests;
