@@ -17,6 +17,7 @@
 //! works offline).
 
 mod address;
+mod backup;
 mod bench;
 mod connect;
 mod crc;
@@ -110,6 +111,12 @@ enum Command {
     Demo(demo::DemoArgs),
     /// FC03 reads back to back: transactions/s, latency and CPU time (the peer benchmark's format)
     Bench(bench::BenchArgs),
+    /// Save every parameter of a device (--device PROFILE) to a diffable TOML file
+    Backup(backup::BackupArgs),
+    /// Compare the device with a backup, or two backups; exit 1 if they differ
+    Diff(backup::diff::DiffArgs),
+    /// Write back what differs from a backup (a dry run unless --apply)
+    Restore(backup::restore::RestoreArgs),
 }
 
 impl Command {
@@ -117,7 +124,11 @@ impl Command {
     fn needs_bus(&self) -> bool {
         !matches!(
             self,
-            Command::Crc(_) | Command::Line(_) | Command::Demo(_) | Command::Sim(sim::SimArgs { pty: true, .. })
+            Command::Crc(_)
+                | Command::Line(_)
+                | Command::Demo(_)
+                | Command::Sim(sim::SimArgs { pty: true, .. })
+                | Command::Diff(backup::diff::DiffArgs { other: Some(_), .. })
         )
     }
 }
@@ -142,6 +153,9 @@ async fn dispatch(cli: &Cli) -> Result<(), CliError> {
         Command::Line(args) => line::run(connection, args).await,
         Command::Demo(args) => demo::run(args).await,
         Command::Bench(args) => bench::run(connection, args).await,
+        Command::Backup(args) => backup::run(connection, args).await,
+        Command::Diff(args) => backup::diff::run(connection, args).await,
+        Command::Restore(args) => backup::restore::run(connection, args).await,
     }
 }
 
