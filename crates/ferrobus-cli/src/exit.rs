@@ -184,7 +184,9 @@ pub(crate) fn report(error: &CliError, target: Option<&Target>, unit: u8) -> Rep
     match error {
         CliError::Modbus { error } => modbus_report(error, target, unit),
         CliError::Pdu(e) => Report { message: format!("invalid request: {}", pdu_words(e)), hints: Vec::new() },
-        CliError::Usage(message) | CliError::BadData(message) => Report { message: message.clone(), hints: Vec::new() },
+        CliError::Usage(message) | CliError::BadData(message) | CliError::Incomplete(message) => {
+            Report { message: message.clone(), hints: Vec::new() }
+        }
         CliError::MissingTarget => Report {
             message: "no bus given: use one of --port PATH, --tcp HOST[:PORT] or --rtu-tcp HOST:PORT".into(),
             hints: Vec::new(),
@@ -206,7 +208,6 @@ pub(crate) fn report(error: &CliError, target: Option<&Target>, unit: u8) -> Rep
         },
         CliError::Interrupted => Report { message: "interrupted".into(), hints: Vec::new() },
         CliError::Differ => Report { message: String::new(), hints: Vec::new() },
-        CliError::Incomplete(message) => Report { message: message.clone(), hints: Vec::new() },
     }
 }
 

@@ -239,7 +239,7 @@ mod tests {
         for _ in 0..500 {
             let limit = u16::try_from(next() % 8 + 2).unwrap();
             let holes = next();
-            let answers = move |a: u16| a >= 64 || holes >> a & 1 == 1 || a % 5 == 0;
+            let answers = move |a: u16| a >= 64 || holes >> a & 1 == 1 || a.is_multiple_of(5);
             let mut points = Vec::new();
             let mut at = u16::try_from(next() % 3).unwrap();
             while at < 60 {

@@ -29,6 +29,7 @@ impl Table {
 }
 
 /// How the registers of a parameter encode its raw value.
+#[allow(dead_code, reason = "i64, f32 and f64 come with the profile crate's types")]
 #[derive(Clone, Copy, PartialEq, Eq, Debug)]
 pub(crate) enum Kind {
     /// Unsigned 16-bit.
@@ -77,6 +78,7 @@ impl Kind {
 
 /// The order of the bytes of a multi-register value, as integrators name it: the letters are
 /// the value's bytes from the most significant (A) down, in the order they travel.
+#[allow(dead_code, reason = "BADC and DCBA come with the profile crate's orders")]
 #[derive(Clone, Copy, PartialEq, Eq, Debug, Default)]
 pub(crate) enum Order {
     /// Big-endian: the high word first, each word high byte first.

@@ -22,10 +22,10 @@ use serde_json::json;
 
 use super::device;
 use super::diff::{load, same};
-use super::file::State;
+use super::file::{Backup, State};
 use super::param::Param;
 use super::view::View;
-use crate::connect::ConnectArgs;
+use crate::connect::{ConnectArgs, Session};
 use crate::exit::CliError;
 use crate::output::{self, Align, Format, OutputArgs, Rows};
 
@@ -53,6 +53,9 @@ pub(crate) struct RestoreArgs {
     #[command(flatten)]
     pub(crate) output: OutputArgs,
 }
+
+/// A value of the file to restore: its parameter, the raw value and its registers.
+type Candidate<'v> = (&'v Param, toml::Value, Vec<u16>);
 
 /// One parameter to restore.
 struct Item<'a> {
@@ -94,38 +97,7 @@ pub(crate) async fn run(connection: &ConnectArgs, args: &RestoreArgs) -> Result<
             view.name
         )));
     }
-    // Every value is checked before anything is sent.
-    let mut candidates: Vec<(&Param, toml::Value, Vec<u16>)> = Vec::new();
-    let mut problems = Vec::new();
-    for entry in &backup.entries {
-        let State::Value { raw, .. } = &entry.state else { continue };
-        let at = format!("{file}:{}: {}", entry.line, entry.code);
-        let Some(param) = view.find(&entry.code) else {
-            if args.force {
-                eprintln!("note: {at}: not in profile {}; skipped", view.name);
-            } else {
-                problems.push(format!("{at}: profile {} has no such parameter", view.name));
-            }
-            continue;
-        };
-        match param.encode(raw) {
-            Err(why) => problems.push(format!("{at}: {why}")),
-            Ok(_) if param.width > view.write_registers => problems.push(format!(
-                "{at}: {} registers do not fit one write request of {}",
-                param.width, view.write_registers
-            )),
-            Ok(words) => match param.out_of_range(raw) {
-                Some(why) if param.writable() => problems.push(format!("{at}: {why}")),
-                _ => candidates.push((param, raw.clone(), words)),
-            },
-        }
-    }
-    if !problems.is_empty() {
-        return Err(CliError::Usage(format!(
-            "{file} cannot be restored; nothing was sent:\n  {}",
-            problems.join("\n  ")
-        )));
-    }
+    let candidates = checked(&backup, &view, &file, args.force)?;
     connection.refuse_broadcast_read()?;
     let session = connection.open().await?;
     let running_param = view.running.as_ref().and_then(|(code, values)| view.find(code).map(|p| (p, values)));
@@ -139,6 +111,34 @@ pub(crate) async fn run(connection: &ConnectArgs, args: &RestoreArgs) -> Result<
     if let Some(error) = before.stopped {
         return Err(error.into());
     }
+    let mut items = differing(candidates, &before, &file)?;
+    order(&mut items).map_err(CliError::Usage)?;
+    let format = args.output.format();
+    if !args.apply {
+        let text = render(&items, format, "dry run", &file);
+        output::print(&text)?;
+        if format == Format::Table {
+            let n = items.iter().filter(|i| i.outcome == Outcome::Pending).count();
+            eprintln!(
+                "restore: dry run: {n} parameter{} would be written, in this order; --apply writes them",
+                plural(n)
+            );
+        }
+        return Ok(());
+    }
+    run_lock(&items, running_param, &before)?;
+    apply(&session, &view, &mut items).await;
+    let drifted = read_back(&session, &view, &backup, &mut items).await;
+    conclude(&items, &drifted, format, &file)
+}
+
+/// The candidates whose value on the device differs from the file's; a read-only one among
+/// them refuses the restore.
+fn differing<'v>(
+    candidates: Vec<Candidate<'v>>,
+    before: &device::Readings,
+    file: &str,
+) -> Result<Vec<Item<'v>>, CliError> {
     let mut items = Vec::new();
     let mut read_only = Vec::new();
     for (param, raw, words) in candidates {
@@ -174,59 +174,15 @@ pub(crate) async fn run(connection: &ConnectArgs, args: &RestoreArgs) -> Result<
             read_only.join("\n  ")
         )));
     }
-    order(&mut items).map_err(CliError::Usage)?;
-    let format = args.output.format();
-    if !args.apply {
-        let text = render(&items, format, "dry run", &file);
-        output::print(&text)?;
-        if format == Format::Table {
-            let n = items.iter().filter(|i| i.outcome == Outcome::Pending).count();
-            eprintln!(
-                "restore: dry run: {n} parameter{} would be written, in this order; --apply writes them",
-                plural(n)
-            );
-        }
-        return Ok(());
-    }
-    // The run-lock rule, before any write.
-    let locked: Vec<&str> = items
-        .iter()
-        .filter(|i| !i.param.while_running && i.outcome == Outcome::Pending)
-        .map(|i| i.param.code.as_str())
-        .collect();
-    if !locked.is_empty()
-        && let Some((p, values)) = running_param
-    {
-        let runs = match before.values.get(&p.code) {
-            Some(Ok(words)) => match p.decode(words) {
-                toml::Value::Integer(n) => values.contains(&n),
-                toml::Value::Boolean(b) => values.contains(&i64::from(b)),
-                _ => false,
-            },
-            Some(Err(why)) => {
-                return Err(CliError::Incomplete(format!(
-                    "cannot tell whether the drive runs ({}: {why}), and {} may not be written while it runs; \
-                     nothing was written",
-                    p.code,
-                    locked.join(", ")
-                )));
-            }
-            None => false,
-        };
-        if runs {
-            return Err(CliError::Incomplete(format!(
-                "the drive runs ({} says so): {} may not be written while it runs; stop the drive and restore \
-                 again (nothing was written)",
-                p.code,
-                locked.join(", ")
-            )));
-        }
-    }
-    apply(&session, &view, &mut items).await;
-    // Read back every parameter of the file and compare.
+    Ok(items)
+}
+
+/// Reads back every parameter of the file: each written item verified or not, and the
+/// parameters not written that differ from the file after the restore.
+async fn read_back(session: &Session, view: &View, backup: &Backup, items: &mut [Item<'_>]) -> Vec<String> {
     let all: Vec<&Param> = backup.entries.iter().filter_map(|e| view.find(&e.code)).collect();
-    let after = device::read(&session, &view, &all).await;
-    for item in &mut items {
+    let after = device::read(session, view, &all).await;
+    for item in items.iter_mut() {
         if item.outcome != Outcome::Pending {
             continue;
         }
@@ -256,7 +212,93 @@ pub(crate) async fn run(connection: &ConnectArgs, args: &RestoreArgs) -> Result<
             ));
         }
     }
-    let text = render(&items, format, "applied", &file);
+    drifted
+}
+
+/// Each value of the file with its parameter and registers, checked before anything is sent:
+/// a parameter the profile lacks (skipped with `--force`), a value not of its type, out of
+/// range, or wider than a write request.
+fn checked<'v>(backup: &Backup, view: &'v View, file: &str, force: bool) -> Result<Vec<Candidate<'v>>, CliError> {
+    let mut candidates: Vec<Candidate<'v>> = Vec::new();
+    let mut problems = Vec::new();
+    for entry in &backup.entries {
+        let State::Value { raw, .. } = &entry.state else { continue };
+        let at = format!("{file}:{}: {}", entry.line, entry.code);
+        let Some(param) = view.find(&entry.code) else {
+            if force {
+                eprintln!("note: {at}: not in profile {}; skipped", view.name);
+            } else {
+                problems.push(format!("{at}: profile {} has no such parameter", view.name));
+            }
+            continue;
+        };
+        match param.encode(raw) {
+            Err(why) => problems.push(format!("{at}: {why}")),
+            Ok(_) if param.width > view.write_registers => problems.push(format!(
+                "{at}: {} registers do not fit one write request of {}",
+                param.width, view.write_registers
+            )),
+            Ok(words) => match param.out_of_range(raw) {
+                Some(why) if param.writable() => problems.push(format!("{at}: {why}")),
+                _ => candidates.push((param, raw.clone(), words)),
+            },
+        }
+    }
+    if !problems.is_empty() {
+        return Err(CliError::Usage(format!(
+            "{file} cannot be restored; nothing was sent:\n  {}",
+            problems.join("\n  ")
+        )));
+    }
+    Ok(candidates)
+}
+
+/// The run-lock rule, before any write: a run-locked parameter to write while the drive runs
+/// (or while it cannot be told whether it runs) refuses the restore.
+fn run_lock(
+    items: &[Item<'_>],
+    running: Option<(&Param, &Vec<i64>)>,
+    before: &device::Readings,
+) -> Result<(), CliError> {
+    let locked: Vec<&str> = items
+        .iter()
+        .filter(|i| !i.param.while_running && i.outcome == Outcome::Pending)
+        .map(|i| i.param.code.as_str())
+        .collect();
+    if !locked.is_empty()
+        && let Some((p, values)) = running
+    {
+        let runs = match before.values.get(&p.code) {
+            Some(Ok(words)) => match p.decode(words) {
+                toml::Value::Integer(n) => values.contains(&n),
+                toml::Value::Boolean(b) => values.contains(&i64::from(b)),
+                _ => false,
+            },
+            Some(Err(why)) => {
+                return Err(CliError::Incomplete(format!(
+                    "cannot tell whether the drive runs ({}: {why}), and {} may not be written while it runs; \
+                     nothing was written",
+                    p.code,
+                    locked.join(", ")
+                )));
+            }
+            None => false,
+        };
+        if runs {
+            return Err(CliError::Incomplete(format!(
+                "the drive runs ({} says so): {} may not be written while it runs; stop the drive and restore \
+                 again (nothing was written)",
+                p.code,
+                locked.join(", ")
+            )));
+        }
+    }
+    Ok(())
+}
+
+/// Prints the outcome; an error naming what was and was not written unless all is verified.
+fn conclude(items: &[Item<'_>], drifted: &[String], format: Format, file: &str) -> Result<(), CliError> {
+    let text = render(items, format, "applied", file);
     output::print(&text)?;
     let verified: Vec<&str> =
         items.iter().filter(|i| i.outcome == Outcome::Verified).map(|i| i.param.code.as_str()).collect();
@@ -278,7 +320,7 @@ pub(crate) async fn run(connection: &ConnectArgs, args: &RestoreArgs) -> Result<
             format!(", {} not written ({})", not_written.len(), not_written.join(", "))
         },
     );
-    for note in &drifted {
+    for note in drifted {
         eprintln!("note: not in the restore, yet differs after it: {note}");
     }
     if written_unverified.is_empty() && not_written.is_empty() && drifted.is_empty() {
@@ -303,7 +345,7 @@ fn plural(n: usize) -> &'static str {
 
 /// Writes each pending item in order. After a refusal the rest go on, except what depends on
 /// it; after no reply or a lost port nothing more is sent.
-async fn apply(session: &crate::connect::Session, view: &View, items: &mut [Item<'_>]) {
+async fn apply(session: &Session, view: &View, items: &mut [Item<'_>]) {
     let mut failed: BTreeSet<String> =
         items.iter().filter(|i| matches!(i.outcome, Outcome::NotWritten(_))).map(|i| i.param.code.clone()).collect();
     let mut stopped: Option<String> = None;

@@ -1,6 +1,8 @@
 //! SHA-256 (FIPS 180-4), to name the exact profile file a backup was made with. The workspace
 //! has no hash crate, and this is all it needs.
 
+use std::fmt::Write as _;
+
 const K: [u32; 64] = [
     0x428a_2f98,
     0x7137_4491,
@@ -69,6 +71,7 @@ const K: [u32; 64] = [
 ];
 
 /// The digest of `data` in lower-case hex.
+#[expect(clippy::many_single_char_names, reason = "the standard's names for the working variables")]
 pub(crate) fn hex(data: &[u8]) -> String {
     let mut h: [u32; 8] =
         [0x6a09_e667, 0xbb67_ae85, 0x3c6e_f372, 0xa54f_f53a, 0x510e_527f, 0x9b05_688c, 0x1f83_d9ab, 0x5be0_cd19];
@@ -103,7 +106,10 @@ pub(crate) fn hex(data: &[u8]) -> String {
             *state = state.wrapping_add(add);
         }
     }
-    h.iter().map(|word| format!("{word:08x}")).collect()
+    h.iter().fold(String::with_capacity(64), |mut out, word| {
+        let _ = write!(out, "{word:08x}");
+        out
+    })
 }
 
 #[cfg(test)]
@@ -118,6 +124,6 @@ mod tests {
             hex(b"abcdbcdecdefdefgefghfghighijhijkijkljklmklmnlmnomnopnopq"),
             "248d6a61d20638b8e5c026930c3e6039a33ce45964ff2167f6ecedd419db06c1"
         );
-        assert_eq!(hex(&[b'a'; 1_000_000]), "cdc76e5c9914fb9281a1c7e284d73e67f1809a48a497200e046d39ccc7112cd0");
+        assert_eq!(hex(&vec![b'a'; 1_000_000]), "cdc76e5c9914fb9281a1c7e284d73e67f1809a48a497200e046d39ccc7112cd0");
     }
 }
