@@ -7,8 +7,10 @@ use std::path::{Path, PathBuf};
 use clap::Args;
 use serde_json::{Value, json};
 
+use ferrobus_profile::Point;
+
 use super::file::{Backup, Entry, State};
-use super::param::{Param, shown_toml};
+use super::param::{self, shown_toml};
 use super::view::View;
 use crate::connect::ConnectArgs;
 use crate::exit::CliError;
@@ -44,11 +46,14 @@ pub(crate) enum Side {
 }
 
 impl Side {
-    fn of(entry: Option<&Entry>, param: Option<&Param>) -> Side {
+    fn of(entry: Option<&Entry>, point: Option<&Point>) -> Side {
         match entry.map(|e| &e.state) {
             Some(State::Value { raw, shown }) => {
-                let shown = param
-                    .map_or_else(|| if shown.is_empty() { shown_toml(raw) } else { shown.clone() }, |p| p.show(raw));
+                let shown = match point.and_then(|p| param::from_toml(p, raw).ok().map(|v| p.show(&v))) {
+                    Some(shown) => shown,
+                    None if shown.is_empty() => shown_toml(raw),
+                    None => shown.clone(),
+                };
                 Side::Value(raw.clone(), shown)
             }
             Some(State::Failed(why)) => Side::Failed(why.clone()),
@@ -85,9 +90,10 @@ fn toml_json(raw: &toml::Value) -> Value {
 
 /// Whether two raw values are the same to the device: through the registers they encode to,
 /// when the parameter is known and both encode; as TOML values otherwise.
-pub(crate) fn same(param: Option<&Param>, a: &toml::Value, b: &toml::Value) -> bool {
-    if let Some(p) = param
-        && let (Ok(x), Ok(y)) = (p.encode(a), p.encode(b))
+pub(crate) fn same(point: Option<&Point>, a: &toml::Value, b: &toml::Value) -> bool {
+    let words = |p: &Point, raw: &toml::Value| param::from_toml(p, raw).and_then(|v| param::encode(p, &v));
+    if let Some(p) = point
+        && let (Ok(x), Ok(y)) = (words(p, a), words(p, b))
     {
         return x == y;
     }
@@ -117,18 +123,18 @@ pub(crate) fn compare(view: Option<&View>, a: &Backup, b: &Backup) -> Vec<Differ
     }
     let mut out = Vec::new();
     for code in codes {
-        let param = view.and_then(|v| v.find(code));
+        let point = view.and_then(|v| v.find(code));
         let (ea, eb) = (a.entry(code), b.entry(code));
         let equal = match (ea.map(|e| &e.state), eb.map(|e| &e.state)) {
-            (Some(State::Value { raw: x, .. }), Some(State::Value { raw: y, .. })) => same(param, x, y),
+            (Some(State::Value { raw: x, .. }), Some(State::Value { raw: y, .. })) => same(point, x, y),
             _ => false,
         };
         if !equal {
             out.push(Difference {
                 code: code.to_string(),
-                label: param.map(|p| p.label.clone()).unwrap_or_default(),
-                a: Side::of(ea, param),
-                b: Side::of(eb, param),
+                label: point.map(|p| param::label(p).to_string()).unwrap_or_default(),
+                a: Side::of(ea, point),
+                b: Side::of(eb, point),
             });
         }
     }
@@ -171,7 +177,7 @@ pub(crate) async fn run(connection: &ConnectArgs, args: &DiffArgs) -> Result<(),
     connection.refuse_broadcast_read()?;
     let session = connection.open().await?;
     // The device's values of the parameters in the file, and of those the profile backs up.
-    let mut params: Vec<&Param> = a.entries.iter().filter_map(|e| view.find(&e.code)).collect();
+    let mut params: Vec<&Point> = a.entries.iter().filter_map(|e| view.find(&e.code)).collect();
     for p in view.backed_up() {
         if !params.iter().any(|q| q.code == p.code) {
             params.push(p);
@@ -188,20 +194,17 @@ pub(crate) async fn run(connection: &ConnectArgs, args: &DiffArgs) -> Result<(),
         .iter()
         .map(|p| {
             let state = match readings.values.get(&p.code) {
-                Some(Ok(words)) => {
-                    let raw = p.decode(words);
-                    State::Value { shown: p.show(&raw), raw }
-                }
-                Some(Err(why)) => {
-                    failed += 1;
-                    State::Failed(why.clone())
-                }
-                None => {
-                    failed += 1;
-                    State::Failed("not read".into())
-                }
+                Some(Ok(words)) => match param::decode(p, words) {
+                    Ok(raw) => State::Value { shown: p.show(&raw), raw: param::to_toml(&raw) },
+                    Err(why) => State::Failed(why),
+                },
+                Some(Err(why)) => State::Failed(why.clone()),
+                None => State::Failed("not read".into()),
             };
-            Entry { code: p.code.clone(), label: p.label.clone(), line: 0, state }
+            if matches!(state, State::Failed(_)) {
+                failed += 1;
+            }
+            Entry { code: p.code.clone(), label: param::label(p).to_string(), line: 0, state }
         })
         .collect();
     let device = Backup { header: a.header.clone(), identification: Vec::new(), entries };

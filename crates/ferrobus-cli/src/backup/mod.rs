@@ -34,7 +34,7 @@
 //! parameter that could not be read has `error` instead, with the reason.
 //!
 //! A backup saves what the profile marks `backup` (by default its read-write registers); the
-//! reads follow the read plan ([`device::plan`]), so the 3G3RX's 4 registers per request are
+//! reads follow the profile's read plan ([`ferrobus_profile::plan`]), so the 3G3RX's 4 registers per request are
 //! filled across neighbouring parameters. Restore writes only what differs, dependencies
 //! first, and refuses before sending anything when a value is read-only, out of range, or
 //! run-locked while the drive runs (see [`restore`]).
@@ -135,26 +135,23 @@ pub(crate) async fn read_backup(
         .iter()
         .map(|p| {
             let state = match readings.values.get(&p.code) {
-                Some(Ok(words)) => {
-                    let raw = p.decode(words);
-                    State::Value { shown: p.show(&raw), raw }
-                }
-                Some(Err(why)) => {
-                    failed += 1;
-                    State::Failed(why.clone())
-                }
-                None => {
-                    failed += 1;
-                    State::Failed("not read".into())
-                }
+                Some(Ok(words)) => match param::decode(p, words) {
+                    Ok(raw) => State::Value { shown: p.show(&raw), raw: param::to_toml(&raw) },
+                    Err(why) => State::Failed(why),
+                },
+                Some(Err(why)) => State::Failed(why.clone()),
+                None => State::Failed("not read".into()),
             };
-            Entry { code: p.code.clone(), label: p.label.clone(), line: 0, state }
+            if matches!(state, State::Failed(_)) {
+                failed += 1;
+            }
+            Entry { code: p.code.clone(), label: param::label(p).to_string(), line: 0, state }
         })
         .collect();
     let header = Header {
         profile: view.name.clone(),
         profile_hash: view.hash.clone(),
-        device: view.device.clone(),
+        device: view.device().to_string(),
         time: file::now_utc(),
         unit: session.unit,
         connection: session.target.to_string(),
@@ -167,7 +164,7 @@ pub(crate) async fn read_backup(
 /// says it has them. A refusal is recorded, not fatal; no reply ends the backup.
 async fn identify(session: &Session, view: &View) -> Result<(String, Vec<(String, String)>), CliError> {
     let (client, unit) = (&session.client, session.unit);
-    match view.identification {
+    match view.identification() {
         Identification::None => {
             Ok(("none: the profile says the device has no identification (FC2B/0E, FC11)".into(), Vec::new()))
         }

@@ -21,9 +21,12 @@ use ferrobus::Error;
 use serde_json::json;
 
 use super::device;
-use super::diff::{load, same};
+use super::diff::load;
 use super::file::{Backup, State};
-use super::param::Param;
+use super::param::shown_toml;
+use ferrobus_profile::{Point, Value};
+
+use super::param;
 use super::view::View;
 use crate::connect::{ConnectArgs, Session};
 use crate::exit::CliError;
@@ -55,13 +58,13 @@ pub(crate) struct RestoreArgs {
 }
 
 /// A value of the file to restore: its parameter, the raw value and its registers.
-type Candidate<'v> = (&'v Param, toml::Value, Vec<u16>);
+type Candidate<'v> = (&'v Point, Value, Vec<u16>);
 
 /// One parameter to restore.
 struct Item<'a> {
-    param: &'a Param,
+    param: &'a Point,
     /// The file's raw value and its registers.
-    raw: toml::Value,
+    raw: Value,
     words: Vec<u16>,
     /// The device's value before, shown.
     before: String,
@@ -100,8 +103,8 @@ pub(crate) async fn run(connection: &ConnectArgs, args: &RestoreArgs) -> Result<
     let candidates = checked(&backup, &view, &file, args.force)?;
     connection.refuse_broadcast_read()?;
     let session = connection.open().await?;
-    let running_param = view.running.as_ref().and_then(|(code, values)| view.find(code).map(|p| (p, values)));
-    let mut to_read: Vec<&Param> = candidates.iter().map(|(p, _, _)| *p).collect();
+    let running_param = view.running();
+    let mut to_read: Vec<&Point> = candidates.iter().map(|(p, _, _)| *p).collect();
     if let Some((p, _)) = running_param
         && !to_read.iter().any(|q| q.code == p.code)
     {
@@ -142,17 +145,15 @@ fn differing<'v>(
     let mut items = Vec::new();
     let mut read_only = Vec::new();
     for (param, raw, words) in candidates {
-        let (before_raw, before_shown) = match before.values.get(&param.code) {
-            Some(Ok(current)) => {
-                let current = param.decode(current);
-                (Some(current.clone()), param.show(&current))
-            }
-            Some(Err(why)) => (None, format!("(not read: {why})")),
-            None => (None, "(not read)".into()),
+        let (known, before_shown) = match before.values.get(&param.code) {
+            Some(Ok(current)) if *current == words => continue,
+            Some(Ok(current)) => match param::decode(param, current) {
+                Ok(value) => (true, param.show(&value)),
+                Err(why) => (false, format!("(not read: {why})")),
+            },
+            Some(Err(why)) => (false, format!("(not read: {why})")),
+            None => (false, "(not read)".into()),
         };
-        if before_raw.as_ref().is_some_and(|current| same(Some(param), current, &raw)) {
-            continue;
-        }
         if !param.writable() {
             read_only.push(format!(
                 "{}: the profile marks it read-only; the device holds {before_shown}, the file {}",
@@ -161,10 +162,10 @@ fn differing<'v>(
             ));
             continue;
         }
-        let outcome = if before_raw.is_none() {
-            Outcome::NotWritten(format!("its value could not be read first: {before_shown}"))
-        } else {
+        let outcome = if known {
             Outcome::Pending
+        } else {
+            Outcome::NotWritten(format!("its value could not be read first: {before_shown}"))
         };
         items.push(Item { param, raw, words, before: before_shown, outcome });
     }
@@ -180,7 +181,7 @@ fn differing<'v>(
 /// Reads back every parameter of the file: each written item verified or not, and the
 /// parameters not written that differ from the file after the restore.
 async fn read_back(session: &Session, view: &View, backup: &Backup, items: &mut [Item<'_>]) -> Vec<String> {
-    let all: Vec<&Param> = backup.entries.iter().filter_map(|e| view.find(&e.code)).collect();
+    let all: Vec<&Point> = backup.entries.iter().filter_map(|e| view.find(&e.code)).collect();
     let after = device::read(session, view, &all).await;
     for item in items.iter_mut() {
         if item.outcome != Outcome::Pending {
@@ -188,9 +189,7 @@ async fn read_back(session: &Session, view: &View, backup: &Backup, items: &mut 
         }
         item.outcome = match after.values.get(&item.param.code) {
             Some(Ok(words)) if *words == item.words => Outcome::Verified,
-            Some(Ok(words)) => {
-                Outcome::Unverified(format!("written, but reads back {}", item.param.show(&item.param.decode(words))))
-            }
+            Some(Ok(words)) => Outcome::Unverified(format!("written, but reads back {}", shown(item.param, words))),
             Some(Err(why)) => Outcome::Unverified(format!("written, but not read back: {why}")),
             None => Outcome::Unverified("written, but not read back".into()),
         };
@@ -202,14 +201,9 @@ async fn read_back(session: &Session, view: &View, backup: &Backup, items: &mut 
             continue;
         }
         if let Some(Ok(words)) = after.values.get(&param.code)
-            && !same(Some(param), &param.decode(words), raw)
+            && param::from_toml(param, raw).and_then(|v| param::encode(param, &v)).is_ok_and(|w| w != *words)
         {
-            drifted.push(format!(
-                "{} now reads {} (the file: {})",
-                param.code,
-                param.show(&param.decode(words)),
-                param.show(raw)
-            ));
+            drifted.push(format!("{} now reads {} (the file: {})", param.code, shown(param, words), shown_toml(raw)));
         }
     }
     drifted
@@ -232,15 +226,15 @@ fn checked<'v>(backup: &Backup, view: &'v View, file: &str, force: bool) -> Resu
             }
             continue;
         };
-        match param.encode(raw) {
+        let limit = view.profile.write_limit(param.table);
+        match param::from_toml(param, raw).and_then(|v| param::encode(param, &v).map(|w| (v, w))) {
             Err(why) => problems.push(format!("{at}: {why}")),
-            Ok(_) if param.width > view.write_registers => problems.push(format!(
-                "{at}: {} registers do not fit one write request of {}",
-                param.width, view.write_registers
-            )),
-            Ok(words) => match param.out_of_range(raw) {
-                Some(why) if param.writable() => problems.push(format!("{at}: {why}")),
-                _ => candidates.push((param, raw.clone(), words)),
+            Ok(_) if param.width > limit => {
+                problems.push(format!("{at}: {} registers do not fit one write request of {limit}", param.width));
+            }
+            Ok((value, words)) => match param.check_write(&value, &param.show(&value)) {
+                Err(why) if param.writable() => problems.push(format!("{file}:{}: {why}", entry.line)),
+                _ => candidates.push((param, value, words)),
             },
         }
     }
@@ -255,25 +249,28 @@ fn checked<'v>(backup: &Backup, view: &'v View, file: &str, force: bool) -> Resu
 
 /// The run-lock rule, before any write: a run-locked parameter to write while the drive runs
 /// (or while it cannot be told whether it runs) refuses the restore.
-fn run_lock(
-    items: &[Item<'_>],
-    running: Option<(&Param, &Vec<i64>)>,
-    before: &device::Readings,
-) -> Result<(), CliError> {
+fn run_lock(items: &[Item<'_>], running: Option<(&Point, &[i64])>, before: &device::Readings) -> Result<(), CliError> {
     let locked: Vec<&str> = items
         .iter()
         .filter(|i| !i.param.while_running && i.outcome == Outcome::Pending)
         .map(|i| i.param.code.as_str())
         .collect();
-    if !locked.is_empty()
-        && let Some((p, values)) = running
-    {
+    let Some((p, values)) = running else {
+        if !locked.is_empty() {
+            eprintln!(
+                "note: the profile does not say how to tell that the drive runs ([state] running): {} may not be \
+                 written while it runs, and the drive may refuse them",
+                locked.join(", ")
+            );
+        }
+        return Ok(());
+    };
+    if !locked.is_empty() {
         let runs = match before.values.get(&p.code) {
-            Some(Ok(words)) => match p.decode(words) {
-                toml::Value::Integer(n) => values.contains(&n),
-                toml::Value::Boolean(b) => values.contains(&i64::from(b)),
-                _ => false,
-            },
+            Some(Ok(words)) => param::decode(p, words)
+                .ok()
+                .and_then(|v| v.as_int())
+                .is_some_and(|n| values.iter().any(|v| i128::from(*v) == n)),
             Some(Err(why)) => {
                 return Err(CliError::Incomplete(format!(
                     "cannot tell whether the drive runs ({}: {why}), and {} may not be written while it runs; \
@@ -333,6 +330,11 @@ fn conclude(items: &[Item<'_>], drifted: &[String], format: Format, file: &str) 
         list(&not_written),
         if drifted.is_empty() { String::new() } else { format!("; differing after it: {}", drifted.len()) }
     )))
+}
+
+/// Registers read from the device, shown in the profile's unit.
+fn shown(point: &Point, words: &[u16]) -> String {
+    param::decode(point, words).map_or_else(|why| format!("(undecodable: {why})"), |v| point.show(&v))
 }
 
 fn list(codes: &[&str]) -> String {
@@ -418,7 +420,7 @@ fn render(items: &[Item<'_>], format: Format, stage: &str, file: &str) -> String
             "stage": stage,
             "parameters": items.iter().map(|i| json!({
                 "code": i.param.code,
-                "label": i.param.label,
+                "label": param::label(i.param),
                 "device": i.before,
                 "file": i.param.show(&i.raw),
                 "result": result(&i.outcome),
@@ -437,7 +439,7 @@ fn render(items: &[Item<'_>], format: Format, stage: &str, file: &str) -> String
     for i in items {
         rows.push(vec![
             i.param.code.clone(),
-            i.param.label.clone(),
+            param::label(i.param).to_string(),
             i.before.clone(),
             i.param.show(&i.raw),
             result(&i.outcome),
@@ -452,44 +454,40 @@ fn render(items: &[Item<'_>], format: Format, stage: &str, file: &str) -> String
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::backup::param::{Access, Kind, Order, Table};
+    use ferrobus_profile::Profile;
+    use std::fmt::Write as _;
 
-    fn param(code: &str, depends_on: &[&str]) -> Param {
-        Param {
-            code: code.into(),
-            label: String::new(),
-            table: Table::Holding,
-            wire: 0,
-            width: 1,
-            kind: Kind::U16,
-            order: Order::Abcd,
-            scale: 1.0,
-            offset: 0.0,
-            unit: None,
-            min: None,
-            max: None,
-            access: Access::Rw,
-            while_running: true,
-            depends_on: depends_on.iter().map(|d| (*d).to_string()).collect(),
-            backup: true,
-            values: Vec::new(),
+    fn profile(entries: &[(&str, &[&str])]) -> Profile {
+        let mut text = String::from("[device]\nname = \"t\"\nvendor = \"t\"\nproduct_code = \"t\"\nrevision = \"1\"\n");
+        for (number, (code, depends_on)) in entries.iter().enumerate() {
+            let list: Vec<String> = depends_on.iter().map(|d| format!("\"{d}\"")).collect();
+            let _ = write!(
+                text,
+                "[[registers]]\nnumber = {number}\nname = \"{code}\"\naccess = \"rw\"\ndepends_on = [{}]\n",
+                list.join(", ")
+            );
         }
+        Profile::parse(&text, "t.toml").unwrap()
     }
 
-    fn item(param: &Param) -> Item<'_> {
-        Item { param, raw: toml::Value::Integer(0), words: vec![0], before: String::new(), outcome: Outcome::Pending }
+    fn items(profile: &Profile) -> Vec<Item<'_>> {
+        profile
+            .points()
+            .iter()
+            .map(|param| Item {
+                param,
+                raw: Value::Int(0),
+                words: vec![0],
+                before: String::new(),
+                outcome: Outcome::Pending,
+            })
+            .collect()
     }
 
     #[test]
     fn dependencies_come_first_and_the_profile_order_is_kept_otherwise() {
-        let params = [
-            param("F001", &["A004"]),
-            param("B", &[]),
-            param("A004", &["A003"]),
-            param("A003", &[]),
-            param("C", &["Z"]),
-        ];
-        let mut items: Vec<Item<'_>> = params.iter().map(item).collect();
+        let profile = profile(&[("F001", &["A004"]), ("B", &[]), ("A004", &["A003"]), ("A003", &[]), ("C", &["B"])]);
+        let mut items = items(&profile);
         order(&mut items).unwrap();
         let codes: Vec<&str> = items.iter().map(|i| i.param.code.as_str()).collect();
         assert_eq!(codes, ["B", "A003", "A004", "F001", "C"]);
@@ -497,8 +495,8 @@ mod tests {
 
     #[test]
     fn a_dependency_cycle_is_refused_before_any_write() {
-        let params = [param("A", &["B"]), param("B", &["A"]), param("C", &[])];
-        let mut items: Vec<Item<'_>> = params.iter().map(item).collect();
+        let profile = profile(&[("A", &["B"]), ("B", &["A"]), ("C", &[])]);
+        let mut items = items(&profile);
         let err = order(&mut items).unwrap_err();
         assert_eq!(err, "the profile's depends_on make a cycle among A, B; nothing was written");
     }
