@@ -22,6 +22,8 @@ pub(crate) struct Readings {
     pub(crate) planned: usize,
     /// The error that stopped the reads (no reply, the port lost), if one did.
     pub(crate) stopped: Option<Error>,
+    /// How long the reads took, from the first request to the last reply.
+    pub(crate) elapsed: std::time::Duration,
 }
 
 /// Reads `params` in the planned requests. A request refused with an exception is read again
@@ -29,6 +31,13 @@ pub(crate) struct Readings {
 /// is not an exception (no reply, a lost port) nothing more is sent and the rest are marked
 /// not read.
 pub(crate) async fn read(session: &Session, view: &View, params: &[&Point]) -> Readings {
+    let began = std::time::Instant::now();
+    let mut readings = read_planned(session, view, params).await;
+    readings.elapsed = began.elapsed();
+    readings
+}
+
+async fn read_planned(session: &Session, view: &View, params: &[&Point]) -> Readings {
     let mut readings = Readings::default();
     let profile = &view.profile;
     for table in [Table::Holding, Table::Input, Table::Coils, Table::DiscreteInputs] {
@@ -66,6 +75,7 @@ pub(crate) async fn read(session: &Session, view: &View, params: &[&Point]) -> R
                 continue;
             }
             readings.requests += 1;
+            tracing::info!(table = table.name(), start, count, "read request");
             match read_table(session, table, start, count).await {
                 Ok(items) => {
                     for p in inside {

@@ -102,11 +102,12 @@ pub(crate) async fn run(connection: &ConnectArgs, args: &BackupArgs) -> Result<(
         None => output::print(&text)?,
     }
     eprintln!(
-        "backup: {saved} of {} parameters of unit {} in {} requests (the plan's {})",
+        "backup: {saved} of {} parameters of unit {} in {} requests (the plan's {}), {:.1} ms",
         backup.entries.len(),
         session.unit,
         readings.requests,
-        readings.planned
+        readings.planned,
+        readings.elapsed.as_secs_f64() * 1e3
     );
     if failed > 0 {
         let list: Vec<&str> =

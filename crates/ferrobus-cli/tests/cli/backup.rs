@@ -130,11 +130,11 @@ fn backup_then_changes_then_diff_shows_exactly_those_and_restore_apply_makes_dif
     let path = temp("round-trip.toml");
     let file = path.to_str().unwrap();
     let out = sim.run("omron-3g3rx", &["backup", "-o", file]).success();
-    // "backup: N of N parameters of unit 1 in R requests (the plan's R)": all read, in the plan.
+    // "backup: N of N parameters of unit 1 in R requests (the plan's R), T.t ms": all read, in the plan.
     let summary = stderr(&out);
     let numbers: Vec<u64> = summary.split(|c: char| !c.is_ascii_digit()).filter_map(|n| n.parse().ok()).collect();
     assert!(summary.starts_with("backup: "), "{summary}");
-    assert!(matches!(numbers[..], [n, m, 1, r, q] if n == m && r == q && r > 0), "{summary}");
+    assert!(matches!(numbers[..], [n, m, 1, r, q, _, _] if n == m && r == q && r > 0), "{summary}");
     let text = std::fs::read_to_string(&path).unwrap();
     for want in [
         "profile = \"omron-3g3rx\"\n",
