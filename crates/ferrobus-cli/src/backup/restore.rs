@@ -216,8 +216,14 @@ fn checked<'v>(backup: &Backup, view: &'v View, file: &str, force: bool) -> Resu
     let mut candidates: Vec<Candidate<'v>> = Vec::new();
     let mut problems = Vec::new();
     for entry in &backup.entries {
-        let State::Value { raw, .. } = &entry.state else { continue };
         let at = format!("{file}:{}: {}", entry.line, entry.code);
+        let raw = match &entry.state {
+            State::Value { raw, .. } => raw,
+            State::Failed(why) => {
+                eprintln!("note: {at}: the backup holds no value (it could not be read: {why}); left as it is");
+                continue;
+            }
+        };
         let Some(param) = view.find(&entry.code) else {
             if force {
                 eprintln!("note: {at}: not in profile {}; skipped", view.name);

@@ -226,6 +226,27 @@ fn a_parameter_that_fails_to_read_is_recorded_with_the_reason_and_exit_7() {
 }
 
 #[test]
+fn a_diff_that_cannot_read_a_parameter_exits_7_and_a_backup_that_cannot_be_written_exits_6() {
+    let sim = TcpSim::start(&["--profile", "omron-3g3rx", "--fault", "1:fc=0x03,addr=0x1202,exception=0x02"]);
+    let path = temp("unread.toml");
+    let file = path.to_str().unwrap();
+    // The backup records A003 as unread; a restore of it leaves A003 alone and says so.
+    sim.run("omron-3g3rx", &["backup", "-o", file]).code(7);
+    let out = sim.run("omron-3g3rx", &["diff", file]).code(7);
+    assert!(
+        stdout(&out).lines().any(|l| l.starts_with("A003") && l.contains("(not read: exception 0x02")),
+        "{}",
+        stdout(&out)
+    );
+    assert!(stderr(&out).contains("1 parameter could not be read from unit 1"), "{}", stderr(&out));
+    let restore = sim.run("omron-3g3rx", &["restore", file]).success();
+    assert!(stderr(&restore).contains("A003: the backup holds no value"), "{}", stderr(&restore));
+    let err = stderr(&sim.run("omron-3g3rx", &["backup", "-o", "/nonexistent/dir/drive.toml"]).code(6));
+    assert!(err.contains("cannot write /nonexistent/dir/drive.toml"), "{err}");
+    std::fs::remove_file(&path).unwrap();
+}
+
+#[test]
 fn an_out_of_range_value_in_the_file_is_refused_with_its_line_before_anything_is_sent() {
     let sim = TcpSim::start(&["--profile", "omron-3g3rx"]);
     let path = temp("range.toml");
