@@ -108,6 +108,9 @@ pub(crate) enum CliError {
     Differ,
     /// Some parameters could not be read or written; what was done has been listed.
     Incomplete(String),
+    /// The device refused some of the work with exceptions, each already explained (in the
+    /// profile's words); the message sums them up.
+    Refused(String),
 }
 
 impl From<Error> for CliError {
@@ -146,6 +149,7 @@ impl CliError {
             CliError::Interrupted => Exit::Interrupted,
             CliError::Differ => Exit::Exception,
             CliError::Incomplete(_) => Exit::Incomplete,
+            CliError::Refused(_) => Exit::Exception,
         }
     }
 }
@@ -184,9 +188,10 @@ pub(crate) fn report(error: &CliError, target: Option<&Target>, unit: u8) -> Rep
     match error {
         CliError::Modbus { error } => modbus_report(error, target, unit),
         CliError::Pdu(e) => Report { message: format!("invalid request: {}", pdu_words(e)), hints: Vec::new() },
-        CliError::Usage(message) | CliError::BadData(message) | CliError::Incomplete(message) => {
-            Report { message: message.clone(), hints: Vec::new() }
-        }
+        CliError::Usage(message)
+        | CliError::BadData(message)
+        | CliError::Incomplete(message)
+        | CliError::Refused(message) => Report { message: message.clone(), hints: Vec::new() },
         CliError::MissingTarget => Report {
             message: "no bus given: use one of --port PATH, --tcp HOST[:PORT] or --rtu-tcp HOST:PORT".into(),
             hints: Vec::new(),

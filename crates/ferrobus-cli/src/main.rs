@@ -24,6 +24,7 @@ mod crc;
 mod demo;
 mod diag;
 mod exit;
+mod get;
 mod hex;
 mod info;
 mod interrupt;
@@ -31,9 +32,11 @@ mod interrupt;
 mod line;
 mod mask;
 mod output;
+mod profile;
 mod raw;
 mod read;
 mod readwrite;
+mod set;
 mod sim;
 mod target;
 #[cfg(not(unix))]
@@ -111,6 +114,12 @@ enum Command {
     Demo(demo::DemoArgs),
     /// FC03 reads back to back: transactions/s, latency and CPU time (the peer benchmark's format)
     Bench(bench::BenchArgs),
+    /// Read named parameters of a --device profile, scaled with their units
+    Get(get::GetArgs),
+    /// Write one named parameter of a --device profile, in its unit, checked first, read back
+    Set(set::SetArgs),
+    /// Device profiles: list the built-in ones, show a parameter table, check a file (offline)
+    Profile(profile::ProfileArgs),
     /// Save every parameter of a device (--device PROFILE) to a diffable TOML file
     Backup(backup::BackupArgs),
     /// Compare the device with a backup, or two backups; exit 1 if they differ
@@ -128,6 +137,7 @@ impl Command {
                 | Command::Line(_)
                 | Command::Demo(_)
                 | Command::Sim(sim::SimArgs { pty: true, .. })
+                | Command::Profile(_)
                 | Command::Diff(backup::diff::DiffArgs { other: Some(_), .. })
         )
     }
@@ -153,6 +163,9 @@ async fn dispatch(cli: &Cli) -> Result<(), CliError> {
         Command::Line(args) => line::run(connection, args).await,
         Command::Demo(args) => demo::run(args).await,
         Command::Bench(args) => bench::run(connection, args).await,
+        Command::Get(args) => get::run(connection, args).await,
+        Command::Set(args) => set::run(connection, args).await,
+        Command::Profile(args) => profile::run(args),
         Command::Backup(args) => backup::run(connection, args).await,
         Command::Diff(args) => backup::diff::run(connection, args).await,
         Command::Restore(args) => backup::restore::run(connection, args).await,

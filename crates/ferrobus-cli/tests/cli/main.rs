@@ -5,6 +5,7 @@
 
 mod backup;
 mod bench_failures;
+mod device;
 mod errors;
 mod line_settings;
 mod offline;
