@@ -1,9 +1,9 @@
 //! A profile written for a device ferrobus did not make: the peer servers' data map
 //! (tests/peers/README.md) described as a small drive — a scaled speed, a 32-bit position, an
-//! enumeration, an enable coil and a read-only input register — used with backup, diff and
-//! restore against the libmodbus and pymodbus servers over Modbus/TCP.
+//! enumeration, an enable coil and a read-only input register — used with get, set, backup,
+//! diff and restore against the libmodbus and pymodbus servers over Modbus/TCP.
 
-use crate::support::{Over, Stack, ferrobus, peer_server, require};
+use crate::support::{Over, Stack, ferrobus, peer_server, require, words};
 
 /// The unit the peer servers serve here.
 const UNIT: u8 = 17;
@@ -101,8 +101,22 @@ fn backup_diff_restore(stack: Stack) {
     }
     assert!(!text.contains("firmware"), "a read-only input is not backed up:\n{text}");
 
-    // Change three of them behind the profile's back.
-    fb.run(&["write", "register", "0", "250"]).ok();
+    // get: named, scaled, with units, the enumeration decoded, the input register too.
+    let got = fb.run(&["--device", device, "get", "speed", "position", "mode", "firmware", "--json"]).json();
+    let values: Vec<(String, String)> = got["points"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|p| (p["code"].as_str().unwrap().to_string(), p["value"].as_str().unwrap().to_string()))
+        .collect();
+    let want = [("speed", "0.3 r/min"), ("position", "655377"), ("mode", "auto"), ("firmware", "4096")];
+    assert_eq!(values, want.map(|(c, v)| (c.to_string(), v.to_string())), "{stack:?}: {got}");
+
+    // set: in the parameter's unit, range-checked before sending, read back.
+    fb.run(&["--device", device, "set", "speed", "25r/min"]).ok();
+    // 6 A is above limit's 5.00 A: refused before sending (the diff below does not list limit).
+    fb.run(&["--device", device, "set", "limit", "6A"]).code(2);
+    // Then two more changes behind the profile's back.
     fb.run(&["write", "registers", "1", "0", "42"]).ok();
     fb.run(&["write", "coil", "0", "off"]).ok();
     let diff = fb.run(&["--device", device, "diff", file]).code(1).stdout;
@@ -113,7 +127,7 @@ fn backup_diff_restore(stack: Stack) {
     // Dry run, then apply: only what differs, read back.
     let dry = fb.run(&["--device", device, "restore", file]).ok();
     assert_eq!(dry.matches("would write").count(), 3, "{stack:?}:\n{dry}");
-    assert_eq!(fb.run(&["read", "holding", "0"]).ok().lines().count(), 2, "the dry run wrote nothing");
+    assert_eq!(fb.values(&["read", "holding", "0"]), words(&[250]), "the dry run wrote nothing");
     let applied = fb.run(&["--device", device, "restore", file, "--apply"]).ok();
     assert_eq!(applied.matches("written, verified").count(), 3, "{stack:?}:\n{applied}");
     let same = fb.run(&["--device", device, "diff", file]).ok();
@@ -122,11 +136,11 @@ fn backup_diff_restore(stack: Stack) {
 }
 
 #[test]
-fn a_custom_profile_backs_up_diffs_and_restores_the_libmodbus_server() {
+fn a_custom_profile_gets_sets_backs_up_diffs_and_restores_the_libmodbus_server() {
     backup_diff_restore(Stack::Libmodbus);
 }
 
 #[test]
-fn a_custom_profile_backs_up_diffs_and_restores_the_pymodbus_server() {
+fn a_custom_profile_gets_sets_backs_up_diffs_and_restores_the_pymodbus_server() {
     backup_diff_restore(Stack::Pymodbus);
 }
