@@ -147,9 +147,8 @@ impl CliError {
             CliError::Output { source, .. } if source.kind() == io::ErrorKind::BrokenPipe => Exit::BrokenPipe,
             CliError::Output { .. } => Exit::Output,
             CliError::Interrupted => Exit::Interrupted,
-            CliError::Differ => Exit::Exception,
+            CliError::Differ | CliError::Refused(_) => Exit::Exception,
             CliError::Incomplete(_) => Exit::Incomplete,
-            CliError::Refused(_) => Exit::Exception,
         }
     }
 }
