@@ -24,6 +24,7 @@
 mod cli_vs_servers;
 mod clients_vs_sim;
 mod custom_profile;
+mod device_profile;
 mod drive_profiles;
 mod fault_rules;
 mod mbpoll_vs_sim;
