@@ -141,12 +141,16 @@ fn backup_then_changes_then_diff_shows_exactly_those_and_restore_apply_makes_dif
         "unit = 1\n",
         &format!("connection = \"{} (Modbus/TCP)\"\n", sim.addr),
         "identification = \"none: the profile says the device has no identification (FC2B/0E, FC11)\"\n",
-        "# Acceleration time 1 (32-bit): time from 0 to the maximum frequency\nF002 = { raw = 1000, value = \"10.00 s\" }\n",
+        "\nF002 = { raw = 1000, value = \"10.00 s\" }\n",
         "A003 = { raw = 60, value = \"60 Hz\" }\n",
     ] {
         assert!(text.contains(want), "{want:?} not in\n{text}");
     }
     assert!(text.lines().any(|l| l.starts_with("time = \"20") && l.ends_with("Z\"")), "{text}");
+    // Each parameter under a comment with its label (or its description).
+    let lines: Vec<&str> = text.lines().collect();
+    let f002 = lines.iter().position(|l| l.starts_with("F002 = ")).unwrap();
+    assert!(lines[f002 - 1].to_lowercase().starts_with("# acceleration time 1"), "{text}");
     // The same backup to stdout is the same file but for the time.
     let again = stdout(&sim.run("omron-3g3rx", &["backup"]).success());
     let untimed = |t: &str| t.lines().filter(|l| !l.starts_with("time = ")).collect::<Vec<_>>().join("\n");
