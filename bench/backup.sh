@@ -16,7 +16,7 @@
 # Usage: bench/backup.sh            (REPS runs, default 5; results on stdout as a table)
 # Environment:
 #   FERROBUS=PATH    the ferrobus binary (default: cargo build --release -p ferrobus-cli)
-#   PROFILE=NAME     the drive (default omron-3g3rx)
+#   PROFILE=NAME     the drive: a built-in profile or a profile file (default omron-3g3rx)
 #   BAUD=N           the line's baud rate (default 19200); the parity is even
 #   REPS=N           runs (default 5)
 set -euo pipefail
@@ -92,11 +92,11 @@ for rep in $(seq 1 "$REPS"); do
 done
 
 python3 - "$WORK" "$REPS" "$BAUD" "$PROFILE" "$ROOT" <<'EOF'
-import json, re, statistics, sys, tomllib
+import json, os, re, statistics, sys, tomllib
 work, reps, baud, profile, root = sys.argv[1], int(sys.argv[2]), int(sys.argv[3]), sys.argv[4], sys.argv[5]
 char = 11 / baud                                  # 8E1: start, 8 data, parity, stop
 t35 = 3.5 * char if baud <= 19200 else 1.75e-3    # the spec fixes 1.75 ms above 19200
-path = f"{root}/crates/ferrobus-profile/profiles/{profile}.toml"
+path = profile if os.path.isfile(profile) else f"{root}/crates/ferrobus-profile/profiles/{profile}.toml"
 try:
     with open(path, "rb") as f:
         wait = tomllib.load(f).get("comm", {}).get("response_wait_ms", 0) / 1e3
