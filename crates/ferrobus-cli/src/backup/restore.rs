@@ -127,6 +127,9 @@ pub(crate) async fn run(connection: &ConnectArgs, args: &RestoreArgs) -> Result<
                 plural(n)
             );
         }
+        if let Err(CliError::Incomplete(why)) = run_lock(&items, running_param, &before) {
+            eprintln!("note: --apply would refuse now: {why}");
+        }
         return Ok(());
     }
     run_lock(&items, running_param, &before)?;
