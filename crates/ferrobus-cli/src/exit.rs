@@ -12,6 +12,7 @@
 //! | 4 | IO error opening or using the port |
 //! | 5 | bad reply (malformed, or not answering the request); `crc --check` on a bad CRC |
 //! | 6 | output error: stdout or an output file could not be written (e.g. disk full) |
+//! | 7 | incomplete: some parameters could not be read or written (backup, restore; the output says which) |
 //! | 130 | interrupted (Ctrl-C or SIGTERM), after writing what was done |
 //! | 141 | stdout was closed by its reader (`| head`): the command ends quietly, as if by SIGPIPE |
 
@@ -29,11 +30,13 @@ pub(crate) const EXIT_CODES_HELP: &str = "\
 Exit codes:
   0  success
   1  the device answered with an exception (e.g. 0x02 Illegal Data Address)
+     (diff: the device and the file, or the two files, differ)
   2  usage error: bad option, value, address or count
   3  timeout: no reply from the device
   4  IO error opening or using the port or connection
   5  bad reply: malformed, or not answering the request (also: crc --check on a bad CRC)
   6  output error: stdout or an output file could not be written (e.g. disk full)
+  7  incomplete: some parameters could not be read or written (backup, diff, restore say which)
   130  interrupted by Ctrl-C (SIGINT) or SIGTERM, after writing what was done
   141  stdout closed by its reader (e.g. `| head -1`): ends quietly, as if by SIGPIPE";
 
@@ -55,6 +58,8 @@ pub(crate) enum Exit {
     BadReply = 5,
     /// 6: stdout or an output file could not be written.
     Output = 6,
+    /// 7: some parameters could not be read or written; the output says which.
+    Incomplete = 7,
     /// 130 (128 + SIGINT): interrupted, after writing what was done.
     Interrupted = 130,
     /// 141 (128 + SIGPIPE): the reader of stdout went away.
@@ -99,6 +104,10 @@ pub(crate) enum CliError {
     },
     /// SIGINT or SIGTERM came; what was done has been written.
     Interrupted,
+    /// `diff` found differences (exit 1, like diff(1)); they have been listed.
+    Differ,
+    /// Some parameters could not be read or written; what was done has been listed.
+    Incomplete(String),
     /// The device refused some of the work with exceptions, each already explained (in the
     /// profile's words); the message sums them up.
     Refused(String),
@@ -138,7 +147,8 @@ impl CliError {
             CliError::Output { source, .. } if source.kind() == io::ErrorKind::BrokenPipe => Exit::BrokenPipe,
             CliError::Output { .. } => Exit::Output,
             CliError::Interrupted => Exit::Interrupted,
-            CliError::Refused(_) => Exit::Exception,
+            CliError::Differ | CliError::Refused(_) => Exit::Exception,
+            CliError::Incomplete(_) => Exit::Incomplete,
         }
     }
 }
@@ -177,9 +187,10 @@ pub(crate) fn report(error: &CliError, target: Option<&Target>, unit: u8) -> Rep
     match error {
         CliError::Modbus { error } => modbus_report(error, target, unit),
         CliError::Pdu(e) => Report { message: format!("invalid request: {}", pdu_words(e)), hints: Vec::new() },
-        CliError::Usage(message) | CliError::BadData(message) | CliError::Refused(message) => {
-            Report { message: message.clone(), hints: Vec::new() }
-        }
+        CliError::Usage(message)
+        | CliError::BadData(message)
+        | CliError::Incomplete(message)
+        | CliError::Refused(message) => Report { message: message.clone(), hints: Vec::new() },
         CliError::MissingTarget => Report {
             message: "no bus given: use one of --port PATH, --tcp HOST[:PORT] or --rtu-tcp HOST:PORT".into(),
             hints: Vec::new(),
@@ -200,6 +211,7 @@ pub(crate) fn report(error: &CliError, target: Option<&Target>, unit: u8) -> Rep
             },
         },
         CliError::Interrupted => Report { message: "interrupted".into(), hints: Vec::new() },
+        CliError::Differ => Report { message: String::new(), hints: Vec::new() },
     }
 }
 

@@ -17,6 +17,7 @@
 //! works offline).
 
 mod address;
+mod backup;
 mod bench;
 mod connect;
 mod crc;
@@ -122,6 +123,12 @@ enum Command {
     Set(set::SetArgs),
     /// Device profiles: list the built-in ones, show a parameter table, check a file (offline)
     Profile(profile::ProfileArgs),
+    /// Save every parameter of a device (--device PROFILE) to a diffable TOML file
+    Backup(backup::BackupArgs),
+    /// Compare the device with a backup, or two backups; exit 1 if they differ
+    Diff(backup::diff::DiffArgs),
+    /// Write back what differs from a backup (a dry run unless --apply)
+    Restore(backup::restore::RestoreArgs),
 }
 
 impl Command {
@@ -134,6 +141,7 @@ impl Command {
                 | Command::Demo(_)
                 | Command::Sim(sim::SimArgs { pty: true, .. })
                 | Command::Profile(_)
+                | Command::Diff(backup::diff::DiffArgs { other: Some(_), .. })
         )
     }
 }
@@ -162,6 +170,9 @@ async fn dispatch(cli: &Cli) -> Result<(), CliError> {
         Command::Get(args) => get::run(connection, args).await,
         Command::Set(args) => set::run(connection, args).await,
         Command::Profile(args) => profile::run(args),
+        Command::Backup(args) => backup::run(connection, args).await,
+        Command::Diff(args) => backup::diff::run(connection, args).await,
+        Command::Restore(args) => backup::restore::run(connection, args).await,
     }
 }
 

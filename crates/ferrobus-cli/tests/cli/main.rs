@@ -3,6 +3,7 @@
 //! it, checking stdout, stderr, exit codes and the requests the server saw.
 #![cfg(unix)] // the servers of these tests sit on ptys as well as TCP
 
+mod backup;
 mod bench_failures;
 mod device;
 mod errors;

@@ -8,6 +8,8 @@
 //!
 //! - [`cli_vs_servers`]: the `ferrobus` binary against each peer server, RTU and TCP.
 //! - [`clients_vs_sim`]: each peer client and mbpoll against `ferrobus sim --profile generic`.
+//! - [`custom_profile`]: a profile file for the peer servers' data map, used with backup, diff
+//!   and restore against libmodbus and pymodbus.
 //! - [`drive_profiles`]: peer clients and raw manual frames against the 3G3RX and SDP profiles.
 //! - [`fault_rules`]: fault rules aimed at requests, each met by pymodbus and libmodbus clients.
 //! - [`port_reopen`]: a serial port that disappears and comes back, through `ferrobus::Client`.
@@ -21,6 +23,7 @@
 
 mod cli_vs_servers;
 mod clients_vs_sim;
+mod custom_profile;
 mod device_profile;
 mod drive_profiles;
 mod fault_rules;

@@ -1,0 +1,159 @@
+//! Reading and writing parameters on the device: the reads in the profile's read plan
+//! ([`ferrobus_profile::plan`]), the writes, and
+//! failures worded with the profile's meaning of the device's exception codes.
+
+use std::collections::BTreeMap;
+
+use ferrobus::Error;
+
+use ferrobus_profile::{Extent, Point, Table};
+
+use super::view::View;
+use crate::connect::Session;
+
+/// What the reads found: each parameter's registers (a bit as 0 or 1), or why it was not read.
+#[derive(Debug, Default)]
+pub(crate) struct Readings {
+    /// By code.
+    pub(crate) values: BTreeMap<String, Result<Vec<u16>, String>>,
+    /// The requests sent.
+    pub(crate) requests: usize,
+    /// The planned requests, before any retry of a refused one point by point.
+    pub(crate) planned: usize,
+    /// The error that stopped the reads (no reply, the port lost), if one did.
+    pub(crate) stopped: Option<Error>,
+    /// How long the reads took, from the first request to the last reply.
+    pub(crate) elapsed: std::time::Duration,
+}
+
+/// Reads `params` in the planned requests. A request refused with an exception is read again
+/// point by point, so that only the points the device refuses are marked; after an error that
+/// is not an exception (no reply, a lost port) nothing more is sent and the rest are marked
+/// not read.
+pub(crate) async fn read(session: &Session, view: &View, params: &[&Point]) -> Readings {
+    let began = std::time::Instant::now();
+    let mut readings = read_planned(session, view, params).await;
+    readings.elapsed = began.elapsed();
+    readings
+}
+
+async fn read_planned(session: &Session, view: &View, params: &[&Point]) -> Readings {
+    let mut readings = Readings::default();
+    let profile = &view.profile;
+    for table in [Table::Holding, Table::Input, Table::Coils, Table::DiscreteInputs] {
+        let here: Vec<&Point> = params.iter().copied().filter(|p| p.table == table).collect();
+        if here.is_empty() {
+            continue;
+        }
+        let wanted: Vec<Extent> = here.iter().map(|p| Extent { start: p.address, width: p.width }).collect();
+        let requests = match ferrobus_profile::plan(
+            &wanted,
+            &profile.mapped(table),
+            &profile.spans(table),
+            profile.read_limit(table),
+        ) {
+            Ok(requests) => requests,
+            Err(error) => {
+                for p in &here {
+                    readings.values.insert(p.code.clone(), Err(format!("no read plan: {error}")));
+                }
+                continue;
+            }
+        };
+        readings.planned += requests.len();
+        for ferrobus_profile::Request { start, count } in requests {
+            let inside: Vec<&Point> = here
+                .iter()
+                .copied()
+                .filter(|p| p.address >= start && u32::from(p.address) < u32::from(start) + u32::from(count))
+                .collect();
+            if let Some(error) = &readings.stopped {
+                let why = format!("not read: the reads stopped after {}", describe(error, view));
+                for p in inside {
+                    readings.values.insert(p.code.clone(), Err(why.clone()));
+                }
+                continue;
+            }
+            readings.requests += 1;
+            tracing::info!(table = table.name(), start, count, "read request");
+            match read_table(session, table, start, count).await {
+                Ok(items) => {
+                    for p in inside {
+                        let from = usize::from(p.address - start);
+                        let words = items.get(from..from + usize::from(p.width)).map(<[u16]>::to_vec);
+                        let value = words.ok_or_else(|| "the reply was short".to_string());
+                        readings.values.insert(p.code.clone(), value);
+                    }
+                }
+                Err(error @ Error::Exception { .. }) if inside.len() > 1 => {
+                    tracing::info!(start, count, %error, "refused; reading point by point");
+                    for p in inside {
+                        readings.requests += 1;
+                        let value = match read_table(session, table, p.address, p.width).await {
+                            Ok(items) => Ok(items),
+                            Err(error @ Error::Exception { .. }) => Err(describe(&error, view)),
+                            Err(error) => {
+                                let why = describe(&error, view);
+                                readings.stopped = Some(error);
+                                Err(why)
+                            }
+                        };
+                        readings.values.insert(p.code.clone(), value);
+                        if readings.stopped.is_some() {
+                            break;
+                        }
+                    }
+                }
+                Err(error) => {
+                    let why = describe(&error, view);
+                    for p in &inside {
+                        readings.values.insert(p.code.clone(), Err(why.clone()));
+                    }
+                    if !matches!(error, Error::Exception { .. }) {
+                        readings.stopped = Some(error);
+                    }
+                }
+            }
+        }
+    }
+    // Points of a request cut short by a stop inside the point-by-point reads.
+    if let Some(error) = &readings.stopped {
+        let why = format!("not read: the reads stopped after {}", describe(error, view));
+        for p in params {
+            readings.values.entry(p.code.clone()).or_insert_with(|| Err(why.clone()));
+        }
+    }
+    readings
+}
+
+async fn read_table(session: &Session, table: Table, start: u16, count: u16) -> Result<Vec<u16>, Error> {
+    let (client, unit) = (&session.client, session.unit);
+    let bits = |b: Vec<bool>| b.into_iter().map(u16::from).collect();
+    match table {
+        Table::Holding => client.read_holding_registers(unit, start, count).await,
+        Table::Input => client.read_input_registers(unit, start, count).await,
+        Table::Coils => client.read_coils(unit, start, count).await.map(bits),
+        Table::DiscreteInputs => client.read_discrete_inputs(unit, start, count).await.map(bits),
+    }
+}
+
+/// Writes `words` to `point`: FC05 for a coil, FC06 for one register, FC10 for more.
+pub(crate) async fn write(session: &Session, point: &Point, words: &[u16]) -> Result<(), Error> {
+    let (client, unit) = (&session.client, session.unit);
+    match (point.table, words) {
+        (Table::Coils, [bit]) => client.write_single_coil(unit, point.address, *bit != 0).await,
+        (_, [one]) => client.write_single_register(unit, point.address, *one).await,
+        _ => client.write_multiple_registers(unit, point.address, words).await,
+    }
+}
+
+/// An error in the user's words, with the profile's meaning of an exception code.
+pub(crate) fn describe(error: &Error, view: &View) -> String {
+    match error {
+        Error::Exception { code, .. } => match view.meaning(code.value()) {
+            Some(meaning) => format!("exception {code}: {meaning}"),
+            None => format!("exception {code}"),
+        },
+        other => other.to_string(),
+    }
+}

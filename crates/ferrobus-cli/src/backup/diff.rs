@@ -1,0 +1,258 @@
+//! `diff FILE` (the device against a backup) and `diff A B` (two backups): each difference with
+//! its code, label and both values in the profile's unit; exit 0 when equal, 1 when they
+//! differ, as diff(1) does, another code for an error.
+
+use std::path::{Path, PathBuf};
+
+use clap::Args;
+use serde_json::{Value, json};
+
+use ferrobus_profile::Point;
+
+use super::file::{Backup, Entry, State};
+use super::param::{self, shown_toml};
+use super::view::View;
+use crate::connect::ConnectArgs;
+use crate::exit::CliError;
+use crate::output::{self, Align, Format, OutputArgs, Rows};
+
+/// `diff FILE [OTHER]`.
+#[derive(Args, Debug)]
+#[command(after_help = "With one file: the device (--device PROFILE and a bus) against the backup. With two: the \
+                        two backups, offline. Exit 0 when equal, 1 when they differ, 7 when some parameters could \
+                        not be read, another code for an error.\n\nExamples:\n  ferrobus --port /dev/ttyUSB0 \
+                        --device omron-3g3rx diff drive-07.toml\n  ferrobus diff drive-07.toml drive-08.toml")]
+pub(crate) struct DiffArgs {
+    /// A backup file
+    pub(crate) file: PathBuf,
+
+    /// A second backup file, to compare with the first instead of the device
+    pub(crate) other: Option<PathBuf>,
+
+    /// Output format.
+    #[command(flatten)]
+    pub(crate) output: OutputArgs,
+}
+
+/// One side of a comparison.
+#[derive(Clone, Debug)]
+pub(crate) enum Side {
+    /// A value: raw, and shown in the profile's unit.
+    Value(toml::Value, String),
+    /// It could not be read: why.
+    Failed(String),
+    /// The side has no entry for it.
+    Absent,
+}
+
+impl Side {
+    fn of(entry: Option<&Entry>, point: Option<&Point>) -> Side {
+        match entry.map(|e| &e.state) {
+            Some(State::Value { raw, shown }) => {
+                let shown = match point.and_then(|p| param::from_toml(p, raw).ok().map(|v| p.show(&v))) {
+                    Some(shown) => shown,
+                    None if shown.is_empty() => shown_toml(raw),
+                    None => shown.clone(),
+                };
+                Side::Value(raw.clone(), shown)
+            }
+            Some(State::Failed(why)) => Side::Failed(why.clone()),
+            None => Side::Absent,
+        }
+    }
+
+    fn shown(&self) -> String {
+        match self {
+            Side::Value(_, shown) => shown.clone(),
+            Side::Failed(why) => format!("(not read: {why})"),
+            Side::Absent => "(absent)".into(),
+        }
+    }
+
+    fn json(&self) -> Value {
+        match self {
+            Side::Value(raw, shown) => json!({ "raw": toml_json(raw), "value": shown }),
+            Side::Failed(why) => json!({ "error": why }),
+            Side::Absent => Value::Null,
+        }
+    }
+}
+
+/// A raw TOML value as JSON.
+fn toml_json(raw: &toml::Value) -> Value {
+    match raw {
+        toml::Value::Integer(n) => json!(n),
+        toml::Value::Float(f) => json!(f),
+        toml::Value::Boolean(b) => json!(b),
+        other => json!(shown_toml(other).trim_matches('"')),
+    }
+}
+
+/// Whether two raw values are the same to the device: through the registers they encode to,
+/// when the parameter is known and both encode; as TOML values otherwise.
+pub(crate) fn same(point: Option<&Point>, a: &toml::Value, b: &toml::Value) -> bool {
+    let words = |p: &Point, raw: &toml::Value| param::from_toml(p, raw).and_then(|v| param::encode(p, &v));
+    if let Some(p) = point
+        && let (Ok(x), Ok(y)) = (words(p, a), words(p, b))
+    {
+        return x == y;
+    }
+    a == b
+}
+
+/// One difference.
+#[derive(Clone, Debug)]
+pub(crate) struct Difference {
+    /// The code.
+    pub(crate) code: String,
+    /// The label, if the profile knows it.
+    pub(crate) label: String,
+    /// The first side (the file).
+    pub(crate) a: Side,
+    /// The second side (the device, or the second file).
+    pub(crate) b: Side,
+}
+
+/// The differences between `a` and `b`, in `a`'s order then `b`'s extras.
+pub(crate) fn compare(view: Option<&View>, a: &Backup, b: &Backup) -> Vec<Difference> {
+    let mut codes: Vec<&str> = a.entries.iter().map(|e| e.code.as_str()).collect();
+    for e in &b.entries {
+        if a.entry(&e.code).is_none() {
+            codes.push(&e.code);
+        }
+    }
+    let mut out = Vec::new();
+    for code in codes {
+        let point = view.and_then(|v| v.find(code));
+        let (ea, eb) = (a.entry(code), b.entry(code));
+        let equal = match (ea.map(|e| &e.state), eb.map(|e| &e.state)) {
+            (Some(State::Value { raw: x, .. }), Some(State::Value { raw: y, .. })) => same(point, x, y),
+            _ => false,
+        };
+        if !equal {
+            out.push(Difference {
+                code: code.to_string(),
+                label: point.map(|p| param::label(p).to_string()).unwrap_or_default(),
+                a: Side::of(ea, point),
+                b: Side::of(eb, point),
+            });
+        }
+    }
+    out
+}
+
+/// Reads a backup file, with its path in every error.
+pub(crate) fn load(path: &Path) -> Result<Backup, CliError> {
+    let shown = path.display().to_string();
+    let text = std::fs::read_to_string(path).map_err(|e| CliError::Usage(format!("cannot read {shown}: {e}")))?;
+    Backup::parse(&text, &shown).map_err(CliError::Usage)
+}
+
+/// Runs `diff`.
+pub(crate) async fn run(connection: &ConnectArgs, args: &DiffArgs) -> Result<(), CliError> {
+    let a = load(&args.file)?;
+    let a_name = args.file.display().to_string();
+    if let Some(other) = &args.other {
+        let b = load(other)?;
+        if a.header.profile != b.header.profile {
+            eprintln!(
+                "note: {a_name} is of profile {}, {} of profile {}",
+                a.header.profile,
+                other.display(),
+                b.header.profile
+            );
+        }
+        // Labels and units come from --device, or else from the first file's profile if it loads.
+        let view = match &connection.device {
+            Some(_) => Some(super::profile(connection, "diff")?),
+            None => View::load(&a.header.profile).ok(),
+        };
+        let differences = compare(view.as_ref(), &a, &b);
+        return finish(&differences, &a_name, &other.display().to_string(), args.output.format(), a.entries.len(), 0);
+    }
+    let view = super::profile(connection, "diff")?;
+    if a.header.profile != view.name {
+        eprintln!("note: {a_name} was made with profile {}; comparing with --device {}", a.header.profile, view.name);
+    }
+    connection.refuse_broadcast_read()?;
+    let session = connection.open().await?;
+    // The device's values of the parameters in the file, and of those the profile backs up.
+    let mut params: Vec<&Point> = a.entries.iter().filter_map(|e| view.find(&e.code)).collect();
+    for p in view.backed_up() {
+        if !params.iter().any(|q| q.code == p.code) {
+            params.push(p);
+        }
+    }
+    let readings = super::device::read(&session, &view, &params).await;
+    if let Some(error) = readings.stopped
+        && readings.values.values().all(Result::is_err)
+    {
+        return Err(error.into());
+    }
+    let mut failed = 0;
+    let entries = params
+        .iter()
+        .map(|p| {
+            let state = match readings.values.get(&p.code) {
+                Some(Ok(words)) => match param::decode(p, words) {
+                    Ok(raw) => State::Value { shown: p.show(&raw), raw: param::to_toml(&raw) },
+                    Err(why) => State::Failed(why),
+                },
+                Some(Err(why)) => State::Failed(why.clone()),
+                None => State::Failed("not read".into()),
+            };
+            if matches!(state, State::Failed(_)) {
+                failed += 1;
+            }
+            Entry { code: p.code.clone(), label: param::label(p).to_string(), line: 0, state }
+        })
+        .collect();
+    let device = Backup { header: a.header.clone(), identification: Vec::new(), entries };
+    let differences = compare(Some(&view), &a, &device);
+    finish(&differences, &a_name, &format!("unit {}", session.unit), args.output.format(), params.len(), failed)
+}
+
+/// Prints the differences; the outcome as an exit code.
+fn finish(
+    differences: &[Difference],
+    a: &str,
+    b: &str,
+    format: Format,
+    compared: usize,
+    unread: usize,
+) -> Result<(), CliError> {
+    let text = match format {
+        Format::Json => output::json_line(&json!({
+            "a": a,
+            "b": b,
+            "compared": compared,
+            "equal": differences.is_empty(),
+            "differences": differences.iter().map(|d| json!({
+                "code": d.code,
+                "label": d.label,
+                "a": d.a.json(),
+                "b": d.b.json(),
+            })).collect::<Vec<_>>(),
+        })),
+        other => {
+            let mut rows =
+                Rows::new(&[("code", Align::Left), ("label", Align::Left), (a, Align::Left), (b, Align::Left)]);
+            for d in differences {
+                rows.push(vec![d.code.clone(), d.label.clone(), d.a.shown(), d.b.shown()]);
+            }
+            if other == Format::Table && differences.is_empty() {
+                format!("{a} and {b} agree on all {compared} parameters\n")
+            } else {
+                rows.render(other)
+            }
+        }
+    };
+    output::print(&text)?;
+    if unread > 0 {
+        return Err(CliError::Incomplete(format!(
+            "{unread} parameter{} could not be read from {b}: the comparison is incomplete",
+            if unread == 1 { "" } else { "s" }
+        )));
+    }
+    if differences.is_empty() { Ok(()) } else { Err(CliError::Differ) }
+}

@@ -1,0 +1,197 @@
+//! `backup`, `diff`, `restore`: a drive's parameters saved to a file, compared with the
+//! device or another file, and written back.
+//!
+//! # The backup file
+//!
+//! TOML, one parameter a line, in the profile's order, each under a comment with its label, so
+//! that two backups compare with any text diff:
+//!
+//! ```toml
+//! # ferrobus backup of unit 1 (Omron 3G3RX inverter), profile omron-3g3rx
+//! [backup]
+//! format = 1                         # this layout; a later one is refused, not misread
+//! profile = "omron-3g3rx"            # a built-in name, or the path of a profile file
+//! profile_hash = "sha256:…"          # only for a profile file: the exact file used
+//! device = "Omron 3G3RX inverter"
+//! time = "2026-12-01T22:00:00Z"      # ISO-8601 UTC
+//! connection = "/dev/ttyUSB0 at 19200 8E1 (RTU)"
+//! identification = "none: …"         # or "FC2B/0E", "FC11", or why it failed
+//! unit = 1
+//!
+//! [identification]                   # the objects read, if the device has them
+//! VendorName = "…"
+//!
+//! [parameters]
+//! # Acceleration time 1
+//! F002 = { raw = 1000, value = "10.00 s" }
+//! # Base frequency
+//! A003 = { error = "exception 0x22 (vendor-specific): the device restricts execution" }
+//! ```
+//!
+//! `raw` is the value the device holds: an integer (a decimal string for a `u64` past
+//! `i64::MAX`), a float for `f32`/`f64`, a string for text, `true`/`false` for a coil. Only
+//! `raw` is read back; `value` (the raw value in the profile's unit) is for people. A
+//! parameter that could not be read has `error` instead, with the reason.
+//!
+//! A backup saves what the profile marks `backup` (by default its read-write registers); the
+//! reads follow the profile's read plan ([`ferrobus_profile::plan`]), so the 3G3RX's 4 registers per request are
+//! filled across neighbouring parameters. Restore writes only what differs, dependencies
+//! first, and refuses before sending anything when a value is read-only, out of range, or
+//! run-locked while the drive runs (see [`restore`]).
+
+pub(crate) mod device;
+pub(crate) mod diff;
+pub(crate) mod file;
+pub(crate) mod param;
+pub(crate) mod restore;
+mod sha256;
+pub(crate) mod view;
+
+use std::path::PathBuf;
+
+use clap::Args;
+use ferrobus::Error;
+use ferrobus_proto::codes::{ReadDeviceIdCode, device_object};
+
+use self::file::{Backup, Entry, Header, State};
+use self::view::{Identification, View};
+use crate::connect::{ConnectArgs, Session};
+use crate::exit::CliError;
+use crate::output;
+
+/// `backup [-o FILE]`.
+#[derive(Args, Debug)]
+#[command(after_help = "Needs --device PROFILE. Writes every readable parameter the profile marks for backup \
+                        (by default its read-write registers) with the device's identification, the time, the \
+                        unit and the connection; a parameter that cannot be read is recorded with the reason \
+                        and the exit code is 7.\n\nExample:\n  ferrobus --port /dev/ttyUSB0 --device omron-3g3rx \
+                        --unit 7 backup -o drive-07.toml")]
+pub(crate) struct BackupArgs {
+    /// Write the backup to FILE instead of stdout
+    #[arg(long, short = 'o', value_name = "FILE")]
+    pub(crate) output: Option<PathBuf>,
+}
+
+/// The profile named by `--device`.
+pub(crate) fn profile(connection: &ConnectArgs, command: &str) -> Result<View, CliError> {
+    let Some(name) = &connection.device else {
+        return Err(CliError::Usage(format!(
+            "{command} needs the device's profile: --device NAME (omron-3g3rx, sdp-servo, generic) or --device FILE"
+        )));
+    };
+    View::load(name).map_err(CliError::Usage)
+}
+
+/// Runs `backup`.
+pub(crate) async fn run(connection: &ConnectArgs, args: &BackupArgs) -> Result<(), CliError> {
+    let view = profile(connection, "backup")?;
+    connection.refuse_broadcast_read()?;
+    let session = connection.open().await?;
+    let (identification, objects) = identify(&session, &view).await?;
+    let (backup, failed, readings) = read_backup(&session, &view, identification, objects).await;
+    let saved = backup.entries.len() - failed;
+    if saved == 0
+        && let Some(error) = readings.stopped
+    {
+        return Err(error.into());
+    }
+    let text = backup.render();
+    match &args.output {
+        Some(path) => std::fs::write(path, &text)
+            .map_err(|source| CliError::Output { what: path.display().to_string(), source })?,
+        None => output::print(&text)?,
+    }
+    eprintln!(
+        "backup: {saved} of {} parameters of unit {} in {} requests (the plan's {}), {:.1} ms",
+        backup.entries.len(),
+        session.unit,
+        readings.requests,
+        readings.planned,
+        readings.elapsed.as_secs_f64() * 1e3
+    );
+    if failed > 0 {
+        let list: Vec<&str> =
+            backup.entries.iter().filter(|e| matches!(e.state, State::Failed(_))).map(|e| e.code.as_str()).collect();
+        return Err(CliError::Incomplete(format!(
+            "{failed} parameter{} could not be read ({}); the backup records why",
+            if failed == 1 { "" } else { "s" },
+            list.join(", ")
+        )));
+    }
+    Ok(())
+}
+
+/// Reads every parameter the profile backs up into a [`Backup`]: the backup, how many failed,
+/// and the readings (requests made, what stopped them).
+pub(crate) async fn read_backup(
+    session: &Session,
+    view: &View,
+    identification: String,
+    objects: Vec<(String, String)>,
+) -> (Backup, usize, device::Readings) {
+    let params = view.backed_up();
+    let readings = device::read(session, view, &params).await;
+    let mut failed = 0;
+    let entries = params
+        .iter()
+        .map(|p| {
+            let state = match readings.values.get(&p.code) {
+                Some(Ok(words)) => match param::decode(p, words) {
+                    Ok(raw) => State::Value { shown: p.show(&raw), raw: param::to_toml(&raw) },
+                    Err(why) => State::Failed(why),
+                },
+                Some(Err(why)) => State::Failed(why.clone()),
+                None => State::Failed("not read".into()),
+            };
+            if matches!(state, State::Failed(_)) {
+                failed += 1;
+            }
+            Entry { code: p.code.clone(), label: param::label(p).to_string(), line: 0, state }
+        })
+        .collect();
+    let header = Header {
+        profile: view.name.clone(),
+        profile_hash: view.hash.clone(),
+        device: view.device().to_string(),
+        time: file::now_utc(),
+        unit: session.unit,
+        connection: session.target.to_string(),
+        identification,
+    };
+    (Backup { header, identification: objects, entries }, failed, readings)
+}
+
+/// How the device identifies itself: FC2B/0E's basic objects, or FC11's data, if the profile
+/// says it has them. A refusal is recorded, not fatal; no reply ends the backup.
+async fn identify(session: &Session, view: &View) -> Result<(String, Vec<(String, String)>), CliError> {
+    let (client, unit) = (&session.client, session.unit);
+    match view.identification() {
+        Identification::None => {
+            Ok(("none: the profile says the device has no identification (FC2B/0E, FC11)".into(), Vec::new()))
+        }
+        Identification::DeviceId => match client.read_device_identification(unit, ReadDeviceIdCode::Basic, 0).await {
+            Ok(info) => {
+                let objects = info
+                    .objects
+                    .into_iter()
+                    .map(|(id, bytes)| {
+                        let name = device_object::name(id).map_or_else(|| format!("object-0x{id:02X}"), str::to_string);
+                        (name, String::from_utf8_lossy(&bytes).into_owned())
+                    })
+                    .collect();
+                Ok(("FC2B/0E".into(), objects))
+            }
+            Err(error @ Error::Exception { .. }) => {
+                Ok((format!("FC2B/0E refused: {}", device::describe(&error, view)), Vec::new()))
+            }
+            Err(error) => Err(error.into()),
+        },
+        Identification::ServerId => match client.report_server_id(unit).await {
+            Ok(data) => Ok(("FC11".into(), vec![("server_id".into(), crate::hex::format(&data))])),
+            Err(error @ Error::Exception { .. }) => {
+                Ok((format!("FC11 refused: {}", device::describe(&error, view)), Vec::new()))
+            }
+            Err(error) => Err(error.into()),
+        },
+    }
+}
