@@ -34,6 +34,7 @@ mod raw;
 mod read;
 mod readwrite;
 mod sim;
+mod sniff;
 mod target;
 #[cfg(not(unix))]
 mod unix_only;
@@ -110,6 +111,8 @@ enum Command {
     Demo(demo::DemoArgs),
     /// FC03 reads back to back: transactions/s, latency and CPU time (the peer benchmark's format)
     Bench(bench::BenchArgs),
+    /// Decode a live RTU bus passively (transmits nothing); pcapng for tshark/Wireshark
+    Sniff(sniff::SniffArgs),
 }
 
 impl Command {
@@ -142,6 +145,7 @@ async fn dispatch(cli: &Cli) -> Result<(), CliError> {
         Command::Line(args) => line::run(connection, args).await,
         Command::Demo(args) => demo::run(args).await,
         Command::Bench(args) => bench::run(connection, args).await,
+        Command::Sniff(args) => sniff::run(connection, args).await,
     }
 }
 
@@ -197,6 +201,10 @@ fn refuse_ignored_options(matches: &clap::ArgMatches) -> Result<(), CliError> {
             &["baud", "parity", "data_bits", "stop_bits", "echo"],
             "line makes its own ptys and takes only the line settings --baud, --parity, --data-bits, --stop-bits",
         ),
+        "sniff" => (
+            &["port", "baud", "parity", "data_bits", "stop_bits", "rs485", "low_latency", "unit", "t15", "t35"],
+            "sniff only listens: it takes the port, the line settings, --t15/--t35 and --unit as a filter",
+        ),
         _ => return Ok(()),
     };
     let given: Vec<String> = CONNECTION_OPTIONS
@@ -243,6 +251,9 @@ fn main() -> ExitCode {
     let mut cli = Cli::from_arg_matches(&matches).unwrap_or_else(|e| e.exit());
     if let (Command::Sim(args), Some(sim)) = (&mut cli.command, matches.subcommand_matches("sim")) {
         args.pair_by_position(sim);
+    }
+    if let (Command::Sniff(args), Some(sniff)) = (&mut cli.command, matches.subcommand_matches("sniff")) {
+        args.units_from(&matches, sniff);
     }
     init_logging(cli.verbose);
     if let Err(error) = refuse_ignored_options(&matches) {

@@ -51,6 +51,8 @@ const EPB_FLAGS: u16 = 2;
 
 const TAG_END: u16 = 0;
 const TAG_DISSECTOR_NAME: u16 = 12;
+const TAG_DISSECTOR_TABLE_NAME: u16 = 14;
+const TAG_DISSECTOR_TABLE_VALUE: u16 = 32;
 const TAG_PORT_TYPE: u16 = 24;
 const TAG_SRC_PORT: u16 = 25;
 const TAG_DST_PORT: u16 = 26;
@@ -175,9 +177,18 @@ fn exported_pdu(packet: &Packet<'_>) -> Vec<u8> {
         Content::Other => (b"data", None),
     };
     // A string value may carry NULs at its end, counted in its length: padded to 32 bits.
-    let mut name = dissector.to_vec();
-    pad(&mut name);
-    put_tag(&mut data, TAG_DISSECTOR_NAME, &name);
+    let padded = |s: &[u8]| {
+        let mut v = s.to_vec();
+        pad(&mut v);
+        v
+    };
+    if ports.is_some() && packet.bytes.first() == Some(&0) {
+        // The `mbrtu` dissector refuses unit 0; the one on UDP ports takes it.
+        put_tag(&mut data, TAG_DISSECTOR_TABLE_NAME, &padded(b"udp.port"));
+        put_tag(&mut data, TAG_DISSECTOR_TABLE_VALUE, &RTU_PORT.to_be_bytes());
+    } else {
+        put_tag(&mut data, TAG_DISSECTOR_NAME, &padded(dissector));
+    }
     if let Some((src, dst)) = ports {
         put_tag(&mut data, TAG_PORT_TYPE, &PORT_TYPE_UDP.to_be_bytes());
         put_tag(&mut data, TAG_SRC_PORT, &src.to_be_bytes());
@@ -216,7 +227,7 @@ fn put_option(out: &mut Vec<u8>, code: u16, value: &[u8]) {
 }
 
 fn pad(out: &mut Vec<u8>) {
-    while out.len() % 4 != 0 {
+    while !out.len().is_multiple_of(4) {
         out.push(0);
     }
 }
@@ -244,7 +255,7 @@ mod tests {
         while at < bytes.len() {
             let (kind, total) = (u32_at(bytes, at), u32_at(bytes, at + 4) as usize);
             assert_eq!(total % 4, 0, "block at {at} is not 32-bit aligned");
-            assert_eq!(u32_at(bytes, at + total - 4), total as u32, "trailing length of the block at {at}");
+            assert_eq!(u32_at(bytes, at + total - 4) as usize, total, "trailing length of the block at {at}");
             out.push((kind, bytes[at + 8..at + total - 4].to_vec()));
             at += total;
         }
@@ -282,7 +293,7 @@ mod tests {
         assert_eq!(&data[..tags.len()], tags);
         assert_eq!(&data[tags.len()..], frame);
         let options = &epb[20 + len.next_multiple_of(4)..];
-        assert_eq!(&options[..8], [2, 0, 4, 0, OUTBOUND as u8, 0, 0, 0], "epb_flags: outbound");
+        assert_eq!(&options[..8], [2, 0, 4, 0, 0b10, 0, 0, 0], "epb_flags: outbound");
         assert_eq!(&options[8..12], [1, 0, 9, 0], "a 9-byte comment");
         assert_eq!(&options[12..21], b"CRC error");
     }

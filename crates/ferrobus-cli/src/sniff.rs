@@ -1,0 +1,785 @@
+//! `ferrobus sniff`: decode a live RTU bus passively, from a spare adapter or a `ferrobus line`
+//! tap, and optionally write pcapng that tshark and Wireshark decode.
+//!
+//! The port is opened and only ever read: nothing is written to it, so the sniffer cannot
+//! disturb the bus. A thread of its own reads it and stamps each chunk the moment the read
+//! returns, so that printing and writing the capture never delay a timestamp; the decoder
+//! ([`ferrobus_proto::sniff`]) takes it from there: the chunk's last byte ended at that
+//! instant, the ones before it back to back. The error of a timestamp is how late the OS hands
+//! over the bytes: on a pty (the virtual line) tens of microseconds on an idle machine, on a USB
+//! adapter up to its latency timer (16 ms on an FTDI by default, 1 ms with --low-latency), plus
+//! the USB poll interval (1 ms at full speed). Bytes delivered together look back to back, so
+//! behind an adapter a short silence before a frame may be a delivery artefact.
+//!
+//! On Ctrl-C or SIGTERM (its normal end, exit 0) or after `--duration`, it settles what it
+//! holds and prints per-unit statistics.
+
+use std::collections::BTreeMap;
+use std::fmt::Write as _;
+use std::fs::File;
+use std::io::{self, BufWriter, Write};
+use std::path::PathBuf;
+use std::time::Duration;
+
+use clap::Args;
+use ferrobus::SerialConfig;
+use ferrobus::pcapng::{Content, Packet, PcapngWriter};
+use ferrobus_proto::crc::crc16;
+use ferrobus_proto::frame::timing::PC_INCOMPLETE_TIMEOUT;
+use ferrobus_proto::pdu::{Request, Response};
+use ferrobus_proto::sniff::{FragmentKind, Role, SniffEvent, Sniffer, WireTime};
+use ferrobus_proto::{FunctionCode, Instant};
+use serde_json::{Value, json};
+use tokio::io::AsyncReadExt;
+use tokio::sync::mpsc;
+
+use crate::connect::{ConnectArgs, Rs485Arg, Target, parse_duration};
+use crate::exit::CliError;
+use crate::interrupt::Interrupt;
+use crate::output;
+
+/// Arguments of `ferrobus sniff`.
+#[derive(Args, Clone, Debug)]
+#[command(after_help = "Filter by unit with the global --unit (repeat it for several). Decode a capture with:\n  \
+                        tshark -r cap.pcapng -o mbrtu.crc_verification:TRUE -o mbrtu.tcp.port:5020\n\
+                        or live: ferrobus --port /dev/ttyUSB1 sniff --pcap - | tshark -i - -o mbrtu.crc_verification:TRUE -o mbrtu.tcp.port:5020")]
+pub(crate) struct SniffArgs {
+    /// Show only these function codes (repeat it): 3, 0x03, 0x10; an exception counts as its
+    /// function
+    #[arg(long, value_name = "FC", value_parser = function_code)]
+    function: Vec<u8>,
+
+    /// Also write the frames as pcapng to FILE, or to stdout with `-` (flushed per frame, for
+    /// `| tshark -i -`; the decode then goes nowhere and the statistics to stderr)
+    #[arg(long, value_name = "FILE")]
+    pcap: Option<PathBuf>,
+
+    /// One JSON object per line for each frame, fragment and unanswered request, and one for
+    /// the statistics at the end
+    #[arg(long)]
+    json: bool,
+
+    /// Stop after this long; default: run until interrupted
+    #[arg(long, value_name = "DURATION", value_parser = parse_duration)]
+    duration: Option<Duration>,
+
+    /// The units to show, from the global --unit if it was given (set in `main`).
+    #[arg(skip)]
+    units: Vec<u8>,
+}
+
+impl SniffArgs {
+    /// Takes the global `--unit`s as the unit filter if they were given on the command line
+    /// (its default, unit 1, is no filter).
+    pub(crate) fn units_from(&mut self, matches: &clap::ArgMatches, sub: &clap::ArgMatches) {
+        let given =
+            [matches, sub].iter().any(|m| m.value_source("unit") == Some(clap::parser::ValueSource::CommandLine));
+        if given {
+            self.units = sub.get_many::<u8>("unit").map(|u| u.copied().collect()).unwrap_or_default();
+        }
+    }
+}
+
+fn function_code(text: &str) -> Result<u8, String> {
+    let t = text.trim();
+    let parsed = match t.strip_prefix("0x").or_else(|| t.strip_prefix("0X")) {
+        Some(hex) => u8::from_str_radix(hex, 16),
+        None => t.parse(),
+    };
+    match parsed {
+        Ok(fc) if (1..0x80).contains(&fc) => Ok(fc),
+        _ => Err(format!("'{text}': a function code is 1 to 127 (0x01 to 0x7F)")),
+    }
+}
+
+/// What the reading thread sends.
+enum Read {
+    /// Bytes, and the instant the read returned.
+    Bytes(Vec<u8>, std::time::Instant),
+    /// The port failed (or could not be opened).
+    Failed(io::Error),
+}
+
+/// Monotonic instants as nanoseconds since the Unix epoch, from one reading of both clocks.
+#[derive(Clone, Copy, Debug)]
+pub(crate) struct WallClock {
+    mono: std::time::Instant,
+    unix_ns: u64,
+}
+
+impl WallClock {
+    /// Both clocks, now.
+    pub(crate) fn now() -> Self {
+        let mono = std::time::Instant::now();
+        let unix = std::time::SystemTime::now().duration_since(std::time::UNIX_EPOCH).unwrap_or_default();
+        WallClock { mono, unix_ns: u64::try_from(unix.as_nanos()).unwrap_or(u64::MAX) }
+    }
+
+    /// `t` as nanoseconds since the Unix epoch.
+    pub(crate) fn unix_ns(&self, t: std::time::Instant) -> u64 {
+        let since = u64::try_from(t.saturating_duration_since(self.mono).as_nanos()).unwrap_or(u64::MAX);
+        let before = u64::try_from(self.mono.saturating_duration_since(t).as_nanos()).unwrap_or(u64::MAX);
+        self.unix_ns.saturating_add(since).saturating_sub(before)
+    }
+
+    /// A core instant counted from the Unix epoch, as a monotonic instant.
+    fn to_mono(self, t: Instant) -> std::time::Instant {
+        let ns = t.as_nanos();
+        if ns >= self.unix_ns {
+            self.mono + Duration::from_nanos(ns.saturating_sub(self.unix_ns))
+        } else {
+            self.mono.checked_sub(Duration::from_nanos(self.unix_ns.saturating_sub(ns))).unwrap_or(self.mono)
+        }
+    }
+}
+
+/// `HH:MM:SS.uuuuuu` (UTC) of nanoseconds since the Unix epoch.
+fn clock_time(unix_ns: u64) -> String {
+    let secs = unix_ns / 1_000_000_000;
+    let micros = (unix_ns % 1_000_000_000) / 1_000;
+    let day = secs % 86_400;
+    format!("{:02}:{:02}:{:02}.{micros:06}", day / 3600, day % 3600 / 60, day % 60)
+}
+
+/// An event, owned, as the decoder gave it.
+enum Heard {
+    Frame { bytes: Vec<u8>, role: Role, crc_ok: bool, time: WireTime, response_time: Option<Duration> },
+    Fragment { bytes: Vec<u8>, kind: FragmentKind, time: WireTime },
+    Unanswered { unit: u8, function: u8, request_end: Instant },
+}
+
+fn own(event: SniffEvent<'_>) -> Heard {
+    match event {
+        SniffEvent::Frame(f) => Heard::Frame {
+            bytes: f.adu().to_vec(),
+            role: f.role,
+            crc_ok: f.crc_ok,
+            time: f.time,
+            response_time: f.reply.map(|r| r.response_time),
+        },
+        SniffEvent::Fragment(f) => Heard::Fragment { bytes: f.bytes.to_vec(), kind: f.kind, time: f.time },
+        SniffEvent::Unanswered(u) => {
+            Heard::Unanswered { unit: u.unit, function: u.function, request_end: u.request_end }
+        }
+    }
+}
+
+/// One unit's figures.
+#[derive(Clone, Debug, Default)]
+struct UnitStats {
+    requests: u64,
+    responses: u64,
+    exceptions: u64,
+    unanswered: u64,
+    crc_errors: u64,
+    t3_5_violations: u64,
+    t1_5_violations: u64,
+    response_times: Vec<Duration>,
+}
+
+/// Everything counted.
+#[derive(Clone, Debug, Default)]
+struct Stats {
+    units: BTreeMap<u8, UnitStats>,
+    partial_frames: u64,
+    noise_runs: u64,
+    noise_bytes: u64,
+}
+
+impl Stats {
+    fn count(&mut self, heard: &Heard) {
+        match heard {
+            Heard::Frame { bytes, role, crc_ok, time, response_time } => {
+                let (unit, fc) = head(bytes);
+                let u = self.units.entry(unit).or_default();
+                match role {
+                    Role::Request => u.requests += 1,
+                    Role::Response => u.responses += 1,
+                }
+                if *role == Role::Response && fc & FunctionCode::EXCEPTION_BIT != 0 {
+                    u.exceptions += 1;
+                }
+                u.crc_errors += u64::from(!crc_ok);
+                u.t3_5_violations += u64::from(time.t3_5_violation);
+                u.t1_5_violations += u64::from(time.t1_5_violation);
+                u.response_times.extend(*response_time);
+            }
+            Heard::Fragment { bytes, kind: FragmentKind::Partial { .. }, .. } => {
+                self.partial_frames += 1;
+                self.noise_bytes += bytes.len() as u64;
+            }
+            Heard::Fragment { bytes, kind: FragmentKind::Noise, .. } => {
+                self.noise_runs += 1;
+                self.noise_bytes += bytes.len() as u64;
+            }
+            Heard::Unanswered { unit, .. } => self.units.entry(*unit).or_default().unanswered += 1,
+        }
+    }
+}
+
+fn head(bytes: &[u8]) -> (u8, u8) {
+    (bytes.first().copied().unwrap_or_default(), bytes.get(1).copied().unwrap_or_default())
+}
+
+fn ms(d: Duration) -> f64 {
+    d.as_secs_f64() * 1e3
+}
+
+/// A capture being written, and what it is called in errors.
+type Capture = (PcapngWriter<Box<dyn Write>>, String);
+
+/// Where the decode goes.
+struct Sinks {
+    json: bool,
+    /// Whether the decode is printed (not with `--pcap -`).
+    print: bool,
+    pcap: Option<Capture>,
+    char_time: Duration,
+    units: Vec<u8>,
+    functions: Vec<u8>,
+    stats: Stats,
+}
+
+impl Sinks {
+    fn shown(&self, heard: &Heard) -> bool {
+        let (unit, fc) = match heard {
+            Heard::Frame { bytes, .. } => head(bytes),
+            Heard::Unanswered { unit, function, .. } => (*unit, *function),
+            // Bytes that are no frame belong to no unit: shown when nothing is filtered.
+            Heard::Fragment { .. } => return self.units.is_empty() && self.functions.is_empty(),
+        };
+        (self.units.is_empty() || self.units.contains(&unit))
+            && (self.functions.is_empty() || self.functions.contains(&(fc & !FunctionCode::EXCEPTION_BIT)))
+    }
+
+    fn chars(&self, d: Duration) -> f64 {
+        if self.char_time.is_zero() { 0.0 } else { d.as_secs_f64() / self.char_time.as_secs_f64() }
+    }
+
+    fn take(&mut self, heard: &Heard) -> Result<(), CliError> {
+        if !self.shown(heard) {
+            return Ok(());
+        }
+        self.stats.count(heard);
+        if let Some((pcap, what)) = &mut self.pcap {
+            if let Some(packet) = packet(heard, self.char_time) {
+                let comment = packet.1;
+                let p = Packet { comment: comment.as_deref(), ..packet.0 };
+                pcap.write(&p).map_err(|source| CliError::Output { what: what.clone(), source })?;
+            }
+        }
+        if self.print {
+            let text = if self.json { output::json_line(&self.json_of(heard)) } else { self.line_of(heard) };
+            output::print(&text)?;
+        }
+        Ok(())
+    }
+
+    fn time_json(&self, time: &WireTime) -> Value {
+        json!({
+            "ts_ns": time.end.as_nanos(),
+            "start_ns": time.start.as_nanos(),
+            "silence_chars": time.silence_before.map(|s| round2(self.chars(s))),
+            "longest_gap_chars": round2(self.chars(time.longest_gap)),
+            "t3_5_violation": time.t3_5_violation,
+            "t1_5_violation": time.t1_5_violation,
+        })
+    }
+
+    fn json_of(&self, heard: &Heard) -> Value {
+        match heard {
+            Heard::Frame { bytes, role, crc_ok, time, response_time } => {
+                let (unit, fc) = head(bytes);
+                let mut doc = json!({
+                    "type": "frame",
+                    "role": match role { Role::Request => "request", Role::Response => "response" },
+                    "unit": unit,
+                    "function": fc & !FunctionCode::EXCEPTION_BIT,
+                    "crc_ok": crc_ok,
+                    "bytes": crate::hex::format(bytes),
+                });
+                merge(&mut doc, self.time_json(time));
+                if *role == Role::Request && unit == 0 {
+                    doc["broadcast"] = true.into();
+                }
+                if let Some(rt) = response_time {
+                    doc["response_time_ms"] = round3(ms(*rt)).into();
+                }
+                let pdu = bytes.get(1..bytes.len().saturating_sub(2)).unwrap_or_default();
+                merge(&mut doc, pdu_json(*role, pdu));
+                doc
+            }
+            Heard::Fragment { bytes, kind, time } => {
+                let mut doc = json!({
+                    "type": match kind { FragmentKind::Partial { .. } => "partial", FragmentKind::Noise => "noise" },
+                    "bytes": crate::hex::format(bytes),
+                });
+                if let FragmentKind::Partial { expected: Some(n) } = kind {
+                    doc["expected_len"] = (*n).into();
+                }
+                merge(&mut doc, self.time_json(time));
+                doc
+            }
+            Heard::Unanswered { unit, function, request_end } => json!({
+                "type": "unanswered", "unit": unit, "function": function, "request_end_ns": request_end.as_nanos(),
+            }),
+        }
+    }
+
+    fn line_of(&self, heard: &Heard) -> String {
+        let gap = |time: &WireTime| match time.silence_before {
+            Some(s) => format!("{:>6.1}ch", self.chars(s)),
+            None => "     -  ".to_string(),
+        };
+        let flags = |time: &WireTime| {
+            let mut f = String::new();
+            if time.t3_5_violation {
+                f.push_str("  t3.5!");
+            }
+            if time.t1_5_violation {
+                let _ = write!(f, "  t1.5! (gap {:.1}ch)", self.chars(time.longest_gap));
+            }
+            f
+        };
+        match heard {
+            Heard::Frame { bytes, role, crc_ok, time, response_time } => {
+                let (unit, fc) = head(bytes);
+                let pdu = bytes.get(1..bytes.len().saturating_sub(2)).unwrap_or_default();
+                let decoded = match role {
+                    Role::Request => Request::parse(pdu).map(|r| format!("{r:?}")),
+                    Role::Response => Response::parse(pdu).map(|r| format!("{r:?}")),
+                }
+                .unwrap_or_else(|e| format!("(malformed: {e}) {}", crate::hex::format(pdu)));
+                let crc = if *crc_ok { "CRC ok ".to_string() } else { "CRC BAD".to_string() };
+                let rt = response_time.map(|rt| format!("  {:.3} ms", ms(rt))).unwrap_or_default();
+                let who = if *role == Role::Request && unit == 0 { "bcast".to_string() } else { format!("u{unit}") };
+                let function = FunctionCode::from_u8(fc & !FunctionCode::EXCEPTION_BIT);
+                format!(
+                    "{}  {}  {:<4} {:<5} {function}  {crc}{rt}{}  {decoded}\n",
+                    clock_time(time.end.as_nanos()),
+                    gap(time),
+                    match role {
+                        Role::Request => "req",
+                        Role::Response => "resp",
+                    },
+                    who,
+                    flags(time),
+                )
+            }
+            Heard::Fragment { bytes, kind, time } => {
+                let what = match kind {
+                    FragmentKind::Partial { expected: Some(n) } => {
+                        format!("partial frame ({} of {n} bytes)", bytes.len())
+                    }
+                    FragmentKind::Partial { expected: None } => format!("partial frame ({} bytes)", bytes.len()),
+                    FragmentKind::Noise => format!("noise ({} bytes)", bytes.len()),
+                };
+                format!(
+                    "{}  {}  {what}{}  {}\n",
+                    clock_time(time.end.as_nanos()),
+                    gap(time),
+                    flags(time),
+                    crate::hex::format(bytes)
+                )
+            }
+            Heard::Unanswered { unit, function, request_end } => format!(
+                "{}  no response from u{unit} to {} before the next request\n",
+                clock_time(request_end.as_nanos()),
+                FunctionCode::from_u8(*function)
+            ),
+        }
+    }
+
+    fn stats_text(&self) -> String {
+        let s = &self.stats;
+        let mut rows = output::Rows::new(&[
+            ("unit", output::Align::Right),
+            ("requests", output::Align::Right),
+            ("responses", output::Align::Right),
+            ("exceptions", output::Align::Right),
+            ("unanswered", output::Align::Right),
+            ("crc_errors", output::Align::Right),
+            ("t3.5", output::Align::Right),
+            ("t1.5", output::Align::Right),
+            ("resp_min_ms", output::Align::Right),
+            ("resp_avg_ms", output::Align::Right),
+            ("resp_max_ms", output::Align::Right),
+        ]);
+        for (unit, u) in &s.units {
+            let (min, avg, max) = spread(&u.response_times);
+            rows.push(vec![
+                unit.to_string(),
+                u.requests.to_string(),
+                u.responses.to_string(),
+                u.exceptions.to_string(),
+                u.unanswered.to_string(),
+                u.crc_errors.to_string(),
+                u.t3_5_violations.to_string(),
+                u.t1_5_violations.to_string(),
+                min.map_or("-".into(), |v| format!("{v:.3}")),
+                avg.map_or("-".into(), |v| format!("{v:.3}")),
+                max.map_or("-".into(), |v| format!("{v:.3}")),
+            ]);
+        }
+        format!(
+            "{}line: {} partial frames, {} noise runs, {} bytes outside frames\n",
+            rows.table(),
+            s.partial_frames,
+            s.noise_runs,
+            s.noise_bytes
+        )
+    }
+
+    fn stats_json(&self) -> Value {
+        let s = &self.stats;
+        let units: Vec<Value> = s
+            .units
+            .iter()
+            .map(|(unit, u)| {
+                let (min, avg, max) = spread(&u.response_times);
+                json!({
+                    "unit": unit, "requests": u.requests, "responses": u.responses, "exceptions": u.exceptions,
+                    "unanswered": u.unanswered, "crc_errors": u.crc_errors, "t3_5_violations": u.t3_5_violations,
+                    "t1_5_violations": u.t1_5_violations, "response_time_min_ms": min.map(round3),
+                    "response_time_avg_ms": avg.map(round3), "response_time_max_ms": max.map(round3),
+                })
+            })
+            .collect();
+        json!({
+            "type": "stats", "units": units, "partial_frames": s.partial_frames, "noise_runs": s.noise_runs,
+            "noise_bytes": s.noise_bytes,
+        })
+    }
+}
+
+fn merge(doc: &mut Value, more: Value) {
+    if let (Value::Object(doc), Value::Object(more)) = (doc, more) {
+        doc.extend(more);
+    }
+}
+
+fn round2(x: f64) -> f64 {
+    (x * 100.0).round() / 100.0
+}
+
+fn round3(x: f64) -> f64 {
+    (x * 1000.0).round() / 1000.0
+}
+
+/// Min, mean and max in milliseconds.
+fn spread(times: &[Duration]) -> (Option<f64>, Option<f64>, Option<f64>) {
+    let min = times.iter().min().map(|d| ms(*d));
+    let max = times.iter().max().map(|d| ms(*d));
+    #[expect(clippy::cast_precision_loss, reason = "a count of responses, far below 2^52")]
+    let avg = (!times.is_empty()).then(|| times.iter().map(|d| ms(*d)).sum::<f64>() / times.len() as f64);
+    (min, avg, max)
+}
+
+/// The fields scripts compare with tshark's: exception code, address (reference) and count.
+fn pdu_json(role: Role, pdu: &[u8]) -> Value {
+    let mut doc = json!({});
+    let (address, count): (Option<u16>, Option<u16>) = match role {
+        Role::Request => match Request::parse(pdu) {
+            Ok(r) => {
+                doc["decoded"] = format!("{r:?}").into();
+                match r {
+                    Request::ReadCoils(b) | Request::ReadDiscreteInputs(b) => (Some(b.start()), Some(b.quantity())),
+                    Request::ReadHoldingRegisters(b) | Request::ReadInputRegisters(b) => {
+                        (Some(b.start()), Some(b.quantity()))
+                    }
+                    Request::WriteSingleCoil(c) => (Some(c.address), None),
+                    Request::WriteSingleRegister(w) => (Some(w.address), None),
+                    Request::WriteMultipleCoils(w) => (Some(w.start()), Some(w.quantity())),
+                    Request::WriteMultipleRegisters(w) => (Some(w.start()), Some(w.quantity())),
+                    Request::MaskWriteRegister(m) => (Some(m.address), None),
+                    Request::ReadWriteMultipleRegisters(rw) => (Some(rw.read().start()), Some(rw.read().quantity())),
+                    _ => (None, None),
+                }
+            }
+            Err(e) => {
+                doc["malformed"] = e.to_string().into();
+                (None, None)
+            }
+        },
+        Role::Response => match Response::parse(pdu) {
+            Ok(r) => {
+                doc["decoded"] = format!("{r:?}").into();
+                match r {
+                    Response::Exception(e) => {
+                        doc["exception"] = e.code().value().into();
+                        (None, None)
+                    }
+                    Response::WriteSingleCoil(c) => (Some(c.address), None),
+                    Response::WriteSingleRegister(w) => (Some(w.address), None),
+                    Response::WriteMultipleCoils(w) => (Some(w.start()), Some(w.quantity())),
+                    Response::WriteMultipleRegisters(w) => (Some(w.start()), Some(w.quantity())),
+                    Response::MaskWriteRegister(m) => (Some(m.address), None),
+                    _ => (None, None),
+                }
+            }
+            Err(e) => {
+                doc["malformed"] = e.to_string().into();
+                (None, None)
+            }
+        },
+    };
+    if let Some(a) = address {
+        doc["address"] = a.into();
+    }
+    if let Some(c) = count {
+        doc["count"] = c.into();
+    }
+    doc
+}
+
+/// The pcapng packet of what was heard, and its comment (what was wrong on the line).
+fn packet(heard: &Heard, char_time: Duration) -> Option<(Packet<'_>, Option<String>)> {
+    let chars = |d: Duration| if char_time.is_zero() { 0.0 } else { d.as_secs_f64() / char_time.as_secs_f64() };
+    let line_errors = |time: &WireTime, notes: &mut Vec<String>| {
+        if let (true, Some(s)) = (time.t3_5_violation, time.silence_before) {
+            notes.push(format!("t3.5 violated: {:.1} characters of silence before it", chars(s)));
+        }
+        if time.t1_5_violation {
+            notes.push(format!("t1.5 violated: a gap of {:.1} characters inside it", chars(time.longest_gap)));
+        }
+    };
+    let mut notes = Vec::new();
+    let (bytes, content, time) = match heard {
+        Heard::Frame { bytes, role, crc_ok, time, .. } => {
+            if !crc_ok {
+                let body = bytes.get(..bytes.len().saturating_sub(2)).unwrap_or_default();
+                let got = bytes.get(bytes.len().saturating_sub(2)..).unwrap_or_default();
+                let got = match got {
+                    [low, high] => u16::from_le_bytes([*low, *high]),
+                    _ => 0,
+                };
+                notes.push(format!("CRC error: 0x{got:04x}, should be 0x{:04x}", crc16(body)));
+            }
+            let content = match role {
+                Role::Request => Content::Request,
+                Role::Response => Content::Response,
+            };
+            (bytes, content, time)
+        }
+        Heard::Fragment { bytes, kind, time } => {
+            notes.push(match kind {
+                FragmentKind::Partial { expected: Some(n) } => format!("partial frame: {} of {n} bytes", bytes.len()),
+                FragmentKind::Partial { expected: None } => format!("partial frame: {} bytes", bytes.len()),
+                FragmentKind::Noise => format!("noise: {} bytes that start no frame", bytes.len()),
+            });
+            (bytes, Content::Other, time)
+        }
+        Heard::Unanswered { .. } => return None,
+    };
+    line_errors(time, &mut notes);
+    let comment = (!notes.is_empty()).then(|| notes.join("; "));
+    Some((Packet { timestamp_ns: time.end.as_nanos(), bytes, content, comment: None }, comment))
+}
+
+/// Runs `ferrobus sniff`.
+pub(crate) async fn run(connection: &ConnectArgs, args: &SniffArgs) -> Result<(), CliError> {
+    let Target::Serial { path, line, ascii } = connection.target()? else {
+        return Err(CliError::Usage(
+            "sniff listens on a serial line: give --port PATH (a spare adapter, or a `ferrobus line --tap` pty)".into(),
+        ));
+    };
+    if ascii {
+        return Err(CliError::Usage("sniff decodes RTU only; leave --ascii out".into()));
+    }
+    let to_stdout = args.pcap.as_deref() == Some(std::path::Path::new("-"));
+    if to_stdout && args.json {
+        return Err(CliError::Usage("--pcap - writes the capture to stdout: --json has nowhere to go".into()));
+    }
+    let mut timing = ferrobus_proto::frame::LineTiming::new(&line);
+    if let Some(t15) = connection.t15 {
+        timing = timing.with_t1_5(t15);
+    }
+    if let Some(t35) = connection.t35 {
+        timing = timing.with_t3_5(t35);
+    }
+    let name = path.rsplit('/').next().unwrap_or(&path).to_string();
+    let description = format!("RS-485 {line} (ferrobus sniff {path})");
+    // The capture is opened before the port, so that a path that cannot be written fails at once.
+    let pcap = open_capture(args.pcap.as_deref(), to_stdout, &name, &description)?;
+    let mut interrupt = Interrupt::listen()?;
+    let mut config = SerialConfig::new(&path, line);
+    config.rs485 = match connection.rs485 {
+        Rs485Arg::Auto => ferrobus::Rs485::Auto,
+        Rs485Arg::Kernel => ferrobus::Rs485::Kernel,
+        Rs485Arg::Rts => ferrobus::Rs485::Rts,
+    };
+    config.low_latency = connection.low_latency;
+    let mut heard = listen(config)?;
+    let clock = WallClock::now();
+    let mut sinks = Sinks {
+        json: args.json,
+        print: !to_stdout,
+        pcap,
+        char_time: timing.char_time(),
+        units: args.units.clone(),
+        functions: args.function.clone(),
+        stats: Stats::default(),
+    };
+    eprintln!(
+        "sniff: listening on {path} at {line} (character {:.1} µs, t1.5 {:.1} µs, t3.5 {:.1} µs), transmitting nothing; \
+         Ctrl-C or SIGTERM prints the statistics",
+        timing.char_time().as_secs_f64() * 1e6,
+        timing.t1_5().as_secs_f64() * 1e6,
+        timing.t3_5().as_secs_f64() * 1e6,
+    );
+    let mut sniffer = Sniffer::new(timing).with_incomplete_timeout(PC_INCOMPLETE_TIMEOUT);
+    let stop = args.duration.map(|d| tokio::time::Instant::now() + d);
+    let mut events: Vec<Heard> = Vec::new();
+    let mut failure = None;
+    loop {
+        let deadline = sniffer.poll_timeout();
+        let wake = deadline.map(|d| tokio::time::Instant::from_std(clock.to_mono(d)));
+        tokio::select! {
+            () = interrupt.wait() => break,
+            () = sleep_until(stop) => break,
+            () = sleep_until(wake) => {
+                if let Some(d) = deadline {
+                    sniffer.expire(d, |e| events.push(own(e)));
+                }
+            }
+            read = heard.recv() => match read {
+                Some(Read::Bytes(bytes, at)) => {
+                    let now = Instant::from_nanos(clock.unix_ns(at));
+                    sniffer.feed(now, &bytes, |e| events.push(own(e)));
+                }
+                Some(Read::Failed(e)) => {
+                    failure = Some(e);
+                    break;
+                }
+                None => break,
+            },
+        }
+        for event in events.drain(..) {
+            sinks.take(&event)?;
+        }
+    }
+    sniffer.finish(|e| events.push(own(e)));
+    for event in events.drain(..) {
+        sinks.take(&event)?;
+    }
+    if let Some((pcap, what)) = &mut sinks.pcap {
+        pcap.flush().map_err(|source| CliError::Output { what: what.clone(), source })?;
+    }
+    let stats = if args.json { output::json_line(&sinks.stats_json()) } else { sinks.stats_text() };
+    if to_stdout {
+        eprint!("{stats}");
+    } else {
+        output::print(&stats)?;
+    }
+    match failure {
+        Some(e) => Err(ferrobus::Error::io(format!("reading {path}"), e).into()),
+        None => Ok(()),
+    }
+}
+
+/// The capture file (or stdout with `-`), its headers written.
+fn open_capture(
+    path: Option<&std::path::Path>,
+    to_stdout: bool,
+    name: &str,
+    description: &str,
+) -> Result<Option<Capture>, CliError> {
+    let Some(path) = path else { return Ok(None) };
+    let what = if to_stdout { "stdout".to_string() } else { path.display().to_string() };
+    let failed = |source| CliError::Output { what: what.clone(), source };
+    let out: Box<dyn Write> = if to_stdout {
+        Box::new(io::stdout())
+    } else {
+        Box::new(BufWriter::new(File::create(path).map_err(failed)?))
+    };
+    let writer = PcapngWriter::new(out, name, description).map_err(failed)?.flush_each(to_stdout);
+    Ok(Some((writer, what)))
+}
+
+async fn sleep_until(at: Option<tokio::time::Instant>) {
+    match at {
+        Some(at) => tokio::time::sleep_until(at).await,
+        None => std::future::pending().await,
+    }
+}
+
+/// Opens the port in a thread of its own that only reads it, stamping each chunk as the read
+/// returns. An error opening it is returned here.
+fn listen(config: SerialConfig) -> Result<mpsc::UnboundedReceiver<Read>, CliError> {
+    let (tx, rx) = mpsc::unbounded_channel();
+    let (opened_tx, opened_rx) = std::sync::mpsc::channel::<io::Result<()>>();
+    let describe = format!("opening {} at {}", config.path.display(), config.line);
+    std::thread::Builder::new()
+        .name("sniff-reader".into())
+        .spawn(move || {
+            let runtime = match tokio::runtime::Builder::new_current_thread().enable_all().build() {
+                Ok(r) => r,
+                Err(e) => {
+                    let _ = opened_tx.send(Err(e));
+                    return;
+                }
+            };
+            runtime.block_on(async move {
+                // Read only: nothing is ever written to the port.
+                let mut port = match ferrobus::port::open_serial(&config) {
+                    Ok(port) => {
+                        let _ = opened_tx.send(Ok(()));
+                        port
+                    }
+                    Err(e) => {
+                        let _ = opened_tx.send(Err(e));
+                        return;
+                    }
+                };
+                let mut buf = [0u8; 1024];
+                loop {
+                    match port.read(&mut buf).await {
+                        Ok(0) => return,
+                        Ok(n) => {
+                            let at = std::time::Instant::now();
+                            let bytes = buf.get(..n).unwrap_or_default().to_vec();
+                            if tx.send(Read::Bytes(bytes, at)).is_err() {
+                                return;
+                            }
+                        }
+                        Err(e) if e.kind() == io::ErrorKind::Interrupted => {}
+                        Err(e) => {
+                            let _ = tx.send(Read::Failed(e));
+                            return;
+                        }
+                    }
+                }
+            });
+        })
+        .map_err(|e| ferrobus::Error::io("starting the reading thread", e))?;
+    match opened_rx.recv() {
+        Ok(Ok(())) => Ok(rx),
+        Ok(Err(e)) => Err(ferrobus::Error::io(describe, e).into()),
+        Err(_) => Err(ferrobus::Error::io(describe, io::Error::other("the reading thread ended")).into()),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn function_codes_are_decimal_or_hex_from_1_to_127() {
+        assert_eq!(function_code("3"), Ok(3));
+        assert_eq!(function_code("0x10"), Ok(0x10));
+        assert_eq!(function_code("0X2B"), Ok(0x2B));
+        assert!(function_code("0").is_err());
+        assert!(function_code("0x83").is_err());
+        assert!(function_code("read").is_err());
+    }
+
+    #[test]
+    fn clock_times_are_utc_to_the_microsecond_and_wall_clock_round_trips() {
+        assert_eq!(clock_time(1_700_000_000_012_000_123), "22:13:20.012000");
+        let clock = WallClock::now();
+        let later = clock.mono + Duration::from_millis(5);
+        let ns = clock.unix_ns(later);
+        assert_eq!(ns, clock.unix_ns + 5_000_000);
+        assert_eq!(clock.to_mono(Instant::from_nanos(ns)), later);
+    }
+}
