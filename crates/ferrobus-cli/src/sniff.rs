@@ -493,6 +493,10 @@ fn pdu_json(role: Role, pdu: &[u8]) -> Value {
                     Request::WriteMultipleRegisters(w) => (Some(w.start()), Some(w.quantity())),
                     Request::MaskWriteRegister(m) => (Some(m.address), None),
                     Request::ReadWriteMultipleRegisters(rw) => (Some(rw.read().start()), Some(rw.read().quantity())),
+                    Request::ReadFifoQueue(f) => (Some(f.address), None),
+                    // One sub-request: its record length, as tshark shows it.
+                    Request::ReadFileRecord(refs) if refs.len() == 1 => (None, refs.get(0).map(|r| r.length)),
+                    Request::WriteFileRecord(w) if w.len() == 1 => (None, file_write_len(&w)),
                     _ => (None, None),
                 }
             }
@@ -514,6 +518,7 @@ fn pdu_json(role: Role, pdu: &[u8]) -> Value {
                     Response::WriteMultipleCoils(w) => (Some(w.start()), Some(w.quantity())),
                     Response::WriteMultipleRegisters(w) => (Some(w.start()), Some(w.quantity())),
                     Response::MaskWriteRegister(m) => (Some(m.address), None),
+                    Response::WriteFileRecord(w) if w.len() == 1 => (None, file_write_len(&w)),
                     _ => (None, None),
                 }
             }
@@ -530,6 +535,11 @@ fn pdu_json(role: Role, pdu: &[u8]) -> Value {
         doc["count"] = c.into();
     }
     doc
+}
+
+/// The register count of the one sub-request of a 0x15 request or response.
+fn file_write_len(writes: &ferrobus_proto::pdu::FileRecordWrites<'_>) -> Option<u16> {
+    writes.iter().next().and_then(|w| u16::try_from(w.data.len()).ok())
 }
 
 /// The pcapng packet of what was heard, and its comment (what was wrong on the line).
@@ -687,11 +697,8 @@ fn open_capture(
     let Some(path) = path else { return Ok(None) };
     let what = if to_stdout { "stdout".to_string() } else { path.display().to_string() };
     let failed = |source| CliError::Output { what: what.clone(), source };
-    let out: Box<dyn Write> = if to_stdout {
-        Box::new(io::stdout())
-    } else {
-        Box::new(BufWriter::new(File::create(path).map_err(failed)?))
-    };
+    let out: Box<dyn Write> =
+        if to_stdout { Box::new(io::stdout()) } else { Box::new(BufWriter::new(File::create(path).map_err(failed)?)) };
     let writer = PcapngWriter::new(out, name, description).map_err(failed)?.flush_each(to_stdout);
     Ok(Some((writer, what)))
 }
