@@ -316,4 +316,19 @@ mod tests {
         assert_eq!(&noise[20..32], [0, 12, 0, 4, b'd', b'a', b't', b'a', 0, 0, 0, 0]);
         assert_eq!(noise[32], 0xFF);
     }
+
+    #[test]
+    fn a_broadcast_goes_through_the_udp_port_table_whose_rtu_dissector_takes_unit_0() {
+        let mut w = PcapngWriter::new(Vec::new(), "tap", "line").unwrap();
+        let broadcast = [0, 0x06, 0, 5, 0, 7, 0xD9, 0xD8];
+        w.write(&Packet { timestamp_ns: 1, bytes: &broadcast, content: Content::Request, comment: None }).unwrap();
+        let blocks = blocks(&w.into_inner());
+        let epb = &blocks[2].1;
+        let tags: &[u8] = &[
+            0, 14, 0, 8, b'u', b'd', b'p', b'.', b'p', b'o', b'r', b't', // the table
+            0, 32, 0, 4, 0, 0, 0x13, 0x9C, // its key: 5020
+            0, 24, 0, 4, 0, 0, 0, 3, // then the ports, as for any request
+        ];
+        assert_eq!(&epb[20..20 + tags.len()], tags);
+    }
 }

@@ -329,3 +329,41 @@ fn sniff_refuses_what_it_cannot_listen_to() {
     let both = ferrobus().args(["--port", "/dev/null", "sniff", "--pcap", "-", "--json"]).assert().code(2);
     assert!(stderr(&both).contains("--json has nowhere to go"), "{}", stderr(&both));
 }
+
+#[test]
+fn noise_a_frame_cut_short_and_an_unanswered_request_are_shown_as_such_and_noise_is_captured_as_data() {
+    let bus = bus();
+    let capture = temp("noise.pcapng");
+    let (mut sniffer, _said) = sniff(&bus.tap, &["--json", "--pcap", capture.to_str().unwrap()], Stdio::piped());
+    let decoded = lines(sniffer.0.stdout.take().unwrap());
+    {
+        let port = serial2::SerialPort::open(&bus.master, 19_200).unwrap();
+        // Noise; then a read cut after 5 of its 8 bytes; each followed by silence.
+        port.write_all(&[0xFF, 0xFF, 0x00]).unwrap();
+        std::thread::sleep(Duration::from_millis(50));
+        port.write_all(&[0x01, 0x03, 0x00, 0x00, 0x00]).unwrap();
+        std::thread::sleep(Duration::from_millis(50));
+    }
+    // Unit 9 is not on the line: its request is unanswered when the next one comes.
+    let nobody = ["--port", &bus.master, "--unit", "9", "--timeout", "100ms", "raw", "03", "00", "00", "00", "01"];
+    assert_eq!(ferrobus().args(nobody).assert().get_output().status.code(), Some(3));
+    raw(&bus.master, "1", "03 00 00 00 01");
+    assert!(sniffer.stop().success());
+    let docs = json_lines(&decoded.iter().collect::<Vec<_>>().join("\n"));
+    let kinds: Vec<&str> = docs.iter().map(|d| d["type"].as_str().unwrap()).collect();
+    assert_eq!(kinds, ["noise", "partial", "frame", "unanswered", "frame", "frame", "stats"], "{docs:#?}");
+    assert_eq!(docs[0]["bytes"], "FF FF 00");
+    assert_eq!((docs[1]["bytes"].as_str(), docs[1]["expected_len"].as_u64()), (Some("01 03 00 00 00"), Some(8)));
+    assert_eq!((docs[3]["unit"].as_u64(), docs[3]["function"].as_u64()), (Some(9), Some(3)));
+    let stats = &docs[6];
+    assert_eq!((stats["partial_frames"].as_u64(), stats["noise_runs"].as_u64()), (Some(1), Some(1)), "{stats}");
+    let unit9 = stats["units"].as_array().unwrap().iter().find(|u| u["unit"] == 9).unwrap();
+    assert_eq!(unit9["unanswered"], 1, "{unit9}");
+    if let Some(tshark) = tshark("sniff noise vs tshark") {
+        let rows = tshark_fields(tshark, &capture);
+        assert_eq!(rows.len(), 5, "{rows:#?}");
+        assert!(rows[0][9].starts_with("noise: 3 bytes") && rows[0][0].is_empty(), "{:?}", rows[0]);
+        assert!(rows[1][9].starts_with("partial frame: 5 of 8 bytes"), "{:?}", rows[1]);
+    }
+    let _ = std::fs::remove_file(&capture);
+}
