@@ -78,7 +78,8 @@ pub(crate) struct LineArgs {
     tap: bool,
 
     /// Write what the tap heard to FILE: one JSON line per run of characters, with when its
-    /// last character left the wire (end_ns, nanoseconds since the Unix epoch) and its bytes
+    /// last character left the wire (end_ns, nanoseconds since the Unix epoch), when the line
+    /// wrote it to the tap's pty (written_ns) and its bytes
     #[arg(long = "tap-record", value_name = "FILE", requires = "tap")]
     tap_record: Option<std::path::PathBuf>,
 }
@@ -180,15 +181,18 @@ pub(crate) async fn run(connection: &ConnectArgs, args: &LineArgs) -> Result<(),
 /// stops. The file is created now, so that a path that cannot be written fails at once.
 fn record_tap(
     path: &std::path::Path,
-    mut heard: tokio::sync::mpsc::UnboundedReceiver<(Vec<u8>, tokio::time::Instant)>,
+    mut heard: tokio::sync::mpsc::UnboundedReceiver<ferrobus::line::TapRun>,
 ) -> Result<(), CliError> {
     let what = path.display().to_string();
     let mut file = std::fs::File::create(path).map_err(|source| CliError::Output { what: what.clone(), source })?;
     let clock = crate::sniff::WallClock::now();
     tokio::spawn(async move {
-        while let Some((bytes, at)) = heard.recv().await {
-            let doc =
-                serde_json::json!({ "end_ns": clock.unix_ns(at.into_std()), "bytes": crate::hex::format(&bytes) });
+        while let Some(run) = heard.recv().await {
+            let doc = serde_json::json!({
+                "end_ns": clock.unix_ns(run.end.into_std()),
+                "written_ns": clock.unix_ns(run.written.into_std()),
+                "bytes": crate::hex::format(&run.bytes),
+            });
             if let Err(e) = output::write_to(&mut file, &what, &output::json_line(&doc)) {
                 tracing::warn!("tap record: {e:?}");
                 return;

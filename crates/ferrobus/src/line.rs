@@ -53,7 +53,7 @@ pub use crate::wire::{EndpointStats, LineFaults, LineOptions, LineStats};
 #[cfg(unix)]
 mod pty;
 #[cfg(unix)]
-pub use pty::Tap;
+pub use pty::{Tap, TapRun};
 
 /// Characters delivered to an endpoint, and when the last of them left the wire.
 type Chunk = (Vec<u8>, Instant);

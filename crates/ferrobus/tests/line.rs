@@ -229,12 +229,13 @@ async fn a_pty_tap_hears_both_sides_says_when_each_run_ended_and_transmits_nothi
     // What a sniffer writes on the tap never reaches the line.
     sniffer.write_all(&[0xEE; 3]).await.unwrap();
     assert!(read_n(&mut a, 1, Duration::from_millis(50)).await.is_empty());
-    let (first, first_end) = tap.heard.recv().await.unwrap();
-    let (second, _) = tap.heard.recv().await.unwrap();
-    assert_eq!((first, second), (vec![0x01, 0x03, 0x00, 0x00], vec![0x01, 0x83]));
+    let first = tap.heard.recv().await.unwrap();
+    let second = tap.heard.recv().await.unwrap();
+    assert_eq!((first.bytes, second.bytes), (vec![0x01, 0x03, 0x00, 0x00], vec![0x01, 0x83]));
     // Four characters of 1.146 ms: the run ended on the wire no earlier than 4.583 ms after
-    // the write.
-    assert!(first_end.duration_since(sent) >= Duration::from_micros(4583), "{:?}", first_end - sent);
+    // the write, and reached the tap's pty no earlier than that.
+    assert!(first.end.duration_since(sent) >= Duration::from_micros(4583), "{:?}", first.end - sent);
+    assert!(first.written >= first.end);
     let stats = line.stats();
     let e = &stats.endpoints[2];
     assert!(e.tap && e.characters == 0, "{e:?}");

@@ -16,14 +16,24 @@ use crate::sys::PeerSettings;
 use crate::wire::{OnError, Receiver};
 
 /// A tap as a pty ([`Line::tap`]): a sniffer opens `path`; what the tap heard comes on
-/// `heard` too, each run of characters as the wire carried them with the instant its last
-/// character left the wire.
+/// `heard` too, run by run.
 #[derive(Debug)]
 pub struct Tap {
     /// The pty for a sniffer to open.
     pub path: PathBuf,
-    /// What the tap heard, and when each run ended on the wire. Dropping it is harmless.
-    pub heard: mpsc::UnboundedReceiver<(Vec<u8>, Instant)>,
+    /// What the tap heard, run by run. Dropping it is harmless.
+    pub heard: mpsc::UnboundedReceiver<TapRun>,
+}
+
+/// A run of back-to-back characters a tap heard.
+#[derive(Clone, PartialEq, Eq, Debug)]
+pub struct TapRun {
+    /// The characters, as the wire carried them.
+    pub bytes: Vec<u8>,
+    /// When the last of them left the wire.
+    pub end: Instant,
+    /// When the line had written them to the tap's pty: how late the line itself was.
+    pub written: Instant,
 }
 
 impl Line {
@@ -44,7 +54,7 @@ impl Line {
     }
 
     /// A pty endpoint; a tap when `record` is given, which gets what it heard.
-    async fn pty_endpoint(&self, record: Option<mpsc::UnboundedSender<Chunk>>) -> io::Result<PathBuf> {
+    async fn pty_endpoint(&self, record: Option<mpsc::UnboundedSender<TapRun>>) -> io::Result<PathBuf> {
         let mut pty = Pty::open()?;
         let path = pty.path.clone();
         let (inbox, mut rx) = mpsc::unbounded_channel::<Chunk>();
@@ -76,7 +86,7 @@ impl Line {
                             };
                             if pty.write_all(&heard).await.is_err() { return; }
                             if let Some(record) = &record {
-                                let _ = record.send((bytes, at));
+                                let _ = record.send(TapRun { bytes, end: at, written: Instant::now() });
                             }
                         }
                         None => return,
