@@ -312,3 +312,39 @@ fn the_frame_view_gives_unit_function_pdu_crc_and_the_parsed_pdu() {
     });
     assert!(checked);
 }
+
+proptest::proptest! {
+    /// Whatever comes, and however it is chunked and timed, every byte comes out once, in a
+    /// frame or a fragment, in order (the `sniffer` fuzz target checks the same at length).
+    #[test]
+    fn every_byte_comes_out_once_in_order_in_a_frame_or_a_fragment(
+        steps in proptest::collection::vec((0u16..6000, proptest::collection::vec(proptest::prelude::any::<u8>(), 0..40)), 0..40),
+        frames in proptest::collection::vec(0usize..3, 0..40),
+    ) {
+        let mut sniffer = Sniffer::new(timing());
+        let (mut fed, mut out) = (Vec::new(), Vec::new());
+        let mut now = Instant::from_millis(1);
+        let take = |e: SniffEvent<'_>, out: &mut Vec<u8>| match e {
+            SniffEvent::Frame(f) => out.extend_from_slice(f.adu()),
+            SniffEvent::Fragment(f) => out.extend_from_slice(f.bytes),
+            SniffEvent::Unanswered(_) => {}
+        };
+        for (i, (gap, noise)) in steps.iter().enumerate() {
+            // Noise, or a real frame now and then, so that both paths are taken.
+            let bytes = match frames.get(i) {
+                Some(1) => rtu(1, &[0x03, 0x00, 0x00, 0x00, 0x02]),
+                Some(2) => rtu(1, &[0x03, 0x02, 0x00, 0x07]),
+                _ => noise.clone(),
+            };
+            let at = now.saturating_add(Duration::from_micros(u64::from(*gap)));
+            while let Some(deadline) = sniffer.poll_timeout().filter(|d| *d <= at) {
+                sniffer.expire(deadline.max(now), |e| take(e, &mut out));
+            }
+            sniffer.feed(at, &bytes, |e| take(e, &mut out));
+            fed.extend_from_slice(&bytes);
+            now = at;
+        }
+        sniffer.finish(|e| take(e, &mut out));
+        proptest::prop_assert_eq!(out, fed);
+    }
+}
