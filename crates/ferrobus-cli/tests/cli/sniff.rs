@@ -134,8 +134,8 @@ const BAD_CRC: [u8; 8] = [0x01, 0x06, 0x00, 0x05, 0x12, 0x34, 0x94, 0xBC ^ 0x5A]
 fn write_bad_crc(master: &str) {
     let port = serial2::SerialPort::open(master, 19_200).unwrap();
     port.write_all(&BAD_CRC).unwrap();
-    // Let it cross the line (4.6 ms at 19200) before the port closes.
-    std::thread::sleep(Duration::from_millis(100));
+    // Let it reach the line (it crosses it in 4.6 ms at 19200) before the port closes.
+    std::thread::sleep(Duration::from_millis(50));
 }
 
 /// tshark, or `None` outside CI when it is not installed (under CI=true that is a failure).
@@ -197,10 +197,13 @@ fn tshark_decodes_the_pcapng_of_every_function_code_exceptions_a_broadcast_and_a
         raw(&bus.master, unit, pdu);
     }
     write_bad_crc(&bus.master);
+    // The next request only once the bad frame has been seen: they cannot run together.
+    let mut seen = wait_for(&decoded, usize::MAX, "\"crc_ok\":false", "ferrobus sniff");
     let (unit, pdu) = SESSION[SESSION.len() - 1];
     raw(&bus.master, unit, pdu);
     assert!(sniffer.stop().success(), "sniff ends well on SIGTERM");
-    let docs: Vec<Value> = json_lines(&decoded.iter().collect::<Vec<_>>().join("\n"));
+    seen.extend(decoded.iter());
+    let docs: Vec<Value> = json_lines(&seen.join("\n"));
     let frames: Vec<&Value> = docs.iter().filter(|d| d["type"] == "frame").collect();
     // 21 requests to unit 1 and their responses, one broadcast, one bad CRC.
     assert_eq!(frames.len(), 21 * 2 + 1 + 1, "{docs:#?}");
@@ -336,20 +339,21 @@ fn noise_a_frame_cut_short_and_an_unanswered_request_are_shown_as_such_and_noise
     let capture = temp("noise.pcapng");
     let (mut sniffer, _said) = sniff(&bus.tap, &["--json", "--pcap", capture.to_str().unwrap()], Stdio::piped());
     let decoded = lines(sniffer.0.stdout.take().unwrap());
-    {
-        let port = serial2::SerialPort::open(&bus.master, 19_200).unwrap();
-        // Noise; then a read cut after 5 of its 8 bytes; each followed by silence.
-        port.write_all(&[0xFF, 0xFF, 0x00]).unwrap();
-        std::thread::sleep(Duration::from_millis(50));
-        port.write_all(&[0x01, 0x03, 0x00, 0x00, 0x00]).unwrap();
-        std::thread::sleep(Duration::from_millis(50));
-    }
+    // Noise; then a read cut after 5 of its 8 bytes. Each is written once the sniffer has
+    // reported what came before, so that the line cannot carry them back to back.
+    let port = serial2::SerialPort::open(&bus.master, 19_200).unwrap();
+    port.write_all(&[0xFF, 0xFF, 0x00]).unwrap();
+    let mut seen = wait_for(&decoded, usize::MAX, "\"noise\"", "ferrobus sniff");
+    port.write_all(&[0x01, 0x03, 0x00, 0x00, 0x00]).unwrap();
+    seen.extend(wait_for(&decoded, usize::MAX, "\"partial\"", "ferrobus sniff"));
+    drop(port);
     // Unit 9 is not on the line: its request is unanswered when the next one comes.
     let nobody = ["--port", &bus.master, "--unit", "9", "--timeout", "100ms", "raw", "03", "00", "00", "00", "01"];
     assert_eq!(ferrobus().args(nobody).assert().get_output().status.code(), Some(3));
     raw(&bus.master, "1", "03 00 00 00 01");
     assert!(sniffer.stop().success());
-    let docs = json_lines(&decoded.iter().collect::<Vec<_>>().join("\n"));
+    seen.extend(decoded.iter());
+    let docs = json_lines(&seen.join("\n"));
     let kinds: Vec<&str> = docs.iter().map(|d| d["type"].as_str().unwrap()).collect();
     assert_eq!(kinds, ["noise", "partial", "frame", "unanswered", "frame", "frame", "stats"], "{docs:#?}");
     assert_eq!(docs[0]["bytes"], "FF FF 00");
