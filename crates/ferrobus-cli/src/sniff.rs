@@ -125,7 +125,9 @@ impl WallClock {
     fn to_mono(self, t: Instant) -> std::time::Instant {
         let ns = t.as_nanos();
         if ns >= self.unix_ns {
-            self.mono + Duration::from_nanos(ns.saturating_sub(self.unix_ns))
+            // Past what the monotonic clock can hold: as good as never.
+            let never = || self.mono.checked_add(Duration::from_secs(1 << 30)).unwrap_or(self.mono);
+            self.mono.checked_add(Duration::from_nanos(ns.saturating_sub(self.unix_ns))).unwrap_or_else(never)
         } else {
             self.mono.checked_sub(Duration::from_nanos(self.unix_ns.saturating_sub(ns))).unwrap_or(self.mono)
         }
