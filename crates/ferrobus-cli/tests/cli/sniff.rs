@@ -150,7 +150,7 @@ fn tshark(test: &str) -> Option<&'static str> {
 }
 
 /// The documented command (plus the preference that decodes broadcasts), as fields.
-const FIELDS: [&str; 11] = [
+const FIELDS: [&str; 14] = [
     "mbrtu.unit_id",
     "modbus.func_code",
     "modbus.reference_num",
@@ -162,6 +162,9 @@ const FIELDS: [&str; 11] = [
     "modbus.exception_code",
     "frame.comment",
     "_ws.col.Info",
+    "frame.time_epoch",
+    "frame.packet_flags_direction",
+    "modbus.response_time",
 ];
 
 fn tshark_fields(tshark: &str, capture: &Path) -> Vec<Vec<String>> {
@@ -210,10 +213,17 @@ fn tshark_decodes_the_pcapng_of_every_function_code_exceptions_a_broadcast_and_a
     assert!(!docs.iter().any(|d| d["type"] == "noise" || d["type"] == "partial"), "{docs:#?}");
     let rows = tshark_fields(tshark, &capture);
     assert_eq!(rows.len(), frames.len(), "one packet per frame: {rows:#?}");
+    let mut timed = 0;
     for (i, (row, doc)) in rows.iter().zip(&frames).enumerate() {
         let at = format!("frame {}: tshark {row:?}, sniff {doc}", i + 1);
         let field = |name: &str| row[FIELDS.iter().position(|f| *f == name).unwrap()].as_str();
         let num = |name: &str| field(name).parse::<u64>().ok();
+        // Nanosecond timestamps (if_tsresol 9): tshark reads sniff's instant to the nanosecond.
+        let ts = doc["ts_ns"].as_u64().unwrap();
+        assert_eq!(field("frame.time_epoch"), format!("{}.{:09}", ts / 1_000_000_000, ts % 1_000_000_000), "{at}");
+        // The direction in epb_flags: a request outbound (2), a response inbound (1).
+        let direction = if doc["role"] == "request" { "0x00000002" } else { "0x00000001" };
+        assert_eq!(field("frame.packet_flags_direction"), direction, "{at}");
         let bytes = doc["bytes"].as_str().unwrap().split(' ').count();
         if bytes < 5 {
             // tshark 4.0's RTU dissector takes no frame under 5 bytes (the requests of 0x07,
@@ -227,6 +237,12 @@ fn tshark_decodes_the_pcapng_of_every_function_code_exceptions_a_broadcast_and_a
         let role = if field("_ws.col.Info").trim_start().starts_with("Query") { "request" } else { "response" };
         assert_eq!(role, doc["role"], "{at}");
         assert_eq!(num("modbus.exception_code"), doc["exception"].as_u64(), "{at}");
+        // Where tshark paired the response too, both say the same time (sniff's in µs).
+        if let Ok(seconds) = field("modbus.response_time").parse::<f64>() {
+            let ms = doc["response_time_ms"].as_f64().unwrap_or(f64::NAN);
+            assert!((seconds * 1e3 - ms).abs() < 0.001, "{at}");
+            timed += 1;
+        }
         let reference = num("modbus.reference_num").or(num("modbus.read_reference_num"));
         let count = num("modbus.word_cnt").or(num("modbus.bit_cnt")).or(num("modbus.read_word_cnt"));
         if doc.get("malformed").is_some() {
@@ -237,6 +253,9 @@ fn tshark_decodes_the_pcapng_of_every_function_code_exceptions_a_broadcast_and_a
         assert_eq!(reference, doc["address"].as_u64(), "{at}");
         assert_eq!(count, doc["count"].as_u64(), "{at}");
     }
+    // Every response tshark times: not those to the 4-byte requests it does not decode (4),
+    // nor the exceptions (2), which it does not time.
+    assert_eq!(timed, 21 - 4 - 2, "responses whose time tshark and sniff both gave");
     // The frame with the bad CRC: a request, marked bad, its comment saying what it should be.
     let bad = frames.iter().position(|d| d["crc_ok"] == false).unwrap();
     assert_eq!(frames[bad]["bytes"], "01 06 00 05 12 34 94 E6");
