@@ -61,15 +61,34 @@ fn wait_for(rx: &mpsc::Receiver<String>, n: usize, until: &str, what: &str) -> V
 /// A line with a tap and a simulated generic drive on its second drop; returns the master's
 /// drop and the tap.
 struct Bus {
-    _line: Running,
+    line: Running,
     _sim: Running,
     master: String,
     tap: String,
+    stats: PathBuf,
+}
+
+impl Bus {
+    /// Stops the line (SIGTERM) and returns the statistics it wrote.
+    fn stop(&mut self) -> Value {
+        assert!(self.line.stop().success());
+        let text = std::fs::read_to_string(&self.stats).unwrap();
+        serde_json::from_str(&text).unwrap_or_else(|e| panic!("{e}: {text}"))
+    }
+}
+
+impl Drop for Bus {
+    fn drop(&mut self) {
+        let _ = std::fs::remove_file(&self.stats);
+    }
 }
 
 fn bus() -> Bus {
+    static NEXT: std::sync::atomic::AtomicUsize = std::sync::atomic::AtomicUsize::new(0);
+    let stats = temp(&format!("line-{}.json", NEXT.fetch_add(1, std::sync::atomic::Ordering::Relaxed)));
     let mut line = ferrobus();
-    line.args(["line", "--tap"]).stdin(Stdio::null()).stdout(Stdio::piped()).stderr(Stdio::null());
+    line.args(["line", "--tap", "--stats-json"]).arg(&stats);
+    line.stdin(Stdio::null()).stdout(Stdio::piped()).stderr(Stdio::null());
     let mut line = Running(line.spawn().unwrap());
     let paths = wait_for(&lines(line.0.stdout.take().unwrap()), 3, "", "ferrobus line --tap");
     let mut sim = ferrobus();
@@ -77,7 +96,7 @@ fn bus() -> Bus {
     let mut sim = Running(sim.stdin(Stdio::null()).stdout(Stdio::null()).stderr(Stdio::piped()).spawn().unwrap());
     let said = lines(sim.0.stderr.take().unwrap());
     wait_for(&said, usize::MAX, "serving on", "ferrobus sim");
-    Bus { _line: line, _sim: sim, master: paths[0].clone(), tap: paths[2].clone() }
+    Bus { line, _sim: sim, master: paths[0].clone(), tap: paths[2].clone(), stats }
 }
 
 /// Starts `ferrobus --port TAP sniff ARGS` and waits until it listens.
@@ -191,7 +210,7 @@ fn json_lines(text: &str) -> Vec<Value> {
 #[test]
 fn tshark_decodes_the_pcapng_of_every_function_code_exceptions_a_broadcast_and_a_bad_crc_as_sniff_does() {
     let Some(tshark) = tshark("sniff vs tshark") else { return };
-    let bus = bus();
+    let mut bus = bus();
     let capture = temp("session.pcapng");
     let capture_arg = capture.to_str().unwrap();
     let (mut sniffer, _said) = sniff(&bus.tap, &["--json", "--pcap", capture_arg], Stdio::piped());
@@ -273,6 +292,14 @@ fn tshark_decodes_the_pcapng_of_every_function_code_exceptions_a_broadcast_and_a
     assert_eq!((unit1["requests"].as_u64(), unit1["responses"].as_u64()), (Some(22), Some(21)), "{unit1}");
     assert_eq!((unit1["exceptions"].as_u64(), unit1["crc_errors"].as_u64()), (Some(2), Some(1)), "{unit1}");
     let _ = std::fs::remove_file(&capture);
+    // The sniffer transmitted nothing: the tap was given no byte to send.
+    let line = bus.stop();
+    let tap = &line["endpoints"][2];
+    assert_eq!(
+        (&tap["tap"], &tap["refused"], &tap["characters"]),
+        (&Value::Bool(true), &0.into(), &0.into()),
+        "{line}"
+    );
 }
 
 #[test]
