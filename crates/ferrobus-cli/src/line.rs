@@ -78,8 +78,8 @@ pub(crate) struct LineArgs {
     tap: bool,
 
     /// Write what the tap heard to FILE: one JSON line per run of characters, with when its
-    /// last character left the wire (end_ns, nanoseconds since the Unix epoch), when the line
-    /// wrote it to the tap's pty (written_ns) and its bytes
+    /// last character left the wire (end_ns, nanoseconds since the Unix epoch), when the line's
+    /// write of it to the tap's pty returned (written_ns) and its bytes
     #[arg(long = "tap-record", value_name = "FILE", requires = "tap")]
     tap_record: Option<std::path::PathBuf>,
 }

@@ -25,8 +25,9 @@
 //! request of the same unit and function code is waiting for one, and a request otherwise. A
 //! response is paired with the waiting request only if its unit and function code match; its
 //! response time is from the request's end to its own. A request that comes while another is
-//! still waiting ends that one as [`SniffEvent::Unanswered`]. A broadcast (unit 0) waits for
-//! nothing.
+//! still waiting ends that one as [`SniffEvent::Unanswered`] — unless the waiting one had a bad
+//! CRC, which a slave rightly leaves unanswered. A broadcast (unit 0) waits for nothing. Noise
+//! and partial frames change nothing in the pairing.
 
 use core::time::Duration;
 

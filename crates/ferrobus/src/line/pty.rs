@@ -32,7 +32,8 @@ pub struct TapRun {
     pub bytes: Vec<u8>,
     /// When the last of them left the wire.
     pub end: Instant,
-    /// When the line had written them to the tap's pty: how late the line itself was.
+    /// When the line's write of them to the tap's pty returned: how late the line itself was
+    /// (a reader on the other end may have been woken a little before).
     pub written: Instant,
 }
 
