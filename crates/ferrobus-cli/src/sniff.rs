@@ -247,7 +247,8 @@ fn open_capture(
     let failed = |source| CliError::Output { what: what.clone(), source };
     let out: Box<dyn Write> =
         if to_stdout { Box::new(io::stdout()) } else { Box::new(BufWriter::new(File::create(path).map_err(failed)?)) };
-    let writer = PcapngWriter::new(out, name, description).map_err(failed)?.flush_each(to_stdout);
+    // Every frame is flushed, to a file too: a capture cut short by a crash keeps what came.
+    let writer = PcapngWriter::new(out, name, description).map_err(failed)?.flush_each(true);
     Ok(Some((writer, what)))
 }
 
