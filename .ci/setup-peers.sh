@@ -1,6 +1,7 @@
 #!/usr/bin/env bash
 # .ci/setup-peers.sh - install and build the peer fixtures of tests/peers/.
 #
+# Also installs tshark (apt), which decodes the captures of `ferrobus sniff`.
 # Installs what the peers need (apt: socat, libmodbus-dev, mbpoll, libudev-dev,
 # pkg-config, gcc; pip: pymodbus==3.16.1, pyserial==3.5), compiles the
 # libmodbus fixtures into target/peers/ and builds tokio-modbus-peer (release,
@@ -29,6 +30,8 @@ CARGO="${CARGO:-cargo}"
 PYMODBUS_VERSION="3.16.1"
 PYSERIAL_VERSION="3.5"
 APT_PACKAGES=(socat libmodbus-dev mbpoll libudev-dev pkg-config gcc)
+# tshark decodes the captures of `ferrobus sniff` in its tests.
+APT_PACKAGES+=(tshark)
 export DEBIAN_FRONTEND=noninteractive
 
 IN_CI=false
@@ -71,6 +74,12 @@ apt_install() { # apt_install PKG...: best effort, the caller checks the result
 pkg_installed() {
     dpkg-query -W -f='${Status}' "$1" 2>/dev/null | grep -q 'install ok installed'
 }
+
+# tshark's package asks whether non-root users may capture; answer no, without a prompt.
+if have debconf-set-selections && [ "${SUDO[0]:-}" != false ]; then
+    echo "wireshark-common wireshark-common/install-setuid boolean false" |
+        "${SUDO[@]}" debconf-set-selections || true
+fi
 
 if have dpkg-query && have apt-get; then
     NEED=()
@@ -169,6 +178,7 @@ done
 for tool in socat mbpoll; do
     have "$tool" || missing "$tool" "$tool not installed"
 done
+have tshark || missing tshark "tshark not installed"
 
 v_libmodbus="$(pkg-config --modversion libmodbus 2>/dev/null || echo missing)"
 v_pymodbus="$("$PYTHON" -c 'import pymodbus; print(pymodbus.__version__)' 2>/dev/null || echo missing)"
@@ -184,6 +194,10 @@ v_rustc="$(rustc --version 2>/dev/null | awk '{ print $2 }')"
 echo "peers: libmodbus ${v_libmodbus}, pymodbus ${v_pymodbus} (python ${v_python}, pyserial ${v_pyserial})," \
     "tokio-modbus ${v_tokio_modbus:-?} (rustc ${v_rustc:-missing}), socat ${v_socat:-missing}," \
     "mbpoll ${v_mbpoll}, gcc ${v_gcc} -> target/peers/"
+
+v_tshark="$(tshark --version 2>/dev/null || true)"
+v_tshark="${v_tshark%%$'\n'*}"
+echo "peers: ${v_tshark:-tshark missing}"
 
 if [ "${#MISSING[@]}" -gt 0 ]; then
     log "WARNING: incomplete setup, missing: ${MISSING[*]}"

@@ -5,6 +5,11 @@
 //! interrupted (Ctrl-C or SIGTERM, its normal end: exit 0) or `--duration` is over. On exit it
 //! prints what it saw: characters, frames, collisions, faults, and for each endpoint the frames
 //! it began before the line had been silent for t3.5.
+//!
+//! With `--tap`, one more pty is printed last: a tap, for `ferrobus sniff`, that hears
+//! everything on the line and transmits nothing. `--tap-record FILE` writes what it heard, one
+//! JSON line per run of characters with the instant its last character left the wire: the
+//! reference the sniffer's timestamps are measured against (`bench/sniff.sh`).
 
 use std::time::Duration;
 
@@ -66,6 +71,17 @@ pub(crate) struct LineArgs {
     /// Also write the statistics as JSON to this file on exit (created at the start)
     #[arg(long = "stats-json", value_name = "FILE")]
     stats_json: Option<std::path::PathBuf>,
+
+    /// Add a tap: one more pty, printed last, that hears everything and transmits nothing
+    /// (for `ferrobus sniff`; what is written to it is dropped and counted)
+    #[arg(long)]
+    tap: bool,
+
+    /// Write what the tap heard to FILE: one JSON line per run of characters, with when its
+    /// last character left the wire (end_ns, nanoseconds since the Unix epoch), when the line's
+    /// write of it to the tap's pty returned (written_ns) and its bytes
+    #[arg(long = "tap-record", value_name = "FILE", requires = "tap")]
+    tap_record: Option<std::path::PathBuf>,
 }
 
 use ferrobus_sim::fault::parse_share as rate;
@@ -130,6 +146,13 @@ pub(crate) async fn run(connection: &ConnectArgs, args: &LineArgs) -> Result<(),
             line.set_dead(usize::from(index), true);
         }
     }
+    if args.tap {
+        let tap = line.tap().await.map_err(|e| ferrobus::Error::io("making the tap's pty", e))?;
+        output::print(&format!("{}\n", tap.path.display()))?;
+        if let Some(file) = &args.tap_record {
+            record_tap(file, tap.heard)?;
+        }
+    }
     let timing = line.timing();
     eprintln!(
         "line: {} drops at {}{}: character {:.1} µs, t3.5 {:.1} µs; Ctrl-C or SIGTERM prints the statistics",
@@ -154,12 +177,41 @@ pub(crate) async fn run(connection: &ConnectArgs, args: &LineArgs) -> Result<(),
     Ok(())
 }
 
+/// Writes what the tap hears to `path` as it comes, one JSON line per run, until the line
+/// stops. The file is created now, so that a path that cannot be written fails at once.
+fn record_tap(
+    path: &std::path::Path,
+    mut heard: tokio::sync::mpsc::UnboundedReceiver<ferrobus::line::TapRun>,
+) -> Result<(), CliError> {
+    let what = path.display().to_string();
+    let mut file = std::fs::File::create(path).map_err(|source| CliError::Output { what: what.clone(), source })?;
+    let clock = crate::sniff::WallClock::now();
+    tokio::spawn(async move {
+        while let Some(run) = heard.recv().await {
+            let doc = serde_json::json!({
+                "end_ns": clock.unix_ns(run.end.into_std()),
+                "written_ns": clock.unix_ns(run.written.into_std()),
+                "bytes": crate::hex::format(&run.bytes),
+            });
+            if let Err(e) = output::write_to(&mut file, &what, &output::json_line(&doc)) {
+                tracing::warn!("tap record: {e:?}");
+                return;
+            }
+        }
+    });
+    Ok(())
+}
+
 fn print_stats(s: &LineStats) {
     eprintln!(
         "line: {} characters, {} frames, {} discards, {} collisions; faults: {} bit errors, {} corrupted, {} lost, {} gaps stretched, {} noise characters",
         s.characters, s.frames, s.discards, s.collisions, s.bit_errors, s.corrupted, s.dropped, s.stretched, s.noise
     );
     for (i, e) in s.endpoints.iter().enumerate() {
+        if e.tap {
+            eprintln!("line: endpoint {i} {}: tap, {} characters written to it refused", e.name, e.refused);
+            continue;
+        }
         eprintln!(
             "line: endpoint {i} {}: {} characters sent, {} frames begun less than t3.5 after the line was busy{}",
             e.name,
@@ -177,6 +229,7 @@ fn stats_json(s: &LineStats) -> serde_json::Value {
         "noise": s.noise,
         "endpoints": s.endpoints.iter().map(|e| serde_json::json!({
             "name": e.name, "characters": e.characters, "gap_violations": e.gap_violations, "dead": e.dead,
+            "tap": e.tap, "refused": e.refused,
         })).collect::<Vec<_>>(),
     })
 }

@@ -39,6 +39,7 @@ mod readwrite;
 mod scan;
 mod set;
 mod sim;
+mod sniff;
 mod target;
 #[cfg(not(unix))]
 mod unix_only;
@@ -129,6 +130,8 @@ enum Command {
     Diff(backup::diff::DiffArgs),
     /// Write back what differs from a backup (a dry run unless --apply)
     Restore(backup::restore::RestoreArgs),
+    /// Decode a live RTU bus passively (transmits nothing); pcapng for tshark/Wireshark
+    Sniff(sniff::SniffArgs),
 }
 
 impl Command {
@@ -173,6 +176,7 @@ async fn dispatch(cli: &Cli) -> Result<(), CliError> {
         Command::Backup(args) => backup::run(connection, args).await,
         Command::Diff(args) => backup::diff::run(connection, args).await,
         Command::Restore(args) => backup::restore::run(connection, args).await,
+        Command::Sniff(args) => sniff::run(connection, args).await,
     }
 }
 
@@ -233,6 +237,10 @@ fn refuse_ignored_options(matches: &clap::ArgMatches) -> Result<(), CliError> {
             "scan sweeps its own settings and units (--bauds, --framings, --units, --probe-timeout); \
              it takes --port, --rs485, --low-latency, --t15, --t35 and --echo",
         ),
+        "sniff" => (
+            &["port", "baud", "parity", "data_bits", "stop_bits", "rs485", "low_latency", "unit", "t15", "t35"],
+            "sniff only listens: it takes the port, the line settings, --t15/--t35 and --unit as a filter",
+        ),
         _ => return Ok(()),
     };
     let given: Vec<String> = CONNECTION_OPTIONS
@@ -279,6 +287,9 @@ fn main() -> ExitCode {
     let mut cli = Cli::from_arg_matches(&matches).unwrap_or_else(|e| e.exit());
     if let (Command::Sim(args), Some(sim)) = (&mut cli.command, matches.subcommand_matches("sim")) {
         args.pair_by_position(sim);
+    }
+    if let (Command::Sniff(args), Some(sniff)) = (&mut cli.command, matches.subcommand_matches("sniff")) {
+        args.units_from(&matches, sniff);
     }
     init_logging(cli.verbose);
     if let Err(error) = refuse_ignored_options(&matches) {

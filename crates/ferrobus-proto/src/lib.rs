@@ -40,6 +40,10 @@
 //!   `handle_timeout(now)`, and writes what `poll_transmit(now, …)` returns. The engines
 //!   decide everything else: when the line has been silent long enough to transmit, when a
 //!   reply is due, which frames to ignore.
+//! - [`sniff`]: the passive decoder of a listener that never transmits: frames with good and
+//!   bad CRCs, partial frames and noise, request or response told from the bytes, pairs with
+//!   response times, the silence before each frame and t1.5/t3.5 violations, all from
+//!   (bytes, arrival time).
 //!
 //! The `ferrobus` crate drives these engines over serial ports and TCP with tokio.
 //!
@@ -83,6 +87,7 @@ pub mod pdu;
 pub mod retry;
 pub mod scan;
 pub mod slave;
+pub mod sniff;
 pub mod time;
 pub mod words;
 

@@ -34,6 +34,8 @@
 //!   the t3.5 rule, seeded faults, a bit-level UART for endpoints at other settings.
 //! - [`line`](mod@line): the thin adapter that runs the wire on tokio's clock, for endpoints
 //!   in this process or, on Unix, other programs behind ptys.
+//! - [`pcapng`]: capture files of an RTU line that tshark and Wireshark decode as Modbus RTU
+//!   (exported PDUs with the `mbrtu` dissector and ports telling queries from responses).
 //!
 //! Linux, macOS and Windows: what differs between them — ttys and ptys on Unix, COM ports on
 //! Windows, Linux's timerfd and kernel RS-485 — is behind one seam, a folder per platform
@@ -50,6 +52,7 @@ mod driver;
 pub mod error;
 mod identity;
 pub mod line;
+pub mod pcapng;
 pub mod port;
 mod pump;
 pub mod scan;

@@ -14,6 +14,10 @@
 //!
 //! Endpoints are in-process ports ([`Line::endpoint`], for tests and the demo) or ptys that
 //! other programs open like a serial port ([`Line::pty`]: a client, a peer stack, mbpoll).
+//! A tap ([`Line::tap`], [`Line::tap_endpoint`]) is an endpoint for a sniffer: it hears every
+//! character on the line and transmits nothing, and the line tells its owner what the tap
+//! heard and when each run of characters ended on the wire — the reference a sniffer's
+//! timestamps are measured against.
 //!
 //! A pty endpoint is held to its own settings, as a UART on a real wire would be: the line
 //! reads the baud rate, data bits, parity and stop bits the program set on its pty (Linux
@@ -48,6 +52,8 @@ pub use crate::wire::{EndpointStats, LineFaults, LineOptions, LineStats};
 /// Pty endpoints (Unix: other platforms have no ptys).
 #[cfg(unix)]
 mod pty;
+#[cfg(unix)]
+pub use pty::{Tap, TapRun};
 
 /// Characters delivered to an endpoint, and when the last of them left the wire.
 type Chunk = (Vec<u8>, Instant);
@@ -64,6 +70,7 @@ enum Cmd {
         name: String,
         inbox: mpsc::UnboundedSender<Chunk>,
         id: tokio::sync::oneshot::Sender<usize>,
+        tap: bool,
     },
     SetDead {
         id: usize,
@@ -105,7 +112,15 @@ impl Line {
     /// A new in-process endpoint.
     pub async fn endpoint(&self, name: impl Into<String>) -> io::Result<Endpoint> {
         let (inbox, rx) = mpsc::unbounded_channel::<Chunk>();
-        let id = self.attach(name.into(), inbox).await?;
+        let id = self.attach(name.into(), inbox, false).await?;
+        Ok(Endpoint { id, to_bus: self.cmds.clone(), inbox: rx, pending: Vec::new(), read: 0, arrival: None })
+    }
+
+    /// A new in-process tap: an endpoint that hears everything on the line and transmits
+    /// nothing (what is written to it is counted in [`EndpointStats::refused`] and dropped).
+    pub async fn tap_endpoint(&self, name: impl Into<String>) -> io::Result<Endpoint> {
+        let (inbox, rx) = mpsc::unbounded_channel::<Chunk>();
+        let id = self.attach(name.into(), inbox, true).await?;
         Ok(Endpoint { id, to_bus: self.cmds.clone(), inbox: rx, pending: Vec::new(), read: 0, arrival: None })
     }
 
@@ -123,10 +138,10 @@ impl Line {
         Transport::custom(Framing::Rtu, self.timing(), connector).with_timer(timer)
     }
 
-    async fn attach(&self, name: String, inbox: mpsc::UnboundedSender<Chunk>) -> io::Result<usize> {
+    async fn attach(&self, name: String, inbox: mpsc::UnboundedSender<Chunk>, tap: bool) -> io::Result<usize> {
         let (tx, rx) = tokio::sync::oneshot::channel();
         let closed = || io::Error::new(io::ErrorKind::BrokenPipe, "the line has stopped");
-        self.cmds.send(Cmd::Attach { name, inbox, id: tx }).map_err(|_| closed())?;
+        self.cmds.send(Cmd::Attach { name, inbox, id: tx, tap }).map_err(|_| closed())?;
         rx.await.map_err(|_| closed())
     }
 
@@ -252,9 +267,9 @@ impl Bus {
                     self.deliver();
                 }
             }
-            Cmd::Attach { name, inbox, id } => {
+            Cmd::Attach { name, inbox, id, tap } => {
                 self.inboxes.push(inbox);
-                let _ = id.send(self.wire.attach(name));
+                let _ = id.send(if tap { self.wire.attach_tap(name) } else { self.wire.attach(name) });
             }
             Cmd::SetDead { id, dead } => self.wire.set_dead(id, dead),
         }

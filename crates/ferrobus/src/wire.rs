@@ -115,6 +115,10 @@ pub struct EndpointStats {
     pub gap_violations: u64,
     /// Whether it is dead (deaf and mute).
     pub dead: bool,
+    /// Whether it is a tap: it hears everything and transmits nothing.
+    pub tap: bool,
+    /// Characters it was given to send and did not, being a tap.
+    pub refused: u64,
 }
 
 /// How a receiver delivers a character that came with a parity or framing error (a
@@ -224,6 +228,17 @@ impl Wire {
         self.stats.endpoints.len() - 1
     }
 
+    /// A new tap named `name`: an endpoint that hears every character on the wire and
+    /// transmits nothing (what it is given to send is counted in
+    /// [`EndpointStats::refused`]). Returns its id.
+    pub fn attach_tap(&mut self, name: impl Into<String>) -> usize {
+        let id = self.attach(name);
+        if let Some(e) = self.stats.endpoints.get_mut(id) {
+            e.tap = true;
+        }
+        id
+    }
+
     /// Makes endpoint `id` dead (it neither sends nor hears) or alive again. An unknown id
     /// is ignored.
     pub fn set_dead(&mut self, id: usize, dead: bool) {
@@ -239,10 +254,12 @@ impl Wire {
 
     /// Endpoint `from` sends `bytes` at the wire's settings at `now`: they go on the wire back
     /// to back from `now`, or from the end of what it is already sending. Nothing from a dead
-    /// or unknown endpoint.
+    /// or unknown endpoint, nor from a tap.
     pub fn send(&mut self, from: usize, bytes: &[u8], now: Instant) {
-        if self.stats.endpoints.get(from).is_some_and(|e| !e.dead) {
-            self.schedule(from, bytes, now);
+        match self.stats.endpoints.get_mut(from) {
+            Some(e) if e.tap => e.refused = e.refused.saturating_add(bytes.len() as u64),
+            Some(e) if !e.dead => self.schedule(from, bytes, now),
+            _ => {}
         }
     }
 

@@ -211,3 +211,47 @@ async fn a_pty_endpoint_at_the_wrong_baud_rate_gets_garbage_and_one_at_the_right
     clean = clean.split_off(clean.len().saturating_sub(8));
     assert_eq!(clean, request, "the right endpoint's request arrives clean");
 }
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_pty_tap_hears_both_sides_says_when_each_run_ended_and_transmits_nothing() {
+    let line = Line::start(line_9600());
+    let mut a = line.endpoint("master").await.unwrap();
+    let mut b = line.endpoint("slave").await.unwrap();
+    let mut tap = line.tap().await.unwrap();
+    let line_config = LineConfig::new(9600).unwrap().with_parity(Parity::None);
+    let mut sniffer = ferrobus::port::open_serial(&ferrobus::SerialConfig::new(&tap.path, line_config)).unwrap();
+    let sent = Instant::now();
+    a.write_all(&[0x01, 0x03, 0x00, 0x00]).await.unwrap();
+    assert_eq!(read_n(&mut b, 4, Duration::from_secs(10)).await.len(), 4);
+    b.write_all(&[0x01, 0x83]).await.unwrap();
+    assert_eq!(read_n(&mut sniffer, 6, Duration::from_secs(10)).await, [0x01, 0x03, 0x00, 0x00, 0x01, 0x83]);
+    assert_eq!(read_n(&mut a, 2, Duration::from_secs(10)).await, [0x01, 0x83]);
+    // What a sniffer writes on the tap never reaches the line.
+    sniffer.write_all(&[0xEE; 3]).await.unwrap();
+    assert!(read_n(&mut a, 1, Duration::from_millis(50)).await.is_empty());
+    let first = tap.heard.recv().await.unwrap();
+    let second = tap.heard.recv().await.unwrap();
+    assert_eq!((first.bytes, second.bytes), (vec![0x01, 0x03, 0x00, 0x00], vec![0x01, 0x83]));
+    // Four characters of 1.146 ms: the run ended on the wire no earlier than 4.583 ms after
+    // the write, and reached the tap's pty no earlier than that.
+    assert!(first.end.duration_since(sent) >= Duration::from_micros(4583), "{:?}", first.end - sent);
+    assert!(first.written >= first.end);
+    let stats = line.stats();
+    let e = &stats.endpoints[2];
+    assert!(e.tap && e.characters == 0, "{e:?}");
+    assert_eq!(e.refused, 3);
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn an_in_process_tap_hears_the_line_and_its_writes_never_reach_it() {
+    let line = Line::start(LineOptions { paced: false, ..line_9600() });
+    let mut a = line.endpoint("a").await.unwrap();
+    let mut b = line.endpoint("b").await.unwrap();
+    let mut tap = line.tap_endpoint("tap").await.unwrap();
+    tap.write_all(&[0xEE; 4]).await.unwrap();
+    a.write_all(&[0x11, 0x22]).await.unwrap();
+    assert_eq!(read_n(&mut tap, 2, Duration::from_secs(10)).await, [0x11, 0x22]);
+    assert_eq!(read_n(&mut b, 3, Duration::from_millis(50)).await, [0x11, 0x22], "only a's bytes");
+    let stats = line.stats();
+    assert_eq!((stats.endpoints[tap.id()].refused, stats.characters), (4, 2));
+}

@@ -268,3 +268,20 @@ fn characters_in_error_are_delivered_as_the_receiver_says() {
     assert_eq!(heard(even, rx(OnError::Zero), &[0x01, 0x03]), [0x00, 0x00]);
     assert_eq!(heard(even, Receiver { config: even, on_error: OnError::Drop }, &[0x01]), [0x01], "clean: kept");
 }
+
+#[test]
+fn a_tap_hears_every_endpoint_at_the_instant_the_others_do_and_what_it_sends_is_refused_and_counted() {
+    let mut w = wire(line_9600());
+    let tap = w.attach_tap("tap");
+    w.send(0, &[1, 2], T0);
+    w.send(tap, &[0xEE; 5], T0);
+    w.send(1, &[3], at(C * 10));
+    let got: Vec<Delivery> = w.advance(at(C * 20)).into_iter().filter(|d| d.to == tap).collect();
+    let delivery = |bytes: &[u8], at| Delivery { to: tap, bytes: bytes.to_vec(), at };
+    assert_eq!(got, [delivery(&[1, 2], at(C * 2)), delivery(&[3], at(C * 11))]);
+    let stats = w.stats();
+    assert_eq!(stats.characters, 3, "nothing of the tap's went on the wire");
+    let e = &stats.endpoints[tap];
+    assert_eq!((e.tap, e.refused, e.characters), (true, 5, 0));
+    assert!(!stats.endpoints[0].tap);
+}

@@ -15,4 +15,5 @@ mod reopen;
 mod scan;
 mod server;
 mod service;
+mod sniff;
 mod write;

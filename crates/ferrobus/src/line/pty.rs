@@ -15,15 +15,51 @@ use crate::port::Pty;
 use crate::sys::PeerSettings;
 use crate::wire::{OnError, Receiver};
 
+/// A tap as a pty ([`Line::tap`]): a sniffer opens `path`; what the tap heard comes on
+/// `heard` too, run by run.
+#[derive(Debug)]
+pub struct Tap {
+    /// The pty for a sniffer to open.
+    pub path: PathBuf,
+    /// What the tap heard, run by run. Dropping it is harmless.
+    pub heard: mpsc::UnboundedReceiver<TapRun>,
+}
+
+/// A run of back-to-back characters a tap heard.
+#[derive(Clone, PartialEq, Eq, Debug)]
+pub struct TapRun {
+    /// The characters, as the wire carried them.
+    pub bytes: Vec<u8>,
+    /// When the last of them left the wire.
+    pub end: Instant,
+    /// When the line's write of them to the tap's pty returned: how late the line itself was
+    /// (a reader on the other end may have been woken a little before).
+    pub written: Instant,
+}
+
 impl Line {
     /// A new endpoint as a pty for another program to open; returns its path. The pty lives
     /// as long as the line. What crosses it is seen at the settings the program set on the
     /// pty (see the [module docs](super)).
     pub async fn pty(&self) -> io::Result<PathBuf> {
+        self.pty_endpoint(None).await
+    }
+
+    /// A new tap as a pty: the program on it hears everything on the line (at the settings it
+    /// set, as on any pty endpoint) and transmits nothing — what it writes is dropped and
+    /// counted in [`EndpointStats::refused`](crate::wire::EndpointStats::refused).
+    pub async fn tap(&self) -> io::Result<Tap> {
+        let (record, heard) = mpsc::unbounded_channel();
+        let path = self.pty_endpoint(Some(record)).await?;
+        Ok(Tap { path, heard })
+    }
+
+    /// A pty endpoint; a tap when `record` is given, which gets what it heard.
+    async fn pty_endpoint(&self, record: Option<mpsc::UnboundedSender<TapRun>>) -> io::Result<PathBuf> {
         let mut pty = Pty::open()?;
         let path = pty.path.clone();
         let (inbox, mut rx) = mpsc::unbounded_channel::<Chunk>();
-        let id = self.attach(path.display().to_string(), inbox).await?;
+        let id = self.attach(path.display().to_string(), inbox, record.is_some()).await?;
         let cmds = self.cmds.clone();
         let wire = self.options.config;
         tokio::spawn(async move {
@@ -33,6 +69,8 @@ impl Line {
                 tokio::select! {
                     read = pty.read(&mut buf) => match read {
                         Ok(n) if n > 0 => {
+                            // A tap's writes reach the wire model too, which refuses and
+                            // counts them.
                             let bytes = buf.get(..n).unwrap_or_default().to_vec();
                             let tx = pty.peer_settings().map(|peer| as_held(peer.line, wire));
                             let write = Cmd::Write { from: id, bytes, at: Instant::now(), tx };
@@ -41,13 +79,16 @@ impl Line {
                         _ => return,
                     },
                     chunk = rx.recv() => match chunk {
-                        Some((bytes, _)) => {
+                        Some((bytes, at)) => {
                             // At the settings the program has when it is handed the bytes.
                             let heard = match pty.peer_settings() {
                                 Some(peer) => crate::wire::heard(wire, receiver(peer, wire), &bytes),
-                                None => bytes,
+                                None => bytes.clone(),
                             };
                             if pty.write_all(&heard).await.is_err() { return; }
+                            if let Some(record) = &record {
+                                let _ = record.send(TapRun { bytes, end: at, written: Instant::now() });
+                            }
                         }
                         None => return,
                     },
