@@ -71,7 +71,7 @@ where
                 .encode(slot.header, pdu, &mut tx)
                 .map_err(|e| io::Error::new(io::ErrorKind::InvalidData, format!("reply too long: {e:?}")))?;
             let frame = tx.get(..n).unwrap_or_default();
-            tracing::debug!(%peer, unit = slot.header.unit, transaction = slot.header.transaction, "reply {}", Hex(pdu));
+            tracing::info!(%peer, unit = slot.header.unit, transaction = slot.header.transaction, "reply {}", Hex(pdu));
             write(&mut stream, frame, timeouts).await?;
             last_activity = tokio::time::Instant::now();
             pending.pop_front();
@@ -199,7 +199,7 @@ fn on_event(
         return true;
     }
     let (header, pdu) = (frame.header, frame.pdu);
-    tracing::debug!(%peer, unit = header.unit, transaction = header.transaction, "request {}", Hex(pdu));
+    tracing::info!(%peer, unit = header.unit, transaction = header.transaction, "request {}", Hex(pdu));
     let function = pdu.first().copied().unwrap_or_default();
     let refuse =
         |code: ExceptionCode| Slot { header, echo: None, state: State::Ready(exception(function, code.value())) };

@@ -83,9 +83,16 @@ pub struct Route {
 }
 
 /// The routing table: for each unit a client may address, the line and the unit on it.
-#[derive(Clone, Debug)]
+#[derive(Clone)]
 pub struct Routes {
     table: Box<[Option<Route>; 256]>,
+}
+
+/// The routes only, by unit.
+impl std::fmt::Debug for Routes {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_map().entries(self.iter()).finish()
+    }
 }
 
 impl Default for Routes {
