@@ -72,6 +72,11 @@ pub(crate) struct GatewayArgs {
     #[arg(long = "backoff-after", default_value_t = 3)]
     backoff_after: u32,
 
+    /// After a request that got no usable reply, keep the line quiet this long so that a late
+    /// reply is dropped, not taken for the next request's
+    #[arg(long = "late-guard", value_name = "DURATION", default_value = "100ms", value_parser = parse_duration)]
+    late_guard: Duration,
+
     /// Connections served at once; past it a new one is closed at once
     #[arg(long = "max-connections", default_value_t = 1000, value_parser = clap::value_parser!(u32).range(1..))]
     max_connections: u32,
@@ -183,7 +188,7 @@ fn config(connection: &ConnectArgs, args: &GatewayArgs) -> Result<GatewayConfig,
         .chain(args.lines.iter().cloned())
         .map(|path| {
             let target = Target::Serial { path, line: connection.line(), ascii: connection.ascii };
-            LineConfig { transport: connection.transport(&target), client, queue }
+            LineConfig { queue, late_guard: args.late_guard, ..LineConfig::new(connection.transport(&target), client) }
         })
         .collect::<Vec<_>>();
     let routes = routes(&args.routes, lines.len())?;

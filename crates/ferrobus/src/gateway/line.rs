@@ -5,13 +5,14 @@
 //! t3.5 before every frame, waits the reply timeout, retries, skips a unit in backoff and
 //! waits the turnaround after a broadcast. A reply is matched to its request by the client's
 //! master engine (unit, function code, and for a parsed request its length and echo), and the
-//! worker starts the next request only once the last has ended, so a late reply (RTU has no
-//! transaction id) can never be taken for another client's: it arrives while the engine
-//! awaits nothing and is dropped, or while it awaits another unit or function and is counted
-//! as not the reply.
+//! worker starts the next request only once the last has ended. After a request that got no
+//! usable reply the line stays quiet for the late-reply guard ([`super::LineConfig::late_guard`])
+//! before the next request goes out: a late reply (RTU has no transaction id) arriving then
+//! is awaited by nobody and dropped, instead of being taken for the next request's.
 
 use std::collections::{HashMap, VecDeque};
 use std::sync::{Arc, Mutex, MutexGuard, PoisonError};
+use std::time::Duration;
 
 use ferrobus_proto::master::Heard;
 use ferrobus_proto::pdu::Request;
@@ -152,9 +153,10 @@ impl LineQueue {
 }
 
 /// The line's one master: takes jobs in turn and forwards each through `client`.
-pub(crate) async fn run(queue: Arc<LineQueue>, client: Client, cache: Option<Arc<Cache>>) {
+pub(crate) async fn run(queue: Arc<LineQueue>, client: Client, cache: Option<Arc<Cache>>, late_guard: Duration) {
     while let Some(job) = queue.next().await {
-        if job.reply.is_closed() {
+        // A broadcast goes out even with nobody waiting for its end (no acknowledgement).
+        if job.reply.is_closed() && job.unit_out != 0 {
             let mut stats = queue.stats();
             stats.total.abandoned = stats.total.abandoned.saturating_add(1);
             continue;
@@ -173,6 +175,11 @@ pub(crate) async fn run(queue: Arc<LineQueue>, client: Client, cache: Option<Arc
         tracing::debug!(unit = job.unit_in, line_unit = job.unit_out, ?ended, "after {took:?}");
         // The client may have gone meanwhile: nothing to answer.
         let _ = job.reply.send(reply);
+        if matches!(ended, Ended::Timeout | Ended::BadCrc | Ended::BadReply) {
+            // A reply that comes late must not be taken for the next request's: the line
+            // stays quiet a while, and what arrives meanwhile, awaited by nobody, is dropped.
+            tokio::time::sleep(late_guard).await;
+        }
     }
 }
 
@@ -221,8 +228,6 @@ pub(crate) fn exception(function: u8, code: u8) -> Vec<u8> {
 
 #[cfg(test)]
 mod tests {
-    use std::time::Duration;
-
     use super::*;
 
     fn job(unit: u8) -> (Job, oneshot::Receiver<Option<Vec<u8>>>) {

@@ -39,10 +39,13 @@
 //! rate (CRC errors).
 //!
 //! Late replies: RTU has no transaction id. The worker sends a request only when the last has
-//! ended, and the client's master engine takes a reply only from the unit asked, with the
-//! function code asked and, for a request it can parse, the length and echo it must have; a
-//! frame that comes after its request's timeout is dropped or counted as "not the reply", so
-//! it is never handed to another request.
+//! ended; the client's master engine takes a reply only from the unit asked, with the
+//! function code asked and, for a request it can parse, the length and echo it must have;
+//! and after a request that got no usable reply the line stays quiet for
+//! [`LineConfig::late_guard`], so a reply that comes late is awaited by nobody and dropped
+//! instead of being taken for the next request's. (A reply later than the timeout plus the
+//! guard, to a request of the same unit, function and length, cannot be told from the next
+//! one's by any gateway: size the timeout to the device.)
 //!
 //! The front end's per-connection code ([`Gateway::serve_connection`]) is generic over the
 //! stream, and every request passes the connection's [`Authorize`] first: a TLS acceptor with
@@ -143,6 +146,17 @@ pub struct LineConfig {
     pub client: ClientConfig,
     /// Requests that may wait for the line; past it, 0x06 at once.
     pub queue: usize,
+    /// After a request that got no usable reply, how long the line stays quiet before the
+    /// next request, so that a late reply is dropped and not taken for the next one's.
+    pub late_guard: Duration,
+}
+
+impl LineConfig {
+    /// A line on `transport` with `client`'s settings, a queue of 64 and a late-reply guard
+    /// of 100 ms.
+    pub fn new(transport: Transport, client: ClientConfig) -> Self {
+        LineConfig { transport, client, queue: 64, late_guard: Duration::from_millis(100) }
+    }
 }
 
 /// What the gateway receives on its connections.
@@ -228,10 +242,10 @@ impl Gateway {
         let mut lines = Vec::with_capacity(config.lines.len());
         for line in config.lines {
             let name = line.transport.describe();
-            let client = Client::connect(line.transport, line.client).await?;
+            let client = Client::connect(line.transport.clone(), line.client).await?;
             let stats = Arc::new(Mutex::new(LineStats { name, ..LineStats::default() }));
             let queue = Arc::new(LineQueue::new(line.queue, stats));
-            tokio::spawn(line::run(Arc::clone(&queue), client, cache.clone()));
+            tokio::spawn(line::run(Arc::clone(&queue), client, cache.clone(), line.late_guard));
             lines.push(queue);
         }
         let inner = Inner {
