@@ -5,6 +5,7 @@
 
 mod bench_failures;
 mod errors;
+mod gateway;
 mod line_settings;
 mod offline;
 mod output;
