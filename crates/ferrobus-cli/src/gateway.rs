@@ -5,15 +5,22 @@
 //! UNITS=LINE[:UNIT]` says which units go where (with one line and no `--route`, units 1-247
 //! go to it under their own addresses); a unit in no route gets exception 0x0A. The library
 //! ([`ferrobus::gateway`]) documents every answer the gateway gives and why. The counters of
-//! every line and unit are printed on SIGUSR1 and at exit.
+//! every line and unit are printed on SIGUSR1 and at exit. `--reverse` turns it around: a
+//! slave on `--port` for the units of `--route UNIT=HOST:PORT[/UNIT]`, each forwarded to its
+//! Modbus/TCP server.
 
+use std::collections::BTreeMap;
 use std::net::SocketAddr;
 use std::sync::Arc;
 use std::time::Duration;
 
 use clap::Args;
-use ferrobus::gateway::{AllowAll, Authorize, Gateway, GatewayConfig, Inbound, LineConfig, Route, Routes, Rules};
+use ferrobus::gateway::{
+    AllowAll, Authorize, Gateway, GatewayConfig, Inbound, LineConfig, OnFailure, Route, Routes, Rules, Upstream,
+    serve_reverse,
+};
 use ferrobus::server::{TcpCounts, TcpLimits};
+use ferrobus::{Client, Transport};
 
 use crate::connect::{ConnectArgs, Target, parse_duration};
 use crate::exit::CliError;
@@ -21,6 +28,7 @@ use crate::interrupt::Interrupt;
 
 /// Arguments of `ferrobus gateway`.
 #[derive(Args, Clone, Debug)]
+#[expect(clippy::struct_excessive_bools, reason = "each bool is a command-line flag")]
 pub(crate) struct GatewayArgs {
     /// Where Modbus/TCP clients connect (binds 127.0.0.1 unless told otherwise)
     #[arg(long, value_name = "ADDR:PORT", default_value = "127.0.0.1:502")]
@@ -89,13 +97,35 @@ pub(crate) struct GatewayArgs {
     #[arg(long = "frame-timeout", value_name = "DURATION", default_value = "5s", value_parser = parse_duration)]
     frame_timeout: Duration,
 
+    /// Reverse: a slave on the serial --port for the units of --route UNIT=HOST:PORT[/UNIT],
+    /// forwarding each request to that Modbus/TCP server
+    #[arg(long)]
+    reverse: bool,
+
+    /// Reverse: when the TCP server gives no answer, stay silent or answer 0x0B (0x0A if it
+    /// cannot be reached)
+    #[arg(long = "on-failure", value_enum, default_value_t = OnFailureArg::Silent)]
+    on_failure: OnFailureArg,
+
     /// Stop after this long (and print the counters), instead of running until interrupted
     #[arg(long, value_name = "DURATION", value_parser = parse_duration)]
     duration: Option<Duration>,
 }
 
+/// What the reverse gateway does when the TCP side gives no answer, as typed.
+#[derive(clap::ValueEnum, Clone, Copy, PartialEq, Eq, Debug)]
+pub(crate) enum OnFailureArg {
+    // No reply: the serial master times out.
+    Silent,
+    // Exception 0x0B (0x0A when the server cannot be reached).
+    Exception,
+}
+
 /// Runs `ferrobus gateway`.
 pub(crate) async fn run(connection: &ConnectArgs, args: &GatewayArgs) -> Result<(), CliError> {
+    if args.reverse {
+        return reverse(connection, args).await;
+    }
     let config = config(connection, args)?;
     let rules = rules(args)?;
     let mut interrupt = Interrupt::listen()?;
@@ -152,6 +182,65 @@ pub(crate) async fn run(connection: &ConnectArgs, args: &GatewayArgs) -> Result<
     serving.abort();
     print(&gateway, &tcp.counts());
     Ok(())
+}
+
+/// Runs `ferrobus gateway --reverse`.
+async fn reverse(connection: &ConnectArgs, args: &GatewayArgs) -> Result<(), CliError> {
+    let Target::Serial { path, line, ascii } = connection.target()? else {
+        return Err(CliError::Usage("--reverse serves a serial line: give --port PATH".into()));
+    };
+    if args.routes.is_empty() {
+        return Err(CliError::Usage(
+            "--reverse needs the units it stands for: --route 5=10.0.0.7:502 (or 5=10.0.0.7:502/1 to ask the server \
+             for unit 1)"
+                .into(),
+        ));
+    }
+    let mut upstreams = BTreeMap::new();
+    let mut client = connection.client_config();
+    client.backoff = None;
+    for text in &args.routes {
+        let (unit, addr, remote) = reverse_route(text)?;
+        let client = Client::spawn(Transport::tcp(addr), client);
+        upstreams.insert(unit, Upstream { client, unit: remote });
+    }
+    let transport = connection.transport(&Target::Serial { path, line, ascii });
+    let mut interrupt = Interrupt::listen()?;
+    let port = transport.open(std::time::Duration::from_secs(5)).await?;
+    let units: Vec<String> = upstreams.keys().map(ToString::to_string).collect();
+    eprintln!("gateway: reverse on {}, units {}", transport.describe(), units.join(", "));
+    let on_failure = if args.on_failure == OnFailureArg::Exception { OnFailure::Exception } else { OnFailure::Silent };
+    let until = async {
+        match args.duration {
+            Some(d) => tokio::time::sleep(d).await,
+            None => std::future::pending().await,
+        }
+    };
+    tokio::select! {
+        served = serve_reverse(&transport, port, &upstreams, on_failure) => {
+            served.map_err(|e| CliError::from(ferrobus::Error::io(format!("serving {}", transport.describe()), e)))
+        }
+        () = interrupt.wait() => Ok(()),
+        () = until => Ok(()),
+    }
+}
+
+/// `5=10.0.0.7:502` or `5=10.0.0.7:502/1`: the serial unit, the server, the unit asked there.
+fn reverse_route(text: &str) -> Result<(u8, String, u8), CliError> {
+    let bad = |why: &str| CliError::Usage(format!("--route '{text}': {why}; with --reverse: 5=10.0.0.7:502[/UNIT]"));
+    let (unit, target) = text.split_once('=').ok_or_else(|| bad("no '='"))?;
+    let unit = parse_u8(unit).map_err(|e| bad(&e))?;
+    if unit == 0 || unit > 247 {
+        return Err(bad("a serial unit is 1-247"));
+    }
+    let (addr, remote) = match target.rsplit_once('/') {
+        Some((addr, remote)) => (addr, parse_u8(remote).map_err(|e| bad(&e))?),
+        None => (target, unit),
+    };
+    if !addr.contains(':') {
+        return Err(bad(&format!("'{addr}' needs HOST:PORT")));
+    }
+    Ok((unit, addr.to_string(), remote))
 }
 
 /// Prints every line's and unit's counters and the TCP side's on stderr.
@@ -307,6 +396,15 @@ mod tests {
         assert_eq!(all.get(247), Some(Route { line: 0, unit: 247 }));
         assert_eq!(all.get(248), None);
         assert!(routes(&[], 2).is_err());
+    }
+
+    #[test]
+    fn reverse_routes_take_a_server_and_an_optional_unit_there() {
+        assert_eq!(reverse_route("5=10.0.0.7:502").unwrap(), (5, "10.0.0.7:502".into(), 5));
+        assert_eq!(reverse_route("5=10.0.0.7:502/1").unwrap(), (5, "10.0.0.7:502".into(), 1));
+        for bad in ["5", "0=h:1", "5=host", "5=h:1/x", "300=h:1"] {
+            assert!(reverse_route(bad).is_err(), "{bad}");
+        }
     }
 
     #[test]

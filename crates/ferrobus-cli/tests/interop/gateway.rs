@@ -315,3 +315,43 @@ fn the_gateway_counts_crc_errors_apart_from_timeouts_and_prints_them_on_sigusr1(
     assert!(unit1.contains("timeouts 0 crc-errors 1"), "{unit1}");
     assert!(unit2.contains("timeouts 1 crc-errors 0"), "{unit2}");
 }
+
+// Reverse: a serial master through the gateway to Modbus/TCP servers.
+
+/// `ferrobus gateway --reverse` on one end of a socat pair; the master's end of the line.
+fn reverse(args: &[&str]) -> (Proc, SocatPair, TempDir, Link) {
+    let dir = TempDir::new();
+    let pair = SocatPair::start(dir.path());
+    let mut command = Command::new(env!("CARGO_BIN_EXE_ferrobus"));
+    command.args(["--port", &pair.b.display().to_string(), "--baud", &BAUD.to_string(), "--parity", "none"]);
+    command.args(["--timeout", "200ms", "gateway", "--reverse"]).args(args);
+    let proc = Proc::spawn("ferrobus gateway --reverse", &mut command);
+    proc.wait_for(Stream::Err, |l| l.starts_with("gateway: reverse on"), STEP);
+    let link = Link::Serial { path: pair.a.clone(), parity: Parity::None };
+    (proc, pair, dir, link)
+}
+
+#[test]
+fn reverse_a_serial_master_reads_and_writes_a_libmodbus_tcp_server_and_an_unlisted_unit_is_silent() {
+    let Some(_turn) = require(&[Need::Libmodbus, Need::Socat]) else { return };
+    let server = crate::support::peer_server(Stack::Libmodbus, crate::support::Over::Tcp, 1);
+    let Link::Tcp(addr) = &server.link else { unreachable!("a TCP server") };
+    // Serial unit 5 is the server's unit 1.
+    let (_gw, _pair, _dir, link) = reverse(&["--route", &format!("5={addr}/1")]);
+    let client = ferrobus(&link).unit(5);
+    assert_eq!(client.values(&["read", "holding", "10", "--count", "3"]), words(&[73, 80, 87]));
+    client.run(&["write", "register", "10", "4242"]).ok();
+    assert_eq!(client.values(&["read", "holding", "10", "--count", "1"]), words(&[4242]));
+    client.run(&["read", "holding", "1000", "--count", "1"]).exception(2);
+    ferrobus(&link).unit(6).timeout_ms(300).run(&["read", "holding", "0"]).timeout();
+}
+
+#[test]
+fn reverse_with_on_failure_exception_a_server_that_cannot_be_reached_gets_0a_on_the_line() {
+    let Some(_turn) = require(&[Need::Socat]) else { return };
+    let nobody = format!("127.0.0.1:{}", free_port());
+    let (_gw, _pair, _dir, link) = reverse(&["--route", &format!("5={nobody}"), "--on-failure", "exception"]);
+    ferrobus(&link).unit(5).timeout_ms(3000).run(&["read", "holding", "0"]).exception(10);
+    let (_gw, _pair, _dir, link) = reverse(&["--route", &format!("5={nobody}")]);
+    ferrobus(&link).unit(5).timeout_ms(1500).run(&["read", "holding", "0"]).timeout();
+}

@@ -47,6 +47,9 @@
 //! guard, to a request of the same unit, function and length, cannot be told from the next
 //! one's by any gateway: size the timeout to the device.)
 //!
+//! The reverse direction, a slave on the serial line forwarding to Modbus/TCP servers, is
+//! [`serve_reverse`].
+//!
 //! The front end's per-connection code ([`Gateway::serve_connection`]) is generic over the
 //! stream, and every request passes the connection's [`Authorize`] first: a TLS acceptor with
 //! a roles policy serves its connections through the same function.
@@ -55,6 +58,7 @@ mod authorize;
 mod cache;
 mod front;
 mod line;
+mod reverse;
 pub mod stats;
 
 use std::io;
@@ -71,6 +75,7 @@ use tokio::sync::oneshot;
 pub use authorize::{AllowAll, Authorize, Chain, Rules};
 use cache::Cache;
 use line::{Job, LineQueue};
+pub use reverse::{OnFailure, Upstream, serve_reverse};
 use stats::LineStats;
 
 use crate::server::TcpLimits;
