@@ -67,9 +67,12 @@ start_sim() {
 # gap_violations NAME_INDEX: the gap violations of the line's endpoint (0: the sim, 1: the master).
 gaps() { "$PYTHON" -c 'import json,sys; print(json.load(open(sys.argv[1]))["endpoints"][int(sys.argv[2])]["gap_violations"])' "$WORK/line.json" "$1"; }
 
-# run_gateway LABEL BAUD PARITY CLIENTS UNITS(,) [DEAD_UNIT DEAD_CLIENTS]: one run; prints a record.
+# run_gateway LABEL BAUD PARITY CLIENTS UNITS(,) SECONDS WARMUP [DEAD_UNIT DEAD_CLIENTS [GATEWAY_ARGS...]]:
+# one run; prints a record.
 run_gateway() {
-    local label="$1" baud="$2" parity="$3" clients="$4" units="$5" dead="${6:-}" dead_clients="${7:-0}"
+    local label="$1" baud="$2" parity="$3" clients="$4" units="$5" seconds="$6" warmup="$7" dead="${8:-}" dead_clients="${9:-0}"
+    shift $(( $# < 9 ? $# : 9 ))
+    local gateway_args=("$@")
     local port queue=64 all_units
     start_line "$baud" "$parity"
     IFS=, read -r -a all_units <<<"$units"
@@ -77,14 +80,14 @@ run_gateway() {
     port="$("$PYTHON" -c 'import socket; s=socket.socket(); s.bind(("127.0.0.1",0)); print(s.getsockname()[1])')"
     [ "$clients" -gt 64 ] && queue=$((clients + dead_clients))
     "$FERROBUS" --port "$B" --baud "$baud" --parity "$parity" gateway --listen "127.0.0.1:$port" \
-        --queue "$queue" --max-connections 2000 2>"$WORK/gw.err" &
+        --queue "$queue" --max-connections 2000 "${gateway_args[@]}" 2>"$WORK/gw.err" &
     local gw=$!
     PIDS+=("$gw")
     wait_for "$WORK/gw.err" "gateway: listening on"
     local extra=()
     [ -n "$dead" ] && extra=(--dead-unit "$dead" --dead-clients "$dead_clients")
     local load
-    load="$("$PYTHON" "$ROOT/bench/gateway_load.py" --addr "127.0.0.1:$port" --clients "$clients" --units "$units" --seconds "$RUN" "${extra[@]}")"
+    load="$("$PYTHON" "$ROOT/bench/gateway_load.py" --addr "127.0.0.1:$port" --clients "$clients" --units "$units" --seconds "$seconds" --warmup "$warmup" "${extra[@]}")"
     stop "$gw" TERM
     stop "$SIM_PID" TERM
     stop "$LINE_PID" INT
@@ -108,11 +111,17 @@ run_direct() {
 }
 
 log "machine: $(nproc) CPUs, load $(cut -d' ' -f1-3 /proc/loadavg); $("$FERROBUS" --version)"
+LONG=$((RUN * 2))
 for setting in "9600 even" "115200 none"; do
     read -r baud parity <<<"$setting"
     run_direct "$baud" "$parity"
-    for n in 1 10 100; do run_gateway "clients-$n" "$baud" "$parity" "$n" 1; done
+    run_gateway clients-1 "$baud" "$parity" 1 1 "$RUN" 0
+    run_gateway clients-10 "$baud" "$parity" 10 1 "$RUN" 0
+    run_gateway clients-100 "$baud" "$parity" 100 1 "$LONG" 0
 done
-run_gateway "clients-1000" 115200 none 1000 1
-run_gateway "ten-live" 115200 none 10 1,2,3,4,5,6,7,8,9,10
-run_gateway "ten-live-one-dead" 115200 none 10 1,2,3,4,5,6,7,8,9,10 11 1
+run_gateway clients-1000 115200 none 1000 1 "$LONG" 0
+# A dead unit among ten live ones, with the gateway's defaults (3 timeouts of 1 s before the
+# unit is skipped, then a probe after 5 s, 10 s, 20 s ... up to 60 s apart): the window opens
+# after a warm-up in which the dead unit has cost its first timeouts and probes.
+run_gateway ten-live 115200 none 10 1,2,3,4,5,6,7,8,9,10 "$LONG" "$LONG"
+run_gateway ten-live-one-dead 115200 none 10 1,2,3,4,5,6,7,8,9,10 "$LONG" "$LONG" 11 1

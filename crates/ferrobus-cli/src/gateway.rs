@@ -80,6 +80,15 @@ pub(crate) struct GatewayArgs {
     #[arg(long = "backoff-after", default_value_t = 3)]
     backoff_after: u32,
 
+    /// How long a unit that stopped answering is skipped before the first probe; each failed
+    /// probe doubles it, up to --backoff-max
+    #[arg(long = "backoff-skip", value_name = "DURATION", default_value = "5s", value_parser = parse_duration)]
+    backoff_skip: Duration,
+
+    /// The longest a unit is skipped between two probes
+    #[arg(long = "backoff-max", value_name = "DURATION", default_value = "60s", value_parser = parse_duration)]
+    backoff_max: Duration,
+
     /// After a request that got no usable reply, keep the line quiet this long so that a late
     /// reply is dropped, not taken for the next request's
     #[arg(long = "late-guard", value_name = "DURATION", default_value = "100ms", value_parser = parse_duration)]
@@ -271,7 +280,7 @@ fn config(connection: &ConnectArgs, args: &GatewayArgs) -> Result<GatewayConfig,
     };
     let mut client = connection.client_config();
     client.backoff = (args.backoff_after > 0)
-        .then(|| ferrobus::Backoff { after: args.backoff_after, ..ferrobus::Backoff::default() });
+        .then(|| ferrobus::Backoff { after: args.backoff_after, initial: args.backoff_skip, max: args.backoff_max });
     let queue = usize::try_from(args.queue).unwrap_or(usize::MAX);
     let lines = std::iter::once(first)
         .chain(args.lines.iter().cloned())
