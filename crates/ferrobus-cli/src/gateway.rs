@@ -279,8 +279,11 @@ fn config(connection: &ConnectArgs, args: &GatewayArgs) -> Result<GatewayConfig,
         }
     };
     let mut client = connection.client_config();
-    client.backoff = (args.backoff_after > 0)
-        .then(|| ferrobus::Backoff { after: args.backoff_after, initial: args.backoff_skip, max: args.backoff_max });
+    client.backoff = (args.backoff_after > 0).then_some(ferrobus::Backoff {
+        after: args.backoff_after,
+        initial: args.backoff_skip,
+        max: args.backoff_max,
+    });
     let queue = usize::try_from(args.queue).unwrap_or(usize::MAX);
     let lines = std::iter::once(first)
         .chain(args.lines.iter().cloned())
