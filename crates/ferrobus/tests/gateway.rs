@@ -332,3 +332,24 @@ async fn a_late_reply_is_never_given_to_the_next_request() {
     assert!(first == [0x03, 0x04, 0x11, 0x11, 0x11, 0x11] || first == [0x83, 0x0B], "{first:02X?}");
     assert_eq!(ask(&mut b, 6, 1, &READ_0_2).await, [0x03, 0x04, 0x22, 0x22, 0x11, 0x11]);
 }
+
+#[tokio::test(start_paused = true)]
+async fn rtu_over_tcp_in_a_framed_request_gets_a_framed_reply_with_its_crc() {
+    use ferrobus_proto::crc::{crc_ok, crc16_wire};
+    let bus = Shared::new(Bus::default());
+    let gw = gateway(&bus, Setup::default()).await;
+    let (mut client, server) = tokio::io::duplex(4096);
+    let served = gw.clone();
+    tokio::spawn(async move {
+        let mut authorize = AllowAll;
+        served.serve_connection(server, "rtu client", Inbound::RtuOverTcp, &mut authorize, Timeouts::default()).await
+    });
+    let mut request = vec![0x02, 0x06, 0x00, 0x03, 0x00, 0x2A];
+    request.extend(crc16_wire(&request));
+    client.write_all(&request).await.unwrap();
+    let mut reply = [0u8; 8];
+    client.read_exact(&mut reply).await.unwrap();
+    assert_eq!(reply, request.as_slice(), "a write's echo, framed");
+    assert!(crc_ok(&reply));
+    assert_eq!(bus.lock().registers[&2][3], 0x2A);
+}
