@@ -339,10 +339,10 @@ async fn rtu_over_tcp_in_a_framed_request_gets_a_framed_reply_with_its_crc() {
     let bus = Shared::new(Bus::default());
     let gw = gateway(&bus, Setup::default()).await;
     let (mut client, server) = tokio::io::duplex(4096);
-    let served = gw.clone();
+    let front = gw.clone();
     tokio::spawn(async move {
         let mut authorize = AllowAll;
-        served.serve_connection(server, "rtu client", Inbound::RtuOverTcp, &mut authorize, Timeouts::default()).await
+        front.serve_connection(server, "rtu client", Inbound::RtuOverTcp, &mut authorize, Timeouts::default()).await
     });
     let mut request = vec![0x02, 0x06, 0x00, 0x03, 0x00, 0x2A];
     request.extend(crc16_wire(&request));
