@@ -24,6 +24,7 @@ mod crc;
 mod demo;
 mod diag;
 mod exit;
+mod gateway;
 mod get;
 mod hex;
 mod info;
@@ -132,6 +133,8 @@ enum Command {
     Restore(backup::restore::RestoreArgs),
     /// Decode a live RTU bus passively (transmits nothing); pcapng for tshark/Wireshark
     Sniff(sniff::SniffArgs),
+    /// Modbus/TCP clients to RTU serial lines: routing by unit, one queue per line, the gateway exceptions
+    Gateway(gateway::GatewayArgs),
 }
 
 impl Command {
@@ -177,6 +180,7 @@ async fn dispatch(cli: &Cli) -> Result<(), CliError> {
         Command::Diff(args) => backup::diff::run(connection, args).await,
         Command::Restore(args) => backup::restore::run(connection, args).await,
         Command::Sniff(args) => sniff::run(connection, args).await,
+        Command::Gateway(args) => gateway::run(connection, args).await,
     }
 }
 

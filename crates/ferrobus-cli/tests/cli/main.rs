@@ -7,6 +7,7 @@ mod backup;
 mod bench_failures;
 mod device;
 mod errors;
+mod gateway;
 mod line_settings;
 mod offline;
 mod output;

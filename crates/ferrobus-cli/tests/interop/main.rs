@@ -12,6 +12,8 @@
 //!   and restore against libmodbus and pymodbus.
 //! - [`drive_profiles`]: peer clients and raw manual frames against the 3G3RX and SDP profiles.
 //! - [`fault_rules`]: fault rules aimed at requests, each met by pymodbus and libmodbus clients.
+//! - [`gateway`]: the peer clients through `ferrobus gateway` to the sim, the client through it
+//!   to the peer RTU servers, and the TCP server's hostile-input tests against the gateway.
 //! - [`port_reopen`]: a serial port that disappears and comes back, through `ferrobus::Client`.
 //! - [`reply_timing`]: when the simulator's reply starts, with a 20 ms response wait.
 //! - [`skips`]: what a test whose peer is missing does, in and outside CI.
@@ -27,6 +29,7 @@ mod custom_profile;
 mod device_profile;
 mod drive_profiles;
 mod fault_rules;
+mod gateway;
 mod mbpoll_vs_sim;
 mod port_reopen;
 mod reply_timing;

@@ -90,6 +90,11 @@ impl Proc {
         }
     }
 
+    /// The child's process id (to send it a signal).
+    pub(crate) fn id(&self) -> u32 {
+        self.child.id()
+    }
+
     /// Everything the child has printed so far.
     pub(crate) fn log(&self) -> String {
         self.log.lock().unwrap_or_else(PoisonError::into_inner).clone()

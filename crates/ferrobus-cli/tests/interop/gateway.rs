@@ -1,0 +1,357 @@
+//! `ferrobus gateway` between real peers: the libmodbus, pymodbus and tokio-modbus TCP
+//! clients through the gateway to `ferrobus sim` on a socat pty pair, the `ferrobus` client
+//! through it to the libmodbus and pymodbus RTU servers, and the hostile-input tests of the
+//! TCP server (tests/interop/tcp_server.rs) run against the gateway's front end.
+
+use std::io::{ErrorKind, Read, Write};
+use std::net::TcpStream;
+use std::path::Path;
+use std::process::Command;
+use std::time::{Duration, Instant};
+
+use crate::support::cli::{BAUD, Link};
+use crate::support::env::require_tool;
+use crate::support::peers::{Stack, free_port, peer_server_on, sim_on};
+use crate::support::process::{Proc, Stream};
+use crate::support::{Need, Parity, SocatPair, TempDir, check_script, ferrobus, require, words};
+
+/// A bound on how long any single step may take before the test fails (not a timing claim).
+const STEP: Duration = Duration::from_secs(20);
+
+/// A device behind a gateway: the device on one end of a socat pair, the gateway on the
+/// other, listening on 127.0.0.1. Dropped in order: gateway, device, line, directory.
+struct Behind {
+    gateway: Proc,
+    _device: Proc,
+    _pair: SocatPair,
+    _dir: TempDir,
+    addr: String,
+}
+
+impl Behind {
+    fn link(&self) -> Link {
+        Link::Tcp(self.addr.clone())
+    }
+}
+
+/// `ferrobus gateway GATEWAY_ARGS` to the device that `device` starts on a tty, at 8N1 (the
+/// pymodbus peers cannot set parity on a pty opened twice). The gateway waits 100 ms for a
+/// reply (the peer clients' own timeout is 300 ms).
+fn behind(device: impl FnOnce(&Path) -> Proc, gateway_args: &[&str]) -> Behind {
+    behind_with(device, gateway_args, &[])
+}
+
+fn behind_with(device: impl FnOnce(&Path) -> Proc, gateway_args: &[&str], wrapper: &[&str]) -> Behind {
+    let dir = TempDir::new();
+    let pair = SocatPair::start(dir.path());
+    let device = device(&pair.b);
+    let addr = format!("127.0.0.1:{}", free_port());
+    let (program, pre) = match wrapper.split_first() {
+        Some((program, rest)) => (program.to_string(), [rest, &["--", env!("CARGO_BIN_EXE_ferrobus")]].concat()),
+        None => (env!("CARGO_BIN_EXE_ferrobus").to_string(), Vec::new()),
+    };
+    let mut command = Command::new(program);
+    command.args(pre);
+    command.args(["--port", &pair.a.display().to_string(), "--baud", &BAUD.to_string(), "--parity", "none"]);
+    command.args(["--timeout", "100ms", "gateway", "--listen", &addr]).args(gateway_args);
+    let gateway = Proc::spawn("ferrobus gateway", &mut command);
+    gateway.wait_for(Stream::Err, |l| l.starts_with("gateway: listening on"), STEP);
+    Behind { gateway, _device: device, _pair: pair, _dir: dir, addr }
+}
+
+fn generic_sim(path: &Path) -> Proc {
+    sim_on(path, Parity::None, &["--profile", "generic"])
+}
+
+/// What each peer client is answered through the gateway by the generic sim (unit 1; unit 2
+/// is routed but silent, unit 3 is in no route).
+fn script(stack: Stack) -> Vec<(&'static str, &'static str)> {
+    let mut steps = vec![
+        ("read_holding 0 3", "ok 0 0 0"),
+        ("read_input 65534 2", "ok 0 0"),
+        ("read_discrete 0 4", "ok 0 0 0 0"),
+        ("write_coil 3 1", "ok"),
+        ("write_coils 4 1 0 1", "ok"),
+        ("read_coils 0 8", "ok 0 0 0 1 1 0 1 0"),
+        ("write_register 5 1234", "ok"),
+        ("write_registers 6 5 6 7", "ok"),
+        ("mask_write 5 0xF2 0x25", "ok"),
+        ("write_read 10 3 11 9 8", "ok 0 9 8"),
+        ("read_holding 5 4", "ok 215 5 6 7"),
+        ("read_exception_status", "ok 0"),
+        // The device's own exception comes through as it was.
+        ("read_holding 65535 2", "exception 2"),
+        // Routed, but nobody answers: 0x0B; in no route: 0x0A.
+        ("unit 2", "ok"),
+        ("read_holding 0 1", "exception 11"),
+        ("unit 3", "ok"),
+        ("read_holding 0 1", "exception 10"),
+        ("unit 1", "ok"),
+        ("read_coils 0 1", "ok 0"),
+    ];
+    if stack != Stack::Libmodbus {
+        steps.extend([
+            ("diag 0 0x1234", "ok 0 4660"),
+            ("read_device_id 1 0", "ok 00=666572726f627573 01=46422d47454e45524943 02=302e31"),
+            ("read_fifo 0x04DE", "ok"),
+        ]);
+    }
+    if stack == Stack::Pymodbus {
+        steps.extend([("write_file 1 0 7 8", "ok"), ("read_file 1 0 2", "ok 7 8")]);
+    }
+    steps
+}
+
+fn client_through_gateway(stack: Stack) {
+    let Some(_turn) = require(&[stack.need(), Need::Socat]) else { return };
+    let gw = behind(generic_sim, &["--route", "1-2=0"]);
+    check_script(stack, &gw.link(), 1, &script(stack));
+}
+
+#[test]
+fn libmodbus_tcp_client_through_the_gateway_gets_every_answer_of_the_sim_and_the_gateway_exceptions() {
+    client_through_gateway(Stack::Libmodbus);
+}
+
+#[test]
+fn pymodbus_tcp_client_through_the_gateway_gets_every_answer_of_the_sim_and_the_gateway_exceptions() {
+    client_through_gateway(Stack::Pymodbus);
+}
+
+#[test]
+fn tokio_modbus_tcp_client_through_the_gateway_gets_every_answer_of_the_sim_and_the_gateway_exceptions() {
+    client_through_gateway(Stack::TokioModbus);
+}
+
+/// The data map of tests/peers/README.md read and written through the gateway.
+fn rtu_server_behind_gateway(stack: Stack) {
+    let Some(_turn) = require(&[stack.need(), Need::Socat]) else { return };
+    let gw = behind(|path| peer_server_on(stack, path, 1), &[]);
+    let client = ferrobus(&gw.link());
+    // Holding i = i*7+3; input 0x1000+i; coils i%3==0; discrete i%5==0.
+    assert_eq!(client.values(&["read", "holding", "10", "--count", "3"]), words(&[73, 80, 87]));
+    assert_eq!(client.values(&["read", "input", "2", "--count", "2"]), words(&[0x1002, 0x1003]));
+    client.run(&["write", "register", "10", "4242"]).ok();
+    assert_eq!(client.values(&["read", "holding", "10", "--count", "1"]), words(&[4242]));
+    client.run(&["write", "registers", "20", "1", "2"]).ok();
+    assert_eq!(client.values(&["read", "holding", "20", "--count", "2"]), words(&[1, 2]));
+    client.run(&["write", "coil", "1", "1"]).ok();
+    client.run(&["read", "coils", "0", "--count", "4"]).ok();
+    client.run(&["read", "holding", "1000", "--count", "1"]).exception(2);
+}
+
+#[test]
+fn the_ferrobus_client_through_the_gateway_reads_and_writes_a_libmodbus_rtu_server() {
+    rtu_server_behind_gateway(Stack::Libmodbus);
+}
+
+#[test]
+fn the_ferrobus_client_through_the_gateway_reads_and_writes_a_pymodbus_rtu_server() {
+    rtu_server_behind_gateway(Stack::Pymodbus);
+}
+
+// The TCP server's hostile-input tests, against the gateway.
+
+fn mbap(t: u16, unit: u8, pdu: &[u8]) -> Vec<u8> {
+    let mut frame = Vec::new();
+    frame.extend_from_slice(&t.to_be_bytes());
+    frame.extend_from_slice(&[0, 0]);
+    frame.extend_from_slice(&u16::try_from(pdu.len() + 1).unwrap().to_be_bytes());
+    frame.push(unit);
+    frame.extend_from_slice(pdu);
+    frame
+}
+
+fn connect(addr: &str) -> TcpStream {
+    let stream = TcpStream::connect(addr).unwrap_or_else(|e| panic!("connecting to {addr}: {e}"));
+    stream.set_read_timeout(Some(STEP)).unwrap();
+    stream
+}
+
+fn read_frame(stream: &mut TcpStream) -> Option<Vec<u8>> {
+    let mut header = [0u8; 7];
+    match stream.read_exact(&mut header) {
+        Ok(()) => {}
+        Err(e) if matches!(e.kind(), ErrorKind::UnexpectedEof | ErrorKind::ConnectionReset) => return None,
+        Err(e) => panic!("reading a reply: {e}"),
+    }
+    let len = usize::from(u16::from_be_bytes([header[4], header[5]]));
+    let mut rest = vec![0u8; len.saturating_sub(1)];
+    stream.read_exact(&mut rest).unwrap_or_else(|e| panic!("reading the reply after {header:02X?}: {e}"));
+    Some([&header[..], &rest].concat())
+}
+
+fn ask(stream: &mut TcpStream, t: u16, unit: u8, pdu: &[u8]) -> Vec<u8> {
+    stream.write_all(&mbap(t, unit, pdu)).unwrap();
+    let reply = read_frame(stream).unwrap_or_else(|| panic!("connection closed instead of a reply to {pdu:02X?}"));
+    assert_eq!(&reply[..2], &t.to_be_bytes(), "the transaction id is echoed");
+    assert_eq!(reply[6], unit, "the reply comes from the unit asked");
+    reply[7..].to_vec()
+}
+
+fn closed_silently(stream: &mut TcpStream) -> bool {
+    let mut byte = [0u8; 1];
+    match stream.read(&mut byte) {
+        Ok(0) => true,
+        Err(e) if e.kind() == ErrorKind::ConnectionReset => true,
+        Ok(_) => false,
+        Err(e) => panic!("waiting for the gateway to close: {e}"),
+    }
+}
+
+const READ_0: [u8; 5] = [0x03, 0x00, 0x00, 0x00, 0x01];
+
+#[test]
+fn through_the_gateway_twenty_pipelined_requests_get_twenty_replies_in_order_each_with_its_transaction() {
+    let Some(_turn) = require(&[Need::Socat]) else { return };
+    let gw = behind(generic_sim, &["--pipeline", "4"]);
+    let mut stream = connect(&gw.addr);
+    let mut burst = Vec::new();
+    for i in 0..10u16 {
+        let v = u8::try_from(i).unwrap();
+        burst.extend(mbap(0x0100 + i, 1, &[0x06, 0x00, v, 0xB0, v]));
+    }
+    for i in 0..10u16 {
+        burst.extend(mbap(0x0200 + i, 1, &[0x03, 0x00, u8::try_from(i).unwrap(), 0x00, 0x01]));
+    }
+    stream.write_all(&burst).unwrap();
+    for i in 0..10u16 {
+        let v = u8::try_from(i).unwrap();
+        assert_eq!(read_frame(&mut stream), Some(mbap(0x0100 + i, 1, &[0x06, 0x00, v, 0xB0, v])), "write {i}");
+    }
+    for i in 0..10u16 {
+        let v = u8::try_from(i).unwrap();
+        assert_eq!(read_frame(&mut stream), Some(mbap(0x0200 + i, 1, &[0x03, 0x02, 0xB0, v])), "read {i}");
+    }
+}
+
+#[test]
+fn through_the_gateway_a_corrupt_mbap_header_closes_the_connection_and_nothing_behind_it_reaches_the_line() {
+    let Some(_turn) = require(&[Need::Socat]) else { return };
+    let gw = behind(generic_sim, &[]);
+    let mut stream = connect(&gw.addr);
+    let mut input = vec![0x00, 0x31, 0x00, 0x00, 0xFF, 0xFF, 0x01];
+    input.extend(mbap(0x0032, 1, &[0x06, 0x00, 0x05, 0x12, 0x34]));
+    stream.write_all(&input).unwrap();
+    assert!(closed_silently(&mut stream), "the connection is closed, nothing answered");
+    let mut stream = connect(&gw.addr);
+    let mut input = vec![0u8; 6];
+    for t in 0..10 {
+        input.extend(mbap(t, 1, &[0x06, 0x00, 0x06, 0x56, 0x78]));
+    }
+    stream.write_all(&input).unwrap();
+    assert!(closed_silently(&mut stream));
+    let mut fresh = connect(&gw.addr);
+    assert_eq!(ask(&mut fresh, 1, 1, &[0x03, 0x00, 0x05, 0x00, 0x02]), [0x03, 0x04, 0, 0, 0, 0], "nothing was written");
+}
+
+#[test]
+fn past_max_connections_the_gateway_closes_a_new_connection_at_once_and_serves_the_others() {
+    let Some(_turn) = require(&[Need::Socat]) else { return };
+    let gw = behind(generic_sim, &["--max-connections", "2"]);
+    let mut first = connect(&gw.addr);
+    let mut second = connect(&gw.addr);
+    ask(&mut first, 1, 1, &READ_0);
+    ask(&mut second, 1, 1, &READ_0);
+    let mut third = connect(&gw.addr);
+    assert!(closed_silently(&mut third), "the third connection is closed");
+    assert_eq!(ask(&mut first, 2, 1, &READ_0), [0x03, 0x02, 0x00, 0x00]);
+}
+
+#[test]
+fn the_gateway_closes_an_idle_connection_and_an_unfinished_frame_never_early() {
+    let Some(_turn) = require(&[Need::Socat]) else { return };
+    let gw = behind(generic_sim, &["--idle-timeout", "400ms", "--frame-timeout", "200ms"]);
+    let mut idle = connect(&gw.addr);
+    let start = Instant::now();
+    assert!(closed_silently(&mut idle));
+    let idle_after = start.elapsed();
+    assert!(idle_after >= Duration::from_millis(400), "closed after {idle_after:?}, before the 400 ms idle timeout");
+    let mut truncated = connect(&gw.addr);
+    truncated.write_all(&[0x00, 0x01, 0x00]).unwrap();
+    let start = Instant::now();
+    assert!(closed_silently(&mut truncated));
+    let frame_after = start.elapsed();
+    assert!(frame_after >= Duration::from_millis(200), "closed after {frame_after:?}, before the 200 ms frame timeout");
+}
+
+#[test]
+fn out_of_file_descriptors_the_gateway_keeps_serving_old_connections_and_new_ones_once_some_close() {
+    let Some(_turn) = require(&[Need::Socat]) else { return };
+    let prlimit = Command::new("prlimit").arg("--version").output().is_ok();
+    if !require_tool(prlimit, "prlimit (not on PATH)", "apt install util-linux") {
+        return;
+    }
+    let gw = behind_with(generic_sim, &[], &["prlimit", "--nofile=48:48"]);
+    let mut first = connect(&gw.addr);
+    ask(&mut first, 1, 1, &READ_0);
+    let mut others: Vec<TcpStream> = (0..60).map(|_| connect(&gw.addr)).collect();
+    gw.gateway.wait_for(Stream::Err, |l| l.contains("Too many open files"), STEP);
+    assert_eq!(ask(&mut first, 2, 1, &READ_0), [0x03, 0x02, 0x00, 0x00], "an old connection is served");
+    others.drain(..40);
+    let mut late = connect(&gw.addr);
+    assert_eq!(ask(&mut late, 3, 1, &READ_0), [0x03, 0x02, 0x00, 0x00], "a new client is served");
+    for (i, stream) in others.iter_mut().enumerate() {
+        let t = u16::try_from(i).unwrap();
+        assert_eq!(ask(stream, t, 1, &READ_0), [0x03, 0x02, 0x00, 0x00], "queued connection {i}");
+    }
+}
+
+#[test]
+fn the_gateway_counts_crc_errors_apart_from_timeouts_and_prints_them_on_sigusr1() {
+    let Some(_turn) = require(&[Need::Socat]) else { return };
+    // Unit 1 corrupts every reply; unit 2 is silent.
+    let device =
+        |path: &Path| sim_on(path, Parity::None, &["--profile", "generic", "--unit", "1", "--fault", "1:corrupt=100%"]);
+    let gw = behind(device, &["--route", "1-2=0", "--backoff-after", "0"]);
+    let mut stream = connect(&gw.addr);
+    assert_eq!(ask(&mut stream, 1, 1, &READ_0), [0x83, 0x0B], "a bad CRC is 0x0B");
+    assert_eq!(ask(&mut stream, 2, 2, &READ_0), [0x83, 0x0B], "silence is 0x0B");
+    let pid = gw.gateway.id();
+    let killed = Command::new("kill").args(["-USR1", &pid.to_string()]).status().unwrap();
+    assert!(killed.success());
+    let unit1 = gw.gateway.wait_for(Stream::Err, |l| l.contains("unit 1:"), STEP);
+    let unit2 = gw.gateway.wait_for(Stream::Err, |l| l.contains("unit 2:"), STEP);
+    assert!(unit1.contains("timeouts 0 crc-errors 1"), "{unit1}");
+    assert!(unit2.contains("timeouts 1 crc-errors 0"), "{unit2}");
+}
+
+// Reverse: a serial master through the gateway to Modbus/TCP servers.
+
+/// `ferrobus gateway --reverse` on one end of a socat pair; the master's end of the line.
+fn reverse(args: &[&str]) -> (Proc, SocatPair, TempDir, Link) {
+    let dir = TempDir::new();
+    let pair = SocatPair::start(dir.path());
+    let mut command = Command::new(env!("CARGO_BIN_EXE_ferrobus"));
+    command.args(["--port", &pair.b.display().to_string(), "--baud", &BAUD.to_string(), "--parity", "none"]);
+    command.args(["--timeout", "200ms", "gateway", "--reverse"]).args(args);
+    let proc = Proc::spawn("ferrobus gateway --reverse", &mut command);
+    proc.wait_for(Stream::Err, |l| l.starts_with("gateway: reverse on"), STEP);
+    let link = Link::Serial { path: pair.a.clone(), parity: Parity::None };
+    (proc, pair, dir, link)
+}
+
+#[test]
+fn reverse_a_serial_master_reads_and_writes_a_libmodbus_tcp_server_and_an_unlisted_unit_is_silent() {
+    let Some(_turn) = require(&[Need::Libmodbus, Need::Socat]) else { return };
+    let server = crate::support::peer_server(Stack::Libmodbus, crate::support::Over::Tcp, 1);
+    let Link::Tcp(addr) = &server.link else { unreachable!("a TCP server") };
+    // Serial unit 5 is the server's unit 1.
+    let (_gw, _pair, _dir, link) = reverse(&["--route", &format!("5={addr}/1")]);
+    let client = ferrobus(&link).unit(5);
+    assert_eq!(client.values(&["read", "holding", "10", "--count", "3"]), words(&[73, 80, 87]));
+    client.run(&["write", "register", "10", "4242"]).ok();
+    assert_eq!(client.values(&["read", "holding", "10", "--count", "1"]), words(&[4242]));
+    client.run(&["read", "holding", "1000", "--count", "1"]).exception(2);
+    ferrobus(&link).unit(6).timeout_ms(300).run(&["read", "holding", "0"]).timeout();
+}
+
+#[test]
+fn reverse_with_on_failure_exception_a_server_that_cannot_be_reached_gets_0a_on_the_line() {
+    let Some(_turn) = require(&[Need::Socat]) else { return };
+    let nobody = format!("127.0.0.1:{}", free_port());
+    let (_gw, _pair, _dir, link) = reverse(&["--route", &format!("5={nobody}"), "--on-failure", "exception"]);
+    ferrobus(&link).unit(5).timeout_ms(3000).run(&["read", "holding", "0"]).exception(10);
+    let (_gw, _pair, _dir, link) = reverse(&["--route", &format!("5={nobody}")]);
+    ferrobus(&link).unit(5).timeout_ms(1500).run(&["read", "holding", "0"]).timeout();
+}

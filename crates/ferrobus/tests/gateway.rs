@@ -1,0 +1,355 @@
+//! The gateway end to end in one process, with paused time: Modbus/TCP clients on in-memory
+//! streams, an RTU line that is an in-memory stream to a slave engine serving simulated
+//! devices. Each test asserts what the clients were answered and what reached the line.
+
+use std::collections::BTreeMap;
+use std::time::Duration;
+
+use ferrobus::gateway::{
+    AllowAll, Authorize, Gateway, GatewayConfig, Inbound, LineConfig, Route, Routes, Rules, Timeouts,
+};
+use ferrobus::port::{BoxPort, ConnectWith, Framing};
+use ferrobus::server::{Answering, Fate, ReplyFilter, ServerOptions, Shared, serve};
+use ferrobus::{ClientConfig, Timer, Transport};
+use ferrobus_proto::ExceptionCode;
+use ferrobus_proto::frame::rtu::RtuCodec;
+use ferrobus_proto::frame::{Expect, LineConfig as Line, LineTiming};
+use ferrobus_proto::pdu::Request;
+use ferrobus_proto::slave::{Admission, Handler, Slave, SlaveConfig, UnitSet};
+use tokio::io::{AsyncReadExt, AsyncWriteExt, DuplexStream};
+
+/// Devices on the line: 100 holding registers each, every request counted by unit; the
+/// units in `dead` never answer.
+#[derive(Default)]
+struct Bus {
+    registers: BTreeMap<u8, [u16; 100]>,
+    seen: BTreeMap<u8, u32>,
+    dead: Vec<u8>,
+    /// Broadcasts admitted, once per unit served.
+    broadcasts: u32,
+}
+
+impl Handler for Bus {
+    fn admit(&mut self, unit: u8, broadcast: bool, _request: &Request<'_>) -> Admission {
+        if broadcast {
+            self.broadcasts += 1;
+            return Admission::Serve;
+        }
+        *self.seen.entry(unit).or_default() += 1;
+        if self.dead.contains(&unit) { Admission::Ignore } else { Admission::Serve }
+    }
+    fn read_holding_registers(&mut self, unit: u8, start: u16, out: &mut [u16]) -> Result<(), ExceptionCode> {
+        let regs = self.registers.entry(unit).or_insert([0; 100]);
+        let start = usize::from(start);
+        let from = regs.get(start..start + out.len()).ok_or(ExceptionCode::IllegalDataAddress)?;
+        out.copy_from_slice(from);
+        Ok(())
+    }
+    fn write_single_register(&mut self, unit: u8, address: u16, value: u16) -> Result<(), ExceptionCode> {
+        let regs = self.registers.entry(unit).or_insert([0; 100]);
+        *regs.get_mut(usize::from(address)).ok_or(ExceptionCode::IllegalDataAddress)? = value;
+        Ok(())
+    }
+}
+
+/// What the line's devices do to their replies: corrupt the CRC of a unit's, or hold the
+/// first reply of a unit back.
+#[derive(Clone, Default)]
+struct Faults {
+    corrupt: Option<u8>,
+    delay_first: Option<(u8, Duration)>,
+}
+
+struct Filter(Faults);
+
+impl ReplyFilter for Filter {
+    fn filter(&mut self, answering: Option<&Answering>, frame: &mut Vec<u8>) -> Fate {
+        let unit = answering.map(|a| a.unit);
+        if unit.is_some() && unit == self.0.corrupt {
+            if let Some(last) = frame.last_mut() {
+                *last ^= 0xFF;
+            }
+        }
+        if let Some((u, d)) = self.0.delay_first {
+            if unit == Some(u) {
+                self.0.delay_first = None;
+                return Fate::Delay(d);
+            }
+        }
+        Fate::Send
+    }
+}
+
+const UNITS: [u8; 4] = [1, 2, 3, 7];
+
+fn timing() -> LineTiming {
+    LineTiming::new(&Line::new(19_200).unwrap())
+}
+
+/// A line whose port is an in-memory stream to the slave engine serving `bus`.
+fn line(bus: &Shared<Bus>, faults: Faults) -> Transport {
+    let bus = bus.clone();
+    let connector = ConnectWith::new("test line", move || {
+        let (ours, theirs) = tokio::io::duplex(4096);
+        let mut bus = bus.clone();
+        let faults = faults.clone();
+        tokio::spawn(async move {
+            let mut units = UnitSet::EMPTY;
+            for unit in UNITS {
+                units.insert(unit);
+            }
+            let slave = Slave::new(
+                RtuCodec::new(timing(), Expect::Requests),
+                SlaveConfig { units, response_wait: Duration::ZERO },
+            );
+            let mut options = ServerOptions::new(timing(), Timer::Tokio);
+            options.filter = Some(Box::new(Filter(faults)));
+            let _ = serve(slave, Box::new(theirs) as BoxPort, &mut bus, &mut options).await;
+        });
+        Box::pin(async move { Ok(Box::new(ours) as BoxPort) })
+    });
+    Transport::custom(Framing::Rtu, timing(), connector).with_timer(Timer::Tokio)
+}
+
+fn client_config() -> ClientConfig {
+    ClientConfig { timeout: Duration::from_millis(50), retries: 1, ..ClientConfig::default() }
+}
+
+struct Setup {
+    routes: Routes,
+    queue: usize,
+    faults: Faults,
+    broadcast_ack: bool,
+    cache: Option<Duration>,
+}
+
+impl Default for Setup {
+    fn default() -> Self {
+        Setup { routes: Routes::all_on(0), queue: 64, faults: Faults::default(), broadcast_ack: false, cache: None }
+    }
+}
+
+async fn gateway(bus: &Shared<Bus>, setup: Setup) -> Gateway {
+    let line = LineConfig { queue: setup.queue, ..LineConfig::new(line(bus, setup.faults), client_config()) };
+    let config = GatewayConfig {
+        lines: vec![line],
+        routes: setup.routes,
+        broadcast_ack: setup.broadcast_ack,
+        cache_max_age: setup.cache,
+    };
+    Gateway::start(config).await.unwrap()
+}
+
+/// A client connection served by `gateway` through `authorize`.
+fn connect(gateway: &Gateway, authorize: Box<dyn Authorize>) -> DuplexStream {
+    let (client, server) = tokio::io::duplex(4096);
+    let gateway = gateway.clone();
+    tokio::spawn(async move {
+        let mut authorize = authorize;
+        gateway.serve_connection(server, "test client", Inbound::Mbap, authorize.as_mut(), Timeouts::default()).await
+    });
+    client
+}
+
+fn mbap(t: u16, unit: u8, pdu: &[u8]) -> Vec<u8> {
+    let mut frame = t.to_be_bytes().to_vec();
+    frame.extend_from_slice(&[0, 0]);
+    frame.extend_from_slice(&u16::try_from(pdu.len() + 1).unwrap().to_be_bytes());
+    frame.push(unit);
+    frame.extend_from_slice(pdu);
+    frame
+}
+
+/// Reads one reply: (transaction, unit, PDU).
+async fn reply(stream: &mut DuplexStream) -> (u16, u8, Vec<u8>) {
+    let mut head = [0u8; 7];
+    stream.read_exact(&mut head).await.unwrap();
+    let len = usize::from(u16::from_be_bytes([head[4], head[5]])) - 1;
+    let mut pdu = vec![0u8; len];
+    stream.read_exact(&mut pdu).await.unwrap();
+    (u16::from_be_bytes([head[0], head[1]]), head[6], pdu)
+}
+
+async fn ask(stream: &mut DuplexStream, t: u16, unit: u8, pdu: &[u8]) -> Vec<u8> {
+    stream.write_all(&mbap(t, unit, pdu)).await.unwrap();
+    let (tid, u, reply) = reply(stream).await;
+    assert_eq!((tid, u), (t, unit), "the reply's transaction and unit are the request's");
+    reply
+}
+
+const READ_0_2: [u8; 5] = [0x03, 0x00, 0x00, 0x00, 0x02];
+
+#[tokio::test(start_paused = true)]
+async fn reads_and_writes_go_through_and_a_renumbered_unit_is_asked_under_its_line_address() {
+    let bus = Shared::new(Bus::default());
+    let mut routes = Routes::all_on(0);
+    routes.set(20, Route { line: 0, unit: 3 });
+    let gw = gateway(&bus, Setup { routes, ..Setup::default() }).await;
+    let mut c = connect(&gw, Box::new(AllowAll));
+    assert_eq!(ask(&mut c, 1, 1, &[0x06, 0x00, 0x01, 0x12, 0x34]).await, [0x06, 0x00, 0x01, 0x12, 0x34]);
+    assert_eq!(ask(&mut c, 2, 1, &READ_0_2).await, [0x03, 0x04, 0x00, 0x00, 0x12, 0x34]);
+    assert_eq!(ask(&mut c, 3, 20, &[0x06, 0x00, 0x00, 0x00, 0x2A]).await, [0x06, 0x00, 0x00, 0x00, 0x2A]);
+    // The device's own exception is forwarded as it came.
+    assert_eq!(ask(&mut c, 4, 2, &[0x03, 0x00, 0x63, 0x00, 0x02]).await, [0x83, 0x02]);
+    let b = bus.lock();
+    assert_eq!(b.registers[&3][0], 0x2A, "unit 20 is unit 3 on the line");
+    assert_eq!(b.seen.get(&20), None);
+    assert_eq!(gw.stats()[0].units[&20].replies, 1, "counted under the client's unit");
+}
+
+#[tokio::test(start_paused = true)]
+async fn a_unit_in_no_route_gets_0a_and_nothing_reaches_the_line() {
+    let bus = Shared::new(Bus::default());
+    let mut routes = Routes::new();
+    routes.set(1, Route { line: 0, unit: 1 });
+    let gw = gateway(&bus, Setup { routes, ..Setup::default() }).await;
+    let mut c = connect(&gw, Box::new(AllowAll));
+    assert_eq!(ask(&mut c, 9, 2, &READ_0_2).await, [0x83, 0x0A]);
+    assert_eq!(ask(&mut c, 10, 255, &READ_0_2).await, [0x83, 0x0A]);
+    assert!(bus.lock().seen.is_empty(), "{:?}", bus.lock().seen);
+    assert_eq!(gw.stats()[0].total.requests, 0);
+}
+
+#[tokio::test(start_paused = true)]
+async fn a_dead_unit_gets_0b_costs_the_line_only_a_probe_now_and_then_and_never_stalls_a_live_one() {
+    let bus = Shared::new(Bus { dead: vec![7], ..Bus::default() });
+    let gw = gateway(&bus, Setup::default()).await;
+    let mut dead = connect(&gw, Box::new(AllowAll));
+    let mut live = connect(&gw, Box::new(AllowAll));
+    let started = tokio::time::Instant::now();
+    for t in 0..40u16 {
+        assert_eq!(ask(&mut dead, t, 7, &READ_0_2).await, [0x83, 0x0B], "request {t}");
+        assert_eq!(ask(&mut live, t, 1, &READ_0_2).await, [0x03, 0x04, 0, 0, 0, 0], "request {t}");
+    }
+    let elapsed = started.elapsed();
+    let seen_dead = bus.lock().seen[&7];
+    // Three requests of two attempts each before the backoff (after 3), then probes at most
+    // once per second: the 40 requests took well under a second of line time after the first
+    // three, so at most one probe.
+    assert!(
+        seen_dead <= 3 * 2 + 1 + u32::try_from(elapsed.as_secs()).unwrap(),
+        "{seen_dead} frames to the dead unit in {elapsed:?}"
+    );
+    let stats = &gw.stats()[0];
+    assert_eq!(stats.units[&7].timeouts + stats.units[&7].skipped, 40);
+    assert!(stats.units[&7].skipped >= 36, "{}", stats.units[&7]);
+    assert_eq!(stats.units[&1].replies, 40);
+}
+
+#[tokio::test(start_paused = true)]
+async fn replies_with_a_bad_crc_get_0b_and_are_counted_as_crc_errors_not_timeouts() {
+    let bus = Shared::new(Bus::default());
+    let gw =
+        gateway(&bus, Setup { faults: Faults { corrupt: Some(2), ..Faults::default() }, ..Setup::default() }).await;
+    let mut c = connect(&gw, Box::new(AllowAll));
+    assert_eq!(ask(&mut c, 1, 2, &READ_0_2).await, [0x83, 0x0B]);
+    assert_eq!(ask(&mut c, 2, 1, &READ_0_2).await, [0x03, 0x04, 0, 0, 0, 0]);
+    let unit = &gw.stats()[0].units[&2];
+    assert_eq!((unit.crc_errors, unit.timeouts), (1, 0), "{unit}");
+    assert_eq!(bus.lock().seen[&2], 2, "retried once");
+}
+
+#[tokio::test(start_paused = true)]
+async fn a_full_queue_answers_06_at_once_and_the_queued_requests_are_served() {
+    let bus = Shared::new(Bus::default());
+    let gw = gateway(&bus, Setup { queue: 1, ..Setup::default() }).await;
+    let mut c = connect(&gw, Box::new(AllowAll));
+    let mut burst = Vec::new();
+    for t in 0..3 {
+        burst.extend(mbap(t, 1, &READ_0_2));
+    }
+    c.write_all(&burst).await.unwrap();
+    let replies = [reply(&mut c).await, reply(&mut c).await, reply(&mut c).await];
+    assert_eq!(replies[0], (0, 1, vec![0x03, 0x04, 0, 0, 0, 0]));
+    assert_eq!(replies[1], (1, 1, vec![0x83, 0x06]));
+    assert_eq!(replies[2], (2, 1, vec![0x83, 0x06]));
+    assert_eq!(gw.stats()[0].total.busy, 2);
+    assert_eq!(bus.lock().seen[&1], 1);
+}
+
+#[tokio::test(start_paused = true)]
+async fn a_broadcast_reaches_the_line_and_gets_no_reply_unless_acknowledged() {
+    let bus = Shared::new(Bus::default());
+    let gw = gateway(&bus, Setup::default()).await;
+    let mut c = connect(&gw, Box::new(AllowAll));
+    c.write_all(&mbap(1, 0, &[0x06, 0x00, 0x05, 0x00, 0x09])).await.unwrap();
+    // The next reply is the next request's: the broadcast got none.
+    assert_eq!(ask(&mut c, 2, 1, &[0x03, 0x00, 0x05, 0x00, 0x01]).await, [0x03, 0x02, 0x00, 0x09]);
+    // A read to unit 0 has no device to answer it.
+    assert_eq!(ask(&mut c, 3, 0, &READ_0_2).await, [0x83, 0x0A]);
+    // The slave engine hands a broadcast to the handler once per unit it serves.
+    assert_eq!(bus.lock().broadcasts, 4);
+
+    let acked = gateway(&bus, Setup { broadcast_ack: true, ..Setup::default() }).await;
+    let mut c = connect(&acked, Box::new(AllowAll));
+    assert_eq!(ask(&mut c, 4, 0, &[0x06, 0x00, 0x05, 0x00, 0x0A]).await, [0x06, 0x00, 0x05, 0x00, 0x0A]);
+    assert_eq!(bus.lock().broadcasts, 8);
+    assert_eq!(bus.lock().registers[&3][5], 0x0A, "every unit executed it");
+}
+
+#[tokio::test(start_paused = true)]
+async fn read_only_rules_answer_a_write_with_01_and_nothing_reaches_the_line() {
+    let bus = Shared::new(Bus::default());
+    let gw = gateway(&bus, Setup::default()).await;
+    let mut c = connect(&gw, Box::new(Rules::new().read_only(true).units([1])));
+    assert_eq!(ask(&mut c, 1, 1, &[0x06, 0x00, 0x01, 0x00, 0x01]).await, [0x86, 0x01]);
+    assert_eq!(ask(&mut c, 2, 2, &READ_0_2).await, [0x83, 0x0A]);
+    assert_eq!(ask(&mut c, 3, 1, &READ_0_2).await, [0x03, 0x04, 0, 0, 0, 0]);
+    assert_eq!(bus.lock().seen.values().sum::<u32>(), 1);
+}
+
+#[tokio::test(start_paused = true)]
+async fn the_cache_answers_a_repeated_read_and_a_write_makes_the_next_read_go_to_the_line() {
+    let bus = Shared::new(Bus::default());
+    let gw = gateway(&bus, Setup { cache: Some(Duration::from_secs(1)), ..Setup::default() }).await;
+    let mut a = connect(&gw, Box::new(AllowAll));
+    let mut b = connect(&gw, Box::new(AllowAll));
+    assert_eq!(ask(&mut a, 1, 1, &READ_0_2).await, [0x03, 0x04, 0, 0, 0, 0]);
+    assert_eq!(ask(&mut b, 1, 1, &READ_0_2).await, [0x03, 0x04, 0, 0, 0, 0]);
+    assert_eq!(bus.lock().seen[&1], 1, "the second read came from the cache");
+    ask(&mut a, 2, 1, &[0x06, 0x00, 0x01, 0x00, 0x07]).await;
+    assert_eq!(ask(&mut b, 2, 1, &READ_0_2).await, [0x03, 0x04, 0, 0, 0, 7]);
+    assert_eq!(bus.lock().seen[&1], 3);
+    assert_eq!(gw.stats()[0].units[&1].cached, 1);
+}
+
+#[tokio::test(start_paused = true)]
+async fn a_late_reply_is_never_given_to_the_next_request() {
+    let bus = Shared::new(Bus::default());
+    bus.lock().registers.insert(1, [0x1111; 100]);
+    // Unit 1's first reply comes 60 ms late: after the 50 ms timeout (and after the retry
+    // has gone out), inside the late-reply guard.
+    let faults = Faults { delay_first: Some((1, Duration::from_millis(60))), ..Faults::default() };
+    let gw = gateway(&bus, Setup { faults, ..Setup::default() }).await;
+    let mut a = connect(&gw, Box::new(AllowAll));
+    let mut b = connect(&gw, Box::new(AllowAll));
+    a.write_all(&mbap(1, 1, &READ_0_2)).await.unwrap();
+    ask(&mut b, 5, 1, &[0x06, 0x00, 0x00, 0x22, 0x22]).await;
+    // b's write changed register 0; a's request (retried) either got its own reply or 0x0B,
+    // and b's read below sees the value b wrote, never a reply meant for another request.
+    let (t, _, first) = reply(&mut a).await;
+    assert_eq!(t, 1);
+    assert!(first == [0x03, 0x04, 0x11, 0x11, 0x11, 0x11] || first == [0x83, 0x0B], "{first:02X?}");
+    assert_eq!(ask(&mut b, 6, 1, &READ_0_2).await, [0x03, 0x04, 0x22, 0x22, 0x11, 0x11]);
+}
+
+#[tokio::test(start_paused = true)]
+async fn rtu_over_tcp_in_a_framed_request_gets_a_framed_reply_with_its_crc() {
+    use ferrobus_proto::crc::{crc_ok, crc16_wire};
+    let bus = Shared::new(Bus::default());
+    let gw = gateway(&bus, Setup::default()).await;
+    let (mut client, server) = tokio::io::duplex(4096);
+    let front = gw.clone();
+    tokio::spawn(async move {
+        let mut authorize = AllowAll;
+        front.serve_connection(server, "rtu client", Inbound::RtuOverTcp, &mut authorize, Timeouts::default()).await
+    });
+    let mut request = vec![0x02, 0x06, 0x00, 0x03, 0x00, 0x2A];
+    request.extend(crc16_wire(&request));
+    client.write_all(&request).await.unwrap();
+    let mut reply = [0u8; 8];
+    client.read_exact(&mut reply).await.unwrap();
+    assert_eq!(reply, request.as_slice(), "a write's echo, framed");
+    assert!(crc_ok(&reply));
+    assert_eq!(bus.lock().registers[&2][3], 0x2A);
+}
