@@ -142,6 +142,15 @@ impl Transport {
         }
     }
 
+    /// Modbus/TCP Security (mbaps): Modbus/TCP inside TLS to `addr` (`host:port`; the
+    /// standard port is [`MBAPS_PORT`](crate::tls::MBAPS_PORT), 802), trusting and showing
+    /// what `tls` holds.
+    #[cfg(feature = "tls")]
+    pub fn tls(addr: impl Into<String>, tls: crate::tls::ClientTls) -> Self {
+        let addr = addr.into();
+        Transport { connector: Arc::new(crate::tls::TlsTarget::new(addr.clone(), tls)), ..Transport::tcp(addr) }
+    }
+
     /// RTU frames carried over TCP to `addr` (a serial gateway or a device that speaks it).
     pub fn rtu_over_tcp(addr: impl Into<String>) -> Self {
         Transport { framing: Framing::Rtu, ..Transport::tcp(addr) }

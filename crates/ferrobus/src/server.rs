@@ -567,6 +567,8 @@ pub struct TcpStats {
     closed_idle: AtomicU64,
     closed_unfinished: AtomicU64,
     closed_bad_header: AtomicU64,
+    tls_refused: AtomicU64,
+    denied: Arc<AtomicU64>,
 }
 
 /// A snapshot of [`TcpStats`].
@@ -590,6 +592,11 @@ pub struct TcpCounts {
     pub closed_unfinished: u64,
     /// Connections closed for a bad MBAP header.
     pub closed_bad_header: u64,
+    /// TLS connections whose handshake was refused (no client certificate, an untrusted
+    /// one, a role refused, a timeout).
+    pub tls_refused: u64,
+    /// Requests denied by the roles' rights (answered with exception 01).
+    pub denied: u64,
 }
 
 impl TcpStats {
@@ -606,6 +613,8 @@ impl TcpStats {
             closed_idle: get(&self.closed_idle),
             closed_unfinished: get(&self.closed_unfinished),
             closed_bad_header: get(&self.closed_bad_header),
+            tls_refused: get(&self.tls_refused),
+            denied: get(&self.denied),
         }
     }
 }
@@ -652,6 +661,54 @@ where
     H: Handler + Send + 'static,
     O: Fn() -> ServerOptions + Send + Sync + 'static,
 {
+    serve_listener(listener, transport, config, handler, options, limits, Security::Plain).await
+}
+
+/// Serves Modbus/TCP Security (mbaps) on `listener`, as [`serve_tcp_with`] serves Modbus/TCP:
+/// each connection first completes a TLS handshake with `tls` (a client certificate
+/// required; a refused handshake is logged and counted in [`TcpCounts::tls_refused`]), then
+/// every request is checked against `tls`'s policy for the client's role, a denied one
+/// answered with exception 01 ([`Authorized`](crate::tls::Authorized), counted in
+/// [`TcpCounts::denied`]). The handshake counts towards the connection limit; it must finish
+/// within the TLS handshake timeout.
+#[cfg(feature = "tls")]
+pub async fn serve_tls_with<H, O>(
+    listener: TcpListener,
+    transport: Transport,
+    config: SlaveConfig,
+    handler: Shared<H>,
+    options: O,
+    limits: TcpLimits,
+    tls: crate::tls::ServerTls,
+) -> io::Result<()>
+where
+    H: Handler + Send + 'static,
+    O: Fn() -> ServerOptions + Send + Sync + 'static,
+{
+    serve_listener(listener, transport, config, handler, options, limits, Security::Tls(tls)).await
+}
+
+/// What a connection goes through before it is served.
+#[derive(Clone)]
+enum Security {
+    Plain,
+    #[cfg(feature = "tls")]
+    Tls(crate::tls::ServerTls),
+}
+
+async fn serve_listener<H, O>(
+    listener: TcpListener,
+    transport: Transport,
+    config: SlaveConfig,
+    handler: Shared<H>,
+    options: O,
+    limits: TcpLimits,
+    security: Security,
+) -> io::Result<()>
+where
+    H: Handler + Send + 'static,
+    O: Fn() -> ServerOptions + Send + Sync + 'static,
+{
     let options = Arc::new(options);
     let slots = Arc::new(tokio::sync::Semaphore::new(limits.max_connections));
     let stats = Arc::clone(&limits.stats);
@@ -687,16 +744,38 @@ where
         bump(&stats.open);
         tracing::debug!(%peer, "connection accepted");
         let transport = transport.clone();
-        let mut handler = handler.clone();
+        let handler = handler.clone();
         let options = Arc::clone(&options);
+        let security = security.clone();
         let (stats, idle, unfinished) = (Arc::clone(&stats), limits.idle_timeout, limits.frame_timeout);
         tokio::spawn(async move {
             let mut options = options();
             options.idle_timeout = options.idle_timeout.or(idle);
             options.frame_timeout = options.frame_timeout.or(unfinished);
-            match serve_transport(&transport, Box::new(stream), config, &mut handler, &mut options).await {
-                Ok(()) => tracing::debug!(%peer, "connection closed"),
-                Err(e) => {
+            let served = match security {
+                Security::Plain => {
+                    let mut handler = handler;
+                    Some(serve_transport(&transport, Box::new(stream), config, &mut handler, &mut options).await)
+                }
+                #[cfg(feature = "tls")]
+                Security::Tls(tls) => match tls.accept(stream).await {
+                    Ok((stream, role)) => {
+                        tracing::info!(%peer, "TLS connection accepted ({role})");
+                        let mut handler = crate::tls::Authorized::new(handler, role, Arc::clone(tls.policy()))
+                            .with_peer(peer)
+                            .counting(Arc::clone(&stats.denied));
+                        Some(serve_transport(&transport, Box::new(stream), config, &mut handler, &mut options).await)
+                    }
+                    Err(refused) => {
+                        bump(&stats.tls_refused);
+                        crate::tls::log_refused(peer, &refused);
+                        None
+                    }
+                },
+            };
+            match served {
+                None | Some(Ok(())) => tracing::debug!(%peer, "connection closed"),
+                Some(Err(e)) => {
                     match Closed::of(&e) {
                         Some(Closed::Idle(_)) => bump(&stats.closed_idle),
                         Some(Closed::UnfinishedFrame(_)) => bump(&stats.closed_unfinished),
