@@ -19,7 +19,7 @@
 //! - The role is read from the client certificate's extension 1.3.6.1.4.1.50316.802.1, a DER
 //!   `UTF8String` ([`role_of`], R-21, R-22, R-65); without the extension the client has the
 //!   NULL role. A role in another encoding, a malformed one or two role extensions
-//!   fail the handshake (a `bad_certificate` alert), and the server logs why.
+//!   fail the handshake (a `certificate_unknown` alert), and the server logs why.
 //! - The rights of each role come from a [`Policy`] (a roles file, R-24–R-28); every request
 //!   is checked against it (§6), and a denied one is answered with exception 01 Illegal
 //!   Function and logged.
@@ -47,7 +47,9 @@ use std::fmt;
 use std::io;
 use std::net::SocketAddr;
 use std::path::{Path, PathBuf};
+use std::pin::Pin;
 use std::sync::Arc;
+use std::task::{Context, Poll};
 use std::time::Duration;
 
 use rustls::client::danger::HandshakeSignatureValid;
@@ -77,7 +79,35 @@ pub type ServerStream = tokio_rustls::server::TlsStream<TcpStream>;
 pub type ClientStream = tokio_rustls::client::TlsStream<TcpStream>;
 
 impl Port for ServerStream {}
-impl Port for ClientStream {}
+
+/// A client connection as a [`Port`]: its errors say what a refused handshake means. (In TLS
+/// 1.3 the server checks the client's certificate after the client has finished its part of
+/// the handshake, so a refusal arrives as an alert on the first read.)
+struct ClientPort(ClientStream);
+
+impl Port for ClientPort {}
+
+impl tokio::io::AsyncRead for ClientPort {
+    fn poll_read(
+        mut self: Pin<&mut Self>,
+        cx: &mut Context<'_>,
+        buf: &mut tokio::io::ReadBuf<'_>,
+    ) -> Poll<io::Result<()>> {
+        Pin::new(&mut self.0).poll_read(cx, buf).map_err(explain)
+    }
+}
+
+impl tokio::io::AsyncWrite for ClientPort {
+    fn poll_write(mut self: Pin<&mut Self>, cx: &mut Context<'_>, buf: &[u8]) -> Poll<io::Result<usize>> {
+        Pin::new(&mut self.0).poll_write(cx, buf).map_err(explain)
+    }
+    fn poll_flush(mut self: Pin<&mut Self>, cx: &mut Context<'_>) -> Poll<io::Result<()>> {
+        Pin::new(&mut self.0).poll_flush(cx).map_err(explain)
+    }
+    fn poll_shutdown(mut self: Pin<&mut Self>, cx: &mut Context<'_>) -> Poll<io::Result<()>> {
+        Pin::new(&mut self.0).poll_shutdown(cx).map_err(explain)
+    }
+}
 
 /// Certificates, keys or a TLS configuration that cannot be used.
 #[derive(Debug, thiserror::Error)]
@@ -271,7 +301,7 @@ impl ServerTls {
 }
 
 /// The client verifier: the CA's check (webpki), then the role's (a role the server would
-/// refuse fails the handshake with a `bad_certificate` alert rather than a silent close).
+/// refuse fails the handshake with a `certificate_unknown` alert rather than a silent close).
 #[derive(Debug)]
 struct RoleVerifier(Arc<dyn ClientCertVerifier>);
 
@@ -389,7 +419,7 @@ fn explain(e: io::Error) -> io::Error {
         ) => "the server's certificate does not name the host connected to",
         rustls::Error::InvalidCertificate(_) => "the server's certificate is refused",
         rustls::Error::AlertReceived(rustls::AlertDescription::CertificateRequired) => {
-            "the server refused the handshake: it requires a client certificate (--cert, --key)"
+            "the server refused the handshake: it requires a client certificate"
         }
         rustls::Error::AlertReceived(
             rustls::AlertDescription::BadCertificate
@@ -418,7 +448,7 @@ impl TlsTarget {
 impl Connector for TlsTarget {
     fn connect(&self) -> Connecting {
         let (addr, tls) = (self.addr.clone(), self.tls.clone());
-        Box::pin(async move { Ok(Box::new(tls.connect(&addr).await?) as BoxPort) })
+        Box::pin(async move { Ok(Box::new(ClientPort(tls.connect(&addr).await?)) as BoxPort) })
     }
 
     fn describe(&self) -> String {
