@@ -29,6 +29,8 @@ CARGO="${CARGO:-cargo}"
 PYMODBUS_VERSION="3.16.1"
 PYSERIAL_VERSION="3.5"
 APT_PACKAGES=(socat libmodbus-dev mbpoll libudev-dev pkg-config gcc)
+# openssl: the Modbus/TCP Security interop test makes a client certificate with it.
+APT_PACKAGES+=(openssl)
 export DEBIAN_FRONTEND=noninteractive
 
 IN_CI=false

@@ -262,3 +262,34 @@ fn the_role_is_read_from_an_rcgen_certificate() {
     let several = role_of(&chain[0]);
     assert_eq!(several, Err(RoleError::Several(2)));
 }
+
+/// One MBAP request and its reply, raw, over `stream`.
+async fn ask(stream: &mut ferrobus::tls::ClientStream, t: u8, pdu: &[u8]) -> Vec<u8> {
+    use tokio::io::{AsyncReadExt, AsyncWriteExt};
+    let mut frame = vec![0, t, 0, 0, 0, u8::try_from(pdu.len() + 1).unwrap(), 1];
+    frame.extend_from_slice(pdu);
+    stream.write_all(&frame).await.unwrap();
+    let mut header = [0u8; 7];
+    stream.read_exact(&mut header).await.unwrap();
+    let mut rest = vec![0u8; usize::from(header[5]) - 1];
+    stream.read_exact(&mut rest).await.unwrap();
+    assert_eq!(header[1], t, "the transaction id is echoed");
+    rest
+}
+
+#[tokio::test]
+async fn a_resumed_session_keeps_the_clients_role() {
+    let ca = Ca::new("test CA");
+    let (addr, stats) = server(&ca).await;
+    let tls = ClientTls::new(vec![ca.der()], Some(ca.issue(false, utf8_role("viewer")))).unwrap();
+    let mut kinds = Vec::new();
+    for t in 0..2 {
+        let mut stream = tls.connect(&addr).await.unwrap();
+        assert_eq!(ask(&mut stream, t, &[0x03, 0x00, 0x00, 0x00, 0x01]).await, [0x03, 0x02, 0x00, 0x07]);
+        // Still a viewer: the write is denied.
+        assert_eq!(ask(&mut stream, t, &[0x06, 0x00, 0x00, 0x00, 0x01]).await, [0x86, 0x01]);
+        kinds.push(stream.get_ref().1.handshake_kind());
+    }
+    assert_eq!(kinds, [Some(rustls::HandshakeKind::Full), Some(rustls::HandshakeKind::Resumed)]);
+    assert_eq!(counts(&stats).denied, 2);
+}

@@ -12,4 +12,5 @@ mod read;
 mod reopen;
 mod server;
 mod service;
+mod tls;
 mod write;
