@@ -224,3 +224,35 @@ fn an_openssl_made_client_certificate_with_the_role_extension_is_accepted_and_it
     assert!(text(&wrote.stderr).contains("exception 0x01"), "stderr: {}", text(&wrote.stderr));
     server.proc.wait_for(Stream::Err, |l| l.contains("TLS connection accepted (role 'viewer')"), LIMIT);
 }
+
+/// `openssl s_client` against `server` with `args`, stdin closed: its stdout and stderr.
+fn s_client(server: &Mbaps, pki: &Pki, identity: &Pair, args: &[&str]) -> String {
+    let mut command = Command::new("openssl");
+    command.args(["s_client", "-connect", &server.addr, "-servername", "localhost", "-CAfile"]).arg(pki.ca());
+    command.arg("-cert").arg(&identity.cert).arg("-key").arg(&identity.key).args(args);
+    let output = output_within(&mut command, "", LIMIT);
+    format!("{}{}", text(&output.stdout), text(&output.stderr))
+}
+
+#[test]
+fn openssl_negotiates_tls_1_2_with_the_ecdsa_aes_128_gcm_suite_and_is_refused_tls_1_1() {
+    let Some(_turn) = require(&[]) else { return };
+    let present = Command::new("openssl").arg("version").output().is_ok_and(|o| o.status.success());
+    if !require_tool(present, "openssl", "apt install openssl (or .ci/setup-peers.sh)") {
+        return;
+    }
+    let pki = Pki::new("test CA");
+    let server = mbaps(&pki, &pki.ca());
+    let operator = pki.client("operator", Some((UTF8_STRING, "operator")));
+    // TLS_ECDHE_ECDSA_WITH_AES_128_GCM_SHA256 with an ECC (P-256) certificate.
+    let tls12 = s_client(&server, &pki, &operator, &["-tls1_2", "-cipher", "ECDHE-ECDSA-AES128-GCM-SHA256"]);
+    assert!(tls12.contains("Protocol  : TLSv1.2"), "{tls12}");
+    assert!(tls12.contains("Cipher    : ECDHE-ECDSA-AES128-GCM-SHA256"), "{tls12}");
+    assert!(tls12.contains("Verify return code: 0 (ok)"), "{tls12}");
+    // never TLS 1.1 (openssl's security level 0 lets it offer 1.1 at all).
+    let tls11 = s_client(&server, &pki, &operator, &["-tls1_1", "-cipher", "DEFAULT@SECLEVEL=0"]);
+    // rustls answers a ClientHello without 1.2 or 1.3 with a handshake_failure alert.
+    assert!(tls11.contains("alert handshake failure") && tls11.contains("Cipher is (NONE)"), "{tls11}");
+    let logged = server.proc.wait_for(Stream::Err, |l| l.contains("TLS handshake refused"), LIMIT);
+    assert!(logged.contains("peer is incompatible"), "{logged}");
+}

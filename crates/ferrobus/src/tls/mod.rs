@@ -20,6 +20,9 @@
 //!   `UTF8String` ([`role_of`], R-21, R-22, R-65); without the extension the client has the
 //!   NULL role. A role in another encoding, a malformed one or two role extensions
 //!   fail the handshake (a `certificate_unknown` alert), and the server logs why.
+//! - A resumed session keeps its role: rustls keeps the client's certificate with the
+//!   session, and the role is read from it again; a connection without a certificate is
+//!   never served.
 //! - The rights of each role come from a [`Policy`] (a roles file, R-24–R-28); every request
 //!   is checked against it (§6), and a denied one is answered with exception 01 Illegal
 //!   Function and logged.

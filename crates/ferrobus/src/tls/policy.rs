@@ -413,6 +413,21 @@ mod tests {
     }
 
     #[test]
+    fn the_documented_example_parses_to_what_it_says() {
+        let text = "[role.operator]\naccess = \"read-write\"\nunits = [\"1-10\", 17]\nfunctions = [3, 4, 6, 16]\n\
+                    addresses = [\"0-0x00FF\"]\n[role.viewer]\n[null-role]\naccess = \"read\"\nunits = [1]\n";
+        let policy = Policy::parse(text).unwrap();
+        let operator = Role::Named("operator".into());
+        assert_eq!(policy.check(&operator, 17, &request(&WRITE_6_AT_0X10)), Ok(()));
+        assert_eq!(policy.check(&operator, 11, &request(&WRITE_6_AT_0X10)), Err(Denied::Unit(11)));
+        let viewer = Role::Named("viewer".into());
+        assert_eq!(policy.check(&viewer, 200, &request(&READ_3_AT_0X10)), Ok(()));
+        assert!(policy.check(&viewer, 200, &request(&WRITE_6_AT_0X10)).is_err());
+        assert_eq!(policy.check(&Role::Null, 1, &request(&READ_3_AT_0X10)), Ok(()));
+        assert_eq!(policy.check(&Role::Null, 2, &request(&READ_3_AT_0X10)), Err(Denied::Unit(2)));
+    }
+
+    #[test]
     fn a_missing_file_is_named() {
         let error = Policy::load(Path::new("/nonexistent/roles.toml")).unwrap_err();
         assert!(error.to_string().starts_with("/nonexistent/roles.toml: cannot read it: "), "{error}");
