@@ -23,6 +23,7 @@ mod crc;
 mod demo;
 mod diag;
 mod exit;
+mod gateway;
 mod hex;
 mod info;
 mod interrupt;
@@ -110,6 +111,8 @@ enum Command {
     Demo(demo::DemoArgs),
     /// FC03 reads back to back: transactions/s, latency and CPU time (the peer benchmark's format)
     Bench(bench::BenchArgs),
+    /// Modbus/TCP clients to RTU serial lines: routing by unit, one queue per line, the gateway exceptions
+    Gateway(gateway::GatewayArgs),
 }
 
 impl Command {
@@ -142,6 +145,7 @@ async fn dispatch(cli: &Cli) -> Result<(), CliError> {
         Command::Line(args) => line::run(connection, args).await,
         Command::Demo(args) => demo::run(args).await,
         Command::Bench(args) => bench::run(connection, args).await,
+        Command::Gateway(args) => gateway::run(connection, args).await,
     }
 }
 

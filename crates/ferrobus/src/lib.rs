@@ -25,6 +25,8 @@
 //!   port that is reopened after it fails.
 //! - [`server`]: runs a slave engine over a port, or over each connection of a TCP listener,
 //!   with precise reply timing and a hook for fault injection.
+//! - [`gateway`]: Modbus/TCP clients to RTU lines: routing by unit, one bounded queue per
+//!   line served round-robin, the gateway exceptions, per-unit backoff, a read cache.
 //! - [`port`]: serial ports (RS-485 by the adapter, the kernel or RTS; the USB latency timer),
 //!   TCP, RTU over TCP, and ptys made in-process.
 //! - `tls` (the `tls` feature): Modbus/TCP Security — TLS with mutual authentication, the
@@ -49,6 +51,7 @@ pub mod clock;
 mod config;
 mod driver;
 pub mod error;
+pub mod gateway;
 mod identity;
 pub mod line;
 pub mod port;

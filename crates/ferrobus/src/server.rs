@@ -19,6 +19,7 @@
 //! TCP, not answered out of order or dropped.
 
 use std::collections::VecDeque;
+use std::future::Future;
 use std::io;
 use std::sync::atomic::{AtomicU64, Ordering};
 use std::sync::{Arc, Mutex, MutexGuard, PoisonError};
@@ -258,7 +259,7 @@ impl std::fmt::Display for Closed {
 impl std::error::Error for Closed {}
 
 impl Closed {
-    fn error(self) -> io::Error {
+    pub(crate) fn error(self) -> io::Error {
         let kind = if self == Closed::BadHeader { io::ErrorKind::InvalidData } else { io::ErrorKind::TimedOut };
         io::Error::new(kind, self)
     }
@@ -661,7 +662,20 @@ where
     H: Handler + Send + 'static,
     O: Fn() -> ServerOptions + Send + Sync + 'static,
 {
-    serve_listener(listener, transport, config, handler, options, limits, Security::Plain).await
+    let options = Arc::new(options);
+    let (idle, unfinished) = (limits.idle_timeout, limits.frame_timeout);
+    accept_connections(listener, &limits, move |stream, _peer| {
+        let transport = transport.clone();
+        let mut handler = handler.clone();
+        let options = Arc::clone(&options);
+        async move {
+            let mut options = options();
+            options.idle_timeout = options.idle_timeout.or(idle);
+            options.frame_timeout = options.frame_timeout.or(unfinished);
+            serve_transport(&transport, Box::new(stream), config, &mut handler, &mut options).await
+        }
+    })
+    .await
 }
 
 /// Serves Modbus/TCP Security (mbaps) on `listener`, as [`serve_tcp_with`] serves Modbus/TCP:
@@ -685,31 +699,47 @@ where
     H: Handler + Send + 'static,
     O: Fn() -> ServerOptions + Send + Sync + 'static,
 {
-    serve_listener(listener, transport, config, handler, options, limits, Security::Tls(tls)).await
-}
-
-/// What a connection goes through before it is served.
-#[derive(Clone)]
-enum Security {
-    Plain,
-    #[cfg(feature = "tls")]
-    Tls(crate::tls::ServerTls),
-}
-
-async fn serve_listener<H, O>(
-    listener: TcpListener,
-    transport: Transport,
-    config: SlaveConfig,
-    handler: Shared<H>,
-    options: O,
-    limits: TcpLimits,
-    security: Security,
-) -> io::Result<()>
-where
-    H: Handler + Send + 'static,
-    O: Fn() -> ServerOptions + Send + Sync + 'static,
-{
     let options = Arc::new(options);
+    let (idle, unfinished) = (limits.idle_timeout, limits.frame_timeout);
+    let stats = Arc::clone(&limits.stats);
+    accept_connections(listener, &limits, move |stream, peer| {
+        let transport = transport.clone();
+        let handler = handler.clone();
+        let options = Arc::clone(&options);
+        let (tls, stats) = (tls.clone(), Arc::clone(&stats));
+        async move {
+            let (stream, role) = match tls.accept(stream).await {
+                Ok(accepted) => accepted,
+                Err(refused) => {
+                    bump(&stats.tls_refused);
+                    crate::tls::log_refused(peer, &refused);
+                    return Ok(());
+                }
+            };
+            tracing::info!(%peer, "TLS connection accepted ({role})");
+            let mut handler = crate::tls::Authorized::new(handler, role, Arc::clone(tls.policy()))
+                .with_peer(peer)
+                .counting(Arc::clone(&stats.denied));
+            let mut options = options();
+            options.idle_timeout = options.idle_timeout.or(idle);
+            options.frame_timeout = options.frame_timeout.or(unfinished);
+            serve_transport(&transport, Box::new(stream), config, &mut handler, &mut options).await
+        }
+    })
+    .await
+}
+
+/// The hardened accept loop every TCP front end shares: accepts on `listener` within
+/// `limits` (past [`TcpLimits::max_connections`] a connection is accepted and closed at once;
+/// out of file descriptors, accepting pauses for [`ACCEPT_BACKOFF`]; TCP_NODELAY set) and
+/// runs `serve` for each connection on its own task, counting how it ended in
+/// [`TcpLimits::stats`] (a [`Closed`] error is the server's own close). No error of a
+/// connection or of accepting one ends it: it runs until dropped.
+pub(crate) async fn accept_connections<S, Fut>(listener: TcpListener, limits: &TcpLimits, serve: S) -> io::Result<()>
+where
+    S: Fn(tokio::net::TcpStream, std::net::SocketAddr) -> Fut,
+    Fut: Future<Output = io::Result<()>> + Send + 'static,
+{
     let slots = Arc::new(tokio::sync::Semaphore::new(limits.max_connections));
     let stats = Arc::clone(&limits.stats);
     loop {
@@ -743,39 +773,12 @@ where
         bump(&stats.accepted);
         bump(&stats.open);
         tracing::debug!(%peer, "connection accepted");
-        let transport = transport.clone();
-        let handler = handler.clone();
-        let options = Arc::clone(&options);
-        let security = security.clone();
-        let (stats, idle, unfinished) = (Arc::clone(&stats), limits.idle_timeout, limits.frame_timeout);
+        let served = serve(stream, peer);
+        let stats = Arc::clone(&stats);
         tokio::spawn(async move {
-            let mut options = options();
-            options.idle_timeout = options.idle_timeout.or(idle);
-            options.frame_timeout = options.frame_timeout.or(unfinished);
-            let served = match security {
-                Security::Plain => {
-                    let mut handler = handler;
-                    Some(serve_transport(&transport, Box::new(stream), config, &mut handler, &mut options).await)
-                }
-                #[cfg(feature = "tls")]
-                Security::Tls(tls) => match tls.accept(stream).await {
-                    Ok((stream, role)) => {
-                        tracing::info!(%peer, "TLS connection accepted ({role})");
-                        let mut handler = crate::tls::Authorized::new(handler, role, Arc::clone(tls.policy()))
-                            .with_peer(peer)
-                            .counting(Arc::clone(&stats.denied));
-                        Some(serve_transport(&transport, Box::new(stream), config, &mut handler, &mut options).await)
-                    }
-                    Err(refused) => {
-                        bump(&stats.tls_refused);
-                        crate::tls::log_refused(peer, &refused);
-                        None
-                    }
-                },
-            };
-            match served {
-                None | Some(Ok(())) => tracing::debug!(%peer, "connection closed"),
-                Some(Err(e)) => {
+            match served.await {
+                Ok(()) => tracing::debug!(%peer, "connection closed"),
+                Err(e) => {
                     match Closed::of(&e) {
                         Some(Closed::Idle(_)) => bump(&stats.closed_idle),
                         Some(Closed::UnfinishedFrame(_)) => bump(&stats.closed_unfinished),

@@ -1,0 +1,312 @@
+//! `ferrobus gateway`: Modbus/TCP clients to RTU serial lines.
+//!
+//! The first line is `--port` with the usual line options; `--line PATH` adds more lines with
+//! the same settings (numbered 1, 2, ... in the order given; `--port` is line 0). `--route
+//! UNITS=LINE[:UNIT]` says which units go where (with one line and no `--route`, units 1-247
+//! go to it under their own addresses); a unit in no route gets exception 0x0A. The library
+//! ([`ferrobus::gateway`]) documents every answer the gateway gives and why. The counters of
+//! every line and unit are printed on SIGUSR1 and at exit.
+
+use std::net::SocketAddr;
+use std::sync::Arc;
+use std::time::Duration;
+
+use clap::Args;
+use ferrobus::gateway::{AllowAll, Authorize, Gateway, GatewayConfig, Inbound, LineConfig, Route, Routes, Rules};
+use ferrobus::server::{TcpCounts, TcpLimits};
+
+use crate::connect::{ConnectArgs, Target, parse_duration};
+use crate::exit::CliError;
+use crate::interrupt::Interrupt;
+
+/// Arguments of `ferrobus gateway`.
+#[derive(Args, Clone, Debug)]
+pub(crate) struct GatewayArgs {
+    /// Where Modbus/TCP clients connect (binds 127.0.0.1 unless told otherwise)
+    #[arg(long, value_name = "ADDR:PORT", default_value = "127.0.0.1:502")]
+    listen: String,
+
+    /// Clients send RTU frames over TCP (CRC and all) instead of Modbus/TCP
+    #[arg(long = "rtu-in")]
+    rtu_in: bool,
+
+    /// Another serial line with the same settings as --port (line 1, 2, ... in order)
+    #[arg(long = "line", value_name = "PATH")]
+    lines: Vec<String>,
+
+    /// Route units to a line, optionally renumbered: 5=0, 1-10=1, 20=0:3 (unit 20 is unit 3
+    /// on line 0; a range renumbered keeps its order: 11-20=1:1 is units 1-10 on line 1)
+    #[arg(long = "route", value_name = "UNITS=LINE[:UNIT]")]
+    routes: Vec<String>,
+
+    /// Requests that may wait for each line; past it a request gets 0x06 (busy) at once
+    #[arg(long, default_value_t = 64, value_parser = clap::value_parser!(u32).range(1..))]
+    queue: u32,
+
+    /// Requests one connection may have outstanding; past it the gateway stops reading it
+    #[arg(long, default_value_t = 16, value_parser = clap::value_parser!(u32).range(1..))]
+    pipeline: u32,
+
+    /// Answer a broadcast (unit 0) with its echo once it has gone out (the spec: no reply)
+    #[arg(long = "broadcast-ack")]
+    broadcast_ack: bool,
+
+    /// Answer reads from a cache of replies younger than this (e.g. 200ms); writes go through
+    /// and drop the cached reads they touch
+    #[arg(long = "cache-max-age", value_name = "DURATION", value_parser = parse_duration)]
+    cache_max_age: Option<Duration>,
+
+    /// Refuse every request that may change a device, with exception 0x01
+    #[arg(long = "read-only")]
+    read_only: bool,
+
+    /// Let only these units through (as clients address them): 1,2,10-20; others get 0x0A
+    #[arg(long = "allow-units", value_name = "LIST")]
+    allow_units: Option<String>,
+
+    /// Let only these function codes through: 3,4,0x10; others get 0x01
+    #[arg(long = "allow-functions", value_name = "LIST")]
+    allow_functions: Option<String>,
+
+    /// Skip a unit after this many timed-out requests in a row, probing it now and then (0: never skip)
+    #[arg(long = "backoff-after", default_value_t = 3)]
+    backoff_after: u32,
+
+    /// Connections served at once; past it a new one is closed at once
+    #[arg(long = "max-connections", default_value_t = 1000, value_parser = clap::value_parser!(u32).range(1..))]
+    max_connections: u32,
+
+    /// Close a connection idle this long with nothing outstanding (0: never)
+    #[arg(long = "idle-timeout", value_name = "DURATION", default_value = "60s", value_parser = parse_duration)]
+    idle_timeout: Duration,
+
+    /// Close a connection whose frame begun is not finished this long after (0: never)
+    #[arg(long = "frame-timeout", value_name = "DURATION", default_value = "5s", value_parser = parse_duration)]
+    frame_timeout: Duration,
+
+    /// Stop after this long (and print the counters), instead of running until interrupted
+    #[arg(long, value_name = "DURATION", value_parser = parse_duration)]
+    duration: Option<Duration>,
+}
+
+/// Runs `ferrobus gateway`.
+pub(crate) async fn run(connection: &ConnectArgs, args: &GatewayArgs) -> Result<(), CliError> {
+    let config = config(connection, args)?;
+    let rules = rules(args)?;
+    let mut interrupt = Interrupt::listen()?;
+    #[cfg(unix)]
+    let mut usr1 = tokio::signal::unix::signal(tokio::signal::unix::SignalKind::user_defined1())
+        .map_err(|e| CliError::from(ferrobus::Error::io("listening for SIGUSR1", e)))?;
+    let listener = tokio::net::TcpListener::bind(&args.listen)
+        .await
+        .map_err(|e| ferrobus::Error::io(format!("listening on {}", args.listen), e))?;
+    let bound = listener.local_addr().map_err(|e| ferrobus::Error::io("listening", e))?;
+    let lines: Vec<String> = config.lines.iter().map(|l| l.transport.describe()).collect();
+    let gateway = Gateway::start(config).await?;
+    let inbound = if args.rtu_in { Inbound::RtuOverTcp } else { Inbound::Mbap };
+    eprintln!(
+        "gateway: listening on {bound} ({}), lines: {}",
+        if args.rtu_in { "RTU over TCP" } else { "Modbus/TCP" },
+        lines.iter().enumerate().map(|(i, l)| format!("{i}={l}")).collect::<Vec<_>>().join(", ")
+    );
+    let limits = TcpLimits {
+        max_connections: usize::try_from(args.max_connections).unwrap_or(usize::MAX),
+        idle_timeout: Some(args.idle_timeout).filter(|d| !d.is_zero()),
+        frame_timeout: Some(args.frame_timeout).filter(|d| !d.is_zero()),
+        stats: Arc::default(),
+    };
+    let tcp = Arc::clone(&limits.stats);
+    let pipeline = usize::try_from(args.pipeline).unwrap_or(usize::MAX);
+    let serving = {
+        let gateway = gateway.clone();
+        tokio::spawn(async move {
+            let authorize = move |_: SocketAddr| -> Box<dyn Authorize> {
+                if rules.allows_all() { Box::new(AllowAll) } else { Box::new(rules.clone()) }
+            };
+            gateway.serve_tcp(listener, inbound, limits, pipeline, authorize).await
+        })
+    };
+    let until = async {
+        match args.duration {
+            Some(d) => tokio::time::sleep(d).await,
+            None => std::future::pending().await,
+        }
+    };
+    tokio::pin!(until);
+    loop {
+        #[cfg(unix)]
+        let usr1 = usr1.recv();
+        #[cfg(not(unix))]
+        let usr1 = std::future::pending::<Option<()>>();
+        tokio::select! {
+            () = interrupt.wait() => break,
+            () = &mut until => break,
+            _ = usr1 => print(&gateway, &tcp.counts()),
+        }
+    }
+    serving.abort();
+    print(&gateway, &tcp.counts());
+    Ok(())
+}
+
+/// Prints every line's and unit's counters and the TCP side's on stderr.
+fn print(gateway: &Gateway, tcp: &TcpCounts) {
+    eprint!("{}", ferrobus::gateway::report(&gateway.stats()));
+    eprintln!(
+        "tcp: {} connections served ({} open), {} refused over --max-connections, {} accept pauses out of file \
+         descriptors; closed: {} idle, {} unfinished frame, {} bad MBAP header",
+        tcp.accepted,
+        tcp.open,
+        tcp.refused,
+        tcp.descriptor_waits,
+        tcp.closed_idle,
+        tcp.closed_unfinished,
+        tcp.closed_bad_header
+    );
+}
+
+/// The gateway's lines and routes from the options.
+fn config(connection: &ConnectArgs, args: &GatewayArgs) -> Result<GatewayConfig, CliError> {
+    let first = match connection.target()? {
+        Target::Serial { path, .. } => path,
+        other => {
+            return Err(CliError::Usage(format!(
+                "the gateway's lines are serial ports: give --port PATH (and --line PATH for more), not {other}"
+            )));
+        }
+    };
+    let mut client = connection.client_config();
+    client.backoff = (args.backoff_after > 0)
+        .then(|| ferrobus::Backoff { after: args.backoff_after, ..ferrobus::Backoff::default() });
+    let queue = usize::try_from(args.queue).unwrap_or(usize::MAX);
+    let lines = std::iter::once(first)
+        .chain(args.lines.iter().cloned())
+        .map(|path| {
+            let target = Target::Serial { path, line: connection.line(), ascii: connection.ascii };
+            LineConfig { transport: connection.transport(&target), client, queue }
+        })
+        .collect::<Vec<_>>();
+    let routes = routes(&args.routes, lines.len())?;
+    Ok(GatewayConfig { lines, routes, broadcast_ack: args.broadcast_ack, cache_max_age: args.cache_max_age })
+}
+
+/// The routing table from `--route`s; none with one line: every unit to it.
+fn routes(given: &[String], lines: usize) -> Result<Routes, CliError> {
+    if given.is_empty() {
+        if lines > 1 {
+            return Err(CliError::Usage(format!(
+                "with {lines} lines, say which units go where: --route 1-10=0 --route 11-20=1 (lines numbered from 0, \
+                 --port first)"
+            )));
+        }
+        return Ok(Routes::all_on(0));
+    }
+    let mut routes = Routes::new();
+    for text in given {
+        let bad = |why: &str| CliError::Usage(format!("--route '{text}': {why}; e.g. 5=0, 1-10=1, 20=0:3"));
+        let (units, target) = text.split_once('=').ok_or_else(|| bad("no '='"))?;
+        let (first, last) = unit_range(units).map_err(|e| bad(&e))?;
+        if first == 0 {
+            return Err(bad("unit 0 is the broadcast, sent to every line; route units 1-255"));
+        }
+        let (line, renumbered) = match target.split_once(':') {
+            Some((line, unit)) => (line, Some(parse_u8(unit).map_err(|e| bad(&e))?)),
+            None => (target, None),
+        };
+        let line: usize = line.trim().parse().map_err(|_| bad(&format!("'{line}' is not a line number")))?;
+        if line >= lines {
+            return Err(bad(&format!("line {line} does not exist: there are {lines} (numbered from 0, --port first)")));
+        }
+        for unit in first..=last {
+            let offset = unit - first;
+            let out = match renumbered {
+                Some(start) => start
+                    .checked_add(offset)
+                    .filter(|u| *u != 0)
+                    .ok_or_else(|| bad("the renumbered range runs past unit 255"))?,
+                None => unit,
+            };
+            routes.set(unit, Route { line, unit: out });
+        }
+    }
+    Ok(routes)
+}
+
+/// `5` or `1-10`.
+fn unit_range(text: &str) -> Result<(u8, u8), String> {
+    let (first, last) = if let Some((a, b)) = text.split_once('-') {
+        (parse_u8(a)?, parse_u8(b)?)
+    } else {
+        let unit = parse_u8(text)?;
+        (unit, unit)
+    };
+    if first > last {
+        return Err(format!("'{text}' runs backwards"));
+    }
+    Ok((first, last))
+}
+
+/// A number 0-255, decimal or 0x hex.
+fn parse_u8(text: &str) -> Result<u8, String> {
+    let text = text.trim();
+    let parsed = match text.strip_prefix("0x").or_else(|| text.strip_prefix("0X")) {
+        Some(hex) => u8::from_str_radix(hex, 16),
+        None => text.parse(),
+    };
+    parsed.map_err(|_| format!("'{text}' is not a number from 0 to 255"))
+}
+
+/// A list such as `1,2,10-20`.
+fn list(option: &str, text: &str) -> Result<Vec<u8>, CliError> {
+    let mut items = Vec::new();
+    for part in text.split(',') {
+        let (first, last) = unit_range(part).map_err(|e| CliError::Usage(format!("{option} '{text}': {e}")))?;
+        items.extend(first..=last);
+    }
+    Ok(items)
+}
+
+/// The read-only mode and allowlists.
+fn rules(args: &GatewayArgs) -> Result<Rules, CliError> {
+    let mut rules = Rules::new().read_only(args.read_only);
+    if let Some(units) = &args.allow_units {
+        rules = rules.units(list("--allow-units", units)?);
+    }
+    if let Some(functions) = &args.allow_functions {
+        rules = rules.functions(list("--allow-functions", functions)?);
+    }
+    Ok(rules)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn routes_take_units_ranges_and_renumbering_and_refuse_what_cannot_be() {
+        let routes = routes(&["5=0".into(), "11-13=1:1".into(), "20=0:3".into()], 2).unwrap();
+        assert_eq!(routes.get(5), Some(Route { line: 0, unit: 5 }));
+        assert_eq!(routes.get(12), Some(Route { line: 1, unit: 2 }));
+        assert_eq!(routes.get(20), Some(Route { line: 0, unit: 3 }));
+        assert_eq!(routes.get(6), None);
+        for bad in ["5", "5=2", "0=0", "9-3=0", "250-255=0:251", "x=0", "5=0:256"] {
+            let err = super::routes(&[bad.into()], 2).unwrap_err();
+            assert!(matches!(&err, CliError::Usage(m) if m.contains(bad)), "{bad}: {err:?}");
+        }
+    }
+
+    #[test]
+    fn one_line_without_routes_takes_units_1_to_247_and_several_lines_need_routes() {
+        let all = routes(&[], 1).unwrap();
+        assert_eq!(all.get(1), Some(Route { line: 0, unit: 1 }));
+        assert_eq!(all.get(247), Some(Route { line: 0, unit: 247 }));
+        assert_eq!(all.get(248), None);
+        assert!(routes(&[], 2).is_err());
+    }
+
+    #[test]
+    fn lists_take_numbers_hex_and_ranges() {
+        assert_eq!(list("--allow-functions", "3,0x10,1-2").unwrap(), [3, 16, 1, 2]);
+        assert!(list("--allow-units", "1,,2").is_err());
+    }
+}

@@ -1,0 +1,282 @@
+//! One serial line behind the gateway: its bounded queue, served round-robin per client
+//! connection, and the worker that is the line's one master.
+//!
+//! The worker takes one request at a time and hands it to the line's [`Client`], which keeps
+//! t3.5 before every frame, waits the reply timeout, retries, skips a unit in backoff and
+//! waits the turnaround after a broadcast. A reply is matched to its request by the client's
+//! master engine (unit, function code, and for a parsed request its length and echo), and the
+//! worker starts the next request only once the last has ended, so a late reply (RTU has no
+//! transaction id) can never be taken for another client's: it arrives while the engine
+//! awaits nothing and is dropped, or while it awaits another unit or function and is counted
+//! as not the reply.
+
+use std::collections::{HashMap, VecDeque};
+use std::sync::{Arc, Mutex, MutexGuard, PoisonError};
+
+use ferrobus_proto::master::Heard;
+use ferrobus_proto::pdu::Request;
+use ferrobus_proto::{ExceptionCode, FunctionCode};
+use tokio::sync::{Notify, oneshot};
+
+use super::cache::Cache;
+use super::stats::{Ended, LineStats};
+use crate::{Client, Error};
+
+/// A request waiting for the line.
+pub(crate) struct Job {
+    /// The unit as the client addressed it (for the counters).
+    pub(crate) unit_in: u8,
+    /// The unit on the line.
+    pub(crate) unit_out: u8,
+    /// The request PDU, function code first.
+    pub(crate) pdu: Vec<u8>,
+    /// Where the reply PDU goes (`None`: a broadcast, no reply).
+    pub(crate) reply: oneshot::Sender<Option<Vec<u8>>>,
+}
+
+/// The queue's state: a FIFO per connection and the order in which connections take turns.
+struct Queues {
+    per_connection: HashMap<u64, VecDeque<Job>>,
+    /// Connections with waiting requests, in turn order.
+    turns: VecDeque<u64>,
+    len: usize,
+    capacity: usize,
+    closed: bool,
+}
+
+/// The bounded queue of one line.
+pub(crate) struct LineQueue {
+    queues: Mutex<Queues>,
+    ready: Notify,
+    stats: Arc<Mutex<LineStats>>,
+}
+
+/// Why a request was not queued.
+#[derive(Debug)]
+pub(crate) enum Full {
+    /// The queue holds its capacity: answer 0x06.
+    Busy,
+}
+
+impl LineQueue {
+    pub(crate) fn new(capacity: usize, stats: Arc<Mutex<LineStats>>) -> Self {
+        LineQueue {
+            queues: Mutex::new(Queues {
+                per_connection: HashMap::new(),
+                turns: VecDeque::new(),
+                len: 0,
+                capacity: capacity.max(1),
+                closed: false,
+            }),
+            ready: Notify::new(),
+            stats,
+        }
+    }
+
+    fn lock(&self) -> MutexGuard<'_, Queues> {
+        self.queues.lock().unwrap_or_else(PoisonError::into_inner)
+    }
+
+    pub(crate) fn stats(&self) -> MutexGuard<'_, LineStats> {
+        self.stats.lock().unwrap_or_else(PoisonError::into_inner)
+    }
+
+    /// Queues `job` for `connection`, or refuses it at once when the queue is full.
+    pub(crate) fn submit(&self, connection: u64, job: Job) -> Result<(), Full> {
+        let depth = {
+            let mut q = self.lock();
+            if q.len >= q.capacity {
+                drop(q);
+                let mut stats = self.stats();
+                stats.total.busy = stats.total.busy.saturating_add(1);
+                let unit = stats.units.entry(job.unit_in).or_default();
+                unit.busy = unit.busy.saturating_add(1);
+                return Err(Full::Busy);
+            }
+            let fifo = q.per_connection.entry(connection).or_default();
+            let first = fifo.is_empty();
+            fifo.push_back(job);
+            if first {
+                q.turns.push_back(connection);
+            }
+            q.len = q.len.saturating_add(1);
+            q.len
+        };
+        let mut stats = self.stats();
+        stats.queue_depth = depth;
+        stats.queue_max = stats.queue_max.max(depth);
+        drop(stats);
+        self.ready.notify_one();
+        Ok(())
+    }
+
+    /// The next job, taking connections in turn: one request of each connection that has one.
+    fn take(&self) -> Option<Job> {
+        let mut q = self.lock();
+        let connection = q.turns.pop_front()?;
+        let fifo = q.per_connection.get_mut(&connection)?;
+        let job = fifo.pop_front();
+        if fifo.is_empty() {
+            q.per_connection.remove(&connection);
+        } else {
+            q.turns.push_back(connection);
+        }
+        if job.is_some() {
+            q.len = q.len.saturating_sub(1);
+        }
+        let depth = q.len;
+        drop(q);
+        self.stats().queue_depth = depth;
+        job
+    }
+
+    /// Waits for the next job; `None` once the queue is closed.
+    async fn next(&self) -> Option<Job> {
+        loop {
+            let notified = self.ready.notified();
+            if let Some(job) = self.take() {
+                return Some(job);
+            }
+            if self.lock().closed {
+                return None;
+            }
+            notified.await;
+        }
+    }
+
+    /// Stops the worker once the jobs queued are done.
+    pub(crate) fn close(&self) {
+        self.lock().closed = true;
+        self.ready.notify_one();
+    }
+}
+
+/// The line's one master: takes jobs in turn and forwards each through `client`.
+pub(crate) async fn run(queue: Arc<LineQueue>, client: Client, cache: Option<Arc<Cache>>) {
+    while let Some(job) = queue.next().await {
+        if job.reply.is_closed() {
+            let mut stats = queue.stats();
+            stats.total.abandoned = stats.total.abandoned.saturating_add(1);
+            continue;
+        }
+        let started = tokio::time::Instant::now();
+        let (reply, ended) = forward(&client, job.unit_out, &job.pdu).await;
+        let took = started.elapsed();
+        {
+            let mut stats = queue.stats();
+            stats.total.count(ended, took);
+            stats.units.entry(job.unit_in).or_default().count(ended, took);
+        }
+        if let (Some(cache), Some(reply), Ended::Replied) = (&cache, &reply, ended) {
+            cache.update(job.unit_in, &job.pdu, reply);
+        }
+        tracing::debug!(unit = job.unit_in, line_unit = job.unit_out, ?ended, "after {took:?}");
+        // The client may have gone meanwhile: nothing to answer.
+        let _ = job.reply.send(reply);
+    }
+}
+
+/// Forwards one request; the reply PDU for the client (`None` for a broadcast) and how it
+/// ended.
+async fn forward(client: &Client, unit: u8, pdu: &[u8]) -> (Option<Vec<u8>>, Ended) {
+    // A request the core can parse is checked against its reply in full (length, echo);
+    // any other (a vendor's function code, a malformed request the device is to judge) is
+    // matched by unit and function code.
+    let result = match Request::parse(pdu) {
+        Ok(request) => client.request(unit, &request).await,
+        Err(_) => client.raw(unit, pdu).await,
+    };
+    let function = pdu.first().copied().unwrap_or_default();
+    match result {
+        Ok(Some(reply)) => (Some(reply), Ended::Replied),
+        Ok(None) => (None, Ended::Broadcast),
+        Err(error) => {
+            let (code, ended) = failure(&error);
+            let code = code.value();
+            let ended = if ended == Ended::Replied { Ended::Exception(code) } else { ended };
+            (Some(exception(function, code)), ended)
+        }
+    }
+}
+
+/// The exception code a failure is answered with, and how it is counted (`Replied` stands
+/// for the device's own exception).
+fn failure(error: &Error) -> (ExceptionCode, Ended) {
+    const TARGET: ExceptionCode = ExceptionCode::GatewayTargetDeviceFailedToRespond;
+    match error {
+        Error::Exception { code, .. } => (*code, Ended::Replied),
+        Error::Timeout { heard: Some(Heard::BadChecksum { .. }), .. } => (TARGET, Ended::BadCrc),
+        Error::Timeout { .. } | Error::NoReply { .. } => (TARGET, Ended::Timeout),
+        Error::BadReply { .. } => (TARGET, Ended::BadReply),
+        Error::Backoff { .. } => (TARGET, Ended::Skipped),
+        Error::InvalidRequest(_) | Error::BroadcastRead { .. } => (ExceptionCode::IllegalDataValue, Ended::Replied),
+        _ => (ExceptionCode::GatewayPathUnavailable, Ended::LineDown),
+    }
+}
+
+/// The exception PDU for `function` with `code`.
+pub(crate) fn exception(function: u8, code: u8) -> Vec<u8> {
+    vec![function | FunctionCode::EXCEPTION_BIT, code]
+}
+
+#[cfg(test)]
+mod tests {
+    use std::time::Duration;
+
+    use super::*;
+
+    fn job(unit: u8) -> (Job, oneshot::Receiver<Option<Vec<u8>>>) {
+        let (reply, rx) = oneshot::channel();
+        (Job { unit_in: unit, unit_out: unit, pdu: vec![3, 0, 0, 0, 1], reply }, rx)
+    }
+
+    fn queue(capacity: usize) -> LineQueue {
+        LineQueue::new(capacity, Arc::default())
+    }
+
+    #[test]
+    fn connections_take_turns_so_one_with_many_requests_cannot_starve_another() {
+        let q = queue(10);
+        let mut keep = Vec::new();
+        for unit in [1, 2, 3] {
+            let (j, rx) = job(unit);
+            keep.push(rx);
+            q.submit(7, j).unwrap();
+        }
+        let (j, rx) = job(9);
+        keep.push(rx);
+        q.submit(8, j).unwrap();
+        let order: Vec<u8> = std::iter::from_fn(|| q.take()).map(|j| j.unit_in).collect();
+        assert_eq!(order, [1, 9, 2, 3]);
+    }
+
+    #[test]
+    fn a_full_queue_refuses_at_once_and_counts_it_busy() {
+        let q = queue(2);
+        let mut keep = Vec::new();
+        for _ in 0..2 {
+            let (j, rx) = job(1);
+            keep.push(rx);
+            q.submit(1, j).unwrap();
+        }
+        let (j, _rx) = job(4);
+        assert!(matches!(q.submit(2, j), Err(Full::Busy)));
+        let stats = q.stats();
+        assert_eq!((stats.total.busy, stats.units[&4].busy, stats.queue_depth, stats.queue_max), (1, 1, 2, 2));
+    }
+
+    #[test]
+    fn failures_map_to_the_gateway_exceptions_and_are_counted_apart() {
+        let timeout = |heard| Error::Timeout { unit: 1, timeout: Duration::from_millis(5), attempts: 2, heard };
+        let crc = Heard::BadChecksum { head: Some((1, 3)), expected: (1, 3) };
+        let target = ExceptionCode::GatewayTargetDeviceFailedToRespond;
+        assert_eq!(failure(&timeout(None)), (target, Ended::Timeout));
+        assert_eq!(failure(&timeout(Some(crc))), (target, Ended::BadCrc));
+        assert_eq!(failure(&Error::Backoff { unit: 1, retry_in: Duration::from_secs(1) }), (target, Ended::Skipped));
+        assert_eq!(
+            failure(&Error::io("reading", std::io::Error::other("gone"))),
+            (ExceptionCode::GatewayPathUnavailable, Ended::LineDown)
+        );
+        assert_eq!(exception(0x03, 0x0B), [0x83, 0x0B]);
+    }
+}

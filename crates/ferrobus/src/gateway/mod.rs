@@ -1,0 +1,365 @@
+//! The gateway: Modbus/TCP clients (or RTU over TCP) in, RTU serial lines out.
+//!
+//! ```text
+//!   TCP connection ─┐  authorize ─ route by unit ─┐   line 0: queue ── worker ── Client ── RTU
+//!   TCP connection ─┼─ (per connection)           ├─▶ (round-robin per connection, bounded)
+//!   TCP connection ─┘                             └─▶ line 1: ...
+//! ```
+//!
+//! Each line has one master, its worker: strictly one transaction at a time through the
+//! line's [`Client`], which keeps t3.5 before every frame, waits the reply timeout and
+//! retries, waits the turnaround after a broadcast, and skips a unit that stopped answering
+//! (per-unit backoff: a powered-off drive costs the bus one probe now and then, never a
+//! timeout per request, and the other units' requests go on meanwhile). Requests from every
+//! connection wait in one bounded queue per line and are taken one per connection in turn,
+//! so no client can starve another; a full queue answers 0x06 Server Device Busy at once.
+//!
+//! What a client is answered:
+//!
+//! | situation | answer |
+//! |---|---|
+//! | the unit's reply, or its exception | forwarded as it came |
+//! | a unit in no routing table | 0x0A Gateway Path Unavailable |
+//! | a read to unit 0 (a broadcast: no device answers it) | 0x0A |
+//! | the line's queue full | 0x06 Server Device Busy, at once |
+//! | silence after every retry, or the unit in backoff | 0x0B Gateway Target Device Failed to Respond |
+//! | replies with a bad CRC after every retry | 0x0B, counted as CRC errors apart from silence |
+//! | a reply that does not answer the request | 0x0B, counted as a bad reply |
+//! | the serial port failed | 0x0A (the path itself is down; it is reopened) |
+//! | refused by the connection's [`Authorize`] | the exception it names ([`Rules`]: 0x01, or 0x0A for a unit) |
+//! | a broadcast (unit 0, a write) | nothing (the spec), or its echo with `broadcast_ack` |
+//!
+//! Why a bad CRC is 0x0B and not 0x04, as mbusd answers: 0x04 Server Device Failure says the
+//! *device* tried and failed to perform the request, so a client takes it as the device's
+//! answer (and may, for a write, believe the device refused it). A frame with a bad CRC is no
+//! answer at all — it may not even come from the unit asked, and the request may or may not
+//! have been executed. For the client it is the same as silence: the target did not respond
+//! usably, which is what 0x0B says. The gateway's counters keep the two apart, so that the
+//! person who reads them can tell a dead unit (timeouts) from a noisy line or a wrong baud
+//! rate (CRC errors).
+//!
+//! Late replies: RTU has no transaction id. The worker sends a request only when the last has
+//! ended, and the client's master engine takes a reply only from the unit asked, with the
+//! function code asked and, for a request it can parse, the length and echo it must have; a
+//! frame that comes after its request's timeout is dropped or counted as "not the reply", so
+//! it is never handed to another request.
+//!
+//! The front end's per-connection code ([`Gateway::serve_connection`]) is generic over the
+//! stream, and every request passes the connection's [`Authorize`] first: a TLS acceptor with
+//! a roles policy serves its connections through the same function.
+
+mod authorize;
+mod cache;
+mod front;
+mod line;
+pub mod stats;
+
+use std::io;
+use std::net::SocketAddr;
+use std::sync::atomic::{AtomicU64, Ordering};
+use std::sync::{Arc, Mutex};
+use std::time::Duration;
+
+use ferrobus_proto::frame::AduHeader;
+use tokio::io::{AsyncRead, AsyncWrite};
+use tokio::net::TcpListener;
+use tokio::sync::oneshot;
+
+pub use authorize::{AllowAll, Authorize, Chain, Rules};
+use cache::Cache;
+use line::{Job, LineQueue};
+use stats::LineStats;
+
+use crate::server::TcpLimits;
+use crate::{Client, ClientConfig, Error, Transport};
+
+/// Where requests for one unit go.
+#[derive(Clone, Copy, PartialEq, Eq, Debug)]
+pub struct Route {
+    /// The line's index in [`GatewayConfig::lines`].
+    pub line: usize,
+    /// The unit's address on that line (the same as the client's, unless renumbered).
+    pub unit: u8,
+}
+
+/// The routing table: for each unit a client may address, the line and the unit on it.
+#[derive(Clone)]
+pub struct Routes {
+    table: Box<[Option<Route>; 256]>,
+}
+
+/// The routes only, by unit.
+impl std::fmt::Debug for Routes {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_map().entries(self.iter()).finish()
+    }
+}
+
+impl Default for Routes {
+    fn default() -> Self {
+        Routes { table: Box::new([None; 256]) }
+    }
+}
+
+impl Routes {
+    /// An empty table: every unit gets 0x0A.
+    pub fn new() -> Self {
+        Self::default()
+    }
+
+    /// Units 1 to 247 on `line`, each under its own address.
+    pub fn all_on(line: usize) -> Self {
+        let mut routes = Self::new();
+        for unit in 1..=247 {
+            routes.set(unit, Route { line, unit });
+        }
+        routes
+    }
+
+    /// Routes `unit` (as clients address it) to `route`, replacing any route it had.
+    pub fn set(&mut self, unit: u8, route: Route) {
+        if let Some(slot) = self.table.get_mut(usize::from(unit)) {
+            *slot = Some(route);
+        }
+    }
+
+    /// Where `unit` goes, if anywhere.
+    pub fn get(&self, unit: u8) -> Option<Route> {
+        self.table.get(usize::from(unit)).copied().flatten()
+    }
+
+    /// Every route, by the client's unit.
+    pub fn iter(&self) -> impl Iterator<Item = (u8, Route)> + '_ {
+        (0..=u8::MAX).filter_map(|unit| self.get(unit).map(|r| (unit, r)))
+    }
+}
+
+/// One serial line behind the gateway.
+#[derive(Clone, Debug)]
+pub struct LineConfig {
+    /// The port and its framing (RTU, or ASCII) and timing.
+    pub transport: Transport,
+    /// Reply timeout, retries, turnaround, backoff of its master.
+    pub client: ClientConfig,
+    /// Requests that may wait for the line; past it, 0x06 at once.
+    pub queue: usize,
+}
+
+/// What the gateway receives on its connections.
+#[derive(Clone, Copy, PartialEq, Eq, Debug, Default)]
+pub enum Inbound {
+    /// Modbus/TCP (MBAP), the receiver strict: a bad header closes the connection.
+    #[default]
+    Mbap,
+    /// RTU frames over TCP (CRC and all).
+    RtuOverTcp,
+}
+
+impl Inbound {
+    fn transport(self) -> Transport {
+        match self {
+            Inbound::Mbap => Transport::tcp("gateway client"),
+            Inbound::RtuOverTcp => Transport::rtu_over_tcp("gateway client"),
+        }
+    }
+}
+
+/// The limits of each connection.
+#[derive(Clone, Copy, PartialEq, Eq, Debug)]
+pub struct Timeouts {
+    /// Close a connection when nothing arrives or leaves for this long while it has nothing
+    /// outstanding.
+    pub idle: Option<Duration>,
+    /// Close a connection whose frame begun is not finished this long after.
+    pub frame: Option<Duration>,
+    /// Requests one connection may have outstanding; past it its socket is not read.
+    pub pipeline: usize,
+}
+
+impl Default for Timeouts {
+    /// The TCP server's: 60 s idle, 5 s for a frame; 16 requests outstanding.
+    fn default() -> Self {
+        let limits = TcpLimits::default();
+        Timeouts { idle: limits.idle_timeout, frame: limits.frame_timeout, pipeline: 16 }
+    }
+}
+
+/// A gateway's settings.
+#[derive(Clone, Debug)]
+pub struct GatewayConfig {
+    /// The serial lines.
+    pub lines: Vec<LineConfig>,
+    /// Which unit goes where.
+    pub routes: Routes,
+    /// Answer a broadcast with its echo once it has gone out (for clients that wait for a
+    /// reply to everything); by default a broadcast gets no reply, as the spec says.
+    pub broadcast_ack: bool,
+    /// Answer reads from a cache of replies younger than this (`None`: no cache).
+    pub cache_max_age: Option<Duration>,
+}
+
+/// A running gateway: the lines' workers. Clone it to serve connections from several tasks.
+#[derive(Clone)]
+pub struct Gateway {
+    inner: Arc<Inner>,
+}
+
+pub(crate) struct Inner {
+    lines: Vec<Arc<LineQueue>>,
+    routes: Routes,
+    broadcast_ack: bool,
+    cache: Option<Arc<Cache>>,
+    connections: AtomicU64,
+}
+
+impl Gateway {
+    /// Opens every line (a port that cannot be opened fails here, named) and starts its
+    /// worker on the current tokio runtime.
+    pub async fn start(config: GatewayConfig) -> Result<Gateway, Error> {
+        if let Some((unit, route)) = config.routes.iter().find(|(_, r)| r.line >= config.lines.len()) {
+            let message = format!(
+                "unit {unit} is routed to line {}, but there are {} lines (numbered from 0)",
+                route.line,
+                config.lines.len()
+            );
+            return Err(Error::io("routing", io::Error::new(io::ErrorKind::InvalidInput, message)));
+        }
+        let cache = config.cache_max_age.map(|age| Arc::new(Cache::new(age)));
+        let mut lines = Vec::with_capacity(config.lines.len());
+        for line in config.lines {
+            let name = line.transport.describe();
+            let client = Client::connect(line.transport, line.client).await?;
+            let stats = Arc::new(Mutex::new(LineStats { name, ..LineStats::default() }));
+            let queue = Arc::new(LineQueue::new(line.queue, stats));
+            tokio::spawn(line::run(Arc::clone(&queue), client, cache.clone()));
+            lines.push(queue);
+        }
+        let inner = Inner {
+            lines,
+            routes: config.routes,
+            broadcast_ack: config.broadcast_ack,
+            cache,
+            connections: AtomicU64::new(0),
+        };
+        Ok(Gateway { inner: Arc::new(inner) })
+    }
+
+    /// What each line has counted so far.
+    pub fn stats(&self) -> Vec<LineStats> {
+        self.inner.lines.iter().map(|q| q.stats().clone()).collect()
+    }
+
+    /// Serves one client connection on `stream` until the client closes it (`Ok`), it fails,
+    /// or it is closed for cause (an error carrying a [`Closed`](crate::server::Closed)
+    /// reason). `peer` names the client in the logs; every request passes `authorize` first.
+    pub async fn serve_connection<S>(
+        &self,
+        stream: S,
+        peer: &str,
+        inbound: Inbound,
+        authorize: &mut dyn Authorize,
+        timeouts: Timeouts,
+    ) -> io::Result<()>
+    where
+        S: AsyncRead + AsyncWrite + Unpin + Send,
+    {
+        front::serve(&self.inner, stream, peer, inbound, authorize, timeouts).await
+    }
+
+    /// Serves every connection `listener` accepts, within `limits` (the hardened TCP
+    /// server's accept loop: connection cap, descriptor backoff, counted closes), each with
+    /// the [`Authorize`] that `authorize` makes for its peer. Runs until dropped.
+    pub async fn serve_tcp<A>(
+        &self,
+        listener: TcpListener,
+        inbound: Inbound,
+        limits: TcpLimits,
+        pipeline: usize,
+        authorize: A,
+    ) -> io::Result<()>
+    where
+        A: Fn(SocketAddr) -> Box<dyn Authorize> + Send + Sync + 'static,
+    {
+        let timeouts = Timeouts { idle: limits.idle_timeout, frame: limits.frame_timeout, pipeline };
+        let authorize = Arc::new(authorize);
+        crate::server::accept_connections(listener, &limits, |stream, peer| {
+            let gateway = self.clone();
+            let authorize = Arc::clone(&authorize);
+            async move {
+                let mut auth = authorize(peer);
+                gateway.serve_connection(stream, &peer.to_string(), inbound, auth.as_mut(), timeouts).await
+            }
+        })
+        .await
+    }
+}
+
+impl Drop for Inner {
+    /// The lines' workers end once the requests queued are done.
+    fn drop(&mut self) {
+        for line in &self.lines {
+            line.close();
+        }
+    }
+}
+
+impl Inner {
+    fn next_connection(&self) -> u64 {
+        self.connections.fetch_add(1, Ordering::Relaxed)
+    }
+
+    fn cached(&self, unit: u8, pdu: &[u8]) -> Option<Vec<u8>> {
+        let reply = self.cache.as_ref()?.get(unit, pdu)?;
+        if let Some(line) = self.routes.get(unit).and_then(|r| self.lines.get(r.line)) {
+            let mut stats = line.stats();
+            let counters = stats.units.entry(unit).or_default();
+            counters.cached = counters.cached.saturating_add(1);
+            stats.total.cached = stats.total.cached.saturating_add(1);
+        }
+        Some(reply)
+    }
+
+    /// Queues `job` on line `line` for `connection`; `Err` when the queue is full.
+    fn submit(&self, line: usize, connection: u64, job: Job) -> Result<(), ()> {
+        let queue = self.lines.get(line).ok_or(())?;
+        queue.submit(connection, job).map_err(|_| ())
+    }
+
+    /// Sends a broadcast on every line; with `broadcast_ack`, what completes when every line
+    /// has sent it (its reply `None`: the echo), or 0x06 if no line could take it.
+    fn broadcast(&self, connection: u64, header: AduHeader, pdu: &[u8]) -> Option<oneshot::Receiver<Option<Vec<u8>>>> {
+        let mut done = Vec::new();
+        for (line, queue) in self.lines.iter().enumerate() {
+            let (reply, rx) = oneshot::channel();
+            let job = Job { unit_in: header.unit, unit_out: 0, pdu: pdu.to_vec(), reply };
+            if queue.submit(connection, job).is_ok() {
+                done.push(rx);
+            } else {
+                tracing::info!(line, "broadcast not queued: the line's queue is full");
+            }
+        }
+        if !self.broadcast_ack {
+            return None;
+        }
+        let (ack, rx) = oneshot::channel();
+        let function = pdu.first().copied().unwrap_or_default();
+        tokio::spawn(async move {
+            let busy = done.is_empty();
+            for line in done {
+                // An exception on one line is the answer; a line that stopped counts as sent.
+                if let Ok(Some(reply)) = line.await {
+                    let _ = ack.send(Some(reply));
+                    return;
+                }
+            }
+            let busy = busy.then(|| line::exception(function, ferrobus_proto::ExceptionCode::ServerDeviceBusy.value()));
+            let _ = ack.send(busy);
+        });
+        Some(rx)
+    }
+}
+
+/// The counters of every line, one block each: what SIGUSR1 and the exit print.
+pub fn report(stats: &[LineStats]) -> String {
+    stats.iter().map(ToString::to_string).collect()
+}
