@@ -34,6 +34,7 @@ mod output;
 mod raw;
 mod read;
 mod readwrite;
+mod server_tls;
 mod sim;
 mod target;
 #[cfg(not(unix))]

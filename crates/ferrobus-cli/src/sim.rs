@@ -9,7 +9,6 @@
 //! `--frame-timeout`. It runs until interrupted, then prints its counters (SIGUSR1
 //! prints them at any time), including how late each reply went out after it was due.
 
-use std::path::PathBuf;
 use std::sync::{Arc, Mutex, PoisonError};
 use std::time::Duration;
 
@@ -19,7 +18,7 @@ use ferrobus::Pty;
 use ferrobus::server::{
     ServerEvent, ServerOptions, Shared, TcpCounts, TcpLimits, serve_tcp_with, serve_tls_with, serve_transport,
 };
-use ferrobus::tls::{Policy, ServerTls};
+use ferrobus::tls::ServerTls;
 use ferrobus::{Framing, Timer, Transport};
 use ferrobus_proto::ExceptionCode;
 use ferrobus_proto::slave::{Disposition, SlaveConfig, SlaveEvent, UnitSet};
@@ -29,6 +28,7 @@ use hdrhistogram::Histogram;
 use crate::connect::{ConnectArgs, MBAPS_PORT, MODBUS_TCP_PORT, Target, parse_duration};
 use crate::exit::CliError;
 use crate::interrupt::Interrupt;
+use crate::server_tls::ServerTlsArgs;
 
 /// Arguments of `ferrobus sim`.
 #[derive(Args, Clone, Debug)]
@@ -83,24 +83,9 @@ pub(crate) struct SimArgs {
     #[arg(long = "any-unit")]
     any_unit: bool,
 
-    /// Modbus/TCP Security (mbaps, --tcp port 802 if omitted): the server's certificate (PEM,
-    /// its chain); needs --tls-key and --tls-ca
-    #[arg(long = "tls-cert", value_name = "FILE", requires_all = ["tls_key", "tls_ca"])]
-    tls_cert: Option<PathBuf>,
-
-    /// mbaps: the private key of --tls-cert (PEM, unencrypted)
-    #[arg(long = "tls-key", value_name = "FILE", requires = "tls_cert")]
-    tls_key: Option<PathBuf>,
-
-    /// mbaps: the CA certificate(s) that clients' certificates must be issued by (PEM); a client
-    /// without a certificate is refused at the handshake
-    #[arg(long = "tls-ca", value_name = "FILE", requires = "tls_cert")]
-    tls_ca: Option<PathBuf>,
-
-    /// mbaps: the rights of each role named in client certificates (TOML; see README); without
-    /// it every trusted client may do everything
-    #[arg(long, value_name = "FILE", requires = "tls_cert")]
-    roles: Option<PathBuf>,
+    /// Modbus/TCP Security (`--tls-cert` ...; `--tcp` port 802 if omitted).
+    #[command(flatten)]
+    tls: ServerTlsArgs,
 }
 
 /// What the simulator has done, kept by its observer.
@@ -228,7 +213,7 @@ pub(crate) async fn run(connection: &ConnectArgs, args: &SimArgs) -> Result<(), 
     };
     serving.abort();
     counters.lock().unwrap_or_else(PoisonError::into_inner).print();
-    print_tcp(&tcp_stats.counts(), args.tls_cert.is_some());
+    print_tcp(&tcp_stats.counts(), args.tls.enabled());
     result
 }
 
@@ -240,14 +225,10 @@ fn server_tls(connection: &ConnectArgs, args: &SimArgs) -> Result<Option<ServerT
             "--tls is the client's; the simulator serves mbaps with --tls-cert, --tls-key and --tls-ca".into(),
         ));
     }
-    let (Some(cert), Some(key), Some(ca)) = (&args.tls_cert, &args.tls_key, &args.tls_ca) else { return Ok(None) };
-    if connection.tcp.is_none() || args.pty {
+    if args.tls.enabled() && (connection.tcp.is_none() || args.pty) {
         return Err(CliError::Usage("--tls-cert serves Modbus/TCP Security: it needs --tcp HOST[:PORT]".into()));
     }
-    let tls = ServerTls::from_pem_files(cert, key, ca).map_err(|e| CliError::Usage(e.to_string()))?;
-    let Some(roles) = &args.roles else { return Ok(Some(tls)) };
-    let policy = Policy::load(roles).map_err(|e| CliError::Usage(format!("roles file {e}")))?;
-    Ok(Some(tls.with_policy(policy)))
+    args.tls.load()
 }
 
 /// The units the engine passes on over Modbus/TCP, and who answers them. A single device
@@ -430,7 +411,7 @@ async fn open(connection: &ConnectArgs, args: &SimArgs) -> Result<(Transport, Se
         crate::output::print(&format!("{}\n", pty.path.display()))?;
         return Ok((transport, Served::Port(Box::new(pty))));
     }
-    let default_port = if args.tls_cert.is_some() { MBAPS_PORT } else { MODBUS_TCP_PORT };
+    let default_port = if args.tls.enabled() { MBAPS_PORT } else { MODBUS_TCP_PORT };
     let target = connection.target_for(default_port)?;
     let transport = connection.transport(&target);
     match &target {
@@ -446,7 +427,7 @@ async fn open(connection: &ConnectArgs, args: &SimArgs) -> Result<(Transport, Se
             let listener = tokio::net::TcpListener::bind(addr)
                 .await
                 .map_err(|e| ferrobus::Error::io(format!("listening on {addr}"), e))?;
-            let security = if args.tls_cert.is_some() { ", TLS: Modbus/TCP Security" } else { "" };
+            let security = if args.tls.enabled() { ", TLS: Modbus/TCP Security" } else { "" };
             eprintln!("sim: listening on {addr} ({:?}{security})", transport.framing());
             Ok((transport, Served::Listener(listener)))
         }

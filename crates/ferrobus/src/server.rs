@@ -620,6 +620,19 @@ impl TcpStats {
     }
 }
 
+#[cfg(feature = "tls")]
+impl TcpStats {
+    /// Counts a refused TLS handshake.
+    pub(crate) fn note_tls_refused(&self) {
+        bump(&self.tls_refused);
+    }
+
+    /// The counter of requests denied by the roles' rights, to share with the checks.
+    pub(crate) fn denied_counter(&self) -> Arc<AtomicU64> {
+        Arc::clone(&self.denied)
+    }
+}
+
 fn bump(counter: &AtomicU64) {
     counter.fetch_add(1, Ordering::Relaxed);
 }
@@ -711,15 +724,16 @@ where
             let (stream, role) = match tls.accept(stream).await {
                 Ok(accepted) => accepted,
                 Err(refused) => {
-                    bump(&stats.tls_refused);
+                    stats.note_tls_refused();
                     crate::tls::log_refused(peer, &refused);
                     return Ok(());
                 }
             };
             tracing::info!(%peer, "TLS connection accepted ({role})");
-            let mut handler = crate::tls::Authorized::new(handler, role, Arc::clone(tls.policy()))
+            let check = crate::tls::RoleCheck::new(role, Arc::clone(tls.policy()))
                 .with_peer(peer)
-                .counting(Arc::clone(&stats.denied));
+                .counting(stats.denied_counter());
+            let mut handler = crate::tls::Authorized::new(handler, check);
             let mut options = options();
             options.idle_timeout = options.idle_timeout.or(idle);
             options.frame_timeout = options.frame_timeout.or(unfinished);

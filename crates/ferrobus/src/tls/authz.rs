@@ -12,21 +12,20 @@ use ferrobus_proto::slave::{Admission, Handler};
 
 use super::{Policy, Role};
 
-/// `inner`, for one client with `role`: every request is checked against the policy first
-/// ([`Handler::admit`] runs before any data method, for every request, broadcasts too); a
-/// denied one is answered with exception 01 Illegal Function and logged.
-pub struct Authorized<H> {
-    inner: H,
+/// One client's authorization: its role, the policy, and where denials are logged and
+/// counted.
+#[derive(Clone, Debug)]
+pub struct RoleCheck {
     role: Role,
     policy: Arc<Policy>,
     peer: Option<SocketAddr>,
     denied: Arc<AtomicU64>,
 }
 
-impl<H> Authorized<H> {
-    /// `inner` behind `policy`'s check for `role`.
-    pub fn new(inner: H, role: Role, policy: Arc<Policy>) -> Self {
-        Authorized { inner, role, policy, peer: None, denied: Arc::default() }
+impl RoleCheck {
+    /// `policy`'s check for `role`.
+    pub fn new(role: Role, policy: Arc<Policy>) -> Self {
+        RoleCheck { role, policy, peer: None, denied: Arc::default() }
     }
 
     /// Names the client in the log lines of denied requests.
@@ -48,23 +47,54 @@ impl<H> Authorized<H> {
         &self.role
     }
 
-    /// Requests denied so far (by this handler and any sharing its counter).
+    /// Requests denied so far (by this check and any sharing its counter).
     pub fn denied(&self) -> u64 {
         self.denied.load(Ordering::Relaxed)
+    }
+
+    /// Whether the client may send `request` to `unit`; a denial is counted and logged.
+    pub fn allows(&self, unit: u8, request: &Request<'_>) -> bool {
+        let Err(why) = self.policy.check(&self.role, unit, request) else { return true };
+        self.denied.fetch_add(1, Ordering::Relaxed);
+        let peer = self.peer.map(|p| p.to_string()).unwrap_or_default();
+        tracing::warn!(%peer, "denied {} to unit {unit} for {}: {why}; answered exception 01", request.function(), self.role);
+        false
+    }
+}
+
+/// The gateway's authorization step for a TLS client: the PDU parsed, then checked; a
+/// denied request gets exception 01, one that does not parse the exception a server would
+/// answer it with (it could not be checked, so it is not forwarded).
+impl crate::gateway::Authorize for RoleCheck {
+    fn authorize(&mut self, unit: u8, pdu: &[u8]) -> Result<(), ExceptionCode> {
+        let request = Request::parse(pdu).map_err(ferrobus_proto::PduError::exception_code)?;
+        if self.allows(unit, &request) { Ok(()) } else { Err(ExceptionCode::IllegalFunction) }
+    }
+}
+
+/// `inner`, for one client: every request is checked by a [`RoleCheck`] first
+/// ([`Handler::admit`] runs before any data method, for every request, broadcasts too); a
+/// denied one is answered with exception 01 Illegal Function and logged.
+pub struct Authorized<H> {
+    inner: H,
+    check: RoleCheck,
+}
+
+impl<H> Authorized<H> {
+    /// `inner` behind `check`.
+    pub fn new(inner: H, check: RoleCheck) -> Self {
+        Authorized { inner, check }
+    }
+
+    /// The check.
+    pub fn check(&self) -> &RoleCheck {
+        &self.check
     }
 }
 
 impl<H: Handler> Handler for Authorized<H> {
     fn admit(&mut self, unit: u8, broadcast: bool, request: &Request<'_>) -> Admission {
-        if let Err(why) = self.policy.check(&self.role, unit, request) {
-            self.denied.fetch_add(1, Ordering::Relaxed);
-            let peer = self.peer.map(|p| p.to_string()).unwrap_or_default();
-            tracing::warn!(
-                %peer,
-                "denied {} to unit {unit} for {}: {why}; answered exception 01",
-                request.function(),
-                self.role
-            );
+        if !self.check.allows(unit, request) {
             // A broadcast gets no reply: it is dropped.
             return if broadcast { Admission::Ignore } else { Admission::Refuse(ExceptionCode::IllegalFunction) };
         }

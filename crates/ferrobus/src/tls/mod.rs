@@ -43,6 +43,7 @@
 //!   extension exists to make safe.
 
 mod authz;
+mod gateway;
 mod policy;
 mod role;
 
@@ -64,7 +65,7 @@ use rustls::server::danger::{ClientCertVerified, ClientCertVerifier};
 use rustls::{CertificateError, DigitallySignedStruct, DistinguishedName, OtherError, RootCertStore, SignatureScheme};
 use tokio::net::TcpStream;
 
-pub use authz::Authorized;
+pub use authz::{Authorized, RoleCheck};
 pub use policy::{Denied, Policy, PolicyError, READ_FUNCTIONS, Rights};
 pub use role::{ROLE_OID, Role, RoleError, parse_utf8_string, role_of};
 
