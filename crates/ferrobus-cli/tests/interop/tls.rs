@@ -3,7 +3,8 @@
 //! rcgen, and one client certificate made with openssl (the role extension written by
 //! openssl's config syntax). Clients with a read-write role, a read-only role (writes get
 //! exception 01), a role in the wrong encoding (refused at the handshake, logged), and no
-//! certificate (refused, logged).
+//! certificate (refused, logged); and `ferrobus gateway --tls-cert ...` in front of a serial
+//! simulator, its roles checked per request.
 
 use std::path::Path;
 use std::process::Command;
@@ -15,7 +16,7 @@ mod pki;
 use pki::{OCTET_STRING, Pair, Pki, UTF8_STRING};
 
 use crate::support::env::{Need, pymodbus_script, python, require, require_tool};
-use crate::support::peers::free_port;
+use crate::support::peers::{free_port, sim_pty};
 use crate::support::process::{Proc, Stream, output_within};
 
 /// A bound on how long a client run may take before the test fails (not a timing claim).
@@ -255,4 +256,39 @@ fn openssl_negotiates_tls_1_2_with_the_ecdsa_aes_128_gcm_suite_and_is_refused_tl
     assert!(tls11.contains("alert handshake failure") && tls11.contains("Cipher is (NONE)"), "{tls11}");
     let logged = server.proc.wait_for(Stream::Err, |l| l.contains("TLS handshake refused"), LIMIT);
     assert!(logged.contains("peer is incompatible"), "{logged}");
+}
+
+#[test]
+fn the_gateway_serves_mbaps_to_a_serial_sim_with_roles_checked_per_request() {
+    let Some(_turn) = require(&[]) else { return };
+    let pki = Pki::new("test CA");
+    let (_sim, pty) = sim_pty(&["--profile", "generic"]);
+    let roles = pki.dir().join("roles.toml");
+    std::fs::write(&roles, ROLES).unwrap();
+    let server = pki.server();
+    let addr = format!("127.0.0.1:{}", free_port());
+    let mut command = Command::new(env!("CARGO_BIN_EXE_ferrobus"));
+    command.args(["-v", "--port"]).arg(&pty).args(["gateway", "--listen", &addr]);
+    command.arg("--tls-cert").arg(&server.cert).arg("--tls-key").arg(&server.key);
+    command.arg("--tls-ca").arg(pki.ca()).arg("--roles").arg(&roles);
+    let proc = Proc::spawn("ferrobus gateway (mbaps)", &mut command);
+    let ready = proc.wait_for(Stream::Err, |l| l.starts_with("gateway: listening on"), LIMIT);
+    assert!(ready.contains("Modbus/TCP Security"), "{ready}");
+    let gateway = Mbaps { proc, addr };
+    // An operator writes through to the simulated device and reads it back.
+    let operator = pki.client("operator", Some((UTF8_STRING, "operator")));
+    let wrote = ferrobus(&gateway, &pki.ca(), Some(&operator), &["write", "register", "9", "321"]);
+    assert!(wrote.status.success(), "stderr: {}\ngateway:\n{}", text(&wrote.stderr), gateway.proc.log());
+    // A viewer reads what the operator wrote; its write gets exception 01 and changes nothing.
+    let viewer = pki.client("viewer", Some((UTF8_STRING, "viewer")));
+    let wrote = ferrobus(&gateway, &pki.ca(), Some(&viewer), &["write", "register", "9", "1"]);
+    assert_eq!(wrote.status.code(), Some(1), "stderr: {}", text(&wrote.stderr));
+    assert!(text(&wrote.stderr).contains("exception 0x01"), "stderr: {}", text(&wrote.stderr));
+    let read = ferrobus(&gateway, &pki.ca(), Some(&viewer), &["read", "holding", "9", "--json"]);
+    assert!(read.status.success(), "stderr: {}", text(&read.stderr));
+    assert!(text(&read.stdout).contains("321"), "stdout: {}", text(&read.stdout));
+    gateway.proc.wait_for(Stream::Err, |l| l.contains("denied") && l.contains("role 'viewer'"), LIMIT);
+    // No certificate: refused at the handshake.
+    let refused = ferrobus(&gateway, &pki.ca(), None, &["read", "holding", "9"]);
+    assert!(text(&refused.stderr).contains("requires a client certificate"), "stderr: {}", text(&refused.stderr));
 }
