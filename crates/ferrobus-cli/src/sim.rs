@@ -15,10 +15,8 @@ use std::time::Duration;
 use clap::Args;
 #[cfg(unix)]
 use ferrobus::Pty;
-use ferrobus::server::{
-    ServerEvent, ServerOptions, Shared, TcpCounts, TcpLimits, serve_tcp_with, serve_tls_with, serve_transport,
-};
-use ferrobus::tls::ServerTls;
+use ferrobus::server::{ServerEvent, ServerOptions, Shared, TcpCounts, TcpLimits, serve_tcp_with, serve_transport};
+use ferrobus::tls::{ServerTls, serve_tls_with};
 use ferrobus::{Framing, Timer, Transport};
 use ferrobus_proto::ExceptionCode;
 use ferrobus_proto::slave::{Disposition, SlaveConfig, SlaveEvent, UnitSet};

@@ -142,13 +142,10 @@ impl Transport {
         }
     }
 
-    /// Modbus/TCP Security (mbaps): Modbus/TCP inside TLS to `addr` (`host:port`; the
-    /// standard port is [`MBAPS_PORT`](crate::tls::MBAPS_PORT), 802), trusting and showing
-    /// what `tls` holds.
+    /// The same transport, its streams opened by `connector` (TLS over TCP, for one).
     #[cfg(feature = "tls")]
-    pub fn tls(addr: impl Into<String>, tls: crate::tls::ClientTls) -> Self {
-        let addr = addr.into();
-        Transport { connector: Arc::new(crate::tls::TlsTarget::new(addr.clone(), tls)), ..Transport::tcp(addr) }
+    pub(crate) fn with_connector(self, connector: Arc<dyn Connector>) -> Self {
+        Transport { connector, ..self }
     }
 
     /// RTU frames carried over TCP to `addr` (a serial gateway or a device that speaks it).

@@ -691,58 +691,6 @@ where
     .await
 }
 
-/// Serves Modbus/TCP Security (mbaps) on `listener`, as [`serve_tcp_with`] serves Modbus/TCP:
-/// each connection first completes a TLS handshake with `tls` (a client certificate
-/// required; a refused handshake is logged and counted in [`TcpCounts::tls_refused`]), then
-/// every request is checked against `tls`'s policy for the client's role, a denied one
-/// answered with exception 01 ([`Authorized`](crate::tls::Authorized), counted in
-/// [`TcpCounts::denied`]). The handshake counts towards the connection limit; it must finish
-/// within the TLS handshake timeout.
-#[cfg(feature = "tls")]
-pub async fn serve_tls_with<H, O>(
-    listener: TcpListener,
-    transport: Transport,
-    config: SlaveConfig,
-    handler: Shared<H>,
-    options: O,
-    limits: TcpLimits,
-    tls: crate::tls::ServerTls,
-) -> io::Result<()>
-where
-    H: Handler + Send + 'static,
-    O: Fn() -> ServerOptions + Send + Sync + 'static,
-{
-    let options = Arc::new(options);
-    let (idle, unfinished) = (limits.idle_timeout, limits.frame_timeout);
-    let stats = Arc::clone(&limits.stats);
-    accept_connections(listener, &limits, move |stream, peer| {
-        let transport = transport.clone();
-        let handler = handler.clone();
-        let options = Arc::clone(&options);
-        let (tls, stats) = (tls.clone(), Arc::clone(&stats));
-        async move {
-            let (stream, role) = match tls.accept(stream).await {
-                Ok(accepted) => accepted,
-                Err(refused) => {
-                    stats.note_tls_refused();
-                    crate::tls::log_refused(peer, &refused);
-                    return Ok(());
-                }
-            };
-            tracing::info!(%peer, "TLS connection accepted ({role})");
-            let check = crate::tls::RoleCheck::new(role, Arc::clone(tls.policy()))
-                .with_peer(peer)
-                .counting(stats.denied_counter());
-            let mut handler = crate::tls::Authorized::new(handler, check);
-            let mut options = options();
-            options.idle_timeout = options.idle_timeout.or(idle);
-            options.frame_timeout = options.frame_timeout.or(unfinished);
-            serve_transport(&transport, Box::new(stream), config, &mut handler, &mut options).await
-        }
-    })
-    .await
-}
-
 /// The hardened accept loop every TCP front end shares: accepts on `listener` within
 /// `limits` (past [`TcpLimits::max_connections`] a connection is accepted and closed at once;
 /// out of file descriptors, accepting pauses for [`ACCEPT_BACKOFF`]; TCP_NODELAY set) and

@@ -8,8 +8,8 @@
 use std::sync::Arc;
 use std::time::Duration;
 
-use ferrobus::server::{ServerOptions, Shared, TcpCounts, TcpLimits, serve_tls_with};
-use ferrobus::tls::{ClientTls, Policy, Role, RoleError, ServerTls, role_of};
+use ferrobus::server::{ServerOptions, Shared, TcpCounts, TcpLimits};
+use ferrobus::tls::{ClientTls, Policy, Role, RoleError, ServerTls, role_of, serve_tls_with};
 use ferrobus::{Client, ClientConfig, Error, Timer, Transport};
 use ferrobus_proto::ExceptionCode;
 use ferrobus_proto::frame::LineTiming;

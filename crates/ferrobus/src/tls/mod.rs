@@ -46,6 +46,7 @@ mod authz;
 mod gateway;
 mod policy;
 mod role;
+mod serve;
 
 use std::fmt;
 use std::io;
@@ -68,6 +69,7 @@ use tokio::net::TcpStream;
 pub use authz::{Authorized, RoleCheck};
 pub use policy::{Denied, Policy, PolicyError, READ_FUNCTIONS, Rights};
 pub use role::{ROLE_OID, Role, RoleError, parse_utf8_string, role_of};
+pub use serve::serve_tls_with;
 
 use crate::port::{BoxPort, Connecting, Connector, Port};
 
@@ -437,14 +439,23 @@ fn explain(e: io::Error) -> io::Error {
     io::Error::new(e.kind(), format!("{hint} ({tls})"))
 }
 
+impl crate::Transport {
+    /// Modbus/TCP Security (mbaps): Modbus/TCP inside TLS to `addr` (`host:port`; the
+    /// standard port is [`MBAPS_PORT`], 802), trusting and showing what `tls` holds.
+    pub fn tls(addr: impl Into<String>, tls: ClientTls) -> Self {
+        let addr = addr.into();
+        crate::Transport::tcp(addr.clone()).with_connector(Arc::new(TlsTarget::new(addr, tls)))
+    }
+}
+
 /// Opens TLS connections for a [`Transport`](crate::Transport).
-pub(crate) struct TlsTarget {
+struct TlsTarget {
     addr: String,
     tls: ClientTls,
 }
 
 impl TlsTarget {
-    pub(crate) fn new(addr: String, tls: ClientTls) -> Self {
+    fn new(addr: String, tls: ClientTls) -> Self {
         TlsTarget { addr, tls }
     }
 }
