@@ -64,6 +64,27 @@ impl Rights {
         Rights { write: true, ..Rights::read_only() }
     }
 
+    /// Only these units.
+    #[must_use]
+    pub fn with_units(mut self, units: impl IntoIterator<Item = RangeInclusive<u8>>) -> Self {
+        self.units = Some(units.into_iter().collect());
+        self
+    }
+
+    /// Only these function codes (within what the access allows).
+    #[must_use]
+    pub fn with_functions(mut self, codes: impl IntoIterator<Item = u8>) -> Self {
+        self.functions = Some(codes.into_iter().collect());
+        self
+    }
+
+    /// Only these addresses, in every table.
+    #[must_use]
+    pub fn with_addresses(mut self, ranges: impl IntoIterator<Item = AddressRange>) -> Self {
+        self.addresses = Some(ranges.into_iter().collect());
+        self
+    }
+
     /// Why `request` to `unit` is outside these rights, if it is.
     pub fn check(&self, unit: u8, request: &Request<'_>) -> Result<(), Denied> {
         let function = request.function();
@@ -382,6 +403,20 @@ mod tests {
         let policy = Policy::parse("[null-role]\nunits = [1]\n").unwrap();
         assert_eq!(policy.check(&Role::Null, 1, &read), Ok(()));
         assert_eq!(policy.check(&Role::Null, 2, &read), Err(Denied::Unit(2)));
+    }
+
+    #[test]
+    fn rights_built_in_code_match_the_same_rights_parsed() {
+        let built = Rights::read_write()
+            .with_units([1..=3, 9..=9])
+            .with_functions([3, 5, 6])
+            .with_addresses([AddressRange::new(0x10, 0x11).unwrap(), AddressRange::new(0x20, 0x20).unwrap()]);
+        let text = "[role.op]\naccess = \"read-write\"\nunits = [\"1-3\", 9]\nfunctions = [3, \"5-6\"]\n\
+                    addresses = [\"0x10-0x11\", 0x20]\n";
+        let parsed = Policy::parse(text).unwrap();
+        assert_eq!(parsed.rights(&Role::Named("op".into())), Some(&built));
+        let policy = Policy::deny_all().with_role(&Role::Named("op".into()), built);
+        assert_eq!(policy, parsed);
     }
 
     #[test]
