@@ -32,6 +32,8 @@ PYSERIAL_VERSION="3.5"
 APT_PACKAGES=(socat libmodbus-dev mbpoll libudev-dev pkg-config gcc)
 # tshark decodes the captures of `ferrobus sniff` in its tests.
 APT_PACKAGES+=(tshark)
+# openssl: the Modbus/TCP Security interop test makes a client certificate with it.
+APT_PACKAGES+=(openssl)
 export DEBIAN_FRONTEND=noninteractive
 
 IN_CI=false

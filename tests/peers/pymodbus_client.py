@@ -7,6 +7,7 @@
 
     CONN is --rtu PATH [--baud B] [--parity N|E|O] [--data-bits 8] [--stop-bits 1|2]
          or --tcp HOST:PORT
+         or --tls HOST:PORT --ca FILE [--cert FILE --key FILE]  (Modbus/TCP Security)
 
 script reads one command per line on stdin and prints exactly one result line
 per command on stdout ("ok ...", "exception N", "timeout", "error TEXT"); blank
@@ -40,13 +41,14 @@ import json
 import logging
 import re
 import resource
+import ssl
 import struct
 import sys
 import time
 
 try:
     import pymodbus
-    from pymodbus.client import AsyncModbusSerialClient, AsyncModbusTcpClient
+    from pymodbus.client import AsyncModbusSerialClient, AsyncModbusTcpClient, AsyncModbusTlsClient
     from pymodbus.exceptions import ModbusException, ModbusIOException
     from pymodbus.pdu import ExceptionResponse, ModbusPDU
     from pymodbus.pdu.diag_message import DiagnosticBase
@@ -389,6 +391,13 @@ def make_client(args, parity: str):
             timeout=timeout,
             retries=0,
         )
+    elif args.tls:
+        # Modbus/TCP Security: trust --ca, show --cert/--key if given.
+        host, port = args.tls
+        sslctx = ssl.create_default_context(ssl.Purpose.SERVER_AUTH, cafile=args.ca)
+        if args.cert:
+            sslctx.load_cert_chain(args.cert, args.key)
+        client = AsyncModbusTlsClient(host, port=port, sslctx=sslctx, timeout=timeout, retries=0)
     else:
         host, port = args.tcp
         client = AsyncModbusTcpClient(host, port=port, timeout=timeout, retries=0)
@@ -479,6 +488,10 @@ def parse_args(argv):
     where = parser.add_mutually_exclusive_group(required=True)
     where.add_argument("--rtu", metavar="PATH", help="serial device (e.g. a socat pty link)")
     where.add_argument("--tcp", metavar="HOST:PORT", type=host_port)
+    where.add_argument("--tls", metavar="HOST:PORT", type=host_port, help="Modbus/TCP Security")
+    parser.add_argument("--ca", metavar="FILE", help="--tls: the CA of the server's certificate")
+    parser.add_argument("--cert", metavar="FILE", help="--tls: our certificate")
+    parser.add_argument("--key", metavar="FILE", help="--tls: the key of --cert")
     parser.add_argument("--baud", type=ranged(50, 4000000), default=19200)
     parser.add_argument("--parity", choices=["N", "E", "O"], default="N")
     parser.add_argument("--data-bits", type=int, choices=[5, 6, 7, 8], default=8)
@@ -491,6 +504,10 @@ def parse_args(argv):
     parser.add_argument("--address", type=ranged(0, 65535), default=0, help="bench (default 0)")
     parser.add_argument("--quantity", type=ranged(1, 125), default=10, help="bench (default 10)")
     args = parser.parse_args(argv)
+    if args.tls and not args.ca:
+        parser.error("--tls needs --ca")
+    if bool(args.cert) != bool(args.key):
+        parser.error("--cert and --key go together")
     if args.mode == "bench" and args.count is None:
         parser.error("bench needs --count N")
     if args.mode == "script" and args.count is not None:

@@ -3,9 +3,11 @@
 //! One of `--port` (serial RTU, or ASCII with `--ascii`), `--tcp` (Modbus/TCP) or `--rtu-tcp`
 //! (RTU frames over TCP) names the bus; the rest tune the line and the requests.
 
+use std::path::PathBuf;
 use std::time::Duration;
 
 use clap::{Args, ValueEnum};
+use ferrobus::tls::ClientTls;
 use ferrobus::{Client, ClientConfig, Rs485, SerialConfig, Transport};
 use ferrobus_proto::codes::unit;
 use ferrobus_proto::frame::{DataBits, LineConfig, Parity, StopBits};
@@ -91,6 +93,22 @@ pub(crate) struct ConnectArgs {
     /// a serial port only while its path names the same device)
     #[arg(long = "no-reopen", global = true)]
     pub(crate) no_reopen: bool,
+
+    /// Modbus/TCP Security (mbaps): TLS to the --tcp server (port 802 if omitted), trusting --ca
+    #[arg(long, global = true)]
+    pub(crate) tls: bool,
+
+    /// --tls: our certificate (PEM; the chain, ours first); mbaps servers require one
+    #[arg(long, global = true, value_name = "FILE", requires = "key")]
+    pub(crate) cert: Option<PathBuf>,
+
+    /// --tls: the private key of --cert (PEM, unencrypted)
+    #[arg(long, global = true, value_name = "FILE", requires = "cert")]
+    pub(crate) key: Option<PathBuf>,
+
+    /// --tls: the CA certificate(s) the server's certificate must be issued by (PEM)
+    #[arg(long, global = true, value_name = "FILE")]
+    pub(crate) ca: Option<PathBuf>,
 
     /// The device's profile: a built-in name or a TOML file; it sets the device's limits, word
     /// order and numbering, and names its parameters for get and set
@@ -262,6 +280,17 @@ pub(crate) use crate::target::Target;
 impl ConnectArgs {
     /// The bus the options name, or a usage error if they name none or a bad one.
     pub(crate) fn target(&self) -> Result<Target, CliError> {
+        self.target_for(if self.tls { MBAPS_PORT } else { MODBUS_TCP_PORT })
+    }
+
+    /// [`ConnectArgs::target`], with `default_port` for a `--tcp` host given without one.
+    pub(crate) fn target_for(&self, default_port: u16) -> Result<Target, CliError> {
+        if self.tls && self.tcp.is_none() {
+            return Err(CliError::Usage("--tls is Modbus/TCP Security: it needs --tcp HOST[:PORT]".into()));
+        }
+        if !self.tls && (self.cert.is_some() || self.ca.is_some()) {
+            return Err(CliError::Usage("--cert, --key and --ca are for --tls".into()));
+        }
         if self.data_bits == 7 && !self.ascii {
             return Err(CliError::Usage("--data-bits 7 only works with --ascii (RTU needs 8 data bits)".into()));
         }
@@ -272,7 +301,7 @@ impl ConnectArgs {
             return Err(CliError::Usage("--ascii applies to a serial --port only".into()));
         }
         if let Some(addr) = &self.tcp {
-            return Ok(Target::Tcp(with_default_port(addr)?));
+            return Ok(Target::Tcp(with_default_port(addr, default_port)?));
         }
         if let Some(addr) = &self.rtu_tcp {
             if !has_port(addr) {
@@ -338,10 +367,24 @@ impl ConnectArgs {
         config
     }
 
+    /// The client's transport for `target`: [`ConnectArgs::transport`], or TLS with `--tls`
+    /// (its certificates read here: a bad file is a usage error naming it).
+    pub(crate) fn client_transport(&self, target: &Target) -> Result<Transport, CliError> {
+        let (true, Target::Tcp(addr)) = (self.tls, target) else { return Ok(self.transport(target)) };
+        let Some(ca) = &self.ca else {
+            return Err(CliError::Usage(
+                "--tls needs --ca FILE: the CA certificate that issued the server's certificate".into(),
+            ));
+        };
+        let identity = self.cert.as_deref().zip(self.key.as_deref());
+        let tls = ClientTls::from_pem_files(ca, identity).map_err(|e| CliError::Usage(e.to_string()))?;
+        Ok(Transport::tls(addr.clone(), tls).with_reopen(!self.no_reopen))
+    }
+
     /// Opens the bus. A TCP connect waits at most the reply timeout (at least one second).
     pub(crate) async fn open(&self) -> Result<Session, CliError> {
         let target = self.target()?;
-        let transport = self.transport(&target);
+        let transport = self.client_transport(&target)?;
         let unit = self.unit()?;
         tracing::info!(%target, unit, "opening");
         let wait = self.timeout.max(Duration::from_secs(1));
@@ -399,8 +442,12 @@ fn has_port(addr: &str) -> bool {
     }
 }
 
-/// `host` → `host:502`; `::1` → `[::1]:502`.
-fn with_default_port(addr: &str) -> Result<String, CliError> {
+/// The port of Modbus/TCP.
+pub(crate) const MODBUS_TCP_PORT: u16 = 502;
+pub(crate) use ferrobus::tls::MBAPS_PORT;
+
+/// `host` → `host:502` (or `default_port`); `::1` → `[::1]:502`.
+pub(crate) fn with_default_port(addr: &str, default_port: u16) -> Result<String, CliError> {
     if addr.is_empty() {
         return Err(CliError::Usage("--tcp needs a host, e.g. 192.168.1.10 or plc:502".into()));
     }
@@ -408,12 +455,12 @@ fn with_default_port(addr: &str) -> Result<String, CliError> {
         return Ok(addr.to_string());
     }
     if addr.starts_with('[') {
-        return Ok(format!("{addr}:502"));
+        return Ok(format!("{addr}:{default_port}"));
     }
     if addr.contains(':') {
-        return Ok(format!("[{addr}]:502"));
+        return Ok(format!("[{addr}]:{default_port}"));
     }
-    Ok(format!("{addr}:502"))
+    Ok(format!("{addr}:{default_port}"))
 }
 
 pub(crate) use ferrobus_sim::fault::parse_duration;
@@ -459,11 +506,18 @@ mod tests {
 
     #[test]
     fn tcp_addresses_get_port_502_unless_they_have_one() {
-        assert_eq!(with_default_port("plc").unwrap(), "plc:502");
-        assert_eq!(with_default_port("10.0.0.5:1502").unwrap(), "10.0.0.5:1502");
-        assert_eq!(with_default_port("::1").unwrap(), "[::1]:502");
-        assert_eq!(with_default_port("[::1]").unwrap(), "[::1]:502");
-        assert_eq!(with_default_port("[::1]:5020").unwrap(), "[::1]:5020");
-        assert!(with_default_port("").is_err());
+        assert_eq!(with_default_port("plc", 502).unwrap(), "plc:502");
+        assert_eq!(with_default_port("10.0.0.5:1502", 502).unwrap(), "10.0.0.5:1502");
+        assert_eq!(with_default_port("::1", 502).unwrap(), "[::1]:502");
+        assert_eq!(with_default_port("[::1]", 502).unwrap(), "[::1]:502");
+        assert_eq!(with_default_port("[::1]:5020", 502).unwrap(), "[::1]:5020");
+        assert!(with_default_port("", 502).is_err());
+    }
+
+    #[test]
+    fn mbaps_addresses_get_port_802_unless_they_have_one() {
+        assert_eq!(with_default_port("plc", MBAPS_PORT).unwrap(), "plc:802");
+        assert_eq!(with_default_port("::1", MBAPS_PORT).unwrap(), "[::1]:802");
+        assert_eq!(with_default_port("plc:8802", MBAPS_PORT).unwrap(), "plc:8802");
     }
 }

@@ -25,13 +25,20 @@ use ferrobus::{Client, Transport};
 use crate::connect::{ConnectArgs, Target, parse_duration};
 use crate::exit::CliError;
 use crate::interrupt::Interrupt;
+use crate::server_tls::ServerTlsArgs;
 
 /// Arguments of `ferrobus gateway`.
 #[derive(Args, Clone, Debug)]
 #[expect(clippy::struct_excessive_bools, reason = "each bool is a command-line flag")]
 pub(crate) struct GatewayArgs {
-    /// Where Modbus/TCP clients connect (binds 127.0.0.1 unless told otherwise)
-    #[arg(long, value_name = "ADDR:PORT", default_value = "127.0.0.1:502")]
+    /// Where Modbus/TCP clients connect (binds 127.0.0.1 unless told otherwise; 127.0.0.1:802
+    /// with --tls-cert)
+    #[arg(
+        long,
+        value_name = "ADDR:PORT",
+        default_value = "127.0.0.1:502",
+        default_value_if("tls_cert", clap::builder::ArgPredicate::IsPresent, "127.0.0.1:802")
+    )]
     listen: String,
 
     /// Clients send RTU frames over TCP (CRC and all) instead of Modbus/TCP
@@ -119,6 +126,10 @@ pub(crate) struct GatewayArgs {
     /// Stop after this long (and print the counters), instead of running until interrupted
     #[arg(long, value_name = "DURATION", value_parser = parse_duration)]
     duration: Option<Duration>,
+
+    /// Modbus/TCP Security: TLS with client certificates and roles.
+    #[command(flatten)]
+    tls: ServerTlsArgs,
 }
 
 /// What the reverse gateway does when the TCP side gives no answer, as typed.
@@ -137,6 +148,11 @@ pub(crate) async fn run(connection: &ConnectArgs, args: &GatewayArgs) -> Result<
     }
     let config = config(connection, args)?;
     let rules = rules(args)?;
+    if args.tls.enabled() && args.rtu_in {
+        return Err(CliError::Usage("--tls-cert serves Modbus/TCP Security (MBAP frames): not with --rtu-in".into()));
+    }
+    let tls = args.tls.load()?;
+    let secure = tls.is_some();
     let mut interrupt = Interrupt::listen()?;
     #[cfg(unix)]
     let mut usr1 = tokio::signal::unix::signal(tokio::signal::unix::SignalKind::user_defined1())
@@ -150,7 +166,13 @@ pub(crate) async fn run(connection: &ConnectArgs, args: &GatewayArgs) -> Result<
     let inbound = if args.rtu_in { Inbound::RtuOverTcp } else { Inbound::Mbap };
     eprintln!(
         "gateway: listening on {bound} ({}), lines: {}",
-        if args.rtu_in { "RTU over TCP" } else { "Modbus/TCP" },
+        if args.rtu_in {
+            "RTU over TCP"
+        } else if secure {
+            "Modbus/TCP Security"
+        } else {
+            "Modbus/TCP"
+        },
         lines.iter().enumerate().map(|(i, l)| format!("{i}={l}")).collect::<Vec<_>>().join(", ")
     );
     let limits = TcpLimits {
@@ -167,7 +189,10 @@ pub(crate) async fn run(connection: &ConnectArgs, args: &GatewayArgs) -> Result<
             let authorize = move |_: SocketAddr| -> Box<dyn Authorize> {
                 if rules.allows_all() { Box::new(AllowAll) } else { Box::new(rules.clone()) }
             };
-            gateway.serve_tcp(listener, inbound, limits, pipeline, authorize).await
+            match tls {
+                Some(tls) => gateway.serve_tls(listener, inbound, limits, pipeline, authorize, tls).await,
+                None => gateway.serve_tcp(listener, inbound, limits, pipeline, authorize).await,
+            }
         })
     };
     let until = async {
@@ -185,11 +210,11 @@ pub(crate) async fn run(connection: &ConnectArgs, args: &GatewayArgs) -> Result<
         tokio::select! {
             () = interrupt.wait() => break,
             () = &mut until => break,
-            _ = usr1 => print(&gateway, &tcp.counts()),
+            _ = usr1 => print(&gateway, &tcp.counts(), secure),
         }
     }
     serving.abort();
-    print(&gateway, &tcp.counts());
+    print(&gateway, &tcp.counts(), secure);
     Ok(())
 }
 
@@ -253,7 +278,7 @@ fn reverse_route(text: &str) -> Result<(u8, String, u8), CliError> {
 }
 
 /// Prints every line's and unit's counters and the TCP side's on stderr.
-fn print(gateway: &Gateway, tcp: &TcpCounts) {
+fn print(gateway: &Gateway, tcp: &TcpCounts, secure: bool) {
     eprint!("{}", ferrobus::gateway::report(&gateway.stats()));
     eprintln!(
         "tcp: {} connections served ({} open), {} refused over --max-connections, {} accept pauses out of file \
@@ -266,6 +291,12 @@ fn print(gateway: &Gateway, tcp: &TcpCounts) {
         tcp.closed_unfinished,
         tcp.closed_bad_header
     );
+    if secure {
+        eprintln!(
+            "tls: {} handshakes refused, {} requests denied by the roles (exception 01)",
+            tcp.tls_refused, tcp.denied
+        );
+    }
 }
 
 /// The gateway's lines and routes from the options.

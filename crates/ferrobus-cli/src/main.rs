@@ -38,6 +38,7 @@ mod raw;
 mod read;
 mod readwrite;
 mod scan;
+mod server_tls;
 mod set;
 mod sim;
 mod sniff;
@@ -204,7 +205,7 @@ fn explain_parse_error(error: clap::Error) -> clap::Error {
 }
 
 /// The connection options, by clap id (the long option is the id with `-` for `_`).
-const CONNECTION_OPTIONS: [&str; 17] = [
+const CONNECTION_OPTIONS: [&str; 21] = [
     "port",
     "tcp",
     "rtu_tcp",
@@ -222,6 +223,10 @@ const CONNECTION_OPTIONS: [&str; 17] = [
     "t35",
     "echo",
     "turnaround",
+    "tls",
+    "cert",
+    "key",
+    "ca",
 ];
 
 /// Refuses the connection options that `--help` lists for every command but that a command

@@ -16,15 +16,17 @@ use clap::Args;
 #[cfg(unix)]
 use ferrobus::Pty;
 use ferrobus::server::{ServerEvent, ServerOptions, Shared, TcpCounts, TcpLimits, serve_tcp_with, serve_transport};
+use ferrobus::tls::{ServerTls, serve_tls_with};
 use ferrobus::{Framing, Timer, Transport};
 use ferrobus_proto::ExceptionCode;
 use ferrobus_proto::slave::{Disposition, SlaveConfig, SlaveEvent, UnitSet};
 use ferrobus_sim::{Device, FaultFilter, Faults, Profile, ProfileFaults, Sim, Unserved, tokio_clock};
 use hdrhistogram::Histogram;
 
-use crate::connect::{ConnectArgs, Target, parse_duration};
+use crate::connect::{ConnectArgs, MBAPS_PORT, MODBUS_TCP_PORT, Target, parse_duration};
 use crate::exit::CliError;
 use crate::interrupt::Interrupt;
+use crate::server_tls::ServerTlsArgs;
 
 /// Arguments of `ferrobus sim`.
 #[derive(Args, Clone, Debug)]
@@ -78,6 +80,10 @@ pub(crate) struct SimArgs {
     /// Modbus/TCP: answer every unit id, the units not simulated by the first --unit's device
     #[arg(long = "any-unit")]
     any_unit: bool,
+
+    /// Modbus/TCP Security (`--tls-cert` ...; `--tcp` port 802 if omitted).
+    #[command(flatten)]
+    tls: ServerTlsArgs,
 }
 
 /// What the simulator has done, kept by its observer.
@@ -138,6 +144,7 @@ impl Counters {
 /// Runs `ferrobus sim`.
 pub(crate) async fn run(connection: &ConnectArgs, args: &SimArgs) -> Result<(), CliError> {
     let mut sim = build(connection, args)?;
+    let tls = server_tls(connection, args)?;
     // Listened for before it says where it serves, so that no early signal kills it.
     let mut signals = Signals::listen()?;
     let (transport, port) = open(connection, args).await?;
@@ -175,11 +182,14 @@ pub(crate) async fn run(connection: &ConnectArgs, args: &SimArgs) -> Result<(), 
     let mut serving = tokio::spawn(async move {
         match port {
             Served::Port(port) => serve_port(&transport, port, reopen, config, &sim, &options).await,
-            Served::Listener(listener) => {
-                serve_tcp_with(listener, transport.clone(), config, sim.clone(), options, limits)
+            Served::Listener(listener) => match tls {
+                Some(tls) => serve_tls_with(listener, transport.clone(), config, sim.clone(), options, limits, tls)
                     .await
-                    .map_err(|e| ferrobus::Error::io("serving", e).into())
-            }
+                    .map_err(|e| ferrobus::Error::io("serving", e).into()),
+                None => serve_tcp_with(listener, transport.clone(), config, sim.clone(), options, limits)
+                    .await
+                    .map_err(|e| ferrobus::Error::io("serving", e).into()),
+            },
         }
     });
     // A --duration ends the run early; Ctrl-C and SIGTERM end it too, with the counters.
@@ -201,8 +211,22 @@ pub(crate) async fn run(connection: &ConnectArgs, args: &SimArgs) -> Result<(), 
     };
     serving.abort();
     counters.lock().unwrap_or_else(PoisonError::into_inner).print();
-    print_tcp(&tcp_stats.counts());
+    print_tcp(&tcp_stats.counts(), args.tls.enabled());
     result
+}
+
+/// The mbaps server's TLS setup, if `--tls-cert` asks for one: its certificate, key, client
+/// CA and roles file read now, so a bad file is an error before anything is served.
+fn server_tls(connection: &ConnectArgs, args: &SimArgs) -> Result<Option<ServerTls>, CliError> {
+    if connection.tls {
+        return Err(CliError::Usage(
+            "--tls is the client's; the simulator serves mbaps with --tls-cert, --tls-key and --tls-ca".into(),
+        ));
+    }
+    if args.tls.enabled() && (connection.tcp.is_none() || args.pty) {
+        return Err(CliError::Usage("--tls-cert serves Modbus/TCP Security: it needs --tcp HOST[:PORT]".into()));
+    }
+    args.tls.load()
 }
 
 /// The units the engine passes on over Modbus/TCP, and who answers them. A single device
@@ -229,9 +253,15 @@ fn tcp_units(sim: &mut Sim, any_unit: bool) -> UnitSet {
     (0..=u8::MAX).collect()
 }
 
-fn print_tcp(c: &TcpCounts) {
+fn print_tcp(c: &TcpCounts, tls: bool) {
     if c.accepted == 0 && c.refused == 0 && c.descriptor_waits == 0 && c.accept_errors == 0 {
         return;
+    }
+    if tls {
+        eprintln!(
+            "sim: tls: {} handshakes refused, {} requests denied by the roles (exception 01)",
+            c.tls_refused, c.denied
+        );
     }
     eprintln!(
         "sim: tcp: {} connections served ({} open), {} refused over --max-connections, {} accept pauses out of file descriptors, {} other accept errors, {} socket-option errors; closed: {} idle, {} unfinished frame, {} bad MBAP header",
@@ -379,7 +409,8 @@ async fn open(connection: &ConnectArgs, args: &SimArgs) -> Result<(Transport, Se
         crate::output::print(&format!("{}\n", pty.path.display()))?;
         return Ok((transport, Served::Port(Box::new(pty))));
     }
-    let target = connection.target()?;
+    let default_port = if args.tls.enabled() { MBAPS_PORT } else { MODBUS_TCP_PORT };
+    let target = connection.target_for(default_port)?;
     let transport = connection.transport(&target);
     match &target {
         Target::Serial { .. } => {
@@ -394,7 +425,8 @@ async fn open(connection: &ConnectArgs, args: &SimArgs) -> Result<(Transport, Se
             let listener = tokio::net::TcpListener::bind(addr)
                 .await
                 .map_err(|e| ferrobus::Error::io(format!("listening on {addr}"), e))?;
-            eprintln!("sim: listening on {addr} ({:?})", transport.framing());
+            let security = if args.tls.enabled() { ", TLS: Modbus/TCP Security" } else { "" };
+            eprintln!("sim: listening on {addr} ({:?}{security})", transport.framing());
             Ok((transport, Served::Listener(listener)))
         }
     }

@@ -31,6 +31,9 @@
 //!   TCP, RTU over TCP, and ptys made in-process.
 //! - [`scan`]: the bus scanner — unit addresses × line settings over one port reconfigured
 //!   in place, listening first, a second pass for leads, identification.
+//! - `tls` (the `tls` feature): Modbus/TCP Security — TLS with mutual authentication, the
+//!   role from the client's certificate and a roles file checked on every request, for the
+//!   server; `Transport::tls` for the client.
 //! - [`wire`]: the virtual RS-485 line's model, sans-IO like the engines: it takes `now` in
 //!   every call and says what each endpoint receives and when — character timing, collisions,
 //!   the t3.5 rule, seeded faults, a bit-level UART for endpoints at other settings.
@@ -63,6 +66,8 @@ mod serial;
 pub mod server;
 mod sys;
 pub mod timer;
+#[cfg(feature = "tls")]
+pub mod tls;
 mod uart;
 pub mod wire;
 

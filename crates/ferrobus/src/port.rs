@@ -142,6 +142,12 @@ impl Transport {
         }
     }
 
+    /// The same transport, its streams opened by `connector` (TLS over TCP, for one).
+    #[cfg(feature = "tls")]
+    pub(crate) fn with_connector(self, connector: Arc<dyn Connector>) -> Self {
+        Transport { connector, ..self }
+    }
+
     /// RTU frames carried over TCP to `addr` (a serial gateway or a device that speaks it).
     pub fn rtu_over_tcp(addr: impl Into<String>) -> Self {
         Transport { framing: Framing::Rtu, ..Transport::tcp(addr) }

@@ -568,6 +568,8 @@ pub struct TcpStats {
     closed_idle: AtomicU64,
     closed_unfinished: AtomicU64,
     closed_bad_header: AtomicU64,
+    tls_refused: AtomicU64,
+    denied: Arc<AtomicU64>,
 }
 
 /// A snapshot of [`TcpStats`].
@@ -591,6 +593,11 @@ pub struct TcpCounts {
     pub closed_unfinished: u64,
     /// Connections closed for a bad MBAP header.
     pub closed_bad_header: u64,
+    /// TLS connections whose handshake was refused (no client certificate, an untrusted
+    /// one, a role refused, a timeout).
+    pub tls_refused: u64,
+    /// Requests denied by the roles' rights (answered with exception 01).
+    pub denied: u64,
 }
 
 impl TcpStats {
@@ -607,7 +614,22 @@ impl TcpStats {
             closed_idle: get(&self.closed_idle),
             closed_unfinished: get(&self.closed_unfinished),
             closed_bad_header: get(&self.closed_bad_header),
+            tls_refused: get(&self.tls_refused),
+            denied: get(&self.denied),
         }
+    }
+}
+
+#[cfg(feature = "tls")]
+impl TcpStats {
+    /// Counts a refused TLS handshake.
+    pub(crate) fn note_tls_refused(&self) {
+        bump(&self.tls_refused);
+    }
+
+    /// The counter of requests denied by the roles' rights, to share with the checks.
+    pub(crate) fn denied_counter(&self) -> Arc<AtomicU64> {
+        Arc::clone(&self.denied)
     }
 }
 

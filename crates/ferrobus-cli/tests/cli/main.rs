@@ -17,4 +17,5 @@ mod scan;
 mod server;
 mod service;
 mod sniff;
+mod tls;
 mod write;

@@ -19,6 +19,8 @@
 //! - [`skips`]: what a test whose peer is missing does, in and outside CI.
 //! - [`tcp_server`]: `ferrobus sim --tcp` under pipelining, corrupt headers, unit ids over TCP,
 //!   its connection cap and timeouts, and a lowered descriptor limit.
+//! - [`tls`]: `ferrobus sim` as a Modbus/TCP Security server with roles, met by ferrobus's
+//!   `--tls` client, pymodbus's TLS client and an openssl-made certificate.
 //!
 //! Run: `cargo test -p ferrobus-cli --test interop`.
 #![cfg(unix)] // the peers run on Linux, over ptys
@@ -36,3 +38,4 @@ mod reply_timing;
 mod skips;
 mod support;
 mod tcp_server;
+mod tls;

@@ -1,0 +1,59 @@
+//! The gateway's front end over Modbus/TCP Security: each connection's TLS handshake, then
+//! the gateway's own rules and the client's role checked on every request.
+
+use std::io;
+use std::net::SocketAddr;
+use std::sync::Arc;
+
+use tokio::net::TcpListener;
+
+use super::{RoleCheck, ServerTls, log_refused};
+use crate::gateway::{Authorize, Chain, Gateway, Inbound, Timeouts};
+use crate::server::TcpLimits;
+
+impl Gateway {
+    /// Serves Modbus/TCP Security on `listener`, as [`Gateway::serve_tcp`] serves Modbus/TCP:
+    /// each connection completes a TLS handshake with `tls` first (a client certificate
+    /// required; a refused handshake is logged and counted in
+    /// [`TcpCounts::tls_refused`](crate::server::TcpCounts::tls_refused)), then every request
+    /// passes the [`Authorize`] that `authorize` makes for its peer (the gateway's rules) and
+    /// then the client's role against `tls`'s policy (a denial: exception 01, logged, counted
+    /// in [`TcpCounts::denied`](crate::server::TcpCounts::denied)). Runs until dropped.
+    pub async fn serve_tls<A>(
+        &self,
+        listener: TcpListener,
+        inbound: Inbound,
+        limits: TcpLimits,
+        pipeline: usize,
+        authorize: A,
+        tls: ServerTls,
+    ) -> io::Result<()>
+    where
+        A: Fn(SocketAddr) -> Box<dyn Authorize> + Send + Sync + 'static,
+    {
+        let timeouts = Timeouts { idle: limits.idle_timeout, frame: limits.frame_timeout, pipeline };
+        let authorize = Arc::new(authorize);
+        let stats = Arc::clone(&limits.stats);
+        crate::server::accept_connections(listener, &limits, |stream, peer| {
+            let gateway = self.clone();
+            let authorize = Arc::clone(&authorize);
+            let (tls, stats) = (tls.clone(), Arc::clone(&stats));
+            async move {
+                let (stream, role) = match tls.accept(stream).await {
+                    Ok(accepted) => accepted,
+                    Err(refused) => {
+                        stats.note_tls_refused();
+                        log_refused(peer, &refused);
+                        return Ok(());
+                    }
+                };
+                tracing::info!(%peer, "TLS connection accepted ({role})");
+                let check =
+                    RoleCheck::new(role, Arc::clone(tls.policy())).with_peer(peer).counting(stats.denied_counter());
+                let mut chain = Chain(vec![authorize(peer), Box::new(check)]);
+                gateway.serve_connection(stream, &peer.to_string(), inbound, &mut chain, timeouts).await
+            }
+        })
+        .await
+    }
+}

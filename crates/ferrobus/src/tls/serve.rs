@@ -1,0 +1,61 @@
+//! Modbus/TCP Security served by the TCP server: the handshake, then the role checked on
+//! every request by the slave engine's handler.
+
+use std::io;
+use std::sync::Arc;
+
+use ferrobus_proto::slave::{Handler, SlaveConfig};
+use tokio::net::TcpListener;
+
+use super::{Authorized, RoleCheck, ServerTls, log_refused};
+use crate::port::Transport;
+use crate::server::{ServerOptions, Shared, TcpLimits, serve_transport};
+
+/// Serves Modbus/TCP Security (mbaps) on `listener`, as [`serve_tcp_with`](crate::server::serve_tcp_with) serves Modbus/TCP:
+/// each connection first completes a TLS handshake with `tls` (a client certificate
+/// required; a refused handshake is logged and counted in [`TcpCounts::tls_refused`](crate::server::TcpCounts::tls_refused)), then
+/// every request is checked against `tls`'s policy for the client's role, a denied one
+/// answered with exception 01 ([`Authorized`], counted in
+/// [`TcpCounts::denied`](crate::server::TcpCounts::denied)). The handshake counts towards the connection limit; it must finish
+/// within the TLS handshake timeout.
+pub async fn serve_tls_with<H, O>(
+    listener: TcpListener,
+    transport: Transport,
+    config: SlaveConfig,
+    handler: Shared<H>,
+    options: O,
+    limits: TcpLimits,
+    tls: ServerTls,
+) -> io::Result<()>
+where
+    H: Handler + Send + 'static,
+    O: Fn() -> ServerOptions + Send + Sync + 'static,
+{
+    let options = Arc::new(options);
+    let (idle, unfinished) = (limits.idle_timeout, limits.frame_timeout);
+    let stats = Arc::clone(&limits.stats);
+    crate::server::accept_connections(listener, &limits, move |stream, peer| {
+        let transport = transport.clone();
+        let handler = handler.clone();
+        let options = Arc::clone(&options);
+        let (tls, stats) = (tls.clone(), Arc::clone(&stats));
+        async move {
+            let (stream, role) = match tls.accept(stream).await {
+                Ok(accepted) => accepted,
+                Err(refused) => {
+                    stats.note_tls_refused();
+                    log_refused(peer, &refused);
+                    return Ok(());
+                }
+            };
+            tracing::info!(%peer, "TLS connection accepted ({role})");
+            let check = RoleCheck::new(role, Arc::clone(tls.policy())).with_peer(peer).counting(stats.denied_counter());
+            let mut handler = Authorized::new(handler, check);
+            let mut options = options();
+            options.idle_timeout = options.idle_timeout.or(idle);
+            options.frame_timeout = options.frame_timeout.or(unfinished);
+            serve_transport(&transport, Box::new(stream), config, &mut handler, &mut options).await
+        }
+    })
+    .await
+}
