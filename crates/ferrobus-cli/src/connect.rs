@@ -89,6 +89,10 @@ pub(crate) struct ConnectArgs {
     /// a serial port only while its path names the same device)
     #[arg(long = "no-reopen", global = true)]
     pub(crate) no_reopen: bool,
+
+    /// The device's profile: a built-in name or a TOML file; it sets the device's limits, word order and numbering
+    #[arg(long, global = true, value_name = "PROFILE")]
+    pub(crate) device: Option<String>,
 }
 
 /// Parity, as typed. (Plain comments on the variants keep `--help` compact.)

@@ -18,6 +18,8 @@
 
 mod address;
 mod bench;
+mod completions;
+mod config;
 mod connect;
 mod crc;
 mod demo;
@@ -28,8 +30,10 @@ mod info;
 mod interrupt;
 #[cfg(unix)]
 mod line;
+mod man;
 mod mask;
 mod output;
+mod ports;
 mod raw;
 mod read;
 mod readwrite;
@@ -73,6 +77,14 @@ pub(crate) struct Cli {
     #[command(flatten)]
     connection: ConnectArgs,
 
+    /// The settings file and a saved connection from it.
+    #[command(flatten)]
+    settings: config::ConfigArgs,
+
+    /// The effective settings and where each came from (filled after parsing).
+    #[arg(skip)]
+    layered: config::Layered,
+
     /// More logging on stderr: -v info, -vv debug, -vvv trace (RUST_LOG overrides)
     #[arg(short, long, action = clap::ArgAction::Count, global = true)]
     verbose: u8,
@@ -110,6 +122,14 @@ enum Command {
     Demo(demo::DemoArgs),
     /// FC03 reads back to back: transactions/s, latency and CPU time (the peer benchmark's format)
     Bench(bench::BenchArgs),
+    /// The serial ports the OS knows: USB ids, manufacturer, product, serial number, /dev/serial/by-id
+    Ports(ports::PortsArgs),
+    /// Saved connections and defaults: `config show` prints the effective settings and their sources
+    Config(config::ConfigCommandArgs),
+    /// A completion script for bash, zsh, fish, powershell or elvish (see README: Install)
+    Completions(completions::CompletionsArgs),
+    /// Manual pages in roff: ferrobus(1) on stdout, or every page into --dir
+    Man(man::ManArgs),
 }
 
 impl Command {
@@ -118,7 +138,7 @@ impl Command {
         !matches!(
             self,
             Command::Crc(_) | Command::Line(_) | Command::Demo(_) | Command::Sim(sim::SimArgs { pty: true, .. })
-        )
+        ) && !matches!(self, Command::Ports(_) | Command::Config(_) | Command::Completions(_) | Command::Man(_))
     }
 }
 
@@ -142,6 +162,10 @@ async fn dispatch(cli: &Cli) -> Result<(), CliError> {
         Command::Line(args) => line::run(connection, args).await,
         Command::Demo(args) => demo::run(args).await,
         Command::Bench(args) => bench::run(connection, args).await,
+        Command::Ports(args) => ports::run(args),
+        Command::Config(args) => config::run(&cli.layered, args),
+        Command::Completions(args) => completions::run(args),
+        Command::Man(args) => man::run(args),
     }
 }
 
@@ -192,6 +216,8 @@ fn refuse_ignored_options(matches: &clap::ArgMatches) -> Result<(), CliError> {
     let (used, why): (&[&str], &str) = match name {
         "crc" => (&[], "crc works offline and opens no bus"),
         "demo" => (&[], "demo runs its own virtual line (its baud rate is --line-baud)"),
+        "ports" => (&[], "ports lists what the OS knows and opens no port"),
+        "completions" | "man" => (&[], "it writes text made from the command definition and opens no bus"),
         // `line --echo` is the line's own option.
         "line" => (
             &["baud", "parity", "data_bits", "stop_bits", "echo"],
@@ -239,16 +265,28 @@ fn init_logging(verbose: u8) {
 }
 
 fn main() -> ExitCode {
+    // At a Tab, the shell's completion script runs ferrobus with FERROBUS_COMPLETE set: answer, exit.
+    clap_complete::CompleteEnv::with_factory(completions::command).var(completions::VAR).complete();
     let matches = Cli::command().try_get_matches().unwrap_or_else(|e| explain_parse_error(e).exit());
-    let mut cli = Cli::from_arg_matches(&matches).unwrap_or_else(|e| e.exit());
-    if let (Command::Sim(args), Some(sim)) = (&mut cli.command, matches.subcommand_matches("sim")) {
-        args.pair_by_position(sim);
-    }
-    init_logging(cli.verbose);
     if let Err(error) = refuse_ignored_options(&matches) {
         exit::report(&error, None, 1).print();
         return error.exit().into();
     }
+    // The settings file's connection and defaults, under the command line's options.
+    let (matches, layered) = match config::layer(matches, std::env::args_os().collect()) {
+        Ok(layered) => layered,
+        Err(error) => {
+            exit::report(&error, None, 1).print();
+            return error.exit().into();
+        }
+    };
+    let mut cli = Cli::from_arg_matches(&matches).unwrap_or_else(|e| e.exit());
+    cli.layered = layered;
+    if let (Command::Sim(args), Some(sim)) = (&mut cli.command, matches.subcommand_matches("sim")) {
+        args.pair_by_position(sim);
+    }
+    init_logging(cli.verbose);
+    cli.layered.log();
     if cli.command.needs_bus()
         && cli.connection.port.is_none()
         && cli.connection.tcp.is_none()
