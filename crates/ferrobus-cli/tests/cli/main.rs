@@ -4,10 +4,14 @@
 #![cfg(unix)] // the servers of these tests sit on ptys as well as TCP
 
 mod bench_failures;
+mod completions;
+mod config;
 mod errors;
 mod line_settings;
 mod offline;
 mod output;
+mod package;
+mod ports;
 mod read;
 mod reopen;
 mod server;
