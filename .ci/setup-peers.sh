@@ -29,6 +29,8 @@ CARGO="${CARGO:-cargo}"
 PYMODBUS_VERSION="3.16.1"
 PYSERIAL_VERSION="3.5"
 APT_PACKAGES=(socat libmodbus-dev mbpoll libudev-dev pkg-config gcc)
+# The man page tests render with `man -l` (man-db) and groff's nroff.
+APT_PACKAGES+=(man-db groff-base)
 export DEBIAN_FRONTEND=noninteractive
 
 IN_CI=false

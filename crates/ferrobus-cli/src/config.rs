@@ -346,7 +346,12 @@ fn chosen_connection<'f>(
 /// The file's settings put under the command line's, as new arguments for clap; and where
 /// each effective setting came from. `args` is the command line, its program name first.
 pub(crate) fn layer(matches: ArgMatches, args: Vec<OsString>) -> Result<(ArgMatches, Layered), CliError> {
-    if matches.subcommand_name().is_some_and(|name| WITHOUT_CONNECTION.contains(&name)) {
+    if let Some(name) = matches.subcommand_name().filter(|name| WITHOUT_CONNECTION.contains(name)) {
+        if let Some(option) = ["config", "conn"].into_iter().find(|id| given(&matches, id)) {
+            return Err(CliError::Usage(format!(
+                "--{option} is not used by `{name}`: it reads no connection settings; leave it out"
+            )));
+        }
         return Ok((matches, Layered::default()));
     }
     let conn = matches.get_one::<String>("conn").cloned();

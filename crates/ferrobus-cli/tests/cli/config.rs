@@ -244,8 +244,10 @@ fn a_broken_file_in_the_default_place_is_an_error_even_without_conn() {
     dir.file("ferrobus/config.toml", "[defaults]\nbaud = \"fast\"\n");
     let out = ferrobus().env("XDG_CONFIG_HOME", &dir.0).args(["config", "show"]).assert().code(2);
     assert!(stderr(&out).contains("[defaults]: invalid value 'fast' for '--baud"), "{}", stderr(&out));
-    // Commands that use no connection setting do not read it.
+    // Commands that use no connection setting do not read it, and refuse --conn.
     ferrobus().env("XDG_CONFIG_HOME", &dir.0).args(["crc", "01 03"]).assert().success();
+    let out = ferrobus().env("XDG_CONFIG_HOME", &dir.0).args(["crc", "--conn", "a", "01 03"]).assert().code(2);
+    assert!(stderr(&out).contains("--conn is not used by `crc`"), "{}", stderr(&out));
 }
 
 #[test]
