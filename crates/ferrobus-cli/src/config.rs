@@ -210,13 +210,17 @@ impl File {
         let shape: FileShape = toml::from_str(text)
             .map_err(|e| CliError::Usage(format!("settings file {}: {}", path.display(), e.to_string().trim_end())))?;
         let options = connection_options();
+        let command = Cli::command();
         let at = |span: std::ops::Range<usize>, table: &str, what: String| {
             let (line, col) = line_col(text, span.start);
             CliError::Usage(format!("{}:{line}:{col}: {table}: {what}", path.display()))
         };
         let table = |name: &str, table: &Table| -> Result<BTreeMap<String, Vec<String>>, CliError> {
             let mut out = BTreeMap::new();
-            for (key, value) in table {
+            // In the file's order, so that an error points at the later of two settings.
+            let mut entries: Vec<_> = table.iter().collect();
+            entries.sort_by_key(|(key, _)| key.span().start);
+            for (key, value) in entries {
                 let typed = key.get_ref().replace('_', "-");
                 let Some(option) = options.iter().find(|o| o.long == typed) else {
                     let known: Vec<&str> = options.iter().map(|o| o.long.as_str()).collect();
@@ -228,6 +232,15 @@ impl File {
                 };
                 if out.contains_key(&option.id) {
                     return Err(at(key.span(), name, format!("'{}' is given twice", option.long)));
+                }
+                if let Some(other) =
+                    options.iter().find(|o| out.contains_key(&o.id) && conflict(&command, &o.id, &option.id))
+                {
+                    return Err(at(
+                        key.span(),
+                        name,
+                        format!("'{}' and '{}' cannot both be set (one bus per connection)", other.long, option.long),
+                    ));
                 }
                 let values = values(option, value.get_ref()).map_err(|what| at(value.span(), name, what))?;
                 for v in values.iter().filter(|_| !option.flag) {
@@ -543,6 +556,12 @@ mod tests {
         assert!(error.contains("line 2"), "{error}");
         let error = parse("[conection.a]\nport = \"x\"\n").unwrap_err();
         assert!(error.contains("line 1") && error.contains("conection"), "{error}");
+    }
+
+    #[test]
+    fn two_buses_in_one_table_are_an_error_at_the_second() {
+        let error = parse("[connection.a]\nport = \"/dev/ttyUSB0\"\ntcp = \"plc\"\n").unwrap_err();
+        assert!(error.starts_with("c.toml:3:1: [connection.a]: 'port' and 'tcp' cannot both be set"), "{error}");
     }
 
     #[test]

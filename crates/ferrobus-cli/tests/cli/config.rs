@@ -271,3 +271,13 @@ fn conn_without_a_file_and_a_missing_config_file_are_errors() {
     let out = ferrobus().args(["--config", missing.to_str().unwrap(), "config", "show"]).assert().code(2);
     assert!(stderr(&out).contains(&format!("cannot read the settings file {}", missing.display())), "{}", stderr(&out));
 }
+
+#[test]
+fn a_flag_set_false_in_a_connection_turns_off_the_defaults_true() {
+    let dir = Scratch::new("config-flag");
+    let path = dir.file("ferrobus/config.toml", "[defaults]\necho = true\n[connection.quiet]\necho = false\n");
+    let doc = show(&dir.0, &[]);
+    assert_eq!(setting(&doc, "echo"), pair("true", &format!("defaults in {}", path.display())));
+    let doc = show(&dir.0, &["--conn", "quiet"]);
+    assert_eq!(setting(&doc, "echo"), pair("false", &format!("connection quiet in {}", path.display())));
+}
