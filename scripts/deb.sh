@@ -93,14 +93,19 @@ License: MIT or Apache-2.0
  On Debian systems the Apache License 2.0 is in /usr/share/common-licenses/Apache-2.0.
 COPYRIGHT
 size="$(du -sk "$pkg/usr" | cut -f1)"
+# The newest glibc symbol version the binary needs (readelf reads any architecture's ELF).
+glibc="$(readelf -W -V "$pkg/usr/bin/ferrobus" | grep -o 'GLIBC_[0-9][0-9.]*' | sed 's/GLIBC_//' | sort -uV | tail -1)"
+depends="libc6${glibc:+ (>= $glibc)}"
+# No one's mailbox: set DEB_MAINTAINER="Name <address>" for a published package.
+maintainer="${DEB_MAINTAINER:-ferrobus developers <ferrobus@invalid>}"
 mkdir -p "$pkg/DEBIAN"
 cat >"$pkg/DEBIAN/control" <<CONTROL
 Package: ferrobus
 Version: $version
 Architecture: $arch
-Maintainer: ferrobus developers <ferrobus@users.noreply.github.com>
+Maintainer: $maintainer
 Installed-Size: $size
-Depends: libc6
+Depends: $depends
 Section: utils
 Priority: optional
 Homepage: $(sed -n 's/^repository = "\(.*\)"/\1/p' "$root/Cargo.toml" | head -1)

@@ -3,9 +3,10 @@
 #
 #   x86_64-unknown-linux-gnu    built here         dist/ferrobus-VERSION-x86_64-unknown-linux-gnu.tar.gz
 #                                                  dist/ferrobus_VERSION_amd64.deb
-#   aarch64-unknown-linux-gnu   cross-built: rustup target aarch64-unknown-linux-gnu and the
-#                               gcc-aarch64-linux-gnu linker (.ci/setup-cross.sh installs both);
-#                               a Raspberry Pi 3/4/5 on a 64-bit OS
+#   aarch64-unknown-linux-gnu   cross-built (a Raspberry Pi 3/4/5 on a 64-bit OS); needs
+#                               `rustup target add aarch64-unknown-linux-gnu` and
+#                               `apt-get install gcc-aarch64-linux-gnu libc6-dev-arm64-cross`
+#                               (with qemu-user, `qemu-aarch64 -L /usr/aarch64-linux-gnu` runs it)
 #                                                  dist/ferrobus-VERSION-aarch64-unknown-linux-gnu.tar.gz
 #                                                  dist/ferrobus_VERSION_arm64.deb
 #   x86_64-pc-windows-gnu       cross-built with mingw-w64
@@ -78,6 +79,10 @@ for target in $targets; do
         ;;
     aarch64-unknown-linux-gnu)
         step "$target"
+        command -v "$CARGO_TARGET_AARCH64_UNKNOWN_LINUX_GNU_LINKER" >/dev/null || {
+            echo "release: no $CARGO_TARGET_AARCH64_UNKNOWN_LINUX_GNU_LINKER: apt-get install gcc-aarch64-linux-gnu libc6-dev-arm64-cross" >&2
+            exit 1
+        }
         build "$target"
         bin="$target_dir/$target/release/ferrobus"
         file "$bin" 2>/dev/null | grep -q 'ARM aarch64' || { echo "release: $bin is not an aarch64 binary" >&2; exit 1; }
