@@ -66,6 +66,8 @@ fn setting(doc: &Value, key: &str) -> Option<(String, String)> {
         .map(|s| (s["value"].as_str().unwrap().to_string(), s["source"].as_str().unwrap().to_string()))
 }
 
+/// What [`setting`] returns for a setting with this value and source.
+#[expect(clippy::unnecessary_wraps, reason = "compared with setting()'s Option")]
 fn pair(value: &str, source: &str) -> Option<(String, String)> {
     Some((value.to_string(), source.to_string()))
 }

@@ -25,9 +25,12 @@ fn the_deb_unpacks_and_its_ferrobus_runs_version_and_demo_with_man_pages_complet
         .unwrap();
     assert!(out.status.success(), "deb.sh: {}", String::from_utf8_lossy(&out.stderr));
     let deb = String::from_utf8(out.stdout).unwrap().trim().to_string();
-    assert!(deb.ends_with(".deb") && Path::new(&deb).exists(), "{deb}");
+    assert!(Path::new(&deb).extension().is_some_and(|e| e == "deb") && Path::new(&deb).exists(), "{deb}");
 
-    let info = Command::new("dpkg-deb").args(["--field", &deb, "Package", "Version", "Architecture", "Depends"]).output().unwrap();
+    let info = Command::new("dpkg-deb")
+        .args(["--field", &deb, "Package", "Version", "Architecture", "Depends"])
+        .output()
+        .unwrap();
     let info = String::from_utf8(info.stdout).unwrap();
     assert!(info.contains("Package: ferrobus") && info.contains("Version: 0.1.0"), "{info}");
     assert!(info.contains("Depends: libc6 (>= 2."), "the glibc the binary needs: {info}");

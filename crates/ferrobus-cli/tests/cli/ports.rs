@@ -4,6 +4,7 @@
 use assert_cmd::assert::OutputAssertExt;
 use serde_json::Value;
 
+#[cfg(target_os = "linux")]
 use crate::config::Scratch;
 use crate::server::{ferrobus, stderr, stdout};
 
