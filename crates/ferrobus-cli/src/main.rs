@@ -10,7 +10,9 @@
 //! - [`value`]: typed values (`--type`, `--word-order`);
 //! - [`output`]: tables, `--csv` and `--json`;
 //! - [`exit`]: error reports with hints, and the exit codes;
-//! - [`hex`]: hex input as people type it.
+//! - [`hex`]: hex input as people type it;
+//! - [`config`]: the settings file (`--config`, `--conn NAME`, `[defaults]`) under the command
+//!   line: every option of `ConnectArgs` is a key there by itself, checked by its own parser.
 //!
 //! To add a command: a file with an `Args` struct and an `async fn run(&ConnectArgs, &Args)`,
 //! a variant in [`Command`], and an arm in [`dispatch`] (and in [`Command::needs_bus`] if it
