@@ -31,6 +31,8 @@ PYSERIAL_VERSION="3.5"
 APT_PACKAGES=(socat libmodbus-dev mbpoll libudev-dev pkg-config gcc)
 # The man page tests render with `man -l` (man-db) and groff's nroff.
 APT_PACKAGES+=(man-db groff-base)
+# The completion tests load the zsh script too (bash is there already).
+APT_PACKAGES+=(zsh)
 export DEBIAN_FRONTEND=noninteractive
 
 IN_CI=false

@@ -1,5 +1,6 @@
 //! `ferrobus completions` loaded by bash (`complete -p ferrobus`, then a Tab completed through
-//! the script: commands, saved connections, built-in profiles), the other shells' scripts, and
+//! the script: commands, saved connections, built-in profiles) and by zsh (compdef, and the
+//! engine answering zsh's request), the other shells' scripts, and
 //! `ferrobus man` rendered by `man -l` without warnings.
 
 use std::process::Command;
@@ -74,6 +75,35 @@ fn bash_completes_commands_saved_connections_and_built_in_profiles() {
     assert_eq!(tab(&dir, &["ferrobus", "read", "--conn", "p"]), ["plc"]);
     assert_eq!(tab(&dir, &["ferrobus", "--device", "omr"]), ["omron-3g3rx"]);
     assert_eq!(tab(&dir, &["ferrobus", "--parity", "o"]), ["odd"]);
+}
+
+#[test]
+fn zsh_registers_the_completer_and_gets_saved_connections_through_it() {
+    if !required("zsh") {
+        return;
+    }
+    let dir = Scratch::new("complete-zsh");
+    let out = ferrobus().args(["completions", "zsh", "--completer", env!("CARGO_BIN_EXE_ferrobus")]).assert().success();
+    let script = dir.file("_ferrobus", &stdout(&out));
+    let program = format!(
+        "autoload -Uz compinit && compinit -u -d '{}' && source '{}' && print -r -- ${{_comps[ferrobus]}}",
+        dir.0.join("zcompdump").display(),
+        script.display()
+    );
+    let out = Command::new("zsh").arg("-fc").arg(program).output().unwrap();
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    assert_eq!(String::from_utf8(out.stdout).unwrap(), "_clap_dynamic_completer_ferrobus\n");
+    // What the script's function asks at a Tab after `ferrobus --conn l`.
+    dir.file("ferrobus/config.toml", "[connection.line-a]\nport = \"/dev/ttyUSB0\"\n[connection.plc]\ntcp = \"plc\"\n");
+    let out = ferrobus()
+        .env("XDG_CONFIG_HOME", &dir.0)
+        .env("FERROBUS_COMPLETE", "zsh")
+        .env("_CLAP_COMPLETE_INDEX", "2")
+        .env("_CLAP_IFS", "\n")
+        .args(["--", "ferrobus", "--conn", "l"])
+        .assert()
+        .success();
+    assert_eq!(stdout(&out), "line-a");
 }
 
 #[test]
