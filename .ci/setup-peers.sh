@@ -34,6 +34,10 @@ APT_PACKAGES=(socat libmodbus-dev mbpoll libudev-dev pkg-config gcc)
 APT_PACKAGES+=(tshark)
 # openssl: the Modbus/TCP Security interop test makes a client certificate with it.
 APT_PACKAGES+=(openssl)
+# The man page tests render with `man -l` (man-db) and groff's nroff.
+APT_PACKAGES+=(man-db groff-base)
+# The completion tests load the zsh script too (bash is there already).
+APT_PACKAGES+=(zsh)
 export DEBIAN_FRONTEND=noninteractive
 
 IN_CI=false

@@ -62,3 +62,7 @@ echo "--- under wine: ferrobus.exe demo (its virtual line in-process, no pty)"
 demo="$(timeout --kill-after=10 60 tests/wine/run.sh "$exe" demo)"
 check "demo, the loop-back test" "echoed 0x12 0x34" "$(grep -m1 echoed <<<"$demo")"
 check "demo, the drive ramps" "running" "$(grep -m1 running <<<"$demo")"
+
+echo "--- under wine: ferrobus.exe ports (SetupAPI through serialport; wine lists the COM ports it maps)"
+ports="$(timeout --kill-after=10 60 tests/wine/run.sh "$exe" ports --json)"
+check "ports --json" '"ports"' "$ports"

@@ -8,6 +8,7 @@
 #            (x86_64-pc-windows-gnu) and macOS (x86_64-apple-darwin)
 #   tests    cargo test --workspace: unit, property, engine, line, simulator, CLI, and the
 #            interop tests against libmodbus, pymodbus, tokio-modbus and mbpoll
+#            (also the Debian package: scripts/deb.sh, dpkg -x, the unpacked ferrobus run)
 #   no_std   ferrobus-proto built for a Cortex-M (thumbv7em-none-eabihf)
 #   docs     cargo doc with warnings denied (every public item documented, links resolve)
 #   windows  the Windows build under wine: proto, simulator and IO unit tests, and ferrobus.exe

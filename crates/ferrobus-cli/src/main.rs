@@ -10,7 +10,9 @@
 //! - [`value`]: typed values (`--type`, `--word-order`);
 //! - [`output`]: tables, `--csv` and `--json`;
 //! - [`exit`]: error reports with hints, and the exit codes;
-//! - [`hex`]: hex input as people type it.
+//! - [`hex`]: hex input as people type it;
+//! - [`config`]: the settings file (`--config`, `--conn NAME`, `[defaults]`) under the command
+//!   line: every option of `ConnectArgs` is a key there by itself, checked by its own parser.
 //!
 //! To add a command: a file with an `Args` struct and an `async fn run(&ConnectArgs, &Args)`,
 //! a variant in [`Command`], and an arm in [`dispatch`] (and in [`Command::needs_bus`] if it
@@ -19,6 +21,8 @@
 mod address;
 mod backup;
 mod bench;
+mod completions;
+mod config;
 mod connect;
 mod crc;
 mod demo;
@@ -31,8 +35,10 @@ mod info;
 mod interrupt;
 #[cfg(unix)]
 mod line;
+mod man;
 mod mask;
 mod output;
+mod ports;
 mod profile;
 mod raw;
 mod read;
@@ -80,6 +86,14 @@ pub(crate) struct Cli {
     /// The bus and how to talk on it.
     #[command(flatten)]
     connection: ConnectArgs,
+
+    /// The settings file and a saved connection from it.
+    #[command(flatten)]
+    settings: config::ConfigArgs,
+
+    /// The effective settings and where each came from (filled after parsing).
+    #[arg(skip)]
+    layered: config::Layered,
 
     /// More logging on stderr: -v info, -vv debug, -vvv trace (RUST_LOG overrides)
     #[arg(short, long, action = clap::ArgAction::Count, global = true)]
@@ -136,6 +150,14 @@ enum Command {
     Sniff(sniff::SniffArgs),
     /// Modbus/TCP clients to RTU serial lines: routing by unit, one queue per line, the gateway exceptions
     Gateway(gateway::GatewayArgs),
+    /// The serial ports the OS knows: USB ids, manufacturer, product, serial number, /dev/serial/by-id
+    Ports(ports::PortsArgs),
+    /// Saved connections and defaults: `config show` prints the effective settings and their sources
+    Config(config::ConfigCommandArgs),
+    /// A completion script for bash, zsh, fish, powershell or elvish (see README: Install)
+    Completions(completions::CompletionsArgs),
+    /// Manual pages in roff: ferrobus(1) on stdout, or every page into --dir
+    Man(man::ManArgs),
 }
 
 impl Command {
@@ -149,6 +171,10 @@ impl Command {
                 | Command::Sim(sim::SimArgs { pty: true, .. })
                 | Command::Profile(_)
                 | Command::Diff(backup::diff::DiffArgs { other: Some(_), .. })
+                | Command::Ports(_)
+                | Command::Config(_)
+                | Command::Completions(_)
+                | Command::Man(_)
         )
     }
 }
@@ -182,6 +208,10 @@ async fn dispatch(cli: &Cli) -> Result<(), CliError> {
         Command::Restore(args) => backup::restore::run(connection, args).await,
         Command::Sniff(args) => sniff::run(connection, args).await,
         Command::Gateway(args) => gateway::run(connection, args).await,
+        Command::Ports(args) => ports::run(args),
+        Command::Config(args) => config::run(&cli.layered, args),
+        Command::Completions(args) => completions::run(args),
+        Command::Man(args) => man::run(args),
     }
 }
 
@@ -236,6 +266,8 @@ fn refuse_ignored_options(matches: &clap::ArgMatches) -> Result<(), CliError> {
     let (used, why): (&[&str], &str) = match name {
         "crc" => (&[], "crc works offline and opens no bus"),
         "demo" => (&[], "demo runs its own virtual line (its baud rate is --line-baud)"),
+        "ports" => (&[], "ports lists what the OS knows and opens no port"),
+        "completions" | "man" => (&[], "it writes text made from the command definition and opens no bus"),
         // `line --echo` is the line's own option.
         "line" => (
             &["baud", "parity", "data_bits", "stop_bits", "echo"],
@@ -292,8 +324,23 @@ fn init_logging(verbose: u8) {
 }
 
 fn main() -> ExitCode {
+    // At a Tab, the shell's completion script runs ferrobus with FERROBUS_COMPLETE set: answer, exit.
+    clap_complete::CompleteEnv::with_factory(completions::command).var(completions::VAR).complete();
     let matches = Cli::command().try_get_matches().unwrap_or_else(|e| explain_parse_error(e).exit());
+    if let Err(error) = refuse_ignored_options(&matches) {
+        exit::report(&error, None, 1).print();
+        return error.exit().into();
+    }
+    // The settings file's connection and defaults, under the command line's options.
+    let (matches, layered) = match config::layer(matches, std::env::args_os().collect()) {
+        Ok(layered) => layered,
+        Err(error) => {
+            exit::report(&error, None, 1).print();
+            return error.exit().into();
+        }
+    };
     let mut cli = Cli::from_arg_matches(&matches).unwrap_or_else(|e| e.exit());
+    cli.layered = layered;
     if let (Command::Sim(args), Some(sim)) = (&mut cli.command, matches.subcommand_matches("sim")) {
         args.pair_by_position(sim);
     }
@@ -301,10 +348,7 @@ fn main() -> ExitCode {
         args.units_from(&matches, sniff);
     }
     init_logging(cli.verbose);
-    if let Err(error) = refuse_ignored_options(&matches) {
-        exit::report(&error, None, 1).print();
-        return error.exit().into();
-    }
+    cli.layered.log();
     if cli.command.needs_bus()
         && cli.connection.port.is_none()
         && cli.connection.tcp.is_none()

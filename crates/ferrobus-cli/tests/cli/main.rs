@@ -5,12 +5,16 @@
 
 mod backup;
 mod bench_failures;
+mod completions;
+mod config;
 mod device;
 mod errors;
 mod gateway;
 mod line_settings;
 mod offline;
 mod output;
+mod package;
+mod ports;
 mod read;
 mod reopen;
 mod scan;

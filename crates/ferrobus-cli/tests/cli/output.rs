@@ -135,6 +135,7 @@ fn spawn(args: &[&str]) -> Child {
     Command::new("env")
         .arg("--default-signal=INT")
         .arg(env!("CARGO_BIN_EXE_ferrobus"))
+        .env("XDG_CONFIG_HOME", crate::server::no_settings())
         .args(args)
         .stdout(Stdio::piped())
         .stderr(Stdio::piped())

@@ -3,6 +3,7 @@
 
 use std::io::{Read, Write};
 use std::net::TcpListener as StdListener;
+use std::path::Path;
 use std::process::Command;
 use std::sync::mpsc;
 use std::thread;
@@ -234,7 +235,15 @@ pub(crate) fn pty_server(ascii: bool) -> String {
 
 /// The binary under test.
 pub(crate) fn ferrobus() -> Command {
-    Command::new(env!("CARGO_BIN_EXE_ferrobus"))
+    let mut command = Command::new(env!("CARGO_BIN_EXE_ferrobus"));
+    command.env("XDG_CONFIG_HOME", no_settings());
+    command
+}
+
+/// An `XDG_CONFIG_HOME` without a settings file: the tests do not read the developer's (a test
+/// that wants one sets its own).
+pub(crate) fn no_settings() -> std::path::PathBuf {
+    Path::new(env!("CARGO_TARGET_TMPDIR")).join("no-settings")
 }
 
 /// Runs the binary without a server.
@@ -303,6 +312,7 @@ impl Sim {
     pub(crate) fn pty(args: &[&str]) -> Sim {
         use std::io::BufRead;
         let mut child = std::process::Command::new(env!("CARGO_BIN_EXE_ferrobus"))
+            .env("XDG_CONFIG_HOME", no_settings())
             .args(["sim", "--pty", "--duration", "60s"])
             .args(args)
             .stdout(std::process::Stdio::piped())
