@@ -235,7 +235,7 @@ fn explain_parse_error(error: clap::Error) -> clap::Error {
 }
 
 /// The connection options, by clap id (the long option is the id with `-` for `_`).
-const CONNECTION_OPTIONS: [&str; 21] = [
+const CONNECTION_OPTIONS: [&str; 22] = [
     "port",
     "tcp",
     "rtu_tcp",
@@ -257,6 +257,7 @@ const CONNECTION_OPTIONS: [&str; 21] = [
     "cert",
     "key",
     "ca",
+    "device",
 ];
 
 /// Refuses the connection options that `--help` lists for every command but that a command
@@ -267,6 +268,7 @@ fn refuse_ignored_options(matches: &clap::ArgMatches) -> Result<(), CliError> {
         "crc" => (&[], "crc works offline and opens no bus"),
         "demo" => (&[], "demo runs its own virtual line (its baud rate is --line-baud)"),
         "ports" => (&[], "ports lists what the OS knows and opens no port"),
+        "profile" => (&[], "profile works offline on the profile it is given as its argument"),
         "completions" | "man" => (&[], "it writes text made from the command definition and opens no bus"),
         // `line --echo` is the line's own option.
         "line" => (

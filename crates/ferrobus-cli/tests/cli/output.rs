@@ -277,13 +277,15 @@ fn line_refuses_a_dead_endpoint_beyond_its_drops() {
 }
 
 #[test]
-fn connection_options_that_crc_demo_and_line_would_ignore_are_refused() {
+fn connection_options_that_crc_demo_line_and_profile_would_ignore_are_refused() {
     for (args, want) in [
         (&["--port", "/dev/ttyUSB0", "crc", "01"][..], "--port is not used by `crc`: crc works offline"),
         (&["crc", "--tcp", "10.0.0.1", "--baud", "9600", "01"], "--tcp, --baud are not used by `crc`"),
         (&["--tcp", "10.0.0.1", "demo"], "--tcp is not used by `demo`: demo runs its own virtual line"),
         (&["line", "--port", "/dev/ttyUSB0"], "--port is not used by `line`: line makes its own ptys"),
         (&["line", "--tcp", "10.0.0.1:502", "--unit", "3"], "--tcp, --unit are not used by `line`"),
+        (&["--device", "omron-3g3rx", "crc", "01"], "--device is not used by `crc`"),
+        (&["--device", "omron-3g3rx", "profile", "show", "sdp-servo"], "--device is not used by `profile`"),
     ] {
         let out = ferrobus().args(args).output().unwrap();
         let err = text(&out.stderr);
