@@ -96,7 +96,7 @@ for target in $targets; do
         ;;
     x86_64-apple-darwin)
         step "$target: cargo check only (no macOS linker or SDK on this machine)"
-        cargo check --release --locked -p ferrobus-cli --bin ferrobus --target "$target"
+        (source .ci/darwin-env.sh && cargo check --release --locked -p ferrobus-cli --bin ferrobus --target "$target")
         ;;
     *)
         echo "release: no recipe for $target" >&2

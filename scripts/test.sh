@@ -50,10 +50,12 @@ step "lint: Windows (x86_64-pc-windows-gnu)"
 cargo clippy --workspace --all-targets --locked --target x86_64-pc-windows-gnu -- -D warnings
 
 step "lint: macOS (x86_64-apple-darwin)"
-# No SDK here: criterion's one C file (alloca) is compiled by clang, freestanding; a check
-# links nothing.
-CC_x86_64_apple_darwin=clang CFLAGS_x86_64_apple_darwin=-ffreestanding AR_x86_64_apple_darwin=llvm-ar \
+# No SDK here: the C that crates build is compiled by clang, freestanding (.ci/darwin-env.sh);
+# a check links nothing.
+(
+    source .ci/darwin-env.sh
     cargo clippy --workspace --all-targets --locked --target x86_64-apple-darwin -- -D warnings
+)
 
 step "tests"
 cargo test --workspace --locked
