@@ -429,9 +429,9 @@ type Problem = (Option<usize>, String);
 
 /// The profiles compiled into the binary.
 pub const BUILTIN: &[(&str, &str)] = &[
-    ("omron-3g3rx", include_str!("../profiles/omron-3g3rx.toml")),
-    ("sdp-servo", include_str!("../profiles/sdp-servo.toml")),
-    ("generic", include_str!("../profiles/generic.toml")),
+    ("omron-3g3rx", include_str!("../../ferrobus-profile/profiles/omron-3g3rx.toml")),
+    ("sdp-servo", include_str!("../../ferrobus-profile/profiles/sdp-servo.toml")),
+    ("generic", include_str!("../../ferrobus-profile/profiles/generic.toml")),
 ];
 
 impl Profile {
