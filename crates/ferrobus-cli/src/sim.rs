@@ -19,7 +19,7 @@ use ferrobus::server::{ServerEvent, ServerOptions, Shared, TcpCounts, TcpLimits,
 use ferrobus::{Framing, Timer, Transport};
 use ferrobus_proto::ExceptionCode;
 use ferrobus_proto::slave::{Disposition, SlaveConfig, SlaveEvent, UnitSet};
-use ferrobus_sim::{Device, FaultFilter, Faults, Profile, Sim, Unserved, tokio_clock};
+use ferrobus_sim::{Device, FaultFilter, Faults, Profile, ProfileFaults, Sim, Unserved, tokio_clock};
 use hdrhistogram::Histogram;
 
 use crate::connect::{ConnectArgs, Target, parse_duration};

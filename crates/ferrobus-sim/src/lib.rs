@@ -25,6 +25,6 @@ pub mod sim;
 
 pub use device::Device;
 pub use fault::Faults;
-pub use profile::Profile;
+pub use profile::{Profile, ProfileFaults};
 pub use rule::Rule;
 pub use sim::{FaultFilter, Sim, SimClock, Unserved, tokio_clock};

@@ -12,20 +12,9 @@
 
 use std::collections::HashMap;
 
-use crate::profile::{Access, BitDef, Profile, RegisterDef, WordOrder};
+use crate::profile::{Access, Point, Profile, Value};
 
-/// The four tables of the data model.
-#[derive(Clone, Copy, PartialEq, Eq, Hash, Debug)]
-pub enum Table {
-    /// Coils (read/write bits).
-    Coils,
-    /// Discrete inputs (read-only bits).
-    DiscreteInputs,
-    /// Holding registers (read/write words).
-    Holding,
-    /// Input registers (read-only words).
-    Input,
-}
+pub use crate::profile::Table;
 
 /// Why an access is refused; the device turns it into its exception code.
 #[derive(Clone, Copy, PartialEq, Eq, Debug)]
@@ -47,57 +36,63 @@ pub struct Item {
     pub table: Table,
     /// Wire address of its first register or bit.
     pub address: u16,
-    /// Registers per item: 1, or 2 for a 32-bit pair (1 for bits).
+    /// Registers per item: 1, 2, 4 or a string's length (1 for bits).
     pub size: u16,
-    /// Word order of a pair.
-    pub word_order: WordOrder,
     /// Name (unique within the profile, or shared by a run of plain registers).
     pub name: String,
     /// Description.
     pub description: String,
-    /// Engineering unit.
-    pub unit: Option<String>,
-    /// Engineering value = raw × scale.
-    pub scale: Option<f64>,
-    /// Range of raw values a write may set.
-    pub min: Option<i64>,
-    /// Range of raw values a write may set.
-    pub max: Option<i64>,
-    /// Whether raw values are signed.
-    pub signed: bool,
     /// Access.
     pub access: Access,
     /// Whether it may change while the drive runs.
     pub while_running: bool,
+    /// The profile's point, for its type, order and range (none for a plain table).
+    pub point: Option<Point>,
 }
 
 impl Item {
-    /// Decodes the raw value from its registers (`words` in address order).
+    /// Decodes the value from its registers (`words` in address order): an integer as is, a
+    /// float rounded, text as 0.
     pub fn decode(&self, words: &[u16]) -> i64 {
-        let raw: u32 = match (self.size, words) {
-            (2, [a, b, ..]) => self.word_order.join([*a, *b]),
-            (_, [a, ..]) => u32::from(*a),
-            _ => 0,
+        match &self.point {
+            #[allow(clippy::cast_possible_truncation)]
+            Some(point) => match point.decode(words.get(..usize::from(self.size)).unwrap_or(words)) {
+                Ok(Value::Int(n)) => i64::try_from(n).unwrap_or(if n < 0 { i64::MIN } else { i64::MAX }),
+                Ok(Value::Float(x)) => x.round() as i64,
+                Ok(Value::Bool(b)) => i64::from(b),
+                Ok(Value::Text(_)) | Err(_) => 0,
+            },
+            None => i64::from(words.first().copied().unwrap_or_default()),
+        }
+    }
+
+    /// Encodes an integer value into its registers, in address order (a float item takes it
+    /// as a float; out of the type's range it is clamped).
+    pub fn encode(&self, value: i64) -> Vec<u16> {
+        let Some(point) = &self.point else { return vec![value.cast_unsigned() as u16] };
+        #[allow(clippy::cast_precision_loss)]
+        let v = if point.value_type.is_float() { Value::Float(value as f64) } else { Value::Int(i128::from(value)) };
+        let (lo, hi) = point.value_type.integer_range();
+        let v = match v {
+            Value::Int(n) if point.value_type.is_integer() => Value::Int(n.clamp(lo, hi)),
+            other => other,
         };
-        match (self.signed, self.size) {
-            (true, 2) => i64::from(raw.cast_signed()),
-            (true, _) => i64::from((raw as u16).cast_signed()),
-            (false, _) => i64::from(raw),
+        point.encode(&v).unwrap_or_else(|_| vec![0; usize::from(self.size)])
+    }
+
+    /// Encodes the point's start value.
+    fn encode_default(&self) -> Vec<u16> {
+        match &self.point {
+            Some(point) => point.encode(&point.default).unwrap_or_else(|_| vec![0; usize::from(self.size)]),
+            None => vec![0],
         }
     }
 
-    /// Encodes a raw value into its registers, in address order.
-    pub fn encode(&self, value: i64) -> [u16; 2] {
-        // Two's complement in 32 bits: -1 is 0xFFFF_FFFF.
-        let raw = u32::try_from(value & 0xFFFF_FFFF).unwrap_or_default();
-        match self.size {
-            2 => self.word_order.split(raw),
-            _ => [raw as u16, 0],
-        }
-    }
-
-    fn in_range(&self, value: i64) -> bool {
-        self.min.is_none_or(|m| value >= m) && self.max.is_none_or(|m| value <= m)
+    fn in_range(&self, words: &[u16]) -> bool {
+        let Some(point) = &self.point else { return true };
+        let Ok(value) = point.decode(words) else { return false };
+        let Some(x) = value.as_f64() else { return true };
+        point.min.is_none_or(|m| x >= m) && point.max.is_none_or(|m| x <= m)
     }
 }
 
@@ -125,6 +120,8 @@ pub struct Memory {
     input: Space<u16>,
     items: Vec<Item>,
     by_name: HashMap<String, usize>,
+    /// Where unmapped addresses read as 0: `(table, first, last)` wire addresses.
+    spans: Vec<(Table, u16, u16)>,
 }
 
 impl Memory {
@@ -137,8 +134,8 @@ impl Memory {
             input: Space::new(),
             items: Vec::new(),
             by_name: HashMap::new(),
+            spans: Vec::new(),
         };
-        let base = u32::from(profile.addressing.base);
         let tables = [
             (Table::Coils, profile.tables.coils),
             (Table::DiscreteInputs, profile.tables.discrete_inputs),
@@ -156,18 +153,10 @@ impl Memory {
                 }
             }
         }
-        for def in &profile.coils {
-            m.add_bits(Table::Coils, def, base);
+        for point in profile.points() {
+            m.add_point(point);
         }
-        for def in &profile.discrete_inputs {
-            m.add_bits(Table::DiscreteInputs, def, base);
-        }
-        for def in &profile.registers {
-            m.add_registers(Table::Holding, def, base);
-        }
-        for def in &profile.inputs {
-            m.add_registers(Table::Input, def, base);
-        }
+        m.spans = Table::ALL.iter().flat_map(|&t| profile.spans(t).into_iter().map(move |(a, b)| (t, a, b))).collect();
         m
     }
 
@@ -188,51 +177,37 @@ impl Memory {
         }
     }
 
-    fn add_bits(&mut self, table: Table, def: &BitDef, base: u32) {
-        for i in 0..def.count {
-            let address = def.number - base + i;
-            let mut item = Item::plain(table, &def.name, def.access);
-            item.address = address as u16;
-            item.description.clone_from(&def.description);
-            let index = self.push_item(item);
-            if def.count == 1 {
-                self.by_name.insert(def.name.clone(), index as usize);
-            }
+    fn add_point(&mut self, point: &Point) {
+        let item = Item {
+            table: point.table,
+            address: point.address,
+            size: point.width,
+            name: point.code.clone(),
+            description: point.description.clone(),
+            access: point.access,
+            while_running: point.while_running,
+            point: Some(point.clone()),
+        };
+        let words = item.encode_default();
+        let (table, address, size) = (item.table, u32::from(item.address), u32::from(item.size));
+        let index = self.push_item(item);
+        self.by_name.insert(point.code.clone(), index as usize);
+        if table.is_bits() {
             self.own(table, address, index);
-            self.set_bit_raw(table, address as u16, def.default);
+            self.set_bit_raw(table, address as u16, point.default == Value::Bool(true));
+            return;
+        }
+        for (w, word) in (0..size).zip(words) {
+            self.own(table, address + w, index);
+            if let Some(v) = self.words_mut(table).get_mut((address + w) as usize) {
+                *v = word;
+            }
         }
     }
 
-    fn add_registers(&mut self, table: Table, def: &RegisterDef, base: u32) {
-        for i in 0..def.count {
-            let address = def.number - base + i * def.size;
-            let item = Item {
-                table,
-                address: address as u16,
-                size: def.size as u16,
-                word_order: def.word_order,
-                name: def.name.clone(),
-                description: def.description.clone(),
-                unit: def.unit.clone(),
-                scale: def.scale,
-                min: def.min,
-                max: def.max,
-                signed: def.signed,
-                access: def.access,
-                while_running: def.while_running,
-            };
-            let words = item.encode(def.default);
-            let index = self.push_item(item);
-            if def.count == 1 {
-                self.by_name.insert(def.name.clone(), index as usize);
-            }
-            for w in 0..def.size {
-                self.own(table, address + w, index);
-                if let Some(v) = self.words_mut(table).get_mut((address + w) as usize) {
-                    *v = words[w as usize];
-                }
-            }
-        }
+    /// Whether unmapped `address` of `table` lies in a span (and reads as 0).
+    fn in_span(&self, table: Table, address: u16) -> bool {
+        self.spans.iter().any(|&(t, first, last)| t == table && (first..=last).contains(&address))
     }
 
     fn words(&self, table: Table) -> &Space<u16> {
@@ -271,6 +246,10 @@ impl Memory {
         for (i, slot) in out.iter_mut().enumerate() {
             let a = usize::from(start) + i;
             if space.owner.get(a).is_none_or(|&o| o == NONE) {
+                if self.in_span(table, a as u16) {
+                    *slot = false;
+                    continue;
+                }
                 return Err(Refusal::Unmapped);
             }
             let wo = self.item_at(table, a as u16).is_some_and(|it| it.access == Access::Wo);
@@ -284,7 +263,13 @@ impl Memory {
         let space = self.words(table);
         for (i, slot) in out.iter_mut().enumerate() {
             let a = usize::from(start) + i;
-            let Some(item) = self.item_at(table, a as u16) else { return Err(Refusal::Unmapped) };
+            let Some(item) = self.item_at(table, a as u16) else {
+                if self.in_span(table, a as u16) {
+                    *slot = 0;
+                    continue;
+                }
+                return Err(Refusal::Unmapped);
+            };
             *slot = if item.access == Access::Wo { 0 } else { space.values.get(a).copied().unwrap_or_default() };
         }
         Ok(())
@@ -325,20 +310,20 @@ impl Memory {
             // The item's registers after the write: new values where written, old elsewhere
             // (a write of one half of a pair keeps the other half). A plain table is one item
             // owning many addresses, each its own register.
-            let first = if item.size == 1 { a } else { usize::from(item.address) };
-            let mut words = [0u16; 2];
-            for (w, word) in words.iter_mut().enumerate().take(usize::from(item.size)) {
-                let addr = first + w;
-                *word = if (usize::from(start)..end).contains(&addr) {
-                    values[addr - usize::from(start)]
-                } else {
-                    self.holding.values.get(addr).copied().unwrap_or_default()
-                };
-            }
-            let value = item.decode(&words);
-            if !item.in_range(value) {
+            let first = if item.point.is_none() { a } else { usize::from(item.address) };
+            let words: Vec<u16> = (first..first + usize::from(item.size))
+                .map(|addr| {
+                    if (usize::from(start)..end).contains(&addr) {
+                        values.get(addr - usize::from(start)).copied().unwrap_or_default()
+                    } else {
+                        self.holding.values.get(addr).copied().unwrap_or_default()
+                    }
+                })
+                .collect();
+            if !item.in_range(&words) {
                 return Err(Refusal::OutOfRange);
             }
+            let value = item.decode(&words);
             touched.push((owner as usize, value));
             // Past the item, and never in place whatever the map says.
             a = (first + usize::from(item.size)).max(a + 1);
@@ -380,7 +365,8 @@ impl Memory {
             Table::Holding | Table::Input => {
                 let a = usize::from(item.address);
                 let space = &self.words(item.table).values;
-                let words = [space.get(a).copied().unwrap_or_default(), space.get(a + 1).copied().unwrap_or_default()];
+                let words: Vec<u16> =
+                    (a..a + usize::from(item.size)).map(|i| space.get(i).copied().unwrap_or_default()).collect();
                 item.decode(&words)
             }
         }
@@ -427,16 +413,11 @@ impl Item {
             table,
             address: 0,
             size: 1,
-            word_order: WordOrder::HighFirst,
             name: name.to_string(),
             description: String::new(),
-            unit: None,
-            scale: None,
-            min: None,
-            max: None,
-            signed: false,
             access,
             while_running: true,
+            point: None,
         }
     }
 }

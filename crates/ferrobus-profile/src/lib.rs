@@ -1,0 +1,29 @@
+//! # ferrobus-profile: what a device is, in a file
+//!
+//! Device profiles in TOML — the register and coil map with codes, labels, types (16-, 32- and
+//! 64-bit integers, IEEE floats, strings) in the four word/byte orders, units, scaling,
+//! ranges, access, run-state rules, groups, enumerations, bit fields and dependencies; the
+//! device's per-request limits, numbering, spans and exception meanings — with no IO but
+//! reading the file.
+//!
+//! ```text
+//!   TOML ──Profile::load──▶ Profile ──points()/find()/group()──▶ Point
+//!   Point: decode(registers) → Value → show() "50.00 Hz";  parse("45Hz") → Value → encode()
+//!   plan(wanted, mapped, spans, limit) → the fewest read requests
+//! ```
+//!
+//! Built-in profiles: `omron-3g3rx`, `sdp-servo`, `generic` (see [`BUILTIN`]).
+
+mod codec;
+mod model;
+mod plan;
+mod point;
+
+pub use codec::{Value, ValueError};
+pub use model::{
+    Access, Addressing, BUILTIN, BitDef, Comm, DeviceSection, ExceptionMeaning, Exceptions, Fifo, Files, Limits,
+    ModelSection, Order, Polarity, Profile, ProfileError, RegisterDef, RunningRule, SpanDef, State, Table, Tables,
+    ValueType,
+};
+pub use plan::{Extent, PlanError, Request, plan};
+pub use point::Point;
