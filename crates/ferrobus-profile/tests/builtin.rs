@@ -137,6 +137,9 @@ fn the_a_b_c_and_h_groups_have_the_sj700_2_numbers_and_ranges() {
     assert_eq!(at("C029"), (0x141D, ValueType::U16, Some(0.0), Some(12.0)));
     // B-66 (H group).
     assert_eq!(point(&rx, "H004").show(&Value::Int(1)), "4 poles");
+    // H003: the capacity codes of the 3G3RX (I560) p.4-158 table.
+    assert_eq!(point(&rx, "H003").show(&Value::Int(13)), "11 kW");
+    assert_eq!(point(&rx, "H003").number, 0x1503);
     assert_eq!(at("H005"), (0x1505, ValueType::U32, Some(0.0), Some(80000.0)));
     assert_eq!(at("H020"), (0x1515, ValueType::U32, Some(1.0), Some(65530.0)));
     assert_eq!(point(&rx, "H306").number, 0x3507);
