@@ -6,7 +6,7 @@
 
 use std::collections::{BTreeMap, BTreeSet};
 
-use ferrobus_profile::{Access, BUILTIN, Order, Point, Profile, Table, Value, ValueType};
+use ferrobus_profile::{Access, BUILTIN, ModelSection, Order, Point, Polarity, Profile, Table, Value, ValueType};
 
 fn rx() -> Profile {
     Profile::load("omron-3g3rx").expect("the built-in 3G3RX profile loads")
@@ -269,8 +269,21 @@ fn every_3g3rx_entry_names_its_source_and_labels_are_unique() {
         }
     }
     // The facts that could not be confirmed for the 3G3RX say so.
-    for code in ["F003", "A001", "A002", "trip1-factor", "d102"] {
+    for code in ["F003", "A001", "A002", "trip-count", "d102"] {
         assert!(!point(&rx, code).confirmed, "{code} is marked unconfirmed");
     }
     assert!(point(&rx, "d001").confirmed && point(&rx, "A003").confirmed);
+}
+
+#[test]
+fn the_trip_monitor_and_direction_coil_are_as_the_3g3rx_manuals_show() {
+    let rx = rx();
+    // I560 p.4-169: reading 0012h-0013h gives 0007h, overvoltage (E07), and 0002h.
+    let factor = point(&rx, "trip1-factor");
+    assert_eq!((factor.number, factor.address), (0x0012, 0x0011));
+    assert_eq!(factor.show(&Value::Int(7)), "E07 overvoltage");
+    assert_eq!(point(&rx, "trip1-status").number, 0x0013);
+    // 3G3RX-V1 8-5-1: coil 0002h, 1 = reverse, 0 = forward; the simulator's polarity agrees.
+    assert_eq!(point(&rx, "direction").number, 0x0002);
+    assert!(matches!(rx.model, Some(ModelSection::Inverter { direction: Polarity::OneIsReverse, .. })));
 }
