@@ -10,7 +10,9 @@ use ferrobus::{Client, ClientConfig, Rs485, SerialConfig, Transport};
 use ferrobus_proto::codes::unit;
 use ferrobus_proto::frame::{DataBits, LineConfig, Parity, StopBits};
 
+use crate::address::AddressArgs;
 use crate::exit::CliError;
+use crate::value::{ValueArgs, WordOrder};
 
 /// Options that say how to reach the device.
 #[derive(Args, Clone, Debug)]
@@ -89,6 +91,78 @@ pub(crate) struct ConnectArgs {
     /// a serial port only while its path names the same device)
     #[arg(long = "no-reopen", global = true)]
     pub(crate) no_reopen: bool,
+
+    /// The device's profile: a built-in name or a TOML file; it sets the device's limits, word
+    /// order and numbering, and names its parameters for get and set
+    #[arg(long, global = true, value_name = "PROFILE")]
+    pub(crate) device: Option<String>,
+}
+
+impl ConnectArgs {
+    /// The `--device` profile, if one was given; a profile that does not load is a usage error
+    /// naming the file and the line.
+    pub(crate) fn profile(&self) -> Result<Option<ferrobus_profile::Profile>, CliError> {
+        self.device.as_deref().map(load_profile).transpose()
+    }
+
+    /// The `--device` profile, which `command` needs.
+    pub(crate) fn require_profile(&self, command: &str) -> Result<ferrobus_profile::Profile, CliError> {
+        self.profile()?.ok_or_else(|| {
+            CliError::Usage(format!(
+                "{command} needs --device PROFILE: a built-in one ({}) or a TOML file",
+                ferrobus_profile::BUILTIN.iter().map(|(n, _)| *n).collect::<Vec<_>>().join(", ")
+            ))
+        })
+    }
+}
+
+impl ConnectArgs {
+    /// `given` with the `--device` profile's numbering: one-based when its `[addressing] base`
+    /// is 1 and neither --one-based nor --modicon was given.
+    pub(crate) fn address_args(&self, given: AddressArgs) -> Result<AddressArgs, CliError> {
+        let Some(profile) = self.profile()? else { return Ok(given) };
+        Ok(AddressArgs { one_based: given.one_based || (!given.modicon && profile.addressing.base == 1), ..given })
+    }
+
+    /// `--max-per-request` if given, else the `--device` profile's limit for `table` (reads,
+    /// or writes with `write`), else none (the spec's).
+    pub(crate) fn max_per_request(
+        &self,
+        given: Option<u16>,
+        table: crate::address::Table,
+        write: bool,
+    ) -> Result<Option<u16>, CliError> {
+        if given.is_some() {
+            return Ok(given);
+        }
+        let Some(profile) = self.profile()? else { return Ok(None) };
+        let table = match table {
+            crate::address::Table::Coils => ferrobus_profile::Table::Coils,
+            crate::address::Table::Discrete => ferrobus_profile::Table::DiscreteInputs,
+            crate::address::Table::Holding => ferrobus_profile::Table::Holding,
+            crate::address::Table::Input => ferrobus_profile::Table::Input,
+        };
+        let limits = &profile.limits;
+        Ok(match (table.is_bits(), write) {
+            (true, false) => limits.read_coils,
+            (true, true) => limits.write_coils,
+            (false, false) => limits.read_registers,
+            (false, true) => limits.write_registers,
+        })
+    }
+
+    /// `given` with the `--device` profile's word order where none was given (ABCD is
+    /// high-first, CDAB low-first; the byte-swapped orders have no 32-bit --word-order).
+    pub(crate) fn values(&self, given: ValueArgs) -> Result<ValueArgs, CliError> {
+        let Some(profile) = self.profile()? else { return Ok(given) };
+        let order = if profile.order().words_low_first() { WordOrder::LowFirst } else { WordOrder::HighFirst };
+        Ok(given.or_order(Some(order)))
+    }
+}
+
+/// A profile by built-in name or path, as a usage error when it does not load.
+pub(crate) fn load_profile(name: &str) -> Result<ferrobus_profile::Profile, CliError> {
+    ferrobus_profile::Profile::load(name).map_err(|e| CliError::Usage(e.to_string()))
 }
 
 /// Parity, as typed. (Plain comments on the variants keep `--help` compact.)

@@ -99,6 +99,9 @@ pub(crate) enum CliError {
     },
     /// SIGINT or SIGTERM came; what was done has been written.
     Interrupted,
+    /// The device refused some of the work with exceptions, each already explained (in the
+    /// profile's words); the message sums them up.
+    Refused(String),
 }
 
 impl From<Error> for CliError {
@@ -135,6 +138,7 @@ impl CliError {
             CliError::Output { source, .. } if source.kind() == io::ErrorKind::BrokenPipe => Exit::BrokenPipe,
             CliError::Output { .. } => Exit::Output,
             CliError::Interrupted => Exit::Interrupted,
+            CliError::Refused(_) => Exit::Exception,
         }
     }
 }
@@ -173,7 +177,9 @@ pub(crate) fn report(error: &CliError, target: Option<&Target>, unit: u8) -> Rep
     match error {
         CliError::Modbus { error } => modbus_report(error, target, unit),
         CliError::Pdu(e) => Report { message: format!("invalid request: {}", pdu_words(e)), hints: Vec::new() },
-        CliError::Usage(message) | CliError::BadData(message) => Report { message: message.clone(), hints: Vec::new() },
+        CliError::Usage(message) | CliError::BadData(message) | CliError::Refused(message) => {
+            Report { message: message.clone(), hints: Vec::new() }
+        }
         CliError::MissingTarget => Report {
             message: "no bus given: use one of --port PATH, --tcp HOST[:PORT] or --rtu-tcp HOST:PORT".into(),
             hints: Vec::new(),

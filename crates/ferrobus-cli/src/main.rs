@@ -23,6 +23,7 @@ mod crc;
 mod demo;
 mod diag;
 mod exit;
+mod get;
 mod hex;
 mod info;
 mod interrupt;
@@ -30,9 +31,11 @@ mod interrupt;
 mod line;
 mod mask;
 mod output;
+mod profile;
 mod raw;
 mod read;
 mod readwrite;
+mod set;
 mod sim;
 mod target;
 #[cfg(not(unix))]
@@ -110,6 +113,12 @@ enum Command {
     Demo(demo::DemoArgs),
     /// FC03 reads back to back: transactions/s, latency and CPU time (the peer benchmark's format)
     Bench(bench::BenchArgs),
+    /// Read named parameters of a --device profile, scaled with their units
+    Get(get::GetArgs),
+    /// Write one named parameter of a --device profile, in its unit, checked first, read back
+    Set(set::SetArgs),
+    /// Device profiles: list the built-in ones, show a parameter table, check a file (offline)
+    Profile(profile::ProfileArgs),
 }
 
 impl Command {
@@ -117,7 +126,11 @@ impl Command {
     fn needs_bus(&self) -> bool {
         !matches!(
             self,
-            Command::Crc(_) | Command::Line(_) | Command::Demo(_) | Command::Sim(sim::SimArgs { pty: true, .. })
+            Command::Crc(_)
+                | Command::Line(_)
+                | Command::Demo(_)
+                | Command::Sim(sim::SimArgs { pty: true, .. })
+                | Command::Profile(_)
         )
     }
 }
@@ -142,6 +155,9 @@ async fn dispatch(cli: &Cli) -> Result<(), CliError> {
         Command::Line(args) => line::run(connection, args).await,
         Command::Demo(args) => demo::run(args).await,
         Command::Bench(args) => bench::run(connection, args).await,
+        Command::Get(args) => get::run(connection, args).await,
+        Command::Set(args) => set::run(connection, args).await,
+        Command::Profile(args) => profile::run(args),
     }
 }
 

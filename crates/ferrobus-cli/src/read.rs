@@ -68,7 +68,8 @@ pub(crate) fn quantity(n: usize) -> u16 {
 /// Runs `read`.
 pub(crate) async fn run(connection: &ConnectArgs, args: &ReadArgs) -> Result<(), CliError> {
     connection.refuse_broadcast_read()?;
-    let address = Address::parse(&args.address, args.table, args.address_args)?;
+    let address = Address::parse(&args.address, args.table, connection.address_args(args.address_args)?)?;
+    let values = connection.values(args.values)?;
     let table = args.table;
     if table.is_bits() && args.values.kind != ValueType::U16 {
         return Err(CliError::Usage(format!("--type applies to registers, not to {table}")));
@@ -79,7 +80,8 @@ pub(crate) async fn run(connection: &ConnectArgs, args: &ReadArgs) -> Result<(),
         return Err(PduError::QuantityOutOfRange { quantity: 0, min: 1, max: table.max_read() }.into());
     }
     address.check_span(items)?;
-    let max = per_request(args.max_per_request, table.max_read(), width, args.values.kind)?;
+    let max_per_request = connection.max_per_request(args.max_per_request, table, false)?;
+    let max = per_request(max_per_request, table.max_read(), width, args.values.kind)?;
     let pieces = split(address.wire, items, width, max);
     let mut interrupt = Interrupt::listen()?;
     let session = interrupt.unless(connection.open()).await.ok_or(CliError::Interrupted)??;
@@ -118,10 +120,10 @@ pub(crate) async fn run(connection: &ConnectArgs, args: &ReadArgs) -> Result<(),
             unit,
             function,
             address,
-            ReadData::Registers(&registers, args.values),
+            ReadData::Registers(&registers, values),
             requests,
         )),
-        other => output::register_rows(address, address.wire, &registers, args.values).render(other),
+        other => output::register_rows(address, address.wire, &registers, values).render(other),
     };
     output::print(&text)?;
     finish(interrupted, registers.len(), items, table)

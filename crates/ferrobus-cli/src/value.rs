@@ -69,8 +69,9 @@ pub(crate) struct ValueArgs {
     pub(crate) kind: ValueType,
 
     /// Register order of 32-bit values: high-first (Omron/Hitachi drives) or low-first
-    #[arg(long = "word-order", value_parser = parse_word_order, default_value = "high-first")]
-    pub(crate) word_order: WordOrder,
+    /// [default: high-first, or the --device profile's order]
+    #[arg(long = "word-order", value_parser = parse_word_order)]
+    pub(crate) word_order: Option<WordOrder>,
 
     /// Same as --word-order low-first
     #[arg(long, conflicts_with = "word_order")]
@@ -80,7 +81,16 @@ pub(crate) struct ValueArgs {
 impl ValueArgs {
     /// The word order, with `--swap` applied.
     pub(crate) fn order(self) -> WordOrder {
-        if self.swap { WordOrder::LowFirst } else { self.word_order }
+        if self.swap { WordOrder::LowFirst } else { self.word_order.unwrap_or_default() }
+    }
+
+    /// These options with `order` where neither --word-order nor --swap was given (a
+    /// `--device` profile's order).
+    pub(crate) fn or_order(mut self, order: Option<WordOrder>) -> Self {
+        if !self.swap && self.word_order.is_none() {
+            self.word_order = order;
+        }
+        self
     }
 
     /// Encodes each typed value into registers.

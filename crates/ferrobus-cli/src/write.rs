@@ -129,7 +129,7 @@ fn on_off(bits: &[bool]) -> String {
 pub(crate) async fn run(connection: &ConnectArgs, args: &WriteArgs) -> Result<(), CliError> {
     match &args.what {
         WriteCommand::Coil { address, value, address_args } => {
-            let address = Address::parse(address, Table::Coils, *address_args)?;
+            let address = Address::parse(address, Table::Coils, connection.address_args(*address_args)?)?;
             let value = parse_coil(value)?;
             let session = &connection.open().await?;
             session.client.write_single_coil(session.unit, address.wire, value).await?;
@@ -138,10 +138,11 @@ pub(crate) async fn run(connection: &ConnectArgs, args: &WriteArgs) -> Result<()
             Ok(())
         }
         WriteCommand::Coils { address, values, max_per_request, address_args } => {
-            let address = Address::parse(address, Table::Coils, *address_args)?;
+            let address = Address::parse(address, Table::Coils, connection.address_args(*address_args)?)?;
             let bits = values.iter().map(|v| parse_coil(v)).collect::<Result<Vec<_>, _>>()?;
             address.check_span(bits.len())?;
-            let max = per_request(*max_per_request, MAX_WRITE_COILS, 1, ValueType::U16)?;
+            let max_per_request = connection.max_per_request(*max_per_request, Table::Coils, true)?;
+            let max = per_request(max_per_request, MAX_WRITE_COILS, 1, ValueType::U16)?;
             let session = &connection.open().await?;
             for (start, n) in split(address.wire, bits.len(), 1, max) {
                 let from = usize::from(start - address.wire);
@@ -160,7 +161,8 @@ pub(crate) async fn run(connection: &ConnectArgs, args: &WriteArgs) -> Result<()
             Ok(())
         }
         WriteCommand::Register { address, value, multiple, values, address_args } => {
-            let address = Address::parse(address, Table::Holding, *address_args)?;
+            let address = Address::parse(address, Table::Holding, connection.address_args(*address_args)?)?;
+            let values = &connection.values(*values)?;
             let registers = values.encode_all(std::slice::from_ref(value))?;
             address.check_span(registers.len())?;
             let session = &connection.open().await?;
@@ -174,10 +176,12 @@ pub(crate) async fn run(connection: &ConnectArgs, args: &WriteArgs) -> Result<()
             write_registers(session, address, &registers, *values, MAX_WRITE_REGISTERS).await
         }
         WriteCommand::Registers { address, value, max_per_request, values, address_args } => {
-            let address = Address::parse(address, Table::Holding, *address_args)?;
+            let address = Address::parse(address, Table::Holding, connection.address_args(*address_args)?)?;
+            let values = &connection.values(*values)?;
             let registers = values.encode_all(value)?;
             address.check_span(registers.len())?;
-            let max = per_request(*max_per_request, MAX_WRITE_REGISTERS, values.kind.width(), values.kind)?;
+            let max_per_request = connection.max_per_request(*max_per_request, Table::Holding, true)?;
+            let max = per_request(max_per_request, MAX_WRITE_REGISTERS, values.kind.width(), values.kind)?;
             let session = &connection.open().await?;
             write_registers(session, address, &registers, *values, max).await
         }

@@ -369,6 +369,11 @@ impl Point {
             return self.fit(Value::Int(raw), typed);
         }
         let number = self.strip_unit(typed)?;
+        let unscaled = (self.scale - 1.0).abs() < f64::EPSILON && self.offset == 0.0;
+        if let (true, true, Ok(n)) = (unscaled, self.value_type.is_integer(), number.parse::<i128>()) {
+            // Exactly, past the 53 bits a float holds (u64, i64).
+            return self.fit(Value::Int(n), typed);
+        }
         let x: f64 = number.parse().map_err(|_| not_a_number())?;
         if !x.is_finite() {
             return Err(not_a_number());
@@ -506,6 +511,9 @@ mod tests {
         assert_eq!(p("DCBA").encode(&v).unwrap(), [0x8877, 0x6655, 0x4433, 0x2211]);
         let i = point("type='i64'");
         assert_eq!(i.decode(&[0xFFFF, 0xFFFF, 0xFFFF, 0xFFFE]).unwrap(), Value::Int(-2));
+        let u = point("type='u64'");
+        assert_eq!(u.parse("18446744073709551615").unwrap(), Value::Int(i128::from(u64::MAX)), "exact past 2^53");
+        assert!(matches!(u.parse("18446744073709551616"), Err(ValueError::Overflow { .. })));
     }
 
     #[test]

@@ -475,6 +475,37 @@ mod tests {
     }
 
     #[test]
+    fn unmapped_addresses_read_as_zero_inside_a_span_and_are_refused_outside() {
+        let text = "[device]\nname='x'\nvendor='v'\nproduct_code='p'\nrevision='1'\n[addressing]\nbase=1\n\
+                    [[registers]]\nnumber=0x1001\nname='a'\ndefault=7\n[[registers]]\nnumber=0x1004\nname='b'\n\
+                    [[span]]\ntable='holding'\nfirst=0x1001\nlast=0x1005\n";
+        let m = Memory::new(&Profile::parse(text, "span.toml").unwrap());
+        let mut out = [9u16; 5];
+        assert_eq!(m.read_registers(Table::Holding, 0x1000, &mut out), Ok(()));
+        assert_eq!(out, [7, 0, 0, 0, 0], "0x1002, 0x1003 and 0x1005 are holes in the span");
+        let mut past = [0u16; 6];
+        assert_eq!(m.read_registers(Table::Holding, 0x1000, &mut past), Err(Refusal::Unmapped), "0x1006 is outside");
+        assert_eq!(m.read_registers(Table::Input, 0x1001, &mut [0u16; 1]), Err(Refusal::Unmapped), "another table");
+        assert_eq!(m.check_write_registers(0x1001, &[1]), Err(Refusal::Unmapped), "a span is for reads only");
+    }
+
+    #[test]
+    fn every_type_is_laid_out_in_its_order_and_checked_whole() {
+        let text = "[device]\nname='x'\nvendor='v'\nproduct_code='p'\nrevision='1'\n\
+                    [[registers]]\nnumber=0\nname='f'\ntype='f32'\norder='DCBA'\ndefault=1.5\nmin=0\nmax=2\naccess='rw'\n\
+                    [[registers]]\nnumber=2\nname='q'\ntype='i64'\norder='CDAB'\ndefault=-2\naccess='rw'\n\
+                    [[registers]]\nnumber=6\nname='s'\ntype='string'\nlength=2\ndefault='OK'\naccess='rw'\n";
+        let m = Memory::new(&Profile::parse(text, "types.toml").unwrap());
+        let mut out = [0u16; 8];
+        m.read_registers(Table::Holding, 0, &mut out).unwrap();
+        assert_eq!(out, [0x0000, 0xC03F, 0xFFFE, 0xFFFF, 0xFFFF, 0xFFFF, 0x4F4B, 0x0000]);
+        assert_eq!(m.get("q"), -2);
+        // 2.5 (0x4020_0000, DCBA: 0000h then 2040h) is above max = 2; 1.75 is not.
+        assert_eq!(m.check_write_registers(0, &[0x0000, 0x2040]), Err(Refusal::OutOfRange));
+        assert!(m.check_write_registers(0, &[0x0000, 0xE03F]).is_ok());
+    }
+
+    #[test]
     fn named_items_start_at_their_defaults() {
         let m = rx();
         assert_eq!(m.get("F002"), 1000);

@@ -4,6 +4,7 @@
 #![cfg(unix)] // the servers of these tests sit on ptys as well as TCP
 
 mod bench_failures;
+mod device;
 mod errors;
 mod line_settings;
 mod offline;

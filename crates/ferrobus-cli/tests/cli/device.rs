@@ -1,0 +1,288 @@
+//! `--device PROFILE` with `get`, `set` and `profile`: named parameters against `ferrobus sim`
+//! serving the same profile, and against the in-process server where the requests sent must
+//! be seen (or proven absent).
+
+use assert_cmd::assert::OutputAssertExt;
+
+use crate::server::{Seen, Server, Sim, ferrobus, offline, stderr, stdout};
+
+/// A test profile's path: a labelled copy of the 3G3RX (`rx-test.toml`) or every type
+/// (`types.toml`).
+fn profile(name: &str) -> String {
+    format!("{}/tests/profiles/{name}", env!("CARGO_MANIFEST_DIR"))
+}
+
+/// The row of `code` in a table.
+fn row<'a>(out: &'a str, code: &str) -> &'a str {
+    out.lines()
+        .find(|l| l.split_whitespace().next() == Some(code))
+        .unwrap_or_else(|| panic!("no row {code} in:\n{out}"))
+}
+
+/// The cells of a row: columns are two or more spaces apart.
+fn cells(line: &str) -> Vec<&str> {
+    line.split("  ").map(str::trim).filter(|c| !c.is_empty()).collect()
+}
+
+#[test]
+fn get_shows_the_3g3rx_values_scaled_with_units_labels_and_enumerations() {
+    let rx = profile("rx-test.toml");
+    let sim = Sim::pty(&["--profile", &rx]);
+    sim.run(1, &["--device", &rx, "set", "F001", "45Hz"]).success();
+    let out = stdout(&sim.run(1, &["--device", &rx, "get", "F001", "F002", "status-a", "A001", "--raw"]).success());
+    assert_eq!(cells(row(&out, "F001")), ["F001", "output frequency setting", "45.00 Hz", "4500 (0x00001194)"]);
+    assert_eq!(cells(row(&out, "F002")), ["F002", "acceleration time 1", "10.00 s", "1000 (0x000003e8)"]);
+    assert_eq!(cells(row(&out, "status-a")), ["status-a", "status", "stop", "2 (0x0002)"]);
+    assert_eq!(cells(row(&out, "A001")), ["A001", "frequency reference source", "modbus", "3 (0x0003)"]);
+    // Labels, globs and groups name the same points, case-insensitively.
+    let by_label = stdout(&sim.run(1, &["--device", &rx, "get", "Output Frequency Setting"]).success());
+    assert_eq!(cells(row(&by_label, "F001"))[2], "45.00 Hz");
+    let monitor = stdout(&sim.run(1, &["--device", &rx, "get", "--group", "monitor", "--csv"]).success());
+    let codes: Vec<&str> = monitor.lines().skip(1).map(|l| l.split(',').next().unwrap()).collect();
+    assert_eq!(codes, ["status-a", "d001", "d002", "d003"]);
+    let globbed = stdout(&sim.run(1, &["--device", &rx, "get", "d00*"]).success());
+    assert_eq!(globbed.lines().count(), 4, "d001, d002, d003 under a header: {globbed}");
+}
+
+#[test]
+fn get_and_set_work_on_the_builtin_profiles_of_both_drives() {
+    let sim = Sim::pty(&["--profile", "omron-3g3rx"]);
+    sim.run(1, &["--device", "omron-3g3rx", "set", "F002", "12.5s"]).success();
+    let out = stdout(&sim.run(1, &["--device", "omron-3g3rx", "get", "F002", "--json"]).success());
+    let doc: serde_json::Value = serde_json::from_str(&out).unwrap();
+    assert_eq!(doc["points"][0]["value"], "12.50 s");
+    assert_eq!(doc["points"][0]["raw"], 1250);
+    assert_eq!(doc["points"][0]["engineering"], 12.5);
+    // The raw registers, high word first, as the drive holds them.
+    let words = stdout(&sim.run(1, &["read", "holding", "--one-based", "0x1103", "--count", "2", "--csv"]).success());
+    assert!(words.contains(",0\n") && words.contains(",1250\n"), "{words}");
+    // With --device, the manual's numbering and the drive's limits need no options.
+    let typed = stdout(
+        &sim.run(1, &["--device", "omron-3g3rx", "read", "holding", "0x1103", "--type", "u32", "--csv"]).success(),
+    );
+    assert!(typed.lines().nth(1).is_some_and(|l| l.ends_with(",1250")), "{typed}");
+
+    let servo = Sim::pty(&["--profile", "sdp-servo"]);
+    let set =
+        stdout(&servo.run(1, &["--device", "sdp-servo", "set", "speed-command", "-1500r/min", "--json"]).success());
+    let doc: serde_json::Value = serde_json::from_str(&set).unwrap();
+    assert_eq!(doc["read_back"]["value"], "-1500 r/min");
+    // CDAB: the low word first, as the manual's example (0BB8h then 0000h for 3000).
+    let words = stdout(&servo.run(1, &["read", "holding", "0x0112", "--count", "2", "--csv"]).success());
+    let values: Vec<&str> = words.lines().skip(1).map(|l| l.rsplit(',').next().unwrap()).collect();
+    assert_eq!(values, ["64036", "65535"], "-1500 = 0xFFFF_FA24: FA24h, then FFFFh");
+    let speed = stdout(&servo.run(1, &["--device", "sdp-servo", "get", "motor-speed", "torque"]).success());
+    assert!(row(&speed, "motor-speed").contains("r/min"), "{speed}");
+}
+
+#[test]
+fn every_type_and_order_is_served_by_the_sim_and_read_and_written_by_name() {
+    let types = profile("types.toml");
+    let sim = Sim::pty(&["--profile", &types]);
+    let out = stdout(&sim.run(1, &["--device", &types, "get", "*", "--json"]).success());
+    let doc: serde_json::Value = serde_json::from_str(&out).unwrap();
+    let value = |code: &str| {
+        doc["points"].as_array().unwrap().iter().find(|p| p["code"] == code).unwrap()["value"]
+            .as_str()
+            .unwrap()
+            .to_string()
+    };
+    assert_eq!(value("u16"), "65535");
+    assert_eq!(value("i16"), "-2");
+    assert_eq!(value("u32-abcd"), "287454020");
+    assert_eq!(value("i32-default-order"), "-100000");
+    assert_eq!(value("u32-badc"), "287454020");
+    assert_eq!(value("u32-dcba"), "287454020");
+    assert_eq!(value("u64"), "1234605616436508552");
+    assert_eq!(value("i64"), "-5");
+    assert_eq!(value("f32"), "1.5 bar");
+    assert_eq!(value("f64"), "-2.25");
+    assert_eq!(value("tag"), "PUMP-7");
+    assert_eq!(value("temperature"), "25.0 °C");
+    assert_eq!(value("alarms"), "overheat, low level");
+    // The words on the wire, in each entry's order (the device default is CDAB).
+    // --device sets read's limit (8 here): 28 registers in four requests.
+    let words = stdout(&sim.run(1, &["--device", &types, "read", "holding", "0", "--count", "28", "--csv"]).success());
+    let w: Vec<u16> = words.lines().skip(1).map(|l| l.rsplit(',').next().unwrap().parse().unwrap()).collect();
+    assert_eq!(w[2..4], [0x1122, 0x3344], "ABCD");
+    assert_eq!(w[4..6], [0x7960, 0xFFFE], "CDAB by default: -100000 = 0xFFFE7960");
+    assert_eq!(w[6..8], [0x2211, 0x4433], "BADC");
+    assert_eq!(w[8..10], [0x4433, 0x2211], "DCBA");
+    assert_eq!(w[10..14], [0x1122, 0x3344, 0x5566, 0x7788], "u64 ABCD");
+    assert_eq!(w[14..18], [0xFBFF, 0xFFFF, 0xFFFF, 0xFFFF], "i64 DCBA: -5");
+    assert_eq!(w[18..20], [0x3FC0, 0x0000], "f32 1.5");
+    assert_eq!(w[24..28], [0x5055, 0x4D50, 0x2D37, 0x0000], "PUMP-7, NUL padded");
+    // The device's order (CDAB) is read's default word order under --device; an option wins.
+    let i32 = |extra: &[&str]| {
+        let mut args = vec!["--device", types.as_str(), "read", "holding", "4", "--type", "i32", "--csv"];
+        args.extend_from_slice(extra);
+        stdout(&sim.run(1, &args).success()).lines().nth(1).unwrap().rsplit(',').next().unwrap().to_string()
+    };
+    assert_eq!(i32(&[]), "-100000");
+    assert_eq!(i32(&["--word-order", "high-first"]), 0x7960_FFFEu32.cast_signed().to_string());
+    // Written by name, in its unit, and read back.
+    for (code, value, shown) in [
+        ("f64", "6.5", "6.5"),
+        ("tag", "AB", "AB"),
+        ("temperature", "20°C", "20.0 °C"),
+        ("u64", "0xFFFFFFFFFFFFFFFF", "18446744073709551615"),
+        ("i16", "-300", "-300"),
+    ] {
+        let out = stdout(&sim.run(1, &["--device", &types, "set", code, value, "--json"]).success());
+        let doc: serde_json::Value = serde_json::from_str(&out).unwrap();
+        assert_eq!(doc["read_back"]["value"], shown, "{code} = {value}: {out}");
+    }
+}
+
+#[test]
+fn get_reads_in_the_planners_fewest_requests_within_the_devices_limit() {
+    let server = Server::start();
+    let out = stdout(&server.run(&["--device", &profile("types.toml"), "get", "*", "--json"]).success());
+    let doc: serde_json::Value = serde_json::from_str(&out).unwrap();
+    assert_eq!(doc["requests"], 5);
+    let seen = server.take_requests();
+    let expected =
+        [(0, 8), (8, 6), (14, 6), (20, 8), (28, 2)].map(|(start, quantity)| Seen { function: 3, start, quantity });
+    assert_eq!(seen, expected, "8 registers a request at most, no value split");
+}
+
+#[test]
+fn a_value_out_of_range_is_refused_before_anything_is_sent() {
+    let server = Server::start();
+    let err = stderr(&server.run(&["--device", "omron-3g3rx", "set", "F001", "500Hz"]).code(2));
+    assert_eq!(err.trim(), "error: not sent: F001: 500Hz is out of range: 0.00 Hz to 400.00 Hz");
+    // The user's notation is kept: a value typed in hex is shown in hex.
+    let err = stderr(&server.run(&["--device", "omron-3g3rx", "set", "A001", "0x20"]).code(2));
+    assert_eq!(err.trim(), "error: not sent: A001: 0x20 is out of range: 0 to 10");
+    let err = stderr(&server.run(&["--device", "omron-3g3rx", "set", "F002", "12.505s"]).code(2));
+    assert_eq!(err.trim(), "error: not sent: F002: 12.505s is not a multiple of its step 0.01 s");
+    let err = stderr(&server.run(&["--device", "omron-3g3rx", "set", "F002", "12Hz"]).code(2));
+    assert_eq!(err.trim(), "error: not sent: F002: \"12Hz\" is not in s, the unit of F002");
+    let err = stderr(&server.run(&["--device", "omron-3g3rx", "set", "d001", "1"]).code(2));
+    assert_eq!(err.trim(), "error: not sent: d001 is read-only");
+    assert_eq!(server.take_requests(), [], "no frame went out");
+}
+
+#[test]
+fn a_run_locked_parameter_is_refused_while_the_drive_runs_after_reading_only_the_run_state() {
+    let server = Server::start();
+    // The test profile's [state] running is the coil "running", number 0x000F: wire 14.
+    server.device().coils[14] = true;
+    let err = stderr(&server.run(&["--device", &profile("rx-test.toml"), "set", "A001", "modbus"]).code(2));
+    assert_eq!(err.trim(), "error: not sent: A001 cannot change while the drive runs (running = 1); stop it first");
+    assert_eq!(server.take_requests(), [Seen { function: 1, start: 14, quantity: 1 }], "one read, no write");
+
+    // And against the simulated drive: started by the run coil.
+    let rx = profile("rx-test.toml");
+    let sim = Sim::pty(&["--profile", &rx]);
+    sim.run(1, &["--device", &rx, "set", "F001", "10Hz"]).success();
+    sim.run(1, &["--device", &rx, "set", "run", "1"]).success();
+    let err = stderr(&sim.run(1, &["--device", &rx, "set", "A003", "50Hz"]).code(2));
+    assert!(err.contains("not sent: A003 cannot change while the drive runs (running = 1)"), "{err}");
+    let a003 = stdout(&sim.run(1, &["--device", &rx, "get", "A003"]).success());
+    assert_eq!(cells(row(&a003, "A003"))[2], "60 Hz", "unchanged");
+    // A parameter that may change while running is written.
+    sim.run(1, &["--device", &rx, "set", "F001", "20Hz"]).success();
+}
+
+#[test]
+fn the_devices_refusal_is_explained_in_the_profiles_words() {
+    let rx = profile("rx-test.toml");
+    let sim = Sim::pty(&["--profile", &rx, "--fault", "1:fc=0x06,addr=0x1200,exception=0x21"]);
+    let err = stderr(&sim.run(1, &["--device", &rx, "set", "A001", "control terminal"]).code(1));
+    assert_eq!(
+        err.trim(),
+        "error: the device refused A001 = control terminal: exception 0x21 (data outside the inverter's range)"
+    );
+}
+
+#[test]
+fn a_point_the_device_refuses_is_reported_and_the_others_still_print() {
+    let rx = profile("rx-test.toml");
+    let sim = Sim::pty(&["--profile", &rx, "--fault", "1:fc=0x03,addr=0x1003,exception=0x22"]);
+    let assert = sim.run(1, &["--device", &rx, "get", "d001", "d002", "d003"]).code(1);
+    let out = stdout(&assert);
+    assert_eq!(cells(row(&out, "d001"))[2], "0.00 Hz");
+    assert_eq!(cells(row(&out, "d002"))[2], "0.00 A");
+    assert_eq!(
+        cells(row(&out, "d003"))[2],
+        "error: exception 0x22 (the inverter restricts execution: read-only, run-locked or tripped)"
+    );
+    assert_eq!(stderr(&assert).trim(), "error: 1 of 3 parameters could not be read: d003");
+}
+
+#[test]
+fn get_and_set_need_a_device_and_known_names() {
+    let err = stderr(&offline(&["--tcp", "127.0.0.1:1", "get", "d001"]).code(2));
+    assert!(err.contains("get needs --device PROFILE: a built-in one (omron-3g3rx, sdp-servo, generic)"), "{err}");
+    let err = stderr(&offline(&["--tcp", "127.0.0.1:1", "--device", "omron-3g3rx", "get", "x999"]).code(2));
+    assert!(err.contains("omron-3g3rx has no parameter \"x999\""), "{err}");
+    let err = stderr(&offline(&["--tcp", "127.0.0.1:1", "--device", "omron-3g3rx", "set", "d00*", "1"]).code(2));
+    assert!(err.contains("\"d00*\" names 3 parameters (d001, d002, d003): set one at a time"), "{err}");
+    let err = stderr(&offline(&["--tcp", "127.0.0.1:1", "--device", "./nope.toml", "get", "x"]).code(2));
+    assert_eq!(err.trim(), "error: profile ./nope.toml: no such file");
+}
+
+#[test]
+fn profile_check_names_the_file_and_line_of_a_mistake() {
+    let dir = std::env::temp_dir().join(format!("ferrobus-cli-profile-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let bad = dir.join("bad.toml");
+    std::fs::write(
+        &bad,
+        "[device]\nname='x'\nvendor='v'\nproduct_code='p'\nrevision='1'\n\n[[registers]]\nnumber=1\nname='r'\ntype='u32'\nbits={ '40' = 'x' }\n",
+    )
+    .unwrap();
+    let shown = bad.display().to_string();
+    let err = stderr(&offline(&["profile", "check", &shown]).code(2));
+    assert_eq!(
+        err.trim(),
+        format!("error: in {shown}, line 11: [[registers]] 1 (r): bits key \"40\" is not a bit from 0 to 31")
+    );
+    let unknown = dir.join("unknown.toml");
+    std::fs::write(&unknown, "[device]\nname='x'\nvendor='v'\nproduct_code='p'\nrevision='1'\ncolour='red'\n").unwrap();
+    let err = stderr(&offline(&["profile", "check", &unknown.display().to_string()]).code(2));
+    assert!(
+        err.starts_with(&format!("error: in {}, line 6 (colour='red'): unknown field `colour`", unknown.display())),
+        "{err}"
+    );
+    let out = stdout(&offline(&["profile", "check", &profile("types.toml")]).success());
+    assert!(out.ends_with("types.toml: ok: ferrobus type test device — 0 coils, 0 discrete inputs, 13 holding and 0 input register values\n"), "{out}");
+    std::fs::remove_dir_all(&dir).unwrap();
+}
+
+#[test]
+fn profile_list_and_show_print_the_profiles_and_their_parameter_tables() {
+    let list = stdout(&offline(&["profile", "list"]).success());
+    for name in ["omron-3g3rx", "sdp-servo", "generic"] {
+        assert!(list.lines().any(|l| l.starts_with(name)), "{list}");
+    }
+    let show = stdout(&offline(&["profile", "show", &profile("rx-test.toml"), "--group", "basic"]).success());
+    let f001 = cells(row(&show, "F001"));
+    assert_eq!(
+        f001,
+        [
+            "F001",
+            "output frequency setting",
+            "holding",
+            "0x0001",
+            "u32 ABCD",
+            "rw",
+            "Hz",
+            "0.00 Hz .. 400.00 Hz",
+            "basic"
+        ]
+    );
+    let a001 = stdout(&offline(&["profile", "show", &profile("rx-test.toml"), "--group", "A"]).success());
+    assert!(row(&a001, "A001").contains("rw stopped"), "run-locked: {a001}");
+    let json = stdout(&offline(&["profile", "show", "sdp-servo", "--json"]).success());
+    let doc: serde_json::Value = serde_json::from_str(&json).unwrap();
+    let speed = doc["points"].as_array().unwrap().iter().find(|p| p["code"] == "speed-command").unwrap().clone();
+    assert_eq!((speed["type"].as_str(), speed["order"].as_str()), (Some("i32"), Some("CDAB")));
+}
+
+#[test]
+fn profile_commands_need_no_bus() {
+    let out = ferrobus().args(["profile", "list", "--csv"]).assert().success();
+    assert!(stdout(&out).starts_with("name,device,vendor,points\n"));
+}
