@@ -287,3 +287,15 @@ fn the_trip_monitor_and_direction_coil_are_as_the_3g3rx_manuals_show() {
     assert_eq!(point(&rx, "direction").number, 0x0002);
     assert!(matches!(rx.model, Some(ModelSection::Inverter { direction: Polarity::OneIsReverse, .. })));
 }
+
+#[test]
+fn every_start_value_of_a_builtin_profile_is_within_its_range() {
+    // A backup of a fresh simulated drive must restore: no register starts out of range.
+    for (name, _) in BUILTIN {
+        let profile = Profile::load(name).expect("a built-in profile loads");
+        for p in profile.points() {
+            let Some(x) = p.default.as_f64() else { continue };
+            assert!(p.min.is_none_or(|m| x >= m) && p.max.is_none_or(|m| x <= m), "{name}: {} starts at {x}", p.code);
+        }
+    }
+}
