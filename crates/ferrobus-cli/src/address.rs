@@ -126,6 +126,8 @@ pub(crate) enum Style {
     Wire,
     /// A 1-based number (`--one-based`).
     OneBased,
+    /// A 1-based number typed in hex (`--one-based 0x1001`), shown in hex.
+    OneBasedHex,
     /// A Modicon reference with this many digits (5 or 6).
     Modicon(u8),
 }
@@ -160,6 +162,7 @@ impl Address {
             )));
         }
         let bad = || CliError::Usage(format!("'{text}' is not an address: use decimal or 0x hex"));
+        let typed_hex = cleaned.starts_with("0x") || cleaned.starts_with("0X");
         let (value, digits) = if let Some(hex) = cleaned.strip_prefix("0x").or_else(|| cleaned.strip_prefix("0X")) {
             (u32::from_str_radix(hex, 16).map_err(|_| bad())?, None)
         } else {
@@ -183,7 +186,8 @@ impl Address {
                     "with --one-based, register numbers start at 1 (frame address = number - 1); 0 is not one".into(),
                 )),
                 1..=65536 => {
-                    Ok(Address { wire: u16::try_from(value - 1).unwrap_or(u16::MAX), table, style: Style::OneBased })
+                    let style = if typed_hex { Style::OneBasedHex } else { Style::OneBased };
+                    Ok(Address { wire: u16::try_from(value - 1).unwrap_or(u16::MAX), table, style })
                 }
                 _ => Err(CliError::Usage(format!("register number {text} is out of range (1-65536)"))),
             };
@@ -221,6 +225,7 @@ impl Address {
         match self.style {
             Style::Wire => None,
             Style::OneBased => Some(number.to_string()),
+            Style::OneBasedHex => Some(format!("0x{number:04X}")),
             Style::Modicon(5) if number <= 9999 => Some(format!("{digit}{number:04}")),
             Style::Modicon(_) => Some(format!("{digit}{number:05}")),
         }
@@ -342,9 +347,14 @@ mod tests {
 
     #[test]
     fn one_based_numbers_are_one_more_than_the_wire() {
-        let a = parse("0x0012", Table::Holding, true).unwrap();
+        let a = parse("18", Table::Holding, true).unwrap();
         assert_eq!((a.wire, a.style), (0x11, Style::OneBased));
         assert_eq!(a.reference(0x11).as_deref(), Some("18"));
+        // The user's notation is kept: a number typed in hex is shown in hex.
+        let hex = parse("0x0012", Table::Holding, true).unwrap();
+        assert_eq!((hex.wire, hex.style), (0x11, Style::OneBasedHex));
+        assert_eq!(hex.reference(0x11).as_deref(), Some("0x0012"));
+        assert_eq!(hex.reference(0x1000).as_deref(), Some("0x1001"));
         assert_eq!(parse("65536", Table::Holding, true).unwrap().wire, 65535);
         assert!(parse("0", Table::Holding, true).is_err());
     }

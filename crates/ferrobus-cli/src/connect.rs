@@ -160,6 +160,76 @@ impl ConnectArgs {
     }
 }
 
+impl ConnectArgs {
+    /// With `--device`, ADDRESS may be a parameter's code or label (`read holding F002`): its
+    /// address, and the options to read or write it whole: its type (when --type was left at
+    /// u16) and its word order (when none was given). `None` when `text` is a number.
+    pub(crate) fn named(
+        &self,
+        text: &str,
+        table: crate::address::Table,
+        given: ValueArgs,
+    ) -> Result<Option<(crate::address::Address, ValueArgs)>, CliError> {
+        use crate::value::ValueType as Cli;
+        use ferrobus_profile::ValueType as Profile;
+        if text.trim().starts_with(|c: char| c.is_ascii_digit()) {
+            return Ok(None);
+        }
+        let Some(profile) = self.profile()? else { return Ok(None) };
+        let point = match profile.find(text).as_slice() {
+            [] => return Ok(None),
+            [one] => (*one).clone(),
+            many => {
+                return Err(CliError::Usage(format!(
+                    "{text:?} names {} parameters ({}): give one, or use get",
+                    many.len(),
+                    many.iter().map(|p| p.code.as_str()).collect::<Vec<_>>().join(", ")
+                )));
+            }
+        };
+        let in_table = match table {
+            crate::address::Table::Coils => ferrobus_profile::Table::Coils,
+            crate::address::Table::Discrete => ferrobus_profile::Table::DiscreteInputs,
+            crate::address::Table::Holding => ferrobus_profile::Table::Holding,
+            crate::address::Table::Input => ferrobus_profile::Table::Input,
+        };
+        if point.table != in_table {
+            return Err(CliError::Usage(format!("{} is in the {} table, not {table}", point.code, point.table.name())));
+        }
+        let kind = match point.value_type {
+            Profile::Bit | Profile::U16 => Cli::U16,
+            Profile::I16 => Cli::I16,
+            Profile::U32 => Cli::U32,
+            Profile::I32 => Cli::I32,
+            Profile::F32 => Cli::F32,
+            other => {
+                return Err(CliError::Usage(format!(
+                    "{} is a {}, which read and write do not type: use get or set",
+                    point.code,
+                    other.name()
+                )));
+            }
+        };
+        let mut values = given;
+        if values.kind == Cli::U16 {
+            values.kind = kind;
+        }
+        if point.width > 1 {
+            if point.order.bytes_swapped() {
+                return Err(CliError::Usage(format!(
+                    "{} is in {} order, which read and write do not take: use get or set",
+                    point.code,
+                    point.order.name()
+                )));
+            }
+            let order = if point.order.words_low_first() { WordOrder::LowFirst } else { WordOrder::HighFirst };
+            values = values.or_order(Some(order));
+        }
+        let address = crate::address::Address { wire: point.address, table, style: crate::address::Style::Wire };
+        Ok(Some((address, values)))
+    }
+}
+
 /// A profile by built-in name or path, as a usage error when it does not load.
 pub(crate) fn load_profile(name: &str) -> Result<ferrobus_profile::Profile, CliError> {
     ferrobus_profile::Profile::load(name).map_err(|e| CliError::Usage(e.to_string()))

@@ -57,7 +57,12 @@ pub(crate) fn select<'p>(
         }
     };
     for name in names {
-        let found = profile.find(name);
+        let mut found = profile.find(name);
+        if found.len() > 1 {
+            // A glob or a shared label reads what can be read; a write-only point named alone
+            // is reported as such.
+            found.retain(|p| p.readable());
+        }
         if found.is_empty() {
             return Err(CliError::Usage(format!(
                 "{} has no parameter {name:?}: give a code, a label or a glob (`ferrobus profile show {}` lists them)",
@@ -67,8 +72,10 @@ pub(crate) fn select<'p>(
         add(found);
     }
     for group in groups {
-        let found = profile.group(group);
-        if found.is_empty() {
+        let mut found = profile.group(group);
+        let known_group = !found.is_empty();
+        found.retain(|p| p.readable());
+        if !known_group {
             let known = profile.groups();
             return Err(CliError::Usage(format!(
                 "{} has no group {group:?}{}",
@@ -307,4 +314,53 @@ pub(crate) async fn run(connection: &ConnectArgs, args: &GetArgs) -> Result<(), 
         points.len(),
         failed.join(", ")
     )))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use ferrobus_proto::{ExceptionCode, FunctionCode};
+
+    fn refused(code: u8) -> ferrobus::Error {
+        ferrobus::Error::Exception {
+            unit: 1,
+            function: FunctionCode::WriteSingleRegister,
+            code: ExceptionCode::from_u8(code),
+        }
+    }
+
+    #[test]
+    fn an_exception_is_told_in_the_profiles_words_else_the_specs_else_by_its_exceptions_table() {
+        let text = "[device]\nname='x'\nvendor='v'\nproduct_code='p'\nrevision='1'\n\
+                    [exceptions]\nout_of_range=0x21\nnot_allowed=0x22\nread_only=0x22\n\
+                    [[exception_meaning]]\ncode=0x23\nmeaning='the inverter is tripped'\n";
+        let profile = Profile::parse(text, "x.toml").unwrap();
+        assert_eq!(exception_words(&profile, &refused(0x23)), "exception 0x23 (the inverter is tripped)");
+        assert_eq!(
+            exception_words(&profile, &refused(0x21)),
+            "exception 0x21 (the value is out of the device's range)"
+        );
+        assert_eq!(
+            exception_words(&profile, &refused(0x22)),
+            "exception 0x22 (not allowed in the device's present state)"
+        );
+        assert_eq!(exception_words(&profile, &refused(0x02)), "exception 0x02 (Illegal Data Address)");
+        assert_eq!(exception_words(&profile, &refused(0x30)), "exception 0x30");
+    }
+
+    #[test]
+    fn globs_and_groups_leave_write_only_points_out_and_a_name_alone_keeps_it() {
+        let text = "[device]\nname='x'\nvendor='v'\nproduct_code='p'\nrevision='1'\n\
+                    [[registers]]\nnumber=0\nname='cmd'\naccess='wo'\ngroup='g'\n\
+                    [[registers]]\nnumber=1\nname='cnt'\ngroup='g'\n";
+        let profile = Profile::parse(text, "x.toml").unwrap();
+        let codes = |names: &[&str], groups: &[&str]| -> Vec<String> {
+            let names: Vec<String> = names.iter().map(ToString::to_string).collect();
+            let groups: Vec<String> = groups.iter().map(ToString::to_string).collect();
+            select(&profile, &names, &groups).unwrap().iter().map(|p| p.code.clone()).collect()
+        };
+        assert_eq!(codes(&["c*"], &[]), ["cnt"]);
+        assert_eq!(codes(&[], &["g"]), ["cnt"]);
+        assert_eq!(codes(&["cmd"], &[]), ["cmd"]);
+    }
 }

@@ -138,7 +138,7 @@ pub(crate) fn csv_field(cell: &str) -> String {
 fn ref_header(address: Address) -> Option<&'static str> {
     match address.style {
         Style::Wire => None,
-        Style::OneBased => Some("number"),
+        Style::OneBased | Style::OneBasedHex => Some("number"),
         Style::Modicon(_) => Some("ref"),
     }
 }

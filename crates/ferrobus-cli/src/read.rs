@@ -68,20 +68,25 @@ pub(crate) fn quantity(n: usize) -> u16 {
 /// Runs `read`.
 pub(crate) async fn run(connection: &ConnectArgs, args: &ReadArgs) -> Result<(), CliError> {
     connection.refuse_broadcast_read()?;
-    let address = Address::parse(&args.address, args.table, connection.address_args(args.address_args)?)?;
-    let values = connection.values(args.values)?;
+    let (address, values) = match connection.named(&args.address, args.table, args.values)? {
+        Some(named) => named,
+        None => (
+            Address::parse(&args.address, args.table, connection.address_args(args.address_args)?)?,
+            connection.values(args.values)?,
+        ),
+    };
     let table = args.table;
-    if table.is_bits() && args.values.kind != ValueType::U16 {
+    if table.is_bits() && values.kind != ValueType::U16 {
         return Err(CliError::Usage(format!("--type applies to registers, not to {table}")));
     }
-    let width = args.values.kind.width();
+    let width = values.kind.width();
     let items = usize::try_from(args.count).unwrap_or(usize::MAX).saturating_mul(width);
     if items == 0 {
         return Err(PduError::QuantityOutOfRange { quantity: 0, min: 1, max: table.max_read() }.into());
     }
     address.check_span(items)?;
     let max_per_request = connection.max_per_request(args.max_per_request, table, false)?;
-    let max = per_request(max_per_request, table.max_read(), width, args.values.kind)?;
+    let max = per_request(max_per_request, table.max_read(), width, values.kind)?;
     let pieces = split(address.wire, items, width, max);
     let mut interrupt = Interrupt::listen()?;
     let session = interrupt.unless(connection.open()).await.ok_or(CliError::Interrupted)??;

@@ -25,7 +25,7 @@ pub(crate) struct SetArgs {
     /// The parameter: a code (F001) or a label
     pub(crate) name: String,
 
-    /// The value (a negative one after `--`: set -- P1 -3)
+    /// The value, in the parameter's unit or raw (a negative one as is: set P1 -3)
     #[arg(allow_hyphen_values = true)]
     pub(crate) value: String,
 

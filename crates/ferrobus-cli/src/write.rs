@@ -129,7 +129,10 @@ fn on_off(bits: &[bool]) -> String {
 pub(crate) async fn run(connection: &ConnectArgs, args: &WriteArgs) -> Result<(), CliError> {
     match &args.what {
         WriteCommand::Coil { address, value, address_args } => {
-            let address = Address::parse(address, Table::Coils, connection.address_args(*address_args)?)?;
+            let address = match connection.named(address, Table::Coils, ValueArgs::default())? {
+                Some((named, _)) => named,
+                None => Address::parse(address, Table::Coils, connection.address_args(*address_args)?)?,
+            };
             let value = parse_coil(value)?;
             let session = &connection.open().await?;
             session.client.write_single_coil(session.unit, address.wire, value).await?;
@@ -161,8 +164,14 @@ pub(crate) async fn run(connection: &ConnectArgs, args: &WriteArgs) -> Result<()
             Ok(())
         }
         WriteCommand::Register { address, value, multiple, values, address_args } => {
-            let address = Address::parse(address, Table::Holding, connection.address_args(*address_args)?)?;
-            let values = &connection.values(*values)?;
+            let (address, values) = match connection.named(address, Table::Holding, *values)? {
+                Some(named) => named,
+                None => (
+                    Address::parse(address, Table::Holding, connection.address_args(*address_args)?)?,
+                    connection.values(*values)?,
+                ),
+            };
+            let values = &values;
             let registers = values.encode_all(std::slice::from_ref(value))?;
             address.check_span(registers.len())?;
             let session = &connection.open().await?;
@@ -176,8 +185,14 @@ pub(crate) async fn run(connection: &ConnectArgs, args: &WriteArgs) -> Result<()
             write_registers(session, address, &registers, *values, MAX_WRITE_REGISTERS).await
         }
         WriteCommand::Registers { address, value, max_per_request, values, address_args } => {
-            let address = Address::parse(address, Table::Holding, connection.address_args(*address_args)?)?;
-            let values = &connection.values(*values)?;
+            let (address, values) = match connection.named(address, Table::Holding, *values)? {
+                Some(named) => named,
+                None => (
+                    Address::parse(address, Table::Holding, connection.address_args(*address_args)?)?,
+                    connection.values(*values)?,
+                ),
+            };
+            let values = &values;
             let registers = values.encode_all(value)?;
             address.check_span(registers.len())?;
             let max_per_request = connection.max_per_request(*max_per_request, Table::Holding, true)?;

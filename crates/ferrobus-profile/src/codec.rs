@@ -365,7 +365,7 @@ impl Point {
         if let Some((raw, _)) = self.values.iter().find(|(_, m)| fold(m) == fold(typed)) {
             return Ok(Value::Int(*raw));
         }
-        if let Some(raw) = crate::model::parse_key(typed).filter(|_| typed.contains(['x', 'X', 'b', 'B'])) {
+        if let Some(raw) = crate::check::parse_key(typed).filter(|_| typed.contains(['x', 'X', 'b', 'B'])) {
             return self.fit(Value::Int(raw), typed);
         }
         let number = self.strip_unit(typed)?;

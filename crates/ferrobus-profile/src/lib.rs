@@ -14,6 +14,7 @@
 //!
 //! Built-in profiles: `omron-3g3rx`, `sdp-servo`, `generic` (see [`BUILTIN`]).
 
+mod check;
 mod codec;
 mod model;
 mod plan;

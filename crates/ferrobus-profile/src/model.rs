@@ -18,6 +18,7 @@ use std::path::Path;
 
 use serde::Deserialize;
 
+use crate::check::{Spans, line_of};
 use crate::point::{self, Point};
 
 /// A device model.
@@ -661,50 +662,6 @@ fn at_line(line: Option<usize>, text: &str) -> String {
     }
 }
 
-/// The line (from 1) of byte `offset` in `text`.
-fn line_of(text: &str, offset: usize) -> usize {
-    text.get(..offset).unwrap_or(text).matches('\n').count().saturating_add(1)
-}
-
-/// The line of `field` in the entry whose header is at `span` of `text` (up to the next
-/// header), else the header's line.
-fn field_line(text: &str, span: &std::ops::Range<usize>, field: &str) -> usize {
-    let header = line_of(text, span.start);
-    let body = text.get(span.end..).unwrap_or_default().lines().skip(1);
-    for (n, line) in (header.saturating_add(1)..).zip(body) {
-        let line = line.trim_start();
-        if line.starts_with('[') {
-            break;
-        }
-        if line.strip_prefix(field).is_some_and(|rest| rest.trim_start().starts_with('=')) {
-            return n;
-        }
-    }
-    header
-}
-
-/// Where each entry of a profile starts, read by a second pass over the same text.
-#[derive(Default, Deserialize)]
-struct Spans {
-    #[serde(default)]
-    coils: Vec<toml::Spanned<toml::Table>>,
-    #[serde(default)]
-    discrete_inputs: Vec<toml::Spanned<toml::Table>>,
-    #[serde(default)]
-    registers: Vec<toml::Spanned<toml::Table>>,
-    #[serde(default)]
-    inputs: Vec<toml::Spanned<toml::Table>>,
-    #[serde(default)]
-    span: Vec<toml::Spanned<toml::Table>>,
-    #[serde(default)]
-    fault_rule: Vec<toml::Spanned<toml::Table>>,
-    faults: Option<toml::Spanned<String>>,
-    state: Option<toml::Spanned<toml::Table>>,
-}
-
-/// A problem with the entry at a line.
-type Problem = (Option<usize>, String);
-
 /// The profiles compiled into the binary.
 pub const BUILTIN: &[(&str, &str)] = &[
     ("omron-3g3rx", include_str!("../profiles/omron-3g3rx.toml")),
@@ -751,7 +708,7 @@ impl Profile {
                 origin: origin.to_string(),
                 line,
                 text: source_line.to_string(),
-                message: e.message().trim().to_string(),
+                message: with_migration_hint(e.message().trim()),
             }
         })?;
         // The same text has parsed once; a second reader that fails only loses the lines.
@@ -779,104 +736,19 @@ impl Profile {
     pub fn problem(&self, line: Option<usize>, problem: String) -> ProfileError {
         ProfileError::Invalid { origin: self.origin.clone(), line, problem }
     }
+}
 
-    #[allow(clippy::too_many_lines)]
-    fn validate(&self, text: &str, spans: &Spans) -> Result<(), Problem> {
-        let lines = |entries: &[toml::Spanned<toml::Table>]| -> Vec<Option<usize>> {
-            entries.iter().map(|e| Some(line_of(text, e.span().start))).collect()
-        };
-        if self.comm.response_wait_ms > 60_000 {
-            return Err((None, format!("response_wait_ms = {} is more than a minute", self.comm.response_wait_ms)));
-        }
-        let base = u64::from(self.addressing.base);
-        for (kind, entries, spans) in
-            [("registers", &self.registers, &spans.registers), ("inputs", &self.inputs, &spans.inputs)]
-        {
-            let lines = lines(spans);
-            let at = |i: usize, field: &str| spans.get(i).map(|e| field_line(text, &e.span(), field));
-            for (i, r) in entries.iter().enumerate() {
-                let entry = format!("[[{kind}]] {} ({})", r.number, r.name);
-                check_register(r, &entry, base, &|field| at(i, field))?;
-            }
-            let extents =
-                entries.iter().map(|r| (r.number, u64::from(r.count) * u64::from(r.width()), r.name.as_str()));
-            no_overlaps(kind, extents, &lines)?;
-        }
-        for (kind, entries, spans) in
-            [("coils", &self.coils, &spans.coils), ("discrete_inputs", &self.discrete_inputs, &spans.discrete_inputs)]
-        {
-            let lines = lines(spans);
-            for (i, b) in entries.iter().enumerate() {
-                if u64::from(b.number) < base || u64::from(b.number) + u64::from(b.count) > 0x1_0000 + base {
-                    let at = lines.get(i).copied().flatten();
-                    return Err((
-                        at,
-                        format!("[[{kind}]] {} ({}): number and count run outside the address space", b.number, b.name),
-                    ));
-                }
-            }
-            no_overlaps(kind, entries.iter().map(|b| (b.number, u64::from(b.count), b.name.as_str())), &lines)?;
-        }
-        for t in
-            [self.tables.coils, self.tables.discrete_inputs, self.tables.holding_registers, self.tables.input_registers]
-                .into_iter()
-                .flatten()
-        {
-            if t > 0x1_0000 {
-                return Err((None, format!("[tables]: a table of {t} items is larger than the address space")));
-            }
-        }
-        let span_lines = lines(&spans.span);
-        for (i, s) in self.span.iter().enumerate() {
-            let at = span_lines.get(i).copied().flatten();
-            if s.first > s.last {
-                return Err((
-                    at,
-                    format!("[[span]] {}: first = {} is above last = {}", s.table.name(), s.first, s.last),
-                ));
-            }
-            if u64::from(s.first) < base || u64::from(s.last) >= 0x1_0000 + base {
-                return Err((
-                    at,
-                    format!("[[span]] {} {}-{}: outside the address space", s.table.name(), s.first, s.last),
-                ));
-            }
-        }
-        self.check_references(text, spans)
-    }
-
-    /// `depends_on` and `[state] running` name points that exist.
-    fn check_references(&self, text: &str, spans: &Spans) -> Result<(), Problem> {
-        let names: Vec<&str> = self
-            .coils
-            .iter()
-            .chain(&self.discrete_inputs)
-            .map(|b| b.name.as_str())
-            .chain(self.registers.iter().chain(&self.inputs).map(|r| r.name.as_str()))
-            .collect();
-        for (kind, entries, spans) in
-            [("registers", &self.registers, &spans.registers), ("inputs", &self.inputs, &spans.inputs)]
-        {
-            for (i, r) in entries.iter().enumerate() {
-                if let Some(missing) = r.depends_on.iter().find(|d| !names.contains(&d.as_str())) {
-                    let line = spans.get(i).map(|e| field_line(text, &e.span(), "depends_on"));
-                    return Err((
-                        line,
-                        format!(
-                            "[[{kind}]] {} ({}): depends_on names {missing:?}, which the profile does not have",
-                            r.number, r.name
-                        ),
-                    ));
-                }
-            }
-        }
-        if let Some(running) = &self.state.running {
-            if !names.contains(&running.point.as_str()) {
-                let line = spans.state.as_ref().map(|s| field_line(text, &s.span(), "running"));
-                return Err((line, format!("[state] running: point {:?} is not in the profile", running.point)));
-            }
-        }
-        Ok(())
+/// A TOML reader's message, with the new keys named when it refuses an old one.
+fn with_migration_hint(message: &str) -> String {
+    let old =
+        ["`size`", "`signed`", "`word_order`"].iter().any(|key| message.starts_with(&format!("unknown field {key}")));
+    if old {
+        format!(
+            "{message} (size, signed and word_order are now type and order: type = \"u32\" or \"i32\", \
+             order = \"ABCD\" for high-first or \"CDAB\" for low-first)"
+        )
+    } else {
+        message.to_string()
     }
 }
 
@@ -890,145 +762,6 @@ impl RegisterDef {
     }
 }
 
-/// A raw integer written in a profile key: decimal, `0x` hex or `0b` binary, maybe negative.
-pub(crate) fn parse_key(key: &str) -> Option<i128> {
-    let key = key.trim();
-    let (negative, digits) = key.strip_prefix('-').map_or((false, key), |rest| (true, rest));
-    let value = if let Some(hex) = digits.strip_prefix("0x").or_else(|| digits.strip_prefix("0X")) {
-        i128::from_str_radix(hex, 16).ok()?
-    } else if let Some(bin) = digits.strip_prefix("0b").or_else(|| digits.strip_prefix("0B")) {
-        i128::from_str_radix(bin, 2).ok()?
-    } else {
-        digits.parse::<i128>().ok()?
-    };
-    Some(if negative { -value } else { value })
-}
-
-#[allow(clippy::too_many_lines)]
-fn check_register(r: &RegisterDef, entry: &str, base: u64, at: &dyn Fn(&str) -> Option<usize>) -> Result<(), Problem> {
-    let ty = r.value_type;
-    match (ty, r.length) {
-        (ValueType::String, None | Some(0)) => {
-            return Err((at("length"), format!("{entry}: a string needs length = its registers (1 or more)")));
-        }
-        (ValueType::String, Some(_)) | (_, None) => {}
-        (_, Some(_)) => return Err((at("length"), format!("{entry}: length is for type = \"string\" only"))),
-    }
-    if r.order.is_some() && ty.registers() == 1 && ty != ValueType::String {
-        return Err((
-            at("order"),
-            format!("{entry}: order is for values of more than one register, not {}", ty.name()),
-        ));
-    }
-    if r.count == 0 {
-        return Err((at("count"), format!("{entry}: count = 0 describes nothing")));
-    }
-    if u64::from(r.number) < base {
-        return Err((at("number"), format!("{entry}: number is below the base {base}")));
-    }
-    if u64::from(r.number) + u64::from(r.count) * u64::from(r.width()) > 0x1_0000 + base {
-        return Err((at("count"), format!("{entry}: count = {} runs past the address space", r.count)));
-    }
-    for (field, value) in [("scale", r.scale), ("offset", r.offset), ("min", r.min), ("max", r.max)] {
-        if value.is_some_and(|v| !v.is_finite()) {
-            return Err((at(field), format!("{entry}: {field} must be a finite number")));
-        }
-    }
-    if r.scale == Some(0.0) {
-        return Err((at("scale"), format!("{entry}: scale = 0 would make every value the same")));
-    }
-    if let (Some(min), Some(max)) = (r.min, r.max) {
-        if min > max {
-            return Err((at("max"), format!("{entry}: min = {min} is above max = {max}")));
-        }
-    }
-    if ty == ValueType::String && (r.min.is_some() || r.max.is_some() || r.scale.is_some() || r.offset.is_some()) {
-        return Err((at("type"), format!("{entry}: a string has no min, max, scale or offset")));
-    }
-    if ty.is_integer() {
-        let (lo, hi) = ty.integer_range();
-        #[allow(clippy::cast_precision_loss)]
-        let (lo, hi) = (lo as f64, hi as f64);
-        for (field, value) in [("min", r.min), ("max", r.max)] {
-            if let Some(v) = value.filter(|v| *v < lo || *v > hi || v.fract() != 0.0) {
-                return Err((at(field), format!("{entry}: {field} = {v} is not a raw {} value", ty.name())));
-            }
-        }
-    }
-    if !r.values.is_empty() && !ty.is_integer() {
-        return Err((
-            at("values"),
-            format!("{entry}: values (an enumeration) needs an integer type, not {}", ty.name()),
-        ));
-    }
-    for key in r.values.keys() {
-        let (lo, hi) = ty.integer_range();
-        if parse_key(key).is_none_or(|k| k < lo || k > hi) {
-            return Err((at("values"), format!("{entry}: values key {key:?} is not a raw {} value", ty.name())));
-        }
-    }
-    if !r.bits.is_empty() && !ty.is_integer() {
-        return Err((at("bits"), format!("{entry}: bits (a bit field) needs an integer type, not {}", ty.name())));
-    }
-    let bit_count = i128::from(ty.registers()) * 16;
-    for key in r.bits.keys() {
-        if parse_key(key).is_none_or(|k| k < 0 || k >= bit_count) {
-            return Err((at("bits"), format!("{entry}: bits key {key:?} is not a bit from 0 to {}", bit_count - 1)));
-        }
-    }
-    if let Some(default) = &r.default {
-        let fits = match (ty, default) {
-            (ValueType::String, toml::Value::String(s)) => s.len() <= usize::from(r.width()) * 2 && s.is_ascii(),
-            (t, toml::Value::Integer(n)) if t.is_integer() => {
-                let (lo, hi) = t.integer_range();
-                (lo..=hi).contains(&i128::from(*n))
-            }
-            (t, toml::Value::Integer(_) | toml::Value::Float(_)) => t.is_float(),
-            _ => false,
-        };
-        if !fits {
-            return Err((at("default"), format!("{entry}: default = {default} is not a {} value", ty.name())));
-        }
-    }
-    Ok(())
-}
-
-/// Checks that no two entries of `kind` — `(number, items, name)`, at `lines` — share an
-/// address; names the later one and the line of the earlier one.
-fn no_overlaps<'a>(
-    kind: &str,
-    entries: impl Iterator<Item = (u32, u64, &'a str)>,
-    lines: &[Option<usize>],
-) -> Result<(), Problem> {
-    let mut sorted: Vec<(u64, u64, &str, usize)> =
-        entries.enumerate().map(|(i, (n, items, name))| (u64::from(n), items, name, i)).collect();
-    sorted.sort_by_key(|&(start, _, _, i)| (start, i));
-    // The entry reaching furthest so far: where it ends, and which it is.
-    let mut reach: Option<(u64, usize)> = None;
-    for (k, &(start, items, _, _)) in sorted.iter().enumerate() {
-        if items == 0 {
-            continue;
-        }
-        if let Some((_, owner)) = reach.filter(|&(end, _)| start < end) {
-            let (Some(a), Some(b)) = (sorted.get(owner), sorted.get(k)) else { break };
-            // Name the entry written later, and the line of the one written first.
-            let (first, later) = if a.3 < b.3 { (a, b) } else { (b, a) };
-            let what = if a.0 == b.0 { "is at the same number as" } else { "overlaps" };
-            let line = |i: usize| lines.get(i).copied().flatten();
-            let earlier = line(first.3).map_or(String::new(), |l| format!(" on line {l}"));
-            return Err((
-                line(later.3),
-                format!("[[{kind}]] {} ({}) {what} {} ({}){earlier}", later.0, later.2, first.0, first.2),
-            ));
-        }
-        let end = start.saturating_add(items);
-        if reach.is_none_or(|(furthest, _)| end > furthest) {
-            reach = Some((end, k));
-        }
-    }
-    Ok(())
-}
-
 impl fmt::Display for Profile {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
         write!(f, "{} ({} {})", self.device.name, self.device.vendor, self.device.product_code)
@@ -1036,117 +769,4 @@ impl fmt::Display for Profile {
 }
 
 #[cfg(test)]
-mod tests {
-    use super::*;
-
-    #[test]
-    fn every_builtin_profile_loads() {
-        for (name, _) in BUILTIN {
-            let p = Profile::load(name).unwrap_or_else(|e| panic!("{name}: {e}"));
-            assert!(!p.device.name.is_empty());
-        }
-        let rx = Profile::load("omron-3g3rx").unwrap();
-        assert_eq!(rx.limits.read_registers, Some(4));
-        assert_eq!(rx.exceptions.out_of_range, 0x21);
-        assert_eq!(rx.addressing.base, 1);
-    }
-
-    #[test]
-    fn an_unknown_name_lists_the_builtins() {
-        let e = Profile::load("omron-3g3xx").unwrap_err();
-        assert_eq!(
-            e.to_string(),
-            "no profile named \"omron-3g3xx\": the built-in ones are omron-3g3rx, sdp-servo, generic, or give a path to a .toml file"
-        );
-    }
-
-    const DEVICE: &str = "[device]\nname='x'\nvendor='v'\nproduct_code='p'\nrevision='1'\n";
-
-    fn error(text: &str) -> String {
-        Profile::parse(text, "mine.toml").unwrap_err().to_string()
-    }
-
-    #[test]
-    fn mistakes_in_a_profile_are_reported_with_the_file_the_line_and_the_field() {
-        assert_eq!(
-            error(&format!("{DEVICE}colour = 'red'\n")),
-            "in mine.toml, line 6 (colour = 'red'): unknown field `colour`, expected one of `name`, `vendor`, \
-             `product_code`, `revision`, `vendor_url`, `product_name`, `model_name`, `user_application_name`, \
-             `identification`, `server_id`"
-        );
-        let wrong_type = error(&format!("{DEVICE}[[registers]]\nnumber = 'one'\nname = 'r'\n"));
-        assert!(wrong_type.starts_with("in mine.toml, line 7 (number = 'one'): invalid type: string"), "{wrong_type}");
-        let bad_type = error(&format!("{DEVICE}[[registers]]\nnumber=1\nname='r'\ntype='u24'\n"));
-        assert!(bad_type.starts_with("in mine.toml, line 9 (type='u24'): unknown variant `u24`"), "{bad_type}");
-        assert_eq!(
-            error(&format!("{DEVICE}[[registers]]\nnumber=1\nname='r'\ntype='string'\n")),
-            "in mine.toml, line 6: [[registers]] 1 (r): a string needs length = its registers (1 or more)"
-        );
-        assert_eq!(
-            error(&format!("{DEVICE}[[registers]]\nnumber=1\nname='r'\nvalues={{ 'x' = 'on' }}\n")),
-            "in mine.toml, line 9: [[registers]] 1 (r): values key \"x\" is not a raw u16 value"
-        );
-        assert_eq!(
-            error(&format!("{DEVICE}[[registers]]\nnumber=1\nname='r'\ndepends_on=['A004']\n")),
-            "in mine.toml, line 9: [[registers]] 1 (r): depends_on names \"A004\", which the profile does not have"
-        );
-        assert_eq!(
-            error(&format!("{DEVICE}[[span]]\ntable='holding'\nfirst=9\nlast=3\n")),
-            "in mine.toml, line 6: [[span]] holding: first = 9 is above last = 3"
-        );
-        assert_eq!(
-            error(&format!("{DEVICE}[[registers]]\nnumber=1\nname='r'\nmin=5\nmax=4\n")),
-            "in mine.toml, line 10: [[registers]] 1 (r): min = 5 is above max = 4"
-        );
-    }
-
-    #[test]
-    fn an_order_is_one_of_the_four_names_and_defaults_to_the_devices() {
-        let pair = |order: &str| {
-            format!("[addressing]\norder='CDAB'\n{DEVICE}[[registers]]\nnumber=1\nname='r'\ntype='u32'\n{order}")
-        };
-        let default = Profile::parse(&pair(""), "mine.toml").unwrap();
-        assert_eq!(default.points()[0].order, Order::Cdab);
-        let own = Profile::parse(&pair("order='BADC'\n"), "mine.toml").unwrap();
-        assert_eq!(own.points()[0].order, Order::Badc);
-        let wrong = error(&pair("order='cdab'\n"));
-        assert!(wrong.starts_with("in mine.toml, line 12 (order='cdab'): unknown variant `cdab`"), "{wrong}");
-        let single = error(&format!("{DEVICE}[[registers]]\nnumber=1\nname='r'\norder='CDAB'\n"));
-        assert_eq!(
-            single,
-            "in mine.toml, line 9: [[registers]] 1 (r): order is for values of more than one register, not u16"
-        );
-    }
-
-    #[test]
-    fn overlapping_registers_are_refused_naming_both_and_their_lines() {
-        let text = format!(
-            "{DEVICE}[[registers]]\nnumber=10\nname='a'\ncount=4\n\n[[registers]]\nnumber=20\nname='b'\n\n\
-             [[registers]]\nnumber=12\nname='c'\ntype='u32'\n"
-        );
-        assert_eq!(error(&text), "in mine.toml, line 15: [[registers]] 12 (c) overlaps 10 (a) on line 6");
-        let duplicate = format!("{DEVICE}[[coils]]\nnumber=3\nname='a'\n[[coils]]\nnumber=3\nname='b'\n");
-        assert_eq!(error(&duplicate), "in mine.toml, line 9: [[coils]] 3 (b) is at the same number as 3 (a) on line 6");
-        // A 32-bit pair takes two numbers; the next one may follow it.
-        let pairs = format!("{DEVICE}[[inputs]]\nnumber=1\nname='a'\ntype='i32'\n[[inputs]]\nnumber=3\nname='b'\n");
-        assert!(Profile::parse(&pairs, "mine.toml").is_ok());
-        let clash = format!("{DEVICE}[[inputs]]\nnumber=1\nname='a'\ntype='f32'\n[[inputs]]\nnumber=2\nname='b'\n");
-        assert_eq!(error(&clash), "in mine.toml, line 10: [[inputs]] 2 (b) overlaps 1 (a) on line 6");
-        // The same number in two tables is no overlap: coils and registers are apart.
-        let apart = format!("{DEVICE}[[coils]]\nnumber=1\nname='a'\n[[registers]]\nnumber=1\nname='b'\n");
-        assert!(Profile::parse(&apart, "mine.toml").is_ok());
-    }
-
-    #[test]
-    fn a_missing_file_says_so_and_a_bare_unknown_name_lists_the_builtins() {
-        assert_eq!(Profile::load("./nope.toml").unwrap_err().to_string(), "profile ./nope.toml: no such file");
-        assert_eq!(Profile::load("drives/nope").unwrap_err().to_string(), "profile drives/nope: no such file");
-        assert_eq!(Profile::load("nope.toml").unwrap_err().to_string(), "profile nope.toml: no such file");
-        assert!(
-            Profile::load("nope")
-                .unwrap_err()
-                .to_string()
-                .starts_with("no profile named \"nope\": the built-in ones are")
-        );
-    }
-}
+mod tests;

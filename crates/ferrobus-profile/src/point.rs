@@ -1,7 +1,8 @@
 //! Points: the profile's entries resolved to one value each, at a wire address, and the ways
 //! to find them (code, label, glob, group).
 
-use crate::model::{Access, Order, Profile, Table, ValueType, parse_key};
+use crate::check::parse_key;
+use crate::model::{Access, Order, Profile, Table, ValueType};
 
 /// One value of the device: a coil, a discrete input, or a register value of any type.
 #[derive(Clone, Debug, PartialEq)]

@@ -291,3 +291,25 @@ fn profile_commands_need_no_bus() {
     let out = ferrobus().args(["profile", "list", "--csv"]).assert().success();
     assert!(stdout(&out).starts_with("name,device,vendor,points\n"));
 }
+
+#[test]
+fn read_and_write_take_a_parameter_name_where_an_address_goes_and_type_it_whole() {
+    let sim = Sim::pty(&["--profile", "omron-3g3rx"]);
+    let rx = ["--device", "omron-3g3rx"];
+    let run = |args: &[&str]| sim.run(1, &[&rx[..], args].concat());
+    let read = stdout(&run(&["read", "holding", "F002", "--csv"]).success());
+    assert_eq!(
+        read, "address,addr_hex,hex,dec,u32\n4354,0x1102,0x0000 0x03E8,0 1000,1000\n",
+        "both registers, as a u32"
+    );
+    let wrote = stdout(&run(&["write", "register", "F002", "1500"]).success());
+    assert_eq!(wrote, "unit 1: FC10 wrote 2 registers at 4354 (0x1102): 0x0000 0x05DC (u32 1500)\n");
+    let doc: serde_json::Value = serde_json::from_str(&stdout(&run(&["get", "F002", "--json"]).success())).unwrap();
+    assert_eq!(doc["points"][0]["value"], "15.00 s");
+    run(&["write", "coil", "run", "on"]).success();
+    assert!(stdout(&run(&["read", "coils", "run", "--csv"]).success()).ends_with(",1,ON\n"));
+    let err = stderr(&run(&["read", "input", "F002"]).code(2));
+    assert_eq!(err.trim(), "error: F002 is in the holding table, not input");
+    let err = stderr(&run(&["read", "holding", "d00*"]).code(2));
+    assert_eq!(err.trim(), "error: \"d00*\" names 3 parameters (d001, d002, d003): give one, or use get");
+}

@@ -177,7 +177,7 @@ fn sim_names_the_file_and_line_of_overlapping_profile_registers() {
     let path = dir.join("overlap.toml");
     std::fs::write(
         &path,
-        "[device]\nname='x'\nvendor='v'\nproduct_code='p'\nrevision='1'\n\n[[registers]]\nnumber=1\nname='a'\nsize=2\n\n[[registers]]\nnumber=2\nname='b'\n",
+        "[device]\nname='x'\nvendor='v'\nproduct_code='p'\nrevision='1'\n\n[[registers]]\nnumber=1\nname='a'\ntype='u32'\n\n[[registers]]\nnumber=2\nname='b'\n",
     )
     .unwrap();
     let shown = path.display().to_string();

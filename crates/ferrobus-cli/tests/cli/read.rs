@@ -88,9 +88,10 @@ fn word_order_decides_which_register_is_high() {
 fn one_based_numbers_are_sent_as_number_minus_one_and_shown_beside_the_wire_address() {
     let server = Server::start();
     let out = stdout(&server.run(&["read", "holding", "--one-based", "0x0012", "--csv"]).success());
-    assert_eq!(out, "address,addr_hex,number,hex,dec\n17,0x0011,18,0x0011,17\n");
+    // The number is shown as typed: in hex.
+    assert_eq!(out, "address,addr_hex,number,hex,dec\n17,0x0011,0x0012,0x0011,17\n");
     let short = stdout(&server.run(&["read", "holding", "-1", "18", "--csv"]).success());
-    assert_eq!(short, out);
+    assert_eq!(short, "address,addr_hex,number,hex,dec\n17,0x0011,18,0x0011,17\n", "typed in decimal");
     assert_eq!(requests(&server), [(0x03, 0x11, 1), (0x03, 0x11, 1)]);
     let zero = server.run(&["read", "holding", "--one-based", "0"]).code(2);
     assert!(stderr(&zero).contains("start at 1"), "{}", stderr(&zero));

@@ -67,7 +67,7 @@ fn long_typed_writes_split_between_values() {
 fn one_based_writes_land_one_lower() {
     let server = Server::start();
     let out = stdout(&server.run(&["write", "register", "--one-based", "0x0012", "50"]).success());
-    assert_eq!(out, "unit 1: FC06 wrote register at 17 (0x0011) = 18: 0x0032\n");
+    assert_eq!(out, "unit 1: FC06 wrote register at 17 (0x0011) = 0x0012: 0x0032\n", "the number as typed, in hex");
     let modicon = stdout(&server.run(&["write", "registers", "--modicon", "40020", "1", "2"]).success());
     assert_eq!(modicon, "unit 1: FC10 wrote 2 registers at 19 (0x0013) = 40020: 0x0001 0x0002\n");
     assert_eq!(requests(&server), [(0x06, 0x11, 1), (0x10, 19, 2)]);

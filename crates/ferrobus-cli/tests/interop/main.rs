@@ -21,6 +21,7 @@
 
 mod cli_vs_servers;
 mod clients_vs_sim;
+mod device_profile;
 mod drive_profiles;
 mod fault_rules;
 mod mbpoll_vs_sim;
