@@ -311,5 +311,8 @@ fn read_and_write_take_a_parameter_name_where_an_address_goes_and_type_it_whole(
     let err = stderr(&run(&["read", "input", "F002"]).code(2));
     assert_eq!(err.trim(), "error: F002 is in the holding table, not input");
     let err = stderr(&run(&["read", "holding", "d00*"]).code(2));
-    assert_eq!(err.trim(), "error: \"d00*\" names 3 parameters (d001, d002, d003): give one, or use get");
+    assert_eq!(
+        err.trim(),
+        "error: \"d00*\" names 9 parameters (d001, d002, d003, d004, d005, d006, d007, d008, d009): give one, or use get"
+    );
 }
