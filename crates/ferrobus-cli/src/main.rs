@@ -32,6 +32,7 @@ mod interrupt;
 mod line;
 mod mask;
 mod output;
+mod poll;
 mod profile;
 mod raw;
 mod read;
@@ -132,6 +133,8 @@ enum Command {
     Restore(backup::restore::RestoreArgs),
     /// Decode a live RTU bus passively (transmits nothing); pcapng for tshark/Wireshark
     Sniff(sniff::SniffArgs),
+    /// Poll registers or named points for ever, each group at its own rate: a live table, CSV or JSON lines, a log
+    Poll(poll::PollArgs),
 }
 
 impl Command {
@@ -177,6 +180,7 @@ async fn dispatch(cli: &Cli) -> Result<(), CliError> {
         Command::Diff(args) => backup::diff::run(connection, args).await,
         Command::Restore(args) => backup::restore::run(connection, args).await,
         Command::Sniff(args) => sniff::run(connection, args).await,
+        Command::Poll(args) => poll::run(connection, args).await,
     }
 }
 
@@ -290,6 +294,9 @@ fn main() -> ExitCode {
     }
     if let (Command::Sniff(args), Some(sniff)) = (&mut cli.command, matches.subcommand_matches("sniff")) {
         args.units_from(&matches, sniff);
+    }
+    if let (Command::Poll(args), Some(poll)) = (&mut cli.command, matches.subcommand_matches("poll")) {
+        args.positions_from(poll);
     }
     init_logging(cli.verbose);
     if let Err(error) = refuse_ignored_options(&matches) {
