@@ -727,6 +727,46 @@ pub(crate) async fn run(connection: &ConnectArgs, args: &PollArgs) -> Result<(),
 mod tests {
     use super::*;
 
+    fn sample(group: usize, result: Result<Vec<ferrobus::poll::Reading>, ferrobus::poll::Failure>) -> Sample {
+        Sample {
+            group,
+            seq: 0,
+            time: std::time::SystemTime::UNIX_EPOCH,
+            due: Duration::ZERO,
+            started: Duration::ZERO,
+            response_time: Duration::ZERO,
+            overrun: false,
+            result,
+            traffic: ferrobus::poll::Traffic::default(),
+        }
+    }
+
+    fn reading(cell: usize, x: f64) -> ferrobus::poll::Reading {
+        ferrobus::poll::Reading {
+            cell,
+            raw: Ok(ferrobus::poll::Value::Float(x)),
+            scaled: Some(x),
+            shown: x.to_string(),
+        }
+    }
+
+    #[test]
+    fn on_change_writes_a_cell_only_past_the_deadband_and_every_status_change() {
+        let mut c = Changes::default();
+        assert_eq!(c.filter(&sample(0, Ok(vec![reading(0, 10.0), reading(1, 5.0)])), 0.5), (vec![true, true], true));
+        // 10.4 is within 0.5 of the 10.0 written; 5.6 is not.
+        assert_eq!(c.filter(&sample(0, Ok(vec![reading(0, 10.4), reading(1, 5.6)])), 0.5), (vec![false, true], true));
+        // Drift adds up against the value last written, not the last seen.
+        assert_eq!(c.filter(&sample(0, Ok(vec![reading(0, 10.6), reading(1, 5.6)])), 0.5), (vec![true, false], true));
+        assert_eq!(c.filter(&sample(0, Ok(vec![reading(0, 10.6), reading(1, 5.6)])), 0.5), (vec![false, false], false));
+        let timeout =
+            || ferrobus::poll::Failure { kind: FailureKind::Timeout, exception: None, diagnosis: "no reply".into() };
+        assert_eq!(c.filter(&sample(0, Err(timeout())), 0.5), (vec![], true));
+        assert_eq!(c.filter(&sample(0, Err(timeout())), 0.5), (vec![], false));
+        // Back to ok: every cell is written again.
+        assert_eq!(c.filter(&sample(0, Ok(vec![reading(0, 10.6), reading(1, 5.6)])), 0.5), (vec![true, true], true));
+    }
+
     #[test]
     fn sizes_take_k_m_g_and_refuse_zero_and_overflow() {
         assert_eq!(parse_size("500k"), Ok(512_000));

@@ -10,6 +10,7 @@ mod errors;
 mod line_settings;
 mod offline;
 mod output;
+mod poll;
 mod read;
 mod reopen;
 mod scan;
