@@ -367,6 +367,8 @@ fn records(sample: &Sample, group: &Group, style: Style, keep: &[bool]) -> Strin
                 "status": status,
                 "exception": sample.result.as_ref().err().and_then(|f| f.exception),
                 "response_ms": (ms * 1000.0).round() / 1000.0,
+                "due_ms": millis(sample.due),
+                "late_ms": millis(sample.started.saturating_sub(sample.due)),
                 "overrun": sample.overrun,
                 "points": points,
                 "diagnosis": diagnosis,
@@ -405,6 +407,11 @@ fn records(sample: &Sample, group: &Group, style: Style, keep: &[bool]) -> Strin
         }
     }
     out
+}
+
+/// Milliseconds to the microsecond.
+fn millis(d: Duration) -> f64 {
+    (d.as_secs_f64() * 1e6).round() / 1e3
 }
 
 fn raw_json(v: &ferrobus::poll::Value) -> serde_json::Value {
@@ -556,7 +563,8 @@ impl Screen {
         }
     }
 
-    fn draw(&mut self, groups: &[Group], counters: &[ferrobus::poll::Counters]) -> Result<(), CliError> {
+    /// The table, preceded after the first time by the escape that moves back to its top.
+    fn draw(&mut self, groups: &[Group], counters: &[ferrobus::poll::Counters]) -> String {
         let mut rows = output::Rows::new(&[
             ("group", output::Align::Left),
             ("point", output::Align::Left),
@@ -595,7 +603,7 @@ impl Screen {
             let _ = writeln!(text, "{line}\x1b[K");
         }
         self.drawn = table.lines().count();
-        output::print(&text)
+        text
     }
 }
 
@@ -681,7 +689,7 @@ pub(crate) async fn run(connection: &ConnectArgs, args: &PollArgs) -> Result<(),
                     if args.on_change { changes.filter(&sample, args.deadband) } else { (Vec::new(), true) };
                 if style == Style::Table {
                     screen.update(&sample);
-                    screen.draw(&groups, &handle.counters())?;
+                    output::print(&screen.draw(&groups, &handle.counters()))?;
                 } else if any {
                     output::print(&records(&sample, group, style, &keep))?;
                 }
@@ -765,6 +773,21 @@ mod tests {
         assert_eq!(c.filter(&sample(0, Err(timeout())), 0.5), (vec![], false));
         // Back to ok: every cell is written again.
         assert_eq!(c.filter(&sample(0, Ok(vec![reading(0, 10.6), reading(1, 5.6)])), 0.5), (vec![true, true], true));
+    }
+
+    #[test]
+    fn the_terminal_table_is_redrawn_over_itself() {
+        let g = Group::raw("u1 holding 0x0000", 1, Table::Holding, 0, 2, Duration::from_secs(1), &Layout::default())
+            .unwrap();
+        let mut screen = Screen::default();
+        let first = screen.draw(std::slice::from_ref(&g), &[]);
+        assert!(first.starts_with("group"), "{first:?}");
+        assert!(first.contains("0x0001"));
+        screen.update(&sample(0, Ok(vec![reading(0, 7.0), reading(1, 8.0)])));
+        let second = screen.draw(std::slice::from_ref(&g), &[]);
+        assert!(second.starts_with("\x1b[3F"), "back up over the header and two rows: {second:?}");
+        assert!(second.lines().all(|l| l.ends_with("\x1b[K")), "each line cleared to its end");
+        assert!(second.contains(" 7 ") || second.contains(" 7\x1b"), "{second:?}");
     }
 
     #[test]

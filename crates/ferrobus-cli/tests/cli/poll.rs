@@ -314,3 +314,24 @@ fn bad_group_arguments_are_usage_errors_that_say_what_is_wrong() {
         assert!(stderr(&out).contains(message), "{args:?}: {}", stderr(&out));
     }
 }
+
+#[test]
+fn named_points_of_a_device_are_scaled_with_their_unit() {
+    let sim = Sim::pty(&["--profile", "omron-3g3rx"]);
+    let out = ferrobus()
+        .args(["--port", &sim.path, "--parity", "none", "--device", "omron-3g3rx", "poll", "d001", "d002"])
+        .args(["--every", "100ms", "--duration", "350ms", "--jsonl"])
+        .assert()
+        .success();
+    let records = jsonl(&stdout(&out));
+    assert!(records.len() >= 3, "{records:?}");
+    for (k, r) in records.iter().enumerate() {
+        assert_eq!(r["status"], "ok", "{r}");
+        assert_eq!(r["due_ms"], 100.0 * f64::from(u32::try_from(k).unwrap()), "due on the grid from the start: {r}");
+        let points = r["points"].as_array().unwrap();
+        assert_eq!(points[0]["point"], "d001");
+        assert_eq!(points[0]["uom"], "Hz");
+        assert!(points[0]["shown"].as_str().unwrap().ends_with(" Hz"), "{r}");
+        assert_eq!(points[1]["point"], "d002");
+    }
+}
