@@ -13,7 +13,7 @@
 //! diagnosis. Nothing ends the polling but [`PollHandle::stop`] (or dropping the [`Poller`]):
 //! a timeout, an exception, a CRC error or a lost port is a sample like any other, and the
 //! client reopens the port. Deadlines are kept by the core's
-//! [`Schedule`](ferrobus_proto::schedule::Schedule): from the start, not from the last poll,
+//! [`Schedule`]: from the start, not from the last poll,
 //! so the rate does not drift; a poll that runs over the next deadline is an overrun and the
 //! next one goes at once. When the line cannot carry what was asked — predicted from the wire
 //! time of each request if the line's timing is known, else seen at the first overrun — an
