@@ -10,7 +10,7 @@
 //!
 //! One task runs every group: it sleeps until the earliest deadline, reads, and hands out a
 //! [`Sample`] — the decoded cells, or a [`Failure`] with its [`FailureKind`] and the
-//! diagnosis. Nothing ends the polling but [`PollHandle::stop`] (or dropping the [`Poller`]):
+//! diagnosis. Nothing ends the polling but [`PollHandle::stop`] or dropping the [`Poller`]:
 //! a timeout, an exception, a CRC error or a lost port is a sample like any other, and the
 //! client reopens the port. Deadlines are kept by the core's
 //! [`Schedule`]: from the start, not from the last poll,
@@ -182,8 +182,9 @@ pub enum WriteError {
 }
 
 impl Poller {
-    /// Starts polling `groups` through `client` on the current tokio runtime. Dropping the
-    /// poller (or [`PollHandle::stop`]) ends it.
+    /// Starts polling `groups` through `client` on the current tokio runtime.
+    /// [`PollHandle::stop`] ends it before the next deadline; dropping the poller ends it at
+    /// the next poll, whose sample has nowhere to go.
     pub fn start(client: Client, groups: Vec<Group>, config: PollConfig) -> Poller {
         let (events_tx, events) = mpsc::channel(1024);
         let (paused, _) = watch::channel(false);
