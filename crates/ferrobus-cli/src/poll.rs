@@ -38,6 +38,7 @@ use crate::output;
      u16). A --unit applies to the groups after it. Records: CSV has one row per point of each poll (a failed \
      poll: one row, its point the group's name); JSON lines one object per poll. status is ok, timeout, crc, \
      garbage, exception, bad-reply, port, backoff or other. The summary goes to stderr.")]
+#[expect(clippy::struct_excessive_bools, reason = "each bool is a command-line flag or one fact about them")]
 pub(crate) struct PollArgs {
     /// Groups: TABLE ADDRESS pairs; with --device, also parameter names (codes, labels, globs)
     #[arg(value_name = "TABLE ADDRESS | NAME", allow_hyphen_values = false)]
@@ -97,7 +98,7 @@ pub(crate) struct PollArgs {
     pub(crate) on_change: bool,
 
     /// With --on-change: the smallest change of a scaled value that is written
-    #[arg(long, value_name = "X", default_value_t = 0.0, requires = "on_change")]
+    #[arg(long, value_name = "X", default_value_t = 0.0, requires = "on_change", value_parser = parse_deadband)]
     pub(crate) deadband: f64,
 
     /// Stop after this long (scripts, tests); default: until Ctrl-C or SIGTERM
@@ -107,6 +108,11 @@ pub(crate) struct PollArgs {
     /// The command line's groups, from the positions of their arguments (set by `main`).
     #[arg(skip)]
     pub(crate) positions: Vec<(usize, Token)>,
+
+    /// `--unit` was written both before and after `poll` (set by `main`): clap keeps only the
+    /// later ones, so the earlier would be lost.
+    #[arg(skip)]
+    pub(crate) units_on_both_sides: bool,
 }
 
 /// One argument of the group list, by position.
@@ -126,6 +132,13 @@ pub(crate) enum Token {
 
 fn parse_period(text: &str) -> Result<Duration, String> {
     period(Some(text))
+}
+
+fn parse_deadband(text: &str) -> Result<f64, String> {
+    match text.trim().parse::<f64>() {
+        Ok(x) if x.is_finite() && x >= 0.0 => Ok(x),
+        _ => Err(format!("{text:?}: give a number, 0 or more")),
+    }
 }
 
 fn parse_size(text: &str) -> Result<u64, String> {
@@ -166,7 +179,20 @@ impl PollArgs {
         }
         tokens.sort_by_key(|(i, _)| *i);
         self.positions = tokens;
+        let argv: Vec<String> = std::env::args_os().map(|a| a.to_string_lossy().into_owned()).collect();
+        self.units_on_both_sides = units_on_both_sides(&argv);
     }
+}
+
+/// Whether `argv` has a `--unit` (or `-u`) both before and after the word `poll`.
+fn units_on_both_sides(argv: &[String]) -> bool {
+    let is_unit = |a: &&String| {
+        a.as_str() == "--unit" || a.starts_with("--unit=") || (a.starts_with("-u") && !a.starts_with("--"))
+    };
+    let Some(at) = argv.iter().position(|a| a == "poll") else { return false };
+    let before = argv.get(1..at).unwrap_or_default().iter().any(|a| is_unit(&a));
+    let after = argv.get(at.saturating_add(1)..).unwrap_or_default().iter().any(|a| is_unit(&a));
+    before && after
 }
 
 /// A group as the command line gives it, before it is checked.
@@ -254,6 +280,13 @@ fn parse_address(word: &str) -> Result<u16, CliError> {
 
 /// Every group to poll: the command line's, then the session file's.
 fn groups(connection: &ConnectArgs, args: &PollArgs) -> Result<Vec<Group>, CliError> {
+    if args.units_on_both_sides {
+        return Err(CliError::Usage(
+            "--unit is given both before and after `poll`: write every --unit after `poll`, each before its groups \
+             (the ones before `poll` would be lost)"
+                .into(),
+        ));
+    }
     let first_unit = connection.unit.first().copied().unwrap_or(1);
     let order = Order::from_name(&args.order)
         .ok_or_else(|| CliError::Usage(format!("--order {:?}: give ABCD, CDAB, BADC or DCBA", args.order)))?;
@@ -791,6 +824,15 @@ mod tests {
     }
 
     #[test]
+    fn a_unit_on_both_sides_of_poll_is_found() {
+        let argv = |s: &str| s.split(' ').map(String::from).collect::<Vec<_>>();
+        assert!(units_on_both_sides(&argv("ferrobus --unit 7 poll holding 0 --unit 3 input 0")));
+        assert!(units_on_both_sides(&argv("ferrobus -u7 poll holding 0 --unit=3 input 0")));
+        assert!(!units_on_both_sides(&argv("ferrobus --unit 7 poll holding 0")));
+        assert!(!units_on_both_sides(&argv("ferrobus poll --unit 7 holding 0 --unit 3 input 0")));
+    }
+
+    #[test]
     fn sizes_take_k_m_g_and_refuse_zero_and_overflow() {
         assert_eq!(parse_size("500k"), Ok(512_000));
         assert_eq!(parse_size("10M"), Ok(10 << 20));
@@ -819,6 +861,7 @@ mod tests {
             deadband: 0.0,
             duration: None,
             positions: tokens.into_iter().enumerate().collect(),
+            units_on_both_sides: false,
         }
     }
 

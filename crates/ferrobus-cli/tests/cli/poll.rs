@@ -303,7 +303,9 @@ fn a_lost_tcp_server_is_a_port_record_and_polling_resumes_when_it_is_back() {
 
 #[test]
 fn bad_group_arguments_are_usage_errors_that_say_what_is_wrong() {
-    let cases: [(&[&str], &str); 4] = [
+    let cases: [(&[&str], &str); 6] = [
+        (&["--unit", "7", "poll", "holding", "0", "--unit", "3", "input", "0"], "given both before and after `poll`"),
+        (&["poll", "holding", "0", "--on-change", "--deadband=-1"], "give a number, 0 or more"),
         (&["poll", "holding"], "holding needs an ADDRESS after it"),
         (&["poll", "speed"], "\"speed\" is neither a table"),
         (&["poll", "holding", "0x10000"], "address \"0x10000\""),
