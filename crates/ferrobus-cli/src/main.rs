@@ -38,6 +38,7 @@ mod line;
 mod man;
 mod mask;
 mod output;
+mod poll;
 mod ports;
 mod profile;
 mod raw;
@@ -158,6 +159,8 @@ enum Command {
     Completions(completions::CompletionsArgs),
     /// Manual pages in roff: ferrobus(1) on stdout, or every page into --dir
     Man(man::ManArgs),
+    /// Poll registers or named points for ever, each group at its own rate: a live table, CSV or JSON lines, a log
+    Poll(poll::PollArgs),
 }
 
 impl Command {
@@ -212,6 +215,7 @@ async fn dispatch(cli: &Cli) -> Result<(), CliError> {
         Command::Config(args) => config::run(&cli.layered, args),
         Command::Completions(args) => completions::run(args),
         Command::Man(args) => man::run(args),
+        Command::Poll(args) => poll::run(connection, args).await,
     }
 }
 
@@ -348,6 +352,9 @@ fn main() -> ExitCode {
     }
     if let (Command::Sniff(args), Some(sniff)) = (&mut cli.command, matches.subcommand_matches("sniff")) {
         args.units_from(&matches, sniff);
+    }
+    if let (Command::Poll(args), Some(poll)) = (&mut cli.command, matches.subcommand_matches("poll")) {
+        args.positions_from(poll);
     }
     init_logging(cli.verbose);
     cli.layered.log();

@@ -29,6 +29,9 @@
 //!   line served round-robin, the gateway exceptions, per-unit backoff, a read cache.
 //! - [`port`]: serial ports (RS-485 by the adapter, the kernel or RTS; the USB latency timer),
 //!   TCP, RTU over TCP, and ptys made in-process.
+//! - [`poll`]: the poller — read groups (raw ranges, a profile's points) each at its own
+//!   rate without drift, samples with each failure's kind, counters, pause and write-through,
+//!   and the session file that `poll` and `monitor` share.
 //! - [`scan`]: the bus scanner — unit addresses × line settings over one port reconfigured
 //!   in place, listening first, a second pass for leads, identification.
 //! - `tls` (the `tls` feature): Modbus/TCP Security — TLS with mutual authentication, the
@@ -59,6 +62,7 @@ pub mod gateway;
 mod identity;
 pub mod line;
 pub mod pcapng;
+pub mod poll;
 pub mod port;
 mod pump;
 pub mod scan;

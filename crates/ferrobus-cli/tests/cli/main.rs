@@ -14,6 +14,7 @@ mod line_settings;
 mod offline;
 mod output;
 mod package;
+mod poll;
 mod ports;
 mod read;
 mod reopen;
