@@ -31,6 +31,7 @@ mod interrupt;
 #[cfg(unix)]
 mod line;
 mod mask;
+mod monitor;
 mod output;
 mod profile;
 mod raw;
@@ -132,6 +133,8 @@ enum Command {
     Restore(backup::restore::RestoreArgs),
     /// Decode a live RTU bus passively (transmits nothing); pcapng for tshark/Wireshark
     Sniff(sniff::SniffArgs),
+    /// A terminal UI: live grids of read definitions or --device points, traffic, trends, writes in place
+    Monitor(monitor::MonitorArgs),
 }
 
 impl Command {
@@ -177,6 +180,7 @@ async fn dispatch(cli: &Cli) -> Result<(), CliError> {
         Command::Diff(args) => backup::diff::run(connection, args).await,
         Command::Restore(args) => backup::restore::run(connection, args).await,
         Command::Sniff(args) => sniff::run(connection, args).await,
+        Command::Monitor(args) => monitor::run(connection, args).await,
     }
 }
 

@@ -1,0 +1,274 @@
+//! The monitor's screens on ratatui's `TestBackend`, as insta snapshots (80×24 and 120×40),
+//! and the keys' effects on the state.
+
+use std::time::Duration;
+
+use ferrobus_profile::{Order, Profile, Table};
+use ratatui::Terminal;
+use ratatui::backend::TestBackend;
+use ratatui::crossterm::event::{KeyCode, KeyEvent, KeyModifiers};
+
+use super::keys::{self, Action};
+use super::model::{App, Definition, Format, Mode, Outcome, TrafficLine};
+use super::{spec, view};
+
+fn render(app: &App, width: u16, height: u16) -> String {
+    let mut terminal = Terminal::new(TestBackend::new(width, height)).unwrap();
+    terminal.draw(|frame| view::draw(frame, app)).unwrap();
+    terminal.backend().to_string()
+}
+
+fn key(app: &mut App, code: KeyCode) -> Action {
+    keys::handle(app, KeyEvent::new(code, KeyModifiers::NONE))
+}
+
+/// Two panes with data, failures of each kind, traffic and a trended cell.
+fn busy() -> App {
+    let mut holding = Definition::raw(1, Table::Holding, 0x0000, 10, Duration::from_millis(500));
+    let mut input = Definition::raw(2, Table::Input, 0x0100, 4, Duration::from_secs(1));
+    for (i, value) in [1200u16, 1210, 1230, 1225].iter().enumerate() {
+        let mut registers: Vec<u16> = (0..10).map(|r| r * 100).collect();
+        registers[0] = *value;
+        registers[4] = 0x4049; // f32 3.14159 in ABCD over 4..6
+        registers[5] = 0x0FD0;
+        registers[6] = 0xFFFF;
+        holding.record(Outcome::Registers(registers), Duration::from_micros(3200 + 100 * i as u64));
+    }
+    holding.record(Outcome::Timeout("no reply from unit 1 within 1000 ms (1 attempt)".into()), Duration::ZERO);
+    input.record(Outcome::Registers(vec![7, 8, 9, 10]), Duration::from_micros(2100));
+    input.record(Outcome::Crc("no valid reply from unit 2: bad CRC".into()), Duration::ZERO);
+    input.record(
+        Outcome::Exception("unit 2 answered 0x04 with exception 02 illegal data address".into()),
+        Duration::from_micros(1900),
+    );
+    holding.cells[0].alias = "speed".into();
+    holding.cells[4].set_format(Format::F32(Order::Abcd));
+    holding.cells[6].set_format(Format::I16);
+    holding.cells[7].set_format(Format::Hex);
+    holding.cells[8].set_format(Format::Binary);
+    let mut app = App::new("tcp 127.0.0.1:5020".into(), vec![holding, input]);
+    app.traffic.push(TrafficLine {
+        at: Duration::from_millis(1500),
+        direction: "Tx",
+        unit: 1,
+        bytes: vec![0x03, 0x00, 0x00, 0x00, 0x0A],
+        decode: "read holding 0x0000 ×10".into(),
+    });
+    app.traffic.push(TrafficLine {
+        at: Duration::from_millis(1503),
+        direction: "Rx",
+        unit: 1,
+        bytes: vec![0x03, 0x14, 0x04, 0xB0],
+        decode: "10 registers".into(),
+    });
+    app.traffic.push(TrafficLine {
+        at: Duration::from_millis(2503),
+        direction: "--",
+        unit: 1,
+        bytes: vec![],
+        decode: "no reply from unit 1 within 1000 ms (1 attempt)".into(),
+    });
+    app
+}
+
+fn with_trend(mut app: App) -> App {
+    app.toggle_trend();
+    for (t, v) in [(0.0, 1200.0), (0.5, 1210.0), (1.0, 1230.0), (1.5, 1225.0)] {
+        if let Some(trend) = app.trends.first_mut() {
+            trend.samples.push_back((t, v));
+        }
+    }
+    app
+}
+
+#[test]
+fn the_busy_screen_at_80x24() {
+    insta::assert_snapshot!(render(&busy(), 80, 24));
+}
+
+#[test]
+fn the_busy_screen_with_a_trend_at_120x40() {
+    insta::assert_snapshot!(render(&with_trend(busy()), 120, 40));
+}
+
+#[test]
+fn the_confirmation_of_a_write_at_80x24() {
+    let mut app = busy();
+    key(&mut app, KeyCode::Char('e'));
+    for c in "4660".chars() {
+        key(&mut app, KeyCode::Char(c));
+    }
+    key(&mut app, KeyCode::Enter);
+    assert_eq!(app.mode, Mode::Confirm { text: "4660".into(), registers: vec![0x1234], bit: None });
+    insta::assert_snapshot!(render(&app, 80, 24));
+    assert_eq!(
+        key(&mut app, KeyCode::Char('y')),
+        Action::Write { pane: 0, address: 0, registers: vec![0x1234], bit: None }
+    );
+}
+
+#[test]
+fn the_80x24_screen_shows_every_pane_status_the_keys_and_the_traffic() {
+    let screen = render(&busy(), 80, 24);
+    assert!(screen.contains("Tx 5  Err 1 (timeout 1, CRC 0, exception 0, other 0)  last 3.5 ms"), "{screen}");
+    assert!(screen.contains("Tx 3  Err 2 (timeout 0, CRC 1, exception 1, other 0)  last 1.9 ms"), "{screen}");
+    assert!(screen.contains("q quit"), "{screen}");
+    assert!(screen.contains("03 00 00 00 0A"), "{screen}");
+}
+
+#[test]
+fn cells_show_each_format() {
+    let app = busy();
+    let pane = &app.panes[0];
+    let shown: Vec<String> = pane.cells.iter().map(|c| c.show(pane).unwrap()).collect();
+    assert_eq!(shown[0], "1225");
+    assert_eq!(shown[4], "3.14159");
+    assert_eq!(shown[6], "-1");
+    assert_eq!(shown[7], "0x02bc");
+    assert_eq!(shown[8], "0000 0011 0010 0000");
+}
+
+#[test]
+fn the_four_orders_decode_the_same_float_from_their_own_layouts() {
+    // 1.5f32 = 0x3FC00000: ABCD 3FC0 0000, CDAB 0000 3FC0, BADC C03F 0000, DCBA 0000 C03F.
+    for (order, words) in [
+        (Order::Abcd, [0x3FC0, 0x0000]),
+        (Order::Cdab, [0x0000, 0x3FC0]),
+        (Order::Badc, [0xC03F, 0x0000]),
+        (Order::Dcba, [0x0000, 0xC03F]),
+    ] {
+        let mut pane = Definition::raw(1, Table::Holding, 0, 2, Duration::from_secs(1));
+        pane.registers = words.to_vec();
+        pane.cells[0].set_format(Format::F32(order));
+        assert_eq!(pane.cells[0].show(&pane).as_deref(), Some("1.5"), "{order:?}");
+    }
+    let mut pane = Definition::raw(1, Table::Holding, 0, 4, Duration::from_secs(1));
+    pane.registers = vec![0x0000, 0x0000, 0x0000, 0xF83F]; // 1.5f64 in DCBA
+    pane.cells[0].set_format(Format::F64(Order::Dcba));
+    assert_eq!(pane.cells[0].show(&pane).as_deref(), Some("1.5"));
+}
+
+#[test]
+fn f_cycles_the_formats_and_o_the_orders() {
+    let mut app = busy();
+    app.cell = 1;
+    let mut seen = Vec::new();
+    for _ in 0..8 {
+        key(&mut app, KeyCode::Char('f'));
+        seen.push(app.panes[0].cells[1].format.name());
+    }
+    assert_eq!(seen, ["i16", "hex", "bin", "u32:ABCD", "i32:ABCD", "f32:ABCD", "f64:ABCD", "u16"]);
+    app.panes[0].cells[1].set_format(Format::U32(Order::Abcd));
+    let orders: Vec<String> = (0..4)
+        .map(|_| {
+            key(&mut app, KeyCode::Char('o'));
+            app.panes[0].cells[1].format.name()
+        })
+        .collect();
+    assert_eq!(orders, ["u32:CDAB", "u32:BADC", "u32:DCBA", "u32:ABCD"]);
+}
+
+#[test]
+fn pause_reset_and_the_traffic_pause_keys_change_the_state() {
+    let mut app = busy();
+    key(&mut app, KeyCode::Char('p'));
+    assert!(app.paused);
+    assert!(render(&app, 80, 24).contains("PAUSED"));
+    key(&mut app, KeyCode::Char('p'));
+    assert!(!app.paused);
+    key(&mut app, KeyCode::Char('r'));
+    assert!(app.panes.iter().all(|p| p.counters.tx == 0 && p.counters.errors() == 0));
+    key(&mut app, KeyCode::Char(' '));
+    let before = app.traffic.lines.len();
+    app.traffic.push(TrafficLine {
+        at: Duration::ZERO,
+        direction: "Tx",
+        unit: 1,
+        bytes: vec![3],
+        decode: String::new(),
+    });
+    assert_eq!(app.traffic.lines.len(), before);
+    assert!(render(&app, 80, 24).contains("paused, 1 not shown"));
+    key(&mut app, KeyCode::PageUp);
+    assert!(app.traffic.scroll > 0);
+    assert_eq!(key(&mut app, KeyCode::Char('q')), Action::None);
+    assert!(app.quit);
+}
+
+#[test]
+fn a_write_out_of_the_points_range_is_refused_before_anything_is_sent() {
+    let profile = Profile::builtin("omron-3g3rx").unwrap();
+    let point = profile.points().iter().find(|p| p.writable() && p.max.is_some()).unwrap().clone();
+    let too_big = point.max.unwrap() + 1.0;
+    let mut pane = spec::parse(&point.code, 1, Some(&profile)).unwrap().remove(0);
+    pane.registers = vec![0; usize::from(pane.count)];
+    let mut app = App::new("t".into(), vec![pane]);
+    key(&mut app, KeyCode::Char('e'));
+    // A raw value past max, in the point's engineering units.
+    let text = format!("{}", too_big * point.scale + point.offset);
+    for c in text.chars() {
+        key(&mut app, KeyCode::Char(c));
+    }
+    assert_eq!(key(&mut app, KeyCode::Enter), Action::None);
+    assert_eq!(app.mode, Mode::Normal);
+    let message = app.message.clone().unwrap();
+    assert!(message.starts_with("not written:"), "{message}");
+}
+
+#[test]
+fn read_only_tables_refuse_an_edit() {
+    let mut app = busy();
+    key(&mut app, KeyCode::Tab);
+    key(&mut app, KeyCode::Char('e'));
+    key(&mut app, KeyCode::Char('1'));
+    key(&mut app, KeyCode::Enter);
+    assert_eq!(app.mode, Mode::Normal);
+    assert_eq!(app.message.as_deref(), Some("input are read-only"));
+}
+
+#[test]
+fn definitions_parse_with_unit_count_and_rate_and_bad_ones_say_why() {
+    let d = spec::parse("3:input:0x100:8@250ms", 1, None).unwrap().remove(0);
+    assert_eq!((d.unit, d.table, d.address, d.count, d.every), (3, Table::Input, 0x100, 8, Duration::from_millis(250)));
+    let d = spec::parse("holding:5", 7, None).unwrap().remove(0);
+    assert_eq!((d.unit, d.address, d.count, d.every), (7, 5, 1, spec::DEFAULT_EVERY));
+    let err = |s: &str| spec::parse(s, 1, None).err().map(|e| format!("{e:?}")).unwrap();
+    assert!(err("holding:0:126").contains("1 to 125"), "{}", err("holding:0:126"));
+    assert!(err("holding:0xFFFF:2").contains("passes the last address"));
+    assert!(err("holding:x").contains("'x' is not a number"));
+    assert!(err("speed").contains("need --device"));
+    assert!(err("holding:0@1ms").contains("under 10 ms"));
+}
+
+#[test]
+fn the_trend_bounds_come_from_the_data_not_from_zero() {
+    assert_eq!(view::bounds([2900.0, 3020.0].into_iter()), Some([2888.0, 3032.0]));
+    assert_eq!(view::bounds([5.0].into_iter()), Some([4.0, 6.0]));
+    assert_eq!(view::bounds(std::iter::empty()), None);
+}
+
+#[test]
+fn a_session_round_trips_formats_aliases_and_trends() {
+    let mut panes = vec![Definition::raw(1, Table::Holding, 0, 4, Duration::from_secs(1))];
+    panes[0].cells[0].alias = "speed".into();
+    panes[0].cells[2].set_format(Format::F32(Order::Cdab));
+    panes[0].cells[3].trended = true;
+    let session = spec::Session::of(None, vec!["holding:0:4".into()], &panes);
+    let dir = std::env::temp_dir().join(format!("ferrobus-monitor-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let path = dir.join("s.toml");
+    let path = path.to_str().unwrap();
+    session.save(path).unwrap();
+    let loaded = spec::Session::load(path).unwrap();
+    assert_eq!(loaded, session);
+    let mut fresh = spec::parse(&loaded.watch[0], 1, None).unwrap();
+    loaded.apply(&mut fresh).unwrap();
+    assert_eq!(fresh[0].cells[0].alias, "speed");
+    assert_eq!(fresh[0].cells[2].format, Format::F32(Order::Cdab));
+    assert!(fresh[0].cells[3].trended);
+    assert_eq!(App::new("t".into(), fresh).trends.len(), 1);
+    std::fs::write(path, "watch = 3").unwrap();
+    let err = format!("{:?}", spec::Session::load(path).err().unwrap());
+    assert!(err.contains("is not valid"), "{err}");
+    std::fs::remove_dir_all(&dir).unwrap();
+}
