@@ -40,6 +40,8 @@
 //!   `handle_timeout(now)`, and writes what `poll_transmit(now, …)` returns. The engines
 //!   decide everything else: when the line has been silent long enough to transmit, when a
 //!   reply is due, which frames to ignore.
+//! - [`schedule`]: polling at a fixed rate — deadlines from the start, overruns, and the
+//!   wire time of an exchange to check a period against.
 //! - [`sniff`]: the passive decoder of a listener that never transmits: frames with good and
 //!   bad CRCs, partial frames and noise, request or response told from the bytes, pairs with
 //!   response times, the silence before each frame and t1.5/t3.5 violations, all from
@@ -86,6 +88,7 @@ pub mod master;
 pub mod pdu;
 pub mod retry;
 pub mod scan;
+pub mod schedule;
 pub mod slave;
 pub mod sniff;
 pub mod time;

@@ -27,6 +27,9 @@
 //!   with precise reply timing and a hook for fault injection.
 //! - [`port`]: serial ports (RS-485 by the adapter, the kernel or RTS; the USB latency timer),
 //!   TCP, RTU over TCP, and ptys made in-process.
+//! - [`poll`]: the poller — read groups (raw ranges, a profile's points) each at its own
+//!   rate without drift, samples with each failure's kind, counters, pause and write-through,
+//!   and the session file that `poll` and `monitor` share.
 //! - [`scan`]: the bus scanner — unit addresses × line settings over one port reconfigured
 //!   in place, listening first, a second pass for leads, identification.
 //! - [`wire`]: the virtual RS-485 line's model, sans-IO like the engines: it takes `now` in
@@ -53,6 +56,7 @@ pub mod error;
 mod identity;
 pub mod line;
 pub mod pcapng;
+pub mod poll;
 pub mod port;
 mod pump;
 pub mod scan;

@@ -1,0 +1,280 @@
+//! The session file: what `ferrobus poll --session F` polls and `ferrobus monitor` saves and
+//! loads. TOML:
+//!
+//! ```toml
+//! # Raw ranges: one read request each, at their own rate.
+//! [[read]]
+//! name = "drive 3 status"   # optional; else "u3 holding 0x1000"
+//! unit = 3
+//! table = "holding"         # holding, input, coils, discrete
+//! address = 0x1000          # wire address of the first item
+//! count = 4                 # items (default 1)
+//! format = "u16"            # u16 i16 hex binary u32 i32 f32 f64 (default u16)
+//! order = "ABCD"            # multi-register order: ABCD CDAB BADC DCBA (default ABCD)
+//! every = "100ms"           # period: us, ms, s, min (default 1s)
+//! [[read.cell]]             # optional: a name or another format for one cell
+//! address = 0x1002
+//! alias = "speed"
+//! format = "i32"
+//!
+//! # Named points of a device profile, in the planner's fewest requests.
+//! [[points]]
+//! unit = 1
+//! device = "omron-3g3rx"    # a built-in profile or a profile file
+//! names = ["d001", "d002"]  # codes, labels or globs
+//! groups = ["monitor"]      # the profile's groups
+//! every = "500ms"
+//! ```
+
+use std::path::Path;
+use std::time::Duration;
+
+use ferrobus_profile::{Order, Profile, Table};
+use serde::{Deserialize, Serialize};
+
+use super::{Format, Group, GroupError, Layout};
+
+/// A session: raw ranges and profile points.
+#[derive(Clone, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Session {
+    /// Raw ranges.
+    #[serde(default, rename = "read", skip_serializing_if = "Vec::is_empty")]
+    pub reads: Vec<ReadDef>,
+    /// Profile points.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub points: Vec<PointsDef>,
+}
+
+/// `[[read]]`: a raw range.
+#[derive(Clone, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct ReadDef {
+    /// Its name; else made from the unit, table and address.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub name: Option<String>,
+    /// The unit.
+    pub unit: u8,
+    /// `holding`, `input`, `coils` or `discrete`.
+    pub table: String,
+    /// The wire address of the first item.
+    pub address: u16,
+    /// Items read.
+    #[serde(default = "one")]
+    pub count: u16,
+    /// The cells' format (`u16` unless given).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub format: Option<String>,
+    /// The order of multi-register cells (`ABCD` unless given).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub order: Option<String>,
+    /// The period (`1s` unless given).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub every: Option<String>,
+    /// Cells with a name or another format.
+    #[serde(default, rename = "cell", skip_serializing_if = "Vec::is_empty")]
+    pub cells: Vec<CellDef>,
+}
+
+/// `[[read.cell]]`: one cell's alias or format.
+#[derive(Clone, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct CellDef {
+    /// Its wire address.
+    pub address: u16,
+    /// Its name.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub alias: Option<String>,
+    /// Its format.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub format: Option<String>,
+}
+
+/// `[[points]]`: named points of a profile.
+#[derive(Clone, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct PointsDef {
+    /// The unit.
+    pub unit: u8,
+    /// A built-in profile's name or a profile file's path.
+    pub device: String,
+    /// Codes, labels or globs.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub names: Vec<String>,
+    /// The profile's groups.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub groups: Vec<String>,
+    /// The period (`1s` unless given).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub every: Option<String>,
+}
+
+fn one() -> u16 {
+    1
+}
+
+/// Why a session file cannot be used.
+#[derive(Debug, thiserror::Error)]
+#[non_exhaustive]
+pub enum SessionError {
+    /// It could not be read or written.
+    #[error("{path}: {source}")]
+    Io {
+        /// The file.
+        path: String,
+        /// The OS error.
+        #[source]
+        source: std::io::Error,
+    },
+    /// It is not a valid session.
+    #[error("{origin}{}: {message}", line.map(|l| format!(", line {l}")).unwrap_or_default())]
+    Parse {
+        /// The file.
+        origin: String,
+        /// The line at fault, when known.
+        line: Option<usize>,
+        /// What is wrong.
+        message: String,
+    },
+    /// A definition names something that does not exist or does not fit.
+    #[error("{origin}: {what}: {problem}")]
+    Invalid {
+        /// The file.
+        origin: String,
+        /// The definition (`read 2`, `points 1`).
+        what: String,
+        /// What is wrong.
+        problem: String,
+    },
+}
+
+impl Session {
+    /// Reads and parses a session file.
+    pub fn load(path: &Path) -> Result<Session, SessionError> {
+        let text = std::fs::read_to_string(path)
+            .map_err(|source| SessionError::Io { path: path.display().to_string(), source })?;
+        Session::parse(&text, &path.display().to_string())
+    }
+
+    /// Parses a session; `origin` names it in errors.
+    pub fn parse(text: &str, origin: &str) -> Result<Session, SessionError> {
+        toml::from_str(text).map_err(|e| SessionError::Parse {
+            origin: origin.to_string(),
+            line: e.span().map(|s| text.get(..s.start).map_or(1, |t| t.matches('\n').count() + 1)),
+            message: e.message().trim().to_string(),
+        })
+    }
+
+    /// The session as TOML.
+    pub fn to_toml(&self) -> String {
+        // Every field is a string, a number or a table of them: serialising cannot fail.
+        toml::to_string(self).unwrap_or_default()
+    }
+
+    /// Writes the session to `path`.
+    pub fn save(&self, path: &Path) -> Result<(), SessionError> {
+        let text = format!("# ferrobus session (poll --session, monitor --session)\n{}", self.to_toml());
+        std::fs::write(path, text).map_err(|source| SessionError::Io { path: path.display().to_string(), source })
+    }
+
+    /// The groups it defines, `[[read]]`s first; profiles are loaded with `load_profile`.
+    pub fn groups(
+        &self,
+        origin: &str,
+        mut load_profile: impl FnMut(&str) -> Result<Profile, String>,
+    ) -> Result<Vec<Group>, SessionError> {
+        let mut out = Vec::new();
+        for (i, r) in self.reads.iter().enumerate() {
+            let what = format!("read {}", i.saturating_add(1));
+            out.push(r.group().map_err(|problem| SessionError::Invalid {
+                origin: origin.to_string(),
+                what,
+                problem,
+            })?);
+        }
+        for (i, p) in self.points.iter().enumerate() {
+            let invalid = |problem: String| SessionError::Invalid {
+                origin: origin.to_string(),
+                what: format!("points {}", i.saturating_add(1)),
+                problem,
+            };
+            let every = period(p.every.as_deref()).map_err(invalid)?;
+            let profile = load_profile(&p.device).map_err(invalid)?;
+            if p.names.is_empty() && p.groups.is_empty() {
+                return Err(invalid("give names or groups".into()));
+            }
+            let groups =
+                Group::points(&profile, p.unit, &p.names, &p.groups, every).map_err(|e| invalid(e.to_string()))?;
+            out.extend(groups);
+        }
+        Ok(out)
+    }
+}
+
+impl ReadDef {
+    /// The group it defines.
+    pub fn group(&self) -> Result<Group, String> {
+        let table = table_from_name(&self.table)?;
+        let format = format_of(self.format.as_deref())?.unwrap_or_default();
+        let order = match self.order.as_deref() {
+            None => Order::default(),
+            Some(o) => Order::from_name(o).ok_or_else(|| format!("order {o:?}: give ABCD, CDAB, BADC or DCBA"))?,
+        };
+        let mut layout = Layout { format, order, ..Layout::default() };
+        for c in &self.cells {
+            if let Some(f) = format_of(c.format.as_deref())? {
+                layout.formats.push((c.address, f));
+            }
+            if let Some(a) = &c.alias {
+                layout.aliases.push((c.address, a.clone()));
+            }
+        }
+        let every = period(self.every.as_deref())?;
+        let name =
+            self.name.clone().unwrap_or_else(|| format!("u{} {} {:#06x}", self.unit, table.name(), self.address));
+        Group::raw(&name, self.unit, table, self.address, self.count, every, &layout)
+            .map_err(|e: GroupError| e.to_string())
+    }
+}
+
+/// A table by its name: `holding`, `input`, `coils`, `discrete` (and `discrete-inputs`).
+pub fn table_from_name(name: &str) -> Result<Table, String> {
+    match name.trim().to_ascii_lowercase().as_str() {
+        "holding" => Ok(Table::Holding),
+        "input" => Ok(Table::Input),
+        "coils" | "coil" => Ok(Table::Coils),
+        "discrete" | "discrete-inputs" => Ok(Table::DiscreteInputs),
+        other => Err(format!("table {other:?}: give holding, input, coils or discrete")),
+    }
+}
+
+fn format_of(name: Option<&str>) -> Result<Option<Format>, String> {
+    name.map(|n| {
+        Format::from_name(n).ok_or_else(|| {
+            let all: Vec<&str> = Format::ALL.iter().map(|f| f.name()).collect();
+            format!("format {n:?}: give one of {}", all.join(", "))
+        })
+    })
+    .transpose()
+}
+
+/// A period: `250us`, `100ms`, `2s`, `1min`; a plain number is milliseconds; `None` is 1 s.
+pub fn period(text: Option<&str>) -> Result<Duration, String> {
+    let Some(text) = text else { return Ok(Duration::from_secs(1)) };
+    let t = text.trim();
+    let split = t.find(|c: char| !(c.is_ascii_digit() || c == '.')).unwrap_or(t.len());
+    let (number, unit) = t.split_at(split);
+    let n: f64 = number.parse().map_err(|_| format!("period {text:?}: give a number and a unit (100ms, 2s)"))?;
+    let scale = match unit.trim() {
+        "us" | "µs" => 1e-6,
+        "" | "ms" => 1e-3,
+        "s" => 1.0,
+        "min" => 60.0,
+        other => return Err(format!("period {text:?}: unknown unit {other:?} (us, ms, s, min)")),
+    };
+    let secs = n * scale;
+    if !secs.is_finite() || secs <= 0.0 || secs > 86_400.0 {
+        return Err(format!("period {text:?}: give more than 0 and at most a day"));
+    }
+    Ok(Duration::from_secs_f64(secs))
+}
