@@ -45,8 +45,8 @@ pub(crate) struct MonitorArgs {
     #[arg(value_name = "DEFINITION")]
     pub(crate) watch: Vec<String>,
 
-    /// A session file: loaded at start if it exists (what to watch, formats, aliases, trends),
-    /// written by the `s` key
+    /// A session file (the one `poll --session` takes): loaded at start if it exists and no
+    /// DEFINITION is given (what to watch, formats, aliases); written by the `s` key
     #[arg(long, value_name = "FILE")]
     pub(crate) session: Option<String>,
 
@@ -99,27 +99,22 @@ fn apply_options(args: &MonitorArgs, panes: &mut [Definition]) -> Result<(), Cli
 pub(crate) async fn run(connection: &ConnectArgs, args: &MonitorArgs) -> Result<(), CliError> {
     let profile = connection.profile()?;
     let unit = connection.unit()?;
-    let session = match &args.session {
-        Some(path) if std::path::Path::new(path).exists() => Some(spec::Session::load(path)?),
-        _ => None,
-    };
-    let watch: Vec<String> = match (&session, args.watch.is_empty()) {
-        (Some(s), true) => s.watch.clone(),
-        _ => args.watch.clone(),
-    };
-    if watch.is_empty() {
-        return Err(CliError::Usage(
-            "give what to watch: one or more definitions like holding:0:10@500ms (or --session FILE)".into(),
-        ));
-    }
     let mut panes = Vec::new();
-    for definition in &watch {
+    for definition in &args.watch {
         panes.extend(spec::parse(definition, unit, profile.as_ref())?);
     }
-    if let Some(s) = &session {
-        if args.watch.is_empty() {
-            s.apply(&mut panes)?;
+    if let Some(path) = &args.session {
+        let path = std::path::Path::new(path);
+        if args.watch.is_empty() && path.exists() {
+            let session = ferrobus::poll::session::Session::load(path)
+                .map_err(|e| CliError::Usage(format!("the session file: {e}")))?;
+            panes = spec::panes_of(&session, &path.display().to_string())?;
         }
+    }
+    if panes.is_empty() {
+        return Err(CliError::Usage(
+            "give what to watch: one or more definitions like holding:0:10@500ms, or --session FILE".into(),
+        ));
     }
     apply_options(args, &mut panes)?;
     if !std::io::IsTerminal::is_terminal(&std::io::stdout()) {
@@ -128,7 +123,7 @@ pub(crate) async fn run(connection: &ConnectArgs, args: &MonitorArgs) -> Result<
     let session_client = connection.open().await?;
     let target = session_client.target.to_string();
     let mut app = App::new(target, panes);
-    let saving = SaveTo { path: args.session.clone(), device: connection.device.clone(), watch };
+    let saving = SaveTo { path: args.session.clone(), device: connection.device.clone() };
     let mut screen = Screen::enter().map_err(|e| io_error("setting up the terminal", e))?;
     let result = event_loop(&mut screen.terminal, &mut app, &session_client.client, &saving).await;
     drop(screen);
@@ -139,7 +134,6 @@ pub(crate) async fn run(connection: &ConnectArgs, args: &MonitorArgs) -> Result<
 struct SaveTo {
     path: Option<String>,
     device: Option<String>,
-    watch: Vec<String>,
 }
 
 fn io_error(what: &str, source: std::io::Error) -> CliError {
@@ -287,8 +281,8 @@ fn save(app: &mut App, saving: &SaveTo) {
         app.message = Some("no --session FILE was given: nothing to save to".into());
         return;
     };
-    let session = spec::Session::of(saving.device.clone(), saving.watch.clone(), &app.panes);
-    app.message = Some(match session.save(path) {
+    let session = spec::session_of(saving.device.as_deref(), &app.panes);
+    app.message = Some(match session.save(std::path::Path::new(path)) {
         Ok(()) => format!("session saved to {path}"),
         Err(e) => format!("not saved: {e}"),
     });

@@ -65,7 +65,7 @@ impl Format {
     }
 
     /// The same format in another order (single-register formats have none).
-    fn with_order(self, order: Order) -> Format {
+    pub(crate) fn with_order(self, order: Order) -> Format {
         match self {
             Format::U32(_) => Format::U32(order),
             Format::I32(_) => Format::I32(order),

@@ -4,8 +4,9 @@
 
 use std::time::Duration;
 
+use ferrobus::poll::session::{CellDef, PointsDef, ReadDef, Session, period, table_from_name};
+use ferrobus_profile::Order;
 use ferrobus_profile::{Point, Profile, Table};
-use serde::{Deserialize, Serialize};
 
 use super::model::{Cell, Definition, Format};
 use crate::exit::CliError;
@@ -143,89 +144,119 @@ fn pane_of(unit: u8, table: Table, every: Duration, points: &[&Point]) -> Defini
     Definition::with_cells(unit, table, start, count, every, cells)
 }
 
-/// The session file: what was watched and how it was shown.
-#[derive(Debug, Default, Serialize, Deserialize, PartialEq)]
-#[serde(deny_unknown_fields)]
-pub(crate) struct Session {
-    /// The `--device` profile, if points were watched.
-    #[serde(default, skip_serializing_if = "Option::is_none")]
-    pub(crate) device: Option<String>,
-    /// The definitions as typed.
-    pub(crate) watch: Vec<String>,
-    /// Cells whose format, alias or trend differ from the start.
-    #[serde(default, rename = "cell", skip_serializing_if = "Vec::is_empty")]
-    pub(crate) cells: Vec<CellSetting>,
-}
-
-/// One cell's settings in a session.
-#[derive(Debug, Serialize, Deserialize, PartialEq)]
-#[serde(deny_unknown_fields)]
-pub(crate) struct CellSetting {
-    /// The pane (0-based, in the order of `watch`'s panes).
-    pub(crate) pane: usize,
-    /// The wire address.
-    pub(crate) address: u16,
-    /// The format (`u16`, `f32:CDAB`, `named`).
-    #[serde(default, skip_serializing_if = "Option::is_none")]
-    pub(crate) format: Option<String>,
-    /// The alias.
-    #[serde(default, skip_serializing_if = "Option::is_none")]
-    pub(crate) alias: Option<String>,
-    /// Whether it is trended.
-    #[serde(default, skip_serializing_if = "std::ops::Not::not")]
-    pub(crate) trend: bool,
-}
-
-impl Session {
-    /// Reads a session file.
-    pub(crate) fn load(path: &str) -> Result<Session, CliError> {
-        let text = std::fs::read_to_string(path)
-            .map_err(|e| CliError::Usage(format!("cannot read the session file {path}: {e}")))?;
-        toml::from_str(&text).map_err(|e| CliError::Usage(format!("the session file {path} is not valid: {e}")))
-    }
-
-    /// The session of the panes: `watch` and the cells' settings.
-    pub(crate) fn of(device: Option<String>, watch: Vec<String>, panes: &[Definition]) -> Session {
-        let mut cells = Vec::new();
-        for (pane, def) in panes.iter().enumerate() {
-            for cell in &def.cells {
-                let format = (cell.format != Format::U16 && cell.format != Format::Named).then(|| cell.format.name());
-                let named_alias = cell.format == Format::Named;
-                let alias = (!cell.alias.is_empty() && !named_alias).then(|| cell.alias.clone());
-                if format.is_some() || alias.is_some() || cell.trended {
-                    cells.push(CellSetting { pane, address: cell.point.address, format, alias, trend: cell.trended });
-                }
-            }
+/// The session file of the panes: the one `ferrobus poll --session` takes
+/// ([`ferrobus::poll::Session`]). Raw panes are `[[read]]`s with their cells' formats and
+/// aliases; panes of profile points are `[[points]]` of `device`. The file has one word/byte
+/// order per read: the first multi-register cell's is saved.
+pub(crate) fn session_of(device: Option<&str>, panes: &[Definition]) -> Session {
+    let mut session = Session::default();
+    for pane in panes {
+        let every = Some(format!("{}ms", pane.every.as_millis()));
+        if pane.cells.iter().any(|c| c.format == Format::Named) {
+            session.points.push(PointsDef {
+                unit: pane.unit,
+                device: device.unwrap_or_default().to_string(),
+                names: pane.cells.iter().map(|c| c.point.code.clone()).collect(),
+                groups: Vec::new(),
+                every,
+            });
+            continue;
         }
-        Session { device, watch, cells }
+        let order = pane.cells.iter().find_map(|c| c.format.order()).filter(|o| *o != Order::Abcd);
+        let cells = pane
+            .cells
+            .iter()
+            .filter(|c| c.format != Format::U16 || !c.alias.is_empty())
+            .map(|c| CellDef {
+                address: c.point.address,
+                alias: (!c.alias.is_empty()).then(|| c.alias.clone()),
+                format: (c.format != Format::U16 && !pane.is_bits()).then(|| poll_format(c.format).to_string()),
+            })
+            .collect();
+        session.reads.push(ReadDef {
+            name: None,
+            unit: pane.unit,
+            table: pane.table_name().to_string(),
+            address: pane.address,
+            count: pane.count,
+            format: None,
+            order: order.map(|o| o.name().to_string()),
+            every,
+            cells,
+        });
     }
+    session
+}
 
-    /// Writes it to `path`.
-    pub(crate) fn save(&self, path: &str) -> Result<(), String> {
-        let text = toml::to_string(self).map_err(|e| e.to_string())?;
-        std::fs::write(path, text).map_err(|e| format!("cannot write {path}: {e}"))
+/// The poll library's name of a format.
+fn poll_format(format: Format) -> &'static str {
+    match format {
+        Format::Named | Format::U16 => "u16",
+        Format::I16 => "i16",
+        Format::Hex => "hex",
+        Format::Binary => "binary",
+        Format::U32(_) => "u32",
+        Format::I32(_) => "i32",
+        Format::F32(_) => "f32",
+        Format::F64(_) => "f64",
     }
+}
 
-    /// Applies the cells' settings to `panes`.
-    pub(crate) fn apply(&self, panes: &mut [Definition]) -> Result<(), CliError> {
-        for setting in &self.cells {
-            let cell = panes
-                .get_mut(setting.pane)
-                .and_then(|p| p.cells.iter_mut().find(|c| c.point.address == setting.address))
-                .ok_or_else(|| {
-                    CliError::Usage(format!(
-                        "the session's cell {:#06x} of pane {} is not in what it watches",
-                        setting.address, setting.pane
-                    ))
-                })?;
-            if let Some(format) = &setting.format {
-                cell.set_format(Format::parse(format).map_err(CliError::Usage)?);
+/// The panes of a session file; `origin` names it in errors.
+pub(crate) fn panes_of(session: &Session, origin: &str) -> Result<Vec<Definition>, CliError> {
+    let bad = |what: String, problem: String| CliError::Usage(format!("{origin}: {what}: {problem}"));
+    let mut panes = Vec::new();
+    for (i, read) in session.reads.iter().enumerate() {
+        let what = || format!("read {}", i + 1);
+        table_from_name(&read.table).map_err(|e| bad(what(), e))?;
+        let every = period(read.every.as_deref()).map_err(|e| bad(what(), e))?;
+        let order = match read.order.as_deref() {
+            None => Order::Abcd,
+            Some(o) => {
+                Order::from_name(o).ok_or_else(|| bad(what(), format!("order {o:?}: give ABCD, CDAB, BADC or DCBA")))?
             }
-            if let Some(alias) = &setting.alias {
+        };
+        let spec = format!("{}:{}:{}:{}", read.unit, read.table, read.address, read.count);
+        let mut pane = parse(&spec, read.unit, None).map_err(|e| bad(what(), format!("{e:?}")))?.remove(0);
+        pane.every = every;
+        let format_of = |name: &str| Format::parse(name).map(|f| f.with_order(order)).map_err(|e| bad(what(), e));
+        if let Some(format) = &read.format {
+            let format = format_of(format)?;
+            pane.cells.iter_mut().for_each(|c| c.set_format(format));
+        }
+        for def in &read.cells {
+            let cell = pane
+                .cells
+                .iter_mut()
+                .find(|c| c.point.address == def.address)
+                .ok_or_else(|| bad(what(), format!("cell {:#06x} is not in the range read", def.address)))?;
+            if let Some(format) = &def.format {
+                cell.set_format(format_of(format)?);
+            }
+            if let Some(alias) = &def.alias {
                 cell.alias.clone_from(alias);
             }
-            cell.trended = setting.trend;
         }
-        Ok(())
+        panes.push(pane);
     }
+    for (i, def) in session.points.iter().enumerate() {
+        let what = || format!("points {}", i + 1);
+        let every = period(def.every.as_deref()).map_err(|e| bad(what(), e))?;
+        let profile = Profile::load(&def.device).map_err(|e| bad(what(), e.to_string()))?;
+        let mut points: Vec<&Point> = Vec::new();
+        for name in &def.names {
+            points.extend(profile.find(name));
+        }
+        for group in &def.groups {
+            points.extend(profile.group(group));
+        }
+        points.retain(|p| p.readable());
+        points.sort_by_key(|p| (p.address, p.code.clone()));
+        points.dedup_by(|a, b| a.code == b.code);
+        if points.is_empty() {
+            return Err(bad(what(), "no readable point of the profile has those names or groups".into()));
+        }
+        panes.extend(points_to_panes(&what(), def.unit, every, &points)?);
+    }
+    Ok(panes)
 }

@@ -248,27 +248,40 @@ fn the_trend_bounds_come_from_the_data_not_from_zero() {
 }
 
 #[test]
-fn a_session_round_trips_formats_aliases_and_trends() {
-    let mut panes = vec![Definition::raw(1, Table::Holding, 0, 4, Duration::from_secs(1))];
-    panes[0].cells[0].alias = "speed".into();
-    panes[0].cells[2].set_format(Format::F32(Order::Cdab));
-    panes[0].cells[3].trended = true;
-    let session = spec::Session::of(None, vec!["holding:0:4".into()], &panes);
+fn a_session_file_round_trips_formats_aliases_and_points_in_polls_format() {
+    let mut raw = Definition::raw(3, Table::Holding, 0x10, 6, Duration::from_millis(250));
+    raw.cells[0].alias = "speed".into();
+    raw.cells[2].set_format(Format::F32(Order::Cdab));
+    raw.cells[5].set_format(Format::Hex);
+    let profile = Profile::builtin("omron-3g3rx").unwrap();
+    let code = profile.points().iter().find(|p| p.readable() && p.table == Table::Holding).unwrap().code.clone();
+    let mut panes = vec![raw];
+    panes.extend(spec::parse(&format!("{code}@2s"), 1, Some(&profile)).unwrap());
+    let session = spec::session_of(Some("omron-3g3rx"), &panes);
     let dir = std::env::temp_dir().join(format!("ferrobus-monitor-{}", std::process::id()));
     std::fs::create_dir_all(&dir).unwrap();
     let path = dir.join("s.toml");
-    let path = path.to_str().unwrap();
-    session.save(path).unwrap();
-    let loaded = spec::Session::load(path).unwrap();
+    session.save(&path).unwrap();
+    let text = std::fs::read_to_string(&path).unwrap();
+    assert!(text.contains("[[read]]") && text.contains("[[points]]") && text.contains("order = \"CDAB\""), "{text}");
+    let loaded = ferrobus::poll::session::Session::load(&path).unwrap();
     assert_eq!(loaded, session);
-    let mut fresh = spec::parse(&loaded.watch[0], 1, None).unwrap();
-    loaded.apply(&mut fresh).unwrap();
-    assert_eq!(fresh[0].cells[0].alias, "speed");
-    assert_eq!(fresh[0].cells[2].format, Format::F32(Order::Cdab));
-    assert!(fresh[0].cells[3].trended);
-    assert_eq!(App::new("t".into(), fresh).trends.len(), 1);
-    std::fs::write(path, "watch = 3").unwrap();
-    let err = format!("{:?}", spec::Session::load(path).err().unwrap());
-    assert!(err.contains("is not valid"), "{err}");
+    // The poll library reads the same file into its own groups.
+    assert_eq!(loaded.groups("s.toml", |name| Profile::load(name).map_err(|e| e.to_string())).unwrap().len(), 2);
+    let fresh = spec::panes_of(&loaded, "s.toml").unwrap();
+    assert_eq!(fresh.len(), 2);
+    let (a, b) = (&fresh[0], &fresh[1]);
+    assert_eq!((a.unit, a.address, a.count, a.every), (3, 0x10, 6, Duration::from_millis(250)));
+    assert_eq!(a.cells[0].alias, "speed");
+    assert_eq!(a.cells[2].format, Format::F32(Order::Cdab));
+    assert_eq!(a.cells[5].format, Format::Hex);
+    assert_eq!(
+        (b.every, b.cells[0].point.code.as_str(), b.cells[0].format),
+        (Duration::from_secs(2), code.as_str(), Format::Named)
+    );
+    std::fs::write(&path, "[[read]]\nunit = 1\ntable = \"holding\"\naddress = 0\nformat = \"f16\"\n").unwrap();
+    let loaded = ferrobus::poll::session::Session::load(&path).unwrap();
+    let err = format!("{:?}", spec::panes_of(&loaded, "s.toml").err().unwrap());
+    assert!(err.contains("read 1") && err.contains("'f16' is not a format"), "{err}");
     std::fs::remove_dir_all(&dir).unwrap();
 }
