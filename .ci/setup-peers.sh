@@ -32,6 +32,8 @@ PYSERIAL_VERSION="3.5"
 APT_PACKAGES=(socat libmodbus-dev mbpoll libudev-dev pkg-config gcc)
 # tshark decodes the captures of `ferrobus sniff` in its tests.
 APT_PACKAGES+=(tshark)
+# tmux is the terminal emulator of `ferrobus monitor`'s end-to-end test.
+APT_PACKAGES+=(tmux)
 export DEBIAN_FRONTEND=noninteractive
 
 IN_CI=false

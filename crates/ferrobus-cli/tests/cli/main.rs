@@ -8,6 +8,7 @@ mod bench_failures;
 mod device;
 mod errors;
 mod line_settings;
+mod monitor;
 mod offline;
 mod output;
 mod read;
