@@ -285,3 +285,53 @@ fn a_session_file_round_trips_formats_aliases_and_points_in_polls_format() {
     assert!(err.contains("read 1") && err.contains("'f16' is not a format"), "{err}");
     std::fs::remove_dir_all(&dir).unwrap();
 }
+
+/// The redraw benchmark (bench/monitor.sh runs it, in release): 200 cells in two panes of 100
+/// registers, every value changed before each frame, drawn 2,000 times on a 160×60 screen,
+/// through ratatui's diff into crossterm's escape sequences (written to a sink). Prints the
+/// median, p90, p99 and max per frame.
+#[test]
+#[ignore = "a benchmark: bench/monitor.sh"]
+fn bench_redraw_of_a_200_cell_grid() {
+    use ratatui::backend::CrosstermBackend;
+    let panes = vec![
+        Definition::raw(1, Table::Holding, 0, 100, Duration::from_millis(100)),
+        Definition::raw(2, Table::Input, 0, 100, Duration::from_millis(100)),
+    ];
+    let mut app = with_trend(App::new("tcp 127.0.0.1:502".into(), panes));
+    let mut terminal = Terminal::with_options(
+        CrosstermBackend::new(std::io::sink()),
+        ratatui::TerminalOptions { viewport: ratatui::Viewport::Fixed(ratatui::layout::Rect::new(0, 0, 160, 60)) },
+    )
+    .unwrap();
+    let cells: usize = app.panes.iter().map(|p| p.cells.len()).sum();
+    assert_eq!(cells, 200);
+    let frames = 2000u16;
+    let mut times = Vec::with_capacity(usize::from(frames));
+    for frame in 0..frames {
+        for pane in &mut app.panes {
+            let registers = (0..100u16).map(|r| r.wrapping_mul(31).wrapping_add(frame)).collect();
+            pane.record(Outcome::Registers(registers), Duration::from_millis(3));
+        }
+        app.sample(0, Duration::from_millis(u64::from(frame) * 100));
+        app.traffic.push(TrafficLine {
+            at: Duration::from_millis(u64::from(frame) * 100),
+            direction: "Rx",
+            unit: 1,
+            bytes: vec![0x03, 0xC8, 0x00, 0x01],
+            decode: "100 registers".into(),
+        });
+        let start = std::time::Instant::now();
+        terminal.draw(|f| view::draw(f, &app)).unwrap();
+        times.push(start.elapsed());
+    }
+    times.sort();
+    let at = |q: usize| times[(times.len() - 1) * q / 100];
+    println!(
+        "redraw of {cells} cells at 160x60, {frames} frames: median {:?}, p90 {:?}, p99 {:?}, max {:?}",
+        at(50),
+        at(90),
+        at(99),
+        times[times.len() - 1]
+    );
+}
