@@ -171,3 +171,29 @@ fn monitor_in_tmux_restores_the_terminal_on_sigterm() {
     tmux.keys(&["echo restored-$((40+2))", "Enter"]);
     tmux.wait_for("the shell running a command", |s| s.contains("restored-42"));
 }
+
+#[test]
+fn monitor_refuses_a_pipe_and_a_bad_definition_with_the_reason_before_opening_the_bus() {
+    // Port 9 on loopback has nothing listening: the refusals come before any connection.
+    let run = |args: &[&str]| {
+        Command::new(env!("CARGO_BIN_EXE_ferrobus"))
+            .args(["--tcp", "127.0.0.1:9", "monitor"])
+            .args(args)
+            .stdin(Stdio::null())
+            .output()
+            .unwrap()
+    };
+    let out = run(&["holding:0:4"]);
+    assert_eq!(out.status.code(), Some(2), "{out:?}");
+    assert!(String::from_utf8_lossy(&out.stderr).contains("monitor needs a terminal"), "{out:?}");
+    let out = run(&["holding:0:126"]);
+    assert_eq!(out.status.code(), Some(2), "{out:?}");
+    assert!(
+        String::from_utf8_lossy(&out.stderr).contains("'holding:0:126': the count is 1 to 125 for holding"),
+        "{out:?}"
+    );
+    let out = run(&["holding:0:4", "--format", "7=f32"]);
+    assert!(String::from_utf8_lossy(&out.stderr).contains("no pane shows address 0x0007"), "{out:?}");
+    let out = run(&[]);
+    assert!(String::from_utf8_lossy(&out.stderr).contains("give what to watch"), "{out:?}");
+}
