@@ -33,6 +33,7 @@ mod line;
 mod mask;
 mod monitor;
 mod output;
+mod poll;
 mod profile;
 mod raw;
 mod read;
@@ -135,6 +136,8 @@ enum Command {
     Sniff(sniff::SniffArgs),
     /// A terminal UI: live grids of read definitions or --device points, traffic, trends, writes in place
     Monitor(monitor::MonitorArgs),
+    /// Poll registers or named points for ever, each group at its own rate: a live table, CSV or JSON lines, a log
+    Poll(poll::PollArgs),
 }
 
 impl Command {
@@ -181,6 +184,7 @@ async fn dispatch(cli: &Cli) -> Result<(), CliError> {
         Command::Restore(args) => backup::restore::run(connection, args).await,
         Command::Sniff(args) => sniff::run(connection, args).await,
         Command::Monitor(args) => monitor::run(connection, args).await,
+        Command::Poll(args) => poll::run(connection, args).await,
     }
 }
 
@@ -294,6 +298,9 @@ fn main() -> ExitCode {
     }
     if let (Command::Sniff(args), Some(sniff)) = (&mut cli.command, matches.subcommand_matches("sniff")) {
         args.units_from(&matches, sniff);
+    }
+    if let (Command::Poll(args), Some(poll)) = (&mut cli.command, matches.subcommand_matches("poll")) {
+        args.positions_from(poll);
     }
     init_logging(cli.verbose);
     if let Err(error) = refuse_ignored_options(&matches) {

@@ -11,6 +11,7 @@ mod line_settings;
 mod monitor;
 mod offline;
 mod output;
+mod poll;
 mod read;
 mod reopen;
 mod scan;

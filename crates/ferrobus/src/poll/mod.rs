@@ -13,7 +13,7 @@
 //! diagnosis. Nothing ends the polling but [`PollHandle::stop`] (or dropping the [`Poller`]):
 //! a timeout, an exception, a CRC error or a lost port is a sample like any other, and the
 //! client reopens the port. Deadlines are kept by the core's
-//! [`Schedule`](ferrobus_proto::schedule::Schedule): from the start, not from the last poll,
+//! [`Schedule`]: from the start, not from the last poll,
 //! so the rate does not drift; a poll that runs over the next deadline is an overrun and the
 //! next one goes at once. When the line cannot carry what was asked — predicted from the wire
 //! time of each request if the line's timing is known, else seen at the first overrun — an
@@ -390,11 +390,14 @@ async fn run(handle: PollHandle, config: PollConfig, events: mpsc::Sender<Event>
             let overload = Overload {
                 load: response_time,
                 detail: format!(
-                    "the line cannot keep up: poll {seq} of {} took {:.3} ms against a period of {:.3} ms; \
-                     polling as fast as the line allows and counting overruns",
+                    "the line cannot keep up: poll {seq} of {} was due at {:.3} ms and ended at {:.3} ms, past the \
+                     next deadline (period {:.3} ms; its own request took {:.3} ms); polling as fast as the line \
+                     allows and counting overruns",
                     group.name,
-                    ms(response_time),
-                    ms(group.every)
+                    ms(due.since_epoch()),
+                    ms(ended.saturating_duration_since(epoch)),
+                    ms(group.every),
+                    ms(response_time)
                 ),
                 seen: true,
             };
@@ -527,4 +530,29 @@ pub fn iso8601_ms(time: SystemTime) -> String {
 }
 
 #[cfg(test)]
-mod tests;
+mod tests {
+    use super::*;
+
+    #[test]
+    fn timestamps_are_iso_8601_utc_to_the_millisecond() {
+        let t = SystemTime::UNIX_EPOCH + Duration::from_millis(1_796_165_548_123);
+        assert_eq!(iso8601_ms(t), "2026-12-01T22:52:28.123Z");
+        assert_eq!(iso8601_ms(SystemTime::UNIX_EPOCH), "1970-01-01T00:00:00.000Z");
+        let leap = SystemTime::UNIX_EPOCH + Duration::from_secs(951_782_400);
+        assert_eq!(iso8601_ms(leap), "2000-02-29T00:00:00.000Z");
+    }
+
+    #[test]
+    fn a_period_shorter_than_the_wire_time_is_predicted_with_the_arithmetic() {
+        use ferrobus_proto::frame::LineConfig;
+        let timing = LineTiming::new(&LineConfig::new(9600).expect("a baud rate"));
+        let layout = Layout::default();
+        let g = Group::raw("g", 1, Table::Holding, 0, 4, Duration::from_millis(20), &layout).expect("a group");
+        let o = predict_overload(std::slice::from_ref(&g), &timing).expect("32 ms of wire time every 20 ms");
+        assert!(!o.seen);
+        assert!(o.detail.contains("(8 + 13) characters × 1.146 ms + 2 × t3.5 4.010 ms = 32.083 ms"), "{}", o.detail);
+        assert!(o.detail.contains("every 20.000 ms"), "{}", o.detail);
+        let slow = Group { every: Duration::from_millis(40), ..g };
+        assert_eq!(predict_overload(&[slow], &timing), None);
+    }
+}

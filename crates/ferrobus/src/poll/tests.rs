@@ -1,1 +1,0 @@
-//! Tests of the poller on paused time.
