@@ -25,6 +25,8 @@ pub(crate) enum Action {
     },
     /// Save the session file.
     Save,
+    /// The counters were reset (the poller's too).
+    Reset,
 }
 
 /// Applies `key`.
@@ -130,7 +132,10 @@ fn normal(app: &mut App, code: KeyCode) -> Action {
         KeyCode::Char('o') => with_cell(app, |c| c.set_format(c.format.next_order())),
         KeyCode::Char('t') => app.toggle_trend(),
         KeyCode::Char('p') => app.paused = !app.paused,
-        KeyCode::Char('r') => app.reset_counters(),
+        KeyCode::Char('r') => {
+            app.reset_counters();
+            return Action::Reset;
+        }
         KeyCode::Char(' ') => {
             app.traffic.paused = !app.traffic.paused;
             if !app.traffic.paused {

@@ -7,7 +7,9 @@
 //! The state ([`model`]), the drawing ([`view`]) and the keys ([`keys`]) take no IO and no
 //! clock, so the screens are snapshot-tested on ratatui's `TestBackend`; this file is the IO:
 //! the terminal (raw mode and the alternate screen, restored on exit, on a panic and on
-//! SIGTERM), the key reader, and the polls and writes on the client.
+//! SIGTERM), the key reader, the samples of a [`Poller`] (the polling of `ferrobus poll`; the
+//! registers are taken from each sample's reply bytes, so a cell's format can change while it
+//! runs) and the writes on the client (logged in the traffic pane).
 
 mod keys;
 mod model;
@@ -22,7 +24,7 @@ use std::time::Instant;
 
 use clap::Args;
 use ferrobus::Client;
-use ferrobus_profile::Table;
+use ferrobus::poll::{Event as PollEvent, Failure, FailureKind, Group, Layout, PollConfig, Poller, Sample};
 use ratatui::Terminal;
 use ratatui::backend::CrosstermBackend;
 use ratatui::crossterm::event::{self, Event};
@@ -120,12 +122,24 @@ pub(crate) async fn run(connection: &ConnectArgs, args: &MonitorArgs) -> Result<
     if !std::io::IsTerminal::is_terminal(&std::io::stdout()) {
         return Err(CliError::Usage("monitor needs a terminal: for a log, use `ferrobus read` in a loop".into()));
     }
+    let groups = panes
+        .iter()
+        .map(|p| {
+            let name = view::title(p);
+            Group::raw(name.trim(), p.unit, p.table, p.address, p.count, p.every, &Layout::default())
+                .map_err(|e| CliError::Usage(e.to_string()))
+        })
+        .collect::<Result<Vec<Group>, CliError>>()?;
     let session_client = connection.open().await?;
     let target = session_client.target.to_string();
+    // The wire time of a cycle can be predicted on an RTU serial line only (as `poll` does).
+    let line = matches!(session_client.target, crate::target::Target::Serial { ascii: false, .. })
+        .then(|| *connection.transport(&session_client.target).timing());
+    let poller = Poller::start(session_client.client.clone(), groups, PollConfig { line });
     let mut app = App::new(target, panes);
     let saving = SaveTo { path: args.session.clone(), device: connection.device.clone() };
     let mut screen = Screen::enter().map_err(|e| io_error("setting up the terminal", e))?;
-    let result = event_loop(&mut screen.terminal, &mut app, &session_client.client, &saving).await;
+    let result = event_loop(&mut screen.terminal, &mut app, &session_client.client, poller, &saving).await;
     drop(screen);
     result
 }
@@ -221,59 +235,81 @@ async fn event_loop(
     terminal: &mut Terminal<CrosstermBackend<std::io::Stdout>>,
     app: &mut App,
     client: &Client,
+    mut poller: Poller,
     saving: &SaveTo,
 ) -> Result<(), CliError> {
     let start = Instant::now();
-    let mut due: Vec<Instant> = app.panes.iter().map(|_| start).collect();
+    let handle = poller.handle();
     let mut keys = key_reader();
     let mut stop = std::pin::pin!(terminated());
     loop {
         terminal.draw(|frame| view::draw(frame, app)).map_err(|e| io_error("drawing the screen", e))?;
         if app.quit {
+            handle.stop();
             return Ok(());
         }
-        let next = if app.paused { None } else { due.iter().min().copied() };
-        let sleep = async {
-            match next {
-                Some(at) => tokio::time::sleep_until(at.into()).await,
-                None => std::future::pending().await,
-            }
-        };
         tokio::select! {
             key = keys.recv() => match key {
-                Some(Ok(Event::Key(key))) => match keys::handle(app, key) {
-                    keys::Action::None => {}
-                    keys::Action::Save => save(app, saving),
-                    keys::Action::Write { pane, address, registers, bit } => {
-                        write(app, client, start, pane, address, &registers, bit).await;
-                        if let Some(d) = due.get_mut(pane) {
-                            *d = Instant::now();
+                Some(Ok(Event::Key(key))) => {
+                    let was_paused = app.paused;
+                    let action = keys::handle(app, key);
+                    match (was_paused, app.paused) {
+                        (false, true) => handle.pause(),
+                        (true, false) => handle.resume(),
+                        _ => {}
+                    }
+                    match action {
+                        keys::Action::None => {}
+                        keys::Action::Save => save(app, saving),
+                        keys::Action::Reset => handle.reset(),
+                        keys::Action::Write { pane, address, registers, bit } => {
+                            write(app, client, start, pane, address, &registers, bit).await;
+                            // Read again at once: a resume polls every group now.
+                            if !app.paused {
+                                handle.pause();
+                                handle.resume();
+                            }
                         }
                     }
-                },
+                }
                 Some(Ok(_)) => {}
                 Some(Err(e)) => return Err(io_error("reading the keyboard", e)),
                 None => return Ok(()),
             },
-            () = sleep => {
-                let now = Instant::now();
-                for index in 0..app.panes.len() {
-                    let Some(at) = due.get(index).copied() else { continue };
-                    if at > now {
-                        continue;
-                    }
-                    poll(app, client, start, index).await;
-                    let every = app.panes.get(index).map_or(spec::DEFAULT_EVERY, |p| p.every);
-                    // Keep the rate; after a stall, start again from now rather than bursting.
-                    let next = at + every;
-                    if let Some(d) = due.get_mut(index) {
-                        *d = if next < Instant::now() { Instant::now() + every } else { next };
-                    }
-                }
+            event = poller.next() => match event {
+                Some(PollEvent::Sample(sample)) => take(app, start, &sample),
+                Some(PollEvent::Overload(overload)) => app.message = Some(overload.detail),
+                None => return Ok(()),
+            },
+            () = &mut stop => {
+                handle.stop();
+                return Ok(());
             }
-            () = &mut stop => return Ok(()),
         }
     }
+}
+
+/// A poll's sample into its pane, the traffic pane and the trends.
+fn take(app: &mut App, start: Instant, sample: &Sample) {
+    let Some(pane) = app.panes.get_mut(sample.group) else { return };
+    let unit = pane.unit;
+    let pdu = |bytes: &[u8]| bytes.get(1..).unwrap_or_default().to_vec();
+    let request = pdu(&sample.traffic.tx);
+    let at = sample.started.min(start.elapsed());
+    let decode = format!("read {} {:#06x} ×{}", pane.table_name(), pane.address, pane.count);
+    let outcome = match (&sample.result, &sample.traffic.rx) {
+        (Ok(_), Some(rx)) => read_reply(pane, &pdu(rx)),
+        (Ok(_), None) => Outcome::Other("no reply".into()),
+        (Err(failure), _) => outcome_of(failure),
+    };
+    let reply = sample.traffic.rx.as_deref().map(pdu).unwrap_or_default();
+    let direction = if reply.is_empty() { "--" } else { "Rx" };
+    let answer = describe(&outcome);
+    pane.record(outcome, sample.response_time);
+    app.traffic.push(TrafficLine { at, direction: "Tx", unit, bytes: request, decode });
+    let ended = at.saturating_add(sample.response_time);
+    app.traffic.push(TrafficLine { at: ended, direction, unit, bytes: reply, decode: answer });
+    app.sample(sample.group, ended);
 }
 
 fn save(app: &mut App, saving: &SaveTo) {
@@ -286,19 +322,6 @@ fn save(app: &mut App, saving: &SaveTo) {
         Ok(()) => format!("session saved to {path}"),
         Err(e) => format!("not saved: {e}"),
     });
-}
-
-/// The read request of a pane.
-fn read_request(pane: &Definition) -> [u8; 5] {
-    let function = match pane.table {
-        Table::Coils => 0x01,
-        Table::DiscreteInputs => 0x02,
-        Table::Holding => 0x03,
-        Table::Input => 0x04,
-    };
-    let [ah, al] = pane.address.to_be_bytes();
-    let [ch, cl] = pane.count.to_be_bytes();
-    [function, ah, al, ch, cl]
 }
 
 /// Decodes a read reply (function code first) for `pane`: registers, bits, or what is wrong.
@@ -318,15 +341,13 @@ fn read_reply(pane: &Definition, reply: &[u8]) -> Outcome {
     }
 }
 
-/// The failure's kind.
-fn outcome_of(error: &ferrobus::Error) -> Outcome {
-    let text = error.to_string();
-    match error {
-        ferrobus::Error::Timeout { heard: Some(ferrobus_proto::master::Heard::BadChecksum { .. }), .. } => {
-            Outcome::Crc(text)
-        }
-        ferrobus::Error::Timeout { .. } => Outcome::Timeout(text),
-        ferrobus::Error::Exception { .. } => Outcome::Exception(text),
+/// The failure by the status line's kinds.
+fn outcome_of(failure: &Failure) -> Outcome {
+    let text = failure.diagnosis.clone();
+    match failure.kind {
+        FailureKind::Timeout => Outcome::Timeout(text),
+        FailureKind::Crc => Outcome::Crc(text),
+        FailureKind::Exception => Outcome::Exception(text),
         _ => Outcome::Other(text),
     }
 }
@@ -338,37 +359,6 @@ fn describe(outcome: &Outcome) -> String {
         Outcome::Bits(b) => format!("{} bits", b.len()),
         Outcome::Timeout(e) | Outcome::Crc(e) | Outcome::Exception(e) | Outcome::Other(e) => e.clone(),
     }
-}
-
-async fn poll(app: &mut App, client: &Client, start: Instant, index: usize) {
-    let Some(pane) = app.panes.get(index) else { return };
-    let request = read_request(pane);
-    let unit = pane.unit;
-    let decode = format!("read {} {:#06x} ×{}", pane.table_name(), pane.address, pane.count);
-    app.traffic.push(TrafficLine { at: start.elapsed(), direction: "Tx", unit, bytes: request.to_vec(), decode });
-    let sent = Instant::now();
-    let result = client.raw(unit, &request).await;
-    let took = sent.elapsed();
-    let Some(pane) = app.panes.get_mut(index) else { return };
-    let (bytes, outcome) = match result {
-        Ok(Some(reply)) => {
-            let outcome = read_reply(pane, &reply);
-            (reply, outcome)
-        }
-        Ok(None) => (Vec::new(), Outcome::Other("no reply (a broadcast)".into())),
-        Err(e) => {
-            let bytes = match &e {
-                ferrobus::Error::Exception { code, .. } => vec![request[0] | 0x80, code.value()],
-                _ => Vec::new(),
-            };
-            (bytes, outcome_of(&e))
-        }
-    };
-    let direction = if bytes.is_empty() { "--" } else { "Rx" };
-    let decode = describe(&outcome);
-    pane.record(outcome, took);
-    app.traffic.push(TrafficLine { at: start.elapsed(), direction, unit, bytes, decode });
-    app.sample(index, start.elapsed());
 }
 
 async fn write(

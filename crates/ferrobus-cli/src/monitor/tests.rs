@@ -335,3 +335,34 @@ fn bench_redraw_of_a_200_cell_grid() {
         times[times.len() - 1]
     );
 }
+
+#[test]
+fn a_pollers_samples_fill_the_pane_its_counters_by_kind_and_the_traffic() {
+    use ferrobus::poll::{Failure, FailureKind, Sample, Traffic};
+    let mut app = App::new("t".into(), vec![Definition::raw(4, Table::Holding, 0x10, 2, Duration::from_secs(1))]);
+    let sample = |result, rx: Option<Vec<u8>>| Sample {
+        group: 0,
+        seq: 0,
+        time: std::time::SystemTime::UNIX_EPOCH,
+        due: Duration::ZERO,
+        started: Duration::ZERO,
+        response_time: Duration::from_micros(2500),
+        overrun: false,
+        result,
+        traffic: Traffic { tx: vec![4, 0x03, 0x00, 0x10, 0x00, 0x02], rx },
+    };
+    let start = std::time::Instant::now();
+    super::take(&mut app, start, &sample(Ok(Vec::new()), Some(vec![4, 0x03, 0x04, 0x12, 0x34, 0xAB, 0xCD])));
+    let failure = |kind| Failure { kind, exception: None, diagnosis: format!("{kind:?} seen") };
+    for kind in [FailureKind::Timeout, FailureKind::Crc, FailureKind::Crc, FailureKind::Exception, FailureKind::Port] {
+        super::take(&mut app, start, &sample(Err(failure(kind)), None));
+    }
+    let pane = &app.panes[0];
+    assert_eq!(pane.registers, [0x1234, 0xABCD]);
+    let c = pane.counters;
+    assert_eq!((c.tx, c.ok, c.timeouts, c.crc, c.exceptions, c.other), (6, 1, 1, 2, 1, 1));
+    assert_eq!(pane.last_response, Some(Duration::from_micros(2500)));
+    let lines: Vec<(&str, &[u8])> = app.traffic.lines.iter().take(2).map(|l| (l.direction, &l.bytes[..])).collect();
+    assert_eq!(lines, [("Tx", &[0x03, 0x00, 0x10, 0x00, 0x02][..]), ("Rx", &[0x03, 0x04, 0x12, 0x34, 0xAB, 0xCD][..])]);
+    assert_eq!(app.traffic.lines.back().map(|l| (l.direction, l.decode.as_str())), Some(("--", "Port seen")));
+}
