@@ -366,3 +366,16 @@ fn a_pollers_samples_fill_the_pane_its_counters_by_kind_and_the_traffic() {
     assert_eq!(lines, [("Tx", &[0x03, 0x00, 0x10, 0x00, 0x02][..]), ("Rx", &[0x03, 0x04, 0x12, 0x34, 0xAB, 0xCD][..])]);
     assert_eq!(app.traffic.lines.back().map(|l| (l.direction, l.decode.as_str())), Some(("--", "Port seen")));
 }
+
+#[test]
+fn a_pane_of_profile_points_shows_them_scaled_with_units_at_80x24() {
+    let profile = Profile::builtin("omron-3g3rx").unwrap();
+    let mut panes = spec::parse("d00*@200ms", 1, Some(&profile)).unwrap();
+    for pane in &mut panes {
+        // 50.00 Hz in d001's 0.01 Hz steps, the rest counting up.
+        let registers = (0..pane.count).map(|i| if i == 1 { 5000 } else { i * 3 }).collect();
+        pane.record(Outcome::Registers(registers), Duration::from_millis(9));
+    }
+    let app = App::new("tcp 127.0.0.1:5020".into(), panes);
+    insta::assert_snapshot!(render(&app, 80, 24));
+}
