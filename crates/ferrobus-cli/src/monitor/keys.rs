@@ -111,7 +111,8 @@ fn check(app: &mut App, text: &str) -> Mode {
 fn normal(app: &mut App, code: KeyCode) -> Action {
     app.message = None;
     let cells = app.panes.get(app.pane).map_or(0, |p| p.cells.len());
-    let columns = 1; // Up and down move by one row of the narrowest grid: a cell.
+    let last = cells.saturating_sub(1);
+    let columns = app.columns.get().max(1);
     match code {
         KeyCode::Char('q') | KeyCode::Esc => app.quit = true,
         KeyCode::Tab => {
@@ -122,10 +123,10 @@ fn normal(app: &mut App, code: KeyCode) -> Action {
             app.pane = app.pane.checked_sub(1).unwrap_or(app.panes.len().saturating_sub(1));
             app.cell = 0;
         }
-        KeyCode::Right | KeyCode::Down | KeyCode::Char('j' | 'l') => {
-            app.cell = (app.cell + columns).min(cells.saturating_sub(1));
-        }
-        KeyCode::Left | KeyCode::Up | KeyCode::Char('k' | 'h') => app.cell = app.cell.saturating_sub(columns),
+        KeyCode::Right | KeyCode::Char('l') => app.cell = app.cell.saturating_add(1).min(last),
+        KeyCode::Left | KeyCode::Char('h') => app.cell = app.cell.saturating_sub(1),
+        KeyCode::Down | KeyCode::Char('j') => app.cell = app.cell.saturating_add(columns).min(last),
+        KeyCode::Up | KeyCode::Char('k') => app.cell = app.cell.saturating_sub(columns),
         KeyCode::Char('e') | KeyCode::Enter => app.mode = Mode::Edit(String::new()),
         KeyCode::Char('a') => app.mode = Mode::Alias(String::new()),
         KeyCode::Char('f') => with_cell(app, |c| c.set_format(c.format.next())),

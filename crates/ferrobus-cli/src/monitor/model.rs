@@ -501,6 +501,8 @@ pub(crate) struct App {
     pub(crate) target: String,
     /// Set by `q`.
     pub(crate) quit: bool,
+    /// The columns of the focused pane's grid as last drawn (Up and Down move by a row).
+    pub(crate) columns: std::cell::Cell<usize>,
 }
 
 impl App {
@@ -528,6 +530,7 @@ impl App {
             message: None,
             target,
             quit: false,
+            columns: std::cell::Cell::new(1),
         }
     }
 

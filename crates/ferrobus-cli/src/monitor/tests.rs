@@ -379,3 +379,27 @@ fn a_pane_of_profile_points_shows_them_scaled_with_units_at_80x24() {
     let app = App::new("tcp 127.0.0.1:5020".into(), panes);
     insta::assert_snapshot!(render(&app, 80, 24));
 }
+
+#[test]
+fn left_and_right_move_a_cell_up_and_down_a_row_of_the_grid_as_drawn() {
+    let mut app = busy();
+    // Two columns at 80: the binary cell's 19 characters set the grid's width.
+    assert!(
+        render(&app, 80, 24)
+            .contains("│ 0000 speed          1225           0001 u16             100                  │")
+    );
+    key(&mut app, KeyCode::Down);
+    assert_eq!(app.cell, 2);
+    key(&mut app, KeyCode::Right);
+    assert_eq!(app.cell, 3);
+    key(&mut app, KeyCode::Up);
+    assert_eq!(app.cell, 1);
+    key(&mut app, KeyCode::Left);
+    key(&mut app, KeyCode::Left);
+    assert_eq!(app.cell, 0);
+    for _ in 0..10 {
+        key(&mut app, KeyCode::Down);
+    }
+    assert_eq!(app.cell, 9, "the last cell, not past it");
+    assert!(render(&app, 80, 24).contains("rows 4-5 of 5 (↑↓ scroll)"), "the grid scrolled to the selection");
+}

@@ -106,8 +106,8 @@ fn draw_pane(frame: &mut Frame<'_>, area: Rect, app: &App, index: usize, pane: &
     let border = if focused { Style::new().fg(Color::Yellow) } else { Style::new() };
     let block = Block::new().borders(Borders::ALL).border_style(border).title(title(pane));
     let inner = block.inner(area);
-    frame.render_widget(block, area);
     if inner.height == 0 {
+        frame.render_widget(block, area);
         return;
     }
     let mut lines = vec![Line::from(status(pane))];
@@ -128,10 +128,21 @@ fn draw_pane(frame: &mut Frame<'_>, area: Rect, app: &App, index: usize, pane: &
         .collect();
     let width = texts.iter().map(|t| t.chars().count()).max().unwrap_or(1).max(usize::from(CELL_WIDTH));
     let columns = (usize::from(inner.width) / width).max(1);
+    if focused {
+        app.columns.set(columns);
+    }
     let rows_free = usize::from(inner.height).saturating_sub(lines.len()).max(1);
     // Scroll the grid so that the selected cell is in view.
     let selected_row = if focused { app.cell / columns } else { 0 };
     let first_row = selected_row.saturating_sub(rows_free.saturating_sub(1));
+    let rows = texts.len().div_ceil(columns);
+    let block = if rows > rows_free {
+        let last = (first_row + rows_free).min(rows);
+        block.title_bottom(format!(" rows {}-{last} of {rows} (↑↓ scroll) ", first_row + 1))
+    } else {
+        block
+    };
+    frame.render_widget(block, area);
     let cells: Vec<(usize, &String)> = texts.iter().enumerate().collect();
     for row in cells.chunks(columns).skip(first_row).take(rows_free) {
         let mut spans = Vec::new();
