@@ -38,6 +38,8 @@ APT_PACKAGES+=(openssl)
 APT_PACKAGES+=(man-db groff-base)
 # The completion tests load the zsh script too (bash is there already).
 APT_PACKAGES+=(zsh)
+# tmux is the terminal emulator of `ferrobus monitor`'s end-to-end test.
+APT_PACKAGES+=(tmux)
 export DEBIAN_FRONTEND=noninteractive
 
 IN_CI=false

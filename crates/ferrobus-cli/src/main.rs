@@ -37,6 +37,7 @@ mod interrupt;
 mod line;
 mod man;
 mod mask;
+mod monitor;
 mod output;
 mod poll;
 mod ports;
@@ -123,34 +124,36 @@ enum Command {
     Info(info::InfoArgs),
     /// Send any PDU and show the reply
     Raw(raw::RawArgs),
-    /// CRC-16 and LRC of bytes, and the framed RTU and ASCII frames (offline)
-    Crc(crc::CrcArgs),
-    /// Simulate drives (Omron 3G3RX, SDP servo, generic) on a serial port, a pty or TCP
-    Sim(sim::SimArgs),
-    /// A virtual RS-485 bus of ptys, with real character timing and seeded faults (Unix)
-    Line(line::LineArgs),
-    /// A tour: a simulated 3G3RX on a virtual line, driven by the client (no hardware needed; Unix)
-    Demo(demo::DemoArgs),
-    /// FC03 reads back to back: transactions/s, latency and CPU time (the peer benchmark's format)
-    Bench(bench::BenchArgs),
-    /// Find every device on a serial bus: unit addresses × baud rates and formats, most likely first
-    Scan(scan::ScanArgs),
     /// Read named parameters of a --device profile, scaled with their units
     Get(get::GetArgs),
     /// Write one named parameter of a --device profile, in its unit, checked first, read back
     Set(set::SetArgs),
-    /// Device profiles: list the built-in ones, show a parameter table, check a file (offline)
-    Profile(profile::ProfileArgs),
     /// Save every parameter of a device (--device PROFILE) to a diffable TOML file
     Backup(backup::BackupArgs),
     /// Compare the device with a backup, or two backups; exit 1 if they differ
     Diff(backup::diff::DiffArgs),
     /// Write back what differs from a backup (a dry run unless --apply)
     Restore(backup::restore::RestoreArgs),
+    /// Device profiles: list the built-in ones, show a parameter table, check a file (offline)
+    Profile(profile::ProfileArgs),
+    /// Poll registers or named points for ever, each group at its own rate: a live table, CSV or JSON lines, a log
+    Poll(poll::PollArgs),
+    /// A terminal UI: live grids of read definitions or --device points, traffic, trends, writes in place
+    Monitor(monitor::MonitorArgs),
+    /// Find every device on a serial bus: unit addresses × baud rates and formats, most likely first
+    Scan(scan::ScanArgs),
     /// Decode a live RTU bus passively (transmits nothing); pcapng for tshark/Wireshark
     Sniff(sniff::SniffArgs),
     /// Modbus/TCP clients to RTU serial lines: routing by unit, one queue per line, the gateway exceptions
     Gateway(gateway::GatewayArgs),
+    /// Simulate drives (Omron 3G3RX, SDP servo, generic) on a serial port, a pty or TCP
+    Sim(sim::SimArgs),
+    /// A virtual RS-485 bus of ptys, with real character timing and seeded faults (Unix)
+    Line(line::LineArgs),
+    /// A tour: a simulated 3G3RX on a virtual line, driven by the client (no hardware needed)
+    Demo(demo::DemoArgs),
+    /// FC03 reads back to back: transactions/s, latency and CPU time (the peer benchmark's format)
+    Bench(bench::BenchArgs),
     /// The serial ports the OS knows: USB ids, manufacturer, product, serial number, /dev/serial/by-id
     Ports(ports::PortsArgs),
     /// Saved connections and defaults: `config show` prints the effective settings and their sources
@@ -159,8 +162,8 @@ enum Command {
     Completions(completions::CompletionsArgs),
     /// Manual pages in roff: ferrobus(1) on stdout, or every page into --dir
     Man(man::ManArgs),
-    /// Poll registers or named points for ever, each group at its own rate: a live table, CSV or JSON lines, a log
-    Poll(poll::PollArgs),
+    /// CRC-16 and LRC of bytes, and the framed RTU and ASCII frames (offline)
+    Crc(crc::CrcArgs),
 }
 
 impl Command {
@@ -197,25 +200,26 @@ async fn dispatch(cli: &Cli) -> Result<(), CliError> {
         Command::Diag(args) => diag::run(connection, args).await,
         Command::Info(args) => info::run(connection, args).await,
         Command::Raw(args) => raw::run(connection, args).await,
-        Command::Crc(args) => crc::run(args),
+        Command::Get(args) => get::run(connection, args).await,
+        Command::Set(args) => set::run(connection, args).await,
+        Command::Backup(args) => backup::run(connection, args).await,
+        Command::Diff(args) => backup::diff::run(connection, args).await,
+        Command::Restore(args) => backup::restore::run(connection, args).await,
+        Command::Profile(args) => profile::run(args),
+        Command::Poll(args) => poll::run(connection, args).await,
+        Command::Monitor(args) => monitor::run(connection, args).await,
+        Command::Scan(args) => scan::run(connection, args).await,
+        Command::Sniff(args) => sniff::run(connection, args).await,
+        Command::Gateway(args) => gateway::run(connection, args).await,
         Command::Sim(args) => sim::run(connection, args).await,
         Command::Line(args) => line::run(connection, args).await,
         Command::Demo(args) => demo::run(args).await,
         Command::Bench(args) => bench::run(connection, args).await,
-        Command::Scan(args) => scan::run(connection, args).await,
-        Command::Get(args) => get::run(connection, args).await,
-        Command::Set(args) => set::run(connection, args).await,
-        Command::Profile(args) => profile::run(args),
-        Command::Backup(args) => backup::run(connection, args).await,
-        Command::Diff(args) => backup::diff::run(connection, args).await,
-        Command::Restore(args) => backup::restore::run(connection, args).await,
-        Command::Sniff(args) => sniff::run(connection, args).await,
-        Command::Gateway(args) => gateway::run(connection, args).await,
         Command::Ports(args) => ports::run(args),
         Command::Config(args) => config::run(&cli.layered, args),
         Command::Completions(args) => completions::run(args),
         Command::Man(args) => man::run(args),
-        Command::Poll(args) => poll::run(connection, args).await,
+        Command::Crc(args) => crc::run(args),
     }
 }
 

@@ -11,6 +11,7 @@ mod device;
 mod errors;
 mod gateway;
 mod line_settings;
+mod monitor;
 mod offline;
 mod output;
 mod package;

@@ -1,0 +1,262 @@
+//! What to watch: raw read definitions (`[UNIT:]TABLE:ADDRESS[:COUNT][@RATE]`), profile points
+//! (a code, a glob or `group:NAME`, with `@RATE`), and the session file that saves them with
+//! the cells' formats, aliases and trends.
+
+use std::time::Duration;
+
+use ferrobus::poll::session::{CellDef, PointsDef, ReadDef, Session, period, table_from_name};
+use ferrobus_profile::Order;
+use ferrobus_profile::{Point, Profile, Table};
+
+use super::model::{Cell, Definition, Format};
+use crate::exit::CliError;
+
+/// The rate of a definition that gives none.
+pub(crate) const DEFAULT_EVERY: Duration = Duration::from_secs(1);
+
+/// The most registers one read definition of a profile's points may span (FC03/FC04's 125).
+const MAX_SPAN: u32 = 125;
+
+fn number(text: &str, what: &str, spec: &str) -> Result<u32, CliError> {
+    let t = text.trim();
+    let parsed = match t.strip_prefix("0x").or_else(|| t.strip_prefix("0X")) {
+        Some(hex) => u32::from_str_radix(hex, 16),
+        None => t.parse(),
+    };
+    parsed.map_err(|_| CliError::Usage(format!("'{spec}': {what} '{t}' is not a number")))
+}
+
+fn table(name: &str) -> Option<Table> {
+    match name.to_ascii_lowercase().as_str() {
+        "coils" | "coil" => Some(Table::Coils),
+        "discrete" => Some(Table::DiscreteInputs),
+        "holding" => Some(Table::Holding),
+        "input" => Some(Table::Input),
+        _ => None,
+    }
+}
+
+/// Splits `@RATE` off a definition.
+fn rate(spec: &str) -> Result<(&str, Duration), CliError> {
+    let Some((body, rate)) = spec.rsplit_once('@') else { return Ok((spec, DEFAULT_EVERY)) };
+    let every = ferrobus_sim::fault::parse_duration(rate).map_err(|e| CliError::Usage(format!("'{spec}': {e}")))?;
+    if every < Duration::from_millis(10) {
+        return Err(CliError::Usage(format!("'{spec}': a rate under 10 ms is not a rate a screen can show")));
+    }
+    Ok((body, every))
+}
+
+/// Parses one definition: raw, or (with a profile) points by name, glob or `group:NAME`.
+pub(crate) fn parse(spec: &str, default_unit: u8, profile: Option<&Profile>) -> Result<Vec<Definition>, CliError> {
+    let (body, every) = rate(spec)?;
+    let parts: Vec<&str> = body.split(':').collect();
+    let (unit, rest) = match parts.as_slice() {
+        [first, rest @ ..] if !rest.is_empty() && table(rest[0]).is_some() && table(first).is_none() => {
+            let unit = number(first, "the unit", spec)?;
+            let unit = u8::try_from(unit)
+                .ok()
+                .filter(|u| (1..=247).contains(u))
+                .ok_or_else(|| CliError::Usage(format!("'{spec}': unit {unit} is not 1 to 247")))?;
+            (unit, rest)
+        }
+        all => (default_unit, all),
+    };
+    if let [name, address, count @ ..] = rest {
+        if let Some(table) = table(name) {
+            let address = number(address, "the address", spec)?;
+            let count = match count {
+                [] => 1,
+                [count] => number(count, "the count", spec)?,
+                _ => return Err(CliError::Usage(format!("'{spec}': use [UNIT:]TABLE:ADDRESS[:COUNT][@RATE]"))),
+            };
+            let max = if matches!(table, Table::Coils | Table::DiscreteInputs) { 2000 } else { 125 };
+            if count == 0 || count > max {
+                return Err(CliError::Usage(format!("'{spec}': the count is 1 to {max} for {name}")));
+            }
+            let address = u16::try_from(address)
+                .ok()
+                .filter(|a| u32::from(*a) + count <= 65536)
+                .ok_or_else(|| CliError::Usage(format!("'{spec}': the range passes the last address 0xFFFF")))?;
+            let count = u16::try_from(count).unwrap_or(u16::MAX);
+            return Ok(vec![Definition::raw(unit, table, address, count, every)]);
+        }
+    }
+    let Some(profile) = profile else {
+        return Err(CliError::Usage(format!(
+            "'{spec}' is not a read definition ([UNIT:]TABLE:ADDRESS[:COUNT][@RATE], TABLE = coils, discrete, \
+             holding or input); point names need --device"
+        )));
+    };
+    let name = rest.join(":");
+    let points: Vec<&Point> = match name.strip_prefix("group:") {
+        Some(group) => profile.group(group),
+        None => profile.find(&name),
+    };
+    let points: Vec<&Point> = points.into_iter().filter(|p| p.readable()).collect();
+    if points.is_empty() {
+        return Err(CliError::Usage(format!(
+            "'{spec}': no readable point of {} is called that (see `ferrobus profile show`)",
+            profile.device.name
+        )));
+    }
+    points_to_panes(spec, unit, every, &points)
+}
+
+/// The points as panes: by table, in address order, a new pane where the span would pass 125.
+fn points_to_panes(spec: &str, unit: u8, every: Duration, points: &[&Point]) -> Result<Vec<Definition>, CliError> {
+    let mut panes: Vec<Definition> = Vec::new();
+    for table in [Table::Holding, Table::Input, Table::Coils, Table::DiscreteInputs] {
+        let mut these: Vec<&Point> = points.iter().copied().filter(|p| p.table == table).collect();
+        these.sort_by_key(|p| p.address);
+        let limit = if matches!(table, Table::Coils | Table::DiscreteInputs) { 2000 } else { MAX_SPAN };
+        let mut group: Vec<&Point> = Vec::new();
+        for point in these {
+            if point.end() - u32::from(point.address) > limit {
+                return Err(CliError::Usage(format!("'{spec}': {} is wider than one read", point.code)));
+            }
+            let start = group.first().map_or(u32::from(point.address), |p| u32::from(p.address));
+            if point.end() - start > limit {
+                panes.push(pane_of(unit, table, every, &group));
+                group.clear();
+            }
+            group.push(point);
+        }
+        if !group.is_empty() {
+            panes.push(pane_of(unit, table, every, &group));
+        }
+    }
+    Ok(panes)
+}
+
+fn pane_of(unit: u8, table: Table, every: Duration, points: &[&Point]) -> Definition {
+    let start = points.first().map_or(0, |p| p.address);
+    let end = points.iter().map(|p| p.end()).max().unwrap_or(u32::from(start));
+    let count = u16::try_from(end - u32::from(start)).unwrap_or(u16::MAX);
+    let cells = points
+        .iter()
+        .map(|p| Cell {
+            point: (*p).clone(),
+            format: Format::Named,
+            alias: if p.label.is_empty() { p.code.clone() } else { p.label.clone() },
+            trended: false,
+        })
+        .collect();
+    Definition::with_cells(unit, table, start, count, every, cells)
+}
+
+/// The session file of the panes: the one `ferrobus poll --session` takes
+/// ([`ferrobus::poll::Session`]). Raw panes are `[[read]]`s with their cells' formats and
+/// aliases; panes of profile points are `[[points]]` of `device`. The file has one word/byte
+/// order per read: the first multi-register cell's is saved.
+pub(crate) fn session_of(device: Option<&str>, panes: &[Definition]) -> Session {
+    let mut session = Session::default();
+    for pane in panes {
+        let every = Some(format!("{}ms", pane.every.as_millis()));
+        if pane.cells.iter().any(|c| c.format == Format::Named) {
+            session.points.push(PointsDef {
+                unit: pane.unit,
+                device: device.unwrap_or_default().to_string(),
+                names: pane.cells.iter().map(|c| c.point.code.clone()).collect(),
+                groups: Vec::new(),
+                every,
+            });
+            continue;
+        }
+        let order = pane.cells.iter().find_map(|c| c.format.order()).filter(|o| *o != Order::Abcd);
+        let cells = pane
+            .cells
+            .iter()
+            .filter(|c| c.format != Format::U16 || !c.alias.is_empty())
+            .map(|c| CellDef {
+                address: c.point.address,
+                alias: (!c.alias.is_empty()).then(|| c.alias.clone()),
+                format: (c.format != Format::U16 && !pane.is_bits()).then(|| poll_format(c.format).to_string()),
+            })
+            .collect();
+        session.reads.push(ReadDef {
+            name: None,
+            unit: pane.unit,
+            table: pane.table_name().to_string(),
+            address: pane.address,
+            count: pane.count,
+            format: None,
+            order: order.map(|o| o.name().to_string()),
+            every,
+            cells,
+        });
+    }
+    session
+}
+
+/// The poll library's name of a format.
+fn poll_format(format: Format) -> &'static str {
+    match format {
+        Format::Named | Format::U16 => "u16",
+        Format::I16 => "i16",
+        Format::Hex => "hex",
+        Format::Binary => "binary",
+        Format::U32(_) => "u32",
+        Format::I32(_) => "i32",
+        Format::F32(_) => "f32",
+        Format::F64(_) => "f64",
+    }
+}
+
+/// The panes of a session file; `origin` names it in errors.
+pub(crate) fn panes_of(session: &Session, origin: &str) -> Result<Vec<Definition>, CliError> {
+    let bad = |what: String, problem: String| CliError::Usage(format!("{origin}: {what}: {problem}"));
+    let mut panes = Vec::new();
+    for (i, read) in session.reads.iter().enumerate() {
+        let what = || format!("read {}", i + 1);
+        table_from_name(&read.table).map_err(|e| bad(what(), e))?;
+        let every = period(read.every.as_deref()).map_err(|e| bad(what(), e))?;
+        let order = match read.order.as_deref() {
+            None => Order::Abcd,
+            Some(o) => {
+                Order::from_name(o).ok_or_else(|| bad(what(), format!("order {o:?}: give ABCD, CDAB, BADC or DCBA")))?
+            }
+        };
+        let spec = format!("{}:{}:{}:{}", read.unit, read.table, read.address, read.count);
+        let mut pane = parse(&spec, read.unit, None).map_err(|e| bad(what(), format!("{e:?}")))?.remove(0);
+        pane.every = every;
+        let format_of = |name: &str| Format::parse(name).map(|f| f.with_order(order)).map_err(|e| bad(what(), e));
+        if let Some(format) = &read.format {
+            let format = format_of(format)?;
+            pane.cells.iter_mut().for_each(|c| c.set_format(format));
+        }
+        for def in &read.cells {
+            let cell = pane
+                .cells
+                .iter_mut()
+                .find(|c| c.point.address == def.address)
+                .ok_or_else(|| bad(what(), format!("cell {:#06x} is not in the range read", def.address)))?;
+            if let Some(format) = &def.format {
+                cell.set_format(format_of(format)?);
+            }
+            if let Some(alias) = &def.alias {
+                cell.alias.clone_from(alias);
+            }
+        }
+        panes.push(pane);
+    }
+    for (i, def) in session.points.iter().enumerate() {
+        let what = || format!("points {}", i + 1);
+        let every = period(def.every.as_deref()).map_err(|e| bad(what(), e))?;
+        let profile = Profile::load(&def.device).map_err(|e| bad(what(), e.to_string()))?;
+        let mut points: Vec<&Point> = Vec::new();
+        for name in &def.names {
+            points.extend(profile.find(name));
+        }
+        for group in &def.groups {
+            points.extend(profile.group(group));
+        }
+        points.retain(|p| p.readable());
+        points.sort_by_key(|p| (p.address, p.code.clone()));
+        points.dedup_by(|a, b| a.code == b.code);
+        if points.is_empty() {
+            return Err(bad(what(), "no readable point of the profile has those names or groups".into()));
+        }
+        panes.extend(points_to_panes(&what(), def.unit, every, &points)?);
+    }
+    Ok(panes)
+}
