@@ -177,7 +177,7 @@ pub(crate) async fn run(connection: &ConnectArgs, args: &WriteArgs) -> Result<()
             let session = &connection.open().await?;
             if registers.len() == 1 && !multiple {
                 session.client.write_single_register(session.unit, address.wire, registers[0]).await?;
-                let data = hex_words(&registers);
+                let data = shown(*values, &registers);
                 let line = report(session, FunctionCode::WriteSingleRegister, "register", address, address.wire, &data);
                 output::print(&line)?;
                 return Ok(());
@@ -203,6 +203,13 @@ pub(crate) async fn run(connection: &ConnectArgs, args: &WriteArgs) -> Result<()
     }
 }
 
+/// The registers written, as on the wire and as the values they are: `0x0004 0x93E0 (u32
+/// 300000)`, `0x0032 (u16 50)`.
+fn shown(values: ValueArgs, registers: &[u16]) -> String {
+    let decoded: Vec<String> = values.decode_all(registers).iter().map(ToString::to_string).collect();
+    format!("{} ({} {})", hex_words(registers), values.kind.name(), decoded.join(" "))
+}
+
 /// FC10, split at value boundaries into requests of at most `max` registers.
 async fn write_registers(
     session: &Session,
@@ -219,11 +226,7 @@ async fn write_registers(
         let chunk = &registers[from..from + n];
         tracing::info!(unit = session.unit, start, n = quantity(n), "writing registers");
         session.client.write_multiple_registers(session.unit, start, chunk).await?;
-        let mut data = hex_words(chunk);
-        if values.kind != ValueType::U16 {
-            let decoded: Vec<String> = values.decode_all(chunk).iter().map(ToString::to_string).collect();
-            data = format!("{data} ({} {})", values.kind.name(), decoded.join(" "));
-        }
+        let data = shown(values, chunk);
         let what = plural(n, "register");
         output::print(&report(session, FunctionCode::WriteMultipleRegisters, &what, address, start, &data))?;
     }

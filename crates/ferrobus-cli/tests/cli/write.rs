@@ -26,9 +26,9 @@ fn coils_are_written_with_fc05_and_fc0f() {
 fn one_register_uses_fc06_unless_multiple_or_32_bit() {
     let server = Server::start();
     let out = stdout(&server.run(&["write", "register", "7", "1234"]).success());
-    assert_eq!(out, "unit 1: FC06 wrote register at 7 (0x0007): 0x04D2\n");
+    assert_eq!(out, "unit 1: FC06 wrote register at 7 (0x0007): 0x04D2 (u16 1234)\n");
     let multiple = stdout(&server.run(&["write", "register", "8", "0x0BB8", "--multiple"]).success());
-    assert_eq!(multiple, "unit 1: FC10 wrote 1 register at 8 (0x0008): 0x0BB8\n");
+    assert_eq!(multiple, "unit 1: FC10 wrote 1 register at 8 (0x0008): 0x0BB8 (u16 3000)\n");
     let wide = stdout(&server.run(&["write", "register", "0x10", "300000", "--type", "u32"]).success());
     assert_eq!(wide, "unit 1: FC10 wrote 2 registers at 16 (0x0010): 0x0004 0x93E0 (u32 300000)\n");
     server.run(&["write", "register", "0x112", "3000", "--type", "u32", "--word-order", "low-first"]).success();
@@ -67,9 +67,12 @@ fn long_typed_writes_split_between_values() {
 fn one_based_writes_land_one_lower() {
     let server = Server::start();
     let out = stdout(&server.run(&["write", "register", "--one-based", "0x0012", "50"]).success());
-    assert_eq!(out, "unit 1: FC06 wrote register at 17 (0x0011) = 0x0012: 0x0032\n", "the number as typed, in hex");
+    assert_eq!(
+        out, "unit 1: FC06 wrote register at 17 (0x0011) = 0x0012: 0x0032 (u16 50)\n",
+        "the number as typed, in hex"
+    );
     let modicon = stdout(&server.run(&["write", "registers", "--modicon", "40020", "1", "2"]).success());
-    assert_eq!(modicon, "unit 1: FC10 wrote 2 registers at 19 (0x0013) = 40020: 0x0001 0x0002\n");
+    assert_eq!(modicon, "unit 1: FC10 wrote 2 registers at 19 (0x0013) = 40020: 0x0001 0x0002 (u16 1 2)\n");
     assert_eq!(requests(&server), [(0x06, 0x11, 1), (0x10, 19, 2)]);
     assert_eq!(server.device().holding[0x11], 50);
 }
@@ -101,7 +104,7 @@ fn readwrite_writes_then_reads_in_one_fc17() {
 fn a_broadcast_write_returns_without_a_reply_and_is_executed() {
     let server = Server::rtu_over_tcp();
     let out = stdout(&server.run(&["--unit", "0", "write", "register", "40", "77"]).success());
-    assert_eq!(out, "broadcast: FC06 sent register at 40 (0x0028): 0x004D (no reply expected)\n");
+    assert_eq!(out, "broadcast: FC06 sent register at 40 (0x0028): 0x004D (u16 77) (no reply expected)\n");
     let deadline = Instant::now() + Duration::from_secs(2);
     while server.device().holding[40] != 77 && Instant::now() < deadline {
         std::thread::sleep(Duration::from_millis(5));
