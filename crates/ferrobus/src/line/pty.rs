@@ -79,11 +79,17 @@ impl Line {
                         _ => return,
                     },
                     chunk = rx.recv() => match chunk {
-                        Some((bytes, at)) => {
-                            // At the settings the program has when it is handed the bytes.
-                            let heard = match pty.peer_settings() {
-                                Some(peer) => crate::wire::heard(wire, receiver(peer, wire), &bytes),
-                                None => bytes.clone(),
+                        Some(Chunk { bytes, at, tx }) => {
+                            // At the settings the program has when it is handed the bytes
+                            // (the line's if they cannot be read).
+                            let rx = pty.peer_settings().map_or(
+                                Receiver { config: wire, on_error: OnError::Keep },
+                                |peer| receiver(peer, wire),
+                            );
+                            let heard = if rx.config == tx {
+                                bytes.clone()
+                            } else {
+                                crate::wire::heard(tx, rx, &bytes)
                             };
                             if pty.write_all(&heard).await.is_err() { return; }
                             if let Some(record) = &record {
