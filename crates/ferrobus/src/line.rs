@@ -78,7 +78,7 @@ enum Cmd {
     },
     Attach {
         name: String,
-        inbox: mpsc::UnboundedSender<Chunk>,
+        inbox: Inbox,
         id: tokio::sync::oneshot::Sender<usize>,
         tap: bool,
     },
@@ -87,6 +87,10 @@ enum Cmd {
         dead: bool,
     },
 }
+
+/// How the bus task hands an endpoint what it hears: a send on a channel, or (a tap's pty) a
+/// write.
+type Inbox = Box<dyn FnMut(Chunk) + Send>;
 
 /// A handle to a running line. Cheap to clone; the line runs until every handle and endpoint
 /// is dropped.
@@ -122,7 +126,7 @@ impl Line {
     /// A new in-process endpoint.
     pub async fn endpoint(&self, name: impl Into<String>) -> io::Result<Endpoint> {
         let (inbox, rx) = mpsc::unbounded_channel::<Chunk>();
-        let id = self.attach(name.into(), inbox, false).await?;
+        let id = self.attach(name.into(), channel(inbox), false).await?;
         Ok(self.in_process(id, rx))
     }
 
@@ -130,7 +134,7 @@ impl Line {
     /// nothing (what is written to it is counted in [`EndpointStats::refused`] and dropped).
     pub async fn tap_endpoint(&self, name: impl Into<String>) -> io::Result<Endpoint> {
         let (inbox, rx) = mpsc::unbounded_channel::<Chunk>();
-        let id = self.attach(name.into(), inbox, true).await?;
+        let id = self.attach(name.into(), channel(inbox), true).await?;
         Ok(self.in_process(id, rx))
     }
 
@@ -153,7 +157,7 @@ impl Line {
         Endpoint { id, to_bus: self.cmds.clone(), inbox, pending: Vec::new(), read: 0, arrival: None, config }
     }
 
-    async fn attach(&self, name: String, inbox: mpsc::UnboundedSender<Chunk>, tap: bool) -> io::Result<usize> {
+    async fn attach(&self, name: String, inbox: Inbox, tap: bool) -> io::Result<usize> {
         let (tx, rx) = tokio::sync::oneshot::channel();
         let closed = || io::Error::new(io::ErrorKind::BrokenPipe, "the line has stopped");
         self.cmds.send(Cmd::Attach { name, inbox, id: tx, tap }).map_err(|_| closed())?;
@@ -169,6 +173,13 @@ impl Line {
     pub fn stats(&self) -> LineStats {
         self.stats.lock().unwrap_or_else(PoisonError::into_inner).clone()
     }
+}
+
+/// An inbox that sends on `inbox`.
+fn channel<T: From<Chunk> + Send + 'static>(inbox: mpsc::UnboundedSender<T>) -> Inbox {
+    Box::new(move |chunk| {
+        let _ = inbox.send(T::from(chunk));
+    })
 }
 
 /// An in-process endpoint of a [`Line`]: a port.
@@ -245,7 +256,7 @@ impl AsyncWrite for Endpoint {
 /// tokio's clock, and hands out deliveries.
 struct Bus {
     wire: Wire,
-    inboxes: Vec<mpsc::UnboundedSender<Chunk>>,
+    inboxes: Vec<Inbox>,
     stats: Arc<Mutex<LineStats>>,
     clock: Clock,
 }
@@ -302,9 +313,9 @@ impl Bus {
         let deliveries = self.wire.advance(self.clock.now());
         self.publish();
         for delivery in deliveries {
-            if let Some(inbox) = self.inboxes.get(delivery.to) {
+            if let Some(inbox) = self.inboxes.get_mut(delivery.to) {
                 let at = self.clock.to_tokio(delivery.at);
-                let _ = inbox.send(Chunk { bytes: delivery.bytes, at, tx: delivery.tx });
+                inbox(Chunk { bytes: delivery.bytes, at, tx: delivery.tx });
             }
         }
     }
