@@ -21,10 +21,13 @@
 //!
 //! A pty endpoint is held to its own settings, as a UART on a real wire would be: the line
 //! reads the baud rate, data bits, parity and stop bits the program set on its pty (Linux
-//! lets the master side read them), and what the program writes is sent at those settings and
-//! received at the line's, what the line carries is received at the program's — both through
-//! the wire's bit-level UART model ([`Wire::send_at`], [`Wire::heard_by`]). An endpoint at the
-//! line's settings gets clean bytes; one at the wrong baud rate or parity gets garbage, with
+//! lets the master side read them), and what the program writes goes on the wire at those
+//! settings, taking their character time ([`Wire::send_at`]); what the wire carries is
+//! received at the program's settings through the wire's bit-level UART model
+//! ([`Delivery::heard_by`](crate::wire::Delivery::heard_by)). A wire carries bits, not the
+//! line's bytes: an endpoint at its sender's settings gets clean bytes, whatever the line's
+//! (two programs at 9600 on a 19200 line understand each other), and in-process endpoints
+//! are at the line's. One at another baud rate or parity than its sender gets garbage, with
 //! parity and framing errors delivered as its terminal settings say (`IGNPAR` drops them,
 //! `PARMRK` marks them `FF 00`, `INPCK` reads them as `00`, otherwise the garbled byte). The
 //! characters of one write, or of one delivery, are taken to be back to back. Linux ptys
@@ -46,8 +49,8 @@ use tokio::time::Instant;
 use crate::clock::Clock;
 use crate::port::{BoxPort, ConnectWith, Connecting, Framing, Port, Transport};
 use crate::timer::Timer;
-use crate::wire::Wire;
 pub use crate::wire::{EndpointStats, LineFaults, LineOptions, LineStats};
+use crate::wire::{OnError, Receiver, Wire, heard};
 
 /// Pty endpoints (Unix: other platforms have no ptys).
 #[cfg(unix)]
@@ -55,8 +58,15 @@ mod pty;
 #[cfg(unix)]
 pub use pty::{Tap, TapRun};
 
-/// Characters delivered to an endpoint, and when the last of them left the wire.
-type Chunk = (Vec<u8>, Instant);
+/// Characters delivered to an endpoint.
+struct Chunk {
+    /// As the wire carried them.
+    bytes: Vec<u8>,
+    /// When the last of them left the wire.
+    at: Instant,
+    /// The settings they were sent at.
+    tx: LineConfig,
+}
 
 enum Cmd {
     /// `bytes` written by `from` at `at`, at its settings `tx` (`None`: the line's).
@@ -68,7 +78,7 @@ enum Cmd {
     },
     Attach {
         name: String,
-        inbox: mpsc::UnboundedSender<Chunk>,
+        inbox: Inbox,
         id: tokio::sync::oneshot::Sender<usize>,
         tap: bool,
     },
@@ -77,6 +87,10 @@ enum Cmd {
         dead: bool,
     },
 }
+
+/// How the bus task hands an endpoint what it hears: a send on a channel, or (a tap's pty) a
+/// write.
+type Inbox = Box<dyn FnMut(Chunk) + Send>;
 
 /// A handle to a running line. Cheap to clone; the line runs until every handle and endpoint
 /// is dropped.
@@ -112,16 +126,16 @@ impl Line {
     /// A new in-process endpoint.
     pub async fn endpoint(&self, name: impl Into<String>) -> io::Result<Endpoint> {
         let (inbox, rx) = mpsc::unbounded_channel::<Chunk>();
-        let id = self.attach(name.into(), inbox, false).await?;
-        Ok(Endpoint { id, to_bus: self.cmds.clone(), inbox: rx, pending: Vec::new(), read: 0, arrival: None })
+        let id = self.attach(name.into(), channel(inbox), false).await?;
+        Ok(self.in_process(id, rx))
     }
 
     /// A new in-process tap: an endpoint that hears everything on the line and transmits
     /// nothing (what is written to it is counted in [`EndpointStats::refused`] and dropped).
     pub async fn tap_endpoint(&self, name: impl Into<String>) -> io::Result<Endpoint> {
         let (inbox, rx) = mpsc::unbounded_channel::<Chunk>();
-        let id = self.attach(name.into(), inbox, true).await?;
-        Ok(Endpoint { id, to_bus: self.cmds.clone(), inbox: rx, pending: Vec::new(), read: 0, arrival: None })
+        let id = self.attach(name.into(), channel(inbox), true).await?;
+        Ok(self.in_process(id, rx))
     }
 
     /// A transport whose every connection is a new endpoint named `name`: RTU at the line's
@@ -138,7 +152,12 @@ impl Line {
         Transport::custom(Framing::Rtu, self.timing(), connector).with_timer(timer)
     }
 
-    async fn attach(&self, name: String, inbox: mpsc::UnboundedSender<Chunk>, tap: bool) -> io::Result<usize> {
+    fn in_process(&self, id: usize, inbox: mpsc::UnboundedReceiver<Chunk>) -> Endpoint {
+        let config = self.options.config;
+        Endpoint { id, to_bus: self.cmds.clone(), inbox, pending: Vec::new(), read: 0, arrival: None, config }
+    }
+
+    async fn attach(&self, name: String, inbox: Inbox, tap: bool) -> io::Result<usize> {
         let (tx, rx) = tokio::sync::oneshot::channel();
         let closed = || io::Error::new(io::ErrorKind::BrokenPipe, "the line has stopped");
         self.cmds.send(Cmd::Attach { name, inbox, id: tx, tap }).map_err(|_| closed())?;
@@ -156,6 +175,13 @@ impl Line {
     }
 }
 
+/// An inbox that sends on `inbox`.
+fn channel<T: From<Chunk> + Send + 'static>(inbox: mpsc::UnboundedSender<T>) -> Inbox {
+    Box::new(move |chunk| {
+        let _ = inbox.send(T::from(chunk));
+    })
+}
+
 /// An in-process endpoint of a [`Line`]: a port.
 pub struct Endpoint {
     id: usize,
@@ -164,6 +190,8 @@ pub struct Endpoint {
     pending: Vec<u8>,
     read: usize,
     arrival: Option<Instant>,
+    /// Its settings: the line's.
+    config: LineConfig,
 }
 
 impl Endpoint {
@@ -186,10 +214,14 @@ impl AsyncRead for Endpoint {
         let this = &mut *self;
         if this.read >= this.pending.len() {
             match this.inbox.poll_recv(cx) {
-                Poll::Ready(Some((chunk, at))) => {
-                    this.pending = chunk;
+                Poll::Ready(Some(chunk)) => {
+                    this.pending = if chunk.tx == this.config {
+                        chunk.bytes
+                    } else {
+                        heard(chunk.tx, Receiver { config: this.config, on_error: OnError::Keep }, &chunk.bytes)
+                    };
                     this.read = 0;
-                    this.arrival = Some(at);
+                    this.arrival = Some(chunk.at);
                 }
                 Poll::Ready(None) => return Poll::Ready(Ok(())),
                 Poll::Pending => return Poll::Pending,
@@ -224,7 +256,7 @@ impl AsyncWrite for Endpoint {
 /// tokio's clock, and hands out deliveries.
 struct Bus {
     wire: Wire,
-    inboxes: Vec<mpsc::UnboundedSender<Chunk>>,
+    inboxes: Vec<Inbox>,
     stats: Arc<Mutex<LineStats>>,
     clock: Clock,
 }
@@ -281,8 +313,9 @@ impl Bus {
         let deliveries = self.wire.advance(self.clock.now());
         self.publish();
         for delivery in deliveries {
-            if let Some(inbox) = self.inboxes.get(delivery.to) {
-                let _ = inbox.send((delivery.bytes, self.clock.to_tokio(delivery.at)));
+            if let Some(inbox) = self.inboxes.get_mut(delivery.to) {
+                let at = self.clock.to_tokio(delivery.at);
+                inbox(Chunk { bytes: delivery.bytes, at, tx: delivery.tx });
             }
         }
     }

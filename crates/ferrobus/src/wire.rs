@@ -20,9 +20,14 @@
 //! - A sniffer on the wire counts the frames it decodes and the byte runs it throws away.
 //! - Faults: bit errors, replaced and lost characters, gaps stretched inside a frame, noise
 //!   bursts at random times, and endpoints that are dead (deaf and mute).
-//! - An endpoint at other settings than the wire's goes through a bit-level UART model
-//!   ([`Wire::send_at`], [`Wire::heard_by`]): at the wrong baud rate or parity it sends and
-//!   hears garbage, with parity and framing errors as a UART has them.
+//! - The wire carries bits, not the line's bytes: each run keeps its sender's settings
+//!   ([`Wire::send_at`]; [`Wire::send`] is at the wire's), its characters take the sender's
+//!   character time, and each [`Delivery`] says what they were sent at. A receiver hears them
+//!   through a bit-level UART model ([`Delivery::heard_by`], [`heard`]): clean at its
+//!   sender's settings, garbage at another baud rate or parity, with parity and framing
+//!   errors as a UART has them. Two endpoints at 9600 on a 19200 line understand each other;
+//!   one at the line's 19200 hears garbage from them. Collisions and the t3.5 rule are as for
+//!   any sender (t3.5 is the wire's).
 
 use std::collections::BTreeMap;
 use std::time::Duration;
@@ -145,15 +150,26 @@ pub struct Receiver {
     pub on_error: OnError,
 }
 
-/// Characters that reach an endpoint.
+/// Characters that reach an endpoint: a run of back-to-back characters sent at one setting.
 #[derive(Clone, PartialEq, Eq, Debug)]
 pub struct Delivery {
     /// The endpoint's id.
     pub to: usize,
-    /// The characters, as the wire carried them.
+    /// The characters, as the wire carried them (as sent at `tx`, collisions and faults
+    /// applied).
     pub bytes: Vec<u8>,
     /// When the last of them left the wire.
     pub at: Instant,
+    /// The settings they were sent at (the wire's for [`Wire::send`] and noise).
+    pub tx: LineConfig,
+}
+
+impl Delivery {
+    /// What a receiver at `rx` makes of these characters: the bytes themselves when it is at
+    /// `tx` (stop bits aside), garbage otherwise.
+    pub fn heard_by(&self, rx: Receiver) -> Vec<u8> {
+        heard(self.tx, rx, &self.bytes)
+    }
 }
 
 /// The sender of injected noise.
@@ -169,6 +185,8 @@ struct OnWire {
     from: usize,
     byte: u8,
     garbled: bool,
+    /// The sender's settings.
+    tx: LineConfig,
 }
 
 /// The wire of a virtual line, and its endpoints. See the [module docs](self).
@@ -183,6 +201,9 @@ pub struct Wire {
     /// Characters scheduled, by the time their last bit leaves the wire.
     scheduled: BTreeMap<(Instant, u64), OnWire>,
     seq: u64,
+    /// The longest character time scheduled so far: how far past a character's end another
+    /// that overlaps it can end.
+    longest: Duration,
     /// When the wire was last busy (the end of the last character scheduled on it).
     last_end: Option<Instant>,
     next_noise: Option<Instant>,
@@ -203,6 +224,7 @@ impl Wire {
             busy_until: Vec::new(),
             scheduled: BTreeMap::new(),
             seq: 0,
+            longest: char_time,
             last_end: None,
             next_noise: None,
             sniffer: RtuCodec::new(timing, Expect::Both),
@@ -256,24 +278,22 @@ impl Wire {
     /// to back from `now`, or from the end of what it is already sending. Nothing from a dead
     /// or unknown endpoint, nor from a tap.
     pub fn send(&mut self, from: usize, bytes: &[u8], now: Instant) {
+        self.send_at(from, self.options.config, bytes, now);
+    }
+
+    /// Endpoint `from` sends `bytes` at its own settings `tx` at `now`: the wire carries them
+    /// as sent, each taking `tx`'s character time, and its receivers hear them through the
+    /// UART model ([`Delivery::heard_by`]). Nothing from a dead or unknown endpoint, nor from
+    /// a tap.
+    pub fn send_at(&mut self, from: usize, tx: LineConfig, bytes: &[u8], now: Instant) {
         match self.stats.endpoints.get_mut(from) {
             Some(e) if e.tap => e.refused = e.refused.saturating_add(bytes.len() as u64),
-            Some(e) if !e.dead => self.schedule(from, bytes, now),
+            Some(e) if !e.dead => self.schedule(from, tx, bytes, now),
             _ => {}
         }
     }
 
-    /// Endpoint `from` sends `bytes` at its own settings `tx` at `now`: the wire carries what
-    /// a UART at the wire's settings makes of them (a character in error as the garbled byte).
-    pub fn send_at(&mut self, from: usize, tx: LineConfig, bytes: &[u8], now: Instant) {
-        let wire = self.options.config;
-        let on_wire = heard(tx, Receiver { config: wire, on_error: OnError::Keep }, bytes);
-        if !on_wire.is_empty() {
-            self.send(from, &on_wire, now);
-        }
-    }
-
-    /// What a receiver at `rx` makes of `bytes` the wire carried back to back.
+    /// What a receiver at `rx` makes of `bytes` sent back to back at the wire's settings.
     pub fn heard_by(&self, rx: Receiver, bytes: &[u8]) -> Vec<u8> {
         heard(self.options.config, rx, bytes)
     }
@@ -301,20 +321,26 @@ impl Wire {
         let mut out = Vec::new();
         let mut chunks: Vec<Vec<u8>> = vec![Vec::new(); self.stats.endpoints.len()];
         let mut run_end: Option<Instant> = None;
+        let mut run_tx = self.options.config;
         while let Some(entry) = self.scheduled.first_entry() {
             let end = entry.key().0;
             if end > now {
                 break;
             }
             let w = *entry.get();
-            if let Some(r) = run_end.filter(|r| w.start > *r) {
-                Self::flush(&mut chunks, r, &mut out);
+            // A run ends at a gap, or where the sender's settings change.
+            if let Some(r) = run_end.filter(|r| w.start > *r || w.tx != run_tx) {
+                Self::flush(&mut chunks, r, run_tx, &mut out);
             }
             run_end = Some(run_end.map_or(end, |r| r.max(end)));
+            run_tx = w.tx;
             entry.remove();
             let Some(byte) = self.on_the_wire(w) else { continue };
+            // The sniffer listens at the wire's settings.
+            let wire_rx = Receiver { config: self.options.config, on_error: OnError::Keep };
+            let sniffed = if w.tx == wire_rx.config { vec![byte] } else { heard(w.tx, wire_rx, &[byte]) };
             let local = &mut self.stats;
-            feed(&mut self.sniffer, end, &[byte], |event| count(local, &event));
+            feed(&mut self.sniffer, end, &sniffed, |event| count(local, &event));
             for (id, chunk) in chunks.iter_mut().enumerate() {
                 let hears = id != w.from || self.options.echo;
                 let dead = self.stats.endpoints.get(id).is_some_and(|e| e.dead);
@@ -324,26 +350,33 @@ impl Wire {
             }
         }
         if let Some(r) = run_end {
-            Self::flush(&mut chunks, r, &mut out);
+            Self::flush(&mut chunks, r, run_tx, &mut out);
         }
         let local = &mut self.stats;
         expire(&mut self.sniffer, now, |event| count(local, &event));
         out
     }
 
-    fn flush(chunks: &mut [Vec<u8>], at: Instant, out: &mut Vec<Delivery>) {
+    fn flush(chunks: &mut [Vec<u8>], at: Instant, tx: LineConfig, out: &mut Vec<Delivery>) {
         for (to, chunk) in chunks.iter_mut().enumerate() {
             if !chunk.is_empty() {
-                out.push(Delivery { to, bytes: std::mem::take(chunk), at });
+                out.push(Delivery { to, bytes: std::mem::take(chunk), at, tx });
             }
         }
     }
 
-    /// Puts `bytes` from `from` on the wire, back to back from `now` or from the end of what
-    /// it is already sending, with stretched gaps drawn; marks collisions; checks the gap
-    /// before a new frame.
-    fn schedule(&mut self, from: usize, bytes: &[u8], now: Instant) {
-        let c = self.char_time;
+    /// Puts `bytes` from `from` at `tx` on the wire, back to back from `now` or from the end
+    /// of what it is already sending, each taking `tx`'s character time, with stretched gaps
+    /// drawn; marks collisions; checks the gap before a new frame.
+    fn schedule(&mut self, from: usize, tx: LineConfig, bytes: &[u8], now: Instant) {
+        let c = if !self.options.paced {
+            Duration::ZERO
+        } else if tx == self.options.config {
+            self.char_time
+        } else {
+            LineTiming::new(&tx).char_time()
+        };
+        self.longest = self.longest.max(c);
         let busy_until = self.busy_until.get(from).copied().flatten();
         let mut start = busy_until.filter(|t| *t > now).unwrap_or(now);
         // A frame begins when this sender was not already transmitting (or within t1.5 of
@@ -366,9 +399,11 @@ impl Wire {
             let end = start.saturating_add(c);
             // Another sender's character overlapping this one: both are garbled.
             let mut garbled = false;
-            let overlapping = self.scheduled.range((start, 0)..(end.saturating_add(c), u64::MAX));
+            // Those that end after this one starts and no later than the longest character
+            // time after it ends, and start before it ends.
+            let overlapping = self.scheduled.range((start, 0)..(end.saturating_add(self.longest), u64::MAX));
             let hits: Vec<(Instant, u64)> = overlapping
-                .filter(|(_, w)| w.from != from && w.start < end && start < w.start.saturating_add(c))
+                .filter(|((w_end, _), w)| w.from != from && w.start < end && start < *w_end)
                 .map(|(k, _)| *k)
                 .collect();
             for key in hits {
@@ -384,7 +419,7 @@ impl Wire {
                 self.stats.collisions += 1;
             }
             self.seq += 1;
-            self.scheduled.insert((end, self.seq), OnWire { start, from, byte, garbled });
+            self.scheduled.insert((end, self.seq), OnWire { start, from, byte, garbled, tx });
             self.last_end = Some(self.last_end.map_or(end, |l| l.max(end)));
             start = end;
             self.stats.characters += 1;
@@ -423,7 +458,7 @@ impl Wire {
         let n = self.rng.random_range(1..=self.options.faults.noise_len.max(1));
         let bytes: Vec<u8> = (0..n).map(|_| self.rng.random()).collect();
         self.stats.noise += n as u64;
-        self.schedule(NOISE, &bytes, at);
+        self.schedule(NOISE, self.options.config, &bytes, at);
         self.schedule_noise(at);
     }
 

@@ -243,6 +243,30 @@ async fn a_pty_tap_hears_both_sides_says_when_each_run_ended_and_transmits_nothi
 }
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_pty_tap_whose_sniffer_falls_behind_a_full_pty_buffer_still_hears_every_run_whole_and_in_order() {
+    // 120 kB through the tap before its sniffer reads a byte: more than a Linux pty buffers
+    // (64 kB and the line discipline's 4 kB), so the line's writes to it stop being taken and
+    // the rest waits for room.
+    let line = Line::start(LineOptions { paced: false, ..line_9600() });
+    let mut a = line.endpoint("a").await.unwrap();
+    let mut tap = line.tap().await.unwrap();
+    let line_config = LineConfig::new(9600).unwrap().with_parity(Parity::None);
+    let mut sniffer = ferrobus::port::open_serial(&ferrobus::SerialConfig::new(&tap.path, line_config)).unwrap();
+    let runs: Vec<Vec<u8>> =
+        (0..120u32).map(|i| (0..1000u32).map(|j| ((i * 1000 + j) % 251) as u8).collect()).collect();
+    for run in &runs {
+        a.write_all(run).await.unwrap();
+    }
+    let got = read_n(&mut sniffer, 120_000, Duration::from_secs(20)).await;
+    assert_eq!(got.len(), 120_000);
+    assert!(got == runs.concat(), "every byte, in order");
+    for run in &runs {
+        let heard = tap.heard.recv().await.unwrap();
+        assert!(&heard.bytes == run && heard.written >= heard.end, "the runs recorded in order");
+    }
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn an_in_process_tap_hears_the_line_and_its_writes_never_reach_it() {
     let line = Line::start(LineOptions { paced: false, ..line_9600() });
     let mut a = line.endpoint("a").await.unwrap();

@@ -10,7 +10,12 @@ use ferrobus_proto::frame::{LineConfig, Parity};
 
 /// 9600 8E1: a character is 11 bits, 1 145 834 ns; t1.5 1 718 750 ns; t3.5 4 010 417 ns.
 fn line_9600() -> LineOptions {
-    LineOptions::new(LineConfig::new(9600).unwrap())
+    LineOptions::new(at_9600())
+}
+
+/// 9600 8E1.
+fn at_9600() -> LineConfig {
+    LineConfig::new(9600).unwrap()
 }
 
 const C: Duration = Duration::from_nanos(1_145_834);
@@ -43,7 +48,7 @@ fn characters_reach_every_other_endpoint_when_their_last_bit_has_left_the_wire_a
     assert_eq!(w.next_wake(), Some(end), "woken once, at the end of the run");
     assert_eq!(w.advance(at(C).saturating_sub(ns(1))), [], "nothing before the first character has left");
     let got = w.advance(end.saturating_sub(ns(1)));
-    let delivery = |to, bytes: &[u8], at| Delivery { to, bytes: bytes.to_vec(), at };
+    let delivery = |to, bytes: &[u8], at| Delivery { to, bytes: bytes.to_vec(), at, tx: at_9600() };
     assert_eq!(
         got,
         [delivery(1, &sent[..9], at(C * 9)), delivery(2, &sent[..9], at(C * 9))],
@@ -70,7 +75,11 @@ fn a_write_while_the_sender_is_still_transmitting_follows_its_last_character() {
     w.send(0, &[1, 2, 3], T0);
     w.send(0, &[4, 5], at(C));
     let got = w.advance(at(C * 5));
-    assert_eq!(got[0], Delivery { to: 1, bytes: vec![1, 2, 3, 4, 5], at: at(C * 5) }, "one run, back to back");
+    assert_eq!(
+        got[0],
+        Delivery { to: 1, bytes: vec![1, 2, 3, 4, 5], at: at(C * 5), tx: at_9600() },
+        "one run, back to back"
+    );
     assert_eq!(w.stats().endpoints[0].gap_violations, 0);
 }
 
@@ -136,8 +145,8 @@ fn an_unpaced_wire_delivers_at_the_instant_of_the_write() {
     assert_eq!(
         w.advance(at(ns(5))),
         [
-            Delivery { to: 1, bytes: vec![1, 2, 3], at: at(ns(5)) },
-            Delivery { to: 2, bytes: vec![1, 2, 3], at: at(ns(5)) },
+            Delivery { to: 1, bytes: vec![1, 2, 3], at: at(ns(5)), tx: at_9600() },
+            Delivery { to: 2, bytes: vec![1, 2, 3], at: at(ns(5)), tx: at_9600() },
         ]
     );
 }
@@ -177,7 +186,7 @@ fn a_dead_endpoint_neither_hears_nor_sends_and_alive_again_does_both() {
     w.send(0, &[1, 2, 3], T0);
     w.send(1, &[4, 5, 6], T0);
     let got = w.advance(at(Duration::from_millis(10)));
-    assert_eq!(got, [Delivery { to: 2, bytes: vec![1, 2, 3], at: at(C * 3) }]);
+    assert_eq!(got, [Delivery { to: 2, bytes: vec![1, 2, 3], at: at(C * 3), tx: at_9600() }]);
     assert!(w.stats().endpoints[1].dead);
     w.set_dead(1, false);
     w.send(1, &[4], at(Duration::from_millis(20)));
@@ -249,8 +258,13 @@ fn an_endpoint_at_the_wrong_baud_rate_sends_and_hears_garbage_and_one_at_the_wir
     assert!(!garbage.is_empty() && garbage != REQUEST, "{garbage:02X?}");
     w.send_at(0, fast, &REQUEST, T0);
     w.send_at(2, wire_config, &REQUEST, at(Duration::from_millis(100)));
-    let to_b: Vec<Vec<u8>> =
-        w.advance(at(Duration::from_millis(200))).into_iter().filter(|d| d.to == 1).map(|d| d.bytes).collect();
+    // b is at the wire's settings.
+    let to_b: Vec<Vec<u8>> = w
+        .advance(at(Duration::from_millis(200)))
+        .into_iter()
+        .filter(|d| d.to == 1)
+        .map(|d| d.heard_by(right))
+        .collect();
     assert_eq!(to_b.len(), 2);
     assert_ne!(to_b[0], REQUEST, "a 38400 transmitter on a 9600 line");
     assert_eq!(to_b[1], REQUEST, "one at the line's settings");
@@ -277,11 +291,82 @@ fn a_tap_hears_every_endpoint_at_the_instant_the_others_do_and_what_it_sends_is_
     w.send(tap, &[0xEE; 5], T0);
     w.send(1, &[3], at(C * 10));
     let got: Vec<Delivery> = w.advance(at(C * 20)).into_iter().filter(|d| d.to == tap).collect();
-    let delivery = |bytes: &[u8], at| Delivery { to: tap, bytes: bytes.to_vec(), at };
+    let delivery = |bytes: &[u8], at| Delivery { to: tap, bytes: bytes.to_vec(), at, tx: at_9600() };
     assert_eq!(got, [delivery(&[1, 2], at(C * 2)), delivery(&[3], at(C * 11))]);
     let stats = w.stats();
     assert_eq!(stats.characters, 3, "nothing of the tap's went on the wire");
     let e = &stats.endpoints[tap];
     assert_eq!((e.tap, e.refused, e.characters), (true, 5, 0));
     assert!(!stats.endpoints[0].tap);
+}
+
+/// 19200 8E1: a character is 572 917 ns.
+fn at_19200() -> LineConfig {
+    LineConfig::new(19_200).unwrap()
+}
+
+/// A response to [`REQUEST`], 01 03 02 00 2A 39 9B.
+const RESPONSE: [u8; 7] = [0x01, 0x03, 0x02, 0x00, 0x2A, 0x39, 0x9B];
+
+#[test]
+fn two_endpoints_at_9600_on_a_19200_line_exchange_a_frame_cleanly_and_in_9600s_time() {
+    let mut w = wire(LineOptions::new(at_19200()));
+    let slow = Receiver { config: at_9600(), on_error: OnError::Drop };
+    w.send_at(0, at_9600(), &REQUEST, T0);
+    let end = at(C * 8);
+    assert_eq!(w.next_wake(), Some(end), "eight characters of 9600, not of 19200");
+    let to_b: Vec<Delivery> = w.advance(end).into_iter().filter(|d| d.to == 1).collect();
+    assert_eq!(to_b.len(), 1);
+    assert_eq!((to_b[0].at, to_b[0].tx), (end, at_9600()));
+    assert_eq!(to_b[0].heard_by(slow), REQUEST, "clean at the sender's settings");
+    // b answers after its own t3.5 (4 ms at 9600): a hears it clean, 7 characters of 9600 later.
+    let answer = end.saturating_add(Duration::from_millis(5));
+    w.send_at(1, at_9600(), &RESPONSE, answer);
+    let to_a: Vec<Delivery> = w.advance(answer.saturating_add(C * 7)).into_iter().filter(|d| d.to == 0).collect();
+    assert_eq!(to_a.len(), 1);
+    assert_eq!((to_a[0].heard_by(slow), to_a[0].at), (RESPONSE.to_vec(), answer.saturating_add(C * 7)));
+    let stats = w.stats();
+    assert_eq!((stats.collisions, stats.endpoints[0].gap_violations, stats.endpoints[1].gap_violations), (0, 0, 0));
+}
+
+#[test]
+fn an_endpoint_at_the_lines_19200_hears_garbage_from_endpoints_at_9600() {
+    let mut w = wire(LineOptions::new(at_19200()));
+    w.send_at(0, at_9600(), &REQUEST, T0);
+    let to_c: Vec<Delivery> = w.advance(at(C * 8)).into_iter().filter(|d| d.to == 2).collect();
+    assert_eq!(to_c.len(), 1);
+    let fast = to_c[0].heard_by(Receiver { config: at_19200(), on_error: OnError::Keep });
+    assert!(fast != REQUEST, "a 19200 receiver of a 9600 frame: {fast:02X?}");
+    // And so does the wire's own sniffer, at the line's settings: no frame.
+    assert_eq!(w.stats().frames, 0);
+    // A frame sent at the line's settings is heard clean and sniffed.
+    w.send(0, &REQUEST, at(Duration::from_millis(50)));
+    let to_c: Vec<Delivery> = w.advance(at(Duration::from_millis(100))).into_iter().filter(|d| d.to == 2).collect();
+    assert_eq!(to_c[0].heard_by(Receiver { config: at_19200(), on_error: OnError::Keep }), REQUEST);
+    assert_eq!(w.stats().frames, 1);
+}
+
+#[test]
+fn a_9600_run_and_a_19200_run_that_overlap_collide() {
+    // c's 19200 character starts three quarters into a's 9600 one: it would not overlap a
+    // character of the line's own 19200 (half of C), it does overlap one of 9600.
+    let mut w = wire(LineOptions::new(at_19200()));
+    w.send_at(0, at_9600(), &[0x55], T0);
+    w.send_at(2, at_19200(), &[0xAA], at(C * 3 / 4));
+    w.advance(at(Duration::from_millis(10)));
+    assert_eq!(w.stats().collisions, 2, "both characters garbled");
+    // The other way round: a 9600 character begun inside a 19200 one.
+    let mut w = wire(LineOptions::new(at_19200()));
+    w.send_at(2, at_19200(), &[0xAA], T0);
+    w.send_at(0, at_9600(), &[0x55], at(C / 4));
+    w.advance(at(Duration::from_millis(10)));
+    assert_eq!(w.stats().collisions, 2);
+    // Back to back, they don't: the 19200 character begins as the 9600 one ends.
+    let mut w = wire(LineOptions::new(at_19200()));
+    w.send_at(0, at_9600(), &[0x55], T0);
+    w.send_at(2, at_19200(), &[0xAA], at(C));
+    let got = w.advance(at(Duration::from_millis(10)));
+    assert_eq!(w.stats().collisions, 0);
+    let to_b: Vec<(Vec<u8>, LineConfig)> = got.into_iter().filter(|d| d.to == 1).map(|d| (d.bytes, d.tx)).collect();
+    assert_eq!(to_b, [(vec![0x55], at_9600()), (vec![0xAA], at_19200())], "one run per sender's settings");
 }

@@ -124,7 +124,7 @@ fn device(doc: &Value, unit: u64) -> &Value {
 #[test]
 fn a_scan_names_exactly_the_devices_on_the_line_with_settings_answers_and_identification() {
     let dir = tempfile_dir("devices");
-    let (_line, drops) = line("19200", 4, &dir.join("stats.json"));
+    let (_line, drops) = line("19200", 5, &dir.join("stats.json"));
     // Unit 1: a generic device (identifies itself); unit 2: a 3G3RX (no identification).
     let _a =
         sim(&drops[1], "19200", &["--profile", "generic", "--unit", "1", "--profile", "omron-3g3rx", "--unit", "2"]);
@@ -133,12 +133,16 @@ fn a_scan_names_exactly_the_devices_on_the_line_with_settings_answers_and_identi
     // Unit 5 answers every request with exception 04; unit 6's replies all have a broken CRC.
     let faults = ["--profile", "generic", "--unit", "5", "--unit", "6", "--fault", "5:exception=0x04", "--fault"];
     let _c = sim(&drops[3], "19200", &[&faults[..], &["6:corrupt=100%"]].concat());
+    // Unit 3 is at 9600 on the same 19200 line: the wire carries each sender's own settings.
+    let _d = sim(&drops[4], "9600", &["--profile", "generic", "--unit", "3"]);
     let args = ["--units", "1-8", "--bauds", "19200,9600", "--framings", "8E1", "--probe-timeout", "300ms", "--listen"];
     let (code, doc) = scan(&drops[0], &[&args[..], &["200ms"]].concat());
     assert_eq!(code, Some(0), "{doc:#}");
     assert_eq!(doc["complete"], true);
     let at = |unit: u64| (unit, "19200 8E1".to_string());
-    assert_eq!(devices(&doc), [at(1), at(2), at(4), at(5)], "{doc:#}");
+    let slow_unit = (3, "9600 8E1".to_string());
+    assert_eq!(devices(&doc), [at(1), at(2), at(4), at(5), slow_unit], "{doc:#}");
+    assert_eq!(device(&doc, 3)["identification"]["product_code"], "FB-GENERIC");
     let generic = device(&doc, 1);
     assert_eq!(generic["answer"]["kind"], "reply");
     assert_eq!(generic["identification"]["vendor"], "ferrobus");
@@ -169,16 +173,20 @@ fn a_scan_names_exactly_the_devices_on_the_line_with_settings_answers_and_identi
 }
 
 #[test]
-fn a_device_at_9600_is_found_in_the_9600_pass_and_not_at_19200() {
+fn on_one_line_a_device_at_9600_is_found_in_the_9600_pass_and_one_at_19200_in_the_19200_pass() {
     let dir = tempfile_dir("baud");
-    let (_line, drops) = line("9600", 2, &dir.join("stats.json"));
-    let _sim = sim(&drops[1], "9600", &["--profile", "generic", "--unit", "3"]);
+    let (_line, drops) = line("19200", 3, &dir.join("stats.json"));
+    let _slow = sim(&drops[1], "9600", &["--profile", "generic", "--unit", "3"]);
+    let _fast = sim(&drops[2], "19200", &["--profile", "generic", "--unit", "1"]);
     let (code, doc) =
         scan(&drops[0], &["--units", "1-4", "--bauds", "19200,9600", "--framings", "8E1", "--listen", "0"]);
     assert_eq!(code, Some(0), "{doc:#}");
     assert_eq!(doc["settings"], serde_json::json!(["19200 8E1", "9600 8E1"]));
-    assert_eq!(devices(&doc), [(3, "9600 8E1".to_string())], "{doc:#}");
+    // Each at its own setting only: at the other each hears garbage and stays silent.
+    assert_eq!(devices(&doc), [(1, "19200 8E1".to_string()), (3, "9600 8E1".to_string())], "{doc:#}");
+    assert_eq!(device(&doc, 1)["baud"], 19200);
     assert_eq!(device(&doc, 3)["baud"], 9600);
+    assert_eq!(doc["leads"], serde_json::json!([]), "{doc:#}");
 }
 
 #[test]

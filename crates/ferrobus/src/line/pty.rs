@@ -4,15 +4,17 @@
 
 use std::io;
 use std::path::PathBuf;
+use std::sync::Arc;
+use std::sync::atomic::{AtomicUsize, Ordering};
 
 use ferrobus_proto::frame::{DataBits, LineConfig, Parity};
 use tokio::io::{AsyncReadExt, AsyncWriteExt};
 use tokio::sync::mpsc;
 use tokio::time::Instant;
 
-use super::{Chunk, Cmd, Line};
+use super::{Chunk, Cmd, Inbox, Line};
 use crate::port::Pty;
-use crate::sys::PeerSettings;
+use crate::sys::{PeerSettings, PtyWriter};
 use crate::wire::{OnError, Receiver};
 
 /// A tap as a pty ([`Line::tap`]): a sniffer opens `path`; what the tap heard comes on
@@ -54,14 +56,30 @@ impl Line {
         Ok(Tap { path, heard })
     }
 
-    /// A pty endpoint; a tap when `record` is given, which gets what it heard.
+    /// A pty endpoint; a tap when `record` is given, which gets what it heard. A tap's pty is
+    /// written by the line's bus task itself, as soon as the wire delivers ([`TapSink`]);
+    /// another endpoint's by its own task.
     async fn pty_endpoint(&self, record: Option<mpsc::UnboundedSender<TapRun>>) -> io::Result<PathBuf> {
         let mut pty = Pty::open()?;
         let path = pty.path.clone();
-        let (inbox, mut rx) = mpsc::unbounded_channel::<Chunk>();
+        let wire = self.options.config;
+        let (to_pty, mut rx) = mpsc::unbounded_channel::<Out>();
+        let queued = Arc::new(AtomicUsize::new(0));
+        let inbox: Inbox = match &record {
+            Some(record) => {
+                let sink = TapSink {
+                    writer: pty.writer()?,
+                    wire,
+                    record: record.clone(),
+                    backlog: to_pty,
+                    queued: Arc::clone(&queued),
+                };
+                Box::new(move |chunk| sink.deliver(chunk))
+            }
+            None => super::channel(to_pty),
+        };
         let id = self.attach(path.display().to_string(), inbox, record.is_some()).await?;
         let cmds = self.cmds.clone();
-        let wire = self.options.config;
         tokio::spawn(async move {
             // The whole pty, so that its other end stays open while the task runs.
             let mut buf = [0u8; 512];
@@ -78,17 +96,18 @@ impl Line {
                         }
                         _ => return,
                     },
-                    chunk = rx.recv() => match chunk {
-                        Some((bytes, at)) => {
+                    out = rx.recv() => match out {
+                        Some(Out::Heard(Chunk { bytes, tx, .. })) => {
                             // At the settings the program has when it is handed the bytes.
-                            let heard = match pty.peer_settings() {
-                                Some(peer) => crate::wire::heard(wire, receiver(peer, wire), &bytes),
-                                None => bytes.clone(),
-                            };
+                            let heard = as_heard(pty.peer_settings(), wire, tx, bytes);
                             if pty.write_all(&heard).await.is_err() { return; }
+                        }
+                        Some(Out::Backlog { rest, run }) => {
+                            if pty.write_all(&rest).await.is_err() { return; }
                             if let Some(record) = &record {
-                                let _ = record.send(TapRun { bytes, end: at, written: Instant::now() });
+                                let _ = record.send(TapRun { written: Instant::now(), ..run });
                             }
+                            queued.fetch_sub(1, Ordering::AcqRel);
                         }
                         None => return,
                     },
@@ -97,6 +116,67 @@ impl Line {
         });
         Ok(path)
     }
+}
+
+/// What a pty endpoint's task is handed.
+enum Out {
+    /// Characters to write at the settings the program has then.
+    Heard(Chunk),
+    /// What a tap's pty did not take at once: the rest of what the program hears, to write
+    /// when there is room, and the run to record then.
+    Backlog { rest: Vec<u8>, run: TapRun },
+}
+
+impl From<Chunk> for Out {
+    fn from(chunk: Chunk) -> Out {
+        Out::Heard(chunk)
+    }
+}
+
+/// A tap's pty as the line's bus task writes it: at once, in the task that owns the wire,
+/// without waking another task first (the line's lateness is what a sniffer's timestamps are
+/// measured against). What the pty's buffer does not take (a sniffer that is not reading) goes
+/// to the pty's task, which waits for room; while any is queued there, what follows is queued
+/// behind it, so that the sniffer hears everything in order.
+struct TapSink {
+    writer: PtyWriter,
+    wire: LineConfig,
+    record: mpsc::UnboundedSender<TapRun>,
+    backlog: mpsc::UnboundedSender<Out>,
+    /// Backlog items the pty's task has not written yet.
+    queued: Arc<AtomicUsize>,
+}
+
+impl TapSink {
+    fn deliver(&self, chunk: Chunk) {
+        let heard = as_heard(self.writer.peer_settings(), self.wire, chunk.tx, chunk.bytes.clone());
+        let mut written = 0;
+        if self.queued.load(Ordering::Acquire) == 0 {
+            match self.writer.try_write(&heard) {
+                Ok(n) => written = n,
+                Err(e) if e.kind() == io::ErrorKind::WouldBlock => {}
+                // The pty is gone: so is the sniffer.
+                Err(_) => return,
+            }
+        }
+        let run = TapRun { bytes: chunk.bytes, end: chunk.at, written: Instant::now() };
+        if written >= heard.len() {
+            let _ = self.record.send(run);
+        } else {
+            self.queued.fetch_add(1, Ordering::AcqRel);
+            let rest = heard.get(written..).unwrap_or_default().to_vec();
+            if self.backlog.send(Out::Backlog { rest, run }).is_err() {
+                self.queued.fetch_sub(1, Ordering::AcqRel);
+            }
+        }
+    }
+}
+
+/// What a program at `peer` (the line's settings if they cannot be read) hears of `bytes`
+/// sent at `tx`.
+fn as_heard(peer: Option<PeerSettings>, wire: LineConfig, tx: LineConfig, bytes: Vec<u8>) -> Vec<u8> {
+    let rx = peer.map_or(Receiver { config: wire, on_error: OnError::Keep }, |peer| receiver(peer, wire));
+    if rx.config == tx { bytes } else { crate::wire::heard(tx, rx, &bytes) }
 }
 
 /// A pty endpoint's settings with what a pty cannot hold taken from the `wire`: no parity

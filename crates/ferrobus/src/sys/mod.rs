@@ -19,7 +19,7 @@ mod unix;
 #[cfg(target_os = "linux")]
 pub(crate) use unix::TimerFd;
 #[cfg(unix)]
-pub(crate) use unix::{PeerSettings, identify};
+pub(crate) use unix::{PeerSettings, PtyWriter, identify};
 #[cfg(unix)]
 pub use unix::{Pty, TtyPort, open_serial};
 

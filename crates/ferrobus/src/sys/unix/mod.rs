@@ -9,5 +9,5 @@ mod tty;
 pub(crate) use identity::identify;
 #[cfg(target_os = "linux")]
 pub(crate) use timerfd::TimerFd;
-pub(crate) use tty::PeerSettings;
+pub(crate) use tty::{PeerSettings, PtyWriter};
 pub use tty::{Pty, TtyPort, open_serial};

@@ -244,32 +244,61 @@ impl Pty {
     /// The other end's settings, read from our end (Linux and macOS give a pty master's
     /// `tcgetattr` the slave's termios). `None` if they cannot be read or the baud rate is 0.
     pub(crate) fn peer_settings(&self) -> Option<PeerSettings> {
-        use rustix::termios::{ControlModes, InputModes};
-        let termios = rustix::termios::tcgetattr(self.port.fd.get_ref()).ok()?;
-        let control = termios.control_modes;
-        let parity = if !control.contains(ControlModes::PARENB) {
-            Parity::None
-        } else if control.contains(ControlModes::PARODD) {
-            Parity::Odd
-        } else {
-            Parity::Even
-        };
-        let data_bits =
-            if (control & ControlModes::CSIZE) == ControlModes::CS8 { DataBits::Eight } else { DataBits::Seven };
-        let stop_bits = if control.contains(ControlModes::CSTOPB) { StopBits::Two } else { StopBits::One };
-        // The speed set last: termios2 leaves the input speed 0 for "as the output".
-        let line = LineConfig::new(termios.output_speed())?
-            .with_parity(parity)
-            .with_data_bits(data_bits)
-            .with_stop_bits(stop_bits);
-        let input = termios.input_modes;
-        Some(PeerSettings {
-            line,
-            ignore_errors: input.contains(InputModes::IGNPAR),
-            mark_errors: input.contains(InputModes::PARMRK),
-            check_parity: input.contains(InputModes::INPCK),
-        })
+        peer_settings(self.port.fd.get_ref())
     }
+
+    /// A second handle on our end, for another task to write to without waiting.
+    pub(crate) fn writer(&self) -> io::Result<PtyWriter> {
+        Ok(PtyWriter { fd: rustix::io::dup(self.port.fd.get_ref())? })
+    }
+}
+
+/// A second handle on a pty's our end ([`Pty::writer`]): it writes what the pty's buffer takes
+/// at once and never waits (the descriptor is non-blocking, as the pty's own).
+#[derive(Debug)]
+pub(crate) struct PtyWriter {
+    fd: rustix::fd::OwnedFd,
+}
+
+impl PtyWriter {
+    /// Writes as much of `data` as the pty's buffer takes now; `WouldBlock` if it takes none.
+    pub(crate) fn try_write(&self, data: &[u8]) -> io::Result<usize> {
+        retry_interrupted(|| rustix::io::write(&self.fd, data))
+    }
+
+    /// The other end's settings, as [`Pty::peer_settings`].
+    pub(crate) fn peer_settings(&self) -> Option<PeerSettings> {
+        peer_settings(&self.fd)
+    }
+}
+
+/// The settings of the other end of the pty whose our end is `fd`.
+fn peer_settings(fd: impl rustix::fd::AsFd) -> Option<PeerSettings> {
+    use rustix::termios::{ControlModes, InputModes};
+    let termios = rustix::termios::tcgetattr(fd).ok()?;
+    let control = termios.control_modes;
+    let parity = if !control.contains(ControlModes::PARENB) {
+        Parity::None
+    } else if control.contains(ControlModes::PARODD) {
+        Parity::Odd
+    } else {
+        Parity::Even
+    };
+    let data_bits =
+        if (control & ControlModes::CSIZE) == ControlModes::CS8 { DataBits::Eight } else { DataBits::Seven };
+    let stop_bits = if control.contains(ControlModes::CSTOPB) { StopBits::Two } else { StopBits::One };
+    // The speed set last: termios2 leaves the input speed 0 for "as the output".
+    let line = LineConfig::new(termios.output_speed())?
+        .with_parity(parity)
+        .with_data_bits(data_bits)
+        .with_stop_bits(stop_bits);
+    let input = termios.input_modes;
+    Some(PeerSettings {
+        line,
+        ignore_errors: input.contains(InputModes::IGNPAR),
+        mark_errors: input.contains(InputModes::PARMRK),
+        check_parity: input.contains(InputModes::INPCK),
+    })
 }
 
 impl AsyncRead for Pty {
