@@ -451,3 +451,42 @@ fn a_pane_of_points_far_apart_is_filled_by_the_planners_reads_never_across_an_un
     let last = pane.cells.last().unwrap();
     assert!(last.point.address >= pane.reads[1].0 && last.show(&pane).is_none(), "shown before its read");
 }
+
+#[test]
+fn a_session_file_keeps_the_trends_and_each_cells_own_order_and_poll_reads_it() {
+    let mut raw = Definition::raw(2, Table::Holding, 0x20, 4, Duration::from_millis(500));
+    raw.cells[0].set_format(Format::F32(Order::Cdab));
+    raw.cells[2].set_format(Format::U32(Order::Dcba));
+    raw.cells[2].trended = true;
+    let profile = Profile::builtin("omron-3g3rx").unwrap();
+    let mut panes = vec![raw];
+    panes.extend(spec::parse("d001", 1, Some(&profile)).unwrap());
+    panes.extend(spec::parse("A003", 1, Some(&profile)).unwrap());
+    panes[1].cells[0].trended = true;
+    let session = spec::session_of(Some("omron-3g3rx"), &panes);
+    let text = session.to_toml();
+    assert!(text.contains("order = \"CDAB\"") && text.contains("order = \"DCBA\""), "{text}");
+    assert!(text.contains("trend = true") && text.contains("trends = [\"d001\"]"), "{text}");
+    let loaded = ferrobus::poll::session::Session::parse(&text, "s.toml").unwrap();
+    assert_eq!(loaded, session);
+    let fresh = spec::panes_of(&loaded, "s.toml").unwrap();
+    assert_eq!(fresh[0].cells[0].format, Format::F32(Order::Cdab));
+    assert_eq!(fresh[0].cells[2].format, Format::U32(Order::Dcba), "the cell's own order, not the read's");
+    let trended: Vec<(usize, u16)> = fresh
+        .iter()
+        .enumerate()
+        .flat_map(|(i, p)| p.cells.iter().filter(|c| c.trended).map(move |c| (i, c.point.address)))
+        .collect();
+    assert_eq!(trended, [(0, 0x22), (1, 0x1000)]);
+    assert_eq!(App::new("t".into(), fresh).trends.len(), 2, "the monitor charts them again");
+    // poll reads the same file: each cell in its own order, the trends ignored.
+    let groups = loaded.groups("s.toml", |name| Profile::load(name).map_err(|e| e.to_string())).unwrap();
+    let orders: Vec<Order> = groups[0].cells.iter().map(|c| c.point.order).collect();
+    assert_eq!(orders, [Order::Cdab, Order::Dcba]);
+    assert_eq!(groups.len(), 3);
+    // A trend of a point not watched is refused, naming it.
+    let bad = text.replace("trends = [\"d001\"]", "trends = [\"F002\"]");
+    let bad = ferrobus::poll::session::Session::parse(&bad, "s.toml").unwrap();
+    let err = format!("{:?}", spec::panes_of(&bad, "s.toml").err().unwrap());
+    assert!(err.contains("points 1") && err.contains("\\\"F002\\\" is not one of the points watched"), "{err}");
+}

@@ -197,3 +197,35 @@ fn monitor_refuses_a_pipe_and_a_bad_definition_with_the_reason_before_opening_th
     let out = run(&[]);
     assert!(String::from_utf8_lossy(&out.stderr).contains("give what to watch"), "{out:?}");
 }
+
+#[test]
+fn monitor_in_tmux_restores_the_terminal_on_a_panic_and_prints_the_panic_message() {
+    if !have_tmux() {
+        return;
+    }
+    let (_sim, addr) = start_sim();
+    let tmux = Tmux { socket: format!("ferrobus-monitor-panic-{}", std::process::id()) };
+    let started = tmux.cmd(&["new-session", "-d", "-s", "m", "-x", "80", "-y", "24", "env", "PS1=prompt$ ", "sh"]);
+    assert!(started.status.success(), "tmux new-session: {}", String::from_utf8_lossy(&started.stderr));
+    tmux.wait_for("the shell's prompt", |s| s.contains("prompt$"));
+    // The trigger is in debug builds only (the test binary's ferrobus is one): `!` panics.
+    let command = format!(
+        "RUST_BACKTRACE=0 FERROBUS_MONITOR_TEST_PANIC=1 {} --tcp {addr} monitor holding:0:4@100ms",
+        env!("CARGO_BIN_EXE_ferrobus")
+    );
+    tmux.keys(&[&command, "Enter"]);
+    tmux.wait_for("the monitor", |s| s.contains("unit 1 holding 0x0000 ×4") && s.contains("q quit"));
+    assert_eq!(tmux.alternate_screen(), "1", "the monitor draws on the alternate screen");
+    tmux.keys(&["!"]);
+    let screen =
+        tmux.wait_for("the prompt after the panic", |s| s.lines().filter(|l| l.starts_with("prompt$")).count() >= 2);
+    assert!(
+        screen.contains("FERROBUS_MONITOR_TEST_PANIC is set: the monitor panics as the test asked"),
+        "the panic's message is not on the screen (stderr):\n{screen}"
+    );
+    assert!(!screen.contains("q quit"), "the monitor's screen is left behind:\n{screen}");
+    assert_eq!(tmux.alternate_screen(), "0", "the panic left the alternate screen on");
+    // Cooked mode again: the shell echoes what is typed and runs it.
+    tmux.keys(&["echo restored-$((40+2))", "Enter"]);
+    tmux.wait_for("the shell running a command", |s| s.contains("restored-42"));
+}
