@@ -312,6 +312,7 @@ async fn event_loop(
 /// Debug builds only (never in a release): with `FERROBUS_MONITOR_TEST_PANIC` set, the `!`
 /// key panics, so a test can see the panic hook restore the terminal.
 #[cfg(debug_assertions)]
+#[allow(clippy::manual_assert)] // a panic on purpose, not an assertion
 fn test_panic(key: event::KeyEvent) {
     if key.code == event::KeyCode::Char('!') && std::env::var_os("FERROBUS_MONITOR_TEST_PANIC").is_some() {
         panic!("FERROBUS_MONITOR_TEST_PANIC is set: the monitor panics as the test asked");
