@@ -276,6 +276,40 @@ every = "500ms"
 }
 
 #[test]
+fn a_cells_own_order_is_polled_in_that_order_and_the_monitors_trends_are_ignored() {
+    let text = r#"
+[[read]]
+unit = 1
+table = "holding"
+address = 0
+count = 4
+format = "u32"
+order = "CDAB"
+[[read.cell]]
+address = 2
+order = "DCBA"
+trend = true
+
+[[points]]
+unit = 1
+device = "omron-3g3rx"
+names = ["d001"]
+trends = ["d001"]
+"#;
+    let session = Session::parse(text, "s.toml").unwrap();
+    assert_eq!(Session::parse(&session.to_toml(), "again").unwrap(), session, "the new keys round-trip");
+    let groups =
+        session.groups("s.toml", |name| ferrobus_profile::Profile::load(name).map_err(|e| e.to_string())).unwrap();
+    assert_eq!(groups.len(), 2);
+    // 0x00010002 in CDAB is 0002 0001; in DCBA it is 0200 0100.
+    let values = groups[0].decode(&[0x0002, 0x0001, 0x0200, 0x0100]);
+    assert_eq!(values, [Ok(Value::Int(0x0001_0002)), Ok(Value::Int(0x0001_0002))]);
+    let s = Session::parse(&text.replace("order = \"DCBA\"", "order = \"DXBA\""), "s").unwrap();
+    let e = s.groups("s", |_| unreachable!()).unwrap_err();
+    assert_eq!(e.to_string(), "s: read 1: order \"DXBA\": give ABCD, CDAB, BADC or DCBA");
+}
+
+#[test]
 fn a_broken_session_names_the_file_the_line_and_the_definition() {
     let e = Session::parse("[[read]]\nunit = 3\ntable = \"holding\"\naddres = 1\n", "s.toml").unwrap_err();
     assert!(e.to_string().starts_with("s.toml, line 4:"), "{e}");

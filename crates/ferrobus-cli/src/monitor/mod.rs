@@ -122,14 +122,19 @@ pub(crate) async fn run(connection: &ConnectArgs, args: &MonitorArgs) -> Result<
     if !std::io::IsTerminal::is_terminal(&std::io::stdout()) {
         return Err(CliError::Usage("monitor needs a terminal: for a log, use `ferrobus read` in a loop".into()));
     }
-    let groups = panes
-        .iter()
-        .map(|p| {
-            let name = view::title(p);
-            Group::raw(name.trim(), p.unit, p.table, p.address, p.count, p.every, &Layout::default())
-                .map_err(|e| CliError::Usage(e.to_string()))
-        })
-        .collect::<Result<Vec<Group>, CliError>>()?;
+    // One poller group per read request of each pane (a pane of profile points may take
+    // several: the planner's); `reads` maps a group back to its pane and range.
+    let mut groups = Vec::new();
+    let mut reads = Vec::new();
+    for (index, p) in panes.iter().enumerate() {
+        for &(start, count) in &p.reads {
+            let name = format!("unit {} {} {start:#06x} ×{count}", p.unit, p.table_name());
+            let group = Group::raw(&name, p.unit, p.table, start, count, p.every, &Layout::default())
+                .map_err(|e| CliError::Usage(e.to_string()))?;
+            groups.push(group);
+            reads.push(Read { pane: index, start, count });
+        }
+    }
     let session_client = connection.open().await?;
     let target = session_client.target.to_string();
     // The wire time of a cycle can be predicted on an RTU serial line only (as `poll` does).
@@ -139,9 +144,17 @@ pub(crate) async fn run(connection: &ConnectArgs, args: &MonitorArgs) -> Result<
     let mut app = App::new(target, panes);
     let saving = SaveTo { path: args.session.clone(), device: connection.device.clone() };
     let mut screen = Screen::enter().map_err(|e| io_error("setting up the terminal", e))?;
-    let result = event_loop(&mut screen.terminal, &mut app, &session_client.client, poller, &saving).await;
+    let result = event_loop(&mut screen.terminal, &mut app, &session_client.client, poller, &reads, &saving).await;
     drop(screen);
     result
+}
+
+/// The read request of one poller group: its pane and range.
+#[derive(Clone, Copy, Debug)]
+struct Read {
+    pane: usize,
+    start: u16,
+    count: u16,
 }
 
 /// Where `s` saves.
@@ -236,6 +249,7 @@ async fn event_loop(
     app: &mut App,
     client: &Client,
     mut poller: Poller,
+    reads: &[Read],
     saving: &SaveTo,
 ) -> Result<(), CliError> {
     let start = Instant::now();
@@ -251,6 +265,8 @@ async fn event_loop(
         tokio::select! {
             key = keys.recv() => match key {
                 Some(Ok(Event::Key(key))) => {
+                    #[cfg(debug_assertions)]
+                    test_panic(key);
                     let was_paused = app.paused;
                     let action = keys::handle(app, key);
                     match (was_paused, app.paused) {
@@ -277,7 +293,11 @@ async fn event_loop(
                 None => return Ok(()),
             },
             event = poller.next() => match event {
-                Some(PollEvent::Sample(sample)) => take(app, start, &sample),
+                Some(PollEvent::Sample(sample)) => {
+                    if let Some(read) = reads.get(sample.group) {
+                        take(app, start, *read, &sample);
+                    }
+                }
                 Some(PollEvent::Overload(overload)) => app.message = Some(overload.detail),
                 None => return Ok(()),
             },
@@ -289,27 +309,37 @@ async fn event_loop(
     }
 }
 
+/// Debug builds only (never in a release): with `FERROBUS_MONITOR_TEST_PANIC` set, the `!`
+/// key panics, so a test can see the panic hook restore the terminal.
+#[cfg(debug_assertions)]
+#[allow(clippy::manual_assert)] // a panic on purpose, not an assertion
+fn test_panic(key: event::KeyEvent) {
+    if key.code == event::KeyCode::Char('!') && std::env::var_os("FERROBUS_MONITOR_TEST_PANIC").is_some() {
+        panic!("FERROBUS_MONITOR_TEST_PANIC is set: the monitor panics as the test asked");
+    }
+}
+
 /// A poll's sample into its pane, the traffic pane and the trends.
-fn take(app: &mut App, start: Instant, sample: &Sample) {
-    let Some(pane) = app.panes.get_mut(sample.group) else { return };
+fn take(app: &mut App, start: Instant, read: Read, sample: &Sample) {
+    let Some(pane) = app.panes.get_mut(read.pane) else { return };
     let unit = pane.unit;
     let pdu = |bytes: &[u8]| bytes.get(1..).unwrap_or_default().to_vec();
     let request = pdu(&sample.traffic.tx);
     let at = sample.started.min(start.elapsed());
-    let decode = format!("read {} {:#06x} ×{}", pane.table_name(), pane.address, pane.count);
+    let decode = format!("read {} {:#06x} ×{}", pane.table_name(), read.start, read.count);
     let outcome = match (&sample.result, &sample.traffic.rx) {
-        (Ok(_), Some(rx)) => read_reply(pane, &pdu(rx)),
+        (Ok(_), Some(rx)) => read_reply(pane.is_bits(), read.count, &pdu(rx)),
         (Ok(_), None) => Outcome::Other("no reply".into()),
         (Err(failure), _) => outcome_of(failure),
     };
     let reply = sample.traffic.rx.as_deref().map(pdu).unwrap_or_default();
     let direction = if reply.is_empty() { "--" } else { "Rx" };
     let answer = describe(&outcome);
-    pane.record(outcome, sample.response_time);
+    pane.record_at(read.start, outcome, sample.response_time);
     app.traffic.push(TrafficLine { at, direction: "Tx", unit, bytes: request, decode });
     let ended = at.saturating_add(sample.response_time);
     app.traffic.push(TrafficLine { at: ended, direction, unit, bytes: reply, decode: answer });
-    app.sample(sample.group, ended);
+    app.sample(read.pane, ended);
 }
 
 fn save(app: &mut App, saving: &SaveTo) {
@@ -324,17 +354,18 @@ fn save(app: &mut App, saving: &SaveTo) {
     });
 }
 
-/// Decodes a read reply (function code first) for `pane`: registers, bits, or what is wrong.
-fn read_reply(pane: &Definition, reply: &[u8]) -> Outcome {
-    let count = usize::from(pane.count);
+/// Decodes a read reply (function code first) of `count` bits or registers: them, or what is
+/// wrong.
+fn read_reply(bits: bool, count: u16, reply: &[u8]) -> Outcome {
+    let count = usize::from(count);
     let Some((&byte_count, data)) = reply.get(1..).and_then(<[u8]>::split_first) else {
         return Outcome::Other(format!("a reply of {} bytes is too short", reply.len()));
     };
-    let want = if pane.is_bits() { count.div_ceil(8) } else { count * 2 };
+    let want = if bits { count.div_ceil(8) } else { count * 2 };
     if usize::from(byte_count) != want || data.len() != want {
         return Outcome::Other(format!("the reply holds {} bytes of data, not {want}", data.len()));
     }
-    if pane.is_bits() {
+    if bits {
         Outcome::Bits((0..count).map(|i| data.get(i / 8).is_some_and(|b| b & (1 << (i % 8)) != 0)).collect())
     } else {
         Outcome::Registers(data.chunks_exact(2).map(|w| u16::from_be_bytes([w[0], w[1]])).collect())

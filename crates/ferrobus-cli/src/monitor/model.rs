@@ -218,10 +218,13 @@ impl Cell {
     /// The raw value from the pane's data.
     pub(crate) fn raw(&self, pane: &Definition) -> Option<Value> {
         let start = self.offset(pane)?;
+        let end = start.checked_add(usize::from(self.point.width))?;
+        if !pane.seen.get(start..end)?.iter().all(|s| *s) {
+            return None;
+        }
         if self.point.value_type == ValueType::Bit {
             return pane.bits.get(start).map(|b| Value::Bool(*b));
         }
-        let end = start.checked_add(usize::from(self.point.width))?;
         let words = pane.registers.get(start..end)?;
         self.point.decode(words).ok()
     }
@@ -297,8 +300,11 @@ pub(crate) struct Definition {
     pub(crate) table: Table,
     /// The first address read.
     pub(crate) address: u16,
-    /// Registers or bits read.
+    /// Registers or bits the pane covers.
     pub(crate) count: u16,
+    /// The read requests that fill it, (first address, count) each: the range itself for a
+    /// raw pane, the planner's reads for profile points.
+    pub(crate) reads: Vec<(u16, u16)>,
     /// How often.
     pub(crate) every: Duration,
     /// The cells shown.
@@ -307,6 +313,8 @@ pub(crate) struct Definition {
     pub(crate) registers: Vec<u16>,
     /// The last bits read (coils, discrete).
     pub(crate) bits: Vec<bool>,
+    /// Which of the pane's items a good reply has filled.
+    pub(crate) seen: Vec<bool>,
     /// The counters.
     pub(crate) counters: Counters,
     /// The last response time.
@@ -344,10 +352,12 @@ impl Definition {
             table,
             address,
             count,
+            reads: vec![(address, count)],
             every,
             cells,
             registers: Vec::new(),
             bits: Vec::new(),
+            seen: Vec::new(),
             counters: Counters::default(),
             last_response: None,
             last_error: None,
@@ -369,19 +379,43 @@ impl Definition {
         }
     }
 
-    /// Counts a poll's outcome and keeps its data.
+    /// Counts a poll's outcome of the read over the whole pane and keeps its data.
+    #[cfg(test)]
     pub(crate) fn record(&mut self, outcome: Outcome, response: Duration) {
+        self.record_at(self.address, outcome, response);
+    }
+
+    /// Counts a poll's outcome of the read from `start` and keeps its data in its place.
+    pub(crate) fn record_at(&mut self, start: u16, outcome: Outcome, response: Duration) {
+        let from = usize::from(start.saturating_sub(self.address));
+        let size = usize::from(self.count);
         let c = &mut self.counters;
         c.tx = c.tx.saturating_add(1);
         match outcome {
             Outcome::Registers(r) => {
                 c.ok = c.ok.saturating_add(1);
-                self.registers = r;
+                self.registers.resize(size, 0);
+                self.seen.resize(size, false);
+                for (i, word) in r.into_iter().enumerate() {
+                    let at = from.saturating_add(i);
+                    if let (Some(slot), Some(seen)) = (self.registers.get_mut(at), self.seen.get_mut(at)) {
+                        *slot = word;
+                        *seen = true;
+                    }
+                }
                 self.last_response = Some(response);
             }
             Outcome::Bits(b) => {
                 c.ok = c.ok.saturating_add(1);
-                self.bits = b;
+                self.bits.resize(size, false);
+                self.seen.resize(size, false);
+                for (i, bit) in b.into_iter().enumerate() {
+                    let at = from.saturating_add(i);
+                    if let (Some(slot), Some(seen)) = (self.bits.get_mut(at), self.seen.get_mut(at)) {
+                        *slot = bit;
+                        *seen = true;
+                    }
+                }
                 self.last_response = Some(response);
             }
             Outcome::Timeout(e) => {

@@ -4,7 +4,8 @@
 
 use std::time::Duration;
 
-use ferrobus::poll::session::{CellDef, PointsDef, ReadDef, Session, period, table_from_name};
+use ferrobus::poll::Group;
+use ferrobus::poll::session::{CellDef, PointsDef, ReadDef, Session, order_of, period, table_from_name};
 use ferrobus_profile::Order;
 use ferrobus_profile::{Point, Profile, Table};
 
@@ -13,9 +14,6 @@ use crate::exit::CliError;
 
 /// The rate of a definition that gives none.
 pub(crate) const DEFAULT_EVERY: Duration = Duration::from_secs(1);
-
-/// The most registers one read definition of a profile's points may span (FC03/FC04's 125).
-const MAX_SPAN: u32 = 125;
 
 fn number(text: &str, what: &str, spec: &str) -> Result<u32, CliError> {
     let t = text.trim();
@@ -99,55 +97,53 @@ pub(crate) fn parse(spec: &str, default_unit: u8, profile: Option<&Profile>) -> 
             profile.device.name
         )));
     }
-    points_to_panes(spec, unit, every, &points)
+    points_to_panes(spec, profile, unit, every, &points)
 }
 
-/// The points as panes: by table, in address order, a new pane where the span would pass 125.
-fn points_to_panes(spec: &str, unit: u8, every: Duration, points: &[&Point]) -> Result<Vec<Definition>, CliError> {
-    let mut panes: Vec<Definition> = Vec::new();
+/// The points as panes: one per table, filled by the profile planner's reads
+/// ([`Group::points`]: the fewest within the device's limits, never across an unmapped hole
+/// outside a span, never splitting a value), the points as cells.
+fn points_to_panes(
+    spec: &str,
+    profile: &Profile,
+    unit: u8,
+    every: Duration,
+    points: &[&Point],
+) -> Result<Vec<Definition>, CliError> {
+    let codes: Vec<String> = points.iter().map(|p| p.code.clone()).collect();
+    let groups =
+        Group::points(profile, unit, &codes, &[], every).map_err(|e| CliError::Usage(format!("'{spec}': {e}")))?;
+    let mut panes = Vec::new();
     for table in [Table::Holding, Table::Input, Table::Coils, Table::DiscreteInputs] {
-        let mut these: Vec<&Point> = points.iter().copied().filter(|p| p.table == table).collect();
-        these.sort_by_key(|p| p.address);
-        let limit = if matches!(table, Table::Coils | Table::DiscreteInputs) { 2000 } else { MAX_SPAN };
-        let mut group: Vec<&Point> = Vec::new();
-        for point in these {
-            if point.end() - u32::from(point.address) > limit {
-                return Err(CliError::Usage(format!("'{spec}': {} is wider than one read", point.code)));
-            }
-            let start = group.first().map_or(u32::from(point.address), |p| u32::from(p.address));
-            if point.end() - start > limit {
-                panes.push(pane_of(unit, table, every, &group));
-                group.clear();
-            }
-            group.push(point);
-        }
-        if !group.is_empty() {
-            panes.push(pane_of(unit, table, every, &group));
-        }
+        let these: Vec<&Group> = groups.iter().filter(|g| g.table == table).collect();
+        let (Some(first), Some(end)) =
+            (these.iter().map(|g| g.start).min(), these.iter().map(|g| u32::from(g.start) + u32::from(g.count)).max())
+        else {
+            continue;
+        };
+        let cells = these
+            .iter()
+            .flat_map(|g| &g.cells)
+            .map(|c| Cell {
+                point: c.point.clone(),
+                format: Format::Named,
+                alias: if c.point.label.is_empty() { c.point.code.clone() } else { c.point.label.clone() },
+                trended: false,
+            })
+            .collect();
+        let count = u16::try_from(end - u32::from(first)).unwrap_or(u16::MAX);
+        let mut pane = Definition::with_cells(unit, table, first, count, every, cells);
+        pane.reads = these.iter().map(|g| (g.start, g.count)).collect();
+        panes.push(pane);
     }
     Ok(panes)
 }
 
-fn pane_of(unit: u8, table: Table, every: Duration, points: &[&Point]) -> Definition {
-    let start = points.first().map_or(0, |p| p.address);
-    let end = points.iter().map(|p| p.end()).max().unwrap_or(u32::from(start));
-    let count = u16::try_from(end - u32::from(start)).unwrap_or(u16::MAX);
-    let cells = points
-        .iter()
-        .map(|p| Cell {
-            point: (*p).clone(),
-            format: Format::Named,
-            alias: if p.label.is_empty() { p.code.clone() } else { p.label.clone() },
-            trended: false,
-        })
-        .collect();
-    Definition::with_cells(unit, table, start, count, every, cells)
-}
-
 /// The session file of the panes: the one `ferrobus poll --session` takes
-/// ([`ferrobus::poll::Session`]). Raw panes are `[[read]]`s with their cells' formats and
-/// aliases; panes of profile points are `[[points]]` of `device`. The file has one word/byte
-/// order per read: the first multi-register cell's is saved.
+/// ([`ferrobus::poll::Session`]). Raw panes are `[[read]]`s with their cells' formats, orders,
+/// aliases and trends (the read's order is its first multi-register cell's; a cell in another
+/// order names its own); panes of profile points are `[[points]]` of `device` with the codes
+/// of the trended points.
 pub(crate) fn session_of(device: Option<&str>, panes: &[Definition]) -> Session {
     let mut session = Session::default();
     for pane in panes {
@@ -159,18 +155,22 @@ pub(crate) fn session_of(device: Option<&str>, panes: &[Definition]) -> Session 
                 names: pane.cells.iter().map(|c| c.point.code.clone()).collect(),
                 groups: Vec::new(),
                 every,
+                trends: pane.cells.iter().filter(|c| c.trended).map(|c| c.point.code.clone()).collect(),
             });
             continue;
         }
-        let order = pane.cells.iter().find_map(|c| c.format.order()).filter(|o| *o != Order::Abcd);
+        let read_order = pane.cells.iter().find_map(|c| c.format.order()).unwrap_or_default();
+        let own_order = |c: &Cell| c.format.order().filter(|o| *o != read_order);
         let cells = pane
             .cells
             .iter()
-            .filter(|c| c.format != Format::U16 || !c.alias.is_empty())
+            .filter(|c| c.format != Format::U16 || !c.alias.is_empty() || c.trended)
             .map(|c| CellDef {
                 address: c.point.address,
                 alias: (!c.alias.is_empty()).then(|| c.alias.clone()),
                 format: (c.format != Format::U16 && !pane.is_bits()).then(|| poll_format(c.format).to_string()),
+                order: own_order(c).map(|o| o.name().to_string()),
+                trend: c.trended,
             })
             .collect();
         session.reads.push(ReadDef {
@@ -180,7 +180,7 @@ pub(crate) fn session_of(device: Option<&str>, panes: &[Definition]) -> Session 
             address: pane.address,
             count: pane.count,
             format: None,
-            order: order.map(|o| o.name().to_string()),
+            order: (read_order != Order::Abcd).then(|| read_order.name().to_string()),
             every,
             cells,
         });
@@ -210,12 +210,7 @@ pub(crate) fn panes_of(session: &Session, origin: &str) -> Result<Vec<Definition
         let what = || format!("read {}", i + 1);
         table_from_name(&read.table).map_err(|e| bad(what(), e))?;
         let every = period(read.every.as_deref()).map_err(|e| bad(what(), e))?;
-        let order = match read.order.as_deref() {
-            None => Order::Abcd,
-            Some(o) => {
-                Order::from_name(o).ok_or_else(|| bad(what(), format!("order {o:?}: give ABCD, CDAB, BADC or DCBA")))?
-            }
-        };
+        let order = order_of(read.order.as_deref()).map_err(|e| bad(what(), e))?.unwrap_or_default();
         let spec = format!("{}:{}:{}:{}", read.unit, read.table, read.address, read.count);
         let mut pane = parse(&spec, read.unit, None).map_err(|e| bad(what(), format!("{e:?}")))?.remove(0);
         pane.every = every;
@@ -233,9 +228,13 @@ pub(crate) fn panes_of(session: &Session, origin: &str) -> Result<Vec<Definition
             if let Some(format) = &def.format {
                 cell.set_format(format_of(format)?);
             }
+            if let Some(own) = order_of(def.order.as_deref()).map_err(|e| bad(what(), e))? {
+                cell.set_format(cell.format.with_order(own));
+            }
             if let Some(alias) = &def.alias {
                 cell.alias.clone_from(alias);
             }
+            cell.trended = def.trend;
         }
         panes.push(pane);
     }
@@ -256,7 +255,16 @@ pub(crate) fn panes_of(session: &Session, origin: &str) -> Result<Vec<Definition
         if points.is_empty() {
             return Err(bad(what(), "no readable point of the profile has those names or groups".into()));
         }
-        panes.extend(points_to_panes(&what(), def.unit, every, &points)?);
+        let mut these = points_to_panes(&what(), &profile, def.unit, every, &points)?;
+        for cell in these.iter_mut().flat_map(|p| p.cells.iter_mut()) {
+            cell.trended = def.trends.iter().any(|t| t.eq_ignore_ascii_case(&cell.point.code));
+        }
+        let shown =
+            |code: &String| these.iter().flat_map(|p| &p.cells).any(|c| c.point.code.eq_ignore_ascii_case(code));
+        if let Some(code) = def.trends.iter().find(|t| !shown(t)) {
+            return Err(bad(what(), format!("trend {code:?} is not one of the points watched")));
+        }
+        panes.extend(these);
     }
     Ok(panes)
 }

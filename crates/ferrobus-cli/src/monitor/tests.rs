@@ -138,12 +138,12 @@ fn the_four_orders_decode_the_same_float_from_their_own_layouts() {
         (Order::Dcba, [0x0000, 0xC03F]),
     ] {
         let mut pane = Definition::raw(1, Table::Holding, 0, 2, Duration::from_secs(1));
-        pane.registers = words.to_vec();
+        pane.record(Outcome::Registers(words.to_vec()), Duration::ZERO);
         pane.cells[0].set_format(Format::F32(order));
         assert_eq!(pane.cells[0].show(&pane).as_deref(), Some("1.5"), "{order:?}");
     }
     let mut pane = Definition::raw(1, Table::Holding, 0, 4, Duration::from_secs(1));
-    pane.registers = vec![0x0000, 0x0000, 0x0000, 0xF83F]; // 1.5f64 in DCBA
+    pane.record(Outcome::Registers(vec![0x0000, 0x0000, 0x0000, 0xF83F]), Duration::ZERO); // 1.5f64 in DCBA
     pane.cells[0].set_format(Format::F64(Order::Dcba));
     assert_eq!(pane.cells[0].show(&pane).as_deref(), Some("1.5"));
 }
@@ -201,7 +201,7 @@ fn a_write_out_of_the_points_range_is_refused_before_anything_is_sent() {
     let point = profile.points().iter().find(|p| p.writable() && p.max.is_some()).unwrap().clone();
     let too_big = point.max.unwrap() + 1.0;
     let mut pane = spec::parse(&point.code, 1, Some(&profile)).unwrap().remove(0);
-    pane.registers = vec![0; usize::from(pane.count)];
+    pane.record(Outcome::Registers(vec![0; usize::from(pane.count)]), Duration::ZERO);
     let mut app = App::new("t".into(), vec![pane]);
     key(&mut app, KeyCode::Char('e'));
     // A raw value past max, in the point's engineering units.
@@ -352,10 +352,11 @@ fn a_pollers_samples_fill_the_pane_its_counters_by_kind_and_the_traffic() {
         traffic: Traffic { tx: vec![4, 0x03, 0x00, 0x10, 0x00, 0x02], rx },
     };
     let start = std::time::Instant::now();
-    super::take(&mut app, start, &sample(Ok(Vec::new()), Some(vec![4, 0x03, 0x04, 0x12, 0x34, 0xAB, 0xCD])));
+    let read = super::Read { pane: 0, start: 0x10, count: 2 };
+    super::take(&mut app, start, read, &sample(Ok(Vec::new()), Some(vec![4, 0x03, 0x04, 0x12, 0x34, 0xAB, 0xCD])));
     let failure = |kind| Failure { kind, exception: None, diagnosis: format!("{kind:?} seen") };
     for kind in [FailureKind::Timeout, FailureKind::Crc, FailureKind::Crc, FailureKind::Exception, FailureKind::Port] {
-        super::take(&mut app, start, &sample(Err(failure(kind)), None));
+        super::take(&mut app, start, read, &sample(Err(failure(kind)), None));
     }
     let pane = &app.panes[0];
     assert_eq!(pane.registers, [0x1234, 0xABCD]);
@@ -402,4 +403,90 @@ fn left_and_right_move_a_cell_up_and_down_a_row_of_the_grid_as_drawn() {
     }
     assert_eq!(app.cell, 9, "the last cell, not past it");
     assert!(render(&app, 80, 24).contains("rows 4-5 of 5 (↑↓ scroll)"), "the grid scrolled to the selection");
+}
+
+#[test]
+fn a_pane_of_points_far_apart_is_filled_by_the_planners_reads_never_across_an_unmapped_hole() {
+    use ferrobus_profile::{Extent, plan};
+    let profile = Profile::builtin("omron-3g3rx").unwrap();
+    // d001 (0x1000, 2 registers), F002 and A003 are far apart; the 3G3RX maps no spans and
+    // reads at most 4 registers a request.
+    let mut panes = Vec::new();
+    for spec in ["d001", "F002", "A003"] {
+        panes.extend(spec::parse(spec, 1, Some(&profile)).unwrap());
+    }
+    let wanted = |codes: &[&str]| {
+        let mut extents: Vec<Extent> =
+            codes.iter().map(|c| profile.find(c)[0]).map(|p| Extent { start: p.address, width: p.width }).collect();
+        extents.sort_by_key(|e| e.start);
+        plan(&extents, &profile.mapped(Table::Holding), &profile.spans(Table::Holding), 4)
+            .unwrap()
+            .iter()
+            .map(|r| (r.start, r.count))
+            .collect::<Vec<_>>()
+    };
+    for (pane, code) in panes.iter().zip(["d001", "F002", "A003"]) {
+        assert_eq!(pane.reads, wanted(&[code]), "{code}'s pane reads what the planner plans");
+        assert_eq!(pane.cells.len(), 1);
+    }
+    // One definition of several points: one pane, its reads the planner's, each within the
+    // limit and over mapped registers only.
+    let mut pane = spec::parse("d00*", 1, Some(&profile)).unwrap().remove(0);
+    let codes: Vec<String> = pane.cells.iter().map(|c| c.point.code.clone()).collect();
+    let codes: Vec<&str> = codes.iter().map(String::as_str).collect();
+    assert_eq!(pane.reads, wanted(&codes));
+    assert!(pane.reads.len() > 1, "d00* needs more than one 4-register read: {:?}", pane.reads);
+    let mapped = profile.mapped(Table::Holding);
+    for &(start, count) in &pane.reads {
+        assert!(count <= profile.read_limit(Table::Holding));
+        for a in start..start + count {
+            assert!(mapped.iter().any(|e| e.start <= a && a < e.start + e.width), "{a:#06x} is not mapped");
+        }
+    }
+    // Each read fills its own cells: d001 shows 50.00 Hz from the first; the others wait.
+    let (first, count) = pane.reads[0];
+    let registers = (0..count).map(|i| if i == 1 { 5000 } else { 0 }).collect();
+    pane.record_at(first, Outcome::Registers(registers), Duration::from_millis(1));
+    assert_eq!(pane.cells[0].show(&pane).as_deref(), Some("50.00 Hz"));
+    let last = pane.cells.last().unwrap();
+    assert!(last.point.address >= pane.reads[1].0 && last.show(&pane).is_none(), "shown before its read");
+}
+
+#[test]
+fn a_session_file_keeps_the_trends_and_each_cells_own_order_and_poll_reads_it() {
+    let mut raw = Definition::raw(2, Table::Holding, 0x20, 4, Duration::from_millis(500));
+    raw.cells[0].set_format(Format::F32(Order::Cdab));
+    raw.cells[2].set_format(Format::U32(Order::Dcba));
+    raw.cells[2].trended = true;
+    let profile = Profile::builtin("omron-3g3rx").unwrap();
+    let mut panes = vec![raw];
+    panes.extend(spec::parse("d001", 1, Some(&profile)).unwrap());
+    panes.extend(spec::parse("A003", 1, Some(&profile)).unwrap());
+    panes[1].cells[0].trended = true;
+    let session = spec::session_of(Some("omron-3g3rx"), &panes);
+    let text = session.to_toml();
+    assert!(text.contains("order = \"CDAB\"") && text.contains("order = \"DCBA\""), "{text}");
+    assert!(text.contains("trend = true") && text.contains("trends = [\"d001\"]"), "{text}");
+    let loaded = ferrobus::poll::session::Session::parse(&text, "s.toml").unwrap();
+    assert_eq!(loaded, session);
+    let fresh = spec::panes_of(&loaded, "s.toml").unwrap();
+    assert_eq!(fresh[0].cells[0].format, Format::F32(Order::Cdab));
+    assert_eq!(fresh[0].cells[2].format, Format::U32(Order::Dcba), "the cell's own order, not the read's");
+    let trended: Vec<(usize, u16)> = fresh
+        .iter()
+        .enumerate()
+        .flat_map(|(i, p)| p.cells.iter().filter(|c| c.trended).map(move |c| (i, c.point.address)))
+        .collect();
+    assert_eq!(trended, [(0, 0x22), (1, 0x1000)]);
+    assert_eq!(App::new("t".into(), fresh).trends.len(), 2, "the monitor charts them again");
+    // poll reads the same file: each cell in its own order, the trends ignored.
+    let groups = loaded.groups("s.toml", |name| Profile::load(name).map_err(|e| e.to_string())).unwrap();
+    let orders: Vec<Order> = groups[0].cells.iter().map(|c| c.point.order).collect();
+    assert_eq!(orders, [Order::Cdab, Order::Dcba]);
+    assert_eq!(groups.len(), 3);
+    // A trend of a point not watched is refused, naming it.
+    let bad = text.replace("trends = [\"d001\"]", "trends = [\"F002\"]");
+    let bad = ferrobus::poll::session::Session::parse(&bad, "s.toml").unwrap();
+    let err = format!("{:?}", spec::panes_of(&bad, "s.toml").err().unwrap());
+    assert!(err.contains("points 1") && err.contains("\\\"F002\\\" is not one of the points watched"), "{err}");
 }

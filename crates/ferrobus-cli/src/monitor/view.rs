@@ -70,8 +70,12 @@ fn draw_panes(frame: &mut Frame<'_>, area: Rect, app: &App) {
 
 /// The pane's title: `unit 1 holding 0x0000 ×10 every 500 ms`.
 pub(crate) fn title(pane: &Definition) -> String {
+    let reads = match pane.reads.len() {
+        0 | 1 => String::new(),
+        n => format!(" in {n} reads"),
+    };
     format!(
-        " unit {} {} {:#06x} ×{} every {} ms ",
+        " unit {} {} {:#06x} ×{}{reads} every {} ms ",
         pane.unit,
         pane.table_name(),
         pane.address,

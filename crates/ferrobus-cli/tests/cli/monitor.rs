@@ -75,10 +75,14 @@ impl Drop for Sim {
 }
 
 fn start_sim() -> (Sim, String) {
+    start_sim_of("generic")
+}
+
+fn start_sim_of(profile: &str) -> (Sim, String) {
     let port = std::net::TcpListener::bind("127.0.0.1:0").unwrap().local_addr().unwrap().port();
     let addr = format!("127.0.0.1:{port}");
     let mut child = Command::new(env!("CARGO_BIN_EXE_ferrobus"))
-        .args(["--tcp", &addr, "sim", "--profile", "generic", "--duration", "120s"])
+        .args(["--tcp", &addr, "sim", "--profile", profile, "--duration", "120s"])
         .stdout(Stdio::null())
         .stderr(Stdio::piped())
         .spawn()
@@ -196,4 +200,74 @@ fn monitor_refuses_a_pipe_and_a_bad_definition_with_the_reason_before_opening_th
     assert!(String::from_utf8_lossy(&out.stderr).contains("no pane shows address 0x0007"), "{out:?}");
     let out = run(&[]);
     assert!(String::from_utf8_lossy(&out.stderr).contains("give what to watch"), "{out:?}");
+}
+
+#[test]
+fn monitor_in_tmux_restores_the_terminal_on_a_panic_and_prints_the_panic_message() {
+    if !have_tmux() {
+        return;
+    }
+    let (_sim, addr) = start_sim();
+    let tmux = Tmux { socket: format!("ferrobus-monitor-panic-{}", std::process::id()) };
+    let started = tmux.cmd(&["new-session", "-d", "-s", "m", "-x", "80", "-y", "24", "env", "PS1=prompt$ ", "sh"]);
+    assert!(started.status.success(), "tmux new-session: {}", String::from_utf8_lossy(&started.stderr));
+    tmux.wait_for("the shell's prompt", |s| s.contains("prompt$"));
+    // The trigger is in debug builds only (the test binary's ferrobus is one): `!` panics.
+    let command = format!(
+        "RUST_BACKTRACE=0 FERROBUS_MONITOR_TEST_PANIC=1 {} --tcp {addr} monitor holding:0:4@100ms",
+        env!("CARGO_BIN_EXE_ferrobus")
+    );
+    tmux.keys(&[&command, "Enter"]);
+    tmux.wait_for("the monitor", |s| s.contains("unit 1 holding 0x0000 ×4") && s.contains("q quit"));
+    assert_eq!(tmux.alternate_screen(), "1", "the monitor draws on the alternate screen");
+    tmux.keys(&["!"]);
+    let screen =
+        tmux.wait_for("the prompt after the panic", |s| s.lines().filter(|l| l.starts_with("prompt$")).count() >= 2);
+    assert!(
+        screen.contains("FERROBUS_MONITOR_TEST_PANIC is set: the monitor panics as the test asked"),
+        "the panic's message is not on the screen (stderr):\n{screen}"
+    );
+    assert!(!screen.contains("q quit"), "the monitor's screen is left behind:\n{screen}");
+    assert_eq!(tmux.alternate_screen(), "0", "the panic left the alternate screen on");
+    // Cooked mode again: the shell echoes what is typed and runs it.
+    tmux.keys(&["echo restored-$((40+2))", "Enter"]);
+    tmux.wait_for("the shell running a command", |s| s.contains("restored-42"));
+}
+
+#[test]
+fn monitor_reads_3g3rx_points_far_apart_through_the_planner_with_no_exception() {
+    if !have_tmux() {
+        return;
+    }
+    // The simulated 3G3RX answers exception 02 to a read of any unmapped register, and reads
+    // at most 4 registers a request: one raw range from d001 to F002 would fail every poll.
+    let (_sim, addr) = start_sim_of("omron-3g3rx");
+    let tmux = Tmux { socket: format!("ferrobus-monitor-plan-{}", std::process::id()) };
+    let command = format!(
+        "{} --tcp {addr} --device omron-3g3rx monitor F002@200ms A003@200ms 'd00*@200ms'",
+        env!("CARGO_BIN_EXE_ferrobus")
+    );
+    let started = tmux.cmd(&["new-session", "-d", "-s", "m", "-x", "100", "-y", "40", &command]);
+    assert!(started.status.success(), "tmux new-session: {}", String::from_utf8_lossy(&started.stderr));
+    let screen = tmux.wait_for("every pane polled at least twice", |s| {
+        let tx: Vec<u64> = s
+            .lines()
+            .filter_map(|l| l.split("│Tx ").nth(1))
+            .filter_map(|t| t.split_whitespace().next()?.parse().ok())
+            .collect();
+        tx.len() == 3 && tx.iter().all(|n| *n >= 2)
+    });
+    for line in screen.lines().filter(|l| l.contains("│Tx ")) {
+        assert!(line.contains("Err 0 (timeout 0, CRC 0, exception 0, other 0)"), "a poll failed: {line}\n{screen}");
+    }
+    // Each pane at the planner's reads: F002 (2 registers) and A003 alone, d00* in 4-register reads.
+    assert!(screen.contains("unit 1 holding 0x1102 ×2 every 200 ms"), "{screen}");
+    assert!(screen.contains("unit 1 holding 0x1202 ×1 every 200 ms"), "{screen}");
+    assert!(screen.contains("unit 1 holding 0x1000 ×13 in 4 reads every 200 ms"), "{screen}");
+    assert!(screen.contains("Tx u1 03 10 00 00 04"), "the traffic shows the first 4-register read:\n{screen}");
+    // The values scaled, with their units (the simulator's power-on values).
+    assert!(screen.contains("1102 accelera    10.00 s"), "{screen}");
+    assert!(screen.contains("1202 base fre      60 Hz"), "{screen}");
+    assert!(screen.contains("1000 output f    0.00 Hz"), "{screen}");
+    tmux.keys(&["q"]);
 }

@@ -242,7 +242,8 @@ impl Group {
             let Ok(at) = u16::try_from(address) else { break };
             let format = layout.formats.iter().find(|(a, _)| *a == at).map_or(layout.format, |(_, f)| *f);
             let alias = layout.aliases.iter().find(|(a, _)| *a == at).map(|(_, n)| n.as_str());
-            let cell = Cell::raw(table, at, format, layout.order, alias);
+            let order = layout.orders.iter().find(|(a, _)| *a == at).map_or(layout.order, |(_, o)| *o);
+            let cell = Cell::raw(table, at, format, order, alias);
             let next = address + u32::from(cell.point.width);
             if next > end {
                 return Err(range(format!(
@@ -255,10 +256,15 @@ impl Group {
             cells.push(cell);
             address = next;
         }
-        let given = layout.aliases.iter().map(|(a, _)| *a).chain(layout.formats.iter().map(|(a, _)| *a));
+        let given = layout
+            .aliases
+            .iter()
+            .map(|(a, _)| *a)
+            .chain(layout.formats.iter().map(|(a, _)| *a))
+            .chain(layout.orders.iter().map(|(a, _)| *a));
         for at in given {
             if !cells.iter().any(|c| c.point.address == at) {
-                return Err(range(format!("no cell starts at {at:#06x} (an alias or format is given for it)")));
+                return Err(range(format!("no cell starts at {at:#06x} (an alias, format or order is given for it)")));
             }
         }
         Ok(Group { name: name.to_string(), unit, table, start, count, every, cells })
@@ -360,6 +366,8 @@ pub struct Layout {
     pub format: Format,
     /// The order of multi-register cells.
     pub order: Order,
+    /// Cells by wire address with another order.
+    pub orders: Vec<(u16, Order)>,
     /// Cells by wire address with another format.
     pub formats: Vec<(u16, Format)>,
     /// Names of cells by wire address.

@@ -16,6 +16,8 @@
 //! address = 0x1002
 //! alias = "speed"
 //! format = "i32"
+//! order = "CDAB"            # optional: this cell's own order (else the read's)
+//! trend = true              # optional: monitor charts it (poll ignores it)
 //!
 //! # Named points of a device profile, in the planner's fewest requests.
 //! [[points]]
@@ -24,6 +26,7 @@
 //! names = ["d001", "d002"]  # codes, labels or globs
 //! groups = ["monitor"]      # the profile's groups
 //! every = "500ms"
+//! trends = ["d001"]         # optional: points monitor charts (poll ignores it)
 //! ```
 
 use std::path::Path;
@@ -88,6 +91,12 @@ pub struct CellDef {
     /// Its format.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub format: Option<String>,
+    /// Its own order of registers (`ABCD` ...), if not the read's.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub order: Option<String>,
+    /// Whether `monitor` charts it (its trends); `poll` ignores it.
+    #[serde(default, skip_serializing_if = "is_false")]
+    pub trend: bool,
 }
 
 /// `[[points]]`: named points of a profile.
@@ -107,6 +116,14 @@ pub struct PointsDef {
     /// The period (`1s` unless given).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub every: Option<String>,
+    /// Codes of the points `monitor` charts (its trends); `poll` ignores them.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub trends: Vec<String>,
+}
+
+#[allow(clippy::trivially_copy_pass_by_ref)] // serde's skip_serializing_if passes a reference
+fn is_false(b: &bool) -> bool {
+    !*b
 }
 
 fn one() -> u16 {
@@ -216,14 +233,14 @@ impl ReadDef {
     pub fn group(&self) -> Result<Group, String> {
         let table = table_from_name(&self.table)?;
         let format = format_of(self.format.as_deref())?.unwrap_or_default();
-        let order = match self.order.as_deref() {
-            None => Order::default(),
-            Some(o) => Order::from_name(o).ok_or_else(|| format!("order {o:?}: give ABCD, CDAB, BADC or DCBA"))?,
-        };
+        let order = order_of(self.order.as_deref())?.unwrap_or_default();
         let mut layout = Layout { format, order, ..Layout::default() };
         for c in &self.cells {
             if let Some(f) = format_of(c.format.as_deref())? {
                 layout.formats.push((c.address, f));
+            }
+            if let Some(o) = order_of(c.order.as_deref())? {
+                layout.orders.push((c.address, o));
             }
             if let Some(a) = &c.alias {
                 layout.aliases.push((c.address, a.clone()));
@@ -246,6 +263,11 @@ pub fn table_from_name(name: &str) -> Result<Table, String> {
         "discrete" | "discrete-inputs" => Ok(Table::DiscreteInputs),
         other => Err(format!("table {other:?}: give holding, input, coils or discrete")),
     }
+}
+
+/// An order by name (`ABCD`, `CDAB`, `BADC`, `DCBA`).
+pub fn order_of(name: Option<&str>) -> Result<Option<Order>, String> {
+    name.map(|o| Order::from_name(o).ok_or_else(|| format!("order {o:?}: give ABCD, CDAB, BADC or DCBA"))).transpose()
 }
 
 fn format_of(name: Option<&str>) -> Result<Option<Format>, String> {
