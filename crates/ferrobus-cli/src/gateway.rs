@@ -53,9 +53,9 @@ pub(crate) struct GatewayArgs {
     #[arg(long = "line", value_name = "PATH")]
     lines: Vec<String>,
 
-    /// The serial lines from a TOML file, each with its own settings and units ([[line]]
-    /// tables: port, baud, parity, ..., units, renumber), instead of --port, --line and
-    /// --route; the connection options are the default of every line
+    /// Serial lines from a TOML file instead of --port, --line and --route: [[line]] tables,
+    /// each with its port, line options (baud, parity, timeout, response-wait, ...) and units
+    /// (units, renumber); what a line leaves out comes from the connection options
     #[arg(long = "lines-file", value_name = "FILE", conflicts_with_all = ["lines", "routes", "reverse"])]
     pub(crate) lines_file: Option<PathBuf>,
 

@@ -149,7 +149,7 @@ pub(super) fn parse(
     let mut lines = Vec::with_capacity(shape.line.len());
     let mut ports: Vec<(String, usize)> = Vec::new();
     // Where each client unit was routed first: its line and the place in the file.
-    let mut routed: Vec<Option<(usize, usize)>> = vec![None; 256];
+    let mut first_seen: Vec<Option<(usize, usize)>> = vec![None; 256];
     let mut routes = Routes::new();
     for (index, table) in shape.line.iter().enumerate() {
         let what = |(span, message): Problem| at(span, &format!("[[line]] {index}, {message}"));
@@ -162,7 +162,7 @@ pub(super) fn parse(
         }
         ports.push((port.0, port.1.start));
         let mut route = |unit: u8, out: u8, span: &Range<usize>| -> Result<(), Problem> {
-            let slot = routed.get_mut(usize::from(unit)).ok_or_else(|| (span.clone(), format!("unit {unit}")))?;
+            let slot = first_seen.get_mut(usize::from(unit)).ok_or_else(|| (span.clone(), format!("unit {unit}")))?;
             if let Some((other, first)) = *slot {
                 let (row, col) = line_col(text, first);
                 let first = format!("{}:{row}:{col}", path.display());

@@ -192,3 +192,19 @@ fn a_file_without_lines_and_a_syntax_error_are_refused_with_the_file_named() {
     refused("[[line]]\nport = \"/dev/ttyA\n", 2, &["gw.toml:2:"]);
     refused("[[line]]\nport = \"/dev/ttyA\"\nport = \"/dev/ttyB\"\n", 3, &["duplicate key"]);
 }
+
+#[test]
+fn the_readme_example_reads_as_it_says() {
+    let readme = include_str!("../../../../../README.md");
+    let start = readme.find("# ferrobus gateway --lines-file lines.toml").expect("the README's example");
+    let example = readme.get(start..).and_then(|rest| rest.split("```").next()).unwrap();
+    let (lines, routes) = lines(example).unwrap();
+    assert_eq!(lines[0].transport.describe(), "/dev/ttyUSB0 at 9600 8E1");
+    assert_eq!(lines[0].client.timeout, Duration::from_millis(320));
+    assert_eq!(lines[1].transport.describe(), "/dev/ttyUSB1 at 115200 8N1");
+    assert_eq!(lines[1].transport.timing().t3_5(), Duration::from_millis(2));
+    assert_eq!(lines[1].client.retries, 1);
+    let on = |line, unit| Some(Route { line, unit });
+    assert_eq!((routes.get(2), routes.get(15), routes.get(21)), (on(0, 2), on(0, 15), None));
+    assert_eq!((routes.get(30), routes.get(41), routes.get(50)), (on(1, 3), on(1, 1), on(1, 10)));
+}
