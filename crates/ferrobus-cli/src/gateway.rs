@@ -362,6 +362,20 @@ fn lines_file(path: &std::path::Path, connection: &ConnectArgs, args: &GatewayAr
         late_guard: args.late_guard,
     };
     let (lines, routes) = lines::read(path, connection, base)?;
+    for (index, line) in lines.iter().enumerate() {
+        let units: Vec<String> =
+            routes.iter().filter(|(_, r)| r.line == index).map(|(u, r)| format!("{u}->{}", r.unit)).collect();
+        tracing::info!(
+            "line {index}: {}, timeout {:?}, retries {}, t3.5 {:?}, queue {}, late guard {:?}, units {}",
+            line.transport.describe(),
+            line.client.timeout,
+            line.client.retries,
+            line.transport.timing().t3_5(),
+            line.queue,
+            line.late_guard,
+            units.join(" ")
+        );
+    }
     Ok(GatewayConfig { lines, routes, broadcast_ack: args.broadcast_ack, cache_max_age: args.cache_max_age })
 }
 
