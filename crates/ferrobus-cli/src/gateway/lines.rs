@@ -36,7 +36,8 @@
 //! The whole file is checked before any port is opened. An error names the file, the line and
 //! column, the `[[line]]` (numbered from 0, as the gateway numbers its lines) and the key: an
 //! unknown key, a value of the wrong type or out of range, a port given twice, a unit routed
-//! twice (with where it was routed first), a line with no units when there are several.
+//! twice (with where it was routed first), a line with no units when there are several, or
+//! with empty `units` and `renumber`.
 
 use std::collections::BTreeMap;
 use std::ops::Range;
@@ -162,7 +163,9 @@ pub(super) fn parse(
         }
         ports.push((port.0, port.1.start));
         let mut route = |unit: u8, out: u8, span: &Range<usize>| -> Result<(), Problem> {
-            let slot = first_seen.get_mut(usize::from(unit)).ok_or_else(|| (span.clone(), format!("unit {unit}")))?;
+            let slot = first_seen
+                .get_mut(usize::from(unit))
+                .ok_or_else(|| (span.clone(), format!("unit {unit}: no such unit")))?;
             if let Some((other, first)) = *slot {
                 let (row, col) = line_col(text, first);
                 let first = format!("{}:{row}:{col}", path.display());
@@ -211,6 +214,9 @@ pub(super) fn parse(
                     .map_err(|(s, m)| what((s, format!("renumber: {m}"))))?;
             }
             any = true;
+        }
+        if !any && (line.units.is_some() || line.renumber.is_some()) {
+            return Err(what((table.span(), "routes no unit: its units and renumber are empty".into())));
         }
         if !any {
             if several {

@@ -184,6 +184,10 @@ fn a_port_given_twice_a_line_without_a_port_and_a_line_without_units_are_refused
     assert!(error(no_port).contains("[[line]] 0, no port"), "{}", error(no_port));
     let no_units = "[[line]]\nport = \"/dev/ttyA\"\nunits = [1]\n[[line]]\nport = \"/dev/ttyB\"\n";
     assert!(error(no_units).contains("[[line]] 1, routes no unit"), "{}", error(no_units));
+    let no_port_at = error(no_port);
+    assert!(no_port_at.starts_with("gw.toml:1:") || no_port_at.starts_with("gw.toml:2:"), "{no_port_at}");
+    let empty = "[[line]]\nport = \"/dev/ttyA\"\nunits = []\n";
+    assert!(error(empty).contains("[[line]] 0, routes no unit: its units and renumber are empty"), "{}", error(empty));
 }
 
 #[test]
