@@ -7,10 +7,14 @@
 //! ([`ferrobus::gateway`]) documents every answer the gateway gives and why. The counters of
 //! every line and unit are printed on SIGUSR1 and at exit. `--reverse` turns it around: a
 //! slave on `--port` for the units of `--route UNIT=HOST:PORT[/UNIT]`, each forwarded to its
-//! Modbus/TCP server.
+//! Modbus/TCP server. `--lines-file FILE` gives every line its own settings and units instead
+//! (see [`lines`]).
+
+mod lines;
 
 use std::collections::BTreeMap;
 use std::net::SocketAddr;
+use std::path::PathBuf;
 use std::sync::Arc;
 use std::time::Duration;
 
@@ -48,6 +52,12 @@ pub(crate) struct GatewayArgs {
     /// Another serial line with the same settings as --port (line 1, 2, ... in order)
     #[arg(long = "line", value_name = "PATH")]
     lines: Vec<String>,
+
+    /// Serial lines from a TOML file instead of --port, --line and --route: [[line]] tables,
+    /// each with its port, line options (baud, parity, timeout, response-wait, ...) and units
+    /// (units, renumber); what a line leaves out comes from the connection options
+    #[arg(long = "lines-file", value_name = "FILE", conflicts_with_all = ["lines", "routes", "reverse"])]
+    pub(crate) lines_file: Option<PathBuf>,
 
     /// Route units to a line, optionally renumbered: 5=0, 1-10=1, 20=0:3 (unit 20 is unit 3
     /// on line 0; a range renumbered keeps its order: 11-20=1:1 is units 1-10 on line 1)
@@ -301,6 +311,9 @@ fn print(gateway: &Gateway, tcp: &TcpCounts, secure: bool) {
 
 /// The gateway's lines and routes from the options.
 fn config(connection: &ConnectArgs, args: &GatewayArgs) -> Result<GatewayConfig, CliError> {
+    if let Some(path) = &args.lines_file {
+        return lines_file(path, connection, args);
+    }
     let first = match connection.target()? {
         Target::Serial { path, .. } => path,
         other => {
@@ -324,6 +337,45 @@ fn config(connection: &ConnectArgs, args: &GatewayArgs) -> Result<GatewayConfig,
         })
         .collect::<Vec<_>>();
     let routes = routes(&args.routes, lines.len())?;
+    Ok(GatewayConfig { lines, routes, broadcast_ack: args.broadcast_ack, cache_max_age: args.cache_max_age })
+}
+
+/// The gateway's lines and routes from `--lines-file`, the connection options the default of
+/// every line; `--port` (or `--tcp`, `--rtu-tcp`) beside it would be a line the file does not
+/// name, and is refused.
+fn lines_file(path: &std::path::Path, connection: &ConnectArgs, args: &GatewayArgs) -> Result<GatewayConfig, CliError> {
+    let given = [("--port", &connection.port), ("--tcp", &connection.tcp), ("--rtu-tcp", &connection.rtu_tcp)];
+    if let Some((option, Some(value))) = given.iter().find(|(_, v)| v.is_some()) {
+        return Err(CliError::Usage(format!(
+            "--lines-file names every line of the gateway: not with {option} {value} (given, or from the settings \
+             file's [defaults] or --conn); put that port in a [[line]] of {}",
+            path.display()
+        )));
+    }
+    let base = lines::Base {
+        backoff: (args.backoff_after > 0).then_some(ferrobus::Backoff {
+            after: args.backoff_after,
+            initial: args.backoff_skip,
+            max: args.backoff_max,
+        }),
+        queue: usize::try_from(args.queue).unwrap_or(usize::MAX),
+        late_guard: args.late_guard,
+    };
+    let (lines, routes) = lines::read(path, connection, base)?;
+    for (index, line) in lines.iter().enumerate() {
+        let units: Vec<String> =
+            routes.iter().filter(|(_, r)| r.line == index).map(|(u, r)| format!("{u}->{}", r.unit)).collect();
+        tracing::info!(
+            "line {index}: {}, timeout {:?}, retries {}, t3.5 {:?}, queue {}, late guard {:?}, units {}",
+            line.transport.describe(),
+            line.client.timeout,
+            line.client.retries,
+            line.transport.timing().t3_5(),
+            line.queue,
+            line.late_guard,
+            units.join(" ")
+        );
+    }
     Ok(GatewayConfig { lines, routes, broadcast_ack: args.broadcast_ack, cache_max_age: args.cache_max_age })
 }
 

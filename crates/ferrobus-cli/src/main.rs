@@ -181,6 +181,7 @@ impl Command {
                 | Command::Config(_)
                 | Command::Completions(_)
                 | Command::Man(_)
+                | Command::Gateway(gateway::GatewayArgs { lines_file: Some(_), .. })
         )
     }
 }

@@ -10,6 +10,7 @@ mod config;
 mod device;
 mod errors;
 mod gateway;
+mod gateway_lines;
 mod line_settings;
 mod monitor;
 mod offline;
