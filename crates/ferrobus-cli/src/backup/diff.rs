@@ -183,30 +183,13 @@ pub(crate) async fn run(connection: &ConnectArgs, args: &DiffArgs) -> Result<(),
             params.push(p);
         }
     }
-    let readings = super::device::read(&session, &view, &params).await;
-    if let Some(error) = readings.stopped
-        && readings.values.values().all(Result::is_err)
+    let mut readings = super::device::read(&session, &view, &params).await;
+    if readings.values.values().all(Result::is_err)
+        && let Some(error) = readings.stopped.take()
     {
         return Err(error.into());
     }
-    let mut failed = 0;
-    let entries = params
-        .iter()
-        .map(|p| {
-            let state = match readings.values.get(&p.code) {
-                Some(Ok(words)) => match param::decode(p, words) {
-                    Ok(raw) => State::Value { shown: p.show(&raw), raw: param::to_toml(&raw) },
-                    Err(why) => State::Failed(why),
-                },
-                Some(Err(why)) => State::Failed(why.clone()),
-                None => State::Failed("not read".into()),
-            };
-            if matches!(state, State::Failed(_)) {
-                failed += 1;
-            }
-            Entry { code: p.code.clone(), label: param::label(p).to_string(), line: 0, state }
-        })
-        .collect();
+    let (entries, failed) = super::entries(&params, &readings);
     let device = Backup { header: a.header.clone(), identification: Vec::new(), entries };
     let differences = compare(Some(&view), &a, &device);
     finish(&differences, &a_name, &format!("unit {}", session.unit), args.output.format(), params.len(), failed)

@@ -217,24 +217,7 @@ fn key(name: &str) -> String {
 
 /// Now, ISO-8601 UTC to the second.
 pub(crate) fn now_utc() -> String {
-    let secs = std::time::SystemTime::now().duration_since(std::time::UNIX_EPOCH).map_or(0, |d| d.as_secs());
-    iso8601(secs)
-}
-
-/// Seconds since 1970 as `YYYY-MM-DDTHH:MM:SSZ` (the civil-from-days algorithm of H. Hinnant).
-fn iso8601(secs: u64) -> String {
-    let days = i64::try_from(secs / 86_400).unwrap_or(0);
-    let rest = secs % 86_400;
-    let z = days + 719_468;
-    let era = z.div_euclid(146_097);
-    let doe = z.rem_euclid(146_097);
-    let yoe = (doe - doe / 1460 + doe / 36_524 - doe / 146_096) / 365;
-    let doy = doe - (365 * yoe + yoe / 4 - yoe / 100);
-    let mp = (5 * doy + 2) / 153;
-    let day = doy - (153 * mp + 2) / 5 + 1;
-    let month = if mp < 10 { mp + 3 } else { mp - 9 };
-    let year = yoe + era * 400 + i64::from(month <= 2);
-    format!("{year:04}-{month:02}-{day:02}T{:02}:{:02}:{:02}Z", rest / 3600, rest / 60 % 60, rest % 60)
+    ferrobus::poll::iso8601(std::time::SystemTime::now())
 }
 
 #[cfg(test)]
@@ -296,12 +279,5 @@ mod tests {
         assert!(Backup::parse(&later, "b.toml").unwrap_err().contains("backup format 9 is not the format 1"));
         let err = Backup::parse("[backup]\nformat = 1\n", "c.toml").unwrap_err();
         assert!(err.starts_with("c.toml:") && err.contains("missing field"), "{err}");
-    }
-
-    #[test]
-    fn times_are_iso_8601_utc() {
-        assert_eq!(iso8601(0), "1970-01-01T00:00:00Z");
-        assert_eq!(iso8601(951_782_400), "2000-02-29T00:00:00Z");
-        assert_eq!(iso8601(1_796_162_461), "2026-12-01T22:01:01Z");
     }
 }

@@ -51,6 +51,7 @@ use std::path::PathBuf;
 
 use clap::Args;
 use ferrobus::Error;
+use ferrobus_profile::Point;
 use ferrobus_proto::codes::{ReadDeviceIdCode, device_object};
 
 use self::file::{Backup, Entry, Header, State};
@@ -131,6 +132,22 @@ pub(crate) async fn read_backup(
 ) -> (Backup, usize, device::Readings) {
     let params = view.backed_up();
     let readings = device::read(session, view, &params).await;
+    let (entries, failed) = entries(&params, &readings);
+    let header = Header {
+        profile: view.name.clone(),
+        profile_hash: view.hash.clone(),
+        device: view.device().to_string(),
+        time: file::now_utc(),
+        unit: session.unit,
+        connection: session.target.to_string(),
+        identification,
+    };
+    (Backup { header, identification: objects, entries }, failed, readings)
+}
+
+/// One entry per parameter, in `params`' order, from what was read: its value, or why it has
+/// none; and how many have none.
+pub(crate) fn entries(params: &[&Point], readings: &device::Readings) -> (Vec<Entry>, usize) {
     let mut failed = 0;
     let entries = params
         .iter()
@@ -149,16 +166,7 @@ pub(crate) async fn read_backup(
             Entry { code: p.code.clone(), label: param::label(p).to_string(), line: 0, state }
         })
         .collect();
-    let header = Header {
-        profile: view.name.clone(),
-        profile_hash: view.hash.clone(),
-        device: view.device().to_string(),
-        time: file::now_utc(),
-        unit: session.unit,
-        connection: session.target.to_string(),
-        identification,
-    };
-    (Backup { header, identification: objects, entries }, failed, readings)
+    (entries, failed)
 }
 
 /// How the device identifies itself: FC2B/0E's basic objects, or FC11's data, if the profile

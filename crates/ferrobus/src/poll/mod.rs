@@ -508,10 +508,19 @@ fn items(reply: &[u8], group: &Group) -> Option<Vec<u16>> {
 /// `time` in ISO 8601, UTC, to the millisecond: `2026-12-01T22:52:28.123Z`.
 pub fn iso8601_ms(time: SystemTime) -> String {
     let since = time.duration_since(SystemTime::UNIX_EPOCH).unwrap_or_default();
-    let secs = since.as_secs();
+    format!("{}.{:03}Z", civil(since.as_secs()), since.subsec_millis())
+}
+
+/// `time` in ISO 8601, UTC, to the second: `2026-12-01T22:52:28Z`.
+pub fn iso8601(time: SystemTime) -> String {
+    let since = time.duration_since(SystemTime::UNIX_EPOCH).unwrap_or_default();
+    format!("{}Z", civil(since.as_secs()))
+}
+
+/// Seconds since 1970 as `YYYY-MM-DDTHH:MM:SS` (Howard Hinnant's days-from-civil, inverted).
+fn civil(secs: u64) -> String {
     let days = i64::try_from(secs / 86_400).unwrap_or(0);
     let rem = secs % 86_400;
-    // Howard Hinnant's days-from-civil, inverted.
     let z = days + 719_468;
     let era = z.div_euclid(146_097);
     let doe = z.rem_euclid(146_097);
@@ -521,13 +530,7 @@ pub fn iso8601_ms(time: SystemTime) -> String {
     let day = doy - (153 * mp + 2) / 5 + 1;
     let month = if mp < 10 { mp + 3 } else { mp - 9 };
     let year = yoe + era * 400 + i64::from(month <= 2);
-    format!(
-        "{year:04}-{month:02}-{day:02}T{:02}:{:02}:{:02}.{:03}Z",
-        rem / 3600,
-        rem % 3600 / 60,
-        rem % 60,
-        since.subsec_millis()
-    )
+    format!("{year:04}-{month:02}-{day:02}T{:02}:{:02}:{:02}", rem / 3600, rem % 3600 / 60, rem % 60)
 }
 
 #[cfg(test)]
@@ -535,12 +538,14 @@ mod tests {
     use super::*;
 
     #[test]
-    fn timestamps_are_iso_8601_utc_to_the_millisecond() {
+    fn timestamps_are_iso_8601_utc_to_the_millisecond_or_the_second() {
         let t = SystemTime::UNIX_EPOCH + Duration::from_millis(1_796_165_548_123);
         assert_eq!(iso8601_ms(t), "2026-12-01T22:52:28.123Z");
         assert_eq!(iso8601_ms(SystemTime::UNIX_EPOCH), "1970-01-01T00:00:00.000Z");
         let leap = SystemTime::UNIX_EPOCH + Duration::from_secs(951_782_400);
         assert_eq!(iso8601_ms(leap), "2000-02-29T00:00:00.000Z");
+        assert_eq!(iso8601(t), "2026-12-01T22:52:28Z");
+        assert_eq!(iso8601(leap), "2000-02-29T00:00:00Z");
     }
 
     #[test]
