@@ -7,7 +7,7 @@ use std::sync::Arc;
 
 use tokio::net::TcpListener;
 
-use super::{RoleCheck, ServerTls, log_refused};
+use super::{ServerTls, handshake};
 use crate::gateway::{Authorize, Chain, Gateway, Inbound, Timeouts};
 use crate::server::TcpLimits;
 
@@ -39,17 +39,7 @@ impl Gateway {
             let authorize = Arc::clone(&authorize);
             let (tls, stats) = (tls.clone(), Arc::clone(&stats));
             async move {
-                let (stream, role) = match tls.accept(stream).await {
-                    Ok(accepted) => accepted,
-                    Err(refused) => {
-                        stats.note_tls_refused();
-                        log_refused(peer, &refused);
-                        return Ok(());
-                    }
-                };
-                tracing::info!(%peer, "TLS connection accepted ({role})");
-                let check =
-                    RoleCheck::new(role, Arc::clone(tls.policy())).with_peer(peer).counting(stats.denied_counter());
+                let Some((stream, check)) = handshake(&tls, stream, peer, &stats).await else { return Ok(()) };
                 let mut chain = Chain(vec![authorize(peer), Box::new(check)]);
                 gateway.serve_connection(stream, &peer.to_string(), inbound, &mut chain, timeouts).await
             }

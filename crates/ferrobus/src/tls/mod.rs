@@ -471,11 +471,29 @@ impl Connector for TlsTarget {
     }
 }
 
-/// Logs a refused TLS connection from `peer` (a role refused says which and why).
-pub(crate) fn log_refused(peer: SocketAddr, refused: &Refused) {
-    if let Some(role) = refused.role_error() {
-        tracing::warn!(%peer, "TLS connection refused: client certificate rejected: {role}");
-    } else {
-        tracing::warn!(%peer, "{refused}");
+/// The TLS handshake of a server's connection from `peer`: the stream and the check of its
+/// role's rights (counting denials in `stats`), or `None` when it was refused — counted, and
+/// logged with the reason (a role refused says which and why).
+pub(crate) async fn handshake(
+    tls: &ServerTls,
+    stream: TcpStream,
+    peer: SocketAddr,
+    stats: &crate::server::TcpStats,
+) -> Option<(ServerStream, RoleCheck)> {
+    match tls.accept(stream).await {
+        Ok((stream, role)) => {
+            tracing::info!(%peer, "TLS connection accepted ({role})");
+            let check = RoleCheck::new(role, Arc::clone(tls.policy())).with_peer(peer).counting(stats.denied_counter());
+            Some((stream, check))
+        }
+        Err(refused) => {
+            stats.note_tls_refused();
+            if let Some(role) = refused.role_error() {
+                tracing::warn!(%peer, "TLS connection refused: client certificate rejected: {role}");
+            } else {
+                tracing::warn!(%peer, "{refused}");
+            }
+            None
+        }
     }
 }

@@ -7,7 +7,7 @@ use std::sync::Arc;
 use ferrobus_proto::slave::{Handler, SlaveConfig};
 use tokio::net::TcpListener;
 
-use super::{Authorized, RoleCheck, ServerTls, log_refused};
+use super::{Authorized, ServerTls, handshake};
 use crate::port::Transport;
 use crate::server::{ServerOptions, Shared, TcpLimits, serve_transport};
 
@@ -40,16 +40,7 @@ where
         let options = Arc::clone(&options);
         let (tls, stats) = (tls.clone(), Arc::clone(&stats));
         async move {
-            let (stream, role) = match tls.accept(stream).await {
-                Ok(accepted) => accepted,
-                Err(refused) => {
-                    stats.note_tls_refused();
-                    log_refused(peer, &refused);
-                    return Ok(());
-                }
-            };
-            tracing::info!(%peer, "TLS connection accepted ({role})");
-            let check = RoleCheck::new(role, Arc::clone(tls.policy())).with_peer(peer).counting(stats.denied_counter());
+            let Some((stream, check)) = handshake(&tls, stream, peer, &stats).await else { return Ok(()) };
             let mut handler = Authorized::new(handler, check);
             let mut options = options();
             options.idle_timeout = options.idle_timeout.or(idle);
