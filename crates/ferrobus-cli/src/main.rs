@@ -76,6 +76,12 @@ const AFTER_HELP: &str = concat!(
     "  ferrobus --port /dev/ttyUSB0 --baud 9600 --unit 5 read holding 0x0011 --count 2\n",
     "  ferrobus --tcp 192.168.1.10 write register --one-based 0x1203 50\n",
     "  ferrobus --port /dev/ttyUSB0 read holding 0x1102 --type u32 --max-per-request 4\n",
+    "  ferrobus --port /dev/ttyUSB0 --device omron-3g3rx get d001 F002 'd0*'\n",
+    "  ferrobus --port /dev/ttyUSB0 --device omron-3g3rx set F002 12.5s\n",
+    "  ferrobus --port /dev/ttyUSB0 --device omron-3g3rx backup -o drive-07.toml\n",
+    "  ferrobus --port /dev/ttyUSB0 --unit 3 poll holding 0x1000 --count 4 --every 100ms --jsonl\n",
+    "  ferrobus --port /dev/ttyUSB0 scan\n",
+    "  ferrobus --port /dev/ttyUSB0 gateway --listen 0.0.0.0:502\n",
     "  ferrobus crc 01 10 01 12 00 02\n\n",
 );
 
