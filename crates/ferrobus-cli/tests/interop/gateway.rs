@@ -3,7 +3,7 @@
 //! through it to the libmodbus and pymodbus RTU servers, and the hostile-input tests of the
 //! TCP server (tests/interop/tcp_server.rs) run against the gateway's front end.
 
-use std::io::{ErrorKind, Read, Write};
+use std::io::Write;
 use std::net::TcpStream;
 use std::path::Path;
 use std::process::Command;
@@ -11,6 +11,7 @@ use std::time::{Duration, Instant};
 
 use crate::support::cli::{BAUD, Link};
 use crate::support::env::require_tool;
+use crate::support::mbap::{ask, closed_silently, connect_to, mbap, read_frame};
 use crate::support::peers::{Stack, free_port, peer_server_on, sim_on};
 use crate::support::process::{Proc, Stream};
 use crate::support::{Need, Parity, SocatPair, TempDir, check_script, ferrobus, require, words};
@@ -152,60 +153,13 @@ fn the_ferrobus_client_through_the_gateway_reads_and_writes_a_pymodbus_rtu_serve
 
 // The TCP server's hostile-input tests, against the gateway.
 
-fn mbap(t: u16, unit: u8, pdu: &[u8]) -> Vec<u8> {
-    let mut frame = Vec::new();
-    frame.extend_from_slice(&t.to_be_bytes());
-    frame.extend_from_slice(&[0, 0]);
-    frame.extend_from_slice(&u16::try_from(pdu.len() + 1).unwrap().to_be_bytes());
-    frame.push(unit);
-    frame.extend_from_slice(pdu);
-    frame
-}
-
-fn connect(addr: &str) -> TcpStream {
-    let stream = TcpStream::connect(addr).unwrap_or_else(|e| panic!("connecting to {addr}: {e}"));
-    stream.set_read_timeout(Some(STEP)).unwrap();
-    stream
-}
-
-fn read_frame(stream: &mut TcpStream) -> Option<Vec<u8>> {
-    let mut header = [0u8; 7];
-    match stream.read_exact(&mut header) {
-        Ok(()) => {}
-        Err(e) if matches!(e.kind(), ErrorKind::UnexpectedEof | ErrorKind::ConnectionReset) => return None,
-        Err(e) => panic!("reading a reply: {e}"),
-    }
-    let len = usize::from(u16::from_be_bytes([header[4], header[5]]));
-    let mut rest = vec![0u8; len.saturating_sub(1)];
-    stream.read_exact(&mut rest).unwrap_or_else(|e| panic!("reading the reply after {header:02X?}: {e}"));
-    Some([&header[..], &rest].concat())
-}
-
-fn ask(stream: &mut TcpStream, t: u16, unit: u8, pdu: &[u8]) -> Vec<u8> {
-    stream.write_all(&mbap(t, unit, pdu)).unwrap();
-    let reply = read_frame(stream).unwrap_or_else(|| panic!("connection closed instead of a reply to {pdu:02X?}"));
-    assert_eq!(&reply[..2], &t.to_be_bytes(), "the transaction id is echoed");
-    assert_eq!(reply[6], unit, "the reply comes from the unit asked");
-    reply[7..].to_vec()
-}
-
-fn closed_silently(stream: &mut TcpStream) -> bool {
-    let mut byte = [0u8; 1];
-    match stream.read(&mut byte) {
-        Ok(0) => true,
-        Err(e) if e.kind() == ErrorKind::ConnectionReset => true,
-        Ok(_) => false,
-        Err(e) => panic!("waiting for the gateway to close: {e}"),
-    }
-}
-
 const READ_0: [u8; 5] = [0x03, 0x00, 0x00, 0x00, 0x01];
 
 #[test]
 fn through_the_gateway_twenty_pipelined_requests_get_twenty_replies_in_order_each_with_its_transaction() {
     let Some(_turn) = require(&[Need::Socat]) else { return };
     let gw = behind(generic_sim, &["--pipeline", "4"]);
-    let mut stream = connect(&gw.addr);
+    let mut stream = connect_to(&gw.addr);
     let mut burst = Vec::new();
     for i in 0..10u16 {
         let v = u8::try_from(i).unwrap();
@@ -229,19 +183,19 @@ fn through_the_gateway_twenty_pipelined_requests_get_twenty_replies_in_order_eac
 fn through_the_gateway_a_corrupt_mbap_header_closes_the_connection_and_nothing_behind_it_reaches_the_line() {
     let Some(_turn) = require(&[Need::Socat]) else { return };
     let gw = behind(generic_sim, &[]);
-    let mut stream = connect(&gw.addr);
+    let mut stream = connect_to(&gw.addr);
     let mut input = vec![0x00, 0x31, 0x00, 0x00, 0xFF, 0xFF, 0x01];
     input.extend(mbap(0x0032, 1, &[0x06, 0x00, 0x05, 0x12, 0x34]));
     stream.write_all(&input).unwrap();
     assert!(closed_silently(&mut stream), "the connection is closed, nothing answered");
-    let mut stream = connect(&gw.addr);
+    let mut stream = connect_to(&gw.addr);
     let mut input = vec![0u8; 6];
     for t in 0..10 {
         input.extend(mbap(t, 1, &[0x06, 0x00, 0x06, 0x56, 0x78]));
     }
     stream.write_all(&input).unwrap();
     assert!(closed_silently(&mut stream));
-    let mut fresh = connect(&gw.addr);
+    let mut fresh = connect_to(&gw.addr);
     assert_eq!(ask(&mut fresh, 1, 1, &[0x03, 0x00, 0x05, 0x00, 0x02]), [0x03, 0x04, 0, 0, 0, 0], "nothing was written");
 }
 
@@ -249,11 +203,11 @@ fn through_the_gateway_a_corrupt_mbap_header_closes_the_connection_and_nothing_b
 fn past_max_connections_the_gateway_closes_a_new_connection_at_once_and_serves_the_others() {
     let Some(_turn) = require(&[Need::Socat]) else { return };
     let gw = behind(generic_sim, &["--max-connections", "2"]);
-    let mut first = connect(&gw.addr);
-    let mut second = connect(&gw.addr);
+    let mut first = connect_to(&gw.addr);
+    let mut second = connect_to(&gw.addr);
     ask(&mut first, 1, 1, &READ_0);
     ask(&mut second, 1, 1, &READ_0);
-    let mut third = connect(&gw.addr);
+    let mut third = connect_to(&gw.addr);
     assert!(closed_silently(&mut third), "the third connection is closed");
     assert_eq!(ask(&mut first, 2, 1, &READ_0), [0x03, 0x02, 0x00, 0x00]);
 }
@@ -262,12 +216,12 @@ fn past_max_connections_the_gateway_closes_a_new_connection_at_once_and_serves_t
 fn the_gateway_closes_an_idle_connection_and_an_unfinished_frame_never_early() {
     let Some(_turn) = require(&[Need::Socat]) else { return };
     let gw = behind(generic_sim, &["--idle-timeout", "400ms", "--frame-timeout", "200ms"]);
-    let mut idle = connect(&gw.addr);
+    let mut idle = connect_to(&gw.addr);
     let start = Instant::now();
     assert!(closed_silently(&mut idle));
     let idle_after = start.elapsed();
     assert!(idle_after >= Duration::from_millis(400), "closed after {idle_after:?}, before the 400 ms idle timeout");
-    let mut truncated = connect(&gw.addr);
+    let mut truncated = connect_to(&gw.addr);
     truncated.write_all(&[0x00, 0x01, 0x00]).unwrap();
     let start = Instant::now();
     assert!(closed_silently(&mut truncated));
@@ -283,13 +237,13 @@ fn out_of_file_descriptors_the_gateway_keeps_serving_old_connections_and_new_one
         return;
     }
     let gw = behind_with(generic_sim, &[], &["prlimit", "--nofile=48:48"]);
-    let mut first = connect(&gw.addr);
+    let mut first = connect_to(&gw.addr);
     ask(&mut first, 1, 1, &READ_0);
-    let mut others: Vec<TcpStream> = (0..60).map(|_| connect(&gw.addr)).collect();
+    let mut others: Vec<TcpStream> = (0..60).map(|_| connect_to(&gw.addr)).collect();
     gw.gateway.wait_for(Stream::Err, |l| l.contains("Too many open files"), STEP);
     assert_eq!(ask(&mut first, 2, 1, &READ_0), [0x03, 0x02, 0x00, 0x00], "an old connection is served");
     others.drain(..40);
-    let mut late = connect(&gw.addr);
+    let mut late = connect_to(&gw.addr);
     assert_eq!(ask(&mut late, 3, 1, &READ_0), [0x03, 0x02, 0x00, 0x00], "a new client is served");
     for (i, stream) in others.iter_mut().enumerate() {
         let t = u16::try_from(i).unwrap();
@@ -304,7 +258,7 @@ fn the_gateway_counts_crc_errors_apart_from_timeouts_and_prints_them_on_sigusr1(
     let device =
         |path: &Path| sim_on(path, Parity::None, &["--profile", "generic", "--unit", "1", "--fault", "1:corrupt=100%"]);
     let gw = behind(device, &["--route", "1-2=0", "--backoff-after", "0"]);
-    let mut stream = connect(&gw.addr);
+    let mut stream = connect_to(&gw.addr);
     assert_eq!(ask(&mut stream, 1, 1, &READ_0), [0x83, 0x0B], "a bad CRC is 0x0B");
     assert_eq!(ask(&mut stream, 2, 2, &READ_0), [0x83, 0x0B], "silence is 0x0B");
     let pid = gw.gateway.id();

@@ -1,9 +1,11 @@
 //! Helpers shared by the interop tests: what they need and how they skip ([`env`]), child
-//! processes that die with their test ([`process`]), pty pairs and raw frames ([`serial`]),
-//! the `ferrobus` binary as a client ([`cli`]), and the peers and the simulator ([`peers`]).
+//! processes that die with their test ([`process`]), pty pairs and raw frames ([`serial`]), a
+//! raw Modbus/TCP client ([`mbap`]), the `ferrobus` binary as a client ([`cli`]), and the peers
+//! and the simulator ([`peers`]).
 
 pub(crate) mod cli;
 pub(crate) mod env;
+pub(crate) mod mbap;
 pub(crate) mod peers;
 pub(crate) mod process;
 pub(crate) mod serial;
