@@ -139,9 +139,6 @@ impl Disk {
         if scan.position_lost {
             tracing::warn!(path = %shown, "store: no read position in the header holds its CRC; reading the segment from its first record");
         }
-        if let Some(at) = scan.moved_start {
-            tracing::warn!(path = %shown, at, start = scan.start.start, "store: the read position is not a record's start; reading from the next record");
-        }
         if let Some((offset, detail)) = &scan.damage {
             self.counters.truncated += 1;
             tracing::warn!(path = %shown, offset, detail = %detail, "store: a damaged segment tail was cut away");

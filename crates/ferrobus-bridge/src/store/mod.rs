@@ -31,11 +31,11 @@
 //! `disk` (at most 16 MiB), so the space of popped records comes back in those steps. `disk`
 //! bounds the bytes of the segment files, headers and popped records of the head included.
 //!
-//! [`Store::open`] reads every segment, checking each record: a torn or corrupt tail (power
-//! loss, kill -9 mid-write, a damaged disk) is cut away with a warning (`tracing`) and counted
-//! in [`StoreStats::truncated`]; a record found damaged later, while reading, drops the rest of
-//! its segment once ([`StoreError::Corrupt`], counted in [`StoreStats::lost`]). Neither panics
-//! nor repeats.
+//! [`Store::open`] reads every segment from its read position on, checking each record: a
+//! torn or corrupt tail (power loss, kill -9 mid-write, a damaged disk) is cut away with a
+//! warning (`tracing`) and counted in [`StoreStats::truncated`]; a record found damaged later,
+//! while reading, drops the rest of its segment once ([`StoreError::Corrupt`], counted in
+//! [`StoreStats::lost`]). Neither panics nor repeats.
 //!
 //! Writes go through a buffered writer flushed after each push, so a killed process loses
 //! nothing the store accepted. There is **no fsync** per record: a power loss may lose the

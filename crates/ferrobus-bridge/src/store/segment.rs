@@ -3,7 +3,7 @@
 //! [module doc](super); this file only encodes, decodes and scans it, without keeping state.
 
 use std::fs::File;
-use std::io::{self, BufReader, ErrorKind, Read};
+use std::io::{self, BufReader, ErrorKind, Read, Seek, SeekFrom};
 
 /// The first eight bytes of every segment file: what it is, and the format's version.
 pub(super) const MAGIC: [u8; 8] = *b"FBSTORE\x01";
@@ -118,18 +118,18 @@ pub(super) struct Scan {
     pub(super) start: Position,
     /// The records from `start` on.
     pub(super) records: u64,
-    /// Where the last whole record ends: the file's length once its damage is cut away.
+    /// Where the last whole record ends: the file's length once its damage is cut away (or
+    /// the file's length when `start` is past it).
     pub(super) end: u64,
     /// The damage found: its offset and what it was (the file is good up to `end`).
     pub(super) damage: Option<(u64, String)>,
-    /// The header's position was not the start of a record: `start` is the next one after it.
-    pub(super) moved_start: Option<u64>,
     /// Neither header slot holds its CRC: the file is read from its first record.
     pub(super) position_lost: bool,
 }
 
-/// Reads a whole segment file, checking every record, to find its read position, how many
-/// records are left and where the good part ends.
+/// Reads a segment file from its read position on, checking every record, to find how many
+/// records are left and where the good part ends. The records before the position (popped) are
+/// not read: damage there does not matter any more.
 pub(super) fn scan(file: File) -> io::Result<Scan> {
     let len = file.metadata()?.len();
     let mut reader = BufReader::new(file);
@@ -148,22 +148,22 @@ pub(super) fn scan(file: File) -> io::Result<Scan> {
         records: 0,
         end: HEADER_LEN,
         damage: None,
-        moved_start: None,
         position_lost: written.is_none(),
     };
-    let wanted = scan.start.start;
+    if scan.start.start > len {
+        // Every record was popped (the file lost its tail after the position was written).
+        scan.end = len;
+        return Ok(scan);
+    }
+    if scan.start.start > HEADER_LEN {
+        reader.seek(SeekFrom::Start(scan.start.start))?;
+        scan.end = scan.start.start;
+    }
     while scan.end < len {
         match read_record(&mut reader, scan.end, len)? {
             Ok(record) => {
-                let at = scan.end;
                 scan.end += FRAME_LEN + record.len() as u64;
-                if at >= wanted {
-                    if scan.records == 0 && at != wanted {
-                        scan.moved_start = Some(wanted);
-                        scan.start.start = at;
-                    }
-                    scan.records += 1;
-                }
+                scan.records += 1;
             }
             Err(detail) => {
                 scan.damage = Some((scan.end, detail));
@@ -171,20 +171,10 @@ pub(super) fn scan(file: File) -> io::Result<Scan> {
             }
         }
     }
-    if scan.records == 0 {
-        scan.start.start = scan.end;
-    }
     Ok(scan)
 }
 
 /// The scan of a file with no usable header: nothing in it can be read.
 fn unreadable(detail: String) -> Scan {
-    Scan {
-        start: Position::FRESH,
-        records: 0,
-        end: 0,
-        damage: Some((0, detail)),
-        moved_start: None,
-        position_lost: false,
-    }
+    Scan { start: Position::FRESH, records: 0, end: 0, damage: Some((0, detail)), position_lost: false }
 }
