@@ -134,11 +134,8 @@ impl Cx<'_> {
     /// The profile `name` (built in) or at a path relative to the file, loaded once.
     fn profile(&mut self, name: &Text) -> Option<Arc<Profile>> {
         let given = name.get_ref();
-        let key = if ferrobus_profile::BUILTIN.iter().any(|(n, _)| n == given) {
-            given.clone()
-        } else {
-            self.path(given).display().to_string()
-        };
+        let is_path = given.contains(['/', '\\']) || Path::new(given).extension().is_some();
+        let key = if is_path { self.path(given).display().to_string() } else { given.clone() };
         if let Some(profile) = self.profiles.get(&key) {
             return Some(Arc::clone(profile));
         }
@@ -149,14 +146,8 @@ impl Cx<'_> {
                 Some(profile)
             }
             Err(e) => {
-                let builtin: Vec<&str> = ferrobus_profile::BUILTIN.iter().map(|(n, _)| *n).collect();
-                self.at(
-                    name.span(),
-                    format!(
-                        "profile {given:?}: {e} (built in: {}; or a .toml path relative to this file)",
-                        builtin.join(", ")
-                    ),
-                );
+                let hint = if is_path { " (paths are relative to the configuration's folder)" } else { "" };
+                self.at(name.span(), format!("profile {given:?}: {e}{hint}"));
                 None
             }
         }
