@@ -279,7 +279,7 @@ const DEVICE_CASES: &[(&str, &str, &[&str])] = &[
     ("unknown device key", "unit = 1\nprofile = \"omron-3g3rx\"\n»point = [\"d001\"]\n", &["unknown field `point`"]),
     ("unit 0", "unit = »0\nprofile = \"omron-3g3rx\"\npoints = [\"d001\"]\n", &["unit 0; a device's unit is 1 to 247"]),
     ("unit 248", "unit = »248\nprofile = \"omron-3g3rx\"\npoints = [\"d001\"]\n", &["unit 248"]),
-    ("duplicate unit", "unit = »9\nprofile = \"omron-3g3rx\"\npoints = [\"d002\"]\n", &["unit \"9\" is used twice"]),
+    ("duplicate unit", "unit = »9\nprofile = \"omron-3g3rx\"\npoints = [\"d002\"]\n", &["unit 9 is used twice (first at line 14)"]),
     (
         "unknown profile",
         "unit = 1\nprofile = »\"omron-4g\"\npoints = [\"d001\"]\n",
