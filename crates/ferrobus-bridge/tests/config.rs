@@ -279,7 +279,11 @@ const DEVICE_CASES: &[(&str, &str, &[&str])] = &[
     ("unknown device key", "unit = 1\nprofile = \"omron-3g3rx\"\n»point = [\"d001\"]\n", &["unknown field `point`"]),
     ("unit 0", "unit = »0\nprofile = \"omron-3g3rx\"\npoints = [\"d001\"]\n", &["unit 0; a device's unit is 1 to 247"]),
     ("unit 248", "unit = »248\nprofile = \"omron-3g3rx\"\npoints = [\"d001\"]\n", &["unit 248"]),
-    ("duplicate unit", "unit = »9\nprofile = \"omron-3g3rx\"\npoints = [\"d002\"]\n", &["unit 9 is used twice (first at line 14)"]),
+    (
+        "duplicate unit",
+        "unit = »9\nprofile = \"omron-3g3rx\"\npoints = [\"d002\"]\n",
+        &["unit 9 is used twice (first at line 14)"],
+    ),
     (
         "unknown profile",
         "unit = 1\nprofile = »\"omron-4g\"\npoints = [\"d001\"]\n",
@@ -334,6 +338,24 @@ const DEVICE_CASES: &[(&str, &str, &[&str])] = &[
         "a raw alias clashes with a point",
         "unit = 1\nprofile = \"omron-3g3rx\"\npoints = [\"d001\"]\n[[line.device.raw]]\ntable = \"holding\"\naddress = 0x2000\nname = »\"d001\"\n",
         &["metric \"d001\" is polled twice"],
+    ),
+    (
+        "two raw names alike",
+        "unit = 1\n[[line.device.raw]]\ntable = \"coils\"\naddress = 0\ncount = 2\nnames = [\"a\", \"b\"]\n\
+         [[line.device.raw]]\ntable = \"holding\"\naddress = 0\ncount = 3\nnames = [\"c\", »\"a\", \"d\"]\n",
+        &["metric \"a\" is polled twice"],
+    ),
+    (
+        "raw names that do not fit",
+        "unit = 1\n[[line.device.raw]]\ntable = \"holding\"\naddress = 0\ncount = 4\ntype = \"f32\"\nnames = [»\"a\"]\n\
+         [[line.device.raw]]\ntable = »\"holdings\"\naddress = 0\ntype = »\"u128\"\norder = »\"ABDC\"\nname = »\"a/b\"\n",
+        &[
+            "1 names for 2 cells of f32",
+            "it is coils, discrete, holding or input",
+            "it is one of u16, i16",
+            "it is ABCD, CDAB",
+            "has no /, + or #",
+        ],
     ),
     ("polls nothing", "id = »\"dev\"\nunit = 1\nprofile = \"omron-3g3rx\"\n", &["polls nothing"]),
     (
