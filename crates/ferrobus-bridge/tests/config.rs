@@ -140,6 +140,17 @@ fn the_real_plant_example_says_what_a_plant_has() {
         })
         .collect();
     assert_eq!(kinds, ["serial", "serial", "tcp"]);
+    let Connection::Serial { config: press, ascii: false } = &plant.lines[0].connection else { panic!("RTU") };
+    assert_eq!((press.path.to_str(), press.line.to_string().as_str()), (Some("/dev/ttyUSB0"), "19200 8E1"));
+    let Connection::Serial { config: packaging, .. } = &plant.lines[1].connection else { panic!("serial") };
+    assert_eq!(packaging.line.to_string(), "9600 8N1");
+    assert_eq!((plant.lines[0].client.timeout, plant.lines[0].client.retries), (Duration::from_millis(200), 2));
+    assert_eq!(plant.lines[2].connection, Connection::Tcp("192.168.10.20:502".into()));
+    let scale = &plant.lines[1].devices[1];
+    assert_eq!(scale.metric_names().collect::<Vec<_>>(), ["net-weight", "tare-mode", "filter"]);
+    assert_eq!(scale.deadbands, [vec![0.01], vec![0.0, 0.0]]);
+    assert_eq!(plant.broker.password.as_deref(), Some("change-me"));
+    assert_eq!(plant.store.memory, 4 << 20);
     assert!(matches!(plant.mode, Mode::Sparkplug(_)));
     assert!(
         plant.store.dir.as_ref().is_some_and(|d| d.starts_with(examples())),
