@@ -207,6 +207,16 @@ fn marked(case: &str) -> (String, Vec<String>) {
 /// Whole files: the text (`»` where each error must point) and a word of each message.
 const FILE_CASES: &[(&str, &str, &[&str])] = &[
     ("syntax", "[broker]\naddress = \"127.0.0.1»\n", &["invalid basic string"]),
+    (
+        "several syntax errors",
+        "[broker]\naddress = \"h»\nkeep = »= 3\n[sparkplug»\n",
+        &["invalid basic string", "extra `=`", "unclosed table"],
+    ),
+    (
+        "a device without an id",
+        "[[line]]\nname = \"a\"\nsimulated = true\n»[[line.device]]\nunit = 1\n",
+        &["missing key `id`"],
+    ),
     ("unknown top-level key", "»colour = 1\n", &["unknown key `colour`"]),
     (
         "unknown broker key",
@@ -286,7 +296,8 @@ const FILE_CASES: &[(&str, &str, &[&str])] = &[
 /// Device cases, after `HEAD` and a good device: the text (`»` where each error must point)
 /// and a word of each message.
 const DEVICE_CASES: &[(&str, &str, &[&str])] = &[
-    ("type error", "unit = »\"one\"\n", &["invalid type"]),
+    ("type error", "unit = »\"one\"\n", &["invalid type: string \"one\", expected a whole number"]),
+    ("a string for an array", "unit = 1\nprofile = \"omron-3g3rx\"\npoints = »\"d001\"\n", &["expected an array"]),
     ("unknown device key", "unit = 1\nprofile = \"omron-3g3rx\"\n»point = [\"d001\"]\n", &["unknown field `point`"]),
     ("unit 0", "unit = »0\nprofile = \"omron-3g3rx\"\npoints = [\"d001\"]\n", &["unit 0; a device's unit is 1 to 247"]),
     ("unit 248", "unit = »248\nprofile = \"omron-3g3rx\"\npoints = [\"d001\"]\n", &["unit 248"]),

@@ -32,15 +32,28 @@ pub(super) fn plant(text: &str, origin: &str, base_dir: &Path) -> Result<Plant, 
     for error in &syntax {
         cx.toml_error(error, 0..0);
     }
-    if !cx.errors.is_empty() {
-        return Err(ConfigErrors(cx.errors));
-    }
-    let sections = Sections::split(&mut cx, doc.get_ref());
-    let plant = sections.resolve(&mut cx);
+    // After a syntax error the rest of the tree cannot be trusted: report the syntax only.
+    let plant = if cx.errors.is_empty() { Sections::split(&mut cx, doc.get_ref()).resolve(&mut cx) } else { None };
     match plant {
         Some(plant) if cx.errors.is_empty() => Ok(plant),
-        _ => Err(ConfigErrors(cx.errors)),
+        _ => {
+            cx.errors.sort_by_key(|e| (e.line, e.column));
+            Err(ConfigErrors(cx.errors))
+        }
     }
+}
+
+/// serde's type names as a configuration's reader knows them.
+fn plain_words(message: &str) -> String {
+    [
+        ("expected i64", "expected a whole number"),
+        ("expected f64", "expected a number"),
+        ("expected a sequence", "expected an array such as [\"a\", \"b\"]"),
+        ("expected a map", "expected a table"),
+        ("missing field", "missing key"),
+    ]
+    .iter()
+    .fold(message.to_string(), |m, (serde, ours)| m.replace(serde, ours))
 }
 
 /// What the checks share: the text (for positions), the errors found so far, and the
@@ -65,10 +78,10 @@ impl Cx<'_> {
         line_col(self.text, span.start).0
     }
 
-    /// A TOML reader's error, at its span (or `fallback`'s).
+    /// A TOML reader's error, at its span (or `fallback`'s), in the file's words.
     fn toml_error(&mut self, error: &toml::de::Error, fallback: Range<usize>) {
         let span = error.span().unwrap_or(fallback);
-        self.at(span, error.message().trim().to_string());
+        self.at(span, plain_words(error.message().trim()));
     }
 
     /// `value` read as `T`; a mistake is reported and gives `None`.
