@@ -290,6 +290,12 @@ const FILE_CASES: &[(&str, &str, &[&str])] = &[
          [[line.device]]\nid = \"y\"\nunit = 2\nprofile = \"omron-3g3rx\"\npoints = [\"d001\"]\n[[line.device.poll]]\nevery = \"1s\"\n»pionts = []\n",
         &["the port is not 1 to 65535", "contains '#'", "is not a size", "unit 0", "unknown field `pionts`"],
     ),
+    (
+        "a metric name with / in plain mode",
+        "[plain]\nprefix = \"p\"\n[[line]]\nname = \"a\"\ntcp = \"plc\"\n[[line.device]]\nid = \"x\"\nunit = 1\n\
+         [[line.device.raw]]\ntable = \"coils\"\naddress = 0\nname = »\"door/left\"\n",
+        &["in plain mode a metric name is a topic level: it is not empty and has no /, +, #"],
+    ),
     ("an unknown line key", "[[line]]\nname = \"a\"\nsimulated = true\n»speed = 9600\n", &["unknown field `speed`"]),
 ];
 
@@ -370,13 +376,13 @@ const DEVICE_CASES: &[(&str, &str, &[&str])] = &[
     (
         "raw names that do not fit",
         "unit = 1\n[[line.device.raw]]\ntable = \"holding\"\naddress = 0\ncount = 4\ntype = \"f32\"\nnames = [»\"a\"]\n\
-         [[line.device.raw]]\ntable = »\"holdings\"\naddress = 0\ntype = »\"u128\"\norder = »\"ABDC\"\nname = »\"a/b\"\n",
+         [[line.device.raw]]\ntable = »\"holdings\"\naddress = 0\ntype = »\"u128\"\norder = »\"ABDC\"\nname = »\"a+b\"\n",
         &[
             "1 names for 2 cells of f32",
             "it is coils, discrete, holding or input",
             "it is one of u16, i16",
             "it is ABCD, CDAB",
-            "has no /, + or #",
+            "has no +, #",
         ],
     ),
     ("polls nothing", "id = »\"dev\"\nunit = 1\nprofile = \"omron-3g3rx\"\n", &["polls nothing"]),

@@ -27,7 +27,7 @@ const MAX_RECONNECT: Duration = Duration::from_secs(30);
 
 /// Reads, checks and resolves a whole file.
 pub(super) fn plant(text: &str, origin: &str, base_dir: &Path) -> Result<Plant, ConfigErrors> {
-    let mut cx = Cx { text, origin, base_dir, errors: Vec::new(), profiles: HashMap::new() };
+    let mut cx = Cx { text, origin, base_dir, errors: Vec::new(), profiles: HashMap::new(), plain: false };
     let (doc, syntax) = DeTable::parse_recoverable(text);
     for error in &syntax {
         cx.toml_error(error, 0..0);
@@ -64,6 +64,8 @@ struct Cx<'a> {
     base_dir: &'a Path,
     errors: Vec<ConfigError>,
     profiles: HashMap<String, Arc<Profile>>,
+    /// Plain mode: metric names are topic levels (no `/`).
+    plain: bool,
 }
 
 impl Cx<'_> {
@@ -88,6 +90,17 @@ impl Cx<'_> {
     fn read<'i, T: Deserialize<'i>>(&mut self, value: &Spanned<DeValue<'i>>) -> Option<T> {
         let span = value.span();
         T::deserialize(ValueDeserializer::from(value.clone())).map_err(|e| self.toml_error(&e, span)).ok()
+    }
+
+    /// What a metric name may not hold: MQTT's wildcards, and in plain mode the topic
+    /// separator (there a name is a topic level; in Sparkplug it is inside the payload).
+    fn unfit_metric_name(&self, name: &str) -> Option<String> {
+        let refused: &[char] = if self.plain { &['/', '+', '#'] } else { &['+', '#'] };
+        (name.is_empty() || name.contains(refused)).then(|| {
+            let mode = if self.plain { "in plain mode a metric name is a topic level: " } else { "" };
+            let list: Vec<String> = refused.iter().map(char::to_string).collect();
+            format!("metric name {name:?}: {mode}it is not empty and has no {}", list.join(", "))
+        })
     }
 
     /// A path of the file, relative to its folder.
@@ -255,6 +268,7 @@ impl Sections {
     /// The plant, when every section resolved (the errors are in `cx`).
     fn resolve(self, cx: &mut Cx<'_>) -> Option<Plant> {
         let mode = self.mode(cx);
+        cx.plain = matches!(mode, Some(Mode::Plain(_)));
         let store = self.store.map_or_else(StoreConfig::default, |s| resolve_store(cx, &s));
         let mut ids = line::Ids::default();
         let mut lines = Vec::new();

@@ -191,8 +191,8 @@ fn raw_group(cx: &mut Cx<'_>, id: &str, unit: u8, every: Duration, range: &Spann
     });
     let every = r.every.as_ref().map_or(Some(every), |e| cx.period("every", e));
     for name in r.names.iter().chain(&r.name) {
-        if name.get_ref().is_empty() || name.get_ref().contains(['+', '#', '/']) {
-            cx.at(name.span(), format!("name {:?}: a metric name is not empty and has no /, + or #", name.get_ref()));
+        if let Some(problem) = cx.unfit_metric_name(name.get_ref()) {
+            cx.at(name.span(), problem);
         }
     }
     if cx.errors.len() > errors {
@@ -244,6 +244,11 @@ fn check_metric_names(cx: &mut Cx<'_>, id: &str, profile: Option<&Profile>, grou
     for (group, _, source) in groups {
         for cell in &group.cells {
             let span = source_span(profile, source, cell);
+            if matches!(source, Source::Points(_))
+                && let Some(problem) = cx.unfit_metric_name(&cell.name)
+            {
+                cx.at(span.clone(), format!("device {id:?}: {problem} (the profile's code)"));
+            }
             if let Some(first) = seen.get(cell.name.as_str()) {
                 let line = cx.line_of(first);
                 cx.at(
