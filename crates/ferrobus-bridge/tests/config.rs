@@ -296,7 +296,11 @@ const FILE_CASES: &[(&str, &str, &[&str])] = &[
          [[line.device.raw]]\ntable = \"coils\"\naddress = 0\nname = »\"door/left\"\n",
         &["in plain mode a metric name is a topic level: it is not empty and has no /, +, #"],
     ),
-    ("an unknown line key", "[[line]]\nname = \"a\"\nsimulated = true\n»speed = 9600\n", &["unknown field `speed`"]),
+    (
+        "an unknown line key, and its devices still checked",
+        "[[line]]\nname = \"a\"\nsimulated = true\n»speed = 9600\n[[line.device]]\nid = \"x\"\nunit = »0\n",
+        &["unknown field `speed`", "unit 0"],
+    ),
 ];
 
 /// Device cases, after `HEAD` and a good device: the text (`»` where each error must point)

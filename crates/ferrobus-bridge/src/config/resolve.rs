@@ -183,6 +183,8 @@ struct Sections {
     plain: Option<raw::Plain>,
     store: Option<raw::Store>,
     lines: Vec<(raw::Line, Vec<raw::Device>)>,
+    /// The devices of lines that could not be read: checked all the same.
+    orphans: Vec<raw::Device>,
     /// `[[line.device]]` entries written (read or not).
     devices_given: usize,
 }
@@ -259,8 +261,9 @@ impl Sections {
                 }
             }
             let line: Option<raw::Line> = cx.read(&Spanned::new(entry.span(), DeValue::Table(rest)));
-            if let Some(line) = line {
-                self.lines.push((line, devices));
+            match line {
+                Some(line) => self.lines.push((line, devices)),
+                None => self.orphans.extend(devices),
             }
         }
     }
@@ -276,6 +279,9 @@ impl Sections {
             if let Some(line) = line::resolve(cx, &line, &devices, &mut ids) {
                 lines.push(line);
             }
+        }
+        for orphan in &self.orphans {
+            device::resolve(cx, orphan);
         }
         if self.devices_given == 0 {
             let span = self.given.get("line").cloned().unwrap_or(0..0);
