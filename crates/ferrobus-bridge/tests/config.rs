@@ -389,6 +389,17 @@ const DEVICE_CASES: &[(&str, &str, &[&str])] = &[
             "has no +, #",
         ],
     ),
+    (
+        "bad counts and periods",
+        "unit = 1\nprofile = \"omron-3g3rx\"\ndeath_after = »0\npoints = [\"d001\"]\ndeadbands = { d001 = »-0.5 }\n\
+         [[line.device.poll]]\nevery = »\"0ms\"\npoints = [\"d002\"]\ndeadband = »-1\n",
+        &[
+            "death_after = 0: it is 1 or more polls",
+            "deadbands.d001: a deadband of -0.5",
+            "longer than zero",
+            "a deadband of -1",
+        ],
+    ),
     ("polls nothing", "id = »\"dev\"\nunit = 1\nprofile = \"omron-3g3rx\"\n", &["polls nothing"]),
     (
         "a poll with nothing",
