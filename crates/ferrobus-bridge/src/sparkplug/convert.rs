@@ -4,10 +4,10 @@
 //! A scaled point (scale ≠ 1 or offset ≠ 0) is published as its engineering value, a Double;
 //! a command's Double (or Float, or integer) is scaled back and rounded to the raw type. An
 //! unscaled point keeps its type: Int8/16/32 and UInt8/16/32 travel in `int_value`, Int64,
-//! UInt64 and DateTime in `long_value`, signed values as two's complement. UInt8/16/32 go in
-//! `int_value` as the specification says, or in `long_value` with [`UintEncoding::LongValue`]
-//! (Eclipse Tahu and Ignition read them there); on input both fields are accepted for every
-//! integer type.
+//! UInt64 and DateTime in `long_value`, signed values as two's complement of their own width
+//! (Int16 −5 is 65531). UInt8/16/32 go in `int_value` as the specification says, or in
+//! `long_value` with [`UintEncoding::LongValue`] (Eclipse Tahu and Ignition read them there);
+//! on input both fields are accepted for every integer type.
 
 use ferrobus_profile::{Point, Value, ValueType};
 
@@ -94,12 +94,14 @@ pub fn metric_value(point: &Point, raw: &Value, encoding: UintEncoding) -> Optio
     }
 }
 
-/// An integer of that datatype in its field: two's complement for the signed types.
+/// An integer of that datatype in its field, a signed one as two's complement of its own width
+/// (Int16 −5 is `int_value` 65531): pysparkplug reads only that, Eclipse Tahu truncates to the
+/// width and so reads it too, while a 32-bit sign extension (4294967291) fails in pysparkplug.
 fn integer_value(datatype: DataType, n: i128, encoding: UintEncoding) -> Option<MetricValue> {
     let in_long = encoding == UintEncoding::LongValue;
     Some(match datatype {
-        DataType::Int8 => MetricValue::Int(i32::from(i8::try_from(n).ok()?).cast_unsigned()),
-        DataType::Int16 => MetricValue::Int(i32::from(i16::try_from(n).ok()?).cast_unsigned()),
+        DataType::Int8 => MetricValue::Int(u32::from(i8::try_from(n).ok()?.cast_unsigned())),
+        DataType::Int16 => MetricValue::Int(u32::from(i16::try_from(n).ok()?.cast_unsigned())),
         DataType::Int32 => MetricValue::Int(i32::try_from(n).ok()?.cast_unsigned()),
         DataType::Int64 | DataType::DateTime => MetricValue::Long(i64::try_from(n).ok()?.cast_unsigned()),
         DataType::UInt8 | DataType::UInt16 | DataType::UInt32 => {
