@@ -699,6 +699,48 @@ fn a_record_survives_a_new_edge_of_the_same_plant_and_maps_once_the_device_is_bo
 }
 
 #[test]
+fn replay_all_births_a_device_not_born_since_a_restart_for_its_history_then_it_dies() {
+    let plant = sparkplug_plant();
+    let mut before = Edge::new(&plant);
+    let stored = records(poll_drive(&mut before, &plant, t(10), &[("F001", Value::Int(1234))]));
+    let mut after = Edge::new(&plant);
+    after.connected(t(100));
+    let mut kinds = Vec::new();
+    let mut dbirth = None;
+    for record in &stored {
+        for p in after.replay_all(record, t(101)).unwrap() {
+            kinds.push(kind(&p).to_string());
+            if kind(&p) == "DBIRTH" {
+                dbirth = Some(decode(&p));
+            } else {
+                assert!(decode(&p).metrics.iter().all(|m| m.is_historical == Some(true)));
+            }
+        }
+    }
+    assert_eq!(kinds[..2], ["DBIRTH", "DDATA"], "born once, then its history");
+    assert!(kinds[2..].iter().all(|k| k == "DDATA"), "{kinds:?}");
+    let dbirth = dbirth.unwrap();
+    assert!(dbirth.metrics.iter().all(|m| m.is_null == Some(true)), "nothing read in this run yet");
+    assert_eq!(after.replayed(t(102)).iter().map(kind).collect::<Vec<_>>(), ["DDEATH"]);
+    let back = publishes(poll_drive(&mut after, &plant, t(200), &[]));
+    assert_eq!(kind(&back[0]), "DBIRTH", "its first answer: born with live values");
+}
+
+#[test]
+fn replay_all_of_a_device_that_answers_before_the_replay_ends_keeps_it_born() {
+    let plant = sparkplug_plant();
+    let mut before = Edge::new(&plant);
+    let stored = records(poll_drive(&mut before, &plant, t(10), &[("F001", Value::Int(1234))]));
+    let mut after = Edge::new(&plant);
+    after.connected(t(100));
+    assert_eq!(after.replay_all(&stored[0], t(101)).unwrap().len(), 2);
+    let (g, _) = locate(&plant, DRIVE, "F001");
+    let out = publishes(after.sample(DRIVE, g, &answered(g, t(150), vec![Value::Int(6000)])));
+    assert_eq!(out.iter().map(kind).collect::<Vec<_>>(), ["DDATA"], "born already: its values as data");
+    assert!(after.replayed(t(160)).is_empty(), "it answers: no DDEATH");
+}
+
+#[test]
 fn a_record_of_a_device_or_metric_gone_from_the_plant_gives_none() {
     let plant = sparkplug_plant();
     let mut edge = Edge::new(&plant);
@@ -879,4 +921,54 @@ fn plain_offline_messages_are_stored_and_replayed_historical_unretained() {
     let sparkplug_record =
         records(Edge::new(&sparkplug_plant()).sample(METER, 0, &answered(0, t(1), vec![Value::Int(1), Value::Int(2)])));
     assert!(matches!(edge.replay(&sparkplug_record[0], t(12)), Err(EdgeError::Record(_))));
+}
+
+// ---------------------------------------------------------------------------------------------
+// Plants read by the config: the shipped demo and the plain example.
+// ---------------------------------------------------------------------------------------------
+
+#[test]
+fn the_demo_plant_births_both_drives_and_a_dcmd_of_60_hz_to_the_3g3rx_writes_raw_6000() {
+    let plant = Plant::demo("127.0.0.1:1883").unwrap();
+    let mut edge = Edge::new(&plant);
+    edge.connected(t(0));
+    let mut dbirths = HashMap::new();
+    for (l, line) in plant.lines.iter().enumerate() {
+        for (d, device) in line.devices.iter().enumerate() {
+            for (g, group) in device.groups.iter().enumerate() {
+                let raws = group.cells.iter().map(|c| c.point.default.clone()).collect();
+                for p in publishes(edge.sample(DeviceRef { line: l, device: d }, g, &answered(g, t(1), raws))) {
+                    if kind(&p) == "DBIRTH" {
+                        dbirths.insert(p.topic.rsplit('/').next().unwrap().to_string(), decode(&p));
+                    }
+                }
+            }
+        }
+    }
+    assert_eq!(dbirths.len(), 2, "{:?}", dbirths.keys());
+    let inverter = &dbirths["inverter"];
+    let f001 = metric(inverter, "F001");
+    assert_eq!(property(f001, "engUnit"), Some(&PropertyValueKind::String("Hz".into())));
+    let set = Metric { alias: f001.alias, value: Some(MetricValue::Double(60.0)), ..Metric::default() };
+    let (_, actions, errors) = edge.message("spBv1.0/ferrobus-demo/DCMD/demo-edge/inverter", &dcmd(vec![set]), t(2));
+    assert!(errors.is_empty(), "{errors:?}");
+    assert!(matches!(&actions[..], [Action::Write { raw: Value::Int(6000), .. }]), "{actions:?}");
+    let over = Metric { alias: f001.alias, value: Some(MetricValue::Double(400.01)), ..Metric::default() };
+    let (_, actions, errors) = edge.message("spBv1.0/ferrobus-demo/DCMD/demo-edge/inverter", &dcmd(vec![over]), t(3));
+    assert!(actions.is_empty() && errors.len() == 1, "{errors:?}");
+}
+
+#[test]
+fn the_plain_example_publishes_on_its_prefix() {
+    let text =
+        std::fs::read_to_string(concat!(env!("CARGO_MANIFEST_DIR"), "/../../examples/bridge/plain.toml")).unwrap();
+    let plant = Plant::parse(&text, "plain.toml", std::path::Path::new(".")).unwrap();
+    let mut edge = Edge::new(&plant);
+    assert_eq!(edge.subscriptions(), [("plant/hall-2/+/+/set".to_string(), 1)]);
+    edge.connected(t(0));
+    let device = &plant.lines[0].devices[0];
+    let raws = device.groups[0].cells.iter().map(|c| c.point.default.clone()).collect();
+    let out = publishes(edge.sample(DeviceRef { line: 0, device: 0 }, 0, &answered(0, t(1), raws)));
+    assert!(out.iter().any(|p| p.topic == "plant/hall-2/pump/status"));
+    assert!(out.iter().filter(|p| !p.topic.ends_with("/status")).all(|p| p.retain && json(p)["quality"] == "good"));
 }

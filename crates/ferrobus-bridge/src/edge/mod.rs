@@ -6,7 +6,7 @@
 //!   will() ─────────────▶ the Will of the next CONNECT (NDEATH with its bdSeq)
 //!   connected(now) ─────▶ NBIRTH, DBIRTHs          (or, with a primary host, after its STATE)
 //!   sample(device, ..) ─▶ DBIRTH | DDATA | DDEATH  (offline: Output::Store records)
-//!   replay(record, now) ▶ historical DDATA          (after the births, in the store's order)
+//!   replay_all(record) ─▶ historical DDATA          (after the births, in the store's order)
 //!   replayed(now) ──────▶ DDEATH of the devices born dead at the connection
 //!   message(topic, ..) ─▶ rebirths, Action::Write, Action::Reconnect, refusals
 //!   disconnected() ─────  the next CONNECT takes the next bdSeq
@@ -44,9 +44,11 @@
 //!   timestamps and the next seq. A device that is dead at the connection gets its DDEATH
 //!   when the runtime says the store is replayed ([`Edge::replayed`]), or at its next silent
 //!   poll, whichever comes first; so its history arrives while it is born, as the specification
-//!   wants DATA between BIRTH and DEATH. A record of a device that is not born now (gone from
-//!   the plant, or not yet answered since a restart) or whose metrics are all gone gives
-//!   `None`, counted in [`EdgeStats::unmapped`].
+//!   wants DATA between BIRTH and DEATH. A record of a device that is configured but not born
+//!   now (not answered since a restart of the bridge, or dead since the connection):
+//!   [`Edge::replay_all`] sends its DBIRTH first (values known, null for the rest) and its
+//!   DDEATH the same way; [`Edge::replay`] gives `None`. A record of a device or metrics gone
+//!   from the plant maps to nothing, counted in [`EdgeStats::unmapped`].
 //! - **Commands.** NCMD `Node Control/Rebirth` = true: NBIRTH and the DBIRTHs of the born
 //!   devices again, same bdSeq. DCMD: each metric (by alias, else by name) is converted to the
 //!   point's raw value and checked by the profile (access, range); a command with any refused
@@ -76,8 +78,9 @@ use plain::PlainEdge;
 use record::Record;
 use sparkplug::SparkplugEdge;
 
-/// A device of the plant: indexes into `Plant.lines[line].devices[device]`.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+/// A device of the plant: indexes into `Plant.lines[line].devices[device]` (ordered by line,
+/// then device).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, PartialOrd, Ord, Hash)]
 pub struct DeviceRef {
     /// The line's index.
     pub line: usize,
@@ -276,7 +279,8 @@ impl Edge {
     }
 
     /// A stored record as historical data (the next seq, the original timestamps); `None` when
-    /// it no longer maps to a born device's metrics (counted).
+    /// it no longer maps to a born device's metrics (counted). See [`Edge::replay_all`], which
+    /// also replays the records of a device not born now.
     ///
     /// # Errors
     /// [`EdgeError::Offline`] before the births (keep the record); [`EdgeError::Record`] when
@@ -284,8 +288,25 @@ impl Edge {
     pub fn replay(&mut self, record: &[u8], now: SystemTime) -> Result<Option<Publish>, EdgeError> {
         let record = Record::decode(record).map_err(EdgeError::Record)?;
         match &mut self.inner {
-            Inner::Sparkplug(s) => s.replay(record, now),
+            Inner::Sparkplug(s) => Ok(s.replay(record, now, false)?.pop()),
             Inner::Plain(p) => p.replay(record),
+        }
+    }
+
+    /// [`Edge::replay`], and for a record of a device that is configured but not born now (it
+    /// has not answered since a restart, or died after the connection): its DBIRTH first (the
+    /// values known, null for the rest), then the historical DDATA; its DDEATH comes with
+    /// [`Edge::replayed`] or its next silent poll, unless it answers first. Nothing is lost
+    /// for a device that is still in the plant. Empty when the device or all its metrics are
+    /// gone (counted).
+    ///
+    /// # Errors
+    /// As [`Edge::replay`].
+    pub fn replay_all(&mut self, record: &[u8], now: SystemTime) -> Result<Vec<Publish>, EdgeError> {
+        let record = Record::decode(record).map_err(EdgeError::Record)?;
+        match &mut self.inner {
+            Inner::Sparkplug(s) => s.replay(record, now, true),
+            Inner::Plain(p) => Ok(p.replay(record)?.into_iter().collect()),
         }
     }
 

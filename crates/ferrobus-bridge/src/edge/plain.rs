@@ -101,7 +101,7 @@ impl PlainEdge {
     }
 
     pub(crate) fn sample(&mut self, at: DeviceRef, group: usize, sample: &Sample) -> Vec<Output> {
-        let Some(i) = self.devices.iter().position(|d| d.device.at == at) else { return Vec::new() };
+        let Some(i) = self.devices.binary_search_by_key(&at, |d| d.device.at).ok() else { return Vec::new() };
         let Some(d) = self.devices.get_mut(i) else { return Vec::new() };
         let liveness = d.device.apply(group, sample);
         let count = d.device.groups.get(group).map_or(0, |g| g.cells.len());

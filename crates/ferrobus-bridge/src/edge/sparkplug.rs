@@ -265,7 +265,7 @@ impl SparkplugEdge {
     }
 
     fn index(&self, at: DeviceRef) -> Option<usize> {
-        self.devices.iter().position(|d| d.device.at == at)
+        self.devices.binary_search_by_key(&at, |d| d.device.at).ok()
     }
 
     pub(crate) fn sample(&mut self, at: DeviceRef, group: usize, sample: &Sample) -> Vec<Output> {
@@ -335,7 +335,10 @@ impl SparkplugEdge {
         Record::Sparkplug { device, payload: payload.encode() }.encode()
     }
 
-    pub(crate) fn replay(&mut self, record: Record, now: SystemTime) -> Result<Option<Publish>, EdgeError> {
+    /// A stored record as historical DDATA under the aliases of the current births. A device
+    /// not born now gives nothing, or with `birth` its DBIRTH first (the values known, null
+    /// for the rest; its DDEATH due after the replay, unless it answers meanwhile).
+    pub(crate) fn replay(&mut self, record: Record, now: SystemTime, birth: bool) -> Result<Vec<Publish>, EdgeError> {
         if !self.node_born {
             return Err(EdgeError::Offline);
         }
@@ -343,19 +346,28 @@ impl SparkplugEdge {
             return Err(EdgeError::Record("a plain-mode record, and the bridge speaks Sparkplug".to_string()));
         };
         let stored = Payload::decode(&payload).map_err(|e| EdgeError::Record(format!("device {device:?}: {e}")))?;
-        let Some(i) = self.devices.iter().position(|d| d.device.id == device && d.born) else {
+        let found = self.devices.iter().position(|d| d.device.id == device);
+        let Some((i, born)) = found.and_then(|i| self.devices.get(i).map(|d| (i, d.born))) else {
             self.stats.unmapped += 1;
-            return Ok(None);
+            return Ok(Vec::new());
         };
         let metrics: Vec<Metric> = stored.metrics.into_iter().filter_map(|m| self.historical(i, m)).collect();
-        if metrics.is_empty() {
+        if metrics.is_empty() || !(born || birth) {
             self.stats.unmapped += 1;
-            return Ok(None);
+            return Ok(Vec::new());
+        }
+        let mut out = Vec::new();
+        if !born {
+            if let Some(d) = self.devices.get_mut(i) {
+                d.death_due = !d.device.alive;
+            }
+            out.push(self.dbirth(i, now));
         }
         let seq = self.next_seq();
         let payload = Payload { timestamp: Some(millis(now)), metrics, seq: Some(seq), ..Payload::default() };
         self.stats.replayed += 1;
-        Ok(Some(self.publish(MessageType::DData, Some(&device), &payload)))
+        out.push(self.publish(MessageType::DData, Some(&device), &payload));
+        Ok(out)
     }
 
     /// A stored metric as historical data of device `i` under its alias of the current
