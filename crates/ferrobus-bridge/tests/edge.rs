@@ -622,6 +622,13 @@ fn births_wait_for_the_primary_host_online_and_its_offline_asks_for_a_reconnect(
     assert!(out.is_empty() && actions.is_empty(), "an older STATE is ignored");
     let (_, actions, _) = edge.message("spBv1.0/STATE/scada", &state(false, 200), t(40));
     assert_eq!(actions, [Action::Reconnect]);
+    let after = poll_drive(&mut edge, &plant, t(45), &[("F001", Value::Int(1))]);
+    assert!(
+        !after.is_empty() && after.iter().all(|o| matches!(o, Output::Store(_))),
+        "no data for a host that is gone"
+    );
+    let ndeath = edge.shutdown(t(46)).unwrap();
+    assert_eq!(kind(&ndeath), "NDEATH");
     let (_, _, errors) = edge.message("spBv1.0/STATE/scada", b"online", t(50));
     assert!(matches!(&errors[..], [EdgeError::Malformed { .. }]));
 }

@@ -95,12 +95,13 @@ impl Device {
         }
     }
 
-    /// Takes a poll of group `group`: the cells' latest readings and the device's liveness.
-    pub(crate) fn apply(&mut self, group: usize, sample: &Sample) -> Liveness {
+    /// Takes a poll of group `group`: the cells' latest readings and the device's liveness;
+    /// `None` (nothing changes) for a group the device does not have.
+    pub(crate) fn apply(&mut self, group: usize, sample: &Sample) -> Option<Liveness> {
         let time = sample.time;
+        let cells = self.cells.get_mut(group)?;
         let answered = match &sample.result {
             Ok(readings) => {
-                let Some(cells) = self.cells.get_mut(group) else { return self.silence() };
                 for reading in readings {
                     if let Some(cell) = cells.get_mut(reading.cell) {
                         cell.latest = match &reading.raw {
@@ -113,7 +114,7 @@ impl Device {
                 true
             }
             Err(failure) if is_answer(failure.kind) => {
-                for cell in self.cells.get_mut(group).into_iter().flatten() {
+                for cell in cells {
                     cell.latest = Seen::Failed(failure.diagnosis.clone());
                     cell.time = time;
                 }
@@ -122,13 +123,13 @@ impl Device {
             Err(_) => false,
         };
         if !answered {
-            return self.silence();
+            return Some(self.silence());
         }
         let back = !self.alive;
         self.alive = true;
         self.answered_once = true;
         self.silent = 0;
-        Liveness::Answered { back }
+        Some(Liveness::Answered { back })
     }
 
     fn silence(&mut self) -> Liveness {
@@ -201,4 +202,84 @@ pub(crate) fn devices_of(plant: &crate::config::Plant) -> Vec<Device> {
             spec.devices.iter().enumerate().map(move |(device, d)| Device::new(d, DeviceRef { line, device }))
         })
         .collect()
+}
+
+#[cfg(test)]
+mod tests {
+    use std::time::Duration;
+
+    use ferrobus::poll::{Failure, Layout, Reading, Table, Traffic};
+    use ferrobus_profile::Value;
+
+    use super::*;
+
+    fn device(death_after: u32) -> Device {
+        let group = Group::raw("g", 1, Table::Holding, 0, 1, Duration::from_secs(1), &Layout::default()).unwrap();
+        let spec = DeviceSpec {
+            id: "d".into(),
+            unit: 1,
+            profile: None,
+            groups: vec![group],
+            deadbands: vec![vec![0.0]],
+            death_after,
+        };
+        Device::new(&spec, DeviceRef { line: 0, device: 0 })
+    }
+
+    fn sample(result: Result<Vec<Reading>, Failure>) -> Sample {
+        Sample {
+            group: 0,
+            seq: 0,
+            time: SystemTime::UNIX_EPOCH,
+            due: Duration::ZERO,
+            started: Duration::ZERO,
+            response_time: Duration::ZERO,
+            overrun: false,
+            result,
+            traffic: Traffic::default(),
+        }
+    }
+
+    fn failure(kind: FailureKind) -> Sample {
+        sample(Err(Failure { kind, exception: None, diagnosis: format!("{kind:?}") }))
+    }
+
+    fn value(n: i128) -> Sample {
+        sample(Ok(vec![Reading { cell: 0, raw: Ok(Value::Int(n)), scaled: None, shown: String::new() }]))
+    }
+
+    #[test]
+    fn an_exception_or_a_reply_that_does_not_fit_is_an_answer_noise_and_silence_are_not() {
+        for kind in [FailureKind::Exception, FailureKind::BadReply] {
+            let mut d = device(1);
+            assert_eq!(d.apply(0, &failure(kind)), Some(Liveness::Answered { back: true }), "{kind:?}");
+            assert!(matches!(d.state(0, 0).map(|s| &s.latest), Some(Seen::Failed(_))));
+        }
+        for kind in
+            [FailureKind::Timeout, FailureKind::Crc, FailureKind::Garbage, FailureKind::Port, FailureKind::Backoff]
+        {
+            let mut d = device(1);
+            d.apply(0, &value(1));
+            assert_eq!(d.apply(0, &failure(kind)), Some(Liveness::Silent { died: true }), "{kind:?}");
+            assert_eq!(d.state(0, 0).map(|s| &s.latest), Some(&Seen::Value(Value::Int(1))), "the value is kept");
+        }
+    }
+
+    #[test]
+    fn a_device_that_never_answered_does_not_die_and_death_after_0_counts_as_1() {
+        let mut d = device(0);
+        assert_eq!(d.apply(0, &failure(FailureKind::Timeout)), Some(Liveness::Silent { died: false }));
+        assert_eq!(d.apply(0, &value(1)), Some(Liveness::Answered { back: true }));
+        assert_eq!(d.apply(0, &value(1)), Some(Liveness::Answered { back: false }));
+        assert_eq!(d.apply(0, &failure(FailureKind::Timeout)), Some(Liveness::Silent { died: true }));
+    }
+
+    #[test]
+    fn a_sample_of_a_group_the_device_does_not_have_changes_nothing() {
+        let mut d = device(1);
+        assert_eq!(d.apply(7, &value(1)), None);
+        assert_eq!(d.apply(7, &failure(FailureKind::Timeout)), None);
+        assert!(d.changes(7).is_empty());
+        assert!(!d.answered_once);
+    }
 }

@@ -103,7 +103,7 @@ impl PlainEdge {
     pub(crate) fn sample(&mut self, at: DeviceRef, group: usize, sample: &Sample) -> Vec<Output> {
         let Some(i) = self.devices.binary_search_by_key(&at, |d| d.device.at).ok() else { return Vec::new() };
         let Some(d) = self.devices.get_mut(i) else { return Vec::new() };
-        let liveness = d.device.apply(group, sample);
+        let Some(liveness) = d.device.apply(group, sample) else { return Vec::new() };
         let count = d.device.groups.get(group).map_or(0, |g| g.cells.len());
         let was_stale = d.stale.get(group).copied().unwrap_or(false);
         let answered = matches!(liveness, Liveness::Answered { .. });
@@ -135,8 +135,8 @@ impl PlainEdge {
         }
         let stale = stale.as_deref().map(|e| (e, sample.time));
         messages.extend(cells.into_iter().filter_map(|c| self.point_message(&d.device, group, c, stale)));
-        self.stats.data += messages.len() as u64;
         if self.connected {
+            self.stats.data += messages.len() as u64;
             return messages.into_iter().map(Output::Publish).collect();
         }
         // Offline: the points' messages are stored; statuses are sent again at the connection.

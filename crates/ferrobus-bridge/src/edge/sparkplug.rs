@@ -151,11 +151,7 @@ impl SparkplugEdge {
     }
 
     pub(crate) fn shutdown(&mut self, now: SystemTime) -> Publish {
-        self.node_born = false;
-        for d in &mut self.devices {
-            d.born = false;
-            d.death_due = false;
-        }
+        self.unborn();
         self.stats.node_deaths += 1;
         self.ndeath(Some(now))
     }
@@ -168,8 +164,14 @@ impl SparkplugEdge {
     pub(crate) fn disconnected(&mut self) {
         self.bd_seq = self.bd_seq.wrapping_add(1);
         self.connected = false;
-        self.node_born = false;
         self.host_online = self.config.primary_host.is_none();
+        self.unborn();
+    }
+
+    /// The session's births no longer hold: nothing is published (samples are stored) until
+    /// the next births.
+    fn unborn(&mut self) {
+        self.node_born = false;
         for d in &mut self.devices {
             d.born = false;
             d.death_due = false;
@@ -272,7 +274,7 @@ impl SparkplugEdge {
         let Some(i) = self.index(at) else { return Vec::new() };
         let online = self.node_born;
         let Some(d) = self.devices.get_mut(i) else { return Vec::new() };
-        let liveness = d.device.apply(group, sample);
+        let Some(liveness) = d.device.apply(group, sample) else { return Vec::new() };
         let born = d.born;
         match liveness {
             Liveness::Answered { .. } if online && !born => vec![Output::Publish(self.dbirth(i, sample.time))],
@@ -451,11 +453,12 @@ impl SparkplugEdge {
         if state.online {
             return (self.births_if_ready(now), Vec::new(), Vec::new());
         }
-        if self.node_born {
-            (Vec::new(), vec![Action::Reconnect], Vec::new())
-        } else {
-            (Vec::new(), Vec::new(), Vec::new())
+        if !self.node_born {
+            return (Vec::new(), Vec::new(), Vec::new());
         }
+        // The host is gone: no more data for it (samples are stored) until the next session.
+        self.unborn();
+        (Vec::new(), vec![Action::Reconnect], Vec::new())
     }
 
     fn node_command(
