@@ -163,6 +163,20 @@ pub enum EdgeError {
     Offline,
 }
 
+impl EdgeError {
+    /// A refusal; a reason that starts with the metric's name (the profile's words) is not
+    /// made to say it twice.
+    fn refused(command: &'static str, target: &str, metric: &str, reason: &str) -> EdgeError {
+        let reason = reason.strip_prefix(metric).and_then(|r| r.strip_prefix(": ")).unwrap_or(reason);
+        EdgeError::Refused {
+            command,
+            target: target.to_string(),
+            metric: metric.to_string(),
+            reason: reason.to_string(),
+        }
+    }
+}
+
 /// What the edge published and refused.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 pub struct EdgeStats {

@@ -204,7 +204,7 @@ impl PlainEdge {
             Err(reason) => {
                 self.stats.refused += 1;
                 let result = self.result(&device, &point, &Err(reason.clone()));
-                let error = EdgeError::Refused { command: "set", target: device, metric: point, reason };
+                let error = EdgeError::refused("set", &device, &point, &reason);
                 (vec![result], Vec::new(), vec![error])
             }
         }

@@ -483,7 +483,7 @@ impl SparkplugEdge {
                         (Some(REBIRTH), None) => format!("{REBIRTH} without a value"),
                         _ => format!("the edge node takes only {REBIRTH}"),
                     };
-                    errors.push(self.refuse("NCMD", &self.config.edge_node_id.clone(), &what, why));
+                    errors.push(self.refuse("NCMD", &self.config.edge_node_id.clone(), &what, &why));
                 }
             }
         }
@@ -498,10 +498,7 @@ impl SparkplugEdge {
 
     fn device_command(&mut self, topic: &str, device: &str, payload: &[u8]) -> (Vec<Action>, Vec<EdgeError>) {
         let Some(i) = self.devices.iter().position(|d| d.device.id == device) else {
-            return (
-                Vec::new(),
-                vec![self.refuse("DCMD", device, "the device", "no such device in this edge node".to_string())],
-            );
+            return (Vec::new(), vec![self.refuse("DCMD", device, "the device", "no such device in this edge node")]);
         };
         let payload = match Payload::decode(payload) {
             Ok(p) => p,
@@ -512,7 +509,7 @@ impl SparkplugEdge {
         for metric in &payload.metrics {
             match self.write_of(i, metric) {
                 Ok(action) => actions.push(action),
-                Err((what, why)) => errors.push(self.refuse("DCMD", device, &what, why)),
+                Err((what, why)) => errors.push(self.refuse("DCMD", device, &what, &why)),
             }
         }
         if errors.is_empty() {
@@ -551,9 +548,9 @@ impl SparkplugEdge {
         Ok(Action::Write { device: target.device.at, group, cell, raw, typed })
     }
 
-    fn refuse(&mut self, command: &'static str, target: &str, metric: &str, reason: String) -> EdgeError {
+    fn refuse(&mut self, command: &'static str, target: &str, metric: &str, reason: &str) -> EdgeError {
         self.stats.refused += 1;
-        EdgeError::Refused { command, target: target.to_string(), metric: metric.to_string(), reason }
+        EdgeError::refused(command, target, metric, reason)
     }
 
     fn malformed(&mut self, topic: &str, error: &prost::DecodeError) -> EdgeError {
