@@ -198,7 +198,7 @@ impl SparkplugEdge {
             let wanted = if all { d.device.answered_once } else { d.born };
             if wanted {
                 d.death_due = !d.device.alive;
-                out.push(self.dbirth(i, now));
+                out.extend(self.dbirth(i, now));
             }
         }
         out
@@ -226,12 +226,13 @@ impl SparkplugEdge {
 
     /// The DBIRTH of device `i`: every metric with name, alias, datatype, last value (or
     /// null), timestamp and properties. Marks it born and every cell published.
-    fn dbirth(&mut self, i: usize, now: SystemTime) -> Publish {
+    fn dbirth(&mut self, i: usize, now: SystemTime) -> Option<Publish> {
         let encoding = self.encoding();
+        if i >= self.devices.len() {
+            return None;
+        }
         let seq = self.next_seq();
-        let Some(d) = self.devices.get_mut(i) else {
-            return Publish { topic: String::new(), payload: Vec::new(), qos: 0, retain: false };
-        };
+        let d = self.devices.get_mut(i)?;
         let mut metrics = Vec::new();
         for (g, group) in d.device.groups.iter().enumerate() {
             for (c, cell) in group.cells.iter().enumerate() {
@@ -252,10 +253,13 @@ impl SparkplugEdge {
         let payload = Payload { timestamp: Some(millis(now)), metrics, seq: Some(seq), ..Payload::default() };
         let id = d.device.id.clone();
         self.stats.device_births += 1;
-        self.publish(MessageType::DBirth, Some(&id), &payload)
+        Some(self.publish(MessageType::DBirth, Some(&id), &payload))
     }
 
     fn ddeath(&mut self, i: usize, now: SystemTime) -> Option<Publish> {
+        if i >= self.devices.len() {
+            return None;
+        }
         let seq = self.next_seq();
         let d = self.devices.get_mut(i)?;
         d.born = false;
@@ -277,7 +281,9 @@ impl SparkplugEdge {
         let Some(liveness) = d.device.apply(group, sample) else { return Vec::new() };
         let born = d.born;
         match liveness {
-            Liveness::Answered { .. } if online && !born => vec![Output::Publish(self.dbirth(i, sample.time))],
+            Liveness::Answered { .. } if online && !born => {
+                self.dbirth(i, sample.time).map(Output::Publish).into_iter().collect()
+            }
             Liveness::Answered { .. } => {
                 d.death_due = false;
                 let changes = d.device.changes(group);
@@ -321,8 +327,8 @@ impl SparkplugEdge {
 
     fn ddata(&mut self, i: usize, g: usize, cells: &[usize], time: SystemTime) -> Option<Publish> {
         let metrics: Vec<Metric> = cells.iter().filter_map(|&c| self.data_metric(i, g, c, false)).collect();
-        let seq = self.next_seq();
         let id = self.devices.get(i)?.device.id.clone();
+        let seq = self.next_seq();
         let payload = Payload { timestamp: Some(millis(time)), metrics, seq: Some(seq), ..Payload::default() };
         self.stats.data += 1;
         Some(self.publish(MessageType::DData, Some(&id), &payload))
@@ -349,12 +355,13 @@ impl SparkplugEdge {
         };
         let stored = Payload::decode(&payload).map_err(|e| EdgeError::Record(format!("device {device:?}: {e}")))?;
         let found = self.devices.iter().position(|d| d.device.id == device);
-        let Some((i, born)) = found.and_then(|i| self.devices.get(i).map(|d| (i, d.born))) else {
+        let Some((i, born)) = found.and_then(|i| self.devices.get(i).map(|d| (i, d.born))).filter(|(_, b)| *b || birth)
+        else {
             self.stats.unmapped += 1;
             return Ok(Vec::new());
         };
         let metrics: Vec<Metric> = stored.metrics.into_iter().filter_map(|m| self.historical(i, m)).collect();
-        if metrics.is_empty() || !(born || birth) {
+        if metrics.is_empty() {
             self.stats.unmapped += 1;
             return Ok(Vec::new());
         }
@@ -363,7 +370,7 @@ impl SparkplugEdge {
             if let Some(d) = self.devices.get_mut(i) {
                 d.death_due = !d.device.alive;
             }
-            out.push(self.dbirth(i, now));
+            out.extend(self.dbirth(i, now));
         }
         let seq = self.next_seq();
         let payload = Payload { timestamp: Some(millis(now)), metrics, seq: Some(seq), ..Payload::default() };
