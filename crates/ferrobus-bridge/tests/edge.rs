@@ -850,6 +850,8 @@ fn plain_failures_are_bad_or_stale_once_with_the_error_and_the_device_goes_offli
     let mut edge = Edge::new(&plant);
     edge.connected(t(0));
     edge.sample(METER, 0, &answered(0, t(1), vec![Value::Int(20), Value::Int(7)]));
+    edge.disconnected();
+    assert_eq!(edge.connected(t(1)).len(), 2, "not retained: the statuses only, no values again");
     let out = publishes(edge.sample(METER, 0, &failed(0, t(2), FailureKind::Exception)));
     assert_eq!(out.len(), 2);
     let bad = json(&out[0]);
@@ -918,13 +920,30 @@ fn plain_offline_messages_are_stored_and_replayed_historical_unretained() {
     assert!(matches!(edge.replay(&stored[0], t(2)), Err(EdgeError::Offline)));
     let hello = edge.connected(t(10));
     let topics: Vec<&str> = hello.iter().map(|p| p.topic.as_str()).collect();
-    assert_eq!(topics, ["factory/line1/status", "factory/line1/meter/status"]);
+    assert_eq!(
+        topics,
+        [
+            "factory/line1/status",
+            "factory/line1/meter/status",
+            "factory/line1/meter/temperature",
+            "factory/line1/meter/0x0001"
+        ],
+        "retained: the last values again, live, so the broker does not keep those before the outage"
+    );
+    assert!(hello[2].retain && json(&hello[2]).get("historical").is_none());
     let p = edge.replay(&stored[0], t(11)).unwrap().unwrap();
     assert_eq!(p.topic, "factory/line1/meter/temperature");
     assert!(!p.retain, "history does not replace the retained last value");
     let body = json(&p);
     assert_eq!(body["historical"], true);
     assert_eq!(body["timestamp"], ferrobus::poll::iso8601_ms(t(1)));
+    for (bad, seen) in [(&b"[1]"[..], "not a JSON object"), (b"{", "not a JSON object")] {
+        let record = records_of_plain("factory/line1/meter/temperature", bad);
+        let error = edge.replay(&record, t(12)).unwrap_err().to_string();
+        assert!(error.contains(seen), "{error}");
+    }
+    let empty = edge.replay(&records_of_plain("a/b/c", b"{}"), t(12)).unwrap().unwrap();
+    assert_eq!(json(&empty), serde_json::json!({"historical": true}));
     let sparkplug_record =
         records(Edge::new(&sparkplug_plant()).sample(METER, 0, &answered(0, t(1), vec![Value::Int(1), Value::Int(2)])));
     assert!(matches!(edge.replay(&sparkplug_record[0], t(12)), Err(EdgeError::Record(_))));
@@ -978,4 +997,13 @@ fn the_plain_example_publishes_on_its_prefix() {
     let out = publishes(edge.sample(DeviceRef { line: 0, device: 0 }, 0, &answered(0, t(1), raws)));
     assert!(out.iter().any(|p| p.topic == "plant/hall-2/pump/status"));
     assert!(out.iter().filter(|p| !p.topic.ends_with("/status")).all(|p| p.retain && json(p)["quality"] == "good"));
+}
+
+/// A plain-mode store record as the edge writes them (see edge/record.rs), for damaged ones.
+fn records_of_plain(topic: &str, payload: &[u8]) -> Vec<u8> {
+    let mut out = b"FBe\x01P".to_vec();
+    out.extend_from_slice(&u16::try_from(topic.len()).unwrap().to_be_bytes());
+    out.extend_from_slice(topic.as_bytes());
+    out.extend_from_slice(payload);
+    out
 }

@@ -82,11 +82,23 @@ impl PlainEdge {
         self.will()
     }
 
+    /// The bridge's status, each known device's, and with `retain` the last value of every
+    /// point read (what the broker retains must not stay as it was before the outage; the
+    /// values taken meanwhile follow as historical, unretained, from the store).
     pub(crate) fn connected(&mut self) -> Vec<Publish> {
         self.connected = true;
         let mut out = vec![Self::status(self.status_topic(), "online")];
         for d in self.devices.iter().filter(|d| d.device.answered_once) {
             out.push(self.device_status(&d.device));
+            if !self.config.retain {
+                continue;
+            }
+            for (g, group) in d.device.groups.iter().enumerate() {
+                if d.stale.get(g).copied().unwrap_or(true) {
+                    continue;
+                }
+                out.extend((0..group.cells.len()).filter_map(|c| self.point_message(&d.device, g, c, None)));
+            }
         }
         out
     }
@@ -183,10 +195,12 @@ impl PlainEdge {
             return Err(EdgeError::Record("a Sparkplug record, and the bridge speaks plain JSON".to_string()));
         };
         let text = std::str::from_utf8(&payload).map_err(|e| EdgeError::Record(format!("{topic}: not UTF-8: {e}")))?;
-        let Some(open) = text.trim_end().strip_suffix('}') else {
-            return Err(EdgeError::Record(format!("{topic}: not a JSON object: {text:?}")));
-        };
-        let payload = format!("{open},\"historical\":true}}").into_bytes();
+        let fields: serde_json::Map<String, serde_json::Value> = serde_json::from_str(text)
+            .map_err(|e| EdgeError::Record(format!("{topic}: not a JSON object ({e}): {text:?}")))?;
+        // The message as it was, its fields in their order, then the flag.
+        let open = text.trim_end().strip_suffix('}').unwrap_or("{");
+        let comma = if fields.is_empty() { "" } else { "," };
+        let payload = format!("{open}{comma}\"historical\":true}}").into_bytes();
         self.stats.replayed += 1;
         Ok(Some(Publish { topic, payload, qos: self.config.qos, retain: false }))
     }
