@@ -7,7 +7,8 @@
 //!                                 value) when the device did not answer, both with an "error";
 //!                                 "historical":true when replayed from the store; retained if configured
 //!   PREFIX/DEVICE/status         "online" / "offline" (retained)
-//!   PREFIX/status                "online" at the connection; the Will "offline" (retained)
+//!   PREFIX/status                "online" at the connection (then the devices' status and, with
+//!                                 retain, every point's last value again); the Will "offline" (retained)
 //!   PREFIX/DEVICE/POINT/set      a write: "45", "45 Hz", "run", or {"value":45}
 //!   PREFIX/DEVICE/POINT/set/result  {"ok":true} or {"ok":false,"error":"..."}
 //! ```
