@@ -23,8 +23,14 @@ const METER: DeviceRef = DeviceRef { line: 1, device: 0 };
 // running coil) on one line, a meter with two raw registers on another.
 // ---------------------------------------------------------------------------------------------
 
+/// The 3G3RX profile, loaded once for all tests.
+fn rx() -> Arc<Profile> {
+    static RX: std::sync::OnceLock<Arc<Profile>> = std::sync::OnceLock::new();
+    Arc::clone(RX.get_or_init(|| Arc::new(Profile::load("omron-3g3rx").unwrap())))
+}
+
 fn drive() -> DeviceSpec {
-    let rx = Arc::new(Profile::load("omron-3g3rx").unwrap());
+    let rx = rx();
     let names: Vec<String> = ["F001", "d001", "running"].iter().map(|s| (*s).to_string()).collect();
     let groups = Group::points(&rx, 1, &names, &[], Duration::from_secs(1)).unwrap();
     let deadbands =
@@ -1006,4 +1012,78 @@ fn records_of_plain(topic: &str, payload: &[u8]) -> Vec<u8> {
     out.extend_from_slice(topic.as_bytes());
     out.extend_from_slice(payload);
     out
+}
+
+#[test]
+fn the_long_value_switch_puts_unsigned_metrics_in_long_value() {
+    let config = SparkplugConfig { uint_encoding: UintEncoding::LongValue, ..sparkplug_config(None) };
+    let plant = plant(Mode::Sparkplug(config));
+    let mut edge = Edge::new(&plant);
+    edge.connected(t(0));
+    let out = publishes(edge.sample(METER, 0, &answered(0, t(1), vec![Value::Int(215), Value::Int(7)])));
+    let dbirth = decode(&out[0]);
+    let temperature = metric(&dbirth, "temperature");
+    assert_eq!(temperature.datatype, Some(DataType::UInt16.number()));
+    assert_eq!(temperature.value, Some(MetricValue::Long(215)));
+}
+
+// ---------------------------------------------------------------------------------------------
+// Whatever comes from the broker or the store, nothing panics.
+// ---------------------------------------------------------------------------------------------
+
+mod hostile {
+    use proptest::prelude::*;
+
+    use super::*;
+
+    const TOPICS: [&str; 6] = [
+        "spBv1.0/plant/NCMD/edge1",
+        "spBv1.0/plant/DCMD/edge1/drive1",
+        "spBv1.0/plant/DCMD/edge1/meter",
+        "spBv1.0/STATE/scada",
+        "factory/line1/drive1/F001/set",
+        "factory/line1/meter/temperature/set",
+    ];
+
+    proptest! {
+        #![proptest_config(ProptestConfig::with_cases(128))]
+
+        #[test]
+        fn any_payload_on_any_topic_is_taken_or_refused(topic in 0..TOPICS.len(), payload in proptest::collection::vec(any::<u8>(), 0..64)) {
+            for mode in [Mode::Sparkplug(sparkplug_config(Some("scada"))), Mode::Plain(PlainConfig { prefix: "factory/line1".into(), retain: false, qos: 0 })] {
+                let plant = plant(mode);
+                let mut edge = Edge::new(&plant);
+                edge.connected(t(0));
+                let (_, actions, _) = edge.message(TOPICS[topic], &payload, t(1));
+                for action in actions {
+                    if let Action::Write { device, group, cell, raw, .. } = action {
+                        let point = &plant.lines[device.line].devices[device.device].groups[group].cells[cell].point;
+                        prop_assert!(point.check_write(&raw, "").is_ok(), "a write the profile refuses: {raw:?}");
+                    }
+                }
+            }
+        }
+
+        #[test]
+        fn any_bytes_as_a_record_are_replayed_or_refused(bytes in proptest::collection::vec(any::<u8>(), 0..64)) {
+            let plant = sparkplug_plant();
+            let (mut edge, _) = online_with_drive(&plant);
+            let _ = edge.replay_all(&bytes, t(1));
+            let mut prefixed = b"FBe\x01S\x00\x06drive1".to_vec();
+            prefixed.extend_from_slice(&bytes);
+            let _ = edge.replay_all(&prefixed, t(2));
+        }
+
+        #[test]
+        fn any_dcmd_metric_values_write_only_what_the_profile_allows(raw in any::<f64>(), alias in 0_u64..8) {
+            let plant = sparkplug_plant();
+            let (mut edge, _) = online_with_drive(&plant);
+            let m = Metric { alias: Some(alias), value: Some(MetricValue::Double(raw)), ..Metric::default() };
+            let (_, actions, errors) = edge.message("spBv1.0/plant/DCMD/edge1/drive1", &dcmd(vec![m]), t(1));
+            prop_assert_eq!(actions.len() + errors.len(), 1);
+            if let [Action::Write { raw: Value::Int(n), .. }] = actions.as_slice() {
+                prop_assert!((0..=40_000).contains(n));
+            }
+        }
+    }
 }
