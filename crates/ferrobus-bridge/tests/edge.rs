@@ -617,6 +617,7 @@ fn births_wait_for_the_primary_host_online_and_its_offline_asks_for_a_reconnect(
     let plant = plant(Mode::Sparkplug(sparkplug_config(Some("scada"))));
     let mut edge = Edge::new(&plant);
     assert!(edge.connected(t(0)).is_empty(), "held until the host's STATE");
+    assert!(!edge.is_online());
     let stored = records(poll_drive(&mut edge, &plant, t(10), &[("F001", Value::Int(6000))]));
     assert!(!stored.is_empty(), "no births yet: the data is stored");
     let state = |online, ts| HostState { online, timestamp: Some(ts) }.to_json();
@@ -624,10 +625,12 @@ fn births_wait_for_the_primary_host_online_and_its_offline_asks_for_a_reconnect(
     assert!(actions.is_empty());
     let kinds: Vec<&str> = out.iter().map(kind).collect();
     assert_eq!(kinds, ["NBIRTH", "DBIRTH"]);
+    assert!(edge.is_online());
     let (out, actions, _) = edge.message("spBv1.0/STATE/scada", &state(false, 50), t(30));
     assert!(out.is_empty() && actions.is_empty(), "an older STATE is ignored");
     let (_, actions, _) = edge.message("spBv1.0/STATE/scada", &state(false, 200), t(40));
     assert_eq!(actions, [Action::Reconnect]);
+    assert!(!edge.is_online());
     let after = poll_drive(&mut edge, &plant, t(45), &[("F001", Value::Int(1))]);
     assert!(
         !after.is_empty() && after.iter().all(|o| matches!(o, Output::Store(_))),

@@ -374,6 +374,15 @@ impl Edge {
         }
     }
 
+    /// Whether the births are out (plain mode: connected): samples are published live and
+    /// stored records may be replayed; otherwise samples become [`Output::Store`] records.
+    pub fn is_online(&self) -> bool {
+        match &self.inner {
+            Inner::Sparkplug(s) => s.is_online(),
+            Inner::Plain(p) => p.is_online(),
+        }
+    }
+
     /// What was published, stored and refused so far.
     pub fn stats(&self) -> EdgeStats {
         match &self.inner {

@@ -104,6 +104,10 @@ impl PlainEdge {
         out
     }
 
+    pub(crate) fn is_online(&self) -> bool {
+        self.connected
+    }
+
     pub(crate) fn disconnected(&mut self) {
         self.connected = false;
     }

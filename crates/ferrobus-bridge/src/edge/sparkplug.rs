@@ -99,6 +99,10 @@ impl SparkplugEdge {
         self.bd_seq
     }
 
+    pub(crate) fn is_online(&self) -> bool {
+        self.node_born
+    }
+
     pub(crate) fn set_bd_seq(&mut self, bd_seq: u8) {
         self.bd_seq = bd_seq;
     }
