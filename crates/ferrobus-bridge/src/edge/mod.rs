@@ -33,8 +33,9 @@
 //!   exception reply) publishes its group's metrics once as null.
 //! - **Deaths.** After `death_after` polls in a row without a reply: DDEATH. The next answered
 //!   poll: DBIRTH again, with the values known.
-//! - **Offline** (before [`Edge::connected`], after [`Edge::disconnected`], while waiting for
-//!   the primary host): the DDATA that would have been published become [`Output::Store`]
+//! - **Offline** (before [`Edge::connected`], after [`Edge::disconnected`] or
+//!   [`Edge::shutdown`], while waiting for the primary host or after its STATE offline; see
+//!   [`Edge::is_online`]): the DDATA that would have been published become [`Output::Store`]
 //!   records, by metric name and datatype (see `record.rs`), so they still mean the same after
 //!   a restart. Births and deaths are not stored: they are a session's, and the broker's Will
 //!   said the node died. At the connection the NBIRTH is followed by a DBIRTH for **every
