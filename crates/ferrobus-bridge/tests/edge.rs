@@ -899,9 +899,13 @@ fn plain_set_writes_through_the_profile_and_the_result_is_published() {
     }
     let ok = edge.written(DRIVE, g, c, Ok(()));
     assert_eq!(ok[0].topic, "factory/line1/drive1/F001/set/result");
-    assert_eq!(json(&ok[0]), serde_json::json!({"ok": true}));
+    assert_eq!(json(&ok[0]), serde_json::json!({"ok": true, "value": "45"}), "the results in the writes' order");
+    assert_eq!(json(&edge.written(DRIVE, g, c, Ok(()))[0])["value"], "45 Hz");
+    assert_eq!(json(&edge.written(DRIVE, g, c, Ok(()))[0])["value"], "45");
     let failed_write = edge.written(DRIVE, g, c, Err("timeout".into()));
-    assert_eq!(json(&failed_write[0]), serde_json::json!({"ok": false, "error": "timeout"}));
+    assert_eq!(json(&failed_write[0]), serde_json::json!({"ok": false, "value": "45.00", "error": "timeout"}));
+    let unasked = edge.written(DRIVE, g, c, Ok(()));
+    assert_eq!(json(&unasked[0]), serde_json::json!({"ok": true}), "a result nobody asked for: no value");
     for (topic, payload) in [
         ("factory/line1/drive1/F001/set", &b"500"[..]),
         ("factory/line1/drive1/F001/set", b"45 V"),

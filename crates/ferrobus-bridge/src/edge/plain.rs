@@ -10,9 +10,10 @@
 //!   PREFIX/status                "online" at the connection (then the devices' status and, with
 //!                                 retain, every point's last value again); the Will "offline" (retained)
 //!   PREFIX/DEVICE/POINT/set      a write: "45", "45 Hz", "run", or {"value":45}
-//!   PREFIX/DEVICE/POINT/set/result  {"ok":true} or {"ok":false,"error":"..."}
+//!   PREFIX/DEVICE/POINT/set/result  {"ok":true,"value":"45"} or {"ok":false,"value":"45","error":"..."}
 //! ```
 
+use std::collections::{HashMap, VecDeque};
 use std::time::SystemTime;
 
 use ferrobus::poll::{Cell, Sample, iso8601_ms};
@@ -39,8 +40,13 @@ pub(crate) struct PlainEdge {
     config: PlainConfig,
     devices: Vec<PlainDevice>,
     connected: bool,
+    /// The values of the writes asked and not yet [`PlainEdge::written`], by cell, oldest first.
+    pending: HashMap<(DeviceRef, usize, usize), VecDeque<String>>,
     pub(crate) stats: EdgeStats,
 }
+
+/// Writes of one cell remembered for their results; older ones are forgotten past this.
+const PENDING_PER_CELL: usize = 16;
 
 /// The quality of a point's message.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -59,7 +65,13 @@ impl PlainEdge {
                 PlainDevice { device, stale }
             })
             .collect();
-        PlainEdge { config: config.clone(), devices, connected: false, stats: EdgeStats::default() }
+        PlainEdge {
+            config: config.clone(),
+            devices,
+            connected: false,
+            pending: HashMap::new(),
+            stats: EdgeStats::default(),
+        }
     }
 
     fn status_topic(&self) -> String {
@@ -218,11 +230,19 @@ impl PlainEdge {
         match self.write_of(&device, &point, payload) {
             Ok(action) => {
                 self.stats.writes += 1;
+                if let Action::Write { device, group, cell, typed, .. } = &action {
+                    let queue = self.pending.entry((*device, *group, *cell)).or_default();
+                    if queue.len() == PENDING_PER_CELL {
+                        queue.pop_front();
+                    }
+                    queue.push_back(typed.clone());
+                }
                 (Vec::new(), vec![action], Vec::new())
             }
             Err(reason) => {
                 self.stats.refused += 1;
-                let result = self.result(&device, &point, &Err(reason.clone()));
+                let typed = set_text(payload).ok();
+                let result = self.result(&device, &point, typed.as_deref(), &Err(reason.clone()));
                 let error = EdgeError::refused("set", &device, &point, &reason);
                 (vec![result], Vec::new(), vec![error])
             }
@@ -245,11 +265,19 @@ impl PlainEdge {
         Ok(Action::Write { device: d.device.at, group: g, cell: c, raw, typed })
     }
 
-    fn result(&self, device: &str, point: &str, result: &Result<(), String>) -> Publish {
-        let payload = match result {
-            Ok(()) => "{\"ok\":true}".to_string(),
-            Err(e) => format!("{{\"ok\":false,\"error\":{}}}", json_string(e)),
-        };
+    /// `{"ok":true,"value":"45"}` or `{"ok":false,"value":"45","error":"..."}` on the point's
+    /// `.../set/result` (the value as the write gave it, when known).
+    fn result(&self, device: &str, point: &str, typed: Option<&str>, result: &Result<(), String>) -> Publish {
+        let mut payload = format!("{{\"ok\":{}", result.is_ok());
+        if let Some(typed) = typed {
+            payload.push_str(",\"value\":");
+            payload.push_str(&json_string(typed));
+        }
+        if let Err(e) = result {
+            payload.push_str(",\"error\":");
+            payload.push_str(&json_string(e));
+        }
+        payload.push('}');
         Publish {
             topic: format!("{}/{device}/{point}/set/result", self.config.prefix),
             payload: payload.into_bytes(),
@@ -265,9 +293,13 @@ impl PlainEdge {
         cell: usize,
         result: &Result<(), String>,
     ) -> Vec<Publish> {
+        let typed = self.pending.get_mut(&(at, group, cell)).and_then(VecDeque::pop_front);
+        if self.pending.get(&(at, group, cell)).is_some_and(VecDeque::is_empty) {
+            self.pending.remove(&(at, group, cell));
+        }
         let Some(d) = self.devices.iter().find(|d| d.device.at == at) else { return Vec::new() };
         let Some(cell) = d.device.cell(group, cell) else { return Vec::new() };
-        vec![self.result(&d.device.id, &cell.name, result)]
+        vec![self.result(&d.device.id, &cell.name, typed.as_deref(), result)]
     }
 }
 
