@@ -178,6 +178,9 @@ impl EdgeError {
     }
 }
 
+/// What a message from the broker gives: messages to publish, actions, refusals.
+type Reply = (Vec<Publish>, Vec<Action>, Vec<EdgeError>);
+
 /// What the edge published and refused.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 pub struct EdgeStats {

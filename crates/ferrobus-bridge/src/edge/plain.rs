@@ -22,7 +22,7 @@ use ferrobus_profile::Value;
 use super::deadband::Seen;
 use super::device::{Device, Liveness, devices_of};
 use super::record::Record;
-use super::{Action, DeviceRef, EdgeError, EdgeStats, Output, Publish};
+use super::{Action, DeviceRef, EdgeError, EdgeStats, Output, Publish, Reply};
 use crate::config::{PlainConfig, Plant};
 use crate::sparkplug::convert::is_scaled;
 
@@ -222,7 +222,7 @@ impl PlainEdge {
         Ok(Some(Publish { topic, payload, qos: self.config.qos, retain: false }))
     }
 
-    pub(crate) fn message(&mut self, topic: &str, payload: &[u8]) -> (Vec<Publish>, Vec<Action>, Vec<EdgeError>) {
+    pub(crate) fn message(&mut self, topic: &str, payload: &[u8]) -> Reply {
         let Some((device, point)) = self.set_target(topic) else {
             self.stats.ignored += 1;
             return (Vec::new(), Vec::new(), Vec::new());
