@@ -221,7 +221,7 @@ const FILE_CASES: &[(&str, &str, &[&str])] = &[
     (
         "unknown broker key",
         "[broker]\naddress = \"h\"\n»kep_alive = \"1s\"\n[sparkplug]\ngroup_id = \"g\"\nedge_node_id = \"e\"\n",
-        &["unknown field `kep_alive`"],
+        &["unknown key `kep_alive`"],
     ),
     (
         "everything missing",
@@ -276,7 +276,7 @@ const FILE_CASES: &[(&str, &str, &[&str])] = &[
     (
         "an unknown TLS key",
         "[broker]\naddress = \"h\"\n[broker.tls]\nca = \"ca.pem\"\n»cafile = \"x\"\n",
-        &["unknown field `cafile`, expected one of `ca`, `cert`, `key`, `server_name`"],
+        &["unknown key `cafile`, expected one of `ca`, `cert`, `key`, `server_name`"],
     ),
     (
         "TLS files that are not there",
@@ -288,7 +288,7 @@ const FILE_CASES: &[(&str, &str, &[&str])] = &[
         "[broker]\naddress = »\"h:0\"\n[sparkplug]\ngroup_id = »\"#\"\nedge_node_id = \"e\"\n[store]\ndisk = »\"lots\"\n\
          [[line]]\nname = \"a\"\nsimulated = true\n[[line.device]]\nid = \"x\"\nunit = »0\nprofile = \"omron-3g3rx\"\npoints = [\"d001\"]\n\
          [[line.device]]\nid = \"y\"\nunit = 2\nprofile = \"omron-3g3rx\"\npoints = [\"d001\"]\n[[line.device.poll]]\nevery = \"1s\"\n»pionts = []\n",
-        &["the port is not 1 to 65535", "contains '#'", "is not a size", "unit 0", "unknown field `pionts`"],
+        &["the port is not 1 to 65535", "contains '#'", "is not a size", "unit 0", "unknown key `pionts`"],
     ),
     (
         "a metric name with / in plain mode",
@@ -299,7 +299,7 @@ const FILE_CASES: &[(&str, &str, &[&str])] = &[
     (
         "an unknown line key, and its devices still checked",
         "[[line]]\nname = \"a\"\nsimulated = true\n»speed = 9600\n[[line.device]]\nid = \"x\"\nunit = »0\n",
-        &["unknown field `speed`", "unit 0"],
+        &["unknown key `speed`", "unit 0"],
     ),
 ];
 
@@ -308,7 +308,7 @@ const FILE_CASES: &[(&str, &str, &[&str])] = &[
 const DEVICE_CASES: &[(&str, &str, &[&str])] = &[
     ("type error", "unit = »\"one\"\n", &["invalid type: string \"one\", expected a whole number"]),
     ("a string for an array", "unit = 1\nprofile = \"omron-3g3rx\"\npoints = »\"d001\"\n", &["expected an array"]),
-    ("unknown device key", "unit = 1\nprofile = \"omron-3g3rx\"\n»point = [\"d001\"]\n", &["unknown field `point`"]),
+    ("unknown device key", "unit = 1\nprofile = \"omron-3g3rx\"\n»point = [\"d001\"]\n", &["unknown key `point`"]),
     ("unit 0", "unit = »0\nprofile = \"omron-3g3rx\"\npoints = [\"d001\"]\n", &["unit 0; a device's unit is 1 to 247"]),
     ("unit 248", "unit = »248\nprofile = \"omron-3g3rx\"\npoints = [\"d001\"]\n", &["unit 248"]),
     (
@@ -387,6 +387,17 @@ const DEVICE_CASES: &[(&str, &str, &[&str])] = &[
             "it is one of u16, i16",
             "it is ABCD, CDAB",
             "has no +, #",
+        ],
+    ),
+    (
+        "bad counts and periods",
+        "unit = 1\nprofile = \"omron-3g3rx\"\ndeath_after = »0\npoints = [\"d001\"]\ndeadbands = { d001 = »-0.5 }\n\
+         [[line.device.poll]]\nevery = »\"0ms\"\npoints = [\"d002\"]\ndeadband = »-1\n",
+        &[
+            "death_after = 0: it is 1 or more polls",
+            "deadbands.d001: a deadband of -0.5",
+            "longer than zero",
+            "a deadband of -1",
         ],
     ),
     ("polls nothing", "id = »\"dev\"\nunit = 1\nprofile = \"omron-3g3rx\"\n", &["polls nothing"]),

@@ -51,6 +51,7 @@ fn plain_words(message: &str) -> String {
         ("expected a sequence", "expected an array such as [\"a\", \"b\"]"),
         ("expected a map", "expected a table"),
         ("missing field", "missing key"),
+        ("unknown field", "unknown key"),
     ]
     .iter()
     .fold(message.to_string(), |m, (serde, ours)| m.replace(serde, ours))

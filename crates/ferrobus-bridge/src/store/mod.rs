@@ -38,8 +38,8 @@
 //! [`StoreStats::lost`]). Neither panics nor repeats.
 //!
 //! Writes go through a buffered writer flushed after each push, so a killed process loses
-//! nothing the store accepted. There is **no fsync** per record: a power loss may lose the
-//! last records (and read positions) the OS had not yet written.
+//! nothing the store put on disk. There is **no fsync** per record: a power loss may lose the
+//! last records the OS had not yet written, and deliver again records whose pops it had not.
 //!
 //! Records in memory are volatile: [`Store::close`] (or dropping the store) writes them to a
 //! new segment numbered below the head, in front of the disk's records, even past the `disk`
@@ -50,8 +50,8 @@
 //! A failed write (a full disk, a directory that became unwritable) is [`StoreError::Io`]
 //! naming the path; that record is not stored, the failed bytes are cut away, and the store
 //! stays usable: memory still takes records while the disk part is empty, and the next disk
-//! write starts a new segment. All IO is blocking and small (one `write` per push, one per
-//! pop); one directory belongs to one store at a time.
+//! write starts a new segment. All IO is blocking and small (a `write` per push to disk, a
+//! seek and a 16-byte write per pop from disk); one directory belongs to one store at a time.
 
 mod disk;
 mod segment;

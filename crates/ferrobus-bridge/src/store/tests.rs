@@ -473,3 +473,16 @@ fn damage_in_records_already_popped_does_not_matter() {
     assert_eq!(store.stats().truncated, 0);
     assert_eq!(drain(&mut store), [record(1, 4), record(2, 4)]);
 }
+
+#[test]
+fn dropping_the_store_saves_memory_like_close_and_it_moves_between_tasks() {
+    fn send<T: Send>(_: &T) {}
+    let dir = TempDir::new("drop");
+    let mut store = Store::open(config(100, &dir.0, 10_000)).unwrap();
+    send(&store);
+    store.push(record(1, 0)).unwrap();
+    store.push(record(2, 0)).unwrap();
+    drop(store);
+    let mut store = Store::open(config(100, &dir.0, 10_000)).unwrap();
+    assert_eq!(drain(&mut store), [record(1, 0), record(2, 0)]);
+}
