@@ -6,9 +6,12 @@
 //!
 //! Tahu does not read everything as the specification writes it, and these tests pin down
 //! exactly where (see `tahu_reads` below): UInt32 only from `long_value` (our default, the
-//! specification's, puts it in `int_value`), UInt8/16 only from `int_value`, Int8/16 as a
-//! 32-bit sign extension. Its encoder writes UInt32 in `long_value` and Int8/16 sign-extended
-//! to 32 bits; our decoder and `convert::to_raw` read both.
+//! specification's, puts it in `int_value`), UInt8/16 only from `int_value` (so
+//! `UintEncoding::LongValue` loses them), Int8/16 only as a 32-bit sign extension (our
+//! own-width two's complement, which pysparkplug requires, reads as a large positive number),
+//! no arrays, no data set cell of an `int_value` type. Its encoder writes UInt32 in
+//! `long_value` and Int8/16 sign-extended to 32 bits; our decoder and `convert::to_raw` read
+//! both.
 //!
 //! The peer: `node` on PATH and `npm ci` run in tests/peers/sparkplug/tahu (both done by
 //! `.ci/setup-peers.sh`). Under `CI=true` a missing peer fails the test; elsewhere the test
@@ -183,8 +186,9 @@ fn unsigned(encoding: UintEncoding, n: u32) -> MetricValue {
 /// Every datatype Tahu 1.0.3 knows (and one it does not), each with what Tahu reads of it.
 ///
 /// Where Tahu diverges (`right` is set), the reason is in its `getValue`: UInt8/16 from
-/// `int_value` only, UInt32 from `long_value` only, Int8/16/32 as `int_value` taken as a signed 32-bit number (our own-width two's
-/// complement of an Int8/16 stays positive), a DataSet's Int64 cell unsigned.
+/// `int_value` only, UInt32 from `long_value` only, Int8/16/32 as `int_value` taken as a
+/// signed 32-bit number (so our own-width two's complement of an Int8/16 stays positive), a
+/// data set's Int64 cell as unsigned, arrays not at all.
 #[allow(clippy::too_many_lines)]
 fn tahu_reads(encoding: UintEncoding) -> Vec<Born> {
     let big_u64 = (1u64 << 53) + 1;
