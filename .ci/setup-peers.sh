@@ -179,6 +179,25 @@ else
     missing tokio-modbus-peer "cargo not found"
 fi
 
+# ---- Eclipse Tahu's JavaScript codec (tests/peers/sparkplug/tahu) ------------
+# npm sparkplug-payload 1.0.3 (EPL-2.0), pinned by its package-lock.json: the third Sparkplug
+# decoder of crates/ferrobus-bridge/tests/tahu.rs. node and npm come from apt when missing.
+TAHU_DIR="$PEERS_SRC/sparkplug/tahu"
+if ! have node || ! have npm; then
+    log "apt-get install nodejs npm"
+    apt_install nodejs npm || true
+fi
+if ! have node || ! have npm; then
+    missing nodejs "node or npm not found and could not be installed: no Tahu codec"
+else
+    log "npm ci in tests/peers/sparkplug/tahu"
+    if ! (cd "$TAHU_DIR" && npm ci --no-audit --no-fund --loglevel=error >/dev/null); then
+        missing sparkplug-payload "npm ci in tests/peers/sparkplug/tahu failed"
+    elif ! (cd "$TAHU_DIR" && node -e 'require("sparkplug-payload")'); then
+        missing sparkplug-payload "sparkplug-payload does not load in node $(node --version)"
+    fi
+fi
+
 # ---- check and summarise -----------------------------------------------------
 for bin in "$OUT/libmodbus_server" "$OUT/libmodbus_client" "$OUT/tokio-modbus-peer/release/tokio-modbus-peer"; do
     [ -x "$bin" ] || missing "$(basename "$bin")" "$bin was not built"
@@ -206,6 +225,9 @@ echo "peers: libmodbus ${v_libmodbus}, pymodbus ${v_pymodbus} (python ${v_python
 v_tshark="$(tshark --version 2>/dev/null || true)"
 v_tshark="${v_tshark%%$'\n'*}"
 echo "peers: ${v_tshark:-tshark missing}"
+
+v_tahu="$(cd "$TAHU_DIR" 2>/dev/null && node -p 'require("sparkplug-payload/package.json").version' 2>/dev/null || echo missing)"
+echo "peers: sparkplug-payload ${v_tahu} (Eclipse Tahu JS; node $(node --version 2>/dev/null || echo missing), npm $(npm --version 2>/dev/null || echo missing))"
 
 if [ "${#MISSING[@]}" -gt 0 ]; then
     log "WARNING: incomplete setup, missing: ${MISSING[*]}"
