@@ -101,7 +101,8 @@ pub struct SparkplugConfig {
     pub edge_node_id: String,
     /// The primary host application whose STATE gates the births, if any.
     pub primary_host: Option<String>,
-    /// Where unsigned integers go in a metric (`uint_in_long_value` in the file).
+    /// How integers are laid out in a metric: the specification's way or Tahu's and Ignition's
+    /// (`uint_in_long_value` in the file).
     pub uint_encoding: UintEncoding,
 }
 

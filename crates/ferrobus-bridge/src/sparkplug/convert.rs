@@ -4,9 +4,11 @@
 //! A scaled point (scale ≠ 1 or offset ≠ 0) is published as its engineering value, a Double;
 //! a command's Double (or Float, or integer) is scaled back and rounded to the raw type. An
 //! unscaled point keeps its type: Int8/16/32 and UInt8/16/32 travel in `int_value`, Int64,
-//! UInt64 and DateTime in `long_value`, signed values as two's complement of their own width
-//! (Int16 −5 is 65531). UInt8/16/32 go in `int_value` as the specification says, or in
-//! `long_value` with [`UintEncoding::LongValue`] (Eclipse Tahu and Ignition read them there);
+//! UInt64 and DateTime in `long_value`. By default ([`UintEncoding::Spec`]) that is the
+//! specification's layout with signed values as two's complement of their own width (Int16 −5
+//! is 65531, the only form pysparkplug reads); [`UintEncoding::LongValue`] is Eclipse Tahu's
+//! and Ignition's convention instead: UInt32 in `long_value`, Int8/16 sign-extended to 32 bits
+//! (Int16 −5 is 4294967291), which is what Tahu's codecs write and read;
 //! on input both fields are accepted for every integer type.
 
 use ferrobus_profile::{Point, Value, ValueType};
@@ -16,13 +18,16 @@ use super::payload::{DataType, MetricValue, PropertySet, PropertyValue, Property
 /// The property key of a metric's engineering unit (Eclipse Tahu's and Ignition's `engUnit`).
 pub const ENG_UNIT: &str = "engUnit";
 
-/// Where UInt8, UInt16 and UInt32 values are written.
+/// How the integer types are laid out in a metric: the specification's way, or Eclipse Tahu's
+/// and Ignition's (`uint_in_long_value` in plant.toml).
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash)]
 pub enum UintEncoding {
-    /// As the specification says: UInt8/16/32 in `int_value`, UInt64 in `long_value`.
+    /// As the specification says: UInt8/16/32 in `int_value`, UInt64 in `long_value`; Int8/16
+    /// as two's complement of their own width (pysparkplug reads only that).
     #[default]
     Spec,
-    /// UInt8/16/32 in `long_value` (beside UInt64), as Eclipse Tahu and Ignition read them.
+    /// As Eclipse Tahu and Ignition write and read them: UInt32 in `long_value` (UInt8/16 stay
+    /// in `int_value`, where Tahu reads them), Int8/16 sign-extended to 32 bits.
     LongValue,
 }
 
@@ -94,19 +99,28 @@ pub fn metric_value(point: &Point, raw: &Value, encoding: UintEncoding) -> Optio
     }
 }
 
-/// An integer of that datatype in its field, a signed one as two's complement of its own width
-/// (Int16 −5 is `int_value` 65531): pysparkplug reads only that, Eclipse Tahu truncates to the
-/// width and so reads it too, while a 32-bit sign extension (4294967291) fails in pysparkplug.
+/// An integer of that datatype in its field, as `encoding` lays it out: a signed Int8/16 as
+/// two's complement of its own width (Int16 −5 is `int_value` 65531: pysparkplug reads only
+/// that, a 32-bit sign extension fails there) or, in Tahu's convention, sign-extended to 32 bits
+/// (4294967291: Tahu reads only that, our own width shows there as a large positive number);
+/// UInt32 in `int_value` or, in Tahu's convention, in `long_value`.
 fn integer_value(datatype: DataType, n: i128, encoding: UintEncoding) -> Option<MetricValue> {
-    let in_long = encoding == UintEncoding::LongValue;
+    let tahu = encoding == UintEncoding::LongValue;
+    let small_signed = |n: i32, own_width: u32| if tahu { n.cast_unsigned() } else { own_width };
     Some(match datatype {
-        DataType::Int8 => MetricValue::Int(u32::from(i8::try_from(n).ok()?.cast_unsigned())),
-        DataType::Int16 => MetricValue::Int(u32::from(i16::try_from(n).ok()?.cast_unsigned())),
+        DataType::Int8 => {
+            let n = i8::try_from(n).ok()?;
+            MetricValue::Int(small_signed(i32::from(n), u32::from(n.cast_unsigned())))
+        }
+        DataType::Int16 => {
+            let n = i16::try_from(n).ok()?;
+            MetricValue::Int(small_signed(i32::from(n), u32::from(n.cast_unsigned())))
+        }
         DataType::Int32 => MetricValue::Int(i32::try_from(n).ok()?.cast_unsigned()),
         DataType::Int64 | DataType::DateTime => MetricValue::Long(i64::try_from(n).ok()?.cast_unsigned()),
         DataType::UInt8 | DataType::UInt16 | DataType::UInt32 => {
             let v = u32::try_from(n).ok().filter(|v| *v <= unsigned_max(datatype))?;
-            if in_long { MetricValue::Long(u64::from(v)) } else { MetricValue::Int(v) }
+            if tahu && datatype == DataType::UInt32 { MetricValue::Long(u64::from(v)) } else { MetricValue::Int(v) }
         }
         DataType::UInt64 => MetricValue::Long(u64::try_from(n).ok()?),
         _ => return None,
@@ -348,12 +362,13 @@ mod tests {
     }
 
     #[test]
-    fn long_value_carries_the_unsigned_types_when_asked() {
-        let long = UintEncoding::LongValue;
-        let value = |ty, n| metric_value(&plain(ty), &Value::Int(n), long);
-        assert_eq!(value(ValueType::U16, 5000), Some(MetricValue::Long(5000)));
+    fn tahus_convention_puts_uint32_in_long_value_and_sign_extends_int8_16() {
+        let tahu = UintEncoding::LongValue;
+        let value = |ty, n| metric_value(&plain(ty), &Value::Int(n), tahu);
+        assert_eq!(value(ValueType::U16, 5000), Some(MetricValue::Int(5000)), "UInt16 stays in int_value");
         assert_eq!(value(ValueType::U32, 19200), Some(MetricValue::Long(19200)));
-        assert_eq!(value(ValueType::I16, -5), Some(MetricValue::Int(65531)), "signed types keep int_value");
+        assert_eq!(value(ValueType::I16, -5), Some(MetricValue::Int(u32::MAX - 4)), "32-bit sign extension");
+        assert_eq!(value(ValueType::I16, 300), Some(MetricValue::Int(300)));
         assert_eq!(value(ValueType::I32, 7), Some(MetricValue::Int(7)));
     }
 

@@ -14,17 +14,17 @@
 //! - [`convert`]: a point's datatype, its raw values as metric values, and a command's metric
 //!   value back to a raw value.
 //!
-//! **The UInt divergence.** The specification carries UInt8, UInt16 and UInt32 in the
-//! payload's `int_value` (protobuf uint32) and we do by default ([`convert::UintEncoding::Spec`]);
-//! Eclipse Tahu and Ignition have long written UInt32 in `long_value`, and Tahu's JavaScript
-//! codec (1.0.3) reads it only there, showing ours as null. [`convert::UintEncoding::LongValue`]
-//! (the plant's `uint_encoding`) writes UInt8/16/32 there; commands are accepted in either field
-//! whatever the switch says.
+//! **The integer divergence.** The specification carries UInt8, UInt16 and UInt32 in the
+//! payload's `int_value` (protobuf uint32) and we do by default ([`convert::UintEncoding::Spec`]),
+//! with a signed Int8/16 as two's complement of its own width (Int16 −5 is 65531), the only form
+//! pysparkplug reads. Eclipse Tahu and Ignition have long written UInt32 in `long_value` and
+//! Int8/16 sign-extended to 32 bits, and Tahu's JavaScript codec (1.0.3) reads only that: ours
+//! shows there as a null UInt32 and a large positive Int16 (`tests/tahu.rs` pins it down).
+//! [`convert::UintEncoding::LongValue`] (the plant's `uint_in_long_value`) writes Tahu's way;
+//! commands are accepted in every one of these forms whatever the switch says.
 //!
-//! Two conventions the specification leaves open: a signed value is written as two's
-//! complement of its own width (Int16 −5 is `int_value` 65531, which pysparkplug and Tahu both
-//! read; a 32-bit sign extension pysparkplug refuses), and a metric's engineering unit is the
-//! String property `engUnit` ([`convert::ENG_UNIT`], Tahu's and Ignition's key).
+//! A metric's engineering unit is the String property `engUnit` ([`convert::ENG_UNIT`],
+//! Tahu's and Ignition's key), a convention the specification leaves open.
 
 pub mod convert;
 pub mod payload;
