@@ -1041,7 +1041,7 @@ fn records_of_plain(topic: &str, payload: &[u8]) -> Vec<u8> {
 }
 
 #[test]
-fn the_long_value_switch_puts_unsigned_metrics_in_long_value() {
+fn the_long_value_switch_keeps_a_uint16_in_int_value_as_tahu_reads_it() {
     let config = SparkplugConfig { uint_encoding: UintEncoding::LongValue, ..sparkplug_config(None) };
     let plant = plant(Mode::Sparkplug(config));
     let mut edge = Edge::new(&plant);
@@ -1050,7 +1050,7 @@ fn the_long_value_switch_puts_unsigned_metrics_in_long_value() {
     let dbirth = decode(&out[0]);
     let temperature = metric(&dbirth, "temperature");
     assert_eq!(temperature.datatype, Some(DataType::UInt16.number()));
-    assert_eq!(temperature.value, Some(MetricValue::Long(215)));
+    assert_eq!(temperature.value, Some(MetricValue::Int(215)), "only UInt32 moves to long_value");
 }
 
 // ---------------------------------------------------------------------------------------------
