@@ -14,8 +14,8 @@ instant r began at c = k × period, k the largest count <= r / period with k = v
 End-to-end latency = r - c: the wait for the next poll (the value is read once per second; it
 changes every 1.1 s, so every change is read, at a phase that sweeps the cycle) plus the read
 on the line plus the bridge, the broker and the subscriber's receive. The DDATA metric's own
-timestamp (the bridge's instant of the sample, ms) splits it: sampled - began is the poll's
-wait and the line, received - sampled the bridge and MQTT.
+timestamp (else the payload's: the bridge's instant of the sample, ms) splits it: sampled -
+began is the poll's wait and the line, received - sampled the bridge and MQTT.
 
 Decoding: pysparkplug (the venv's), DDATA with the names of the device's DBIRTH.
 """
@@ -104,8 +104,10 @@ def sparkplug(run: dict) -> dict:
                     anomalies += 1
                     continue
                 latency.append((t - began) / 1e6)
-                if metric.timestamp:
-                    sampled = metric.timestamp * 1_000_000
+                # The sample's instant: the metric's timestamp, else the payload's.
+                stamp = metric.timestamp or payload.timestamp
+                if stamp:
+                    sampled = stamp * 1_000_000
                     wait.append((sampled - began) / 1e6)
                     after.append((t - sampled) / 1e6)
                 if device in last_value:
