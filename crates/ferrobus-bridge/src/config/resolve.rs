@@ -166,13 +166,15 @@ impl Cx<'_> {
 /// The top-level sections, found and read.
 #[derive(Default)]
 struct Sections {
-    broker: Option<(Range<usize>, raw::Broker)>,
-    sparkplug: Option<(Range<usize>, raw::Sparkplug)>,
-    plain: Option<(Range<usize>, raw::Plain)>,
+    /// The top-level keys written, with their spans (read or not).
+    given: HashMap<&'static str, Range<usize>>,
+    broker: Option<raw::Broker>,
+    sparkplug: Option<raw::Sparkplug>,
+    plain: Option<raw::Plain>,
     store: Option<raw::Store>,
     lines: Vec<(raw::Line, Vec<raw::Device>)>,
-    line_spans: Vec<Range<usize>>,
-    line_given: bool,
+    /// `[[line.device]]` entries written (read or not).
+    devices_given: usize,
 }
 
 impl Sections {
@@ -181,15 +183,16 @@ impl Sections {
         let mut s = Sections::default();
         for (key, value) in doc {
             let span = key.span();
-            match key.get_ref().as_ref() {
-                "broker" => s.broker = cx.read(value).map(|b| (span, b)),
-                "sparkplug" => s.sparkplug = cx.read(value).map(|b| (span, b)),
-                "plain" => s.plain = cx.read(value).map(|b| (span, b)),
+            let name = key.get_ref().as_ref();
+            if let Some(known) = ["broker", "sparkplug", "plain", "store", "line"].into_iter().find(|k| *k == name) {
+                s.given.insert(known, span.clone());
+            }
+            match name {
+                "broker" => s.broker = cx.read(value),
+                "sparkplug" => s.sparkplug = cx.read(value),
+                "plain" => s.plain = cx.read(value),
                 "store" => s.store = cx.read(value),
-                "line" => {
-                    s.line_given = true;
-                    s.read_lines(cx, value);
-                }
+                "line" => s.read_lines(cx, value),
                 other => cx.at(
                     span,
                     format!(
@@ -199,6 +202,29 @@ impl Sections {
             }
         }
         s
+    }
+
+    /// Exactly one of `[sparkplug]` and `[plain]`.
+    fn mode(&self, cx: &mut Cx<'_>) -> Option<Mode> {
+        match (self.given.get("sparkplug"), self.given.get("plain")) {
+            (Some(s), Some(p)) => {
+                let (second, first) = if s.start > p.start { (s, "[plain]") } else { (p, "[sparkplug]") };
+                cx.at(
+                    second.clone(),
+                    format!("both [sparkplug] and [plain]; a bridge publishes one way ({first} came first)"),
+                );
+                None
+            }
+            (None, None) => {
+                cx.at(0..0, "no [sparkplug] or [plain] section; give one (group_id and edge_node_id, or prefix)");
+                None
+            }
+            _ => match (&self.sparkplug, &self.plain) {
+                (Some(s), _) => resolve_sparkplug(cx, s).map(Mode::Sparkplug),
+                (_, Some(p)) => resolve_plain(cx, p).map(Mode::Plain),
+                _ => None,
+            },
+        }
     }
 
     /// `[[line]]` entries, each with its `[[line.device]]` entries read one by one.
@@ -216,6 +242,7 @@ impl Sections {
             let mut devices = Vec::new();
             for (key, value) in table {
                 if key.get_ref() == "device" {
+                    self.devices_given += value.get_ref().as_array().map_or(1, |a| a.len());
                     devices = read_devices(cx, value);
                 } else {
                     rest.insert(key.clone(), value.clone());
@@ -223,7 +250,6 @@ impl Sections {
             }
             let line: Option<raw::Line> = cx.read(&Spanned::new(entry.span(), DeValue::Table(rest)));
             if let Some(line) = line {
-                self.line_spans.push(entry.span());
                 self.lines.push((line, devices));
             }
         }
@@ -231,7 +257,7 @@ impl Sections {
 
     /// The plant, when every section resolved (the errors are in `cx`).
     fn resolve(self, cx: &mut Cx<'_>) -> Option<Plant> {
-        let mode = resolve_mode(cx, self.sparkplug, self.plain);
+        let mode = self.mode(cx);
         let store = self.store.map_or_else(StoreConfig::default, |s| resolve_store(cx, &s));
         let mut ids = Ids::default();
         let mut lines = Vec::new();
@@ -240,21 +266,15 @@ impl Sections {
                 lines.push(line);
             }
         }
-        if lines.iter().all(|l| l.devices.is_empty()) && !self.line_given {
-            cx.at(0..0, "no devices: add a [[line]] with name and a connection, and a [[line.device]] under it");
-        } else if lines.iter().all(|l| l.devices.is_empty()) && cx.errors.is_empty() {
-            let span = self.line_spans.first().cloned().unwrap_or(0..0);
-            cx.at(span, "no devices: add a [[line.device]] (id, unit, profile, points) under a [[line]]");
+        if self.devices_given == 0 {
+            let span = self.given.get("line").cloned().unwrap_or(0..0);
+            cx.at(span, "no devices: add a [[line]] (name and a connection) with a [[line.device]] under it");
         }
-        let Some((_, broker)) = self.broker else {
-            if !cx.errors.iter().any(|e| e.message.contains("[broker]")) {
-                cx.at(0..0, "no [broker] section; the bridge needs one with address = \"host:port\"");
-            }
-            return None;
-        };
-        let mode = mode?;
-        let broker = resolve_broker(cx, &broker, &mode)?;
-        Some(Plant { origin: cx.origin.to_string(), broker, mode, store, lines })
+        if !self.given.contains_key("broker") {
+            cx.at(0..0, "no [broker] section; the bridge needs one with address = \"host:port\"");
+        }
+        let broker = self.broker.and_then(|b| resolve_broker(cx, &b, mode.as_ref()));
+        Some(Plant { origin: cx.origin.to_string(), broker: broker?, mode: mode?, store, lines })
     }
 }
 
@@ -265,27 +285,6 @@ fn read_devices(cx: &mut Cx<'_>, value: &Spanned<DeValue<'_>>) -> Vec<raw::Devic
         return Vec::new();
     };
     entries.iter().filter_map(|entry| cx.read(entry)).collect()
-}
-
-/// Exactly one of `[sparkplug]` and `[plain]`.
-fn resolve_mode(
-    cx: &mut Cx<'_>,
-    sparkplug: Option<(Range<usize>, raw::Sparkplug)>,
-    plain: Option<(Range<usize>, raw::Plain)>,
-) -> Option<Mode> {
-    match (sparkplug, plain) {
-        (Some((s, _)), Some((p, _))) => {
-            let (second, other) = if s.start > p.start { (s, "[plain]") } else { (p, "[sparkplug]") };
-            cx.at(second, format!("both [sparkplug] and [plain]; a bridge publishes one way, and {other} came first"));
-            None
-        }
-        (Some((_, s)), None) => resolve_sparkplug(cx, &s).map(Mode::Sparkplug),
-        (None, Some((_, p))) => resolve_plain(cx, &p).map(Mode::Plain),
-        (None, None) => {
-            cx.at(0..0, "no [sparkplug] or [plain] section; give one (group_id and edge_node_id, or prefix)");
-            None
-        }
-    }
 }
 
 /// A Sparkplug id key: no `/`, `+` or `#`, not empty.
@@ -362,7 +361,8 @@ fn resolve_store(cx: &mut Cx<'_>, s: &raw::Store) -> StoreConfig {
     config
 }
 
-fn resolve_broker(cx: &mut Cx<'_>, b: &raw::Broker, mode: &Mode) -> Option<Broker> {
+/// The broker; `mode` (when it resolved) names the default client id.
+fn resolve_broker(cx: &mut Cx<'_>, b: &raw::Broker, mode: Option<&Mode>) -> Option<Broker> {
     let errors = cx.errors.len();
     let tls = b.tls.as_ref().map(|t| resolve_tls(cx, t));
     let default_port = if tls.is_some() { 8883 } else { 1883 };
@@ -375,7 +375,7 @@ fn resolve_broker(cx: &mut Cx<'_>, b: &raw::Broker, mode: &Mode) -> Option<Broke
             String::new()
         }
         Some(id) => id.get_ref().clone(),
-        None => default_client_id(mode),
+        None => mode.map(default_client_id).unwrap_or_default(),
     };
     let password = resolve_password(cx, b);
     let keep_alive = b.keep_alive.as_ref().map_or(Some(Duration::from_secs(30)), |k| cx.period("keep_alive", k));
