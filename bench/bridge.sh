@@ -15,9 +15,13 @@
 # the window (characters plus a t3.5 after each frame) per second of the window.
 # bench/BRIDGE.md has the method and the figures.
 #
-# Usage: bench/bridge.sh [--seconds N] [--baud B] [--poll] [--keep]
+# Usage: bench/bridge.sh [--seconds N] [--baud B] [--lines N] [--units N] [--poll] [--heaptrack] [--keep]
 #   --seconds N  the steady window, after every DBIRTH has arrived and 5 s more (default 60)
 #   --baud B     the lines' speed, 8N1 (default 115200)
+#   --lines N, --units N  another plant: N lines (default 4), N drives on each (default 25);
+#                the memory's share per line and per device, by subtraction
+#   --heaptrack  run the bridge under heaptrack and print its peak heap and biggest allocators
+#                (allocation is slower under it: the CPU figure is not the bridge's then)
 #   --poll       instead of the bridge, one `ferrobus poll` per line on the same points: the
 #                setup checked without the bridge (CPU and memory are the four polls' sums)
 #   --keep       keep the work directory (its path is printed)
@@ -33,10 +37,16 @@ WINDOW=60
 BAUD=115200
 MODE=bridge
 KEEP=0
+LINES=4
+UNITS=25
+HEAPTRACK=0
 while [[ $# -gt 0 ]]; do
     case "$1" in
         --seconds) WINDOW="$2"; shift 2 ;;
         --baud) BAUD="$2"; shift 2 ;;
+        --lines) LINES="$2"; shift 2 ;;
+        --units) UNITS="$2"; shift 2 ;;
+        --heaptrack) HEAPTRACK=1; shift ;;
         --poll) MODE=poll; shift ;;
         --keep) KEEP=1; shift ;;
         -h|--help) sed -n '2,30p' "$0"; exit 0 ;;
@@ -44,8 +54,6 @@ while [[ $# -gt 0 ]]; do
     esac
 done
 
-LINES=4
-UNITS=25
 TICKER_POINT=d005
 TICKER_PERIOD=1.1
 SETTLE=5
@@ -67,13 +75,18 @@ done
 
 WORK="$(mktemp -d "${TMPDIR:-/tmp}/bridgebench.XXXXXX")"
 PIDS=()
-cleanup() {
+# Stops every process started, the last started first: the bridge before the broker and the
+# lines it uses, the subscriber (which flushes its file) before the figures are read.
+stop_all() {
     local i
-    # The last started first: the bridge before the broker and the lines it uses.
     for ((i = ${#PIDS[@]} - 1; i >= 0; i--)); do
         kill -TERM "${PIDS[i]}" 2>/dev/null || true
         wait "${PIDS[i]}" 2>/dev/null || true
     done
+    PIDS=()
+}
+cleanup() {
+    stop_all
     if [[ $KEEP == 1 ]]; then echo "bridge.sh: work directory kept: $WORK" >&2; else rm -rf "$WORK"; fi
 }
 trap cleanup EXIT
@@ -143,6 +156,7 @@ toml_list() { local p out=""; for p in "$@"; do out+="\"$p\", "; done; echo "[${
         echo "port = \"${MASTER[l]}\""
         echo "baud = $BAUD"
         echo "parity = \"none\""
+        echo "stop_bits = 1"
         echo "timeout = \"100ms\""
         for u in $(seq "$UNITS"); do
             echo
@@ -165,9 +179,22 @@ wait_lines "$WORK/subscriber.out" 10
 MEASURED=()
 POLL_RECORDS=()
 if [[ $MODE == bridge ]]; then
-    "$FERROBUS" bridge --config "$WORK/plant.toml" >"$WORK/bridge.out" 2>"$WORK/bridge.err" &
-    PIDS+=($!)
-    MEASURED+=($!)
+    if [[ $HEAPTRACK == 1 ]]; then
+        heaptrack -o "$WORK/heaptrack" "$FERROBUS" bridge --config "$WORK/plant.toml" \
+            >"$WORK/bridge.out" 2>"$WORK/bridge.err" &
+        PIDS+=($!)
+        # The bridge is heaptrack's child.
+        for _ in $(seq 100); do
+            BRIDGE="$(pgrep -P "$!" -x ferrobus || true)"
+            [[ -n "$BRIDGE" ]] && break
+            sleep 0.05
+        done
+        MEASURED+=("$BRIDGE")
+    else
+        "$FERROBUS" bridge --config "$WORK/plant.toml" >"$WORK/bridge.out" 2>"$WORK/bridge.err" &
+        PIDS+=($!)
+        MEASURED+=($!)
+    fi
     # Every DBIRTH, then a few seconds for the first cycles to settle.
     for _ in $(seq 1200); do
         [[ $(grep -c '/DBIRTH/' "$WORK/messages.jsonl" 2>/dev/null) -ge $((LINES * UNITS)) ]] && break
@@ -201,13 +228,17 @@ END_NS="$(date +%s%N)"
 RSS1="$(status_kb VmRSS)"
 HWM="$(status_kb VmHWM)"
 # Where the memory of the (first) measured process is: anonymous (heap, stacks) or file-backed.
+cp "/proc/${MEASURED[0]}/smaps" "$WORK/smaps.txt"
+THREADS="$(awk '$1 == "Threads:" {print $2}' "/proc/${MEASURED[0]}/status")"
 MEMORY="$(awk '$1 ~ /^(Rss|Anonymous|Shared_Clean|Private_Clean|Private_Dirty):$/ {sub(":", "", $1); printf "%s\"%s\": %s", n++ ? ", " : "", $1, $2}' "/proc/${MEASURED[0]}/smaps_rollup")"
 
-# Stop the measured processes and the lines now: their counters and the last messages are in.
+# The bridge (or the polls) first, its last messages delivered, then everything else: the
+# subscriber's file and the taps' records are complete once their writers have ended.
 for p in "${MEASURED[@]}"; do kill -TERM "$p" 2>/dev/null || true; wait "$p" 2>/dev/null || true; done
 sleep 1
+stop_all
 
-OVERLOAD="$({ grep -h -i -E 'keep up|overload' "$WORK"/bridge.err "$WORK"/poll*.err 2>/dev/null || true; } \
+OVERLOAD="$({ grep -h -i -E 'cannot carry|keep up|overload' "$WORK"/bridge.err "$WORK"/poll*.err 2>/dev/null || true; } \
     | head -5 | "$PYTHON" -c 'import json, sys; print(json.dumps([l.strip() for l in sys.stdin]))')"
 LINES_JSON="$(for l in $(seq "$LINES"); do
     awk -v l="$l" -v tap="$WORK/tap$l.jsonl" '/^line: .* drops at/ {
@@ -221,11 +252,23 @@ cat >"$WORK/run.json" <<EOF
  "window_start_ns": $START_NS, "window_end_ns": $END_NS,
  "cpu_ticks": $((CPU1 - CPU0)), "clk_tck": $(getconf CLK_TCK),
  "rss_start_kb": $RSS0, "rss_end_kb": $RSS1, "hwm_kb": $HWM, "memory_kb": {$MEMORY},
+ "smaps": "$WORK/smaps.txt", "threads": $THREADS,
  "messages": "$WORK/messages.jsonl", "poll_records": $(list_json "${POLL_RECORDS[@]}"),
  "ticker_point": "$TICKER_POINT", "ticker_period_s": $TICKER_PERIOD,
  "lines": [$LINES_JSON], "overload_messages": $OVERLOAD}
 EOF
 "$PYTHON" "$ROOT/bench/bridge/figures.py" --run "$WORK/run.json" --json "$WORK/figures.json"
+if [[ $MODE == bridge ]]; then
+    echo
+    echo "The bridge's own summary (the whole run, births included):"
+    cat "$WORK/bridge.out"
+fi
+if [[ $HEAPTRACK == 1 ]]; then
+    heaptrack_print --print-peaks=1 --peak-limit=12 --sub-peak-limit=2 --print-allocators=0 --print-temporary=0 --print-leaks=0 \
+        -f "$(ls "$WORK"/heaptrack.*)" >"$WORK/heaptrack.txt" 2>&1 || true
+    grep -E "peak heap memory|total memory leaked|calls to allocation" "$WORK/heaptrack.txt" || true
+    sed -n '/MOST MEMORY CONSUMED/,$p' "$WORK/heaptrack.txt" | head -80
+fi
 if [[ -n "${RECORD:-}" ]]; then
     cat "$WORK/figures.json" >>"$RECORD"
     echo >>"$RECORD"

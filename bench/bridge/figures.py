@@ -215,6 +215,34 @@ def line_figures(line: dict, start: int, end: int) -> dict:
     }
 
 
+def memory_map(path: str) -> dict:
+    """The measured process's resident memory by kind of mapping (/proc/PID/smaps at the end):
+    the binary and libraries (file-backed), the [heap] (brk), and anonymous mappings: malloc's
+    per-thread arenas (64 MiB reserved each, resident as used) and thread stacks."""
+    kinds: Counter = Counter()
+    anonymous: list[int] = []
+    name = None
+    with open(path) as f:
+        for line in f:
+            fields = line.split()
+            if fields and "-" in fields[0] and len(fields) >= 5 and not fields[0].endswith(":"):
+                name = fields[5] if len(fields) > 5 else ""
+            elif fields and fields[0] == "Rss:":
+                rss = int(fields[1])
+                if name.startswith("/"):
+                    kinds["file-backed"] += rss
+                elif name == "[heap]":
+                    kinds["heap"] += rss
+                elif name == "":
+                    kinds["anonymous mappings"] += rss
+                    if rss:
+                        anonymous.append(rss)
+                else:
+                    kinds[name] += rss
+    top = sorted(anonymous, reverse=True)[:8]
+    return {"by_kind_kb": dict(kinds), "anonymous_mappings": len(anonymous), "largest_anonymous_kb": top}
+
+
 def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--run", required=True)
@@ -228,6 +256,9 @@ def main() -> int:
     figures["cpu_share_of_one_core"] = round(run["cpu_ticks"] / run["clk_tck"] / window_s, 4)
     figures["rss_kb"] = {"start": run["rss_start_kb"], "end": run["rss_end_kb"], "hwm": run["hwm_kb"]}
     figures["memory_kb"] = run.get("memory_kb", {})
+    figures["threads"] = run.get("threads")
+    if run.get("smaps"):
+        figures["memory_map"] = memory_map(run["smaps"])
     figures.update(sparkplug(run) if run["mode"] == "bridge" else polls(run))
     figures["lines"] = [line_figures(line, start, end) for line in run["lines"]]
     figures["overload_messages"] = run.get("overload_messages", [])
@@ -251,6 +282,12 @@ def print_table(f: dict) -> None:
     if f["memory_kb"]:
         rows.append(("of which (smaps_rollup at the end)",
                      ", ".join(f"{k} {v} kB" for k, v in f["memory_kb"].items())))
+    if f.get("memory_map"):
+        m = f["memory_map"]
+        rows.append(("resident by mapping (first measured process)",
+                     ", ".join(f"{k} {v} kB" for k, v in m["by_kind_kb"].items())
+                     + f"; {m['anonymous_mappings']} anonymous mappings resident, the largest "
+                     + ", ".join(str(v) for v in m["largest_anonymous_kb"]) + f" kB; {f['threads']} threads"))
     rows.append(("latency change → message (n)",
                  f"p50 {lat.get('p50')} ms, p99 {lat.get('p99')} ms, max {lat.get('max')} ms ({lat['n']})"))
     if f["mode"] == "bridge":
@@ -273,6 +310,10 @@ def print_table(f: dict) -> None:
                      f"{line['requests_per_s']} requests/s, wire busy {line['wire_busy_share'] * 100:.1f} % "
                      f"(planned {line['planned_wire_s_per_cycle'] * 1000:.0f} ms per 1 s cycle)"))
     for message in f["overload_messages"]:
+        # The bridge's "cannot carry this" lists every read's arithmetic: its head and its total.
+        head, _, total = message.partition(": u1 ")
+        if total and "that is " in total:
+            message = f"{head}: … {total[total.index('that is '):]}"
         rows.append(("overload", message))
     print("| figure | value |\n|---|---|")
     for name, value in rows:
