@@ -72,6 +72,10 @@ MOSQUITTO="${MOSQUITTO:-$(command -v mosquitto || echo /usr/sbin/mosquitto)}"
 for tool in "$PYTHON" "$MOSQUITTO"; do
     [[ -x "$tool" ]] || { echo "bridge.sh: $tool is missing: run .ci/setup-peers.sh" >&2; exit 1; }
 done
+if [[ $HEAPTRACK == 1 ]] && ! command -v heaptrack >/dev/null; then
+    echo "bridge.sh: --heaptrack needs heaptrack (Debian: apt-get install heaptrack)" >&2
+    exit 1
+fi
 
 WORK="$(mktemp -d "${TMPDIR:-/tmp}/bridgebench.XXXXXX")"
 PIDS=()
@@ -267,7 +271,9 @@ if [[ $HEAPTRACK == 1 ]]; then
     heaptrack_print --print-peaks=1 --peak-limit=12 --sub-peak-limit=2 --print-allocators=0 --print-temporary=0 --print-leaks=0 \
         -f "$(ls "$WORK"/heaptrack.*)" >"$WORK/heaptrack.txt" 2>&1 || true
     grep -E "peak heap memory|total memory leaked|calls to allocation" "$WORK/heaptrack.txt" || true
-    sed -n '/MOST MEMORY CONSUMED/,$p' "$WORK/heaptrack.txt" | head -80
+    # Each peak consumer with the top four frames of its biggest call stack.
+    echo "heaptrack's peak consumers (the whole report: --keep, heaptrack.txt):"
+    awk '/PEAK MEMORY CONSUMERS/ {on = 1} /^ *in \// {next} on && /consumed over/ {n = 5} on && n-- > 0' "$WORK/heaptrack.txt" | head -60
 fi
 if [[ -n "${RECORD:-}" ]]; then
     cat "$WORK/figures.json" >>"$RECORD"
