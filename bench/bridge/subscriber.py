@@ -5,7 +5,8 @@
 
 One JSON line per message: {"t_ns": receive time (the system clock, nanoseconds since the Unix
 epoch, taken in the callback), "topic": ..., "payload": base64}. Decoding is left to
-figures.py, so the receive path stays short. Once subscribed it writes "subscribed" on stdout;
+figures.py, so the receive path stays short; births and deaths are flushed to the file at once,
+the rest in 64 KiB blocks. Once subscribed it writes "subscribed" on stdout;
 SIGTERM or SIGINT ends it after flushing the file. paho-mqtt 1.6.1 (the venv's, with pysparkplug).
 """
 
@@ -47,6 +48,9 @@ def main() -> int:
         t_ns = time.time_ns()
         out.write(json.dumps({"t_ns": t_ns, "topic": message.topic,
                               "payload": base64.b64encode(message.payload).decode()}) + "\n")
+        # Births and deaths at once: bridge.sh waits for the births by reading the file.
+        if "BIRTH" in message.topic or "DEATH" in message.topic:
+            out.flush()
 
     def stop(_signum, _frame):
         client.disconnect()
