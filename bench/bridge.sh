@@ -49,7 +49,7 @@ while [[ $# -gt 0 ]]; do
         --heaptrack) HEAPTRACK=1; shift ;;
         --poll) MODE=poll; shift ;;
         --keep) KEEP=1; shift ;;
-        -h|--help) sed -n '2,30p' "$0"; exit 0 ;;
+        -h|--help) sed -n '2,/^set -euo/p' "$0" | sed '$d'; exit 0 ;;
         *) echo "bridge.sh: unknown argument $1 (see --help)" >&2; exit 2 ;;
     esac
 done
