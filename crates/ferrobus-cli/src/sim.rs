@@ -8,6 +8,8 @@
 //! them all ([`tcp_units`]); the server's limits are `--max-connections`, `--idle-timeout` and
 //! `--frame-timeout`. It runs until interrupted, then prints its counters (SIGUSR1
 //! prints them at any time), including how late each reply went out after it was due.
+//! `--ticker` makes a point count periods of the wall clock ([`ferrobus_sim::ticker`]), for
+//! latency measurements.
 
 use std::sync::{Arc, Mutex, PoisonError};
 use std::time::Duration;
@@ -20,7 +22,7 @@ use ferrobus::tls::{ServerTls, serve_tls_with};
 use ferrobus::{Framing, Timer, Transport};
 use ferrobus_proto::ExceptionCode;
 use ferrobus_proto::slave::{Disposition, SlaveConfig, SlaveEvent, UnitSet};
-use ferrobus_sim::{Device, FaultFilter, Faults, Profile, ProfileFaults, Sim, Unserved, tokio_clock};
+use ferrobus_sim::{Device, FaultFilter, Faults, Profile, ProfileFaults, Sim, Ticker, Unserved, tokio_clock};
 use hdrhistogram::Histogram;
 
 use crate::connect::{ConnectArgs, MBAPS_PORT, MODBUS_TCP_PORT, Target, parse_duration};
@@ -80,6 +82,12 @@ pub(crate) struct SimArgs {
     /// Modbus/TCP: answer every unit id, the units not simulated by the first --unit's device
     #[arg(long = "any-unit")]
     any_unit: bool,
+
+    /// Make POINT of every unit count whole PERIODs of the system clock since the Unix epoch
+    /// (wrapping past its type's largest value), so a reader knows when each value began:
+    /// latency benches, e.g. d005:1.1s (repeatable)
+    #[arg(long = "ticker", value_name = "POINT:PERIOD")]
+    tickers: Vec<String>,
 
     /// Modbus/TCP Security (`--tls-cert` ...; `--tcp` port 802 if omitted).
     #[command(flatten)]
@@ -384,6 +392,11 @@ fn build(connection: &ConnectArgs, args: &SimArgs) -> Result<Sim, CliError> {
     }
     if let Some((unit, _)) = faults.iter().find(|(u, _)| !units.contains(u)) {
         return Err(CliError::Usage(format!("--fault for unit {unit}, which is not simulated")));
+    }
+    for spec in &args.tickers {
+        let ticker = Ticker::parse(spec).map_err(|e| CliError::Usage(format!("--ticker: {e}")))?;
+        eprintln!("sim: every unit's {} counts {:?} periods of the system clock", ticker.point(), ticker.period());
+        sim.add_ticker(ticker).map_err(|e| CliError::Usage(format!("--ticker: {e}")))?;
     }
     Ok(sim)
 }

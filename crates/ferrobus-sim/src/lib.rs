@@ -8,6 +8,7 @@
 //! ```text
 //!   Profile (TOML) ──▶ Device: Memory (the map) + Model (physics) + the profile's rules
 //!   Sim: devices by unit ──implements──▶ slave::Handler ──▶ ferrobus::server::serve
+//!   Ticker ──▶ a point that counts periods of the wall clock (latency benches)
 //!   FaultFilter ──▶ drops, corrupts, delays, cuts, re-addresses and trickles replies on their way out
 //! ```
 //!
@@ -22,9 +23,11 @@ pub mod profile;
 mod reframe;
 pub mod rule;
 pub mod sim;
+pub mod ticker;
 
 pub use device::Device;
 pub use fault::Faults;
 pub use profile::{Profile, ProfileFaults};
 pub use rule::Rule;
 pub use sim::{FaultFilter, Sim, SimClock, Unserved, tokio_clock};
+pub use ticker::Ticker;

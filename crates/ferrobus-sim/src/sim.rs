@@ -18,6 +18,7 @@ use crate::fault::Faults;
 use crate::memory::Table;
 use crate::reframe::{corrupt_checksum, reframe, unit_of};
 use crate::rule::Action;
+use crate::ticker::Ticker;
 
 /// Where the simulation's time comes from: the time since it started.
 pub type SimClock = Arc<dyn Fn() -> Duration + Send + Sync>;
@@ -60,6 +61,8 @@ pub struct Sim {
     unserved: Unserved,
     clock: SimClock,
     rng: SmallRng,
+    /// Points that count periods of the wall clock, on every unit.
+    tickers: Vec<Ticker>,
 }
 
 impl Sim {
@@ -71,6 +74,7 @@ impl Sim {
             unserved: Unserved::Silent,
             clock,
             rng: SmallRng::seed_from_u64(seed),
+            tickers: Vec::new(),
         }
     }
 
@@ -101,6 +105,17 @@ impl Sim {
         self.units.insert(unit, Unit { device, faults, tripped: false });
     }
 
+    /// Makes `ticker`'s point of every unit count its periods (see [`crate::ticker`]); refused,
+    /// naming the unit, if a unit's profile has no integer register by that name. Add the
+    /// units first.
+    pub fn add_ticker(&mut self, ticker: Ticker) -> Result<(), String> {
+        for (unit, u) in &self.units {
+            ticker.check(u.device.memory()).map_err(|e| format!("unit {unit}: {e}"))?;
+        }
+        self.tickers.push(ticker);
+        Ok(())
+    }
+
     /// The unit addresses served.
     pub fn unit_set(&self) -> UnitSet {
         self.units.keys().copied().collect()
@@ -117,6 +132,9 @@ impl Sim {
         let unit = self.resolve(unit)?;
         let u = self.units.get_mut(&unit)?;
         u.device.advance_to(now);
+        for ticker in &self.tickers {
+            ticker.apply(u.device.memory_mut());
+        }
         if let Some(after) = u.faults.trip_after {
             if !u.tripped && now >= after {
                 u.tripped = true;

@@ -259,3 +259,34 @@ fn a_tcp_reply_under_another_transaction_id_exits_3_naming_both_ids() {
     assert!(err.contains("a reply came under transaction id 2, not 1, ignored"), "{err}");
     assert!(err.contains("late reply") && err.contains("transaction ids"), "{err}");
 }
+
+#[test]
+fn sim_refuses_a_ticker_on_a_point_a_unit_lacks_naming_the_unit() {
+    let err = stderr(
+        &offline(&["--tcp", "127.0.0.1:1", "--unit", "3", "sim", "--profile", "generic", "--ticker", "d005:1s"])
+            .code(2),
+    );
+    assert!(err.contains("--ticker: unit 3: ticker d005: the profile has no point by that name"), "{err}");
+    let err =
+        stderr(&offline(&["--tcp", "127.0.0.1:1", "sim", "--profile", "omron-3g3rx", "--ticker", "d005"]).code(2));
+    assert!(err.contains("expected POINT:PERIOD, e.g. d005:1.1s"), "{err}");
+}
+
+#[test]
+fn sim_says_which_point_counts_the_clock_s_periods() {
+    let said = stderr(
+        &offline(&[
+            "--tcp",
+            "127.0.0.1:0",
+            "sim",
+            "--profile",
+            "omron-3g3rx",
+            "--ticker",
+            "d005:1.1s",
+            "--duration",
+            "10ms",
+        ])
+        .success(),
+    );
+    assert!(said.contains("sim: every unit's d005 counts 1.1s periods of the system clock"), "{said}");
+}
