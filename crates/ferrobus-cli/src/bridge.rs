@@ -25,6 +25,9 @@ use crate::output;
 /// The demo's broker when none is given.
 const DEMO_BROKER: &str = "127.0.0.1:1883";
 
+/// The demo's acceleration time (F002): 20 s from 0 to the maximum frequency.
+const DEMO_RAMP: &str = "20s";
+
 /// The set frequencies the demo cycles through, and how long it stays at each.
 const DEMO_FREQUENCIES: [&str; 4] = ["60 Hz", "35 Hz", "50 Hz", "20 Hz"];
 const DEMO_STEP: Duration = Duration::from_secs(20);
@@ -38,8 +41,9 @@ to stderr as things happen; the summary goes to stdout at the end (Ctrl-C, SIGTE
 --duration), after the NDEATH.
 
 --demo runs that file against simulated drives (an Omron 3G3RX and an SDP servo on an in-process \
-virtual RS-485 line): after the births it runs the inverter (coil `run` on, F001 set) and changes \
-its set frequency every 20 s (60, 35, 50, 20 Hz), so its output frequency ramps in the DDATA.
+virtual RS-485 line): after the births it sets the inverter's acceleration time (F002 = 20 s), runs \
+it (coil `run` on, F001 set) and changes its set frequency every 20 s (60, 35, 50, 20 Hz), so its \
+output frequency d001 ramps in the DDATA.
 
 Examples:
   ferrobus bridge --demo                                   # broker on 127.0.0.1:1883
@@ -206,6 +210,8 @@ struct Inverter {
     id: String,
     run: Point,
     frequency: Point,
+    /// F002, the acceleration time: set long enough to watch the ramp.
+    ramp: Option<Point>,
 }
 
 /// The first device of the plant with a `run` coil and an F001 (the 3G3RX).
@@ -219,6 +225,7 @@ fn inverter(plant: &Plant) -> Option<Inverter> {
                 id: d.id.clone(),
                 run: profile.point("run")?.clone(),
                 frequency: profile.point("F001")?.clone(),
+                ramp: profile.point("F002").cloned(),
             })
         })
     })
@@ -240,6 +247,12 @@ async fn drive_inverter(
             eprintln!("demo: {text}");
         }
     };
+    if let Some(ramp) = &inverter.ramp {
+        match set(&client, inverter.unit, ramp, DEMO_RAMP).await {
+            Ok(()) => say(format!("{} F002 = {DEMO_RAMP} (the acceleration time)", inverter.id)),
+            Err(e) => say(format!("{} F002 = {DEMO_RAMP}: {e}", inverter.id)),
+        }
+    }
     for (step, text) in DEMO_FREQUENCIES.iter().cycle().enumerate() {
         match set(&client, inverter.unit, &inverter.frequency, text).await {
             Ok(()) => say(format!("{} F001 = {text}", inverter.id)),

@@ -559,20 +559,21 @@ impl Bridge {
     }
 
     fn publish_all(&mut self, messages: Vec<Publish>) {
-        let mut births = (0usize, 0usize);
+        let mut node = false;
+        let mut devices = Vec::new();
         for message in messages {
-            match Topic::parse(&message.topic).map(|t| t.kind) {
-                Some(MessageType::NBirth) => births.0 += 1,
-                Some(MessageType::DBirth) => births.1 += 1,
+            match Topic::parse(&message.topic) {
+                Some(Topic { kind: MessageType::NBirth, .. }) => node = true,
+                Some(Topic { kind: MessageType::DBirth, device: Some(device), .. }) => devices.push(device),
                 _ => {}
             }
             self.publish(message);
         }
-        if births.0 > 0 {
+        if node {
             self.born = true;
-            self.say(Status::Births { node: true, devices: births.1 });
-        } else if births.1 > 0 {
-            self.say(Status::Births { node: false, devices: births.1 });
+        }
+        if node || !devices.is_empty() {
+            self.say(Status::Births { node, devices });
         }
         self.check_replayed();
     }
