@@ -7,47 +7,54 @@ use std::path::{Path, PathBuf};
 use std::sync::Arc;
 use std::time::Duration;
 
-use ferrobus::poll::{Format, Group, GroupError, Layout};
-use ferrobus::{ClientConfig, Rs485, SerialConfig};
-use ferrobus_profile::{Order, Point, Profile, Table};
-use ferrobus_proto::frame::{DataBits, LineConfig, Parity, StopBits};
+use ferrobus_profile::Profile;
 use serde::Deserialize;
 use toml::Spanned;
 use toml::de::{DeTable, DeValue, ValueDeserializer};
 
 use super::raw::{self, Text};
 use super::text::{duration, host_port, line_col, size};
-use super::{
-    Broker, BrokerTls, ConfigError, ConfigErrors, Connection, DeviceSpec, LineSpec, Mode, PlainConfig, Plant,
-    SparkplugConfig,
-};
+use super::{Broker, BrokerTls, ConfigError, ConfigErrors, Mode, PlainConfig, Plant, SparkplugConfig};
 use crate::sparkplug::convert::UintEncoding;
 use crate::sparkplug::topic::check_id;
 use crate::store::StoreConfig;
 
-/// The default poll period of a device.
-const DEFAULT_EVERY: Duration = Duration::from_secs(1);
-/// Polls without a reply before a device is declared dead, unless `death_after` says.
-const DEFAULT_DEATH_AFTER: u32 = 3;
+mod device;
+mod line;
+
 /// The slowest first reconnect delay (the delay doubles up to it).
 const MAX_RECONNECT: Duration = Duration::from_secs(30);
 
 /// Reads, checks and resolves a whole file.
 pub(super) fn plant(text: &str, origin: &str, base_dir: &Path) -> Result<Plant, ConfigErrors> {
-    let mut cx = Cx { text, origin, base_dir, errors: Vec::new(), profiles: HashMap::new() };
+    let mut cx = Cx { text, origin, base_dir, errors: Vec::new(), profiles: HashMap::new(), plain: false };
     let (doc, syntax) = DeTable::parse_recoverable(text);
     for error in &syntax {
         cx.toml_error(error, 0..0);
     }
-    if !cx.errors.is_empty() {
-        return Err(ConfigErrors(cx.errors));
-    }
-    let sections = Sections::split(&mut cx, doc.get_ref());
-    let plant = sections.resolve(&mut cx);
+    // After a syntax error the rest of the tree cannot be trusted: report the syntax only.
+    let plant = if cx.errors.is_empty() { Sections::split(&mut cx, doc.get_ref()).resolve(&mut cx) } else { None };
     match plant {
         Some(plant) if cx.errors.is_empty() => Ok(plant),
-        _ => Err(ConfigErrors(cx.errors)),
+        _ => {
+            cx.errors.sort_by_key(|e| (e.line, e.column));
+            Err(ConfigErrors(cx.errors))
+        }
     }
+}
+
+/// serde's type names as a configuration's reader knows them.
+fn plain_words(message: &str) -> String {
+    [
+        ("expected i64", "expected a whole number"),
+        ("expected f64", "expected a number"),
+        ("expected a sequence", "expected an array such as [\"a\", \"b\"]"),
+        ("expected a map", "expected a table"),
+        ("missing field", "missing key"),
+        ("unknown field", "unknown key"),
+    ]
+    .iter()
+    .fold(message.to_string(), |m, (serde, ours)| m.replace(serde, ours))
 }
 
 /// What the checks share: the text (for positions), the errors found so far, and the
@@ -58,6 +65,8 @@ struct Cx<'a> {
     base_dir: &'a Path,
     errors: Vec<ConfigError>,
     profiles: HashMap<String, Arc<Profile>>,
+    /// Plain mode: metric names are topic levels (no `/`).
+    plain: bool,
 }
 
 impl Cx<'_> {
@@ -72,16 +81,27 @@ impl Cx<'_> {
         line_col(self.text, span.start).0
     }
 
-    /// A TOML reader's error, at its span (or `fallback`'s).
+    /// A TOML reader's error, at its span (or `fallback`'s), in the file's words.
     fn toml_error(&mut self, error: &toml::de::Error, fallback: Range<usize>) {
         let span = error.span().unwrap_or(fallback);
-        self.at(span, error.message().trim().to_string());
+        self.at(span, plain_words(error.message().trim()));
     }
 
     /// `value` read as `T`; a mistake is reported and gives `None`.
     fn read<'i, T: Deserialize<'i>>(&mut self, value: &Spanned<DeValue<'i>>) -> Option<T> {
         let span = value.span();
         T::deserialize(ValueDeserializer::from(value.clone())).map_err(|e| self.toml_error(&e, span)).ok()
+    }
+
+    /// What a metric name may not hold: MQTT's wildcards, and in plain mode the topic
+    /// separator (there a name is a topic level; in Sparkplug it is inside the payload).
+    fn unfit_metric_name(&self, name: &str) -> Option<String> {
+        let refused: &[char] = if self.plain { &['/', '+', '#'] } else { &['+', '#'] };
+        (name.is_empty() || name.contains(refused)).then(|| {
+            let mode = if self.plain { "in plain mode a metric name is a topic level: " } else { "" };
+            let list: Vec<String> = refused.iter().map(char::to_string).collect();
+            format!("metric name {name:?}: {mode}it is not empty and has no {}", list.join(", "))
+        })
     }
 
     /// A path of the file, relative to its folder.
@@ -134,11 +154,8 @@ impl Cx<'_> {
     /// The profile `name` (built in) or at a path relative to the file, loaded once.
     fn profile(&mut self, name: &Text) -> Option<Arc<Profile>> {
         let given = name.get_ref();
-        let key = if ferrobus_profile::BUILTIN.iter().any(|(n, _)| n == given) {
-            given.clone()
-        } else {
-            self.path(given).display().to_string()
-        };
+        let is_path = given.contains(['/', '\\']) || Path::new(given).extension().is_some();
+        let key = if is_path { self.path(given).display().to_string() } else { given.clone() };
         if let Some(profile) = self.profiles.get(&key) {
             return Some(Arc::clone(profile));
         }
@@ -149,14 +166,8 @@ impl Cx<'_> {
                 Some(profile)
             }
             Err(e) => {
-                let builtin: Vec<&str> = ferrobus_profile::BUILTIN.iter().map(|(n, _)| *n).collect();
-                self.at(
-                    name.span(),
-                    format!(
-                        "profile {given:?}: {e} (built in: {}; or a .toml path relative to this file)",
-                        builtin.join(", ")
-                    ),
-                );
+                let hint = if is_path { " (paths are relative to the configuration's folder)" } else { "" };
+                self.at(name.span(), format!("profile {given:?}: {e}{hint}"));
                 None
             }
         }
@@ -173,6 +184,8 @@ struct Sections {
     plain: Option<raw::Plain>,
     store: Option<raw::Store>,
     lines: Vec<(raw::Line, Vec<raw::Device>)>,
+    /// The devices of lines that could not be read: checked all the same.
+    orphans: Vec<raw::Device>,
     /// `[[line.device]]` entries written (read or not).
     devices_given: usize,
 }
@@ -249,8 +262,9 @@ impl Sections {
                 }
             }
             let line: Option<raw::Line> = cx.read(&Spanned::new(entry.span(), DeValue::Table(rest)));
-            if let Some(line) = line {
-                self.lines.push((line, devices));
+            match line {
+                Some(line) => self.lines.push((line, devices)),
+                None => self.orphans.extend(devices),
             }
         }
     }
@@ -258,13 +272,17 @@ impl Sections {
     /// The plant, when every section resolved (the errors are in `cx`).
     fn resolve(self, cx: &mut Cx<'_>) -> Option<Plant> {
         let mode = self.mode(cx);
+        cx.plain = matches!(mode, Some(Mode::Plain(_)));
         let store = self.store.map_or_else(StoreConfig::default, |s| resolve_store(cx, &s));
-        let mut ids = Ids::default();
+        let mut ids = line::Ids::default();
         let mut lines = Vec::new();
         for (line, devices) in self.lines {
-            if let Some(line) = resolve_line(cx, &line, &devices, &mut ids) {
+            if let Some(line) = line::resolve(cx, &line, &devices, &mut ids) {
                 lines.push(line);
             }
+        }
+        for orphan in &self.orphans {
+            device::resolve(cx, orphan);
         }
         if self.devices_given == 0 {
             let span = self.given.get("line").cloned().unwrap_or(0..0);
@@ -466,492 +484,4 @@ fn resolve_tls(cx: &mut Cx<'_>, t: &Spanned<raw::Tls>) -> Option<BrokerTls> {
         key,
         server_name: tls.server_name.as_ref().map(|s| s.get_ref().clone()),
     })
-}
-
-/// Device ids (plant-wide) and line names seen so far, with where.
-#[derive(Default)]
-struct Ids {
-    devices: HashMap<String, Range<usize>>,
-    lines: HashMap<String, Range<usize>>,
-}
-
-/// Registers `name` in `seen`; a name seen before is reported at its second place.
-fn first_use(cx: &mut Cx<'_>, seen: &mut HashMap<String, Range<usize>>, what: &str, name: &Text, rule: &str) -> bool {
-    if let Some(first) = seen.get(name.get_ref()) {
-        let line = cx.line_of(first);
-        cx.at(name.span(), format!("{what} {:?} is used twice (first at line {line}); {rule}", name.get_ref()));
-        return false;
-    }
-    seen.insert(name.get_ref().clone(), name.span());
-    true
-}
-
-fn resolve_line(cx: &mut Cx<'_>, line: &raw::Line, devices: &[raw::Device], ids: &mut Ids) -> Option<LineSpec> {
-    first_use(cx, &mut ids.lines, "line name", &line.name, "each line has its own");
-    let connection = resolve_connection(cx, line);
-    let client = resolve_client(cx, line);
-    let simulated = matches!(connection, Some(Connection::Simulated { .. }));
-    let mut units: HashMap<String, Range<usize>> = HashMap::new();
-    let mut specs = Vec::new();
-    for device in devices {
-        first_use(cx, &mut ids.devices, "device id", &device.id, "ids are unique in a plant");
-        let unit = Spanned::new(device.unit.span(), device.unit.get_ref().to_string());
-        first_use(cx, &mut units, "unit", &unit, "each device on a line has its own");
-        if let Some(spec) = resolve_device(cx, device) {
-            if simulated && spec.profile.is_none() {
-                cx.at(
-                    device.id.span(),
-                    format!(
-                        "device {:?}: a simulated line simulates each device from its profile; give it one",
-                        spec.id
-                    ),
-                );
-            }
-            specs.push(spec);
-        }
-    }
-    Some(LineSpec { name: line.name.get_ref().clone(), connection: connection?, client: client?, devices: specs })
-}
-
-/// Exactly one of `port`, `tcp`, `rtu_tcp` and `simulated = true`, with the keys it takes.
-fn resolve_connection(cx: &mut Cx<'_>, line: &raw::Line) -> Option<Connection> {
-    let mut kinds: Vec<(&str, Range<usize>)> = Vec::new();
-    if let Some(p) = &line.port {
-        kinds.push(("port", p.span()));
-    }
-    if let Some(t) = &line.tcp {
-        kinds.push(("tcp", t.span()));
-    }
-    if let Some(t) = &line.rtu_tcp {
-        kinds.push(("rtu_tcp", t.span()));
-    }
-    if let Some(s) = line.simulated.as_ref().filter(|s| *s.get_ref()) {
-        kinds.push(("simulated", s.span()));
-    }
-    kinds.sort_by_key(|(_, span)| span.start);
-    let name = line.name.get_ref();
-    let kind = match kinds.as_slice() {
-        [] => {
-            cx.at(
-                line.name.span(),
-                format!("line {name:?} has no connection; give one of port, tcp, rtu_tcp or simulated = true"),
-            );
-            return None;
-        }
-        [(kind, _)] => *kind,
-        [(first, _), (second, span), ..] => {
-            cx.at(span.clone(), format!("line {name:?} has both {first} and {second}; a line has one connection"));
-            return None;
-        }
-    };
-    refuse_serial_keys(cx, line, kind);
-    match kind {
-        "port" => serial(cx, line),
-        "simulated" => line_config(cx, line).map(|line| Connection::Simulated { line }),
-        "tcp" => tcp_address(cx, "tcp", line.tcp.as_ref()?).map(Connection::Tcp),
-        _ => tcp_address(cx, "rtu_tcp", line.rtu_tcp.as_ref()?).map(Connection::RtuTcp),
-    }
-}
-
-/// The serial keys on a line that is not a port (baud is also a simulated line's).
-fn refuse_serial_keys(cx: &mut Cx<'_>, line: &raw::Line, kind: &str) {
-    let spans = [
-        ("parity", line.parity.as_ref().map(Spanned::span)),
-        ("data_bits", line.data_bits.as_ref().map(Spanned::span)),
-        ("stop_bits", line.stop_bits.as_ref().map(Spanned::span)),
-        ("rs485", line.rs485.as_ref().map(Spanned::span)),
-        ("low_latency", line.low_latency.as_ref().map(Spanned::span)),
-        ("ascii", line.ascii.as_ref().map(Spanned::span)),
-        ("baud", line.baud.as_ref().map(Spanned::span).filter(|_| kind != "simulated")),
-    ];
-    if kind == "port" {
-        return;
-    }
-    for (key, span) in spans {
-        if let Some(span) = span {
-            cx.at(span, format!("{key} is a serial port's setting; this line is {kind}"));
-        }
-    }
-}
-
-fn tcp_address(cx: &mut Cx<'_>, key: &str, address: &Text) -> Option<String> {
-    match host_port(address.get_ref(), 502) {
-        Ok((host, port)) if host.contains(':') => Some(format!("[{host}]:{port}")),
-        Ok((host, port)) => Some(format!("{host}:{port}")),
-        Err(problem) => {
-            cx.at(address.span(), format!("{key}: {problem}"));
-            None
-        }
-    }
-}
-
-fn serial(cx: &mut Cx<'_>, line: &raw::Line) -> Option<Connection> {
-    let path = line.port.as_ref()?;
-    if path.get_ref().trim().is_empty() {
-        cx.at(path.span(), "port is empty; name the serial port (\"/dev/ttyUSB0\", \"COM3\")");
-    }
-    let rs485 = match line.rs485.as_ref() {
-        None => Some(Rs485::Auto),
-        Some(r) => match r.get_ref().to_ascii_lowercase().as_str() {
-            "auto" => Some(Rs485::Auto),
-            "kernel" => Some(Rs485::Kernel),
-            "rts" => Some(Rs485::Rts),
-            _ => {
-                cx.at(r.span(), format!("rs485 = {:?}: it is auto (the adapter), kernel or rts", r.get_ref()));
-                None
-            }
-        },
-    };
-    let config = line_config(cx, line);
-    let mut serial = SerialConfig::new(path.get_ref().clone(), config?);
-    serial.rs485 = rs485?;
-    serial.low_latency = line.low_latency.as_ref().is_some_and(|l| *l.get_ref());
-    Some(Connection::Serial { config: serial, ascii: line.ascii.as_ref().is_some_and(|a| *a.get_ref()) })
-}
-
-/// Baud (19200 unless given), parity (even), data bits (8, or 7 with ascii) and stop bits
-/// (1, or 2 without parity).
-fn line_config(cx: &mut Cx<'_>, line: &raw::Line) -> Option<LineConfig> {
-    let errors = cx.errors.len();
-    let baud = line.baud.as_ref().map_or(Some(19_200), |b| {
-        let baud = u32::try_from(*b.get_ref()).ok().filter(|baud| (50..=10_000_000).contains(baud));
-        if baud.is_none() {
-            cx.at(b.span(), format!("baud = {}: a line's baud is 50 to 10000000", b.get_ref()));
-        }
-        baud
-    });
-    let parity = line.parity.as_ref().map_or(Parity::Even, |p| match p.get_ref().to_ascii_lowercase().as_str() {
-        "even" | "e" => Parity::Even,
-        "odd" | "o" => Parity::Odd,
-        "none" | "n" => Parity::None,
-        _ => {
-            cx.at(p.span(), format!("parity = {:?}: it is even, odd or none", p.get_ref()));
-            Parity::Even
-        }
-    });
-    let ascii = line.ascii.as_ref().is_some_and(|a| *a.get_ref());
-    let data_bits = match line.data_bits.as_ref().map(|d| (d, *d.get_ref())) {
-        None if ascii => DataBits::Seven,
-        None | Some((_, 8)) => DataBits::Eight,
-        Some((_, 7)) => DataBits::Seven,
-        Some((d, n)) => {
-            cx.at(d.span(), format!("data_bits = {n}: it is 8 (RTU) or 7 (ASCII)"));
-            DataBits::Eight
-        }
-    };
-    let stop_bits = match line.stop_bits.as_ref().map(|s| (s, *s.get_ref())) {
-        None if parity == Parity::None => StopBits::Two,
-        None | Some((_, 1)) => StopBits::One,
-        Some((_, 2)) => StopBits::Two,
-        Some((s, n)) => {
-            cx.at(s.span(), format!("stop_bits = {n}: it is 1 or 2"));
-            StopBits::One
-        }
-    };
-    let config = LineConfig::new(baud?)?.with_parity(parity).with_data_bits(data_bits).with_stop_bits(stop_bits);
-    (cx.errors.len() == errors).then_some(config)
-}
-
-/// The client's timeout, retries and connect timeout (the library's defaults unless given).
-fn resolve_client(cx: &mut Cx<'_>, line: &raw::Line) -> Option<ClientConfig> {
-    let errors = cx.errors.len();
-    let mut client = ClientConfig::default();
-    if let Some(timeout) = line.timeout.as_ref().and_then(|t| cx.period("timeout", t)) {
-        client.timeout = timeout;
-    }
-    if let Some(timeout) = line.connect_timeout.as_ref().and_then(|t| cx.period("connect_timeout", t)) {
-        client.connect_timeout = timeout;
-    }
-    if let Some(retries) = &line.retries {
-        match u32::try_from(*retries.get_ref()) {
-            Ok(r @ 0..=100) => client.retries = r,
-            _ => cx.at(retries.span(), format!("retries = {}: it is 0 to 100", retries.get_ref())),
-        }
-    }
-    if let Some(echo) = line.echo_suppression {
-        client.echo_suppression = echo;
-    }
-    (cx.errors.len() == errors).then_some(client)
-}
-
-/// One set of profile points polled at one rate: the device's own, or a `[[line.device.poll]]`.
-struct PointSet<'a> {
-    span: Range<usize>,
-    every: Duration,
-    points: &'a [Text],
-    groups: &'a [Text],
-    deadband: f64,
-}
-
-/// Where a group came from, to point at the second use of a metric name.
-enum Source<'a> {
-    Points(&'a PointSet<'a>),
-    Raw(&'a Spanned<raw::Raw>),
-}
-
-fn resolve_device(cx: &mut Cx<'_>, d: &raw::Device) -> Option<DeviceSpec> {
-    let errors = cx.errors.len();
-    let id = d.id.get_ref();
-    sparkplug_id(cx, "device", &d.id);
-    let unit = u8::try_from(*d.unit.get_ref()).ok().filter(|u| (1..=247).contains(u)).unwrap_or_else(|| {
-        let seen = d.unit.get_ref();
-        cx.at(d.unit.span(), format!("device {id:?}: unit {seen}; a device's unit is 1 to 247 (0 is broadcast)"));
-        1
-    });
-    let profile = d.profile.as_ref().and_then(|p| cx.profile(p));
-    let every = d.every.as_ref().map_or(Some(DEFAULT_EVERY), |e| cx.period("every", e)).unwrap_or(DEFAULT_EVERY);
-    let deadband = d.deadband.as_ref().map_or(0.0, |b| cx.deadband("deadband", b));
-    let death_after = match &d.death_after {
-        None => DEFAULT_DEATH_AFTER,
-        Some(n) => u32::try_from(*n.get_ref()).ok().filter(|n| *n > 0).unwrap_or_else(|| {
-            cx.at(n.span(), format!("death_after = {}: it is 1 or more polls", n.get_ref()));
-            DEFAULT_DEATH_AFTER
-        }),
-    };
-    let sets = point_sets(cx, d, every, deadband);
-    if d.profile.is_some() && profile.is_none() {
-        return None;
-    }
-    let mut groups: Vec<(Group, f64, Source<'_>)> = Vec::new();
-    for set in &sets {
-        for group in profile_groups(cx, id, profile.as_deref(), unit, set) {
-            groups.push((group, set.deadband, Source::Points(set)));
-        }
-    }
-    for range in &d.raw {
-        if let Some(group) = raw_group(cx, id, unit, every, range) {
-            let band = range.get_ref().deadband.as_ref().map_or(deadband, |b| cx.deadband("deadband", b));
-            groups.push((group, band, Source::Raw(range)));
-        }
-    }
-    if groups.is_empty() && cx.errors.len() == errors {
-        cx.at(d.id.span(), format!("device {id:?} polls nothing; give points or groups (with a profile), a [[line.device.poll]] or a [[line.device.raw]]"));
-    }
-    check_metric_names(cx, id, profile.as_deref(), &groups);
-    let deadbands = deadbands(cx, d, &groups);
-    (cx.errors.len() == errors).then(|| DeviceSpec {
-        id: id.clone(),
-        unit,
-        profile,
-        groups: groups.into_iter().map(|(g, _, _)| g).collect(),
-        deadbands,
-        death_after,
-    })
-}
-
-/// The device's own points and groups (if any), then each `[[line.device.poll]]`.
-fn point_sets<'a>(cx: &mut Cx<'_>, d: &'a raw::Device, every: Duration, deadband: f64) -> Vec<PointSet<'a>> {
-    let mut sets = Vec::new();
-    if !d.points.is_empty() || !d.groups.is_empty() {
-        let span = d.points.first().or(d.groups.first()).map_or_else(|| d.id.span(), Spanned::span);
-        sets.push(PointSet { span, every, points: &d.points, groups: &d.groups, deadband });
-    }
-    for poll in &d.poll {
-        let p = poll.get_ref();
-        let every = cx.period("every", &p.every).unwrap_or(every);
-        let deadband = p.deadband.as_ref().map_or(deadband, |b| cx.deadband("deadband", b));
-        if p.points.is_empty() && p.groups.is_empty() {
-            cx.at(poll.span(), "a [[line.device.poll]] names no points and no groups");
-        }
-        sets.push(PointSet { span: poll.span(), every, points: &p.points, groups: &p.groups, deadband });
-    }
-    sets
-}
-
-/// The planner's groups for one point set; every unknown name is reported, at its place.
-fn profile_groups(cx: &mut Cx<'_>, id: &str, profile: Option<&Profile>, unit: u8, set: &PointSet<'_>) -> Vec<Group> {
-    let Some(profile) = profile else {
-        cx.at(
-            set.span.clone(),
-            format!("device {id:?} has no profile; points and groups need one (raw ranges do not)"),
-        );
-        return Vec::new();
-    };
-    let mut known = true;
-    let lookups: [(&[Text], &'static str); 2] = [(set.points, "parameter"), (set.groups, "group")];
-    for (names, what) in lookups {
-        for name in names {
-            let found = if what == "group" { profile.group(name.get_ref()) } else { profile.find(name.get_ref()) };
-            if found.is_empty() {
-                let error =
-                    GroupError::NoSuchPoint { profile: profile.origin.clone(), what, name: name.get_ref().clone() };
-                cx.at(name.span(), format!("device {id:?}: {error}{}", suggestion(profile, what)));
-                known = false;
-            }
-        }
-    }
-    if !known {
-        return Vec::new();
-    }
-    let names: Vec<String> = set.points.iter().map(|p| p.get_ref().clone()).collect();
-    let groups: Vec<String> = set.groups.iter().map(|g| g.get_ref().clone()).collect();
-    Group::points(profile, unit, &names, &groups, set.every).unwrap_or_else(|e| {
-        cx.at(set.span.clone(), format!("device {id:?}: {e}"));
-        Vec::new()
-    })
-}
-
-/// What the profile offers, for an unknown name's message.
-fn suggestion(profile: &Profile, what: &str) -> String {
-    if what == "group" {
-        format!(" (its groups: {})", profile.groups().join(", "))
-    } else {
-        " (a code, a label or a glob such as \"d0*\")".to_string()
-    }
-}
-
-/// The table names of a raw range.
-fn table(name: &str) -> Option<Table> {
-    match name.to_ascii_lowercase().as_str() {
-        "coils" | "coil" => Some(Table::Coils),
-        "discrete" | "discrete_inputs" | "inputs" => Some(Table::DiscreteInputs),
-        "holding" | "holding_registers" => Some(Table::Holding),
-        "input" | "input_registers" => Some(Table::Input),
-        _ => None,
-    }
-}
-
-/// A `[[line.device.raw]]` range as one group.
-fn raw_group(cx: &mut Cx<'_>, id: &str, unit: u8, every: Duration, range: &Spanned<raw::Raw>) -> Option<Group> {
-    let errors = cx.errors.len();
-    let r = range.get_ref();
-    let table = table(r.table.get_ref()).or_else(|| {
-        cx.at(r.table.span(), format!("table = {:?}: it is coils, discrete, holding or input", r.table.get_ref()));
-        None
-    });
-    let address = u16::try_from(*r.address.get_ref()).ok().or_else(|| {
-        cx.at(
-            r.address.span(),
-            format!("address = {}: a wire address is 0 to 65535 (0x0000 to 0xFFFF)", r.address.get_ref()),
-        );
-        None
-    });
-    let format = r.format.as_ref().map_or(Some(Format::U16), |f| {
-        Format::from_name(f.get_ref()).or_else(|| {
-            let all: Vec<&str> = Format::ALL.iter().map(|f| f.name()).collect();
-            cx.at(f.span(), format!("type = {:?}: it is one of {}", f.get_ref(), all.join(", ")));
-            None
-        })
-    });
-    let order = r.order.as_ref().map_or(Some(Order::default()), |o| {
-        Order::from_name(o.get_ref()).or_else(|| {
-            cx.at(o.span(), format!("order = {:?}: it is ABCD, CDAB, BADC or DCBA", o.get_ref()));
-            None
-        })
-    });
-    let every = r.every.as_ref().map_or(Some(every), |e| cx.period("every", e));
-    let (table, address, format, order, every) = (table?, address?, format?, order?, every?);
-    let format = if table.is_bits() { Format::Bit } else { format };
-    let count = match &r.count {
-        None => Some(format.width()),
-        Some(c) => u16::try_from(*c.get_ref()).ok().filter(|c| *c > 0).or_else(|| {
-            cx.at(c.span(), format!("count = {}: a range reads 1 or more items", c.get_ref()));
-            None
-        }),
-    }?;
-    let aliases = raw_names(cx, r, address, count, format)?;
-    let layout = Layout { format, order, aliases, ..Layout::default() };
-    let name =
-        r.name.as_ref().map_or_else(|| format!("u{unit} {}@{address:#06x}", table.name()), |n| n.get_ref().clone());
-    let group = Group::raw(&name, unit, table, address, count, every, &layout)
-        .map_err(|e| cx.at(range.span(), format!("device {id:?}: {e}")))
-        .ok()?;
-    (cx.errors.len() == errors).then_some(group)
-}
-
-/// The cells' names: `names` in order, or `name` for a single cell, or `name.0`, `name.1`, ...
-/// (nothing given: the address, `0x1000`).
-fn raw_names(cx: &mut Cx<'_>, r: &raw::Raw, address: u16, count: u16, format: Format) -> Option<Vec<(u16, String)>> {
-    let width = format.width().max(1);
-    let cells = count / width;
-    let at = |i: u16| address.saturating_add(i.saturating_mul(width));
-    for name in r.names.iter().chain(&r.name) {
-        if name.get_ref().is_empty() || name.get_ref().contains(['+', '#', '/']) {
-            cx.at(name.span(), format!("name {:?}: a metric name is not empty and has no /, + or #", name.get_ref()));
-            return None;
-        }
-    }
-    if !r.names.is_empty() {
-        if r.names.len() != usize::from(cells) {
-            let span = r.names.first().map_or(0..0, Spanned::span);
-            cx.at(span, format!("{} names for {cells} cells of {}", r.names.len(), format.name()));
-            return None;
-        }
-        return Some((0..cells).zip(&r.names).map(|(i, n)| (at(i), n.get_ref().clone())).collect());
-    }
-    Some(match &r.name {
-        Some(name) if cells == 1 => vec![(address, name.get_ref().clone())],
-        Some(name) => (0..cells).map(|i| (at(i), format!("{}.{i}", name.get_ref()))).collect(),
-        None => Vec::new(),
-    })
-}
-
-/// A metric name is used once per device; the second use is reported where it was asked for.
-fn check_metric_names(cx: &mut Cx<'_>, id: &str, profile: Option<&Profile>, groups: &[(Group, f64, Source<'_>)]) {
-    let mut seen: HashMap<&str, Range<usize>> = HashMap::new();
-    for (group, _, source) in groups {
-        for cell in &group.cells {
-            let span = source_span(profile, source, &cell.point);
-            if let Some(first) = seen.get(cell.name.as_str()) {
-                let line = cx.line_of(first);
-                cx.at(
-                    span,
-                    format!("device {id:?}: metric {:?} is polled twice (first at line {line}); a device's metric names are unique", cell.name),
-                );
-            } else {
-                seen.insert(&cell.name, span);
-            }
-        }
-    }
-}
-
-/// Where a cell was asked for: the name that matched its point, or its range.
-fn source_span(profile: Option<&Profile>, source: &Source<'_>, point: &Point) -> Range<usize> {
-    match source {
-        Source::Raw(range) => range.get_ref().name.as_ref().map_or_else(|| range.span(), Spanned::span),
-        Source::Points(set) => {
-            let same = |p: &&Point| p.table == point.table && p.address == point.address;
-            let by_name = profile.and_then(|profile| {
-                set.points
-                    .iter()
-                    .find(|n| profile.find(n.get_ref()).iter().any(same))
-                    .or_else(|| set.groups.iter().find(|g| profile.group(g.get_ref()).iter().any(same)))
-            });
-            by_name.map_or_else(|| set.span.clone(), Spanned::span)
-        }
-    }
-}
-
-/// `[group][cell]`: the cell's own (`deadbands`), else its poll's or range's, else the
-/// device's.
-fn deadbands(cx: &mut Cx<'_>, d: &raw::Device, groups: &[(Group, f64, Source<'_>)]) -> Vec<Vec<f64>> {
-    let mut own: Vec<(&str, f64)> = Vec::new();
-    for (name, band) in &d.deadbands {
-        let value = cx.deadband(&format!("deadbands.{}", name.get_ref()), band);
-        let polled = groups.iter().flat_map(|(g, _, _)| &g.cells).any(|c| c.name.eq_ignore_ascii_case(name.get_ref()));
-        if polled {
-            own.push((name.get_ref(), value));
-        } else {
-            let names: Vec<&str> = groups.iter().flat_map(|(g, _, _)| &g.cells).map(|c| c.name.as_str()).collect();
-            cx.at(
-                name.span(),
-                format!(
-                    "deadbands: device {:?} polls no {:?}; it polls {}",
-                    d.id.get_ref(),
-                    name.get_ref(),
-                    names.join(", ")
-                ),
-            );
-        }
-    }
-    groups
-        .iter()
-        .map(|(group, band, _)| {
-            group
-                .cells
-                .iter()
-                .map(|c| own.iter().find(|(n, _)| c.name.eq_ignore_ascii_case(n)).map_or(*band, |(_, b)| *b))
-                .collect()
-        })
-        .collect()
 }
