@@ -22,7 +22,7 @@ pub enum UintEncoding {
     /// As the specification says: UInt8/16/32 in `int_value`, UInt64 in `long_value`.
     #[default]
     Spec,
-    /// UInt8/16/32 (and UInt64) in `long_value`, as Eclipse Tahu and Ignition read them.
+    /// UInt8/16/32 in `long_value` (beside UInt64), as Eclipse Tahu and Ignition read them.
     LongValue,
 }
 
@@ -105,8 +105,7 @@ fn integer_value(datatype: DataType, n: i128, encoding: UintEncoding) -> Option<
         DataType::Int32 => MetricValue::Int(i32::try_from(n).ok()?.cast_unsigned()),
         DataType::Int64 | DataType::DateTime => MetricValue::Long(i64::try_from(n).ok()?.cast_unsigned()),
         DataType::UInt8 | DataType::UInt16 | DataType::UInt32 => {
-            let (_, max) = unsigned_range(datatype);
-            let v = u32::try_from(n).ok().filter(|v| u64::from(*v) <= max)?;
+            let v = u32::try_from(n).ok().filter(|v| *v <= unsigned_max(datatype))?;
             if in_long { MetricValue::Long(u64::from(v)) } else { MetricValue::Int(v) }
         }
         DataType::UInt64 => MetricValue::Long(u64::try_from(n).ok()?),
@@ -114,20 +113,21 @@ fn integer_value(datatype: DataType, n: i128, encoding: UintEncoding) -> Option<
     })
 }
 
-fn unsigned_range(datatype: DataType) -> (u64, u64) {
+/// The largest value of an unsigned datatype that travels in `int_value`.
+fn unsigned_max(datatype: DataType) -> u32 {
     match datatype {
-        DataType::UInt8 => (0, u64::from(u8::MAX)),
-        DataType::UInt16 => (0, u64::from(u16::MAX)),
-        DataType::UInt32 => (0, u64::from(u32::MAX)),
-        _ => (0, u64::MAX),
+        DataType::UInt8 => u32::from(u8::MAX),
+        DataType::UInt16 => u32::from(u16::MAX),
+        _ => u32::MAX,
     }
 }
 
 /// The raw value a DCMD metric's value asks to write to the point: `int_value` or
 /// `long_value` for an integer point (signed values as two's complement of their own width,
 /// of 32 or of 64 bits); a Double, Float or integer engineering value for a scaled point,
-/// scaled back and rounded; a Boolean for a bit; a String for a string. The caller then runs
-/// [`Point::check_write`]: access and the profile's range stay the profile's.
+/// scaled back and rounded; a Boolean for a bit; a String (ASCII, as many characters as its
+/// registers hold) for a string. The caller then runs [`Point::check_write`]: access and the
+/// profile's range stay the profile's.
 ///
 /// # Errors
 /// The value is of a kind the point does not take, not finite, or out of its raw type's range;
@@ -143,7 +143,13 @@ pub fn to_raw(point: &Point, value: &MetricValue) -> Result<Value, ConvertError>
     match (point.value_type, value) {
         (ValueType::Bit, MetricValue::Boolean(b)) => Ok(Value::Bool(*b)),
         (ValueType::Bit, _) => Err(refuse("a Boolean")),
-        (ValueType::String, MetricValue::String(text)) => Ok(Value::Text(text.clone())),
+        (ValueType::String, MetricValue::String(text)) => {
+            let max = usize::from(point.width) * 2;
+            if text.len() > max || !text.is_ascii() {
+                return Err(refuse(&format!("a String of at most {max} ASCII characters")));
+            }
+            Ok(Value::Text(text.clone()))
+        }
         (ValueType::String, _) => Err(refuse("a String")),
         (ValueType::F32 | ValueType::F64, value) => {
             let x = number(value).ok_or_else(|| refuse("a Float or Double"))?;
@@ -438,6 +444,11 @@ mod tests {
     fn bits_strings_and_floats_are_written_as_given() {
         assert_eq!(to_raw(&plain(ValueType::Bit), &MetricValue::Boolean(true)), Ok(Value::Bool(true)));
         assert_eq!(to_raw(&plain(ValueType::String), &MetricValue::String("AB".into())), Ok(Value::Text("AB".into())));
+        assert_eq!(
+            raw_err(&plain(ValueType::String), &MetricValue::String("ABCDEFGHI".into())),
+            "P1: string_value \"ABCDEFGHI\" given; the point (String) takes a String of at most 8 ASCII characters"
+        );
+        assert!(to_raw(&plain(ValueType::String), &MetricValue::String("µ".into())).is_err());
         assert_eq!(to_raw(&plain(ValueType::F32), &MetricValue::Float(1.5)), Ok(Value::Float(1.5)));
         assert_eq!(to_raw(&plain(ValueType::F32), &MetricValue::Double(1.5)), Ok(Value::Float(1.5)));
         assert_eq!(to_raw(&plain(ValueType::F64), &MetricValue::Int(3)), Ok(Value::Float(3.0)));
