@@ -23,8 +23,14 @@ const METER: DeviceRef = DeviceRef { line: 1, device: 0 };
 // running coil) on one line, a meter with two raw registers on another.
 // ---------------------------------------------------------------------------------------------
 
+/// The 3G3RX profile, loaded once for all tests.
+fn rx() -> Arc<Profile> {
+    static RX: std::sync::OnceLock<Arc<Profile>> = std::sync::OnceLock::new();
+    Arc::clone(RX.get_or_init(|| Arc::new(Profile::load("omron-3g3rx").unwrap())))
+}
+
 fn drive() -> DeviceSpec {
-    let rx = Arc::new(Profile::load("omron-3g3rx").unwrap());
+    let rx = rx();
     let names: Vec<String> = ["F001", "d001", "running"].iter().map(|s| (*s).to_string()).collect();
     let groups = Group::points(&rx, 1, &names, &[], Duration::from_secs(1)).unwrap();
     let deadbands =
@@ -611,6 +617,7 @@ fn births_wait_for_the_primary_host_online_and_its_offline_asks_for_a_reconnect(
     let plant = plant(Mode::Sparkplug(sparkplug_config(Some("scada"))));
     let mut edge = Edge::new(&plant);
     assert!(edge.connected(t(0)).is_empty(), "held until the host's STATE");
+    assert!(!edge.is_online());
     let stored = records(poll_drive(&mut edge, &plant, t(10), &[("F001", Value::Int(6000))]));
     assert!(!stored.is_empty(), "no births yet: the data is stored");
     let state = |online, ts| HostState { online, timestamp: Some(ts) }.to_json();
@@ -618,10 +625,12 @@ fn births_wait_for_the_primary_host_online_and_its_offline_asks_for_a_reconnect(
     assert!(actions.is_empty());
     let kinds: Vec<&str> = out.iter().map(kind).collect();
     assert_eq!(kinds, ["NBIRTH", "DBIRTH"]);
+    assert!(edge.is_online());
     let (out, actions, _) = edge.message("spBv1.0/STATE/scada", &state(false, 50), t(30));
     assert!(out.is_empty() && actions.is_empty(), "an older STATE is ignored");
     let (_, actions, _) = edge.message("spBv1.0/STATE/scada", &state(false, 200), t(40));
     assert_eq!(actions, [Action::Reconnect]);
+    assert!(!edge.is_online());
     let after = poll_drive(&mut edge, &plant, t(45), &[("F001", Value::Int(1))]);
     assert!(
         !after.is_empty() && after.iter().all(|o| matches!(o, Output::Store(_))),
@@ -850,6 +859,8 @@ fn plain_failures_are_bad_or_stale_once_with_the_error_and_the_device_goes_offli
     let mut edge = Edge::new(&plant);
     edge.connected(t(0));
     edge.sample(METER, 0, &answered(0, t(1), vec![Value::Int(20), Value::Int(7)]));
+    edge.disconnected();
+    assert_eq!(edge.connected(t(1)).len(), 2, "not retained: the statuses only, no values again");
     let out = publishes(edge.sample(METER, 0, &failed(0, t(2), FailureKind::Exception)));
     assert_eq!(out.len(), 2);
     let bad = json(&out[0]);
@@ -888,9 +899,13 @@ fn plain_set_writes_through_the_profile_and_the_result_is_published() {
     }
     let ok = edge.written(DRIVE, g, c, Ok(()));
     assert_eq!(ok[0].topic, "factory/line1/drive1/F001/set/result");
-    assert_eq!(json(&ok[0]), serde_json::json!({"ok": true}));
+    assert_eq!(json(&ok[0]), serde_json::json!({"ok": true, "value": "45"}), "the results in the writes' order");
+    assert_eq!(json(&edge.written(DRIVE, g, c, Ok(()))[0])["value"], "45 Hz");
+    assert_eq!(json(&edge.written(DRIVE, g, c, Ok(()))[0])["value"], "45");
     let failed_write = edge.written(DRIVE, g, c, Err("timeout".into()));
-    assert_eq!(json(&failed_write[0]), serde_json::json!({"ok": false, "error": "timeout"}));
+    assert_eq!(json(&failed_write[0]), serde_json::json!({"ok": false, "value": "45.00", "error": "timeout"}));
+    let unasked = edge.written(DRIVE, g, c, Ok(()));
+    assert_eq!(json(&unasked[0]), serde_json::json!({"ok": true}), "a result nobody asked for: no value");
     for (topic, payload) in [
         ("factory/line1/drive1/F001/set", &b"500"[..]),
         ("factory/line1/drive1/F001/set", b"45 V"),
@@ -918,13 +933,30 @@ fn plain_offline_messages_are_stored_and_replayed_historical_unretained() {
     assert!(matches!(edge.replay(&stored[0], t(2)), Err(EdgeError::Offline)));
     let hello = edge.connected(t(10));
     let topics: Vec<&str> = hello.iter().map(|p| p.topic.as_str()).collect();
-    assert_eq!(topics, ["factory/line1/status", "factory/line1/meter/status"]);
+    assert_eq!(
+        topics,
+        [
+            "factory/line1/status",
+            "factory/line1/meter/status",
+            "factory/line1/meter/temperature",
+            "factory/line1/meter/0x0001"
+        ],
+        "retained: the last values again, live, so the broker does not keep those before the outage"
+    );
+    assert!(hello[2].retain && json(&hello[2]).get("historical").is_none());
     let p = edge.replay(&stored[0], t(11)).unwrap().unwrap();
     assert_eq!(p.topic, "factory/line1/meter/temperature");
     assert!(!p.retain, "history does not replace the retained last value");
     let body = json(&p);
     assert_eq!(body["historical"], true);
     assert_eq!(body["timestamp"], ferrobus::poll::iso8601_ms(t(1)));
+    for (bad, seen) in [(&b"[1]"[..], "not a JSON object"), (b"{", "not a JSON object")] {
+        let record = records_of_plain("factory/line1/meter/temperature", bad);
+        let error = edge.replay(&record, t(12)).unwrap_err().to_string();
+        assert!(error.contains(seen), "{error}");
+    }
+    let empty = edge.replay(&records_of_plain("a/b/c", b"{}"), t(12)).unwrap().unwrap();
+    assert_eq!(json(&empty), serde_json::json!({"historical": true}));
     let sparkplug_record =
         records(Edge::new(&sparkplug_plant()).sample(METER, 0, &answered(0, t(1), vec![Value::Int(1), Value::Int(2)])));
     assert!(matches!(edge.replay(&sparkplug_record[0], t(12)), Err(EdgeError::Record(_))));
@@ -978,4 +1010,87 @@ fn the_plain_example_publishes_on_its_prefix() {
     let out = publishes(edge.sample(DeviceRef { line: 0, device: 0 }, 0, &answered(0, t(1), raws)));
     assert!(out.iter().any(|p| p.topic == "plant/hall-2/pump/status"));
     assert!(out.iter().filter(|p| !p.topic.ends_with("/status")).all(|p| p.retain && json(p)["quality"] == "good"));
+}
+
+/// A plain-mode store record as the edge writes them (see edge/record.rs), for damaged ones.
+fn records_of_plain(topic: &str, payload: &[u8]) -> Vec<u8> {
+    let mut out = b"FBe\x01P".to_vec();
+    out.extend_from_slice(&u16::try_from(topic.len()).unwrap().to_be_bytes());
+    out.extend_from_slice(topic.as_bytes());
+    out.extend_from_slice(payload);
+    out
+}
+
+#[test]
+fn the_long_value_switch_puts_unsigned_metrics_in_long_value() {
+    let config = SparkplugConfig { uint_encoding: UintEncoding::LongValue, ..sparkplug_config(None) };
+    let plant = plant(Mode::Sparkplug(config));
+    let mut edge = Edge::new(&plant);
+    edge.connected(t(0));
+    let out = publishes(edge.sample(METER, 0, &answered(0, t(1), vec![Value::Int(215), Value::Int(7)])));
+    let dbirth = decode(&out[0]);
+    let temperature = metric(&dbirth, "temperature");
+    assert_eq!(temperature.datatype, Some(DataType::UInt16.number()));
+    assert_eq!(temperature.value, Some(MetricValue::Long(215)));
+}
+
+// ---------------------------------------------------------------------------------------------
+// Whatever comes from the broker or the store, nothing panics.
+// ---------------------------------------------------------------------------------------------
+
+mod hostile {
+    use proptest::prelude::*;
+
+    use super::*;
+
+    const TOPICS: [&str; 6] = [
+        "spBv1.0/plant/NCMD/edge1",
+        "spBv1.0/plant/DCMD/edge1/drive1",
+        "spBv1.0/plant/DCMD/edge1/meter",
+        "spBv1.0/STATE/scada",
+        "factory/line1/drive1/F001/set",
+        "factory/line1/meter/temperature/set",
+    ];
+
+    proptest! {
+        #![proptest_config(ProptestConfig::with_cases(128))]
+
+        #[test]
+        fn any_payload_on_any_topic_is_taken_or_refused(topic in 0..TOPICS.len(), payload in proptest::collection::vec(any::<u8>(), 0..64)) {
+            for mode in [Mode::Sparkplug(sparkplug_config(Some("scada"))), Mode::Plain(PlainConfig { prefix: "factory/line1".into(), retain: false, qos: 0 })] {
+                let plant = plant(mode);
+                let mut edge = Edge::new(&plant);
+                edge.connected(t(0));
+                let (_, actions, _) = edge.message(TOPICS[topic], &payload, t(1));
+                for action in actions {
+                    if let Action::Write { device, group, cell, raw, .. } = action {
+                        let point = &plant.lines[device.line].devices[device.device].groups[group].cells[cell].point;
+                        prop_assert!(point.check_write(&raw, "").is_ok(), "a write the profile refuses: {raw:?}");
+                    }
+                }
+            }
+        }
+
+        #[test]
+        fn any_bytes_as_a_record_are_replayed_or_refused(bytes in proptest::collection::vec(any::<u8>(), 0..64)) {
+            let plant = sparkplug_plant();
+            let (mut edge, _) = online_with_drive(&plant);
+            let _ = edge.replay_all(&bytes, t(1));
+            let mut prefixed = b"FBe\x01S\x00\x06drive1".to_vec();
+            prefixed.extend_from_slice(&bytes);
+            let _ = edge.replay_all(&prefixed, t(2));
+        }
+
+        #[test]
+        fn any_dcmd_metric_values_write_only_what_the_profile_allows(raw in any::<f64>(), alias in 0_u64..8) {
+            let plant = sparkplug_plant();
+            let (mut edge, _) = online_with_drive(&plant);
+            let m = Metric { alias: Some(alias), value: Some(MetricValue::Double(raw)), ..Metric::default() };
+            let (_, actions, errors) = edge.message("spBv1.0/plant/DCMD/edge1/drive1", &dcmd(vec![m]), t(1));
+            prop_assert_eq!(actions.len() + errors.len(), 1);
+            if let [Action::Write { raw: Value::Int(n), .. }] = actions.as_slice() {
+                prop_assert!((0..=40_000).contains(n));
+            }
+        }
+    }
 }

@@ -33,8 +33,9 @@
 //!   exception reply) publishes its group's metrics once as null.
 //! - **Deaths.** After `death_after` polls in a row without a reply: DDEATH. The next answered
 //!   poll: DBIRTH again, with the values known.
-//! - **Offline** (before [`Edge::connected`], after [`Edge::disconnected`], while waiting for
-//!   the primary host): the DDATA that would have been published become [`Output::Store`]
+//! - **Offline** (before [`Edge::connected`], after [`Edge::disconnected`] or
+//!   [`Edge::shutdown`], while waiting for the primary host or after its STATE offline; see
+//!   [`Edge::is_online`]): the DDATA that would have been published become [`Output::Store`]
 //!   records, by metric name and datatype (see `record.rs`), so they still mean the same after
 //!   a restart. Births and deaths are not stored: they are a session's, and the broker's Will
 //!   said the node died. At the connection the NBIRTH is followed by a DBIRTH for **every
@@ -162,6 +163,23 @@ pub enum EdgeError {
     #[error("not online: a record is replayed after the births")]
     Offline,
 }
+
+impl EdgeError {
+    /// A refusal; a reason that starts with the metric's name (the profile's words) is not
+    /// made to say it twice.
+    fn refused(command: &'static str, target: &str, metric: &str, reason: &str) -> EdgeError {
+        let reason = reason.strip_prefix(metric).and_then(|r| r.strip_prefix(": ")).unwrap_or(reason);
+        EdgeError::Refused {
+            command,
+            target: target.to_string(),
+            metric: metric.to_string(),
+            reason: reason.to_string(),
+        }
+    }
+}
+
+/// What a message from the broker gives: messages to publish, actions, refusals.
+type Reply = (Vec<Publish>, Vec<Action>, Vec<EdgeError>);
 
 /// What the edge published and refused.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
@@ -357,6 +375,15 @@ impl Edge {
         match &mut self.inner {
             Inner::Sparkplug(s) => Some(s.shutdown(now)),
             Inner::Plain(p) => Some(p.shutdown()),
+        }
+    }
+
+    /// Whether the births are out (plain mode: connected): samples are published live and
+    /// stored records may be replayed; otherwise samples become [`Output::Store`] records.
+    pub fn is_online(&self) -> bool {
+        match &self.inner {
+            Inner::Sparkplug(s) => s.is_online(),
+            Inner::Plain(p) => p.is_online(),
         }
     }
 

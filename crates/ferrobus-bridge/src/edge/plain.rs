@@ -7,11 +7,13 @@
 //!                                 value) when the device did not answer, both with an "error";
 //!                                 "historical":true when replayed from the store; retained if configured
 //!   PREFIX/DEVICE/status         "online" / "offline" (retained)
-//!   PREFIX/status                "online" at the connection; the Will "offline" (retained)
+//!   PREFIX/status                "online" at the connection (then the devices' status and, with
+//!                                 retain, every point's last value again); the Will "offline" (retained)
 //!   PREFIX/DEVICE/POINT/set      a write: "45", "45 Hz", "run", or {"value":45}
-//!   PREFIX/DEVICE/POINT/set/result  {"ok":true} or {"ok":false,"error":"..."}
+//!   PREFIX/DEVICE/POINT/set/result  {"ok":true,"value":"45"} or {"ok":false,"value":"45","error":"..."}
 //! ```
 
+use std::collections::{HashMap, VecDeque};
 use std::time::SystemTime;
 
 use ferrobus::poll::{Cell, Sample, iso8601_ms};
@@ -20,7 +22,7 @@ use ferrobus_profile::Value;
 use super::deadband::Seen;
 use super::device::{Device, Liveness, devices_of};
 use super::record::Record;
-use super::{Action, DeviceRef, EdgeError, EdgeStats, Output, Publish};
+use super::{Action, DeviceRef, EdgeError, EdgeStats, Output, Publish, Reply};
 use crate::config::{PlainConfig, Plant};
 use crate::sparkplug::convert::is_scaled;
 
@@ -38,8 +40,13 @@ pub(crate) struct PlainEdge {
     config: PlainConfig,
     devices: Vec<PlainDevice>,
     connected: bool,
+    /// The values of the writes asked and not yet [`PlainEdge::written`], by cell, oldest first.
+    pending: HashMap<(DeviceRef, usize, usize), VecDeque<String>>,
     pub(crate) stats: EdgeStats,
 }
+
+/// Writes of one cell remembered for their results; older ones are forgotten past this.
+const PENDING_PER_CELL: usize = 16;
 
 /// The quality of a point's message.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -58,7 +65,13 @@ impl PlainEdge {
                 PlainDevice { device, stale }
             })
             .collect();
-        PlainEdge { config: config.clone(), devices, connected: false, stats: EdgeStats::default() }
+        PlainEdge {
+            config: config.clone(),
+            devices,
+            connected: false,
+            pending: HashMap::new(),
+            stats: EdgeStats::default(),
+        }
     }
 
     fn status_topic(&self) -> String {
@@ -82,13 +95,29 @@ impl PlainEdge {
         self.will()
     }
 
+    /// The bridge's status, each known device's, and with `retain` the last value of every
+    /// point read (what the broker retains must not stay as it was before the outage; the
+    /// values taken meanwhile follow as historical, unretained, from the store).
     pub(crate) fn connected(&mut self) -> Vec<Publish> {
         self.connected = true;
         let mut out = vec![Self::status(self.status_topic(), "online")];
         for d in self.devices.iter().filter(|d| d.device.answered_once) {
             out.push(self.device_status(&d.device));
+            if !self.config.retain {
+                continue;
+            }
+            for (g, group) in d.device.groups.iter().enumerate() {
+                if d.stale.get(g).copied().unwrap_or(true) {
+                    continue;
+                }
+                out.extend((0..group.cells.len()).filter_map(|c| self.point_message(&d.device, g, c, None)));
+            }
         }
         out
+    }
+
+    pub(crate) fn is_online(&self) -> bool {
+        self.connected
     }
 
     pub(crate) fn disconnected(&mut self) {
@@ -183,15 +212,17 @@ impl PlainEdge {
             return Err(EdgeError::Record("a Sparkplug record, and the bridge speaks plain JSON".to_string()));
         };
         let text = std::str::from_utf8(&payload).map_err(|e| EdgeError::Record(format!("{topic}: not UTF-8: {e}")))?;
-        let Some(open) = text.trim_end().strip_suffix('}') else {
-            return Err(EdgeError::Record(format!("{topic}: not a JSON object: {text:?}")));
-        };
-        let payload = format!("{open},\"historical\":true}}").into_bytes();
+        let fields: serde_json::Map<String, serde_json::Value> = serde_json::from_str(text)
+            .map_err(|e| EdgeError::Record(format!("{topic}: not a JSON object ({e}): {text:?}")))?;
+        // The message as it was, its fields in their order, then the flag.
+        let open = text.trim_end().strip_suffix('}').unwrap_or("{");
+        let comma = if fields.is_empty() { "" } else { "," };
+        let payload = format!("{open}{comma}\"historical\":true}}").into_bytes();
         self.stats.replayed += 1;
         Ok(Some(Publish { topic, payload, qos: self.config.qos, retain: false }))
     }
 
-    pub(crate) fn message(&mut self, topic: &str, payload: &[u8]) -> (Vec<Publish>, Vec<Action>, Vec<EdgeError>) {
+    pub(crate) fn message(&mut self, topic: &str, payload: &[u8]) -> Reply {
         let Some((device, point)) = self.set_target(topic) else {
             self.stats.ignored += 1;
             return (Vec::new(), Vec::new(), Vec::new());
@@ -199,12 +230,20 @@ impl PlainEdge {
         match self.write_of(&device, &point, payload) {
             Ok(action) => {
                 self.stats.writes += 1;
+                if let Action::Write { device, group, cell, typed, .. } = &action {
+                    let queue = self.pending.entry((*device, *group, *cell)).or_default();
+                    if queue.len() == PENDING_PER_CELL {
+                        queue.pop_front();
+                    }
+                    queue.push_back(typed.clone());
+                }
                 (Vec::new(), vec![action], Vec::new())
             }
             Err(reason) => {
                 self.stats.refused += 1;
-                let result = self.result(&device, &point, &Err(reason.clone()));
-                let error = EdgeError::Refused { command: "set", target: device, metric: point, reason };
+                let typed = set_text(payload).ok();
+                let result = self.result(&device, &point, typed.as_deref(), &Err(reason.clone()));
+                let error = EdgeError::refused("set", &device, &point, &reason);
                 (vec![result], Vec::new(), vec![error])
             }
         }
@@ -226,11 +265,19 @@ impl PlainEdge {
         Ok(Action::Write { device: d.device.at, group: g, cell: c, raw, typed })
     }
 
-    fn result(&self, device: &str, point: &str, result: &Result<(), String>) -> Publish {
-        let payload = match result {
-            Ok(()) => "{\"ok\":true}".to_string(),
-            Err(e) => format!("{{\"ok\":false,\"error\":{}}}", json_string(e)),
-        };
+    /// `{"ok":true,"value":"45"}` or `{"ok":false,"value":"45","error":"..."}` on the point's
+    /// `.../set/result` (the value as the write gave it, when known).
+    fn result(&self, device: &str, point: &str, typed: Option<&str>, result: &Result<(), String>) -> Publish {
+        let mut payload = format!("{{\"ok\":{}", result.is_ok());
+        if let Some(typed) = typed {
+            payload.push_str(",\"value\":");
+            payload.push_str(&json_string(typed));
+        }
+        if let Err(e) = result {
+            payload.push_str(",\"error\":");
+            payload.push_str(&json_string(e));
+        }
+        payload.push('}');
         Publish {
             topic: format!("{}/{device}/{point}/set/result", self.config.prefix),
             payload: payload.into_bytes(),
@@ -246,9 +293,13 @@ impl PlainEdge {
         cell: usize,
         result: &Result<(), String>,
     ) -> Vec<Publish> {
+        let typed = self.pending.get_mut(&(at, group, cell)).and_then(VecDeque::pop_front);
+        if self.pending.get(&(at, group, cell)).is_some_and(VecDeque::is_empty) {
+            self.pending.remove(&(at, group, cell));
+        }
         let Some(d) = self.devices.iter().find(|d| d.device.at == at) else { return Vec::new() };
         let Some(cell) = d.device.cell(group, cell) else { return Vec::new() };
-        vec![self.result(&d.device.id, &cell.name, result)]
+        vec![self.result(&d.device.id, &cell.name, typed.as_deref(), result)]
     }
 }
 

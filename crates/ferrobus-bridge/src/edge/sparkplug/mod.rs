@@ -1,7 +1,11 @@
 //! The Sparkplug B 3.0 edge node: births, data by exception, deaths, commands, the primary
 //! host's STATE, and the records kept while the broker is away.
 //!
-//! See the [module doc of `edge`](super) for the rules; this file carries them out.
+//! See the [module doc of `edge`](super) for the rules; this file carries them out for the
+//! session, the births, the data and the replay; `command.rs` takes what the broker sends
+//! (NCMD, DCMD, the primary host's STATE).
+
+mod command;
 
 use std::time::SystemTime;
 
@@ -10,13 +14,13 @@ use ferrobus::poll::Sample;
 use super::deadband::Seen;
 use super::device::{Device, Liveness, devices_of};
 use super::record::Record;
-use super::{Action, DeviceRef, EdgeError, EdgeStats, Output, Publish, millis};
+use super::{DeviceRef, EdgeError, EdgeStats, Output, Publish, millis};
 use crate::config::{Plant, SparkplugConfig};
-use crate::sparkplug::convert::{self, UintEncoding, datatype_of, metric_value, properties_of, to_raw};
+use crate::sparkplug::convert::{UintEncoding, datatype_of, metric_value, properties_of};
 use crate::sparkplug::payload::{
     DataType, Metric, MetricValue, Payload, PropertySet, PropertyValue, PropertyValueKind,
 };
-use crate::sparkplug::topic::{MessageType, Topic, parse_state, state_topic};
+use crate::sparkplug::topic::{MessageType, Topic, state_topic};
 
 /// The node metric carrying the session's birth/death sequence number.
 pub(crate) const BD_SEQ: &str = "bdSeq";
@@ -97,6 +101,10 @@ impl SparkplugEdge {
 
     pub(crate) fn bd_seq(&self) -> u8 {
         self.bd_seq
+    }
+
+    pub(crate) fn is_online(&self) -> bool {
+        self.node_born
     }
 
     pub(crate) fn set_bd_seq(&mut self, bd_seq: u8) {
@@ -198,7 +206,7 @@ impl SparkplugEdge {
             let wanted = if all { d.device.answered_once } else { d.born };
             if wanted {
                 d.death_due = !d.device.alive;
-                out.push(self.dbirth(i, now));
+                out.extend(self.dbirth(i, now));
             }
         }
         out
@@ -226,12 +234,13 @@ impl SparkplugEdge {
 
     /// The DBIRTH of device `i`: every metric with name, alias, datatype, last value (or
     /// null), timestamp and properties. Marks it born and every cell published.
-    fn dbirth(&mut self, i: usize, now: SystemTime) -> Publish {
+    fn dbirth(&mut self, i: usize, now: SystemTime) -> Option<Publish> {
         let encoding = self.encoding();
+        if i >= self.devices.len() {
+            return None;
+        }
         let seq = self.next_seq();
-        let Some(d) = self.devices.get_mut(i) else {
-            return Publish { topic: String::new(), payload: Vec::new(), qos: 0, retain: false };
-        };
+        let d = self.devices.get_mut(i)?;
         let mut metrics = Vec::new();
         for (g, group) in d.device.groups.iter().enumerate() {
             for (c, cell) in group.cells.iter().enumerate() {
@@ -252,10 +261,13 @@ impl SparkplugEdge {
         let payload = Payload { timestamp: Some(millis(now)), metrics, seq: Some(seq), ..Payload::default() };
         let id = d.device.id.clone();
         self.stats.device_births += 1;
-        self.publish(MessageType::DBirth, Some(&id), &payload)
+        Some(self.publish(MessageType::DBirth, Some(&id), &payload))
     }
 
     fn ddeath(&mut self, i: usize, now: SystemTime) -> Option<Publish> {
+        if i >= self.devices.len() {
+            return None;
+        }
         let seq = self.next_seq();
         let d = self.devices.get_mut(i)?;
         d.born = false;
@@ -277,7 +289,9 @@ impl SparkplugEdge {
         let Some(liveness) = d.device.apply(group, sample) else { return Vec::new() };
         let born = d.born;
         match liveness {
-            Liveness::Answered { .. } if online && !born => vec![Output::Publish(self.dbirth(i, sample.time))],
+            Liveness::Answered { .. } if online && !born => {
+                self.dbirth(i, sample.time).map(Output::Publish).into_iter().collect()
+            }
             Liveness::Answered { .. } => {
                 d.death_due = false;
                 let changes = d.device.changes(group);
@@ -321,8 +335,8 @@ impl SparkplugEdge {
 
     fn ddata(&mut self, i: usize, g: usize, cells: &[usize], time: SystemTime) -> Option<Publish> {
         let metrics: Vec<Metric> = cells.iter().filter_map(|&c| self.data_metric(i, g, c, false)).collect();
-        let seq = self.next_seq();
         let id = self.devices.get(i)?.device.id.clone();
+        let seq = self.next_seq();
         let payload = Payload { timestamp: Some(millis(time)), metrics, seq: Some(seq), ..Payload::default() };
         self.stats.data += 1;
         Some(self.publish(MessageType::DData, Some(&id), &payload))
@@ -349,12 +363,13 @@ impl SparkplugEdge {
         };
         let stored = Payload::decode(&payload).map_err(|e| EdgeError::Record(format!("device {device:?}: {e}")))?;
         let found = self.devices.iter().position(|d| d.device.id == device);
-        let Some((i, born)) = found.and_then(|i| self.devices.get(i).map(|d| (i, d.born))) else {
+        let Some((i, born)) = found.and_then(|i| self.devices.get(i).map(|d| (i, d.born))).filter(|(_, b)| *b || birth)
+        else {
             self.stats.unmapped += 1;
             return Ok(Vec::new());
         };
         let metrics: Vec<Metric> = stored.metrics.into_iter().filter_map(|m| self.historical(i, m)).collect();
-        if metrics.is_empty() || !(born || birth) {
+        if metrics.is_empty() {
             self.stats.unmapped += 1;
             return Ok(Vec::new());
         }
@@ -363,7 +378,7 @@ impl SparkplugEdge {
             if let Some(d) = self.devices.get_mut(i) {
                 d.death_due = !d.device.alive;
             }
-            out.push(self.dbirth(i, now));
+            out.extend(self.dbirth(i, now));
         }
         let seq = self.next_seq();
         let payload = Payload { timestamp: Some(millis(now)), metrics, seq: Some(seq), ..Payload::default() };
@@ -400,165 +415,6 @@ impl SparkplugEdge {
         let due: Vec<usize> =
             (0..self.devices.len()).filter(|&i| self.devices.get(i).is_some_and(|d| d.death_due)).collect();
         due.into_iter().filter_map(|i| self.ddeath(i, now)).collect()
-    }
-
-    pub(crate) fn message(
-        &mut self,
-        topic: &str,
-        payload: &[u8],
-        now: SystemTime,
-    ) -> (Vec<Publish>, Vec<Action>, Vec<EdgeError>) {
-        if let Some(host) = &self.config.primary_host
-            && topic == state_topic(host)
-        {
-            return self.host_state(topic, payload, now);
-        }
-        let Some(parsed) = Topic::parse(topic) else { return self.ignore() };
-        if parsed.group != self.config.group_id || parsed.node != self.config.edge_node_id {
-            return self.ignore();
-        }
-        match (parsed.kind, parsed.device.as_deref()) {
-            (MessageType::NCmd, None) => self.node_command(topic, payload, now),
-            (MessageType::DCmd, Some(device)) => {
-                let (actions, errors) = self.device_command(topic, device, payload);
-                (Vec::new(), actions, errors)
-            }
-            _ => self.ignore(),
-        }
-    }
-
-    fn ignore(&mut self) -> (Vec<Publish>, Vec<Action>, Vec<EdgeError>) {
-        self.stats.ignored += 1;
-        (Vec::new(), Vec::new(), Vec::new())
-    }
-
-    fn host_state(
-        &mut self,
-        topic: &str,
-        payload: &[u8],
-        now: SystemTime,
-    ) -> (Vec<Publish>, Vec<Action>, Vec<EdgeError>) {
-        let Some(state) = parse_state(payload) else {
-            let detail = format!("not a host STATE: {:?}", String::from_utf8_lossy(payload));
-            return (Vec::new(), Vec::new(), vec![EdgeError::Malformed { topic: topic.to_string(), detail }]);
-        };
-        if let (Some(last), Some(t)) = (self.host_timestamp, state.timestamp)
-            && t < last
-        {
-            // An older STATE than the one acted on (the spec: ignore it).
-            return self.ignore();
-        }
-        self.host_timestamp = state.timestamp.or(self.host_timestamp);
-        self.host_online = state.online;
-        if state.online {
-            return (self.births_if_ready(now), Vec::new(), Vec::new());
-        }
-        if !self.node_born {
-            return (Vec::new(), Vec::new(), Vec::new());
-        }
-        // The host is gone: no more data for it (samples are stored) until the next session.
-        self.unborn();
-        (Vec::new(), vec![Action::Reconnect], Vec::new())
-    }
-
-    fn node_command(
-        &mut self,
-        topic: &str,
-        payload: &[u8],
-        now: SystemTime,
-    ) -> (Vec<Publish>, Vec<Action>, Vec<EdgeError>) {
-        let payload = match Payload::decode(payload) {
-            Ok(p) => p,
-            Err(e) => return (Vec::new(), Vec::new(), vec![self.malformed(topic, &e)]),
-        };
-        let mut rebirth = false;
-        let mut errors = Vec::new();
-        for metric in &payload.metrics {
-            match (metric.name.as_deref(), &metric.value) {
-                (Some(REBIRTH), Some(MetricValue::Boolean(b))) => rebirth |= *b,
-                (name, value) => {
-                    let what = name.map_or_else(|| format!("alias {:?}", metric.alias), str::to_string);
-                    let why = match (name, value) {
-                        (Some(REBIRTH), Some(v)) => format!("{REBIRTH} takes a Boolean, not {}", convert::describe(v)),
-                        (Some(REBIRTH), None) => format!("{REBIRTH} without a value"),
-                        _ => format!("the edge node takes only {REBIRTH}"),
-                    };
-                    errors.push(self.refuse("NCMD", &self.config.edge_node_id.clone(), &what, why));
-                }
-            }
-        }
-        let publishes = if rebirth && self.node_born {
-            self.stats.rebirths += 1;
-            self.births(now, false)
-        } else {
-            Vec::new()
-        };
-        (publishes, Vec::new(), errors)
-    }
-
-    fn device_command(&mut self, topic: &str, device: &str, payload: &[u8]) -> (Vec<Action>, Vec<EdgeError>) {
-        let Some(i) = self.devices.iter().position(|d| d.device.id == device) else {
-            return (
-                Vec::new(),
-                vec![self.refuse("DCMD", device, "the device", "no such device in this edge node".to_string())],
-            );
-        };
-        let payload = match Payload::decode(payload) {
-            Ok(p) => p,
-            Err(e) => return (Vec::new(), vec![self.malformed(topic, &e)]),
-        };
-        let mut actions = Vec::new();
-        let mut errors = Vec::new();
-        for metric in &payload.metrics {
-            match self.write_of(i, metric) {
-                Ok(action) => actions.push(action),
-                Err((what, why)) => errors.push(self.refuse("DCMD", device, &what, why)),
-            }
-        }
-        if errors.is_empty() {
-            self.stats.writes += actions.len() as u64;
-            (actions, errors)
-        } else {
-            // All or nothing: a command with one refused metric writes none.
-            (Vec::new(), errors)
-        }
-    }
-
-    /// The write a DCMD metric asks for, or (the metric, why it is refused).
-    fn write_of(&self, index: usize, metric: &Metric) -> Result<Action, (String, String)> {
-        let target = self.devices.get(index).ok_or_else(|| (String::new(), "no such device".to_string()))?;
-        let label = metric.name.clone().or_else(|| metric.alias.map(|a| format!("alias {a}"))).unwrap_or_default();
-        let by_alias = metric.alias.and_then(|alias| {
-            target.aliases.iter().enumerate().find_map(|(g, a)| a.iter().position(|x| *x == alias).map(|c| (g, c)))
-        });
-        let (group, cell) = match (metric.alias, by_alias) {
-            (Some(alias), None) => return Err((label, format!("no metric has alias {alias}"))),
-            (_, Some(found)) => found,
-            (None, None) => match metric.name.as_deref() {
-                Some(name) => {
-                    target.device.find(name).ok_or_else(|| (label.clone(), "no metric of that name".to_string()))?
-                }
-                None => return Err(("a metric".to_string(), "neither a name nor an alias".to_string())),
-            },
-        };
-        let point =
-            &target.device.cell(group, cell).ok_or_else(|| (label.clone(), "no such metric".to_string()))?.point;
-        let label = point.code.clone();
-        let Some(value) = &metric.value else { return Err((label, "no value given (null)".to_string())) };
-        let raw = to_raw(point, value).map_err(|e| (label.clone(), e.to_string()))?;
-        let typed = point.show(&raw);
-        point.check_write(&raw, &typed).map_err(|e| (label.clone(), e.to_string()))?;
-        Ok(Action::Write { device: target.device.at, group, cell, raw, typed })
-    }
-
-    fn refuse(&mut self, command: &'static str, target: &str, metric: &str, reason: String) -> EdgeError {
-        self.stats.refused += 1;
-        EdgeError::Refused { command, target: target.to_string(), metric: metric.to_string(), reason }
-    }
-
-    fn malformed(&mut self, topic: &str, error: &prost::DecodeError) -> EdgeError {
-        self.stats.refused += 1;
-        EdgeError::Malformed { topic: topic.to_string(), detail: format!("not a Sparkplug B payload: {error}") }
     }
 }
 
