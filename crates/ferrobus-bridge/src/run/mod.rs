@@ -262,6 +262,11 @@ impl Bridge {
         self.end_drop_burst();
         let mut report = std::mem::take(&mut self.report);
         report.finish(&self.lines.iter().map(|l| l.running.poll.counters()).collect::<Vec<_>>(), &self.store);
+        // What is left in memory goes to disk for the next run (if the store has a folder).
+        if let Err(e) = self.store.close() {
+            report.store_errors += 1;
+            tracing::warn!("closing the store: {e}");
+        }
         report
     }
 
