@@ -155,6 +155,20 @@ async fn one_run(port: u16, store: &Path) -> (u64, u64, Report) {
     (bd_seq(&birth).expect("NBIRTH has a bdSeq"), bd_seq(&death).expect("NDEATH has a bdSeq"), report)
 }
 
+#[test]
+fn a_device_dies_after_death_after_polls_without_a_reply_and_an_exception_is_a_reply() {
+    let mut health = DeviceHealth::default();
+    assert_eq!(health.observe(Some(FailureKind::Timeout), 3), None);
+    assert_eq!(health.observe(Some(FailureKind::Crc), 3), None);
+    assert_eq!(health.observe(Some(FailureKind::Exception), 3), None, "an answer resets the count");
+    assert_eq!(health.observe(Some(FailureKind::Timeout), 3), None);
+    assert_eq!(health.observe(Some(FailureKind::Port), 3), None);
+    assert_eq!(health.observe(Some(FailureKind::Timeout), 3), Some(true), "the third silent poll in a row");
+    assert_eq!(health.observe(Some(FailureKind::Timeout), 3), None, "said once");
+    assert_eq!(health.observe(Some(FailureKind::BadReply), 3), Some(false), "a reply: back");
+    assert_eq!(health.observe(None, 3), None);
+}
+
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn births_arrive_a_stop_publishes_ndeath_and_the_next_run_takes_the_next_bd_seq() {
     let Some(broker) = start_broker("births").await else { return };
