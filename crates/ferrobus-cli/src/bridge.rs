@@ -25,8 +25,9 @@ use crate::output;
 /// The demo's broker when none is given.
 const DEMO_BROKER: &str = "127.0.0.1:1883";
 
-/// The demo's acceleration time (F002): 20 s from 0 to the maximum frequency.
-const DEMO_RAMP: &str = "20s";
+/// The demo's acceleration and deceleration times (F002, F003), from 0 to the maximum
+/// frequency (400 Hz) and back: a few seconds between two set frequencies.
+const DEMO_RAMP: &str = "60s";
 
 /// The set frequencies the demo cycles through, and how long it stays at each.
 const DEMO_FREQUENCIES: [&str; 4] = ["60 Hz", "35 Hz", "50 Hz", "20 Hz"];
@@ -41,9 +42,9 @@ to stderr as things happen; the summary goes to stdout at the end (Ctrl-C, SIGTE
 --duration), after the NDEATH.
 
 --demo runs that file against simulated drives (an Omron 3G3RX and an SDP servo on an in-process \
-virtual RS-485 line): after the births it sets the inverter's acceleration time (F002 = 20 s), runs \
-it (coil `run` on, F001 set) and changes its set frequency every 20 s (60, 35, 50, 20 Hz), so its \
-output frequency d001 ramps in the DDATA.
+virtual RS-485 line): after the births it sets the inverter's ramps (F002, F003 = 60 s for 400 Hz), \
+runs it (coil `run` on, F001 set) and changes its set frequency every 20 s (60, 35, 50, 20 Hz), so \
+its output frequency d001 and current d002 ramp in the DDATA.
 
 Examples:
   ferrobus bridge --demo                                   # broker on 127.0.0.1:1883
@@ -210,8 +211,9 @@ struct Inverter {
     id: String,
     run: Point,
     frequency: Point,
-    /// F002, the acceleration time: set long enough to watch the ramp.
-    ramp: Option<Point>,
+    /// F002 and F003, the acceleration and deceleration times: set long enough to watch the
+    /// ramps.
+    ramps: Vec<Point>,
 }
 
 /// The first device of the plant with a `run` coil and an F001 (the 3G3RX).
@@ -225,7 +227,7 @@ fn inverter(plant: &Plant) -> Option<Inverter> {
                 id: d.id.clone(),
                 run: profile.point("run")?.clone(),
                 frequency: profile.point("F001")?.clone(),
-                ramp: profile.point("F002").cloned(),
+                ramps: ["F002", "F003"].iter().filter_map(|code| profile.point(code).cloned()).collect(),
             })
         })
     })
@@ -247,10 +249,10 @@ async fn drive_inverter(
             eprintln!("demo: {text}");
         }
     };
-    if let Some(ramp) = &inverter.ramp {
+    for ramp in &inverter.ramps {
         match set(&client, inverter.unit, ramp, DEMO_RAMP).await {
-            Ok(()) => say(format!("{} F002 = {DEMO_RAMP} (the acceleration time)", inverter.id)),
-            Err(e) => say(format!("{} F002 = {DEMO_RAMP}: {e}", inverter.id)),
+            Ok(()) => say(format!("{} {} = {DEMO_RAMP} ({})", inverter.id, ramp.code, ramp.label)),
+            Err(e) => say(format!("{} {} = {DEMO_RAMP}: {e}", inverter.id, ramp.code)),
         }
     }
     for (step, text) in DEMO_FREQUENCIES.iter().cycle().enumerate() {
