@@ -290,6 +290,33 @@ mod tests {
     use super::*;
 
     #[test]
+    fn check_sums_up_the_plant_in_words() {
+        let plant = Plant::demo("10.0.0.5:1884").unwrap();
+        let text = summary("demo.toml", &plant);
+        assert!(text.starts_with("demo.toml: 1 line, 2 devices, "), "{text}");
+        assert!(
+            text.ends_with("; Sparkplug B, group ferrobus-demo, edge node demo-edge; broker mqtt://10.0.0.5:1884; ok"),
+            "{text}"
+        );
+        assert_eq!(count(1, "metric"), "1 metric");
+        assert_eq!(count(11, "metric"), "11 metrics");
+    }
+
+    #[test]
+    fn the_demo_drives_the_inverter_by_its_profiles_points() {
+        let plant = Plant::demo("127.0.0.1").unwrap();
+        let inverter = inverter(&plant).expect("the demo has a 3G3RX");
+        assert_eq!((inverter.id.as_str(), inverter.unit), ("inverter", 1));
+        assert_eq!(inverter.run.table, ferrobus_profile::Table::Coils);
+        assert!(inverter.frequency.prepare_write(DEMO_FREQUENCIES[0]).is_ok());
+        let ramps: Vec<&str> = inverter.ramps.iter().map(|p| p.code.as_str()).collect();
+        assert_eq!(ramps, ["F002", "F003"]);
+        for ramp in &inverter.ramps {
+            assert!(ramp.prepare_write(DEMO_RAMP).is_ok(), "{} takes {DEMO_RAMP}", ramp.code);
+        }
+    }
+
+    #[test]
     fn a_broker_is_host_and_port() {
         assert_eq!(host_port("127.0.0.1:1883").unwrap(), ("127.0.0.1".to_string(), 1883));
         assert_eq!(host_port("[::1]:8883").unwrap(), ("::1".to_string(), 8883));
