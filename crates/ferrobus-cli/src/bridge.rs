@@ -64,8 +64,8 @@ pub(crate) struct BridgeArgs {
     #[arg(long)]
     demo: bool,
 
-    /// The broker, HOST:PORT, instead of the plant file's (the demo's default: 127.0.0.1:1883)
-    #[arg(long, value_name = "HOST:PORT")]
+    /// The broker, HOST[:PORT], instead of the plant file's (the demo's default: 127.0.0.1:1883)
+    #[arg(long, value_name = "HOST[:PORT]")]
     broker: Option<String>,
 
     /// Stop after this long (NDEATH, then the summary), instead of running until interrupted
@@ -129,7 +129,8 @@ fn load(plant_file: Option<&Path>, args: &BridgeArgs) -> Result<(Plant, String),
         (Plant::load(path).map_err(|e| config_errors(&e))?, path.display().to_string())
     };
     if let (Some(broker), false) = (&args.broker, args.demo) {
-        let (host, port) = host_port(broker)?;
+        let default_port = if plant.broker.tls.is_some() { 8883 } else { 1883 };
+        let (host, port) = host_port(broker, default_port)?;
         plant.broker.host = host;
         plant.broker.port = port;
     }
@@ -146,12 +147,24 @@ fn config_errors(errors: &ConfigErrors) -> CliError {
     CliError::Usage(format!("{origin}: {n} error{}", if n == 1 { "" } else { "s" }))
 }
 
-/// `HOST:PORT` (`[::1]:1883` too).
-fn host_port(text: &str) -> Result<(String, u16), CliError> {
-    let bad = || CliError::Usage(format!("--broker '{text}': give HOST:PORT, e.g. 127.0.0.1:1883"));
-    let (host, port) = text.rsplit_once(':').ok_or_else(bad)?;
-    let host = host.trim_start_matches('[').trim_end_matches(']');
-    let port = port.parse::<u16>().map_err(|_| bad())?;
+/// `HOST[:PORT]` (`[::1]:1883` too), the port `default_port` when left out.
+fn host_port(text: &str, default_port: u16) -> Result<(String, u16), CliError> {
+    let bad = || CliError::Usage(format!("--broker '{text}': give HOST[:PORT], e.g. 127.0.0.1:1883"));
+    let (host, port) = match text.strip_prefix('[') {
+        Some(rest) => {
+            let (host, after) = rest.split_once(']').ok_or_else(bad)?;
+            (host, after.strip_prefix(':'))
+        }
+        None => match text.rsplit_once(':') {
+            Some((host, _)) if host.contains(':') => (text, None), // a bare IPv6 address
+            Some((host, port)) => (host, Some(port)),
+            None => (text, None),
+        },
+    };
+    let port = match port {
+        Some(port) => port.parse::<u16>().map_err(|_| bad())?,
+        None => default_port,
+    };
     if host.is_empty() || port == 0 {
         return Err(bad());
     }
@@ -318,10 +331,15 @@ mod tests {
 
     #[test]
     fn a_broker_is_host_and_port() {
-        assert_eq!(host_port("127.0.0.1:1883").unwrap(), ("127.0.0.1".to_string(), 1883));
-        assert_eq!(host_port("[::1]:8883").unwrap(), ("::1".to_string(), 8883));
-        for bad in ["localhost", ":1883", "host:0", "host:x", "host:70000"] {
-            assert!(host_port(bad).is_err(), "{bad}");
+        let ok = |text: &str| host_port(text, 1883).unwrap();
+        assert_eq!(ok("127.0.0.1:1884"), ("127.0.0.1".to_string(), 1884));
+        assert_eq!(ok("broker.plant"), ("broker.plant".to_string(), 1883));
+        assert_eq!(host_port("broker.plant", 8883).unwrap().1, 8883, "the TLS port when the plant has TLS");
+        assert_eq!(ok("[::1]:8883"), ("::1".to_string(), 8883));
+        assert_eq!(ok("[::1]"), ("::1".to_string(), 1883));
+        assert_eq!(ok("::1"), ("::1".to_string(), 1883));
+        for bad in ["", ":1883", "host:0", "host:x", "host:70000", "[::1", "[]:1883"] {
+            assert!(host_port(bad, 1883).is_err(), "{bad}");
         }
     }
 }
