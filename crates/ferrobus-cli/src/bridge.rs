@@ -35,7 +35,8 @@ const DEMO_STEP: Duration = Duration::from_secs(20);
 
 /// Long help of `ferrobus bridge`.
 const AFTER_HELP: &str = "\
-The plant file (--config plant.toml) names the broker (address, TLS, credentials, client id), \
+Here --config FILE is the plant file (no settings file is read, and the connection options are \
+refused: each line of the plant has its own). The plant file names the broker (address, TLS, credentials, client id), \
 the Sparkplug group and edge node ids (or plain JSON topics), and the lines with their devices, \
 points, poll rates and deadbands; examples/bridge/demo.toml is one to copy from. Status lines go \
 to stderr as things happen; the summary goes to stdout at the end (Ctrl-C, SIGTERM or \
