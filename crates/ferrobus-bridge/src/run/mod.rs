@@ -166,6 +166,8 @@ struct Bridge {
     events: Option<mpsc::Sender<Status>>,
     backoff: Backoff,
     reconnect_at: Option<Instant>,
+    /// When the next batch of stored records may be replayed.
+    replay_at: Instant,
     online: bool,
     /// The births of this session have gone out: stored records may follow.
     born: bool,
@@ -211,6 +213,7 @@ impl Bridge {
             written,
             events,
             reconnect_at: None,
+            replay_at: Instant::now(),
             online: false,
             born: false,
             replay_done: false,
@@ -251,7 +254,11 @@ impl Bridge {
                     self.reconnect_at = None;
                     self.connect();
                 }
-                () = tokio::time::sleep(REPLAY_PACE), if replaying => self.replay(),
+                // A deadline kept across turns: a steady flow of samples does not put it off.
+                () = tokio::time::sleep_until(self.replay_at), if replaying => {
+                    self.replay();
+                    self.replay_at = Instant::now() + REPLAY_PACE;
+                }
             }
         }
     }
