@@ -192,10 +192,9 @@ impl Bridge {
         let (written_tx, written) = mpsc::channel(64);
         let mut lines = Vec::with_capacity(plant.lines.len());
         for (index, spec) in plant.lines.iter().enumerate() {
-            let mut started = lines::start(spec, samples_tx.clone()).await?;
-            started.forward(index);
+            let (running, map) = lines::start(index, spec, samples_tx.clone()).await?;
             let devices = vec![DeviceHealth::default(); spec.devices.len()];
-            lines.push(LineState { running: started.running, map: started.map, devices });
+            lines.push(LineState { running, map, devices });
         }
         let report = Report::new(&plant, store.stats().recovered);
         let (bd_seq_file, note) = restore_bd_seq(&plant, &mut edge);
