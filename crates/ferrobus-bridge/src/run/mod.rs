@@ -10,15 +10,20 @@
 //!
 //! One task runs the loop, in this order of priority: stop, the broker's events, the lines'
 //! samples, the results of writes, the reconnect timer, and last the replay of stored records
-//! (a batch at a time while the client's queue is short, so that live data is never starved).
-//! Lines run concurrently in their own pollers: one line's failure never stops another.
+//! (a batch every 10 ms while the client's queue is short, so that live data is never starved
+//! and the replay is never put off for ever). Lines run concurrently in their own pollers: one
+//! line's failure never stops another. A write ([`Action::Write`]) runs in a task of its own
+//! and comes back as a result for [`Edge::written`].
 //!
 //! The broker session: CONNECT with the edge's Will (NDEATH with the bdSeq, kept across
 //! restarts in a small file, see [`state`]); on CONNACK subscribe to the edge's topics and
-//! publish its births, then replay the store; on a lost connection the edge is told (its
-//! samples become store records, the next CONNECT takes the next bdSeq) and the next attempt
-//! waits the backoff (the configured delay, doubling to 30 s). Stopping publishes NDEATH
-//! before the DISCONNECT, stops the pollers and returns a [`Report`].
+//! publish its births, then replay the store in order ([`Edge::replay_all`], then
+//! [`Edge::replayed`] once it is empty); on a lost connection the edge is told (its samples
+//! become store records, the next CONNECT takes the next bdSeq) and the next attempt waits the
+//! backoff (the configured delay, doubling to 30 s). Stopping publishes NDEATH before the
+//! DISCONNECT, stops the pollers, closes the store (what is left is kept on disk for the next
+//! run) and returns a [`Report`]. [`run_with`]'s [`Options`] hand out the running lines (their
+//! clients, pollers and simulated lines) to a caller that drives a device beside the bridge.
 
 mod broker;
 mod lines;
