@@ -10,15 +10,20 @@
 //!
 //! One task runs the loop, in this order of priority: stop, the broker's events, the lines'
 //! samples, the results of writes, the reconnect timer, and last the replay of stored records
-//! (a batch at a time while the client's queue is short, so that live data is never starved).
-//! Lines run concurrently in their own pollers: one line's failure never stops another.
+//! (a batch every 10 ms while the client's queue is short, so that live data is never starved
+//! and the replay is never put off for ever). Lines run concurrently in their own pollers: one
+//! line's failure never stops another. A write ([`Action::Write`]) runs in a task of its own
+//! and comes back as a result for [`Edge::written`].
 //!
 //! The broker session: CONNECT with the edge's Will (NDEATH with the bdSeq, kept across
 //! restarts in a small file, see [`state`]); on CONNACK subscribe to the edge's topics and
-//! publish its births, then replay the store; on a lost connection the edge is told (its
-//! samples become store records, the next CONNECT takes the next bdSeq) and the next attempt
-//! waits the backoff (the configured delay, doubling to 30 s). Stopping publishes NDEATH
-//! before the DISCONNECT, stops the pollers and returns a [`Report`].
+//! publish its births, then replay the store in order ([`Edge::replay_all`], then
+//! [`Edge::replayed`] once it is empty); on a lost connection the edge is told (its samples
+//! become store records, the next CONNECT takes the next bdSeq) and the next attempt waits the
+//! backoff (the configured delay, doubling to 30 s). Stopping publishes NDEATH before the
+//! DISCONNECT, stops the pollers, closes the store (what is left is kept on disk for the next
+//! run) and returns a [`Report`]. [`run_with`]'s [`Options`] hand out the running lines (their
+//! clients, pollers and simulated lines) to a caller that drives a device beside the bridge.
 
 mod broker;
 mod lines;
@@ -124,6 +129,25 @@ struct DeviceHealth {
     dead: bool,
 }
 
+impl DeviceHealth {
+    /// One poll of the device, failed with `failure` or not: `Some(true)` when it has just
+    /// died (`death_after` polls in a row without a reply), `Some(false)` when it is back.
+    fn observe(&mut self, failure: Option<FailureKind>, death_after: u32) -> Option<bool> {
+        match failure {
+            Some(kind) if !answered(kind) => {
+                self.silent = self.silent.saturating_add(1);
+                let dies = self.silent >= death_after && !self.dead;
+                self.dead |= dies;
+                dies.then_some(true)
+            }
+            _ => {
+                self.silent = 0;
+                std::mem::take(&mut self.dead).then_some(false)
+            }
+        }
+    }
+}
+
 /// A write's outcome, back from its task.
 struct Written {
     device: DeviceRef,
@@ -147,6 +171,8 @@ struct Bridge {
     events: Option<mpsc::Sender<Status>>,
     backoff: Backoff,
     reconnect_at: Option<Instant>,
+    /// When the next batch of stored records may be replayed.
+    replay_at: Instant,
     online: bool,
     /// The births of this session have gone out: stored records may follow.
     born: bool,
@@ -171,10 +197,9 @@ impl Bridge {
         let (written_tx, written) = mpsc::channel(64);
         let mut lines = Vec::with_capacity(plant.lines.len());
         for (index, spec) in plant.lines.iter().enumerate() {
-            let mut started = lines::start(spec, samples_tx.clone()).await?;
-            started.forward(index);
+            let (running, map) = lines::start(index, spec, samples_tx.clone()).await?;
             let devices = vec![DeviceHealth::default(); spec.devices.len()];
-            lines.push(LineState { running: started.running, map: started.map, devices });
+            lines.push(LineState { running, map, devices });
         }
         let report = Report::new(&plant, store.stats().recovered);
         let (bd_seq_file, note) = restore_bd_seq(&plant, &mut edge);
@@ -192,6 +217,7 @@ impl Bridge {
             written,
             events,
             reconnect_at: None,
+            replay_at: Instant::now(),
             online: false,
             born: false,
             replay_done: false,
@@ -232,7 +258,11 @@ impl Bridge {
                     self.reconnect_at = None;
                     self.connect();
                 }
-                () = tokio::time::sleep(REPLAY_PACE), if replaying => self.replay(),
+                // A deadline kept across turns: a steady flow of samples does not put it off.
+                () = tokio::time::sleep_until(self.replay_at), if replaying => {
+                    self.replay();
+                    self.replay_at = Instant::now() + REPLAY_PACE;
+                }
             }
         }
     }
@@ -262,6 +292,11 @@ impl Bridge {
         self.end_drop_burst();
         let mut report = std::mem::take(&mut self.report);
         report.finish(&self.lines.iter().map(|l| l.running.poll.counters()).collect::<Vec<_>>(), &self.store);
+        // What is left in memory goes to disk for the next run (if the store has a folder).
+        if let Err(e) = self.store.close() {
+            report.store_errors += 1;
+            tracing::warn!("closing the store: {e}");
+        }
         report
     }
 
@@ -430,26 +465,18 @@ impl Bridge {
     /// and when it is back.
     fn track_health(&mut self, device: DeviceRef, sample: &Sample) {
         let death_after = self.device_spec_death_after(device);
-        let name = self.device_name(device);
         let Some(health) = self.lines.get_mut(device.line).and_then(|l| l.devices.get_mut(device.device)) else {
             return;
         };
-        let status = match &sample.result {
-            Err(failure) if !answered(failure.kind) => {
-                health.silent = health.silent.saturating_add(1);
-                (health.silent >= death_after && !health.dead).then(|| {
-                    health.dead = true;
-                    Status::DeviceDead { device: name, polls: health.silent, why: failure.diagnosis.clone() }
-                })
-            }
-            _ => {
-                health.silent = 0;
-                std::mem::take(&mut health.dead).then_some(Status::DeviceBack { device: name })
-            }
-        };
-        if let Some(status) = status {
-            self.say(status);
-        }
+        let failure = sample.result.as_ref().err();
+        let Some(died) = health.observe(failure.map(|f| f.kind), death_after) else { return };
+        let polls = health.silent;
+        let name = self.device_name(device);
+        self.say(if died {
+            Status::DeviceDead { device: name, polls, why: failure.map(|f| f.diagnosis.clone()).unwrap_or_default() }
+        } else {
+            Status::DeviceBack { device: name }
+        });
     }
 
     fn device_spec_death_after(&self, device: DeviceRef) -> u32 {
@@ -559,20 +586,21 @@ impl Bridge {
     }
 
     fn publish_all(&mut self, messages: Vec<Publish>) {
-        let mut births = (0usize, 0usize);
+        let mut node = false;
+        let mut devices = Vec::new();
         for message in messages {
-            match Topic::parse(&message.topic).map(|t| t.kind) {
-                Some(MessageType::NBirth) => births.0 += 1,
-                Some(MessageType::DBirth) => births.1 += 1,
+            match Topic::parse(&message.topic) {
+                Some(Topic { kind: MessageType::NBirth, .. }) => node = true,
+                Some(Topic { kind: MessageType::DBirth, device: Some(device), .. }) => devices.push(device),
                 _ => {}
             }
             self.publish(message);
         }
-        if births.0 > 0 {
+        if node {
             self.born = true;
-            self.say(Status::Births { node: true, devices: births.1 });
-        } else if births.1 > 0 {
-            self.say(Status::Births { node: false, devices: births.1 });
+        }
+        if node || !devices.is_empty() {
+            self.say(Status::Births { node, devices });
         }
         self.check_replayed();
     }

@@ -35,8 +35,8 @@ pub enum Status {
     Births {
         /// Whether an NBIRTH was among them.
         node: bool,
-        /// DBIRTHs.
-        devices: usize,
+        /// The devices born (DBIRTH).
+        devices: Vec<String>,
     },
     /// The connection failed or was lost; the next attempt waits `retry_in`.
     BrokerLost {
@@ -135,8 +135,16 @@ impl fmt::Display for Status {
             Status::Recovered { records } => write!(f, "the store holds {records} records of a previous run"),
             Status::Connecting { broker } => write!(f, "connecting to {broker}"),
             Status::Connected { broker } => write!(f, "connected to {broker}"),
-            Status::Births { node: true, devices } => write!(f, "births: NBIRTH and {devices} DBIRTH"),
-            Status::Births { node: false, devices } => write!(f, "births: {devices} DBIRTH"),
+            Status::Births { node, devices } => {
+                let mut parts = Vec::new();
+                if *node {
+                    parts.push("NBIRTH".to_string());
+                }
+                if !devices.is_empty() {
+                    parts.push(format!("DBIRTH {}", devices.join(", ")));
+                }
+                write!(f, "births: {}", parts.join(", "))
+            }
             Status::BrokerLost { broker, error, retry_in, was_online } => {
                 let what = if *was_online { "lost" } else { "unreachable" };
                 write!(f, "broker {broker} {what}: {error}; next attempt in {:.1} s", retry_in.as_secs_f64())
