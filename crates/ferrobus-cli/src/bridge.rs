@@ -51,7 +51,7 @@ Examples:
   ferrobus bridge --demo                                   # broker on 127.0.0.1:1883
   mosquitto_sub -t 'spBv1.0/#' -v                          # in another terminal: the traffic
   ferrobus bridge --config plant.toml --check              # file:line:col errors, exit 2
-  ferrobus bridge --config plant.toml --broker 10.0.0.5:1883 --duration 1h";
+  ferrobus bridge --config plant.toml --broker 10.0.0.5:1883 --duration 30min";
 
 /// Arguments of `ferrobus bridge`.
 #[derive(Args, Clone, Debug)]
@@ -87,7 +87,8 @@ pub(crate) async fn run(plant_file: Option<&Path>, args: &BridgeArgs) -> Result<
     let mut interrupt = Interrupt::listen()?;
     if args.demo && !args.quiet {
         let (host, port) = (&plant.broker.host, plant.broker.port);
-        eprintln!("bridge: the demo plant: a simulated 3G3RX and SDP servo on a virtual line, to {host}:{port}");
+        let at = if host.contains(':') { format!("[{host}]:{port}") } else { format!("{host}:{port}") };
+        eprintln!("bridge: the demo plant: a simulated 3G3RX and SDP servo on a virtual line, to {at}");
         eprintln!("bridge: to see it: mosquitto_sub -h {host} -p {port} -t 'spBv1.0/#' -v");
     }
     let inverter = if args.demo { inverter(&plant) } else { None };

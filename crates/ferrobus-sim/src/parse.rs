@@ -27,7 +27,7 @@ pub fn parse_duration(text: &str) -> Result<Duration, String> {
         "us" | "µs" => value / 1e6,
         "ns" => value / 1e9,
         "m" | "min" => value * 60.0,
-        other => return Err(format!("unknown unit '{other}' in '{text}'; use ms, s or us")),
+        other => return Err(format!("unknown unit '{other}' in '{text}'; use ns, us, ms, s or min")),
     };
     if seconds > 3600.0 {
         return Err(format!("'{text}' is longer than an hour"));

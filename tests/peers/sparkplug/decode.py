@@ -1,7 +1,7 @@
 #!/usr/bin/env python3
 """decode.py - what pysparkplug 0.6.1 makes of a Sparkplug B payload, as JSON.
 
-    decode.py TYPE [--birth FILE] [FILE|-]
+    decode.py TYPE [FILE|-] [--birth FILE]
 
 TYPE is the message type of the payload (NBIRTH, NDATA, NCMD, NDEATH, DBIRTH, DDATA, DCMD,
 DDEATH); the payload is read from FILE, or stdin when FILE is '-' or absent. A DATA or CMD

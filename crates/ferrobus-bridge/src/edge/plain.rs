@@ -9,7 +9,7 @@
 //!   PREFIX/DEVICE/status         "online" / "offline" (retained)
 //!   PREFIX/status                "online" at the connection (then the devices' status and, with
 //!                                 retain, every point's last value again); the Will "offline" (retained)
-//!   PREFIX/DEVICE/POINT/set      a write: "45", "45 Hz", "run", or {"value":45}
+//!   PREFIX/DEVICE/POINT/set      a write: "45", "45 Hz", "on", or {"value":45}
 //!   PREFIX/DEVICE/POINT/set/result  {"ok":true,"value":"45"} or {"ok":false,"value":"45","error":"..."}
 //! ```
 

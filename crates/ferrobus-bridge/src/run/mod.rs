@@ -127,6 +127,8 @@ struct LineState {
 struct DeviceHealth {
     silent: u32,
     dead: bool,
+    /// It has answered a poll in this run (the edge has born it).
+    answered: bool,
 }
 
 impl DeviceHealth {
@@ -142,6 +144,7 @@ impl DeviceHealth {
             }
             _ => {
                 self.silent = 0;
+                self.answered = true;
                 std::mem::take(&mut self.dead).then_some(false)
             }
         }
@@ -336,14 +339,11 @@ impl Bridge {
                 tracing::warn!("{e}");
             }
         }
-        if self.stored_offline > 0 {
-            let records = std::mem::take(&mut self.stored_offline);
-            self.say(Status::Replaying { records, queued: self.store.len() });
-        }
         self.replayed_now = 0;
         let births = self.edge.connected(SystemTime::now());
         if matches!(self.plant.mode, Mode::Plain(_)) {
             self.born = true;
+            self.announce_replay();
         }
         self.replay_done = false;
         self.publish_all(births);
@@ -469,13 +469,15 @@ impl Bridge {
             return;
         };
         let failure = sample.result.as_ref().err();
+        let answered_before = health.answered;
         let Some(died) = health.observe(failure.map(|f| f.kind), death_after) else { return };
         let polls = health.silent;
         let name = self.device_name(device);
         self.say(if died {
-            Status::DeviceDead { device: name, polls, why: failure.map(|f| f.diagnosis.clone()).unwrap_or_default() }
+            let why = failure.map(|f| f.diagnosis.clone()).unwrap_or_default();
+            Status::DeviceDead { device: name, polls, why, never_answered: !answered_before }
         } else {
-            Status::DeviceBack { device: name }
+            Status::DeviceBack { device: name, first: !answered_before }
         });
     }
 
@@ -503,7 +505,7 @@ impl Bridge {
             Ok(_) => {
                 self.end_drop_burst();
                 if self.stored_offline == 0 {
-                    self.say(Status::Storing);
+                    self.say(Status::Storing { connected: self.online });
                 }
                 self.stored_offline += 1;
                 self.report.stored += 1;
@@ -585,6 +587,14 @@ impl Bridge {
         self.publish_all(deaths);
     }
 
+    /// Says, once the births are out, how many records were stored since the last ones.
+    fn announce_replay(&mut self) {
+        if self.stored_offline > 0 {
+            let records = std::mem::take(&mut self.stored_offline);
+            self.say(Status::Replaying { records, queued: self.store.len() });
+        }
+    }
+
     fn publish_all(&mut self, messages: Vec<Publish>) {
         let mut node = false;
         let mut devices = Vec::new();
@@ -601,6 +611,9 @@ impl Bridge {
         }
         if node || !devices.is_empty() {
             self.say(Status::Births { node, devices });
+        }
+        if node {
+            self.announce_replay();
         }
         self.check_replayed();
     }

@@ -49,11 +49,15 @@ pub enum Status {
         /// Whether a session was up (else an attempt failed).
         was_online: bool,
     },
-    /// The first record kept in the store since the broker was lost.
-    Storing,
-    /// The broker is back: records stored meanwhile are replayed after the births.
+    /// The first record kept in the store since the last births: the broker is away, or
+    /// (`connected`) the births wait for the primary host's STATE.
+    Storing {
+        /// Whether the broker is connected.
+        connected: bool,
+    },
+    /// The births are out again: records stored meanwhile are replayed after them.
     Replaying {
-        /// Records stored while it was away.
+        /// Records stored since the last births.
         records: u64,
         /// Records in the store now (with older ones).
         queued: u64,
@@ -83,11 +87,15 @@ pub enum Status {
         polls: u32,
         /// The last failure.
         why: String,
+        /// It has not answered once in this run (so it was never born).
+        never_answered: bool,
     },
     /// A device answers again.
     DeviceBack {
         /// Its id.
         device: String,
+        /// Its first reply in this run (it never answered before).
+        first: bool,
     },
     /// A command was refused; nothing was written.
     Refused {
@@ -149,17 +157,24 @@ impl fmt::Display for Status {
                 let what = if *was_online { "lost" } else { "unreachable" };
                 write!(f, "broker {broker} {what}: {error}; next attempt in {:.1} s", retry_in.as_secs_f64())
             }
-            Status::Storing => write!(f, "broker away: samples go to the store"),
+            Status::Storing { connected: false } => write!(f, "broker away: samples go to the store"),
+            Status::Storing { connected: true } => {
+                write!(f, "waiting for the primary host's STATE: samples go to the store")
+            }
             Status::Replaying { records, queued } => {
-                write!(f, "{records} records stored while the broker was away; replaying {queued}")
+                write!(f, "{records} records stored since the last births; replaying {queued}")
             }
             Status::Replayed { records } => write!(f, "replayed {records} stored records, in order, as historical"),
             Status::Dropped { records } => write!(f, "the store was full: {records} new records dropped"),
             Status::StoreError { error, count } => write!(f, "store error ({count} so far): {error}"),
-            Status::DeviceDead { device, polls, why } => {
+            Status::DeviceDead { device, polls, why, never_answered: true } => {
+                write!(f, "device {device} does not answer ({polls} polls: {why}); it is born at its first reply")
+            }
+            Status::DeviceDead { device, polls, why, never_answered: false } => {
                 write!(f, "device {device} stopped answering ({polls} polls: {why})")
             }
-            Status::DeviceBack { device } => write!(f, "device {device} answers again"),
+            Status::DeviceBack { device, first: false } => write!(f, "device {device} answers again"),
+            Status::DeviceBack { device, first: true } => write!(f, "device {device} answers at last"),
             Status::Refused { topic, error } => write!(f, "command refused on {topic}: {error}"),
             Status::Written { device, point, value, result: Ok(()) } => write!(f, "wrote {device} {point} = {value}"),
             Status::Written { device, point, value, result: Err(e) } => {
