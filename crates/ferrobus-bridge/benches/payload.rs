@@ -16,7 +16,7 @@ use ferrobus_bridge::sparkplug::convert::{self, UintEncoding};
 use ferrobus_bridge::sparkplug::payload::{
     DataType, Metric, MetricValue, Payload, PropertySet, PropertyValue, PropertyValueKind,
 };
-use ferrobus_profile::{Access, Order, Point, Table, Value, ValueType};
+use ferrobus_profile::{Point, Table, Value, ValueType};
 
 const NOW: u64 = 1_700_000_000_000;
 
@@ -64,32 +64,7 @@ fn payload(c: &mut Criterion) {
 }
 
 fn scaled_point() -> Point {
-    Point {
-        table: Table::Holding,
-        address: 0,
-        number: 1,
-        code: "F001".into(),
-        label: String::new(),
-        description: String::new(),
-        value_type: ValueType::U16,
-        order: Order::Abcd,
-        width: 1,
-        unit: Some("Hz".into()),
-        scale: 0.01,
-        offset: 0.0,
-        min: None,
-        max: None,
-        access: Access::Rw,
-        while_running: true,
-        group: None,
-        values: Vec::new(),
-        bits: Vec::new(),
-        depends_on: Vec::new(),
-        backup: false,
-        source: None,
-        confirmed: true,
-        default: Value::Int(0),
-    }
+    Point { code: "F001".into(), unit: Some("Hz".into()), scale: 0.01, ..Point::raw(Table::Holding, 0, ValueType::U16) }
 }
 
 fn convert(c: &mut Criterion) {

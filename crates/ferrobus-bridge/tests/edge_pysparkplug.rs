@@ -6,8 +6,7 @@
 //! The peer: pysparkplug in `target/peers/sparkplug-venv` (`.ci/setup-peers.sh`). Under
 //! `CI=true` a missing peer fails the test; elsewhere it passes with a `SKIPPED` line.
 
-use std::io::Write as _;
-use std::path::{Path, PathBuf};
+use std::path::PathBuf;
 use std::process::Command;
 use std::time::{Duration, SystemTime};
 
@@ -16,23 +15,11 @@ use ferrobus_bridge::config::Plant;
 use ferrobus_bridge::edge::{DeviceRef, Edge, Output, Publish};
 use serde_json::Value as Json;
 
-fn root() -> PathBuf {
-    let root = Path::new(env!("CARGO_MANIFEST_DIR")).join("../..");
-    root.canonicalize().unwrap_or(root)
-}
+mod support;
 
 /// pysparkplug's python and decode.py, or None (after a `SKIPPED` line) outside CI.
 fn peer(test: &str) -> Option<(PathBuf, PathBuf)> {
-    let python = root().join("target/peers/sparkplug-venv/bin/python");
-    let script = root().join("tests/peers/sparkplug/decode.py");
-    if python.is_file() && script.is_file() {
-        return Some((python, script));
-    }
-    let what = format!("{} or {}", python.display(), script.display());
-    let ci = matches!(std::env::var("CI").as_deref(), Ok("true" | "TRUE" | "True" | "1" | "yes"));
-    assert!(!ci, "{test}: missing {what} (CI=true: a missing peer is a failure)");
-    let _ = writeln!(std::io::stderr(), "\nSKIPPED {test}: missing {what}\n");
-    None
+    support::present(test, &support::missing_pysparkplug()).then(support::pysparkplug)
 }
 
 /// What pysparkplug decoded of `message` (its type from the topic), aliases resolved by `birth`.

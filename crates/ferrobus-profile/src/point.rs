@@ -58,6 +58,41 @@ pub struct Point {
 }
 
 impl Point {
+    /// A point no profile describes: `value_type` at wire `address` of `table` (a bit for the
+    /// bit tables), named by its address (`0x1000`), in order ABCD, unscaled, with no unit,
+    /// range or meaning, read/write where the table allows, zero at start. Set the fields that
+    /// differ with struct update syntax.
+    pub fn raw(table: Table, address: u16, value_type: ValueType) -> Point {
+        let bits = table.is_bits();
+        let value_type = if bits { ValueType::Bit } else { value_type };
+        Point {
+            table,
+            address,
+            number: u32::from(address),
+            code: format!("{address:#06x}"),
+            label: String::new(),
+            description: String::new(),
+            value_type,
+            order: Order::default(),
+            width: value_type.registers(),
+            unit: None,
+            scale: 1.0,
+            offset: 0.0,
+            min: None,
+            max: None,
+            access: Access::Rw,
+            while_running: true,
+            group: None,
+            values: Vec::new(),
+            bits: Vec::new(),
+            depends_on: Vec::new(),
+            backup: false,
+            source: None,
+            confirmed: true,
+            default: if bits { crate::Value::Bool(false) } else { crate::Value::Int(0) },
+        }
+    }
+
     /// Whether a client may read it (write-only points read as zero).
     pub fn readable(&self) -> bool {
         self.access != Access::Wo

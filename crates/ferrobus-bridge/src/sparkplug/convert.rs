@@ -258,7 +258,7 @@ pub fn describe(value: &MetricValue) -> String {
 
 #[cfg(test)]
 mod tests {
-    use ferrobus_profile::{Access, Order, Table};
+    use ferrobus_profile::Table;
     use proptest::prelude::*;
 
     use super::*;
@@ -277,31 +277,14 @@ mod tests {
     ];
 
     fn point(value_type: ValueType, scale: f64, offset: f64) -> Point {
+        let table = if value_type == ValueType::Bit { Table::Coils } else { Table::Holding };
         Point {
-            table: if value_type == ValueType::Bit { Table::Coils } else { Table::Holding },
-            address: 0,
-            number: 1,
             code: "P1".into(),
-            label: String::new(),
-            description: String::new(),
-            value_type,
-            order: Order::Abcd,
             width: if value_type == ValueType::String { 4 } else { value_type.registers() },
             unit: Some("Hz".into()),
             scale,
             offset,
-            min: None,
-            max: None,
-            access: Access::Rw,
-            while_running: true,
-            group: None,
-            values: Vec::new(),
-            bits: Vec::new(),
-            depends_on: Vec::new(),
-            backup: false,
-            source: None,
-            confirmed: true,
-            default: Value::Int(0),
+            ..Point::raw(table, 0, value_type)
         }
     }
 

@@ -47,15 +47,6 @@ impl Format {
         Format::F64(Order::Abcd),
     ];
 
-    /// Registers one value takes.
-    pub(crate) fn width(self) -> u16 {
-        match self {
-            Format::Named | Format::U16 | Format::I16 | Format::Hex | Format::Binary => 1,
-            Format::U32(_) | Format::I32(_) | Format::F32(_) => 2,
-            Format::F64(_) => 4,
-        }
-    }
-
     /// The order of a multi-register format.
     pub(crate) fn order(self) -> Option<Order> {
         match self {
@@ -150,33 +141,10 @@ impl Format {
 /// A point for a raw register or bit: what the profile's codec needs to decode, show, parse
 /// and check a write of it (any value of its type, read/write where the table allows).
 pub(crate) fn raw_point(table: Table, address: u16, format: Format) -> Point {
-    let bits = matches!(table, Table::Coils | Table::DiscreteInputs);
-    let value_type = if bits { ValueType::Bit } else { format.value_type() };
     Point {
-        table,
-        address,
-        number: u32::from(address),
-        code: format!("{address:#06x}"),
-        label: String::new(),
-        description: String::new(),
-        value_type,
         order: format.order().unwrap_or_default(),
-        width: if bits { 1 } else { format.width() },
-        unit: None,
-        scale: 1.0,
-        offset: 0.0,
-        min: None,
-        max: None,
         access: if matches!(table, Table::Coils | Table::Holding) { Access::Rw } else { Access::Ro },
-        while_running: true,
-        group: None,
-        values: Vec::new(),
-        bits: Vec::new(),
-        depends_on: Vec::new(),
-        backup: false,
-        source: None,
-        confirmed: true,
-        default: if bits { Value::Bool(false) } else { Value::Int(0) },
+        ..Point::raw(table, address, format.value_type())
     }
 }
 

@@ -2,7 +2,7 @@
 
 use std::time::Duration;
 
-use ferrobus_profile::{Access, Extent, Order, Point, Profile, Table, Value, ValueType, plan};
+use ferrobus_profile::{Extent, Order, Point, Profile, Table, Value, ValueType, plan};
 
 /// How a raw cell's registers are read and shown.
 #[derive(Clone, Copy, PartialEq, Eq, Hash, Debug, Default)]
@@ -101,32 +101,7 @@ impl Cell {
     pub fn raw(table: Table, address: u16, format: Format, order: Order, alias: Option<&str>) -> Cell {
         let format = if table.is_bits() { Format::Bit } else { format };
         let name = alias.map_or_else(|| format!("{address:#06x}"), str::to_string);
-        let point = Point {
-            table,
-            address,
-            number: u32::from(address),
-            code: name.clone(),
-            label: String::new(),
-            description: String::new(),
-            value_type: format.value_type(),
-            order,
-            width: format.width(),
-            unit: None,
-            scale: 1.0,
-            offset: 0.0,
-            min: None,
-            max: None,
-            access: Access::Rw,
-            while_running: true,
-            group: None,
-            values: Vec::new(),
-            bits: Vec::new(),
-            depends_on: Vec::new(),
-            backup: false,
-            source: None,
-            confirmed: true,
-            default: if table.is_bits() { Value::Bool(false) } else { Value::Int(0) },
-        };
+        let point = Point { code: name.clone(), order, ..Point::raw(table, address, format.value_type()) };
         Cell { name, point, format: Some(format) }
     }
 
