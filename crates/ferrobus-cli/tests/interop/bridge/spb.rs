@@ -10,6 +10,7 @@
 //!   session that follows (or breaks) the rules;
 //! - [`decode_raw`]: `protoc --decode_raw` on one payload.
 
+use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
 use std::process::Command;
 use std::thread;
@@ -163,10 +164,10 @@ fn message(line: &Value) -> Option<Message> {
 
 /// One line per message: the topic, QoS, retain and size (failure messages).
 pub(crate) fn listing(messages: &[Message]) -> String {
-    messages
-        .iter()
-        .map(|m| format!("  {} qos {} retain {} {} bytes\n", m.topic, m.qos, m.retain, m.payload.len()))
-        .collect()
+    messages.iter().fold(String::new(), |mut text, m| {
+        let _ = writeln!(text, "  {} qos {} retain {} {} bytes", m.topic, m.qos, m.retain, m.payload.len());
+        text
+    })
 }
 
 /// How many messages have a topic of this Sparkplug message type (`"DBIRTH"`, ...) or,
@@ -220,6 +221,11 @@ impl Verdict {
     pub(crate) fn series(&self, device: &str, metric: &str) -> Vec<Value> {
         let key = format!("{device}/{metric}").replace('~', "~0").replace('/', "~1");
         self.summary.pointer(&format!("/series/{key}")).and_then(Value::as_array).cloned().unwrap_or_default()
+    }
+
+    /// How many metrics were marked historical.
+    pub(crate) fn historical_count(&self) -> usize {
+        self.summary.get("historical").and_then(Value::as_u64).map_or(0, |n| usize::try_from(n).unwrap_or(usize::MAX))
     }
 
     /// `summary.by_type[kind]`, 0 when absent.

@@ -12,6 +12,7 @@
 //! with a persistent session misses nothing published between the restart and its own
 //! reconnection.
 
+use std::fmt::Write as _;
 use std::net::TcpStream;
 use std::path::{Path, PathBuf};
 use std::process::Command;
@@ -95,10 +96,11 @@ impl Broker {
         if persistent {
             // Sessions are saved on SIGTERM and restored at start; QoS 0 messages for a
             // client that is away are queued too (the Sparkplug data is QoS 0).
-            config.push_str(&format!(
+            let _ = write!(
+                config,
                 "persistence true\npersistence_location {}/\nautosave_interval 0\nqueue_qos0_messages true\n",
                 dir.path().display()
-            ));
+            );
         } else {
             config.push_str("persistence false\n");
         }

@@ -1,0 +1,225 @@
+//! `ferrobus bridge` in Sparkplug B mode against a simulated 3G3RX (`ferrobus sim --tcp`):
+//! births and data checked by pysparkplug and `protoc --decode_raw`, the Will NDEATH after a
+//! SIGKILL and the next bdSeq after a restart, DCMD writes to F001 (and one refused), and a
+//! drive that goes silent and comes back.
+
+use std::time::Duration;
+
+use super::harness::{Bridge, Drive, Plant};
+use super::spb::{self, Message, Recorder, Verdict};
+use crate::support::mosquitto::Broker;
+
+/// How long the bridge may take from its start to the births (connecting, the first polls).
+const BIRTHS_WITHIN: Duration = Duration::from_secs(20);
+
+/// The inverter as the plant publishes it: four points every 200 ms, dead after 3 silent polls.
+const INVERTER: &str = "[[line.device]]\nid = \"inverter\"\nunit = 1\nprofile = \"omron-3g3rx\"\n\
+                        every = \"200ms\"\npoints = [\"d001\", \"d002\", \"F001\", \"running\"]\ndeath_after = 3\n";
+
+/// A broker, a recorder on it, a 3G3RX sim, and the plant that bridges them (not started).
+struct Scene {
+    broker: Broker,
+    recorder: Recorder,
+    drive: Drive,
+    config: std::path::PathBuf,
+}
+
+fn scene(name: &str) -> Scene {
+    let broker = Broker::start();
+    let dir = spb::evidence_dir(name);
+    let recorder = Recorder::start(&broker, &dir, &[]);
+    let drive = Drive::start(&["--profile", "omron-3g3rx"]);
+    let config = Plant::sparkplug(broker.port(), "plant", name)
+        .with("[store]\ndir = \"store\"")
+        .tcp_line("tcp", drive.address(), INVERTER)
+        .write(&dir);
+    Scene { broker, recorder, drive, config }
+}
+
+/// Waits for `n` messages of `kind` (of `device`) in the recording.
+fn wait_for(recorder: &Recorder, kind: &str, device: Option<&str>, n: usize, within: Duration) -> Vec<Message> {
+    let what = format!("{n} {kind}{}", device.map(|d| format!(" of {d}")).unwrap_or_default());
+    recorder.wait_until(&what, within, |m| spb::count(m, kind, device) >= n)
+}
+
+fn set(drive: &Drive, point: &str, value: &str) {
+    drive.client(1).run(&["--device", "omron-3g3rx", "set", point, value]).ok();
+}
+
+/// F001 as the drive has it, `"45.50 Hz"`.
+fn f001(drive: &Drive) -> String {
+    let out = drive.client(1).run(&["--device", "omron-3g3rx", "get", "F001", "--json"]).json();
+    out.pointer("/points/0/value").and_then(|v| v.as_str()).unwrap_or_default().to_string()
+}
+
+/// Stops the bridge cleanly, waits for its NDEATH, and verifies the whole recording.
+fn finish(scene: Scene, mut bridge: Bridge, ndeaths: usize, args: &[&str]) -> Verdict {
+    bridge.terminate();
+    wait_for(&scene.recorder, "NDEATH", None, ndeaths, Duration::from_secs(10));
+    let path = scene.recorder.stop();
+    drop(scene.broker);
+    spb::verify(&path, args)
+}
+
+/// The lines of `protoc --decode_raw` output at `indent` spaces (2: inside a metric).
+fn fields_at(text: &str, indent: usize) -> Vec<&str> {
+    text.lines()
+        .filter(|l| l.len() > indent && l[..indent].chars().all(|c| c == ' ') && !l[indent..].starts_with(' '))
+        .map(|l| &l[indent..])
+        .filter(|l| !l.starts_with('}'))
+        .collect()
+}
+
+#[test]
+fn births_and_data_pass_pysparkplug_and_protoc_shows_their_raw_structure() {
+    let Some(_turn) = spb::require() else { return };
+    let scene = scene("births-and-data");
+    let bridge = Bridge::start(&scene.config, &[]);
+    wait_for(&scene.recorder, "DBIRTH", Some("inverter"), 1, BIRTHS_WITHIN);
+    set(&scene.drive, "F001", "30");
+    set(&scene.drive, "run", "on");
+    let messages = wait_for(&scene.recorder, "DDATA", Some("inverter"), 3, Duration::from_secs(10));
+    let dir = scene.config.parent().map(std::path::Path::to_path_buf).unwrap_or_default();
+
+    // The raw structure, with no schema: Payload.metrics is field 2, Payload.seq field 3;
+    // Metric.name 1, alias 2, datatype 4; DDATA metrics by alias only, without datatype.
+    let first = |kind: &str| messages.iter().find(|m| spb::is(m, kind, Some("inverter"))).cloned();
+    let dbirth = decode_first(first("DBIRTH"), &dir, "dbirth");
+    let top = fields_at(&dbirth, 0);
+    assert!(top.contains(&"2 {") && top.iter().any(|l| l.starts_with("3: ")), "DBIRTH:\n{dbirth}");
+    let inside = fields_at(&dbirth, 2);
+    for field in ["1: \"d001\"", "1: \"F001\"", "4: 10", "4: 11"] {
+        // d001 and F001 are scaled: Double (10); running is a bit: Boolean (11).
+        assert!(inside.contains(&field), "DBIRTH has no metric field {field:?}:\n{dbirth}");
+    }
+    assert!(inside.iter().any(|l| l.starts_with("2: ")), "DBIRTH metrics have no alias (field 2):\n{dbirth}");
+    assert!(dbirth.contains("\"engUnit\"") && dbirth.contains("\"Hz\""), "DBIRTH: no engUnit property:\n{dbirth}");
+    let ddata = decode_first(first("DDATA"), &dir, "ddata");
+    let inside = fields_at(&ddata, 2);
+    assert!(fields_at(&ddata, 0).iter().any(|l| l.starts_with("3: ")), "DDATA has no seq:\n{ddata}");
+    assert!(inside.iter().any(|l| l.starts_with("2: ")), "DDATA metrics have no alias:\n{ddata}");
+    assert!(
+        !inside.iter().any(|l| l.starts_with("1: ") || l.starts_with("4: ")),
+        "DDATA: a name or datatype:\n{ddata}"
+    );
+
+    let verdict = finish(
+        scene,
+        bridge,
+        1,
+        &[
+            "--no-historical",
+            "--expect-unit",
+            "inverter/d001=Hz",
+            "--expect-unit",
+            "inverter/F001=Hz",
+            "--expect-unit",
+            "inverter/d002=A",
+            "--series",
+            "inverter/d001",
+        ],
+    );
+    verdict.assert_clean();
+    let sessions = verdict.sessions();
+    assert_eq!(sessions.len(), 1, "{verdict}");
+    assert_eq!(sessions[0]["ndeath_bdseq"], sessions[0]["bdseq"], "{verdict}");
+    assert_eq!(verdict.metric("inverter", "d001", "datatype"), "DOUBLE", "{verdict}");
+    assert_eq!(verdict.metric("inverter", "running", "datatype"), "BOOLEAN", "{verdict}");
+    let d001: Vec<f64> = verdict.series("inverter", "d001").iter().filter_map(|p| p["value"].as_f64()).collect();
+    assert!(d001.iter().any(|&f| f > 0.0), "the output frequency never rose in DDATA: {d001:?}\n{verdict}");
+}
+
+fn decode_first(message: Option<Message>, dir: &std::path::Path, name: &str) -> String {
+    let Some(message) = message else { panic!("no {name} recorded") };
+    spb::decode_raw(&message.payload, dir, name)
+}
+
+#[test]
+fn a_sigkill_brings_the_will_ndeath_with_the_nbirth_bdseq_and_a_restart_the_next_bdseq() {
+    let Some(_turn) = spb::require() else { return };
+    let scene = scene("sigkill-restart");
+    let mut bridge = Bridge::start(&scene.config, &[]);
+    wait_for(&scene.recorder, "DBIRTH", Some("inverter"), 1, BIRTHS_WITHIN);
+    bridge.kill();
+    wait_for(&scene.recorder, "NDEATH", None, 1, Duration::from_secs(10));
+    let bridge = Bridge::start(&scene.config, &[]);
+    wait_for(&scene.recorder, "DBIRTH", Some("inverter"), 2, BIRTHS_WITHIN);
+    let verdict = finish(scene, bridge, 2, &["--no-historical"]);
+    verdict.assert_clean();
+    let sessions = verdict.sessions();
+    assert_eq!(sessions.len(), 2, "one session per run:\n{verdict}");
+    let (first, second) = (&sessions[0], &sessions[1]);
+    assert_eq!(first["ndeath_bdseq"], first["bdseq"], "the Will's bdSeq is the NBIRTH's:\n{verdict}");
+    assert_eq!(first["ndeath_qos"], 1, "the Will is QoS 1:\n{verdict}");
+    assert_eq!(first["ndeath_retain"], false, "{verdict}");
+    let next = first["bdseq"].as_u64().map(|b| (b + 1) % 256);
+    assert_eq!(second["bdseq"].as_u64(), next, "the restart takes the next bdSeq:\n{verdict}");
+    assert_eq!(second["ndeath_bdseq"], second["bdseq"], "{verdict}");
+}
+
+/// The alias of `metric` in the device's DBIRTH, from what has been recorded so far.
+fn alias_of(recorder: &Recorder, device: &str, metric: &str) -> u64 {
+    let verdict = spb::verify(recorder.path(), &[]);
+    verdict.metric(device, metric, "alias").as_u64().unwrap_or_else(|| panic!("no alias of {metric}:\n{verdict}"))
+}
+
+/// Waits until the drive's F001 reads `expected`.
+fn wait_f001(drive: &Drive, expected: &str, bridge: &Bridge) {
+    let deadline = std::time::Instant::now() + Duration::from_secs(10);
+    let mut seen = f001(drive);
+    while seen != expected && std::time::Instant::now() < deadline {
+        std::thread::sleep(Duration::from_millis(100));
+        seen = f001(drive);
+    }
+    assert_eq!(seen, expected, "F001 on the drive after the DCMD; the bridge said:\n{}", bridge.output());
+}
+
+#[test]
+fn a_dcmd_sets_f001_on_the_drive_by_name_or_alias_and_one_out_of_range_is_refused() {
+    let Some(_turn) = spb::require() else { return };
+    let scene = scene("dcmd-f001");
+    let bridge = Bridge::start(&scene.config, &[]);
+    wait_for(&scene.recorder, "DBIRTH", Some("inverter"), 1, BIRTHS_WITHIN);
+    let broker = &scene.broker;
+    let to_inverter = ["dcmd", "--group", "plant", "--node", "dcmd-f001", "--device", "inverter"];
+    let dcmd = |how: &[&str]| spb::publish(broker, &[&to_inverter[..], how].concat());
+
+    dcmd(&["--metric", "F001", "--datatype", "DOUBLE", "--value", "45.5"]);
+    wait_f001(&scene.drive, "45.50 Hz", &bridge);
+    let alias = alias_of(&scene.recorder, "inverter", "F001").to_string();
+    dcmd(&["--alias", &alias, "--datatype", "DOUBLE", "--value", "12.25"]);
+    wait_f001(&scene.drive, "12.25 Hz", &bridge);
+
+    // 500 Hz is past F001's maximum (400.00 Hz); d001 is read-only: both refused, nothing written.
+    dcmd(&["--metric", "F001", "--datatype", "DOUBLE", "--value", "500"]);
+    dcmd(&["--metric", "d001", "--datatype", "DOUBLE", "--value", "10"]);
+    std::thread::sleep(Duration::from_secs(1));
+    assert_eq!(f001(&scene.drive), "12.25 Hz", "a refused DCMD changed F001; the bridge said:\n{}", bridge.output());
+    wait_for(&scene.recorder, "DDATA", Some("inverter"), 2, Duration::from_secs(5));
+    std::thread::sleep(Duration::from_millis(600)); // the next poll's DDATA
+    let output = bridge.output();
+
+    let verdict = finish(scene, bridge, 1, &["--no-historical", "--series", "inverter/F001"]);
+    verdict.assert_clean();
+    assert_eq!(verdict.summary["commands"], 4, "{verdict}");
+    let f001: Vec<f64> = verdict.series("inverter", "F001").iter().filter_map(|p| p["value"].as_f64()).collect();
+    assert_eq!(f001, [45.5, 12.25], "F001 in DDATA: the two writes, never 500:\n{verdict}");
+    assert!(output.contains("F001") && output.contains("500"), "the refusal is not reported:\n{output}");
+}
+
+#[test]
+fn a_drive_that_goes_silent_gets_a_ddeath_and_a_dbirth_when_it_answers_again() {
+    let Some(_turn) = spb::require() else { return };
+    let mut scene = scene("ddeath-dbirth");
+    let bridge = Bridge::start(&scene.config, &[]);
+    wait_for(&scene.recorder, "DBIRTH", Some("inverter"), 1, BIRTHS_WITHIN);
+    scene.drive.stop();
+    wait_for(&scene.recorder, "DDEATH", Some("inverter"), 1, Duration::from_secs(15));
+    scene.drive.start_again();
+    wait_for(&scene.recorder, "DBIRTH", Some("inverter"), 2, Duration::from_secs(30));
+    let verdict = finish(scene, bridge, 1, &["--no-historical"]);
+    verdict.assert_clean();
+    assert_eq!(verdict.sessions().len(), 1, "the node's session goes on:\n{verdict}");
+    assert_eq!(verdict.summary["devices"]["inverter"]["ddeaths"], 1, "{verdict}");
+    assert_eq!(verdict.summary["devices"]["inverter"]["dbirths"], 2, "{verdict}");
+}
