@@ -110,6 +110,19 @@ impl Plant {
         self
     }
 
+    /// Adds an RTU line on the serial port (a pty) `path` at 19200 baud 8E1, 300 ms reply
+    /// timeout, no retries, followed by `devices`.
+    #[must_use]
+    pub(crate) fn rtu_line(mut self, name: &str, path: &Path, devices: &str) -> Plant {
+        let _ = write!(
+            self.text,
+            "\n[[line]]\nname = \"{name}\"\nport = \"{}\"\nbaud = 19200\nparity = \"even\"\n\
+             timeout = \"300ms\"\nretries = 0\n\n{devices}\n",
+            path.display()
+        );
+        self
+    }
+
     /// Writes it as `dir/plant.toml` and returns the path.
     pub(crate) fn write(&self, dir: &Path) -> PathBuf {
         let path = dir.join("plant.toml");

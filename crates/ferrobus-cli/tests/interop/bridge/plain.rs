@@ -1,6 +1,6 @@
 //! `ferrobus bridge` in plain mode: JSON on `PREFIX/DEVICE/POINT` (value, unit, timestamp,
-//! quality), a write on `.../set` that changes the drive, and the result on `.../set/result`,
-//! for a value in range and one out of it.
+//! quality), the bridge's and the device's status, a write on `.../set` that changes the
+//! drive, and the result on `.../set/result`, for a value in range and one out of it.
 
 use std::time::Duration;
 
@@ -41,6 +41,10 @@ fn plain_json_per_point_and_a_set_that_changes_the_drive_with_its_result() {
     assert!(first["value"].is_number(), "{first}");
     let stamp = first["timestamp"].as_str().unwrap_or_default();
     assert!(stamp.len() >= 20 && stamp.ends_with('Z') && stamp.contains('T'), "not an ISO 8601 UTC time: {first}");
+
+    let status = |topic: &str| messages.iter().filter(|m| m.topic == topic).map(Message::text).collect::<Vec<_>>();
+    assert_eq!(status("plant1/status"), ["online"], "the bridge's status:\n{}", spb::listing(&messages));
+    assert_eq!(status("plant1/inverter/status"), ["online"], "the device's status:\n{}", spb::listing(&messages));
 
     spb::publish(&broker, &["text", "--topic", "plant1/inverter/F001/set", "--payload", "45"]);
     let results = |m: &[Message]| json_on(m, "plant1/inverter/F001/set/result");

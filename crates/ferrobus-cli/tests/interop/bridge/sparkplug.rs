@@ -1,13 +1,14 @@
-//! `ferrobus bridge` in Sparkplug B mode against a simulated 3G3RX (`ferrobus sim --tcp`):
-//! births and data checked by pysparkplug and `protoc --decode_raw`, the Will NDEATH after a
-//! SIGKILL and the next bdSeq after a restart, DCMD writes to F001 (and one refused), and a
-//! drive that goes silent and comes back.
+//! `ferrobus bridge` in Sparkplug B mode against a simulated 3G3RX (`ferrobus sim --tcp`; an
+//! SDP servo on a pty beside it in the first test): births and data checked by pysparkplug and
+//! `protoc --decode_raw`, the Will NDEATH after a SIGKILL and the next bdSeq after a restart,
+//! DCMD writes to F001 (and one refused), and a drive that goes silent and comes back.
 
 use std::time::Duration;
 
 use super::harness::{Bridge, Drive, Plant};
 use super::spb::{self, Message, Recorder, Verdict};
 use crate::support::mosquitto::Broker;
+use crate::support::sim_pty;
 
 /// How long the bridge may take from its start to the births (connecting, the first polls).
 const BIRTHS_WITHIN: Duration = Duration::from_secs(20);
@@ -70,16 +71,27 @@ fn fields_at(text: &str, indent: usize) -> Vec<&str> {
         .collect()
 }
 
+/// The servo on an RTU line: its monitor group every 300 ms.
+const SERVO: &str = "[[line.device]]\nid = \"servo\"\nunit = 2\nprofile = \"sdp-servo\"\n\
+                     every = \"300ms\"\ngroups = [\"monitor\"]\n";
+
 #[test]
 fn births_and_data_pass_pysparkplug_and_protoc_shows_their_raw_structure() {
     let Some(_turn) = spb::require() else { return };
     let scene = scene("births-and-data");
+    // A second line: the servo on a pty, RTU, beside the inverter on Modbus/TCP.
+    let (_servo, pty) = sim_pty(&["--profile", "sdp-servo", "--unit", "2"]);
+    let dir = scene.config.parent().map(std::path::Path::to_path_buf).unwrap_or_default();
+    Plant::sparkplug(scene.broker.port(), "plant", "births-and-data")
+        .tcp_line("tcp", scene.drive.address(), INVERTER)
+        .rtu_line("rs485", &pty, SERVO)
+        .write(&dir);
     let bridge = Bridge::start(&scene.config, &[]);
     wait_for(&scene.recorder, "DBIRTH", Some("inverter"), 1, BIRTHS_WITHIN);
+    wait_for(&scene.recorder, "DBIRTH", Some("servo"), 1, BIRTHS_WITHIN);
     set(&scene.drive, "F001", "30");
     set(&scene.drive, "run", "on");
     let messages = wait_for(&scene.recorder, "DDATA", Some("inverter"), 3, Duration::from_secs(10));
-    let dir = scene.config.parent().map(std::path::Path::to_path_buf).unwrap_or_default();
 
     // The raw structure, with no schema: Payload.metrics is field 2, Payload.seq field 3;
     // Metric.name 1, alias 2, datatype 4; DDATA metrics by alias only, without datatype.
@@ -115,6 +127,8 @@ fn births_and_data_pass_pysparkplug_and_protoc_shows_their_raw_structure() {
             "inverter/F001=Hz",
             "--expect-unit",
             "inverter/d002=A",
+            "--expect-unit",
+            "servo/motor-speed=r/min",
             "--series",
             "inverter/d001",
         ],
