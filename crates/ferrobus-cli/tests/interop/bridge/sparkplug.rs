@@ -1,7 +1,8 @@
 //! `ferrobus bridge` in Sparkplug B mode against a simulated 3G3RX (`ferrobus sim --tcp`; an
 //! SDP servo on a pty beside it in the first test): births and data checked by pysparkplug and
-//! `protoc --decode_raw`, the Will NDEATH after a SIGKILL and the next bdSeq after a restart,
-//! DCMD writes to F001 (and one refused), and a drive that goes silent and comes back.
+//! `protoc --decode_raw`, an NCMD Rebirth, the Will NDEATH after a SIGKILL and the next bdSeq
+//! after a restart, DCMD writes to F001 (and one refused), and a drive that goes silent and
+//! comes back.
 
 use std::time::Duration;
 
@@ -115,6 +116,11 @@ fn births_and_data_pass_pysparkplug_and_protoc_shows_their_raw_structure() {
         "DDATA: a name or datatype:\n{ddata}"
     );
 
+    // NCMD Rebirth: NBIRTH (seq 0, the same bdSeq) and both DBIRTHs again.
+    spb::publish(&scene.broker, &["rebirth", "--group", "plant", "--node", "births-and-data"]);
+    wait_for(&scene.recorder, "DBIRTH", Some("servo"), 2, Duration::from_secs(10));
+    wait_for(&scene.recorder, "DBIRTH", Some("inverter"), 2, Duration::from_secs(10));
+
     let verdict = finish(
         scene,
         bridge,
@@ -135,7 +141,8 @@ fn births_and_data_pass_pysparkplug_and_protoc_shows_their_raw_structure() {
     );
     verdict.assert_clean();
     let sessions = verdict.sessions();
-    assert_eq!(sessions.len(), 1, "{verdict}");
+    assert_eq!(sessions.len(), 1, "a rebirth keeps the session and its bdSeq:\n{verdict}");
+    assert_eq!(sessions[0]["rebirths"], 1, "{verdict}");
     assert_eq!(sessions[0]["ndeath_bdseq"], sessions[0]["bdseq"], "{verdict}");
     assert_eq!(verdict.metric("inverter", "d001", "datatype"), "DOUBLE", "{verdict}");
     assert_eq!(verdict.metric("inverter", "running", "datatype"), "BOOLEAN", "{verdict}");
