@@ -1,1 +1,25 @@
 //! Sparkplug B 3.0: the payload, the topics, and values to and from metrics.
+//!
+//! Sparkplug B is the Eclipse Foundation's specification of MQTT for industrial devices: an
+//! edge node announces itself and its devices with birth certificates (NBIRTH, DBIRTH) that
+//! name and type every metric and give it an alias, then publishes changes by exception
+//! (NDATA, DDATA: aliases only, a `seq` 0–255 per message), takes commands (NCMD, DCMD), and
+//! dies with a death certificate (NDEATH, its MQTT Will, carrying the session's `bdSeq`).
+//! Here the edge node is the bridge, its devices are the plant's Modbus devices, and their
+//! metrics are the profiles' points.
+//!
+//! - [`payload`]: the protobuf payload as prost message types, written from the
+//!   specification, so no protoc and no schema file enter the build.
+//! - [`topic`]: `spBv1.0/<group>/<type>/<edge node>[/<device>]`, host STATE, id checks.
+//! - [`convert`]: a point's datatype, its raw values as metric values, and a command's metric
+//!   value back to a raw value.
+//!
+//! **The UInt divergence.** The specification carries UInt8, UInt16 and UInt32 in the
+//! payload's `int_value` (protobuf uint32) and we do by default ([`convert::UintEncoding::Spec`]);
+//! Eclipse Tahu and Ignition read and write them in `long_value`, so a Tahu decoder shows such
+//! a value as null. [`convert::UintEncoding::LongValue`] (the plant's `uint_encoding`) writes
+//! them there; commands are accepted in either field whatever the switch says.
+
+pub mod convert;
+pub mod payload;
+pub mod topic;

@@ -1,0 +1,207 @@
+//! Sparkplug B topics: `spBv1.0/<group_id>/<message type>/<edge_node_id>[/<device_id>]` for an
+//! edge node's and its devices' messages, `spBv1.0/STATE/<host_id>` for a host application's
+//! state (a retained JSON `{"online":true,"timestamp":...}`), and the checks an id must pass to
+//! be one level of a topic.
+
+use std::fmt;
+use std::str::FromStr;
+
+/// The first level of every Sparkplug B 3.0 topic.
+pub const NAMESPACE: &str = "spBv1.0";
+
+/// The message types of an edge node and its devices.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+pub enum MessageType {
+    /// The edge node's birth certificate.
+    NBirth,
+    /// The edge node's data.
+    NData,
+    /// A command to the edge node.
+    NCmd,
+    /// The edge node's death certificate (its MQTT Will).
+    NDeath,
+    /// A device's birth certificate.
+    DBirth,
+    /// A device's data.
+    DData,
+    /// A command to a device.
+    DCmd,
+    /// A device's death certificate.
+    DDeath,
+}
+
+impl MessageType {
+    /// Every message type.
+    pub const ALL: [MessageType; 8] = [
+        MessageType::NBirth,
+        MessageType::NData,
+        MessageType::NCmd,
+        MessageType::NDeath,
+        MessageType::DBirth,
+        MessageType::DData,
+        MessageType::DCmd,
+        MessageType::DDeath,
+    ];
+
+    /// Its topic level: `NBIRTH`, `DDATA`, ...
+    pub const fn as_str(self) -> &'static str {
+        match self {
+            MessageType::NBirth => "NBIRTH",
+            MessageType::NData => "NDATA",
+            MessageType::NCmd => "NCMD",
+            MessageType::NDeath => "NDEATH",
+            MessageType::DBirth => "DBIRTH",
+            MessageType::DData => "DDATA",
+            MessageType::DCmd => "DCMD",
+            MessageType::DDeath => "DDEATH",
+        }
+    }
+
+    /// Whether it is a device's message (its topic has a device id).
+    pub const fn is_device(self) -> bool {
+        matches!(self, MessageType::DBirth | MessageType::DData | MessageType::DCmd | MessageType::DDeath)
+    }
+}
+
+impl fmt::Display for MessageType {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.write_str(self.as_str())
+    }
+}
+
+/// A topic level that is no Sparkplug message type.
+#[derive(Clone, Debug, PartialEq, Eq, thiserror::Error)]
+#[error("{0:?} is not a Sparkplug message type (NBIRTH, NDATA, NCMD, NDEATH, DBIRTH, DDATA, DCMD, DDEATH)")]
+pub struct UnknownMessageType(pub String);
+
+impl FromStr for MessageType {
+    type Err = UnknownMessageType;
+
+    fn from_str(level: &str) -> Result<MessageType, UnknownMessageType> {
+        MessageType::ALL
+            .into_iter()
+            .find(|kind| kind.as_str() == level)
+            .ok_or_else(|| UnknownMessageType(level.to_owned()))
+    }
+}
+
+/// An edge node's or device's topic.
+#[derive(Clone, Debug, PartialEq, Eq, Hash)]
+pub struct Topic {
+    /// The group id.
+    pub group: String,
+    /// The message type.
+    pub kind: MessageType,
+    /// The edge node id.
+    pub node: String,
+    /// The device id, for a device's message.
+    pub device: Option<String>,
+}
+
+impl Topic {
+    /// The topic of an edge node's message.
+    pub fn node(group: &str, kind: MessageType, node: &str) -> Topic {
+        Topic { group: group.to_owned(), kind, node: node.to_owned(), device: None }
+    }
+
+    /// The topic of a device's message.
+    pub fn device(group: &str, kind: MessageType, node: &str, device: &str) -> Topic {
+        Topic { group: group.to_owned(), kind, node: node.to_owned(), device: Some(device.to_owned()) }
+    }
+
+    /// The topic of that name, if it is an edge node's (`spBv1.0/G/NBIRTH/N`) or a device's
+    /// (`spBv1.0/G/DDATA/N/D`): the right namespace, a known message type, non-empty ids,
+    /// a device id exactly when the type is a device's.
+    pub fn parse(topic: &str) -> Option<Topic> {
+        let mut levels = topic.split('/');
+        if levels.next()? != NAMESPACE {
+            return None;
+        }
+        let group = levels.next()?;
+        let kind: MessageType = levels.next()?.parse().ok()?;
+        let node = levels.next()?;
+        let device = levels.next();
+        if levels.next().is_some() || kind.is_device() != device.is_some() {
+            return None;
+        }
+        let ids_ok = [Some(group), Some(node), device].into_iter().flatten().all(|id| !id.is_empty());
+        ids_ok.then(|| Topic {
+            group: group.to_owned(),
+            kind,
+            node: node.to_owned(),
+            device: device.map(str::to_owned),
+        })
+    }
+}
+
+impl fmt::Display for Topic {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        write!(f, "{NAMESPACE}/{}/{}/{}", self.group, self.kind, self.node)?;
+        match &self.device {
+            Some(device) => write!(f, "/{device}"),
+            None => Ok(()),
+        }
+    }
+}
+
+/// The topic of a host application's state: `spBv1.0/STATE/<host_id>`.
+pub fn state_topic(host_id: &str) -> String {
+    format!("{NAMESPACE}/STATE/{host_id}")
+}
+
+/// The host id of a STATE topic, if it is one.
+pub fn parse_state_topic(topic: &str) -> Option<&str> {
+    let host = topic.strip_prefix(NAMESPACE)?.strip_prefix("/STATE/")?;
+    (!host.is_empty() && !host.contains('/')).then_some(host)
+}
+
+/// A host application's state, as its STATE message says.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct HostState {
+    /// Whether the host is online.
+    pub online: bool,
+    /// When the host's session began (milliseconds since the Unix epoch), if given.
+    pub timestamp: Option<u64>,
+}
+
+impl HostState {
+    /// Its JSON payload: `{"online":true,"timestamp":1700000000000}`.
+    pub fn to_json(&self) -> Vec<u8> {
+        let mut json = serde_json::json!({ "online": self.online });
+        if let Some(timestamp) = self.timestamp {
+            json["timestamp"] = timestamp.into();
+        }
+        json.to_string().into_bytes()
+    }
+}
+
+/// The host state of a STATE message's JSON payload `{"online":true,"timestamp":...}`; None
+/// when it is not JSON, not an object, or has no boolean `online`.
+pub fn parse_state(payload: &[u8]) -> Option<HostState> {
+    let json: serde_json::Value = serde_json::from_slice(payload).ok()?;
+    let online = json.get("online")?.as_bool()?;
+    let timestamp = json.get("timestamp").and_then(serde_json::Value::as_u64);
+    Some(HostState { online, timestamp })
+}
+
+/// Whether `id` can be a group, edge node, device or host id (`what` names which, for the
+/// message): not empty, and none of `/` (a topic level's separator), `+` and `#` (MQTT's
+/// wildcards).
+///
+/// # Errors
+/// Says which id and why, e.g. `device id "pump/1" contains '/', which separates topic levels`.
+pub fn check_id(what: &str, id: &str) -> Result<(), String> {
+    if id.is_empty() {
+        return Err(format!("{what} id is empty; Sparkplug ids are one non-empty topic level"));
+    }
+    let why = |c: char| match c {
+        '/' => Some("which separates topic levels"),
+        '+' => Some("which is MQTT's single-level wildcard"),
+        '#' => Some("which is MQTT's multi-level wildcard"),
+        _ => None,
+    };
+    match id.chars().find_map(|c| why(c).map(|reason| (c, reason))) {
+        Some((c, reason)) => Err(format!("{what} id {id:?} contains '{c}', {reason}")),
+        None => Ok(()),
+    }
+}
