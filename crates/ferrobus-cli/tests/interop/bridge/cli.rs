@@ -26,6 +26,11 @@ id = "inverter"
 unit = 1
 profile = "omron-3g3rx"
 points = ["F00x"]
+
+[[line.device]]
+id = "servo"
+unit = 2
+profile = "sdp-servo"
 colour = "red"
 "#;
 
@@ -56,7 +61,7 @@ fn check_prints_each_error_at_its_line_and_column_and_exits_2() {
     let (code, text) = check(&path);
     assert_eq!(code, 2, "--check on a broken file exits 2:\n{text}");
     let file = path.display().to_string();
-    for (line, what) in [(6, "the edge node id with a +"), (16, "the unknown point F00x"), (17, "the unknown key")] {
+    for (line, what) in [(6, "the edge node id with a +"), (16, "the unknown point F00x"), (22, "the unknown key")] {
         assert!(points_at(&text, &file, line), "no `{file}:{line}:COL: ...` line for {what}:\n{text}");
     }
 }
