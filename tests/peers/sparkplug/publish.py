@@ -5,6 +5,7 @@
     publish.py --port P dcmd --group G --node N --device D (--metric NAME | --alias A)
                              --datatype TYPE --value V
     publish.py --port P rebirth --group G --node N
+    publish.py --port P edge-node --group G --node N --device D
     publish.py --port P text --topic T --payload TEXT [--qos Q]
 
 `session` plays a small edge node that follows the rules: CONNECT with the NDEATH Will
@@ -17,7 +18,10 @@ publishes the Will). --break spoils one rule, so that a checker can be shown to 
 
 `dcmd` sends one DCMD metric (by name, or by alias without a name; TYPE is a pysparkplug
 DataType name such as FLOAT, DOUBLE, UINT16); `rebirth` an NCMD `Node Control/Rebirth` =
-true; `text` one plain MQTT message. Exit 0 once everything was handed to the broker (QoS 1
+true; `text` one plain MQTT message. `edge-node` runs pysparkplug's own EdgeNode (connect,
+one DDATA, disconnect) as it is: in 0.6.1 its NBIRTH has no Rebirth metric unless given one,
+its DDATA carry datatypes, and the NDEATH of its clean disconnect carries the bdSeq of the
+*next* connection (it prepares the Will twice), which a checker should catch. Exit 0 once everything was handed to the broker (QoS 1
 waits for the PUBACK), 1 if the broker cannot be reached, 2 on bad arguments.
 """
 
@@ -56,6 +60,10 @@ def parse_args():
     rebirth = sub.add_parser("rebirth")
     rebirth.add_argument("--group", required=True)
     rebirth.add_argument("--node", required=True)
+    edge = sub.add_parser("edge-node")
+    edge.add_argument("--group", required=True)
+    edge.add_argument("--node", required=True)
+    edge.add_argument("--device", required=True)
     text = sub.add_parser("text")
     text.add_argument("--topic", required=True)
     text.add_argument("--payload", required=True)
@@ -166,6 +174,21 @@ def rebirth(args):
     client.loop_stop()
 
 
+def edge_node(args):
+    metric = spb.Metric(timestamp=now(), name="speed", datatype=spb.DataType.FLOAT, value=1.0)
+    node = spb.EdgeNode(args.group, args.node, metrics=[])
+    node.register(spb.Device(args.device, metrics=[metric]))
+    try:
+        node.connect(args.host, port=args.port, blocking=False)
+    except OSError as error:
+        print(f"publish: {args.host}:{args.port}: {error}", file=sys.stderr)
+        sys.exit(1)
+    time.sleep(0.5)
+    node.update_device(args.device, [spb.Metric(timestamp=now(), name="speed", datatype=spb.DataType.FLOAT, value=2.0)])
+    time.sleep(0.2)
+    node.disconnect()
+
+
 def text(args):
     client = connect(args)
     send(client, args.topic, args.payload.encode(), qos=args.qos)
@@ -175,7 +198,7 @@ def text(args):
 
 def main():
     args = parse_args()
-    {"session": session, "dcmd": dcmd, "rebirth": rebirth, "text": text}[args.command](args)
+    {"session": session, "dcmd": dcmd, "rebirth": rebirth, "edge-node": edge_node, "text": text}[args.command](args)
     return 0
 
 

@@ -2,7 +2,9 @@
 //! pysparkplug and published through mosquitto passes `verify.py`; the same session with one
 //! rule broken (a skipped seq, no DBIRTH, an NDEATH with another bdSeq, an unknown alias, an
 //! NBIRTH with seq 1) fails it with that rule named. A session that ends without DISCONNECT
-//! gets its Will NDEATH from the broker, QoS 1, with the NBIRTH's bdSeq.
+//! gets its Will NDEATH from the broker, QoS 1, with the NBIRTH's bdSeq. pysparkplug's own
+//! EdgeNode (0.6.1) is caught breaking two rules. And the broker harness: stopped and started
+//! again on its port, it keeps a recorder's session and what was published meanwhile.
 
 use super::spb::{self, Recorder};
 use crate::support::mosquitto::Broker;
@@ -96,4 +98,23 @@ fn a_broker_started_again_on_its_port_keeps_a_recorders_session_and_what_came_me
     std::thread::sleep(std::time::Duration::from_millis(300));
     let topics: Vec<String> = recorder.messages().iter().map(|m| format!("{}={}", m.topic, m.text())).collect();
     assert_eq!(topics, ["t/before=1", "t/after=2"], "{}\nbroker log:\n{}", spb::listing(&messages), broker.log());
+}
+
+#[test]
+fn pysparkplugs_own_edge_node_is_caught_sending_an_ndeath_with_the_next_bdseq() {
+    let Some(_turn) = spb::require() else { return };
+    let broker = Broker::start();
+    let dir = spb::evidence_dir("checker-pysparkplug-edge-node");
+    let recorder = Recorder::start(&broker, &dir, &[]);
+    spb::publish(&broker, &["edge-node", "--group", "g", "--node", "n", "--device", "d"]);
+    recorder.wait_until("its NDEATH", std::time::Duration::from_secs(10), |m| spb::count(m, "NDEATH", None) == 1);
+    let verdict = spb::verify(&recorder.stop(), &[]);
+    // pysparkplug 0.6.1's EdgeNode prepares the Will again after the NBIRTH, so the NDEATH of
+    // its clean disconnect carries the next connection's bdSeq.
+    let errors = verdict.errors();
+    assert!(
+        errors.iter().any(|e| e.ends_with("NDEATH g/n: bdSeq 1 differs from the session's NBIRTH bdSeq 0")),
+        "{verdict}"
+    );
+    assert!(errors.iter().any(|e| e.contains("no Boolean metric 'Node Control/Rebirth'")), "{verdict}");
 }
