@@ -140,6 +140,17 @@ fn the_real_plant_example_says_what_a_plant_has() {
         })
         .collect();
     assert_eq!(kinds, ["serial", "serial", "tcp"]);
+    let Connection::Serial { config: press, ascii: false } = &plant.lines[0].connection else { panic!("RTU") };
+    assert_eq!((press.path.to_str(), press.line.to_string().as_str()), (Some("/dev/ttyUSB0"), "19200 8E1"));
+    let Connection::Serial { config: packaging, .. } = &plant.lines[1].connection else { panic!("serial") };
+    assert_eq!(packaging.line.to_string(), "9600 8N1");
+    assert_eq!((plant.lines[0].client.timeout, plant.lines[0].client.retries), (Duration::from_millis(200), 2));
+    assert_eq!(plant.lines[2].connection, Connection::Tcp("192.168.10.20:502".into()));
+    let scale = &plant.lines[1].devices[1];
+    assert_eq!(scale.metric_names().collect::<Vec<_>>(), ["net-weight", "tare-mode", "filter"]);
+    assert_eq!(scale.deadbands, [vec![0.01], vec![0.0, 0.0]]);
+    assert_eq!(plant.broker.password.as_deref(), Some("change-me"));
+    assert_eq!(plant.store.memory, 4 << 20);
     assert!(matches!(plant.mode, Mode::Sparkplug(_)));
     assert!(
         plant.store.dir.as_ref().is_some_and(|d| d.starts_with(examples())),
@@ -196,11 +207,21 @@ fn marked(case: &str) -> (String, Vec<String>) {
 /// Whole files: the text (`»` where each error must point) and a word of each message.
 const FILE_CASES: &[(&str, &str, &[&str])] = &[
     ("syntax", "[broker]\naddress = \"127.0.0.1»\n", &["invalid basic string"]),
+    (
+        "several syntax errors",
+        "[broker]\naddress = \"h»\nkeep = »= 3\n[sparkplug»\n",
+        &["invalid basic string", "extra `=`", "unclosed table"],
+    ),
+    (
+        "a device without an id",
+        "[[line]]\nname = \"a\"\nsimulated = true\n»[[line.device]]\nunit = 1\n",
+        &["missing key `id`"],
+    ),
     ("unknown top-level key", "»colour = 1\n", &["unknown key `colour`"]),
     (
         "unknown broker key",
         "[broker]\naddress = \"h\"\n»kep_alive = \"1s\"\n[sparkplug]\ngroup_id = \"g\"\nedge_node_id = \"e\"\n",
-        &["unknown field `kep_alive`"],
+        &["unknown key `kep_alive`"],
     ),
     (
         "everything missing",
@@ -255,7 +276,7 @@ const FILE_CASES: &[(&str, &str, &[&str])] = &[
     (
         "an unknown TLS key",
         "[broker]\naddress = \"h\"\n[broker.tls]\nca = \"ca.pem\"\n»cafile = \"x\"\n",
-        &["unknown field `cafile`, expected one of `ca`, `cert`, `key`, `server_name`"],
+        &["unknown key `cafile`, expected one of `ca`, `cert`, `key`, `server_name`"],
     ),
     (
         "TLS files that are not there",
@@ -267,19 +288,34 @@ const FILE_CASES: &[(&str, &str, &[&str])] = &[
         "[broker]\naddress = »\"h:0\"\n[sparkplug]\ngroup_id = »\"#\"\nedge_node_id = \"e\"\n[store]\ndisk = »\"lots\"\n\
          [[line]]\nname = \"a\"\nsimulated = true\n[[line.device]]\nid = \"x\"\nunit = »0\nprofile = \"omron-3g3rx\"\npoints = [\"d001\"]\n\
          [[line.device]]\nid = \"y\"\nunit = 2\nprofile = \"omron-3g3rx\"\npoints = [\"d001\"]\n[[line.device.poll]]\nevery = \"1s\"\n»pionts = []\n",
-        &["the port is not 1 to 65535", "contains '#'", "is not a size", "unit 0", "unknown field `pionts`"],
+        &["the port is not 1 to 65535", "contains '#'", "is not a size", "unit 0", "unknown key `pionts`"],
     ),
-    ("an unknown line key", "[[line]]\nname = \"a\"\nsimulated = true\n»speed = 9600\n", &["unknown field `speed`"]),
+    (
+        "a metric name with / in plain mode",
+        "[plain]\nprefix = \"p\"\n[[line]]\nname = \"a\"\ntcp = \"plc\"\n[[line.device]]\nid = \"x\"\nunit = 1\n\
+         [[line.device.raw]]\ntable = \"coils\"\naddress = 0\nname = »\"door/left\"\n",
+        &["in plain mode a metric name is a topic level: it is not empty and has no /, +, #"],
+    ),
+    (
+        "an unknown line key, and its devices still checked",
+        "[[line]]\nname = \"a\"\nsimulated = true\n»speed = 9600\n[[line.device]]\nid = \"x\"\nunit = »0\n",
+        &["unknown key `speed`", "unit 0"],
+    ),
 ];
 
 /// Device cases, after `HEAD` and a good device: the text (`»` where each error must point)
 /// and a word of each message.
 const DEVICE_CASES: &[(&str, &str, &[&str])] = &[
-    ("type error", "unit = »\"one\"\n", &["invalid type"]),
-    ("unknown device key", "unit = 1\nprofile = \"omron-3g3rx\"\n»point = [\"d001\"]\n", &["unknown field `point`"]),
+    ("type error", "unit = »\"one\"\n", &["invalid type: string \"one\", expected a whole number"]),
+    ("a string for an array", "unit = 1\nprofile = \"omron-3g3rx\"\npoints = »\"d001\"\n", &["expected an array"]),
+    ("unknown device key", "unit = 1\nprofile = \"omron-3g3rx\"\n»point = [\"d001\"]\n", &["unknown key `point`"]),
     ("unit 0", "unit = »0\nprofile = \"omron-3g3rx\"\npoints = [\"d001\"]\n", &["unit 0; a device's unit is 1 to 247"]),
     ("unit 248", "unit = »248\nprofile = \"omron-3g3rx\"\npoints = [\"d001\"]\n", &["unit 248"]),
-    ("duplicate unit", "unit = »9\nprofile = \"omron-3g3rx\"\npoints = [\"d002\"]\n", &["unit 9 is used twice (first at line 14)"]),
+    (
+        "duplicate unit",
+        "unit = »9\nprofile = \"omron-3g3rx\"\npoints = [\"d002\"]\n",
+        &["unit 9 is used twice (first at line 14)"],
+    ),
     (
         "unknown profile",
         "unit = 1\nprofile = »\"omron-4g\"\npoints = [\"d001\"]\n",
@@ -334,6 +370,35 @@ const DEVICE_CASES: &[(&str, &str, &[&str])] = &[
         "a raw alias clashes with a point",
         "unit = 1\nprofile = \"omron-3g3rx\"\npoints = [\"d001\"]\n[[line.device.raw]]\ntable = \"holding\"\naddress = 0x2000\nname = »\"d001\"\n",
         &["metric \"d001\" is polled twice"],
+    ),
+    (
+        "two raw names alike",
+        "unit = 1\n[[line.device.raw]]\ntable = \"coils\"\naddress = 0\ncount = 2\nnames = [\"a\", \"b\"]\n\
+         [[line.device.raw]]\ntable = \"holding\"\naddress = 0\ncount = 3\nnames = [\"c\", »\"a\", \"d\"]\n",
+        &["metric \"a\" is polled twice"],
+    ),
+    (
+        "raw names that do not fit",
+        "unit = 1\n[[line.device.raw]]\ntable = \"holding\"\naddress = 0\ncount = 4\ntype = \"f32\"\nnames = [»\"a\"]\n\
+         [[line.device.raw]]\ntable = »\"holdings\"\naddress = 0\ntype = »\"u128\"\norder = »\"ABDC\"\nname = »\"a+b\"\n",
+        &[
+            "1 names for 2 cells of f32",
+            "it is coils, discrete, holding or input",
+            "it is one of u16, i16",
+            "it is ABCD, CDAB",
+            "has no +, #",
+        ],
+    ),
+    (
+        "bad counts and periods",
+        "unit = 1\nprofile = \"omron-3g3rx\"\ndeath_after = »0\npoints = [\"d001\"]\ndeadbands = { d001 = »-0.5 }\n\
+         [[line.device.poll]]\nevery = »\"0ms\"\npoints = [\"d002\"]\ndeadband = »-1\n",
+        &[
+            "death_after = 0: it is 1 or more polls",
+            "deadbands.d001: a deadband of -0.5",
+            "longer than zero",
+            "a deadband of -1",
+        ],
     ),
     ("polls nothing", "id = »\"dev\"\nunit = 1\nprofile = \"omron-3g3rx\"\n", &["polls nothing"]),
     (

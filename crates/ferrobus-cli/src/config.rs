@@ -367,6 +367,15 @@ pub(crate) fn layer(matches: ArgMatches, args: Vec<OsString>) -> Result<(ArgMatc
         }
         return Ok((matches, Layered::default()));
     }
+    // `bridge --config FILE` is the plant file: the bridge reads no connection settings.
+    if matches.subcommand_name() == Some("bridge") {
+        if given(&matches, "conn") {
+            return Err(CliError::Usage(
+                "--conn is not used by `bridge`: each line of the plant file has its own settings; leave it out".into(),
+            ));
+        }
+        return Ok((matches, Layered::default()));
+    }
     let conn = matches.get_one::<String>("conn").cloned();
     let (path, file) = find_file(matches.get_one::<PathBuf>("config"))?;
     let chosen = chosen_connection(conn.as_deref(), path.as_deref(), file.as_ref())?;

@@ -21,6 +21,7 @@
 mod address;
 mod backup;
 mod bench;
+mod bridge;
 mod completions;
 mod config;
 mod connect;
@@ -82,6 +83,7 @@ const AFTER_HELP: &str = concat!(
     "  ferrobus --port /dev/ttyUSB0 --unit 3 poll holding 0x1000 --count 4 --every 100ms --jsonl\n",
     "  ferrobus --port /dev/ttyUSB0 scan\n",
     "  ferrobus --port /dev/ttyUSB0 gateway --listen 0.0.0.0:502\n",
+    "  ferrobus bridge --config plant.toml\n",
     "  ferrobus crc 01 10 01 12 00 02\n\n",
 );
 
@@ -152,6 +154,8 @@ enum Command {
     Sniff(sniff::SniffArgs),
     /// Modbus/TCP clients to RTU serial lines: routing by unit, one queue per line, the gateway exceptions
     Gateway(gateway::GatewayArgs),
+    /// The plant's devices to an MQTT broker as Sparkplug B (or JSON), commands back, store and forward (--config plant.toml, --demo)
+    Bridge(bridge::BridgeArgs),
     /// Simulate drives (Omron 3G3RX, SDP servo, generic) on a serial port, a pty or TCP
     Sim(sim::SimArgs),
     /// A virtual RS-485 bus of ptys, with real character timing and seeded faults (Unix)
@@ -188,6 +192,7 @@ impl Command {
                 | Command::Completions(_)
                 | Command::Man(_)
                 | Command::Gateway(gateway::GatewayArgs { lines_file: Some(_), .. })
+                | Command::Bridge(_)
         )
     }
 }
@@ -218,6 +223,7 @@ async fn dispatch(cli: &Cli) -> Result<(), CliError> {
         Command::Scan(args) => scan::run(connection, args).await,
         Command::Sniff(args) => sniff::run(connection, args).await,
         Command::Gateway(args) => gateway::run(connection, args).await,
+        Command::Bridge(args) => bridge::run(cli.settings.config.as_deref(), args).await,
         Command::Sim(args) => sim::run(connection, args).await,
         Command::Line(args) => line::run(connection, args).await,
         Command::Demo(args) => demo::run(args).await,
@@ -282,6 +288,7 @@ fn refuse_ignored_options(matches: &clap::ArgMatches) -> Result<(), CliError> {
     let (used, why): (&[&str], &str) = match name {
         "crc" => (&[], "crc works offline and opens no bus"),
         "demo" => (&[], "demo runs its own virtual line (its baud rate is --line-baud)"),
+        "bridge" => (&[], "bridge takes its lines, devices and broker from the plant file (--config FILE) or --demo"),
         "ports" => (&[], "ports lists what the OS knows and opens no port"),
         "profile" => (&[], "profile works offline on the profile it is given as its argument"),
         "completions" | "man" => (&[], "it writes text made from the command definition and opens no bus"),

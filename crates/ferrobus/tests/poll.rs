@@ -8,7 +8,7 @@ use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::Duration;
 
 use ferrobus::poll::session::Session;
-use ferrobus::poll::{Event, FailureKind, Format, Group, Layout, PollConfig, Poller, Sample, Table, Value};
+use ferrobus::poll::{Event, FailureKind, Format, Group, Layout, PollConfig, Poller, Sample, Table, Value, WriteError};
 use ferrobus::port::{BoxPort, ConnectWith, Connecting};
 use ferrobus::server::{ServerOptions, Shared, serve};
 use ferrobus::{Client, ClientConfig, Framing, Transport};
@@ -227,10 +227,19 @@ async fn pause_stops_polling_reset_zeroes_the_counters_and_a_write_goes_through(
     assert_eq!(handle.counters()[0], ferrobus::poll::Counters::default());
     assert_eq!(handle.write(0, 1, "1234").await.unwrap(), Value::Int(1234));
     assert!(handle.write(0, 1, "70000").await.is_err(), "a u16 cell takes no 70000");
+    assert_eq!(handle.prepare_write(0, 1, "4321").unwrap(), Value::Int(4321), "prepared, not sent");
+    assert!(handle.write_raw(0, 1, &Value::Int(70_000)).await.is_err(), "a raw value must fit the type");
+    assert!(matches!(handle.write_raw(0, 9, &Value::Int(1)).await, Err(WriteError::NoSuchCell { group: 0, cell: 9 })));
     handle.resume();
     let s = samples(&mut poller, 1).await.remove(0);
     assert_eq!(s.result.unwrap()[1].shown, "1234");
     assert_eq!(handle.counters()[0].polls, 1);
+    handle.pause();
+    while poller.try_next().is_some() {}
+    handle.write_raw(0, 0, &Value::Int(4321)).await.unwrap();
+    handle.resume();
+    let s = samples(&mut poller, 1).await.remove(0);
+    assert_eq!(s.result.unwrap()[0].shown, "4321", "a raw write goes through as is");
     handle.stop();
     assert!(poller.next().await.is_none(), "stopped: the stream ends");
 }

@@ -27,20 +27,34 @@ const MAX_RECONNECT: Duration = Duration::from_secs(30);
 
 /// Reads, checks and resolves a whole file.
 pub(super) fn plant(text: &str, origin: &str, base_dir: &Path) -> Result<Plant, ConfigErrors> {
-    let mut cx = Cx { text, origin, base_dir, errors: Vec::new(), profiles: HashMap::new() };
+    let mut cx = Cx { text, origin, base_dir, errors: Vec::new(), profiles: HashMap::new(), plain: false };
     let (doc, syntax) = DeTable::parse_recoverable(text);
     for error in &syntax {
         cx.toml_error(error, 0..0);
     }
-    if !cx.errors.is_empty() {
-        return Err(ConfigErrors(cx.errors));
-    }
-    let sections = Sections::split(&mut cx, doc.get_ref());
-    let plant = sections.resolve(&mut cx);
+    // After a syntax error the rest of the tree cannot be trusted: report the syntax only.
+    let plant = if cx.errors.is_empty() { Sections::split(&mut cx, doc.get_ref()).resolve(&mut cx) } else { None };
     match plant {
         Some(plant) if cx.errors.is_empty() => Ok(plant),
-        _ => Err(ConfigErrors(cx.errors)),
+        _ => {
+            cx.errors.sort_by_key(|e| (e.line, e.column));
+            Err(ConfigErrors(cx.errors))
+        }
     }
+}
+
+/// serde's type names as a configuration's reader knows them.
+fn plain_words(message: &str) -> String {
+    [
+        ("expected i64", "expected a whole number"),
+        ("expected f64", "expected a number"),
+        ("expected a sequence", "expected an array such as [\"a\", \"b\"]"),
+        ("expected a map", "expected a table"),
+        ("missing field", "missing key"),
+        ("unknown field", "unknown key"),
+    ]
+    .iter()
+    .fold(message.to_string(), |m, (serde, ours)| m.replace(serde, ours))
 }
 
 /// What the checks share: the text (for positions), the errors found so far, and the
@@ -51,6 +65,8 @@ struct Cx<'a> {
     base_dir: &'a Path,
     errors: Vec<ConfigError>,
     profiles: HashMap<String, Arc<Profile>>,
+    /// Plain mode: metric names are topic levels (no `/`).
+    plain: bool,
 }
 
 impl Cx<'_> {
@@ -65,16 +81,27 @@ impl Cx<'_> {
         line_col(self.text, span.start).0
     }
 
-    /// A TOML reader's error, at its span (or `fallback`'s).
+    /// A TOML reader's error, at its span (or `fallback`'s), in the file's words.
     fn toml_error(&mut self, error: &toml::de::Error, fallback: Range<usize>) {
         let span = error.span().unwrap_or(fallback);
-        self.at(span, error.message().trim().to_string());
+        self.at(span, plain_words(error.message().trim()));
     }
 
     /// `value` read as `T`; a mistake is reported and gives `None`.
     fn read<'i, T: Deserialize<'i>>(&mut self, value: &Spanned<DeValue<'i>>) -> Option<T> {
         let span = value.span();
         T::deserialize(ValueDeserializer::from(value.clone())).map_err(|e| self.toml_error(&e, span)).ok()
+    }
+
+    /// What a metric name may not hold: MQTT's wildcards, and in plain mode the topic
+    /// separator (there a name is a topic level; in Sparkplug it is inside the payload).
+    fn unfit_metric_name(&self, name: &str) -> Option<String> {
+        let refused: &[char] = if self.plain { &['/', '+', '#'] } else { &['+', '#'] };
+        (name.is_empty() || name.contains(refused)).then(|| {
+            let mode = if self.plain { "in plain mode a metric name is a topic level: " } else { "" };
+            let list: Vec<String> = refused.iter().map(char::to_string).collect();
+            format!("metric name {name:?}: {mode}it is not empty and has no {}", list.join(", "))
+        })
     }
 
     /// A path of the file, relative to its folder.
@@ -157,6 +184,8 @@ struct Sections {
     plain: Option<raw::Plain>,
     store: Option<raw::Store>,
     lines: Vec<(raw::Line, Vec<raw::Device>)>,
+    /// The devices of lines that could not be read: checked all the same.
+    orphans: Vec<raw::Device>,
     /// `[[line.device]]` entries written (read or not).
     devices_given: usize,
 }
@@ -233,8 +262,9 @@ impl Sections {
                 }
             }
             let line: Option<raw::Line> = cx.read(&Spanned::new(entry.span(), DeValue::Table(rest)));
-            if let Some(line) = line {
-                self.lines.push((line, devices));
+            match line {
+                Some(line) => self.lines.push((line, devices)),
+                None => self.orphans.extend(devices),
             }
         }
     }
@@ -242,6 +272,7 @@ impl Sections {
     /// The plant, when every section resolved (the errors are in `cx`).
     fn resolve(self, cx: &mut Cx<'_>) -> Option<Plant> {
         let mode = self.mode(cx);
+        cx.plain = matches!(mode, Some(Mode::Plain(_)));
         let store = self.store.map_or_else(StoreConfig::default, |s| resolve_store(cx, &s));
         let mut ids = line::Ids::default();
         let mut lines = Vec::new();
@@ -249,6 +280,9 @@ impl Sections {
             if let Some(line) = line::resolve(cx, &line, &devices, &mut ids) {
                 lines.push(line);
             }
+        }
+        for orphan in &self.orphans {
+            device::resolve(cx, orphan);
         }
         if self.devices_given == 0 {
             let span = self.given.get("line").cloned().unwrap_or(0..0);

@@ -16,9 +16,15 @@
 //!
 //! **The UInt divergence.** The specification carries UInt8, UInt16 and UInt32 in the
 //! payload's `int_value` (protobuf uint32) and we do by default ([`convert::UintEncoding::Spec`]);
-//! Eclipse Tahu and Ignition read and write them in `long_value`, so a Tahu decoder shows such
-//! a value as null. [`convert::UintEncoding::LongValue`] (the plant's `uint_encoding`) writes
-//! them there; commands are accepted in either field whatever the switch says.
+//! Eclipse Tahu and Ignition have long written UInt32 in `long_value`, and Tahu's JavaScript
+//! codec (1.0.3) reads it only there, showing ours as null. [`convert::UintEncoding::LongValue`]
+//! (the plant's `uint_encoding`) writes UInt8/16/32 there; commands are accepted in either field
+//! whatever the switch says.
+//!
+//! Two conventions the specification leaves open: a signed value is written as two's
+//! complement of its own width (Int16 −5 is `int_value` 65531, which pysparkplug and Tahu both
+//! read; a 32-bit sign extension pysparkplug refuses), and a metric's engineering unit is the
+//! String property `engUnit` ([`convert::ENG_UNIT`], Tahu's and Ignition's key).
 
 pub mod convert;
 pub mod payload;

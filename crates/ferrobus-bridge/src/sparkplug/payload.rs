@@ -520,3 +520,266 @@ impl Metric {
         self.datatype.and_then(DataType::from_u32)
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use proptest::collection::vec;
+    use proptest::option;
+    use proptest::prelude::*;
+
+    use super::*;
+
+    fn float() -> impl Strategy<Value = f32> {
+        any::<f32>().prop_filter("NaN is not equal to itself", |x| !x.is_nan())
+    }
+
+    fn double() -> impl Strategy<Value = f64> {
+        any::<f64>().prop_filter("NaN is not equal to itself", |x| !x.is_nan())
+    }
+
+    fn text() -> impl Strategy<Value = String> {
+        "[a-zA-Z0-9 /°µ_-]{0,12}"
+    }
+
+    fn property_set(depth: u32) -> BoxedStrategy<PropertySet> {
+        let leaf = prop_oneof![
+            any::<u32>().prop_map(PropertyValueKind::Int),
+            any::<u64>().prop_map(PropertyValueKind::Long),
+            float().prop_map(PropertyValueKind::Float),
+            double().prop_map(PropertyValueKind::Double),
+            any::<bool>().prop_map(PropertyValueKind::Boolean),
+            text().prop_map(PropertyValueKind::String),
+            vec(any::<u8>(), 0..6).prop_map(PropertyValueKind::Extension),
+        ];
+        let kind = if depth == 0 {
+            leaf.boxed()
+        } else {
+            prop_oneof![
+                4 => leaf,
+                1 => property_set(depth - 1).prop_map(PropertyValueKind::PropertySet),
+                1 => vec(property_set(depth - 1), 0..3)
+                    .prop_map(|propertyset| PropertyValueKind::PropertySetList(PropertySetList { propertyset })),
+            ]
+            .boxed()
+        };
+        let value = (option::of(0u32..35), option::of(any::<bool>()), option::of(kind))
+            .prop_map(|(r#type, is_null, value)| PropertyValue { r#type, is_null, value });
+        vec((text(), value), 0..4)
+            .prop_map(|pairs| {
+                let (keys, values) = pairs.into_iter().unzip();
+                PropertySet { keys, values }
+            })
+            .boxed()
+    }
+
+    fn data_set() -> impl Strategy<Value = DataSet> {
+        let value = prop_oneof![
+            any::<u32>().prop_map(DataSetValueKind::Int),
+            any::<u64>().prop_map(DataSetValueKind::Long),
+            float().prop_map(DataSetValueKind::Float),
+            double().prop_map(DataSetValueKind::Double),
+            any::<bool>().prop_map(DataSetValueKind::Boolean),
+            text().prop_map(DataSetValueKind::String),
+        ];
+        let row = vec(option::of(value).prop_map(|value| DataSetValue { value }), 0..4)
+            .prop_map(|elements| DataSetRow { elements });
+        (option::of(any::<u64>()), vec(text(), 0..4), vec(0u32..35, 0..4), vec(row, 0..3))
+            .prop_map(|(num_of_columns, columns, types, rows)| DataSet { num_of_columns, columns, types, rows })
+    }
+
+    fn template(depth: u32) -> BoxedStrategy<Template> {
+        let parameter_value = prop_oneof![
+            any::<u32>().prop_map(ParameterValue::Int),
+            any::<u64>().prop_map(ParameterValue::Long),
+            float().prop_map(ParameterValue::Float),
+            double().prop_map(ParameterValue::Double),
+            any::<bool>().prop_map(ParameterValue::Boolean),
+            text().prop_map(ParameterValue::String),
+            vec(any::<u8>(), 0..6).prop_map(ParameterValue::Extension),
+        ];
+        let parameter = (option::of(text()), option::of(0u32..35), option::of(parameter_value))
+            .prop_map(|(name, r#type, value)| TemplateParameter { name, r#type, value });
+        (
+            option::of(text()),
+            vec(metric(depth), 0..3),
+            vec(parameter, 0..3),
+            option::of(text()),
+            option::of(any::<bool>()),
+        )
+            .prop_map(|(version, metrics, parameters, template_ref, is_definition)| Template {
+                version,
+                metrics,
+                parameters,
+                template_ref,
+                is_definition,
+            })
+            .boxed()
+    }
+
+    fn metric_value(depth: u32) -> BoxedStrategy<MetricValue> {
+        let scalar = prop_oneof![
+            any::<u32>().prop_map(MetricValue::Int),
+            any::<u64>().prop_map(MetricValue::Long),
+            float().prop_map(MetricValue::Float),
+            double().prop_map(MetricValue::Double),
+            any::<bool>().prop_map(MetricValue::Boolean),
+            text().prop_map(MetricValue::String),
+            vec(any::<u8>(), 0..16).prop_map(MetricValue::Bytes),
+            data_set().prop_map(MetricValue::DataSet),
+            vec(any::<u8>(), 0..6).prop_map(MetricValue::Extension),
+        ];
+        if depth == 0 {
+            scalar.boxed()
+        } else {
+            prop_oneof![6 => scalar, 1 => template(depth - 1).prop_map(MetricValue::Template)].boxed()
+        }
+    }
+
+    fn metadata() -> impl Strategy<Value = MetaData> {
+        (
+            option::of(any::<bool>()),
+            option::of(text()),
+            option::of(any::<u64>()),
+            option::of(any::<u64>()),
+            (option::of(text()), option::of(text()), option::of(text()), option::of(text())),
+        )
+            .prop_map(|(is_multi_part, content_type, size, seq, (file_name, file_type, md5, description))| {
+                MetaData { is_multi_part, content_type, size, seq, file_name, file_type, md5, description }
+            })
+    }
+
+    fn metric(depth: u32) -> BoxedStrategy<Metric> {
+        (
+            (option::of(text()), option::of(any::<u64>()), option::of(any::<u64>()), option::of(any::<u32>())),
+            (option::of(any::<bool>()), option::of(any::<bool>()), option::of(any::<bool>())),
+            option::of(metadata()),
+            option::of(property_set(1)),
+            option::of(metric_value(depth)),
+        )
+            .prop_map(
+                |(
+                    (name, alias, timestamp, datatype),
+                    (is_historical, is_transient, is_null),
+                    metadata,
+                    properties,
+                    value,
+                )| Metric {
+                    name,
+                    alias,
+                    timestamp,
+                    datatype,
+                    is_historical,
+                    is_transient,
+                    is_null,
+                    metadata,
+                    properties,
+                    value,
+                },
+            )
+            .boxed()
+    }
+
+    fn payload() -> impl Strategy<Value = Payload> {
+        (
+            option::of(any::<u64>()),
+            vec(metric(1), 0..6),
+            option::of(any::<u64>()),
+            option::of(text()),
+            option::of(vec(any::<u8>(), 0..8)),
+        )
+            .prop_map(|(timestamp, metrics, seq, uuid, body)| Payload { timestamp, metrics, seq, uuid, body })
+    }
+
+    proptest! {
+        #[test]
+        fn every_payload_decodes_to_itself(payload in payload()) {
+            let bytes = payload.encode();
+            prop_assert_eq!(Payload::decode(&bytes), Ok(payload));
+        }
+
+        #[test]
+        fn any_bytes_decode_or_fail_without_panicking(bytes in vec(any::<u8>(), 0..64)) {
+            if let Ok(payload) = Payload::decode(&bytes) {
+                // What decoded encodes again and decodes to the same payload.
+                prop_assert_eq!(Payload::decode(&payload.encode()), Ok(payload));
+            }
+        }
+    }
+
+    #[test]
+    fn fields_are_where_the_specification_puts_them() {
+        let payload = Payload { timestamp: Some(1), seq: Some(2), ..Payload::default() };
+        assert_eq!(payload.encode(), [0x08, 1, 0x18, 2], "timestamp is field 1, seq field 3 (varints)");
+        let metric = Metric { alias: Some(3), value: Some(MetricValue::Int(19200)), ..Metric::default() };
+        let bytes = Payload { metrics: vec![metric], ..Payload::default() }.encode();
+        // metrics: field 2, length-delimited; alias field 2; int_value field 10 (tag 0x50), 19200 = 0x80 0x96 0x01.
+        assert_eq!(bytes, [0x12, 6, 0x10, 3, 0x50, 0x80, 0x96, 0x01]);
+    }
+
+    #[test]
+    fn a_set_scalar_is_encoded_even_when_zero() {
+        let metric = Metric { is_historical: Some(false), value: Some(MetricValue::Long(0)), ..Metric::default() };
+        let bytes = Payload { metrics: vec![metric], seq: Some(0), ..Payload::default() }.encode();
+        assert_eq!(bytes, [0x12, 4, 0x28, 0, 0x58, 0, 0x18, 0]);
+    }
+
+    #[test]
+    fn data_set_types_are_unpacked_as_proto2_writes_them() {
+        let set = DataSet { types: vec![7, 12], ..DataSet::default() };
+        assert_eq!(set.encode_to_vec(), [0x18, 7, 0x18, 12]);
+        let packed = [0x1a, 2, 7, 12];
+        assert_eq!(DataSet::decode(&packed[..]).map(|s| s.types), Ok(vec![7, 12]), "packed decodes too");
+    }
+
+    #[test]
+    fn extension_fields_are_skipped() {
+        let payload = Payload {
+            seq: Some(4),
+            metrics: vec![Metric::new("bdSeq", DataType::UInt64, Some(MetricValue::Long(7)))],
+            ..Payload::default()
+        };
+        let mut bytes = payload.encode();
+        // Field 6 (the first of Payload's extensions), a varint; field 1000, length-delimited.
+        bytes.extend([0x30, 0x2a, 0xc2, 0x3e, 3, b'a', b'b', b'c']);
+        assert_eq!(Payload::decode(&bytes), Ok(payload));
+    }
+
+    #[test]
+    fn a_value_extension_is_kept_as_its_bytes() {
+        let metric = Metric { value: Some(MetricValue::Extension(vec![0x08, 0x01])), ..Metric::default() };
+        let payload = Payload { metrics: vec![metric], ..Payload::default() };
+        let bytes = payload.encode();
+        assert_eq!(bytes, [0x12, 5, 0x9a, 0x01, 2, 0x08, 0x01], "extension_value is field 19");
+        assert_eq!(Payload::decode(&bytes), Ok(payload));
+    }
+
+    #[test]
+    fn truncated_bytes_are_an_error() {
+        let bytes = Payload { uuid: Some("abcdef".into()), ..Payload::default() }.encode();
+        let short = bytes.get(..bytes.len() - 1).unwrap_or_default();
+        assert!(Payload::decode(short).is_err());
+    }
+
+    #[test]
+    fn every_datatype_has_its_number_and_name() {
+        for (number, datatype) in (0u32..).zip(DataType::ALL) {
+            assert_eq!(datatype.number(), number);
+            assert_eq!(DataType::from_u32(number), Some(datatype));
+        }
+        assert_eq!(DataType::from_u32(35), None);
+        assert_eq!(DataType::from_u32(u32::MAX), None);
+        assert_eq!(DataType::UInt32.name(), "UInt32");
+        assert_eq!(DataType::Uuid.to_string(), "UUID");
+        assert_eq!(DataType::DateTimeArray.number(), 34);
+    }
+
+    #[test]
+    fn a_birth_metric_has_name_datatype_and_value() {
+        let metric = Metric::new("Node Control/Rebirth", DataType::Boolean, Some(MetricValue::Boolean(false)));
+        assert_eq!(metric.name.as_deref(), Some("Node Control/Rebirth"));
+        assert_eq!(metric.data_type(), Some(DataType::Boolean));
+        assert_eq!(metric.is_null, None);
+        let null = Metric::new("F001", DataType::UInt16, None);
+        assert_eq!(null.is_null, Some(true));
+    }
+}

@@ -205,3 +205,107 @@ pub fn check_id(what: &str, id: &str) -> Result<(), String> {
         None => Ok(()),
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use proptest::prelude::*;
+
+    use super::*;
+
+    #[test]
+    fn node_and_device_topics_read_as_the_specification_writes_them() {
+        let node = Topic::node("plant", MessageType::NBirth, "bridge1");
+        assert_eq!(node.to_string(), "spBv1.0/plant/NBIRTH/bridge1");
+        let device = Topic::device("plant", MessageType::DData, "bridge1", "drive1");
+        assert_eq!(device.to_string(), "spBv1.0/plant/DDATA/bridge1/drive1");
+        assert_eq!(Topic::parse("spBv1.0/plant/NBIRTH/bridge1"), Some(node));
+        assert_eq!(Topic::parse("spBv1.0/plant/DDATA/bridge1/drive1"), Some(device));
+    }
+
+    #[test]
+    fn other_topics_are_not_sparkplug_ones() {
+        for topic in [
+            "spBv1.0/STATE/scada",
+            "spAv1.0/plant/NBIRTH/bridge1",
+            "spBv1.0/plant/NBIRTH",
+            "spBv1.0/plant/NBIRTH/bridge1/drive1",
+            "spBv1.0/plant/DDATA/bridge1",
+            "spBv1.0/plant/DDATA/bridge1/drive1/extra",
+            "spBv1.0/plant/DDATA/bridge1/",
+            "spBv1.0//NDATA/bridge1",
+            "spBv1.0/plant/NDATA/",
+            "spBv1.0/plant/nbirth/bridge1",
+            "spBv1.0/plant/NRESET/bridge1",
+            "",
+        ] {
+            assert_eq!(Topic::parse(topic), None, "{topic}");
+        }
+    }
+
+    #[test]
+    fn message_types_read_back() {
+        for kind in MessageType::ALL {
+            assert_eq!(kind.as_str().parse::<MessageType>(), Ok(kind));
+            assert_eq!(kind.is_device(), kind.as_str().starts_with('D'));
+        }
+        let error = "STATE".parse::<MessageType>().unwrap_err().to_string();
+        assert!(error.contains("\"STATE\" is not a Sparkplug message type"), "{error}");
+    }
+
+    #[test]
+    fn the_host_state_topic() {
+        assert_eq!(state_topic("scada"), "spBv1.0/STATE/scada");
+        assert_eq!(parse_state_topic("spBv1.0/STATE/scada"), Some("scada"));
+        assert_eq!(parse_state_topic("spBv1.0/STATE/"), None);
+        assert_eq!(parse_state_topic("spBv1.0/STATE/a/b"), None);
+        assert_eq!(parse_state_topic("spBv1.0/plant/NBIRTH/bridge1"), None);
+    }
+
+    #[test]
+    fn the_host_state_json() {
+        let online = HostState { online: true, timestamp: Some(1_700_000_000_000) };
+        assert_eq!(parse_state(br#"{"online":true,"timestamp":1700000000000}"#), Some(online));
+        assert_eq!(parse_state(&online.to_json()), Some(online));
+        assert_eq!(String::from_utf8_lossy(&online.to_json()), r#"{"online":true,"timestamp":1700000000000}"#);
+        let offline = HostState { online: false, timestamp: None };
+        assert_eq!(parse_state(br#"{ "online" : false }"#), Some(offline));
+        assert_eq!(parse_state(&offline.to_json()), Some(offline));
+        for bad in [&b"ONLINE"[..], b"", b"{}", br#"{"online":"true"}"#, b"[true]", b"\xff\xfe", br#"{"online":1}"#] {
+            assert_eq!(parse_state(bad), None, "{}", String::from_utf8_lossy(bad));
+        }
+    }
+
+    #[test]
+    fn ids_are_one_topic_level() {
+        assert_eq!(check_id("group", "plant-1"), Ok(()));
+        assert_eq!(check_id("device", "Drive 1.ä"), Ok(()));
+        let said = |what, id| check_id(what, id).unwrap_err();
+        assert_eq!(said("group", ""), "group id is empty; Sparkplug ids are one non-empty topic level");
+        assert_eq!(said("device", "pump/1"), "device id \"pump/1\" contains '/', which separates topic levels");
+        assert_eq!(
+            said("edge node", "a+b"),
+            "edge node id \"a+b\" contains '+', which is MQTT's single-level wildcard"
+        );
+        assert_eq!(said("host", "#"), "host id \"#\" contains '#', which is MQTT's multi-level wildcard");
+    }
+
+    fn id() -> impl Strategy<Value = String> {
+        "[^/+#]{1,8}"
+    }
+
+    proptest! {
+        #[test]
+        fn a_topic_of_valid_ids_reads_back(
+            group in id(), node in id(), device in id(), kind in 0usize..8,
+        ) {
+            let kind = MessageType::ALL.get(kind).copied().unwrap_or(MessageType::NData);
+            let topic = if kind.is_device() {
+                Topic::device(&group, kind, &node, &device)
+            } else {
+                Topic::node(&group, kind, &node)
+            };
+            prop_assert!(check_id("group", &group).is_ok());
+            prop_assert_eq!(Topic::parse(&topic.to_string()), Some(topic));
+        }
+    }
+}

@@ -255,24 +255,44 @@ impl PollHandle {
     /// Writes `text` to a cell, as its point parses it (`45 Hz`, `run`, `0x10`) and within
     /// the point's range and access; returns the raw value written.
     pub async fn write(&self, group: usize, cell: usize, text: &str) -> Result<Value, WriteError> {
-        let g = self.shared.groups.get(group).ok_or(WriteError::NoSuchCell { group, cell })?;
-        let c = g.cells.get(cell).ok_or(WriteError::NoSuchCell { group, cell })?;
-        let raw = c.point.prepare_write(text)?;
+        let raw = self.prepare_write(group, cell, text)?;
+        self.write_raw(group, cell, &raw).await?;
+        Ok(raw)
+    }
+
+    /// The raw value that writing `text` to a cell would write, checked against the point's
+    /// range and access; nothing is sent.
+    pub fn prepare_write(&self, group: usize, cell: usize, text: &str) -> Result<Value, WriteError> {
+        let (_, c) = self.cell(group, cell)?;
+        Ok(c.point.prepare_write(text)?)
+    }
+
+    /// Writes the raw value `raw` to a cell as is: a coil, one register or several, encoded
+    /// in the point's type and word order. Range and access are the caller's to check
+    /// ([`Point::check_write`]); a value that does not fit the point's type is refused.
+    pub async fn write_raw(&self, group: usize, cell: usize, raw: &Value) -> Result<(), WriteError> {
+        let (g, c) = self.cell(group, cell)?;
         let point = &c.point;
         if point.table == Table::Coils {
-            let on = match &raw {
+            let on = match raw {
                 Value::Bool(b) => *b,
                 other => other.as_int().is_some_and(|n| n != 0),
             };
             self.client.write_single_coil(g.unit, point.address, on).await?;
         } else {
-            let words = point.encode(&raw)?;
+            let words = point.encode(raw)?;
             match words.as_slice() {
                 [one] => self.client.write_single_register(g.unit, point.address, *one).await?,
                 many => self.client.write_multiple_registers(g.unit, point.address, many).await?,
             }
         }
-        Ok(raw)
+        Ok(())
+    }
+
+    fn cell(&self, group: usize, cell: usize) -> Result<(&Group, &Cell), WriteError> {
+        let g = self.shared.groups.get(group).ok_or(WriteError::NoSuchCell { group, cell })?;
+        let c = g.cells.get(cell).ok_or(WriteError::NoSuchCell { group, cell })?;
+        Ok((g, c))
     }
 
     fn stats(&self) -> std::sync::MutexGuard<'_, Stats> {

@@ -392,6 +392,12 @@ impl ClientTls {
         ClientTls::new(load_certificates(ca)?, identity.transpose()?)
     }
 
+    /// Its rustls configuration, for a client of another protocol over TLS (the bridge's
+    /// MQTT connection to its broker) built from the same PEM files.
+    pub fn rustls_config(&self) -> Arc<rustls::ClientConfig> {
+        Arc::clone(self.connector.config())
+    }
+
     /// Connects to `addr` (`host:port`) and runs the handshake, checking that the server's
     /// certificate names `host`.
     pub async fn connect(&self, addr: &str) -> io::Result<ClientStream> {

@@ -5,7 +5,7 @@ use std::collections::HashMap;
 use std::ops::Range;
 use std::time::Duration;
 
-use ferrobus::poll::{Format, Group, GroupError, Layout};
+use ferrobus::poll::{Cell, Format, Group, GroupError, Layout};
 use ferrobus_profile::{Order, Point, Profile, Table};
 use toml::Spanned;
 
@@ -122,6 +122,11 @@ fn profile_groups(cx: &mut Cx<'_>, id: &str, profile: Option<&Profile>, unit: u8
                     GroupError::NoSuchPoint { profile: profile.origin.clone(), what, name: name.get_ref().clone() };
                 cx.at(name.span(), format!("device {id:?}: {error}{}", suggestion(profile, what)));
                 known = false;
+            } else if !found.iter().any(|p| p.readable()) {
+                let said =
+                    format!("{what} {:?} of {} is write-only; it cannot be polled", name.get_ref(), profile.origin);
+                cx.at(name.span(), format!("device {id:?}: {said}"));
+                known = false;
             }
         }
     }
@@ -185,6 +190,14 @@ fn raw_group(cx: &mut Cx<'_>, id: &str, unit: u8, every: Duration, range: &Spann
         })
     });
     let every = r.every.as_ref().map_or(Some(every), |e| cx.period("every", e));
+    for name in r.names.iter().chain(&r.name) {
+        if let Some(problem) = cx.unfit_metric_name(name.get_ref()) {
+            cx.at(name.span(), problem);
+        }
+    }
+    if cx.errors.len() > errors {
+        return None;
+    }
     let (table, address, format, order, every) = (table?, address?, format?, order?, every?);
     let format = if table.is_bits() { Format::Bit } else { format };
     let count = match &r.count {
@@ -210,12 +223,6 @@ fn raw_names(cx: &mut Cx<'_>, r: &raw::Raw, address: u16, count: u16, format: Fo
     let width = format.width().max(1);
     let cells = count / width;
     let at = |i: u16| address.saturating_add(i.saturating_mul(width));
-    for name in r.names.iter().chain(&r.name) {
-        if name.get_ref().is_empty() || name.get_ref().contains(['+', '#', '/']) {
-            cx.at(name.span(), format!("name {:?}: a metric name is not empty and has no /, + or #", name.get_ref()));
-            return None;
-        }
-    }
     if !r.names.is_empty() {
         if r.names.len() != usize::from(cells) {
             let span = r.names.first().map_or(0..0, Spanned::span);
@@ -236,7 +243,12 @@ fn check_metric_names(cx: &mut Cx<'_>, id: &str, profile: Option<&Profile>, grou
     let mut seen: HashMap<&str, Range<usize>> = HashMap::new();
     for (group, _, source) in groups {
         for cell in &group.cells {
-            let span = source_span(profile, source, &cell.point);
+            let span = source_span(profile, source, cell);
+            if matches!(source, Source::Points(_))
+                && let Some(problem) = cx.unfit_metric_name(&cell.name)
+            {
+                cx.at(span.clone(), format!("device {id:?}: {problem} (the profile's code)"));
+            }
             if let Some(first) = seen.get(cell.name.as_str()) {
                 let line = cx.line_of(first);
                 cx.at(
@@ -250,11 +262,17 @@ fn check_metric_names(cx: &mut Cx<'_>, id: &str, profile: Option<&Profile>, grou
     }
 }
 
-/// Where a cell was asked for: the name that matched its point, or its range.
-fn source_span(profile: Option<&Profile>, source: &Source<'_>, point: &Point) -> Range<usize> {
+/// Where a cell was asked for: the name that matched its point, or the name given to it in
+/// its range (else the range).
+fn source_span(profile: Option<&Profile>, source: &Source<'_>, cell: &Cell) -> Range<usize> {
     match source {
-        Source::Raw(range) => range.get_ref().name.as_ref().map_or_else(|| range.span(), Spanned::span),
+        Source::Raw(range) => {
+            let r = range.get_ref();
+            let named = r.names.iter().find(|n| *n.get_ref() == cell.name).or(r.name.as_ref());
+            named.map_or_else(|| range.span(), Spanned::span)
+        }
         Source::Points(set) => {
+            let point = &cell.point;
             let same = |p: &&Point| p.table == point.table && p.address == point.address;
             let by_name = profile.and_then(|profile| {
                 set.points

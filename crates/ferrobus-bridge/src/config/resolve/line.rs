@@ -157,7 +157,8 @@ fn serial(cx: &mut Cx<'_>, line: &raw::Line) -> Option<Connection> {
 }
 
 /// Baud (19200 unless given), parity (even), data bits (8, or 7 with ascii) and stop bits
-/// (1, or 2 without parity).
+/// (1, as the command line's default: the spec asks for 2 without parity, most 8N1 devices
+/// do not).
 fn line_config(cx: &mut Cx<'_>, line: &raw::Line) -> Option<LineConfig> {
     let errors = cx.errors.len();
     let baud = line.baud.as_ref().map_or(Some(19_200), |b| {
@@ -187,7 +188,6 @@ fn line_config(cx: &mut Cx<'_>, line: &raw::Line) -> Option<LineConfig> {
         }
     };
     let stop_bits = match line.stop_bits.as_ref().map(|s| (s, *s.get_ref())) {
-        None if parity == Parity::None => StopBits::Two,
         None | Some((_, 1)) => StopBits::One,
         Some((_, 2)) => StopBits::Two,
         Some((s, n)) => {

@@ -1,0 +1,647 @@
+//! The bridge itself: a poller per line, one MQTT session, the store; the [`Edge`] decides
+//! what each sample, connection and command publishes, this module does the IO.
+//!
+//! ```text
+//!   line 0: Client ─▶ Poller ─┐ (line, Event)                 ┌─▶ Session (rumqttc) ─▶ broker
+//!   line 1: Client ─▶ Poller ─┼──────────────▶ run: Edge ─────┤        │ Connected, Message, Lost
+//!   line 2: virtual line+Sim ─┘        ▲  Action::Write       └─▶ Store (while offline)
+//!                                      └─ PollHandle::write_raw ◀─┘ replayed after the births
+//! ```
+//!
+//! One task runs the loop, in this order of priority: stop, the broker's events, the lines'
+//! samples, the results of writes, the reconnect timer, and last the replay of stored records
+//! (a batch at a time while the client's queue is short, so that live data is never starved).
+//! Lines run concurrently in their own pollers: one line's failure never stops another.
+//!
+//! The broker session: CONNECT with the edge's Will (NDEATH with the bdSeq, kept across
+//! restarts in a small file, see [`state`]); on CONNACK subscribe to the edge's topics and
+//! publish its births, then replay the store; on a lost connection the edge is told (its
+//! samples become store records, the next CONNECT takes the next bdSeq) and the next attempt
+//! waits the backoff (the configured delay, doubling to 30 s). Stopping publishes NDEATH
+//! before the DISCONNECT, stops the pollers and returns a [`Report`].
+
+mod broker;
+mod lines;
+pub mod mqtt;
+mod report;
+pub mod state;
+mod status;
+
+use std::future::Future;
+use std::time::{Duration, SystemTime};
+
+use ferrobus::poll::{Event, FailureKind, Sample};
+use tokio::sync::{mpsc, oneshot};
+use tokio::time::Instant;
+
+pub use lines::{GroupMap, RunningLine, SimulatedLine};
+pub use report::{LineReport, Report};
+pub use status::Status;
+
+use crate::config::{Mode, Plant};
+use crate::edge::{Action, DeviceRef, Edge, EdgeError, Output, Publish};
+use crate::sparkplug::topic::{MessageType, Topic};
+use crate::store::{Pushed, Store, StoreError};
+use mqtt::{Backoff, Session, SessionEvent};
+use state::{BdSeqFile, Stored};
+
+/// Records replayed per turn of the loop.
+const REPLAY_BATCH: usize = 64;
+
+/// The pause between two replay batches.
+const REPLAY_PACE: Duration = Duration::from_millis(10);
+
+/// Replay waits while the client has this many messages queued for the broker.
+const REPLAY_QUEUE_LIMIT: usize = 256;
+
+/// How long a stop waits for the NDEATH and the DISCONNECT to go out.
+const CLOSE_WAIT: Duration = Duration::from_secs(3);
+
+/// Why the bridge could not start.
+#[derive(Debug, thiserror::Error)]
+#[non_exhaustive]
+pub enum RunError {
+    /// The store could not be opened.
+    #[error("the store: {0}")]
+    Store(#[from] StoreError),
+    /// The broker's TLS files or settings.
+    #[error("the broker's TLS: {0}")]
+    Tls(String),
+    /// A line could not be set up (a simulated line's devices).
+    #[error("line {line:?}: {detail}")]
+    Line {
+        /// The line's name.
+        line: String,
+        /// What failed.
+        detail: String,
+    },
+}
+
+/// What a caller may ask of [`run_with`] beside the plant.
+#[derive(Debug, Default)]
+pub struct Options {
+    /// Receives the running lines once they are started: their clients (to command a device
+    /// beside the poller, as `bridge --demo` does), pollers and simulated lines.
+    pub running: Option<oneshot::Sender<Vec<RunningLine>>>,
+}
+
+/// Runs the bridge of `plant` until `stop` completes; `events`, if given, hears what happens
+/// as it happens (never waited for: a full channel loses the status, not the bridge's time).
+pub async fn run(
+    plant: Plant,
+    stop: impl Future<Output = ()>,
+    events: Option<mpsc::Sender<Status>>,
+) -> Result<Report, RunError> {
+    run_with(plant, stop, events, Options::default()).await
+}
+
+/// [`run`], with [`Options`].
+pub async fn run_with(
+    plant: Plant,
+    stop: impl Future<Output = ()>,
+    events: Option<mpsc::Sender<Status>>,
+    options: Options,
+) -> Result<Report, RunError> {
+    let mut bridge = Bridge::start(plant, events).await?;
+    if let Some(running) = options.running {
+        let _ = running.send(bridge.lines.iter().map(|l| l.running.clone()).collect());
+    }
+    bridge.serve(stop).await;
+    Ok(bridge.finish().await)
+}
+
+/// A started line and what the bridge keeps of its devices.
+struct LineState {
+    running: RunningLine,
+    map: GroupMap,
+    devices: Vec<DeviceHealth>,
+}
+
+/// Whether a device answers, for the status lines.
+#[derive(Clone, Debug, Default)]
+struct DeviceHealth {
+    silent: u32,
+    dead: bool,
+}
+
+/// A write's outcome, back from its task.
+struct Written {
+    device: DeviceRef,
+    group: usize,
+    cell: usize,
+    typed: String,
+    result: Result<(), String>,
+}
+
+struct Bridge {
+    plant: Plant,
+    edge: Edge,
+    store: Store,
+    session: Session,
+    broker: String,
+    bd_seq_file: Option<BdSeqFile>,
+    lines: Vec<LineState>,
+    samples: mpsc::Receiver<(usize, Event)>,
+    written_tx: mpsc::Sender<Written>,
+    written: mpsc::Receiver<Written>,
+    events: Option<mpsc::Sender<Status>>,
+    backoff: Backoff,
+    reconnect_at: Option<Instant>,
+    online: bool,
+    /// The births of this session have gone out: stored records may follow.
+    born: bool,
+    /// The store has been replayed in this session (and the edge told).
+    replay_done: bool,
+    /// Records pushed since the broker was lost, for the status when it is back.
+    stored_offline: u64,
+    /// Records replayed since the broker came back.
+    replayed_now: u64,
+    /// New records dropped in a row because the store is full.
+    dropping: u64,
+    report: Report,
+}
+
+impl Bridge {
+    async fn start(plant: Plant, events: Option<mpsc::Sender<Status>>) -> Result<Bridge, RunError> {
+        let store = Store::open(plant.store.clone())?;
+        let session = Session::start(broker::options(&plant.broker)?);
+        let broker = broker::describe(&plant.broker);
+        let mut edge = Edge::new(&plant);
+        let (samples_tx, samples) = mpsc::channel(1024);
+        let (written_tx, written) = mpsc::channel(64);
+        let mut lines = Vec::with_capacity(plant.lines.len());
+        for (index, spec) in plant.lines.iter().enumerate() {
+            let mut started = lines::start(spec, samples_tx.clone()).await?;
+            started.forward(index);
+            let devices = vec![DeviceHealth::default(); spec.devices.len()];
+            lines.push(LineState { running: started.running, map: started.map, devices });
+        }
+        let report = Report::new(&plant, store.stats().recovered);
+        let (bd_seq_file, note) = restore_bd_seq(&plant, &mut edge);
+        let mut bridge = Bridge {
+            bd_seq_file,
+            backoff: Backoff::new(plant.broker.reconnect),
+            plant,
+            edge,
+            store,
+            session,
+            broker,
+            lines,
+            samples,
+            written_tx,
+            written,
+            events,
+            reconnect_at: None,
+            online: false,
+            born: false,
+            replay_done: false,
+            stored_offline: 0,
+            replayed_now: 0,
+            dropping: 0,
+            report,
+        };
+        if let Some(note) = note {
+            bridge.say(Status::Note(note));
+        }
+        let devices = bridge.plant.lines.iter().map(|l| l.devices.len()).sum();
+        bridge.say(Status::Started { lines: bridge.lines.len(), devices, broker: bridge.broker.clone() });
+        if !bridge.store.is_empty() {
+            bridge.say(Status::Recovered { records: bridge.store.len() });
+        }
+        bridge.say(Status::Connecting { broker: bridge.broker.clone() });
+        bridge.connect();
+        Ok(bridge)
+    }
+
+    /// Loops until `stop`.
+    async fn serve(&mut self, stop: impl Future<Output = ()>) {
+        tokio::pin!(stop);
+        loop {
+            let reconnect_at = self.reconnect_at;
+            let replaying = self.online && self.born && !self.store.is_empty();
+            tokio::select! {
+                biased;
+                () = &mut stop => return,
+                event = self.session.next() => match event {
+                    Some(event) => self.on_session(event),
+                    None => return,
+                },
+                Some((line, event)) = self.samples.recv() => self.on_poll(line, event),
+                Some(written) = self.written.recv() => self.on_written(written),
+                () = sleep_until(reconnect_at), if reconnect_at.is_some() => {
+                    self.reconnect_at = None;
+                    self.connect();
+                }
+                () = tokio::time::sleep(REPLAY_PACE), if replaying => self.replay(),
+            }
+        }
+    }
+
+    /// Stops: NDEATH, DISCONNECT, the pollers; the report.
+    async fn finish(mut self) -> Report {
+        self.say(Status::Stopping);
+        if self.online {
+            if let Some(death) = self.edge.shutdown(SystemTime::now()) {
+                self.publish(death);
+            }
+            self.session.disconnect();
+            let closed = tokio::time::timeout(CLOSE_WAIT, async {
+                while let Some(event) = self.session.next().await {
+                    if matches!(event, SessionEvent::Closed | SessionEvent::Lost(_)) {
+                        return;
+                    }
+                }
+            });
+            if closed.await.is_err() {
+                tracing::warn!("the broker did not take the DISCONNECT within {CLOSE_WAIT:?}");
+            }
+        }
+        for line in &self.lines {
+            line.running.poll.stop();
+        }
+        self.end_drop_burst();
+        let mut report = std::mem::take(&mut self.report);
+        report.finish(&self.lines.iter().map(|l| l.running.poll.counters()).collect::<Vec<_>>(), &self.store);
+        // What is left in memory goes to disk for the next run (if the store has a folder).
+        if let Err(e) = self.store.close() {
+            report.store_errors += 1;
+            tracing::warn!("closing the store: {e}");
+        }
+        report
+    }
+
+    /// Asks the session to connect with the edge's Will, keeping its bdSeq first.
+    fn connect(&mut self) {
+        let will = self.edge.will();
+        if let Some(file) = &self.bd_seq_file {
+            let bd_seq = self.edge.bd_seq();
+            if let Err(e) = file.write(bd_seq) {
+                tracing::warn!("keeping bdSeq {bd_seq} in {}: {e}", file.path().display());
+            }
+        }
+        self.session.connect(will.as_ref());
+    }
+
+    fn on_session(&mut self, event: SessionEvent) {
+        match event {
+            SessionEvent::Connected => self.on_connected(),
+            SessionEvent::Message { topic, payload } => self.on_message(&topic, &payload),
+            SessionEvent::Lost(error) => self.on_lost(error),
+            SessionEvent::Closed => {
+                // A Reconnect action's DISCONNECT: connect again at once with the next bdSeq.
+                self.went_offline();
+                self.connect();
+            }
+        }
+    }
+
+    fn on_connected(&mut self) {
+        self.online = true;
+        self.born = false;
+        self.backoff.reset();
+        self.report.connections += 1;
+        self.say(Status::Connected { broker: self.broker.clone() });
+        for (filter, qos) in self.edge.subscriptions() {
+            if let Err(e) = self.session.subscribe(&filter, qos) {
+                tracing::warn!("{e}");
+            }
+        }
+        if self.stored_offline > 0 {
+            let records = std::mem::take(&mut self.stored_offline);
+            self.say(Status::Replaying { records, queued: self.store.len() });
+        }
+        self.replayed_now = 0;
+        let births = self.edge.connected(SystemTime::now());
+        if matches!(self.plant.mode, Mode::Plain(_)) {
+            self.born = true;
+        }
+        self.replay_done = false;
+        self.publish_all(births);
+    }
+
+    fn on_lost(&mut self, error: String) {
+        let was_online = self.online;
+        self.went_offline();
+        let retry_in = self.backoff.delay();
+        self.reconnect_at = Some(Instant::now() + retry_in);
+        if was_online {
+            self.report.broker_lost += 1;
+        }
+        self.say(Status::BrokerLost { broker: self.broker.clone(), error, retry_in, was_online });
+    }
+
+    fn went_offline(&mut self) {
+        if self.online {
+            self.edge.disconnected();
+        }
+        self.online = false;
+        self.born = false;
+    }
+
+    fn on_message(&mut self, topic: &str, payload: &[u8]) {
+        let (publishes, actions, errors) = self.edge.message(topic, payload, SystemTime::now());
+        for error in errors {
+            self.report.refused += 1;
+            self.say(Status::Refused { topic: topic.to_string(), error: error.to_string() });
+        }
+        self.publish_all(publishes);
+        for action in actions {
+            match action {
+                Action::Write { device, group, cell, raw, typed } => self.write(device, group, cell, raw, typed),
+                Action::Reconnect => self.reconnect(),
+            }
+        }
+    }
+
+    /// The primary host went offline: NDEATH, DISCONNECT, then connect again.
+    fn reconnect(&mut self) {
+        self.say(Status::Note("the primary host is offline: reconnecting".into()));
+        if let Some(death) = self.edge.shutdown(SystemTime::now()) {
+            self.publish(death);
+        }
+        self.session.disconnect();
+    }
+
+    /// Writes `raw` to a device's cell in a task of its own; the result comes back on
+    /// `written`.
+    fn write(&mut self, device: DeviceRef, group: usize, cell: usize, raw: ferrobus::poll::Value, typed: String) {
+        let target = self.lines.get(device.line).and_then(|line| {
+            let index = line.map.poller_group(device.device, group)?;
+            let point = line.running.poll.groups().get(index)?.cells.get(cell)?.point.clone();
+            Some((line.running.poll.clone(), index, point))
+        });
+        let tx = self.written_tx.clone();
+        let Some((poll, index, point)) = target else {
+            let result = Err(format!("no cell {cell} in group {group} of device {}", device.device));
+            self.on_written(Written { device, group, cell, typed, result });
+            return;
+        };
+        if let Err(e) = point.check_write(&raw, &typed) {
+            self.on_written(Written { device, group, cell, typed, result: Err(e.to_string()) });
+            return;
+        }
+        tokio::spawn(async move {
+            let result = poll.write_raw(index, cell, &raw).await.map_err(|e| e.to_string());
+            let _ = tx.send(Written { device, group, cell, typed, result }).await;
+        });
+    }
+
+    fn on_written(&mut self, written: Written) {
+        let Written { device, group, cell, typed, result } = written;
+        if result.is_ok() {
+            self.report.writes += 1;
+        } else {
+            self.report.write_failures += 1;
+        }
+        let point = self
+            .lines
+            .get(device.line)
+            .and_then(|l| l.running.poll.groups().get(l.map.poller_group(device.device, group)?)?.cells.get(cell))
+            .map_or_else(|| format!("cell {cell}"), |c| c.name.clone());
+        let name = self.device_name(device);
+        self.say(Status::Written { device: name, point, value: typed, result: result.clone() });
+        let publishes = self.edge.written(device, group, cell, result);
+        self.publish_all(publishes);
+    }
+
+    fn on_poll(&mut self, line: usize, event: Event) {
+        match event {
+            Event::Sample(sample) => self.on_sample(line, &sample),
+            Event::Overload(overload) => {
+                let name = self.lines.get(line).map(|l| l.running.name.clone()).unwrap_or_default();
+                self.say(Status::Overload { line: name, detail: overload.detail });
+            }
+        }
+    }
+
+    fn on_sample(&mut self, line: usize, sample: &Sample) {
+        let Some((device, group)) = self.lines.get(line).and_then(|l| l.map.device(line, sample.group)) else {
+            return;
+        };
+        self.track_health(device, sample);
+        let mut messages = Vec::new();
+        for output in self.edge.sample(device, group, sample) {
+            match output {
+                Output::Publish(message) => messages.push(message),
+                Output::Store(record) => self.keep(record),
+            }
+        }
+        if !messages.is_empty() {
+            self.publish_all(messages);
+        }
+    }
+
+    /// Says when a device stops answering (`death_after` polls in a row without a reply)
+    /// and when it is back.
+    fn track_health(&mut self, device: DeviceRef, sample: &Sample) {
+        let death_after = self.device_spec_death_after(device);
+        let name = self.device_name(device);
+        let Some(health) = self.lines.get_mut(device.line).and_then(|l| l.devices.get_mut(device.device)) else {
+            return;
+        };
+        let status = match &sample.result {
+            Err(failure) if !answered(failure.kind) => {
+                health.silent = health.silent.saturating_add(1);
+                (health.silent >= death_after && !health.dead).then(|| {
+                    health.dead = true;
+                    Status::DeviceDead { device: name, polls: health.silent, why: failure.diagnosis.clone() }
+                })
+            }
+            _ => {
+                health.silent = 0;
+                std::mem::take(&mut health.dead).then_some(Status::DeviceBack { device: name })
+            }
+        };
+        if let Some(status) = status {
+            self.say(status);
+        }
+    }
+
+    fn device_spec_death_after(&self, device: DeviceRef) -> u32 {
+        self.plant.lines.get(device.line).and_then(|l| l.devices.get(device.device)).map_or(3, |d| d.death_after.max(1))
+    }
+
+    fn device_name(&self, device: DeviceRef) -> String {
+        self.plant
+            .lines
+            .get(device.line)
+            .and_then(|l| l.devices.get(device.device))
+            .map_or_else(|| format!("device {}/{}", device.line, device.device), |d| d.id.clone())
+    }
+
+    /// Keeps a record for the broker's return.
+    fn keep(&mut self, record: Vec<u8>) {
+        match self.store.push(record) {
+            Ok(Pushed::Dropped) => {
+                if self.dropping == 0 {
+                    tracing::warn!("the store is full: new samples are dropped until the broker is back");
+                }
+                self.dropping += 1;
+            }
+            Ok(_) => {
+                self.end_drop_burst();
+                if self.stored_offline == 0 {
+                    self.say(Status::Storing);
+                }
+                self.stored_offline += 1;
+                self.report.stored += 1;
+            }
+            Err(e) => self.store_error(&e),
+        }
+    }
+
+    /// Says how many records a burst of drops lost, once it is over.
+    fn end_drop_burst(&mut self) {
+        if self.dropping > 0 {
+            let records = std::mem::take(&mut self.dropping);
+            self.report.dropped += records;
+            self.say(Status::Dropped { records });
+        }
+    }
+
+    fn store_error(&mut self, error: &StoreError) {
+        self.report.store_errors += 1;
+        if self.report.store_errors.is_power_of_two() {
+            self.say(Status::StoreError { error: error.to_string(), count: self.report.store_errors });
+        }
+    }
+
+    /// Publishes the oldest stored records, as historical data, a batch at a time.
+    fn replay(&mut self) {
+        self.end_drop_burst();
+        for _ in 0..REPLAY_BATCH {
+            if self.session.queued() >= REPLAY_QUEUE_LIMIT {
+                return;
+            }
+            let record = match self.store.front() {
+                Ok(Some(record)) => record,
+                Ok(None) => break,
+                Err(e) => {
+                    self.store_error(&e);
+                    // A record that cannot be read is passed over, not retried for ever.
+                    if let Err(e) = self.store.pop() {
+                        self.store_error(&e);
+                        return;
+                    }
+                    continue;
+                }
+            };
+            match self.edge.replay_all(&record, SystemTime::now()) {
+                Ok(messages) if messages.is_empty() => self.report.unreplayable += 1,
+                Ok(messages) => {
+                    self.report.replayed += 1;
+                    self.replayed_now += 1;
+                    self.publish_all(messages);
+                }
+                // Births not out (a primary host went away meanwhile): keep it for later.
+                Err(EdgeError::Offline) => return,
+                Err(e) => {
+                    self.report.unreplayable += 1;
+                    tracing::warn!("a stored record cannot be replayed: {e}");
+                }
+            }
+            if let Err(e) = self.store.pop() {
+                self.store_error(&e);
+                return;
+            }
+        }
+        self.check_replayed();
+    }
+
+    /// Once the births are out and the store is empty: says so, and publishes the DDEATHs the
+    /// edge held back for the devices born only so that their history resolves.
+    fn check_replayed(&mut self) {
+        if !self.born || self.replay_done || !self.store.is_empty() {
+            return;
+        }
+        self.replay_done = true;
+        if self.replayed_now > 0 {
+            let records = std::mem::take(&mut self.replayed_now);
+            self.say(Status::Replayed { records });
+        }
+        let deaths = self.edge.replayed(SystemTime::now());
+        self.publish_all(deaths);
+    }
+
+    fn publish_all(&mut self, messages: Vec<Publish>) {
+        let mut node = false;
+        let mut devices = Vec::new();
+        for message in messages {
+            match Topic::parse(&message.topic) {
+                Some(Topic { kind: MessageType::NBirth, .. }) => node = true,
+                Some(Topic { kind: MessageType::DBirth, device: Some(device), .. }) => devices.push(device),
+                _ => {}
+            }
+            self.publish(message);
+        }
+        if node {
+            self.born = true;
+        }
+        if node || !devices.is_empty() {
+            self.say(Status::Births { node, devices });
+        }
+        self.check_replayed();
+    }
+
+    fn publish(&mut self, message: Publish) {
+        let kind = kind_of(&message.topic);
+        match self.session.publish(message) {
+            Ok(()) => *self.report.published.entry(kind).or_default() += 1,
+            Err(e) => {
+                self.report.unsent += 1;
+                if self.report.unsent.is_power_of_two() {
+                    tracing::warn!("{kind} not sent: {e} ({} so far)", self.report.unsent);
+                }
+            }
+        }
+    }
+
+    fn say(&self, status: Status) {
+        tracing::debug!("{status}");
+        if let Some(events) = &self.events {
+            let _ = events.try_send(status);
+        }
+    }
+}
+
+/// Reads the last run's bdSeq into `edge` (Sparkplug only): the file to keep it in, and a
+/// note if the file could not be used.
+fn restore_bd_seq(plant: &Plant, edge: &mut Edge) -> (Option<BdSeqFile>, Option<String>) {
+    let Mode::Sparkplug(spb) = &plant.mode else { return (None, None) };
+    let Some(file) = BdSeqFile::locate(plant.store.dir.as_deref(), &spb.group_id, &spb.edge_node_id) else {
+        return (None, Some("no state directory on this platform: bdSeq starts at 0 at each start".into()));
+    };
+    let note = match file.read() {
+        Stored::Last(last) => {
+            edge.set_bd_seq(state::next(last));
+            None
+        }
+        Stored::None => None,
+        Stored::Unusable(why) => Some(format!("{why}; bdSeq starts again at 0")),
+    };
+    (Some(file), note)
+}
+
+/// Whether a poll that failed this way still heard the device (an exception, a reply that
+/// did not fit): it is alive.
+fn answered(kind: FailureKind) -> bool {
+    matches!(kind, FailureKind::Exception | FailureKind::BadReply)
+}
+
+/// The kind of message on `topic`, for the counts: `NBIRTH`, `DDATA`, ... or `plain`.
+fn kind_of(topic: &str) -> String {
+    Topic::parse(topic).map_or_else(
+        || if topic.ends_with("/result") { "result".into() } else { "plain".into() },
+        |t| t.kind.as_str().to_string(),
+    )
+}
+
+async fn sleep_until(at: Option<Instant>) {
+    match at {
+        Some(at) => tokio::time::sleep_until(at).await,
+        None => std::future::pending().await,
+    }
+}
+
+#[cfg(test)]
+mod tests;

@@ -1,0 +1,227 @@
+//! The MQTT session (rumqttc, MQTT 3.1.1): one task drives rumqttc's event loop and tells the
+//! bridge what happened; the bridge says when to connect, with which Will.
+//!
+//! ```text
+//!   bridge ── connect(Will) ─▶ task: set the Will, CONNECT, poll the event loop
+//!          ◀─ Connected / Message / Lost / Closed ──┘
+//!   bridge ── publish, subscribe, disconnect ─▶ AsyncClient (a bounded queue) ─▶ event loop
+//! ```
+//!
+//! The task never reconnects by itself: after a lost connection it waits until the bridge has
+//! taken the next bdSeq and asks again with its Will (`MqttOptions::set_last_will`, which
+//! rumqttc reads at each CONNECT), after the backoff. Before each CONNECT the requests still
+//! queued from the old session are dropped (`EventLoop::clean`, then a clean session): what
+//! they carried belonged to a session the broker has declared dead. Publishing never waits:
+//! a full queue is an error the bridge counts.
+
+use std::sync::Arc;
+use std::sync::atomic::{AtomicUsize, Ordering};
+use std::time::Duration;
+
+use rumqttc::{AsyncClient, Event, EventLoop, LastWill, MqttOptions, Outgoing, Packet, QoS};
+use tokio::sync::mpsc;
+use tokio::task::JoinHandle;
+
+use crate::edge::Publish;
+
+/// Requests the client may have queued for the event loop.
+const QUEUE: usize = 4096;
+
+/// The largest packet sent or taken (a DBIRTH of a big device, a replayed record).
+const MAX_PACKET: usize = 1 << 20;
+
+/// The longest wait between two connection attempts.
+pub const MAX_BACKOFF: Duration = Duration::from_secs(30);
+
+/// The shortest: a zero first delay would make a busy loop.
+const MIN_BACKOFF: Duration = Duration::from_millis(100);
+
+/// What the session tells the bridge.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub enum SessionEvent {
+    /// The broker accepted the CONNECT.
+    Connected,
+    /// A message on a subscribed topic.
+    Message {
+        /// Its topic.
+        topic: String,
+        /// Its payload.
+        payload: Vec<u8>,
+    },
+    /// The connection failed or was lost, and why.
+    Lost(String),
+    /// The DISCONNECT asked for has been sent.
+    Closed,
+}
+
+/// One MQTT session to the broker, reconnected on demand.
+#[derive(Debug)]
+pub struct Session {
+    client: AsyncClient,
+    events: mpsc::Receiver<SessionEvent>,
+    connect: mpsc::UnboundedSender<Option<LastWill>>,
+    queued: Arc<AtomicUsize>,
+    task: JoinHandle<()>,
+}
+
+impl Session {
+    /// Starts the task with `options` (its Will is set at each [`Session::connect`]); nothing
+    /// is connected yet.
+    pub fn start(mut options: MqttOptions) -> Session {
+        options.set_max_packet_size(MAX_PACKET, MAX_PACKET);
+        options.set_clean_session(true);
+        let (client, eventloop) = AsyncClient::new(options, QUEUE);
+        let (events_tx, events) = mpsc::channel(256);
+        let (connect, connect_rx) = mpsc::unbounded_channel();
+        let queued = Arc::new(AtomicUsize::new(0));
+        let task = tokio::spawn(drive(eventloop, connect_rx, events_tx, Arc::clone(&queued)));
+        Session { client, events, connect, queued, task }
+    }
+
+    /// Connects (again), with `will` as the CONNECT's Will.
+    pub fn connect(&self, will: Option<&Publish>) {
+        let will = will.map(|w| LastWill::new(w.topic.clone(), w.payload.clone(), qos(w.qos), w.retain));
+        let _ = self.connect.send(will);
+    }
+
+    /// Queues `message`; an error if the queue is full or the task has ended.
+    pub fn publish(&self, message: Publish) -> Result<(), String> {
+        self.client
+            .try_publish(message.topic, qos(message.qos), message.retain, message.payload)
+            .map_err(|_| "the MQTT client's queue is full".to_string())?;
+        self.queued.fetch_add(1, Ordering::Relaxed);
+        Ok(())
+    }
+
+    /// Subscribes to `filter`.
+    pub fn subscribe(&self, filter: &str, qos_level: u8) -> Result<(), String> {
+        self.client
+            .try_subscribe(filter, qos(qos_level))
+            .map_err(|_| format!("subscribing to {filter}: the MQTT client's queue is full"))
+    }
+
+    /// Asks for a DISCONNECT after what is queued; [`SessionEvent::Closed`] says it went.
+    pub fn disconnect(&self) {
+        let _ = self.client.try_disconnect();
+    }
+
+    /// Publishes queued and not yet written to the broker.
+    pub fn queued(&self) -> usize {
+        self.queued.load(Ordering::Relaxed)
+    }
+
+    /// The next event; `None` once the task has ended.
+    pub async fn next(&mut self) -> Option<SessionEvent> {
+        self.events.recv().await
+    }
+}
+
+impl Drop for Session {
+    fn drop(&mut self) {
+        self.task.abort();
+    }
+}
+
+/// The event loop's task: waits to be told to connect, then polls until the session ends.
+async fn drive(
+    mut eventloop: EventLoop,
+    mut connect: mpsc::UnboundedReceiver<Option<LastWill>>,
+    events: mpsc::Sender<SessionEvent>,
+    queued: Arc<AtomicUsize>,
+) {
+    while let Some(will) = connect.recv().await {
+        eventloop.clean();
+        eventloop.pending.clear();
+        queued.store(0, Ordering::Relaxed);
+        if let Some(will) = will {
+            eventloop.mqtt_options.set_last_will(will);
+        }
+        loop {
+            let event = match eventloop.poll().await {
+                Ok(Event::Incoming(Packet::ConnAck(_))) => SessionEvent::Connected,
+                Ok(Event::Incoming(Packet::Publish(p))) => {
+                    SessionEvent::Message { topic: p.topic.clone(), payload: p.payload.to_vec() }
+                }
+                Ok(Event::Outgoing(Outgoing::Publish(_))) => {
+                    let _ = queued.fetch_update(Ordering::Relaxed, Ordering::Relaxed, |n| Some(n.saturating_sub(1)));
+                    continue;
+                }
+                Ok(Event::Outgoing(Outgoing::Disconnect)) => SessionEvent::Closed,
+                Ok(_) => continue,
+                Err(e) => SessionEvent::Lost(e.to_string()),
+            };
+            let ended = matches!(event, SessionEvent::Closed | SessionEvent::Lost(_));
+            if events.send(event).await.is_err() {
+                return;
+            }
+            if ended {
+                break;
+            }
+        }
+    }
+}
+
+/// The QoS of a level (2 and above are 2).
+pub fn qos(level: u8) -> QoS {
+    match level {
+        0 => QoS::AtMostOnce,
+        1 => QoS::AtLeastOnce,
+        _ => QoS::ExactlyOnce,
+    }
+}
+
+/// The waits between connection attempts: the configured first delay, doubling up to
+/// [`MAX_BACKOFF`]; back to the first once connected.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct Backoff {
+    first: Duration,
+    next: Duration,
+}
+
+impl Backoff {
+    /// Starting at `first` (at least 100 ms, at most [`MAX_BACKOFF`]).
+    pub fn new(first: Duration) -> Backoff {
+        let first = first.clamp(MIN_BACKOFF, MAX_BACKOFF);
+        Backoff { first, next: first }
+    }
+
+    /// The wait before the next attempt; the one after is twice as long.
+    pub fn delay(&mut self) -> Duration {
+        let delay = self.next;
+        self.next = self.next.saturating_mul(2).min(MAX_BACKOFF);
+        delay
+    }
+
+    /// Connected: the next loss waits the first delay again.
+    pub fn reset(&mut self) {
+        self.next = self.first;
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_backoff_doubles_to_30_s_and_starts_again_once_connected() {
+        let mut b = Backoff::new(Duration::from_secs(1));
+        let waits: Vec<u64> = (0..8).map(|_| b.delay().as_secs()).collect();
+        assert_eq!(waits, [1, 2, 4, 8, 16, 30, 30, 30]);
+        b.reset();
+        assert_eq!(b.delay(), Duration::from_secs(1));
+    }
+
+    #[test]
+    fn a_zero_first_delay_is_not_a_busy_loop_and_a_long_one_is_capped() {
+        assert_eq!(Backoff::new(Duration::ZERO).delay(), MIN_BACKOFF);
+        assert_eq!(Backoff::new(Duration::from_secs(600)).delay(), MAX_BACKOFF);
+    }
+
+    #[test]
+    fn qos_levels_map_to_rumqttc() {
+        assert_eq!(qos(0), QoS::AtMostOnce);
+        assert_eq!(qos(1), QoS::AtLeastOnce);
+        assert_eq!(qos(2), QoS::ExactlyOnce);
+        assert_eq!(qos(9), QoS::ExactlyOnce);
+    }
+}

@@ -1,0 +1,173 @@
+//! What the bridge says as it happens: the CLI prints these on stderr, tests wait for them.
+
+use std::fmt;
+use std::time::Duration;
+
+/// One thing that happened.
+#[derive(Clone, Debug, PartialEq, Eq)]
+#[non_exhaustive]
+pub enum Status {
+    /// The lines are polling.
+    Started {
+        /// Lines started.
+        lines: usize,
+        /// Devices on them.
+        devices: usize,
+        /// The broker (`mqtt://host:port`).
+        broker: String,
+    },
+    /// The store held records of a previous run (replayed once connected).
+    Recovered {
+        /// Records.
+        records: u64,
+    },
+    /// The first CONNECT is on its way.
+    Connecting {
+        /// The broker.
+        broker: String,
+    },
+    /// The broker accepted the session.
+    Connected {
+        /// The broker.
+        broker: String,
+    },
+    /// Births went out: an NBIRTH (with every device's DBIRTH), or a device's DBIRTH.
+    Births {
+        /// Whether an NBIRTH was among them.
+        node: bool,
+        /// The devices born (DBIRTH).
+        devices: Vec<String>,
+    },
+    /// The connection failed or was lost; the next attempt waits `retry_in`.
+    BrokerLost {
+        /// The broker.
+        broker: String,
+        /// Why.
+        error: String,
+        /// The backoff.
+        retry_in: Duration,
+        /// Whether a session was up (else an attempt failed).
+        was_online: bool,
+    },
+    /// The first record kept in the store since the broker was lost.
+    Storing,
+    /// The broker is back: records stored meanwhile are replayed after the births.
+    Replaying {
+        /// Records stored while it was away.
+        records: u64,
+        /// Records in the store now (with older ones).
+        queued: u64,
+    },
+    /// Every stored record has been replayed.
+    Replayed {
+        /// Records replayed since the broker came back.
+        records: u64,
+    },
+    /// The store was full: new records were dropped (said once per burst).
+    Dropped {
+        /// Records dropped in the burst.
+        records: u64,
+    },
+    /// The store failed (said at the 1st, 2nd, 4th, 8th, ... failure).
+    StoreError {
+        /// The error.
+        error: String,
+        /// Failures so far.
+        count: u64,
+    },
+    /// A device stopped answering.
+    DeviceDead {
+        /// Its id.
+        device: String,
+        /// Polls in a row without a reply.
+        polls: u32,
+        /// The last failure.
+        why: String,
+    },
+    /// A device answers again.
+    DeviceBack {
+        /// Its id.
+        device: String,
+    },
+    /// A command was refused; nothing was written.
+    Refused {
+        /// Its topic.
+        topic: String,
+        /// Why.
+        error: String,
+    },
+    /// A command was written to a device (or failed on the bus).
+    Written {
+        /// The device.
+        device: String,
+        /// The metric (cell) written.
+        point: String,
+        /// The value as commanded.
+        value: String,
+        /// The bus's answer.
+        result: Result<(), String>,
+    },
+    /// A line cannot carry what it was asked to poll.
+    Overload {
+        /// The line.
+        line: String,
+        /// The arithmetic.
+        detail: String,
+    },
+    /// Anything else worth a line.
+    Note(String),
+    /// The bridge is stopping.
+    Stopping,
+}
+
+impl fmt::Display for Status {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        match self {
+            Status::Started { lines, devices, broker } => {
+                let plural = |n: usize| if n == 1 { "" } else { "s" };
+                write!(
+                    f,
+                    "polling {devices} device{} on {lines} line{}; broker {broker}",
+                    plural(*devices),
+                    plural(*lines)
+                )
+            }
+            Status::Recovered { records } => write!(f, "the store holds {records} records of a previous run"),
+            Status::Connecting { broker } => write!(f, "connecting to {broker}"),
+            Status::Connected { broker } => write!(f, "connected to {broker}"),
+            Status::Births { node, devices } => {
+                let mut parts = Vec::new();
+                if *node {
+                    parts.push("NBIRTH".to_string());
+                }
+                if !devices.is_empty() {
+                    parts.push(format!("DBIRTH {}", devices.join(", ")));
+                }
+                write!(f, "births: {}", parts.join(", "))
+            }
+            Status::BrokerLost { broker, error, retry_in, was_online } => {
+                let what = if *was_online { "lost" } else { "unreachable" };
+                write!(f, "broker {broker} {what}: {error}; next attempt in {:.1} s", retry_in.as_secs_f64())
+            }
+            Status::Storing => write!(f, "broker away: samples go to the store"),
+            Status::Replaying { records, queued } => {
+                write!(f, "{records} records stored while the broker was away; replaying {queued}")
+            }
+            Status::Replayed { records } => write!(f, "replayed {records} stored records, in order, as historical"),
+            Status::Dropped { records } => write!(f, "the store was full: {records} new records dropped"),
+            Status::StoreError { error, count } => write!(f, "store error ({count} so far): {error}"),
+            Status::DeviceDead { device, polls, why } => {
+                write!(f, "device {device} stopped answering ({polls} polls: {why})")
+            }
+            Status::DeviceBack { device } => write!(f, "device {device} answers again"),
+            Status::Refused { topic, error } => write!(f, "command refused on {topic}: {error}"),
+            Status::Written { device, point, value, result: Ok(()) } => write!(f, "wrote {device} {point} = {value}"),
+            Status::Written { device, point, value, result: Err(e) } => {
+                write!(f, "writing {device} {point} = {value} failed: {e}")
+            }
+            Status::Overload { line, detail } => write!(f, "line {line}: {detail}"),
+            Status::Note(note) => f.write_str(note),
+            Status::Stopping => f.write_str("stopping"),
+        }
+    }
+}
