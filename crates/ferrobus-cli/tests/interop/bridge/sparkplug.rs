@@ -1,10 +1,12 @@
 //! `ferrobus bridge` in Sparkplug B mode against a simulated 3G3RX (`ferrobus sim --tcp`; an
 //! SDP servo on a pty beside it in the first test): births and data checked by pysparkplug and
-//! `protoc --decode_raw`, an NCMD Rebirth, the Will NDEATH after a SIGKILL and the next bdSeq
-//! after a restart, DCMD writes to F001 (and one refused), and a drive that goes silent and
-//! comes back.
+//! `protoc --decode_raw` (and read alike by our own types), an NCMD Rebirth, the Will NDEATH
+//! after a SIGKILL and the next bdSeq after a restart, DCMD writes to F001 (and one refused),
+//! and a drive that goes silent and comes back.
 
 use std::time::Duration;
+
+use ferrobus_bridge::sparkplug::payload::Payload;
 
 use super::harness::{Bridge, Drive, Plant};
 use super::spb::{self, Message, Recorder, Verdict};
@@ -150,6 +152,29 @@ fn births_and_data_pass_pysparkplug_and_protoc_shows_their_raw_structure() {
     assert_eq!(verdict.metric("inverter", "running", "datatype"), "BOOLEAN", "{verdict}");
     let d001: Vec<f64> = verdict.series("inverter", "d001").iter().filter_map(|p| p["value"].as_f64()).collect();
     assert!(d001.iter().any(|&f| f > 0.0), "the output frequency never rose in DDATA: {d001:?}\n{verdict}");
+    same_as_our_types(&verdict);
+}
+
+/// Our own payload types (ferrobus_bridge::sparkplug) read every recorded edge message, and
+/// the last DBIRTH of each device has the names and aliases pysparkplug read.
+fn same_as_our_types(verdict: &Verdict) {
+    let recorded = spb::messages_in(&verdict.recording);
+    for m in recorded.iter().filter(|m| m.topic.starts_with("spBv1.0/") && !m.topic.contains("/STATE/")) {
+        let decoded = Payload::decode(&m.payload);
+        assert!(decoded.is_ok(), "ferrobus_bridge cannot decode {}: {decoded:?}", m.topic);
+    }
+    for device in ["inverter", "servo"] {
+        let Some(birth) = recorded.iter().rev().find(|m| spb::is(m, "DBIRTH", Some(device))) else {
+            panic!("no DBIRTH of {device}")
+        };
+        let ours = Payload::decode(&birth.payload).unwrap_or_default();
+        assert!(!ours.metrics.is_empty(), "{device}: no metrics in its DBIRTH");
+        for metric in &ours.metrics {
+            let name = metric.name.clone().unwrap_or_default();
+            let theirs = verdict.metric(device, &name, "alias").as_u64();
+            assert_eq!(metric.alias, theirs, "{device}/{name}: our alias and pysparkplug's:\n{verdict}");
+        }
+    }
 }
 
 fn decode_first(message: Option<Message>, dir: &std::path::Path, name: &str) -> String {

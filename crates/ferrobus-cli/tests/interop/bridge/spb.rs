@@ -116,8 +116,7 @@ impl Recorder {
 
     /// What it has recorded so far.
     pub(crate) fn messages(&self) -> Vec<Message> {
-        let text = std::fs::read_to_string(&self.path).unwrap_or_default();
-        text.lines().filter_map(|line| serde_json::from_str::<Value>(line).ok()).filter_map(|v| message(&v)).collect()
+        messages_in(&self.path)
     }
 
     /// Waits until `done` holds for the messages so far, and returns them.
@@ -148,6 +147,12 @@ impl Recorder {
         self.proc.terminate();
         self.path.clone()
     }
+}
+
+/// The messages of a recording (lines that do not parse are left out).
+pub(crate) fn messages_in(recording: &Path) -> Vec<Message> {
+    let text = std::fs::read_to_string(recording).unwrap_or_default();
+    text.lines().filter_map(|line| serde_json::from_str::<Value>(line).ok()).filter_map(|v| message(&v)).collect()
 }
 
 fn message(line: &Value) -> Option<Message> {
