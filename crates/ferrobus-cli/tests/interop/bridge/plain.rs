@@ -1,6 +1,7 @@
 //! `ferrobus bridge` in plain mode: JSON on `PREFIX/DEVICE/POINT` (value, unit, timestamp,
 //! quality), the bridge's and the device's status, a write on `.../set` that changes the
-//! drive, and the result on `.../set/result`, for a value in range and one out of it.
+//! drive, and the result on `.../set/result`, for a value in range and one out of it; with
+//! `retain`, the last values for a subscriber that comes later.
 
 use std::time::Duration;
 
@@ -65,4 +66,28 @@ fn plain_json_per_point_and_a_set_that_changes_the_drive_with_its_result() {
     bridge.terminate();
     let all = recorder.messages();
     assert!(all.iter().all(|m| !m.topic.starts_with("spBv1.0/")), "Sparkplug in plain mode:\n{}", spb::listing(&all));
+}
+
+#[test]
+fn with_retain_a_late_subscriber_gets_each_points_last_value_at_once() {
+    let Some(_turn) = spb::require() else { return };
+    let broker = Broker::start();
+    let dir = spb::evidence_dir("plain-retained");
+    let drive = Drive::start(&["--profile", "omron-3g3rx"]);
+    let config = Plant::plain(broker.port(), "plant2", true).tcp_line("tcp", drive.address(), INVERTER).write(&dir);
+    let mut bridge = Bridge::start(&config, &[]);
+    let early = Recorder::start(&broker, &dir, &["plant2/#"]);
+    early.wait_until("plant2/inverter/F001", Duration::from_secs(20), |m| {
+        !json_on(m, "plant2/inverter/F001").is_empty()
+    });
+    drop(early);
+    let late_dir = dir.join("late");
+    std::fs::create_dir_all(&late_dir).expect("the late recorder's directory");
+    let late = Recorder::start(&broker, &late_dir, &["plant2/#"]);
+    let messages = late.wait_until("the retained F001 and d001", Duration::from_secs(5), |m| {
+        ["plant2/inverter/F001", "plant2/inverter/d001"].iter().all(|t| m.iter().any(|m| m.topic == *t && m.retain))
+    });
+    let f001 = messages.iter().find(|m| m.topic == "plant2/inverter/F001" && m.retain).map(Message::text);
+    assert!(f001.is_some_and(|t| t.contains("\"unit\":\"Hz\"")), "{}", spb::listing(&messages));
+    bridge.terminate();
 }

@@ -147,6 +147,7 @@ fn births_and_data_pass_pysparkplug_and_protoc_shows_their_raw_structure() {
     let sessions = verdict.sessions();
     assert_eq!(sessions.len(), 1, "a rebirth keeps the session and its bdSeq:\n{verdict}");
     assert_eq!(sessions[0]["rebirths"], 1, "{verdict}");
+    assert_eq!((&sessions[0]["nbirth_qos"], &sessions[0]["nbirth_retain"]), (&0.into(), &false.into()), "{verdict}");
     assert_eq!(sessions[0]["ndeath_bdseq"], sessions[0]["bdseq"], "{verdict}");
     assert_eq!(verdict.metric("inverter", "d001", "datatype"), "DOUBLE", "{verdict}");
     assert_eq!(verdict.metric("inverter", "running", "datatype"), "BOOLEAN", "{verdict}");
