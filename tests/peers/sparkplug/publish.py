@@ -6,7 +6,7 @@
                              --datatype TYPE --value V
     publish.py --port P rebirth --group G --node N
     publish.py --port P edge-node --group G --node N --device D
-    publish.py --port P text --topic T --payload TEXT [--qos Q]
+    publish.py --port P text --topic T --payload TEXT [--qos Q] [--retain]
 
 `session` plays a small edge node that follows the rules: CONNECT with the NDEATH Will
 (QoS 1, bdSeq 7), NBIRTH (seq 0, bdSeq 7, `Node Control/Rebirth`), a DBIRTH of D with two
@@ -68,6 +68,7 @@ def parse_args():
     text.add_argument("--topic", required=True)
     text.add_argument("--payload", required=True)
     text.add_argument("--qos", type=int, default=1)
+    text.add_argument("--retain", action="store_true")
     args = parser.parse_args()
     if args.command == "dcmd" and (args.metric is None) == (args.alias is None):
         parser.error("dcmd takes one of --metric and --alias")
@@ -191,7 +192,7 @@ def edge_node(args):
 
 def text(args):
     client = connect(args)
-    send(client, args.topic, args.payload.encode(), qos=args.qos)
+    send(client, args.topic, args.payload.encode(), qos=args.qos, retain=args.retain)
     client.disconnect()
     client.loop_stop()
 

@@ -92,6 +92,13 @@ impl Plant {
         }
     }
 
+    /// Makes the births wait for the Sparkplug host application `host` (its STATE online).
+    #[must_use]
+    pub(crate) fn primary_host(mut self, host: &str) -> Plant {
+        self.text = self.text.replacen("[sparkplug]\n", &format!("[sparkplug]\nprimary_host = \"{host}\"\n"), 1);
+        self
+    }
+
     /// Adds TOML as written (a `[store]` section, ...).
     #[must_use]
     pub(crate) fn with(mut self, toml: &str) -> Plant {

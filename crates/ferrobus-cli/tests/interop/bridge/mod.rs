@@ -4,9 +4,10 @@
 //!
 //! - [`checker`]: the checker proven first, on sessions built with pysparkplug, clean and
 //!   broken, and the broker harness's restart;
-//! - [`sparkplug`]: births and data, SIGKILL and the Will, DCMD to F001, DDEATH and DBIRTH;
+//! - [`sparkplug`]: births and data (two lines, TCP and RTU), NCMD Rebirth, SIGKILL and the Will,
+//!   DCMD to F001, DDEATH and DBIRTH, a primary host's STATE;
 //! - [`outage`]: the broker away for 30 s, the samples meanwhile delivered as historical;
-//! - [`plain`]: plain JSON per point and writes on `.../set`;
+//! - [`plain`]: plain JSON per point, writes on `.../set`, retained last values;
 //! - [`cli`]: `--check` on a broken file and the shipped examples, and `--demo`;
 //! - [`harness`] (drives, plant.toml, the bridge process) and [`spb`] (recorder, checker,
 //!   publisher, protoc) are what they are made of.

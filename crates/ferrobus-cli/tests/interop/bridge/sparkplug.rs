@@ -2,7 +2,7 @@
 //! SDP servo on a pty beside it in the first test): births and data checked by pysparkplug and
 //! `protoc --decode_raw` (and read alike by our own types), an NCMD Rebirth, the Will NDEATH
 //! after a SIGKILL and the next bdSeq after a restart, DCMD writes to F001 (and one refused),
-//! and a drive that goes silent and comes back.
+//! a drive that goes silent and comes back, and a primary host whose STATE gates the births.
 
 use std::time::Duration;
 
@@ -275,4 +275,45 @@ fn a_drive_that_goes_silent_gets_a_ddeath_and_a_dbirth_when_it_answers_again() {
     assert_eq!(verdict.sessions().len(), 1, "the node's session goes on:\n{verdict}");
     assert_eq!(verdict.summary["devices"]["inverter"]["ddeaths"], 1, "{verdict}");
     assert_eq!(verdict.summary["devices"]["inverter"]["dbirths"], 2, "{verdict}");
+}
+
+/// `spBv1.0/STATE/scada` as a Sparkplug host application publishes it (QoS 1, retained).
+fn host_state(broker: &Broker, online: bool) {
+    let payload = format!("{{\"online\":{online},\"timestamp\":{}}}", now_ms());
+    spb::publish(broker, &["text", "--topic", "spBv1.0/STATE/scada", "--payload", &payload, "--retain"]);
+}
+
+fn now_ms() -> u128 {
+    std::time::SystemTime::now().duration_since(std::time::UNIX_EPOCH).map_or(0, |d| d.as_millis())
+}
+
+#[test]
+fn with_a_primary_host_the_births_wait_for_its_state_online_and_end_when_it_goes_offline() {
+    let Some(_turn) = spb::require() else { return };
+    let scene = scene("primary-host");
+    let dir = scene.config.parent().map(std::path::Path::to_path_buf).unwrap_or_default();
+    Plant::sparkplug(scene.broker.port(), "plant", "primary-host")
+        .primary_host("scada")
+        .with("[store]\ndir = \"store\"")
+        .tcp_line("tcp", scene.drive.address(), INVERTER)
+        .write(&dir);
+    let bridge = Bridge::start(&scene.config, &[]);
+    std::thread::sleep(Duration::from_secs(2));
+    assert_eq!(spb::count(&scene.recorder.messages(), "NBIRTH", None), 0, "births before the host is online");
+
+    host_state(&scene.broker, true);
+    wait_for(&scene.recorder, "DBIRTH", Some("inverter"), 1, BIRTHS_WITHIN);
+    host_state(&scene.broker, false);
+    wait_for(&scene.recorder, "NDEATH", None, 1, Duration::from_secs(10));
+    host_state(&scene.broker, true);
+    wait_for(&scene.recorder, "DBIRTH", Some("inverter"), 2, BIRTHS_WITHIN);
+    let verdict = finish(scene, bridge, 2, &[]);
+    verdict.assert_clean();
+    // What was polled while the host was away comes after the births, as history.
+    assert!(verdict.historical_count() > 0, "the samples before the host was online:\n{verdict}");
+    let sessions = verdict.sessions();
+    assert_eq!(sessions.len(), 2, "the host offline ends the session, online again starts one:\n{verdict}");
+    assert_eq!(sessions[0]["ndeath_bdseq"], sessions[0]["bdseq"], "{verdict}");
+    let next = sessions[0]["bdseq"].as_u64().map(|b| (b + 1) % 256);
+    assert_eq!(sessions[1]["bdseq"].as_u64(), next, "{verdict}");
 }
