@@ -519,6 +519,25 @@ fn ncmd_rebirth_sends_nbirth_with_seq_0_and_the_same_bdseq_then_the_dbirths() {
 }
 
 #[test]
+fn ncmd_other_than_a_boolean_rebirth_is_refused_and_rebirth_false_does_nothing() {
+    let plant = sparkplug_plant();
+    let (mut edge, _) = online_with_drive(&plant);
+    let ncmd = |edge: &mut Edge, metric: Metric| edge.message("spBv1.0/plant/NCMD/edge1", &dcmd(vec![metric]), t(1));
+    let (out, _, errors) =
+        ncmd(&mut edge, Metric::new("Node Control/Rebirth", DataType::Boolean, Some(MetricValue::Boolean(false))));
+    assert!(out.is_empty() && errors.is_empty());
+    let (out, _, errors) =
+        ncmd(&mut edge, Metric::new("Node Control/Rebirth", DataType::Int32, Some(MetricValue::Int(1))));
+    assert!(out.is_empty());
+    assert!(errors[0].to_string().contains("takes a Boolean"), "{}", errors[0]);
+    let (out, _, errors) =
+        ncmd(&mut edge, Metric::new("Node Control/Reboot", DataType::Boolean, Some(MetricValue::Boolean(true))));
+    assert!(out.is_empty());
+    assert!(errors[0].to_string().contains("NCMD edge1: Node Control/Reboot"), "{}", errors[0]);
+    assert_eq!(edge.stats().rebirths, 0);
+}
+
+#[test]
 fn dcmd_in_range_becomes_a_write_of_the_raw_value() {
     let plant = sparkplug_plant();
     let (mut edge, dbirth) = online_with_drive(&plant);

@@ -83,7 +83,7 @@ pub(crate) async fn run(plant_file: Option<&Path>, args: &BridgeArgs) -> Result<
         return output::print(&format!("{}\n", summary(&origin, &plant)));
     }
     let mut interrupt = Interrupt::listen()?;
-    if args.demo {
+    if args.demo && !args.quiet {
         let (host, port) = (&plant.broker.host, plant.broker.port);
         eprintln!("bridge: the demo plant: a simulated 3G3RX and SDP servo on a virtual line, to {host}:{port}");
         eprintln!("bridge: to see it: mosquitto_sub -h {host} -p {port} -t 'spBv1.0/#' -v");

@@ -22,19 +22,19 @@ pub(super) fn options(broker: &Broker) -> Result<MqttOptions, RunError> {
     Ok(options)
 }
 
-/// TLS to the broker, trusting `tls.ca`, showing `tls.cert` and `tls.key` if given.
+/// TLS to the broker, trusting `tls.ca`, showing `tls.cert` and `tls.key` if given; the
+/// broker's certificate must name `tls.server_name`, else the host connected to.
 fn transport(tls: &BrokerTls) -> Result<Transport, RunError> {
-    if tls.server_name.is_some() {
-        return Err(RunError::Tls(
-            "server_name is not supported yet: the broker's certificate must name the host connected to".into(),
-        ));
-    }
     let identity = match (&tls.cert, &tls.key) {
         (Some(cert), Some(key)) => Some((cert.as_path(), key.as_path())),
         (None, None) => None,
         _ => return Err(RunError::Tls("a client certificate needs its key, and a key its certificate".into())),
     };
-    let client = ClientTls::from_pem_files(&tls.ca, identity).map_err(|e| RunError::Tls(e.to_string()))?;
+    let client = match &tls.server_name {
+        Some(name) => ClientTls::from_pem_files_naming(&tls.ca, identity, name),
+        None => ClientTls::from_pem_files(&tls.ca, identity),
+    }
+    .map_err(|e| RunError::Tls(e.to_string()))?;
     Ok(Transport::tls_with_config(TlsConfiguration::Rustls(client.rustls_config())))
 }
 

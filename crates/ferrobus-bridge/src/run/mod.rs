@@ -124,6 +124,25 @@ struct DeviceHealth {
     dead: bool,
 }
 
+impl DeviceHealth {
+    /// One poll of the device, failed with `failure` or not: `Some(true)` when it has just
+    /// died (`death_after` polls in a row without a reply), `Some(false)` when it is back.
+    fn observe(&mut self, failure: Option<FailureKind>, death_after: u32) -> Option<bool> {
+        match failure {
+            Some(kind) if !answered(kind) => {
+                self.silent = self.silent.saturating_add(1);
+                let dies = self.silent >= death_after && !self.dead;
+                self.dead |= dies;
+                dies.then_some(true)
+            }
+            _ => {
+                self.silent = 0;
+                std::mem::take(&mut self.dead).then_some(false)
+            }
+        }
+    }
+}
+
 /// A write's outcome, back from its task.
 struct Written {
     device: DeviceRef,
@@ -435,26 +454,18 @@ impl Bridge {
     /// and when it is back.
     fn track_health(&mut self, device: DeviceRef, sample: &Sample) {
         let death_after = self.device_spec_death_after(device);
-        let name = self.device_name(device);
         let Some(health) = self.lines.get_mut(device.line).and_then(|l| l.devices.get_mut(device.device)) else {
             return;
         };
-        let status = match &sample.result {
-            Err(failure) if !answered(failure.kind) => {
-                health.silent = health.silent.saturating_add(1);
-                (health.silent >= death_after && !health.dead).then(|| {
-                    health.dead = true;
-                    Status::DeviceDead { device: name, polls: health.silent, why: failure.diagnosis.clone() }
-                })
-            }
-            _ => {
-                health.silent = 0;
-                std::mem::take(&mut health.dead).then_some(Status::DeviceBack { device: name })
-            }
-        };
-        if let Some(status) = status {
-            self.say(status);
-        }
+        let failure = sample.result.as_ref().err();
+        let Some(died) = health.observe(failure.map(|f| f.kind), death_after) else { return };
+        let polls = health.silent;
+        let name = self.device_name(device);
+        self.say(if died {
+            Status::DeviceDead { device: name, polls, why: failure.map(|f| f.diagnosis.clone()).unwrap_or_default() }
+        } else {
+            Status::DeviceBack { device: name }
+        });
     }
 
     fn device_spec_death_after(&self, device: DeviceRef) -> u32 {

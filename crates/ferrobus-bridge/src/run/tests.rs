@@ -44,15 +44,25 @@ fn free_port() -> u16 {
     std::net::TcpListener::bind("127.0.0.1:0").and_then(|l| l.local_addr()).map(|a| a.port()).expect("a free port")
 }
 
-async fn start_broker(name: &str) -> Option<Broker> {
-    let program = mosquitto()?;
-    let port = free_port();
+fn temporary_dir(name: &str) -> PathBuf {
     let dir = std::env::temp_dir().join(format!("ferrobus-run-{name}-{}", std::process::id()));
     let _ = std::fs::remove_dir_all(&dir);
     std::fs::create_dir_all(&dir).expect("a temporary folder");
+    dir
+}
+
+async fn start_broker(name: &str) -> Option<Broker> {
+    start_broker_with(name, "").await
+}
+
+/// A mosquitto whose listener takes the lines `listener` too (its TLS files).
+async fn start_broker_with(name: &str, listener: &str) -> Option<Broker> {
+    let program = mosquitto()?;
+    let port = free_port();
+    let dir = temporary_dir(name);
     let conf = dir.join("mosquitto.conf");
-    std::fs::write(&conf, format!("listener {port} 127.0.0.1\nallow_anonymous true\npersistence false\n"))
-        .expect("the broker's configuration");
+    let text = format!("listener {port} 127.0.0.1\n{listener}allow_anonymous true\npersistence false\n");
+    std::fs::write(&conf, text).expect("the broker's configuration");
     let child = Command::new(program)
         .arg("-c")
         .arg(&conf)
@@ -145,6 +155,20 @@ async fn one_run(port: u16, store: &Path) -> (u64, u64, Report) {
     (bd_seq(&birth).expect("NBIRTH has a bdSeq"), bd_seq(&death).expect("NDEATH has a bdSeq"), report)
 }
 
+#[test]
+fn a_device_dies_after_death_after_polls_without_a_reply_and_an_exception_is_a_reply() {
+    let mut health = DeviceHealth::default();
+    assert_eq!(health.observe(Some(FailureKind::Timeout), 3), None);
+    assert_eq!(health.observe(Some(FailureKind::Crc), 3), None);
+    assert_eq!(health.observe(Some(FailureKind::Exception), 3), None, "an answer resets the count");
+    assert_eq!(health.observe(Some(FailureKind::Timeout), 3), None);
+    assert_eq!(health.observe(Some(FailureKind::Port), 3), None);
+    assert_eq!(health.observe(Some(FailureKind::Timeout), 3), Some(true), "the third silent poll in a row");
+    assert_eq!(health.observe(Some(FailureKind::Timeout), 3), None, "said once");
+    assert_eq!(health.observe(Some(FailureKind::BadReply), 3), Some(false), "a reply: back");
+    assert_eq!(health.observe(None, 3), None);
+}
+
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn births_arrive_a_stop_publishes_ndeath_and_the_next_run_takes_the_next_bd_seq() {
     let Some(broker) = start_broker("births").await else { return };
@@ -163,8 +187,7 @@ async fn births_arrive_a_stop_publishes_ndeath_and_the_next_run_takes_the_next_b
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn an_unreachable_broker_is_retried_with_backoff_while_the_lines_poll() {
     let port = free_port();
-    let dir = std::env::temp_dir().join(format!("ferrobus-run-unreachable-{}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&dir);
+    let dir = temporary_dir("unreachable");
     let plant = demo_plant(port, &dir.join("store"));
     let (status_tx, mut statuses) = mpsc::channel(256);
     let (stop_tx, stop_rx) = oneshot::channel::<()>();
@@ -183,4 +206,98 @@ async fn an_unreachable_broker_is_retried_with_backoff_while_the_lines_poll() {
     assert!(report.lines[0].ok > 0, "the line polls while the broker is away: {report}");
     assert_eq!(report.left, report.stored, "what was taken while the broker was away is kept: {report}");
     let _ = std::fs::remove_dir_all(&dir);
+}
+
+/// A CA and a certificate for `broker.test` signed by it, made by openssl in `dir`; `None`
+/// (skipped) without openssl.
+fn certificates(dir: &Path) -> Option<()> {
+    let openssl = |args: &[&str]| {
+        Command::new("openssl").args(args).current_dir(dir).stdout(Stdio::null()).stderr(Stdio::null()).status()
+    };
+    if openssl(&["version"]).is_err() {
+        assert!(std::env::var("CI").as_deref() != Ok("true"), "openssl is missing (CI installs it)");
+        eprintln!("skipped: openssl is not installed");
+        return None;
+    }
+    let ec = ["-newkey", "ec", "-pkeyopt", "ec_paramgen_curve:P-256", "-nodes"];
+    std::fs::write(dir.join("san.ext"), "subjectAltName=DNS:broker.test\n").expect("the extension file");
+    let steps: [&[&str]; 3] = [
+        &[&["req", "-x509"][..], &ec, &["-keyout", "ca.key", "-out", "ca.pem", "-days", "2", "-subj", "/CN=test CA"]]
+            .concat(),
+        &[&["req"][..], &ec, &["-keyout", "server.key", "-out", "server.csr", "-subj", "/CN=broker.test"]].concat(),
+        &[
+            "x509",
+            "-req",
+            "-in",
+            "server.csr",
+            "-CA",
+            "ca.pem",
+            "-CAkey",
+            "ca.key",
+            "-CAcreateserial",
+            "-out",
+            "server.pem",
+            "-days",
+            "2",
+            "-extfile",
+            "san.ext",
+        ],
+    ];
+    for step in steps {
+        assert!(openssl(step).expect("openssl runs").success(), "openssl {step:?} failed");
+    }
+    // mosquitto started as root reads its files as the user `mosquitto`.
+    #[cfg(unix)]
+    for file in ["ca.pem", "server.pem", "server.key"] {
+        let _ = std::fs::set_permissions(dir.join(file), std::os::unix::fs::PermissionsExt::from_mode(0o644));
+    }
+    Some(())
+}
+
+/// The first Connected or BrokerLost status.
+async fn first_outcome(statuses: &mut mpsc::Receiver<Status>) -> Status {
+    loop {
+        let status = tokio::time::timeout(Duration::from_secs(10), statuses.recv())
+            .await
+            .expect("a status in time")
+            .expect("the bridge runs");
+        if matches!(status, Status::Connected { .. } | Status::BrokerLost { .. }) {
+            return status;
+        }
+    }
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn tls_to_the_broker_checks_its_certificate_against_the_server_name() {
+    if mosquitto().is_none() {
+        return;
+    }
+    let certs = temporary_dir("tls-certificates");
+    if certificates(&certs).is_none() {
+        return;
+    }
+    let files = format!("cafile {0}/ca.pem\ncertfile {0}/server.pem\nkeyfile {0}/server.key\n", certs.display());
+    let Some(broker) = start_broker_with("tls", &files).await else { return };
+    for (server_name, connects) in [(Some("broker.test"), true), (None, false)] {
+        let mut plant = demo_plant(broker.port, &broker.dir.join("store"));
+        plant.broker.tls = Some(crate::config::BrokerTls {
+            ca: certs.join("ca.pem"),
+            cert: None,
+            key: None,
+            server_name: server_name.map(str::to_string),
+        });
+        let (status_tx, mut statuses) = mpsc::channel(256);
+        let (stop_tx, stop_rx) = oneshot::channel::<()>();
+        let bridge = tokio::spawn(run(plant, async move { drop(stop_rx.await) }, Some(status_tx)));
+        let outcome = first_outcome(&mut statuses).await;
+        if connects {
+            assert!(matches!(outcome, Status::Connected { .. }), "{outcome}");
+        } else {
+            // 127.0.0.1 is not the name in the certificate.
+            assert!(matches!(&outcome, Status::BrokerLost { error, .. } if error.contains("name")), "{outcome}");
+        }
+        stop_tx.send(()).expect("the bridge runs");
+        bridge.await.expect("the bridge's task").expect("the bridge ran");
+    }
+    let _ = std::fs::remove_dir_all(&certs);
 }

@@ -392,6 +392,36 @@ impl ClientTls {
         ClientTls::new(load_certificates(ca)?, identity.transpose()?)
     }
 
+    /// [`ClientTls::from_pem_files`], but the server's certificate must name `server_name`
+    /// whatever host is connected to (a server reached by its IP address, or through a
+    /// tunnel, whose certificate names it otherwise). The chain is checked as always.
+    pub fn from_pem_files_naming(
+        ca: &Path,
+        identity: Option<(&Path, &Path)>,
+        server_name: &str,
+    ) -> Result<Self, TlsError> {
+        let general = |context, detail: String| TlsError::Config { context, source: rustls::Error::General(detail) };
+        let name = ServerName::try_from(server_name.to_string()).map_err(|_| {
+            general("the server name", format!("'{server_name}' is neither a host name nor an IP address"))
+        })?;
+        let roots = Arc::new(root_store(load_certificates(ca)?)?);
+        let inner = rustls::client::WebPkiServerVerifier::builder_with_provider(roots, provider())
+            .build()
+            .map_err(|e| general("the CA certificate", e.to_string()))?;
+        let builder = rustls::ClientConfig::builder_with_provider(provider())
+            .with_protocol_versions(VERSIONS)
+            .map_err(|source| TlsError::Config { context: "the TLS versions", source })?
+            .dangerous()
+            .with_custom_certificate_verifier(Arc::new(NamedServer { inner, name }));
+        let config = match identity {
+            Some((cert, key)) => builder
+                .with_client_auth_cert(load_certificates(cert)?, load_private_key(key)?)
+                .map_err(|source| TlsError::Config { context: "the client certificate and key", source })?,
+            None => builder.with_no_client_auth(),
+        };
+        Ok(ClientTls { connector: tokio_rustls::TlsConnector::from(Arc::new(config)) })
+    }
+
     /// Its rustls configuration, for a client of another protocol over TLS (the bridge's
     /// MQTT connection to its broker) built from the same PEM files.
     pub fn rustls_config(&self) -> Arc<rustls::ClientConfig> {
@@ -408,6 +438,46 @@ impl ClientTls {
         let stream = TcpStream::connect(addr).await?;
         stream.set_nodelay(true)?;
         self.connector.connect(name, stream).await.map_err(explain)
+    }
+}
+
+/// The usual check of a server's certificate, against a fixed name instead of the host
+/// connected to.
+#[derive(Debug)]
+struct NamedServer {
+    inner: Arc<rustls::client::WebPkiServerVerifier>,
+    name: ServerName<'static>,
+}
+
+impl rustls::client::danger::ServerCertVerifier for NamedServer {
+    fn verify_server_cert(
+        &self,
+        end_entity: &CertificateDer<'_>,
+        intermediates: &[CertificateDer<'_>],
+        _connected_to: &ServerName<'_>,
+        ocsp_response: &[u8],
+        now: UnixTime,
+    ) -> Result<rustls::client::danger::ServerCertVerified, rustls::Error> {
+        self.inner.verify_server_cert(end_entity, intermediates, &self.name, ocsp_response, now)
+    }
+    fn verify_tls12_signature(
+        &self,
+        message: &[u8],
+        cert: &CertificateDer<'_>,
+        dss: &DigitallySignedStruct,
+    ) -> Result<HandshakeSignatureValid, rustls::Error> {
+        self.inner.verify_tls12_signature(message, cert, dss)
+    }
+    fn verify_tls13_signature(
+        &self,
+        message: &[u8],
+        cert: &CertificateDer<'_>,
+        dss: &DigitallySignedStruct,
+    ) -> Result<HandshakeSignatureValid, rustls::Error> {
+        self.inner.verify_tls13_signature(message, cert, dss)
+    }
+    fn supported_verify_schemes(&self) -> Vec<SignatureScheme> {
+        self.inner.supported_verify_schemes()
     }
 }
 
