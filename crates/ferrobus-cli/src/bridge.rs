@@ -25,8 +25,9 @@ use crate::output;
 /// The demo's broker when none is given.
 const DEMO_BROKER: &str = "127.0.0.1:1883";
 
-/// The demo's acceleration time (F002): 20 s from 0 to the maximum frequency.
-const DEMO_RAMP: &str = "20s";
+/// The demo's acceleration and deceleration times (F002, F003), from 0 to the maximum
+/// frequency (400 Hz) and back: a few seconds between two set frequencies.
+const DEMO_RAMP: &str = "60s";
 
 /// The set frequencies the demo cycles through, and how long it stays at each.
 const DEMO_FREQUENCIES: [&str; 4] = ["60 Hz", "35 Hz", "50 Hz", "20 Hz"];
@@ -34,16 +35,17 @@ const DEMO_STEP: Duration = Duration::from_secs(20);
 
 /// Long help of `ferrobus bridge`.
 const AFTER_HELP: &str = "\
-The plant file (--config plant.toml) names the broker (address, TLS, credentials, client id), \
+Here --config FILE is the plant file (no settings file is read, and the connection options are \
+refused: each line of the plant has its own). The plant file names the broker (address, TLS, credentials, client id), \
 the Sparkplug group and edge node ids (or plain JSON topics), and the lines with their devices, \
 points, poll rates and deadbands; examples/bridge/demo.toml is one to copy from. Status lines go \
 to stderr as things happen; the summary goes to stdout at the end (Ctrl-C, SIGTERM or \
 --duration), after the NDEATH.
 
 --demo runs that file against simulated drives (an Omron 3G3RX and an SDP servo on an in-process \
-virtual RS-485 line): after the births it sets the inverter's acceleration time (F002 = 20 s), runs \
-it (coil `run` on, F001 set) and changes its set frequency every 20 s (60, 35, 50, 20 Hz), so its \
-output frequency d001 ramps in the DDATA.
+virtual RS-485 line): after the births it sets the inverter's ramps (F002, F003 = 60 s for 400 Hz), \
+runs it (coil `run` on, F001 set) and changes its set frequency every 20 s (60, 35, 50, 20 Hz), so \
+its output frequency d001 and current d002 ramp in the DDATA.
 
 Examples:
   ferrobus bridge --demo                                   # broker on 127.0.0.1:1883
@@ -63,8 +65,8 @@ pub(crate) struct BridgeArgs {
     #[arg(long)]
     demo: bool,
 
-    /// The broker, HOST:PORT, instead of the plant file's (the demo's default: 127.0.0.1:1883)
-    #[arg(long, value_name = "HOST:PORT")]
+    /// The broker, HOST[:PORT], instead of the plant file's (the demo's default: 127.0.0.1:1883)
+    #[arg(long, value_name = "HOST[:PORT]")]
     broker: Option<String>,
 
     /// Stop after this long (NDEATH, then the summary), instead of running until interrupted
@@ -128,7 +130,8 @@ fn load(plant_file: Option<&Path>, args: &BridgeArgs) -> Result<(Plant, String),
         (Plant::load(path).map_err(|e| config_errors(&e))?, path.display().to_string())
     };
     if let (Some(broker), false) = (&args.broker, args.demo) {
-        let (host, port) = host_port(broker)?;
+        let default_port = if plant.broker.tls.is_some() { 8883 } else { 1883 };
+        let (host, port) = host_port(broker, default_port)?;
         plant.broker.host = host;
         plant.broker.port = port;
     }
@@ -145,12 +148,24 @@ fn config_errors(errors: &ConfigErrors) -> CliError {
     CliError::Usage(format!("{origin}: {n} error{}", if n == 1 { "" } else { "s" }))
 }
 
-/// `HOST:PORT` (`[::1]:1883` too).
-fn host_port(text: &str) -> Result<(String, u16), CliError> {
-    let bad = || CliError::Usage(format!("--broker '{text}': give HOST:PORT, e.g. 127.0.0.1:1883"));
-    let (host, port) = text.rsplit_once(':').ok_or_else(bad)?;
-    let host = host.trim_start_matches('[').trim_end_matches(']');
-    let port = port.parse::<u16>().map_err(|_| bad())?;
+/// `HOST[:PORT]` (`[::1]:1883` too), the port `default_port` when left out.
+fn host_port(text: &str, default_port: u16) -> Result<(String, u16), CliError> {
+    let bad = || CliError::Usage(format!("--broker '{text}': give HOST[:PORT], e.g. 127.0.0.1:1883"));
+    let (host, port) = match text.strip_prefix('[') {
+        Some(rest) => {
+            let (host, after) = rest.split_once(']').ok_or_else(bad)?;
+            (host, after.strip_prefix(':'))
+        }
+        None => match text.rsplit_once(':') {
+            Some((host, _)) if host.contains(':') => (text, None), // a bare IPv6 address
+            Some((host, port)) => (host, Some(port)),
+            None => (text, None),
+        },
+    };
+    let port = match port {
+        Some(port) => port.parse::<u16>().map_err(|_| bad())?,
+        None => default_port,
+    };
     if host.is_empty() || port == 0 {
         return Err(bad());
     }
@@ -210,8 +225,9 @@ struct Inverter {
     id: String,
     run: Point,
     frequency: Point,
-    /// F002, the acceleration time: set long enough to watch the ramp.
-    ramp: Option<Point>,
+    /// F002 and F003, the acceleration and deceleration times: set long enough to watch the
+    /// ramps.
+    ramps: Vec<Point>,
 }
 
 /// The first device of the plant with a `run` coil and an F001 (the 3G3RX).
@@ -225,7 +241,7 @@ fn inverter(plant: &Plant) -> Option<Inverter> {
                 id: d.id.clone(),
                 run: profile.point("run")?.clone(),
                 frequency: profile.point("F001")?.clone(),
-                ramp: profile.point("F002").cloned(),
+                ramps: ["F002", "F003"].iter().filter_map(|code| profile.point(code).cloned()).collect(),
             })
         })
     })
@@ -247,10 +263,10 @@ async fn drive_inverter(
             eprintln!("demo: {text}");
         }
     };
-    if let Some(ramp) = &inverter.ramp {
+    for ramp in &inverter.ramps {
         match set(&client, inverter.unit, ramp, DEMO_RAMP).await {
-            Ok(()) => say(format!("{} F002 = {DEMO_RAMP} (the acceleration time)", inverter.id)),
-            Err(e) => say(format!("{} F002 = {DEMO_RAMP}: {e}", inverter.id)),
+            Ok(()) => say(format!("{} {} = {DEMO_RAMP} ({})", inverter.id, ramp.code, ramp.label)),
+            Err(e) => say(format!("{} {} = {DEMO_RAMP}: {e}", inverter.id, ramp.code)),
         }
     }
     for (step, text) in DEMO_FREQUENCIES.iter().cycle().enumerate() {
@@ -288,11 +304,43 @@ mod tests {
     use super::*;
 
     #[test]
+    fn check_sums_up_the_plant_in_words() {
+        let plant = Plant::demo("10.0.0.5:1884").unwrap();
+        let text = summary("demo.toml", &plant);
+        assert!(text.starts_with("demo.toml: 1 line, 2 devices, "), "{text}");
+        assert!(
+            text.ends_with("; Sparkplug B, group ferrobus-demo, edge node demo-edge; broker mqtt://10.0.0.5:1884; ok"),
+            "{text}"
+        );
+        assert_eq!(count(1, "metric"), "1 metric");
+        assert_eq!(count(11, "metric"), "11 metrics");
+    }
+
+    #[test]
+    fn the_demo_drives_the_inverter_by_its_profiles_points() {
+        let plant = Plant::demo("127.0.0.1").unwrap();
+        let inverter = inverter(&plant).expect("the demo has a 3G3RX");
+        assert_eq!((inverter.id.as_str(), inverter.unit), ("inverter", 1));
+        assert_eq!(inverter.run.table, ferrobus_profile::Table::Coils);
+        assert!(inverter.frequency.prepare_write(DEMO_FREQUENCIES[0]).is_ok());
+        let ramps: Vec<&str> = inverter.ramps.iter().map(|p| p.code.as_str()).collect();
+        assert_eq!(ramps, ["F002", "F003"]);
+        for ramp in &inverter.ramps {
+            assert!(ramp.prepare_write(DEMO_RAMP).is_ok(), "{} takes {DEMO_RAMP}", ramp.code);
+        }
+    }
+
+    #[test]
     fn a_broker_is_host_and_port() {
-        assert_eq!(host_port("127.0.0.1:1883").unwrap(), ("127.0.0.1".to_string(), 1883));
-        assert_eq!(host_port("[::1]:8883").unwrap(), ("::1".to_string(), 8883));
-        for bad in ["localhost", ":1883", "host:0", "host:x", "host:70000"] {
-            assert!(host_port(bad).is_err(), "{bad}");
+        let ok = |text: &str| host_port(text, 1883).unwrap();
+        assert_eq!(ok("127.0.0.1:1884"), ("127.0.0.1".to_string(), 1884));
+        assert_eq!(ok("broker.plant"), ("broker.plant".to_string(), 1883));
+        assert_eq!(host_port("broker.plant", 8883).unwrap().1, 8883, "the TLS port when the plant has TLS");
+        assert_eq!(ok("[::1]:8883"), ("::1".to_string(), 8883));
+        assert_eq!(ok("[::1]"), ("::1".to_string(), 1883));
+        assert_eq!(ok("::1"), ("::1".to_string(), 1883));
+        for bad in ["", ":1883", "host:0", "host:x", "host:70000", "[::1", "[]:1883"] {
+            assert!(host_port(bad, 1883).is_err(), "{bad}");
         }
     }
 }

@@ -91,32 +91,13 @@ impl GroupMap {
     }
 }
 
-/// A line started: what the bridge keeps of it.
-pub(super) struct Started {
-    /// The line.
-    pub(super) running: RunningLine,
-    /// Its groups.
-    pub(super) map: GroupMap,
-    /// The poller (stopped through `running.poll`), moved into the forwarding task.
-    forward: Option<(Poller, mpsc::Sender<(usize, Event)>)>,
-}
-
-impl Started {
-    /// Forwards the poller's events to `events`, tagged with `index`, until it stops.
-    pub(super) fn forward(&mut self, index: usize) {
-        let Some((mut poller, events)) = self.forward.take() else { return };
-        tokio::spawn(async move {
-            while let Some(event) = poller.next().await {
-                if events.send((index, event)).await.is_err() {
-                    return;
-                }
-            }
-        });
-    }
-}
-
-/// Starts line `spec`: its client (a simulated line's devices too) and its poller.
-pub(super) async fn start(spec: &LineSpec, events: mpsc::Sender<(usize, Event)>) -> Result<Started, RunError> {
+/// Starts line `index` of the plant, `spec`: its client (a simulated line's devices too) and
+/// its poller, whose events go to `events` tagged with `index` until it stops.
+pub(super) async fn start(
+    index: usize,
+    spec: &LineSpec,
+    events: mpsc::Sender<(usize, Event)>,
+) -> Result<(RunningLine, GroupMap), RunError> {
     let (transport, timing, sim) = match &spec.connection {
         Connection::Serial { config, ascii } => {
             let timing = LineTiming::new(&config.line);
@@ -135,9 +116,16 @@ pub(super) async fn start(spec: &LineSpec, events: mpsc::Sender<(usize, Event)>)
     let client = Client::spawn(transport, spec.client);
     let groups: Vec<Group> = spec.devices.iter().flat_map(|d| d.groups.iter().cloned()).collect();
     let map = GroupMap::new(spec.devices.iter().map(|d| d.groups.len()));
-    let poller = Poller::start(client.clone(), groups, PollConfig { line: timing });
+    let mut poller = Poller::start(client.clone(), groups, PollConfig { line: timing });
     let running = RunningLine { name: spec.name.clone(), describe, client, poll: poller.handle(), sim };
-    Ok(Started { running, map, forward: Some((poller, events)) })
+    tokio::spawn(async move {
+        while let Some(event) = poller.next().await {
+            if events.send((index, event)).await.is_err() {
+                return;
+            }
+        }
+    });
+    Ok((running, map))
 }
 
 /// A virtual line at `config` with a simulator of every device of `spec` behind one endpoint.

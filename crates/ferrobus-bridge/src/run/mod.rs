@@ -10,15 +10,20 @@
 //!
 //! One task runs the loop, in this order of priority: stop, the broker's events, the lines'
 //! samples, the results of writes, the reconnect timer, and last the replay of stored records
-//! (a batch at a time while the client's queue is short, so that live data is never starved).
-//! Lines run concurrently in their own pollers: one line's failure never stops another.
+//! (a batch every 10 ms while the client's queue is short, so that live data is never starved
+//! and the replay is never put off for ever). Lines run concurrently in their own pollers: one
+//! line's failure never stops another. A write ([`Action::Write`]) runs in a task of its own
+//! and comes back as a result for [`Edge::written`].
 //!
 //! The broker session: CONNECT with the edge's Will (NDEATH with the bdSeq, kept across
 //! restarts in a small file, see [`state`]); on CONNACK subscribe to the edge's topics and
-//! publish its births, then replay the store; on a lost connection the edge is told (its
-//! samples become store records, the next CONNECT takes the next bdSeq) and the next attempt
-//! waits the backoff (the configured delay, doubling to 30 s). Stopping publishes NDEATH
-//! before the DISCONNECT, stops the pollers and returns a [`Report`].
+//! publish its births, then replay the store in order ([`Edge::replay_all`], then
+//! [`Edge::replayed`] once it is empty); on a lost connection the edge is told (its samples
+//! become store records, the next CONNECT takes the next bdSeq) and the next attempt waits the
+//! backoff (the configured delay, doubling to 30 s). Stopping publishes NDEATH before the
+//! DISCONNECT, stops the pollers, closes the store (what is left is kept on disk for the next
+//! run) and returns a [`Report`]. [`run_with`]'s [`Options`] hand out the running lines (their
+//! clients, pollers and simulated lines) to a caller that drives a device beside the bridge.
 
 mod broker;
 mod lines;
@@ -166,6 +171,8 @@ struct Bridge {
     events: Option<mpsc::Sender<Status>>,
     backoff: Backoff,
     reconnect_at: Option<Instant>,
+    /// When the next batch of stored records may be replayed.
+    replay_at: Instant,
     online: bool,
     /// The births of this session have gone out: stored records may follow.
     born: bool,
@@ -190,10 +197,9 @@ impl Bridge {
         let (written_tx, written) = mpsc::channel(64);
         let mut lines = Vec::with_capacity(plant.lines.len());
         for (index, spec) in plant.lines.iter().enumerate() {
-            let mut started = lines::start(spec, samples_tx.clone()).await?;
-            started.forward(index);
+            let (running, map) = lines::start(index, spec, samples_tx.clone()).await?;
             let devices = vec![DeviceHealth::default(); spec.devices.len()];
-            lines.push(LineState { running: started.running, map: started.map, devices });
+            lines.push(LineState { running, map, devices });
         }
         let report = Report::new(&plant, store.stats().recovered);
         let (bd_seq_file, note) = restore_bd_seq(&plant, &mut edge);
@@ -211,6 +217,7 @@ impl Bridge {
             written,
             events,
             reconnect_at: None,
+            replay_at: Instant::now(),
             online: false,
             born: false,
             replay_done: false,
@@ -251,7 +258,11 @@ impl Bridge {
                     self.reconnect_at = None;
                     self.connect();
                 }
-                () = tokio::time::sleep(REPLAY_PACE), if replaying => self.replay(),
+                // A deadline kept across turns: a steady flow of samples does not put it off.
+                () = tokio::time::sleep_until(self.replay_at), if replaying => {
+                    self.replay();
+                    self.replay_at = Instant::now() + REPLAY_PACE;
+                }
             }
         }
     }

@@ -102,9 +102,10 @@ impl fmt::Display for Report {
         if self.unsent > 0 {
             writeln!(f, "not sent (the MQTT client's queue was full): {}", self.unsent)?;
         }
+        let sessions = if self.connections == 1 { "session" } else { "sessions" };
         writeln!(
             f,
-            "broker: {} sessions, {} lost; store: {} stored, {} replayed, {} dropped, {} left, {} errors",
+            "broker: {} {sessions}, {} lost; store: {} stored, {} replayed, {} dropped, {} left, {} errors",
             self.connections, self.broker_lost, self.stored, self.replayed, self.dropped, self.left, self.store_errors
         )?;
         if self.recovered > 0 || self.unreplayable > 0 {
@@ -145,7 +146,7 @@ mod tests {
         report.lines.push(LineReport { name: "drives".into(), polls: 100, ok: 96, failures, overruns: 0 });
         let text = report.to_string();
         assert!(text.contains("published: 1 NBIRTH, 345 DDATA"), "{text}");
-        assert!(text.contains("12 stored, 12 replayed, 0 dropped"), "{text}");
+        assert!(text.contains("broker: 0 sessions, 0 lost; store: 12 stored, 12 replayed, 0 dropped"), "{text}");
         assert!(text.contains("commands: 2 written, 0 failed on the bus, 1 refused"), "{text}");
         assert!(text.contains("line drives: 100 polls, 96 ok, 4 failed (4 timeout), 0 overruns"), "{text}");
         assert_eq!(report.published("DDATA"), 345);

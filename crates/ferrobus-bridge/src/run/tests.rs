@@ -57,8 +57,12 @@ async fn start_broker(name: &str) -> Option<Broker> {
 
 /// A mosquitto whose listener takes the lines `listener` too (its TLS files).
 async fn start_broker_with(name: &str, listener: &str) -> Option<Broker> {
+    start_broker_on(free_port(), name, listener).await
+}
+
+/// A mosquitto listening on `port`.
+async fn start_broker_on(port: u16, name: &str, listener: &str) -> Option<Broker> {
     let program = mosquitto()?;
-    let port = free_port();
     let dir = temporary_dir(name);
     let conf = dir.join("mosquitto.conf");
     let text = format!("listener {port} 127.0.0.1\n{listener}allow_anonymous true\npersistence false\n");
@@ -300,4 +304,73 @@ async fn tls_to_the_broker_checks_its_certificate_against_the_server_name() {
         bridge.await.expect("the bridge's task").expect("the bridge ran");
     }
     let _ = std::fs::remove_dir_all(&certs);
+}
+
+/// Waits for a status that `wanted` picks.
+async fn status_where(statuses: &mut mpsc::Receiver<Status>, wanted: impl Fn(&Status) -> bool) -> Status {
+    loop {
+        let status = tokio::time::timeout(Duration::from_secs(20), statuses.recv())
+            .await
+            .expect("a status in time")
+            .expect("the bridge runs");
+        if wanted(&status) {
+            return status;
+        }
+    }
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn while_the_broker_is_away_samples_are_stored_and_replayed_as_historical_after_the_next_births() {
+    let Some(broker) = start_broker("outage").await else { return };
+    let port = broker.port;
+    let store = temporary_dir("outage-store");
+    let plant = demo_plant(port, &store);
+    let f001 = plant.lines[0].devices[0].profile.as_ref().and_then(|p| p.point("F001")).expect("F001").clone();
+    let mut watcher = subscribe(port).await;
+    let (status_tx, mut statuses) = mpsc::channel(1024);
+    let (stop_tx, stop_rx) = oneshot::channel::<()>();
+    let (running_tx, running) = oneshot::channel();
+    let options = Options { running: Some(running_tx) };
+    let bridge = tokio::spawn(run_with(plant, async move { drop(stop_rx.await) }, Some(status_tx), options));
+    let client = running.await.expect("the running lines")[0].client.clone();
+    let (_, first) = next_of(&mut watcher, MessageType::NBirth).await;
+    next_of(&mut watcher, MessageType::DBirth).await;
+
+    drop(broker);
+    status_where(&mut statuses, |s| matches!(s, Status::BrokerLost { was_online: true, .. })).await;
+    // F001 (polled every second) moves while the broker is away: each poll is a record.
+    for centi_hz in [1000, 2000, 3000] {
+        let words = f001.encode(&ferrobus::poll::Value::Int(centi_hz)).expect("F001 words");
+        client.write_multiple_registers(1, f001.address, &words).await.expect("written");
+        tokio::time::sleep(Duration::from_millis(1100)).await;
+    }
+    // The attempts come 1 s and 3 s after the loss, the next one 4 s later: the broker is back
+    // between them, and the watcher subscribed before the bridge is.
+    tokio::time::sleep(Duration::from_millis(700)).await;
+    let broker = start_broker_on(port, "outage-again", "").await.expect("mosquitto again");
+    let mut watcher = subscribe(port).await;
+    let (_, second) = next_of(&mut watcher, MessageType::NBirth).await;
+    assert_eq!(bd_seq(&second), bd_seq(&first).map(|b| (b + 1) % 256), "the next session, the next bdSeq");
+    let replayed = status_where(&mut statuses, |s| matches!(s, Status::Replayed { .. })).await;
+    let mut historical = Vec::new();
+    while let Ok(Some((topic, payload))) = tokio::time::timeout(Duration::from_millis(500), watcher.recv()).await {
+        let payload = Payload::decode(&payload).expect("a Sparkplug payload");
+        if Topic::parse(&topic).is_some_and(|t| t.kind == MessageType::DData) {
+            historical
+                .extend(payload.metrics.iter().filter(|m| m.is_historical == Some(true)).map(|m| m.value.clone()));
+        }
+    }
+    stop_tx.send(()).expect("the bridge runs");
+    let report = bridge.await.expect("the bridge's task").expect("the bridge ran");
+    assert!(report.stored >= 3, "a record per F001 poll at least: {report}");
+    assert_eq!(report.replayed, report.stored, "every record replayed: {report} ({replayed})");
+    assert_eq!(report.left, 0, "{report}");
+    for hz in [10.0, 20.0, 30.0] {
+        assert!(
+            historical.contains(&Some(MetricValue::Double(hz))),
+            "F001 {hz} Hz replayed as historical: {historical:?}"
+        );
+    }
+    drop(broker);
+    let _ = std::fs::remove_dir_all(&store);
 }
