@@ -2,6 +2,13 @@
 # .ci/setup-peers.sh - install and build the peer fixtures of tests/peers/.
 #
 # Also installs tshark (apt), which decodes the captures of `ferrobus sniff`.
+# For the MQTT bridge's tests (tests/peers/sparkplug/): mosquitto, the broker the
+# tests start themselves, and protobuf-compiler (`protoc --decode_raw`) from apt;
+# pysparkplug==0.6.1 (it pins paho-mqtt<2 itself) in its own venv,
+# target/peers/sparkplug-venv, kept out of the system Python where pymodbus
+# lives (python3-venv from apt makes it); and Eclipse Tahu's JavaScript codec
+# (npm sparkplug-payload, pinned by tests/peers/sparkplug/tahu/package-lock.json;
+# nodejs and npm from apt when missing).
 # Installs what the peers need (apt: socat, libmodbus-dev, mbpoll, libudev-dev,
 # pkg-config, gcc; pip: pymodbus==3.16.1, pyserial==3.5), compiles the
 # libmodbus fixtures into target/peers/ and builds tokio-modbus-peer (release,
@@ -40,6 +47,10 @@ APT_PACKAGES+=(man-db groff-base)
 APT_PACKAGES+=(zsh)
 # tmux is the terminal emulator of `ferrobus monitor`'s end-to-end test.
 APT_PACKAGES+=(tmux)
+# The bridge's tests: their own broker, protoc for the raw payload, and the venv for pysparkplug.
+APT_PACKAGES+=(mosquitto protobuf-compiler python3-venv)
+PYSPARKPLUG_VERSION="0.6.1"
+SPARKPLUG_VENV="$OUT/sparkplug-venv"
 export DEBIAN_FRONTEND=noninteractive
 
 IN_CI=false
@@ -151,6 +162,28 @@ if ! py_versions_ok; then
     fi
 fi
 
+# ---- pysparkplug venv --------------------------------------------------------
+sparkplug_ok() {
+    "$SPARKPLUG_VENV/bin/python" - "$PYSPARKPLUG_VERSION" <<'EOF' 2>/dev/null
+import sys
+import paho.mqtt.client, pysparkplug
+sys.exit(0 if pysparkplug.__version__ == sys.argv[1] else 1)
+EOF
+}
+
+if ! sparkplug_ok; then
+    log "venv $SPARKPLUG_VENV: pip install pysparkplug==$PYSPARKPLUG_VERSION"
+    mkdir -p "$OUT"
+    VENV_LOG="$(mktemp)"
+    if ! { "$PYTHON" -m venv "$SPARKPLUG_VENV" &&
+        "$SPARKPLUG_VENV/bin/python" -m pip install --quiet --disable-pip-version-check \
+            "pysparkplug==$PYSPARKPLUG_VERSION"; } >"$VENV_LOG" 2>&1 || ! sparkplug_ok; then
+        cat "$VENV_LOG" >&2
+        missing pysparkplug "cannot make $SPARKPLUG_VENV with pysparkplug==$PYSPARKPLUG_VERSION"
+    fi
+    rm -f "$VENV_LOG"
+fi
+
 # ---- libmodbus fixtures ------------------------------------------------------
 mkdir -p "$OUT"
 if have gcc && pkg-config --exists libmodbus 2>/dev/null; then
@@ -206,6 +239,10 @@ for tool in socat mbpoll; do
     have "$tool" || missing "$tool" "$tool not installed"
 done
 have tshark || missing tshark "tshark not installed"
+MOSQUITTO=/usr/sbin/mosquitto
+[ -x "$MOSQUITTO" ] || MOSQUITTO="$(command -v mosquitto || true)"
+[ -n "$MOSQUITTO" ] || missing mosquitto "mosquitto not installed"
+have protoc || missing protoc "protoc (protobuf-compiler) not installed"
 
 v_libmodbus="$(pkg-config --modversion libmodbus 2>/dev/null || echo missing)"
 v_pymodbus="$("$PYTHON" -c 'import pymodbus; print(pymodbus.__version__)' 2>/dev/null || echo missing)"
@@ -228,6 +265,12 @@ echo "peers: ${v_tshark:-tshark missing}"
 
 v_tahu="$(cd "$TAHU_DIR" 2>/dev/null && node -p 'require("sparkplug-payload/package.json").version' 2>/dev/null || echo missing)"
 echo "peers: sparkplug-payload ${v_tahu} (Eclipse Tahu JS; node $(node --version 2>/dev/null || echo missing), npm $(npm --version 2>/dev/null || echo missing))"
+v_mosquitto="$("${MOSQUITTO:-mosquitto}" -h 2>/dev/null | awk '/^mosquitto version/ { print $3; exit }' || true)"
+v_protoc="$(protoc --version 2>/dev/null | awk '{ print $2 }' || true)"
+v_pysparkplug="$("$SPARKPLUG_VENV/bin/python" -c 'import pysparkplug; print(pysparkplug.__version__)' 2>/dev/null || echo missing)"
+v_paho="$("$SPARKPLUG_VENV/bin/python" -c 'import paho.mqtt; print(paho.mqtt.__version__)' 2>/dev/null || echo missing)"
+echo "peers: mosquitto ${v_mosquitto:-missing}, protoc ${v_protoc:-missing}," \
+    "pysparkplug ${v_pysparkplug} (paho-mqtt ${v_paho}) -> target/peers/sparkplug-venv"
 
 if [ "${#MISSING[@]}" -gt 0 ]; then
     log "WARNING: incomplete setup, missing: ${MISSING[*]}"

@@ -6,6 +6,8 @@
 //! with a `SKIPPED ...` line on stderr (shown even for passing tests) naming what installs it;
 //! under `CI=true` it fails ([`skips`] shows both).
 //!
+//! - [`bridge`]: `ferrobus bridge` against mosquitto, its Sparkplug B checked by pysparkplug
+//!   and protoc, with the broker, the bridge and the drives stopped and started under it.
 //! - [`cli_vs_servers`]: the `ferrobus` binary against each peer server, RTU and TCP.
 //! - [`clients_vs_sim`]: each peer client and mbpoll against `ferrobus sim --profile generic`.
 //! - [`custom_profile`]: a profile file for the peer servers' data map, used with backup, diff
@@ -25,6 +27,7 @@
 //! Run: `cargo test -p ferrobus-cli --test interop`.
 #![cfg(unix)] // the peers run on Linux, over ptys
 
+mod bridge;
 mod cli_vs_servers;
 mod clients_vs_sim;
 mod custom_profile;

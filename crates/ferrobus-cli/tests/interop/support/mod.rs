@@ -2,10 +2,12 @@
 //! processes that die with their test ([`process`]), pty pairs and raw frames ([`serial`]), a
 //! raw Modbus/TCP client ([`mbap`]), the `ferrobus` binary as a client ([`cli`]), and the peers
 //! and the simulator ([`peers`]).
+//! An MQTT broker of the test's own: [`mosquitto`].
 
 pub(crate) mod cli;
 pub(crate) mod env;
 pub(crate) mod mbap;
+pub(crate) mod mosquitto;
 pub(crate) mod peers;
 pub(crate) mod process;
 pub(crate) mod serial;

@@ -1,0 +1,25 @@
+//! `ferrobus bridge` end to end: the binary against a real mosquitto, simulated drives as
+//! separate processes (`ferrobus sim --tcp`), and every message checked by tools nobody here
+//! wrote (pysparkplug through tests/peers/sparkplug/verify.py, `protoc --decode_raw`).
+//!
+//! - [`checker`]: the checker proven first, on sessions built with pysparkplug, clean and
+//!   broken, and the broker harness's restart;
+//! - [`sparkplug`]: births and data (two lines, TCP and RTU), NCMD Rebirth, SIGKILL and the Will,
+//!   DCMD to F001, DDEATH and DBIRTH, a primary host's STATE;
+//! - [`outage`]: the broker away for 30 s, the samples meanwhile delivered as historical;
+//! - [`plain`]: plain JSON per point, writes on `.../set`, retained last values;
+//! - [`cli`]: `--check` on a broken file and the shipped examples, and `--demo`;
+//! - [`harness`] (drives, plant.toml, the bridge process) and [`spb`] (recorder, checker,
+//!   publisher, protoc) are what they are made of.
+//!
+//! Each test starts its own broker on a free port and leaves a directory
+//! `target/interop/bridge/<test>/` with the recording, verify.py's summary (`verify.json`),
+//! the plant.toml and the bridge's output (`bridge.log`); a failure message names it.
+
+mod checker;
+mod cli;
+mod harness;
+mod outage;
+mod plain;
+mod sparkplug;
+mod spb;
