@@ -74,12 +74,12 @@ enum Step {
         which: u8,
         ok: bool,
     },
-    /// The oldest record stored so far, or any bytes as a record.
+    /// The oldest record stored so far (`all`: through `replay_all`).
     Replay {
-        stored: bool,
         all: bool,
-        bytes: Vec<u8>,
     },
+    /// Any bytes as a record.
+    ReplayBytes(Vec<u8>),
     Replayed,
 }
 
@@ -154,10 +154,12 @@ enum ValuePick {
 /// What a poll gave.
 #[derive(Arbitrary, Debug)]
 enum Reply {
-    /// The registers of the group's cells taken in turn from `words` (0 when they run out),
-    /// a bit from the low bit; the cell `bad` (if any) does not decode.
+    /// The group's registers `base`, `base + step`, `base + 2 × step`, ... (wrapping), a bit
+    /// from the low bit; the cell `bad` (if any) does not decode. Of a fixed size, so that an
+    /// input holds many polls.
     Answered {
-        words: Vec<u16>,
+        base: u16,
+        step: u16,
         bad: Option<u8>,
     },
     Failed {
@@ -238,20 +240,28 @@ impl Run<'_> {
                 let publishes = self.edge.written(device, group, cell, result);
                 self.check_publishes(&publishes);
             }
-            Step::Replay { stored, all, bytes } => {
-                let record = if stored && !self.records.is_empty() { self.records.remove(0) } else { bytes };
-                if all {
-                    if let Ok(publishes) = self.edge.replay_all(&record, now) {
-                        self.check_publishes(&publishes);
-                    }
-                } else if let Ok(Some(publish)) = self.edge.replay(&record, now) {
-                    self.check_publishes(std::slice::from_ref(&publish));
+            Step::Replay { all } => {
+                if !self.records.is_empty() {
+                    let record = self.records.remove(0);
+                    self.replay(&record, all);
                 }
             }
+            Step::ReplayBytes(bytes) => self.replay(&bytes, true),
             Step::Replayed => {
                 let publishes = self.edge.replayed(now);
                 self.check_publishes(&publishes);
             }
+        }
+    }
+
+    /// A record replayed: through `replay_all`, or `replay`.
+    fn replay(&mut self, record: &[u8], all: bool) {
+        if all {
+            if let Ok(publishes) = self.edge.replay_all(record, self.now) {
+                self.check_publishes(&publishes);
+            }
+        } else if let Ok(Some(publish)) = self.edge.replay(record, self.now) {
+            self.check_publishes(std::slice::from_ref(&publish));
         }
     }
 
@@ -312,8 +322,8 @@ impl Run<'_> {
         let g = usize::from(group) % spec.groups.len();
         let cells = &spec.groups[g].cells;
         let result = match reply {
-            Reply::Answered { words, bad } => {
-                let mut words = words.into_iter();
+            Reply::Answered { base, step, bad } => {
+                let mut words = (0u16..).map(|i| base.wrapping_add(step.wrapping_mul(i)));
                 let bad = bad.map(|b| usize::from(b) % cells.len());
                 Ok(cells
                     .iter()
