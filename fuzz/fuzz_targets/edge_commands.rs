@@ -12,7 +12,8 @@
 //!   value (and whose registers can hold it).
 //! - Sparkplug: every message goes to a topic of this edge node, its payload decodes, its seq
 //!   is 0 to 255: 0 for an NBIRTH, the previous message's + 1 (255 → 0) for the others, none
-//!   for an NDEATH, whose bdSeq is the Will's. Plain: every topic is under the prefix.
+//!   for an NDEATH; an NBIRTH's and an NDEATH's bdSeq is that of the session's Will. Plain:
+//!   every topic is under the prefix, every payload text.
 //! - QoS is 0 to 2; every refusal has a message.
 #![no_main]
 

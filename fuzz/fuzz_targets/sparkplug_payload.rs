@@ -10,16 +10,18 @@
 //!   fits the point's registers (`Point::encode`), passes or fails `check_write` without
 //!   panicking, and publishes as a metric value (`metric_value`, both UInt encodings) that
 //!   `to_raw` maps back to the same registers.
-//! - The bytes as text: `Topic::parse` gives a topic whose Display is that text, a device id
-//!   exactly for a device's message type; `parse_state_topic` gives a host id whose
-//!   `state_topic` is that text; `parse_state` gives a state whose JSON parses to itself.
+//! - The bytes as text, alone and after `spBv1.0/` with a message type put in as the second
+//!   level: `Topic::parse` gives a topic whose Display is that text, a device id exactly for a
+//!   device's message type; `parse_state_topic` gives a host id whose `state_topic` is that
+//!   text. The bytes, and the text as the values of `{"online":..,"timestamp":..}`:
+//!   `parse_state` gives a state whose JSON parses to itself.
 #![no_main]
 
 use std::sync::LazyLock;
 
 use ferrobus_bridge::sparkplug::convert::{self, UintEncoding};
 use ferrobus_bridge::sparkplug::payload::{DataType, Metric, MetricValue, Payload};
-use ferrobus_bridge::sparkplug::topic::{self, MessageType, Topic};
+use ferrobus_bridge::sparkplug::topic::{self, MessageType, NAMESPACE, Topic};
 use ferrobus_profile::{Point, Profile, Value, ValueType};
 use libfuzzer_sys::fuzz_target;
 
@@ -83,13 +85,26 @@ fuzz_target!(|data: &[u8]| {
             check_metric(metric);
         }
     }
+    check_state(data);
     if let Ok(text) = std::str::from_utf8(data) {
         check_topic(text);
-    }
-    if let Some(state) = topic::parse_state(data) {
-        assert_eq!(topic::parse_state(&state.to_json()), Some(state), "a STATE's JSON does not parse to itself");
+        // The fuzzer does not guess "spBv1.0" or "DCMD" by itself: the text also goes in as
+        // the levels after them, and as a STATE's values.
+        let kind = MessageType::ALL[usize::from(data.first().copied().unwrap_or(0)) % MessageType::ALL.len()];
+        let (group, rest) = text.split_once('/').unwrap_or((text, ""));
+        check_topic(&format!("{NAMESPACE}/{group}/{kind}/{rest}"));
+        check_topic(&topic::state_topic(text));
+        check_state(format!("{{\"online\":{text}}}").as_bytes());
+        check_state(format!("{{\"online\":true,\"timestamp\":{text}}}").as_bytes());
     }
 });
+
+/// A host's STATE payload: what parses gives JSON that parses to the same state.
+fn check_state(payload: &[u8]) {
+    if let Some(state) = topic::parse_state(payload) {
+        assert_eq!(topic::parse_state(&state.to_json()), Some(state), "a STATE's JSON does not parse to itself");
+    }
+}
 
 /// Encode, decode, encode: the same bytes twice.
 fn round_trip(payload: &Payload) {
