@@ -9,9 +9,16 @@ use std::path::{Path, PathBuf};
 
 /// Cycles known and owned elsewhere, each as its sorted modules. When one is broken, this test
 /// fails until it is taken off the list, so that it cannot come back unseen.
-const KNOWN: &[(&str, &[&str])] = &[];
+///
+/// ferrobus-profile's was there when the crate joined this test: a parsed profile keeps its
+/// resolved points (`model` → `point`), a point is resolved from the profile's definitions and
+/// reads keys with `check`'s parser (`point` → `model`, `check`), and `codec` both reads points
+/// and gives them their values. Breaking it means moving the shared types and the key and line
+/// helpers into leaf modules; until then it is listed rather than left out of the scan.
+const KNOWN: &[(&str, &[&str])] = &[("ferrobus-profile", &["check", "codec", "model", "point"])];
 
-const CRATES: [&str; 4] = ["ferrobus-proto", "ferrobus", "ferrobus-sim", "ferrobus-cli"];
+const CRATES: [&str; 6] =
+    ["ferrobus-proto", "ferrobus", "ferrobus-profile", "ferrobus-sim", "ferrobus-bridge", "ferrobus-cli"];
 
 fn rust_files(dir: &Path, out: &mut Vec<PathBuf>) {
     let entries = std::fs::read_dir(dir).unwrap_or_else(|e| panic!("reading {}: {e}", dir.display()));

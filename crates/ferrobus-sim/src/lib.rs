@@ -14,6 +14,7 @@
 //!
 //! Built-in profiles: `omron-3g3rx`, `sdp-servo`, `generic` (see [`profile::BUILTIN`]).
 
+pub mod clock;
 pub mod device;
 pub mod fault;
 pub mod memory;
@@ -25,9 +26,10 @@ pub mod rule;
 pub mod sim;
 pub mod ticker;
 
+pub use clock::{SimClock, tokio_clock};
 pub use device::Device;
 pub use fault::Faults;
 pub use profile::{Profile, ProfileFaults};
 pub use rule::Rule;
-pub use sim::{FaultFilter, Sim, SimClock, Unserved, tokio_clock};
+pub use sim::{FaultFilter, Sim, Unserved};
 pub use ticker::Ticker;

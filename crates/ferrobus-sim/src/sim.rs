@@ -2,7 +2,6 @@
 //! [`Handler`] — and the faults injected into their replies.
 
 use std::collections::BTreeMap;
-use std::sync::Arc;
 use std::time::Duration;
 
 use ferrobus::Framing;
@@ -13,21 +12,13 @@ use ferrobus_proto::slave::{Admission, Handler, UnitSet};
 use rand::rngs::SmallRng;
 use rand::{RngExt, SeedableRng};
 
+use crate::clock::SimClock;
 use crate::device::Device;
 use crate::fault::Faults;
 use crate::memory::Table;
 use crate::reframe::{corrupt_checksum, reframe, unit_of};
 use crate::rule::Action;
 use crate::ticker::Ticker;
-
-/// Where the simulation's time comes from: the time since it started.
-pub type SimClock = Arc<dyn Fn() -> Duration + Send + Sync>;
-
-/// A clock that follows tokio's (and so a paused test clock).
-pub fn tokio_clock() -> SimClock {
-    let start = tokio::time::Instant::now();
-    Arc::new(move || start.elapsed())
-}
 
 /// One unit on the line.
 pub struct Unit {

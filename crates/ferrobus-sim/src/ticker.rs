@@ -14,9 +14,9 @@
 use std::fmt;
 use std::time::{Duration, SystemTime, UNIX_EPOCH};
 
+use crate::clock::SimClock;
 use crate::memory::{Item, Memory};
 use crate::parse::parse_duration;
-use crate::sim::SimClock;
 
 /// A point that counts periods of a clock (see the module docs).
 #[derive(Clone)]
