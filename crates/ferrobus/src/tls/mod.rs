@@ -372,24 +372,13 @@ impl ClientTls {
         server_roots: Vec<CertificateDer<'static>>,
         identity: Option<(Vec<CertificateDer<'static>>, PrivateKeyDer<'static>)>,
     ) -> Result<Self, TlsError> {
-        let builder = rustls::ClientConfig::builder_with_provider(provider())
-            .with_protocol_versions(VERSIONS)
-            .map_err(|source| TlsError::Config { context: "the TLS versions", source })?
-            .with_root_certificates(root_store(server_roots)?);
-        let config = match identity {
-            Some((chain, key)) => builder
-                .with_client_auth_cert(chain, key)
-                .map_err(|source| TlsError::Config { context: "the client certificate and key", source })?,
-            None => builder.with_no_client_auth(),
-        };
-        Ok(ClientTls { connector: tokio_rustls::TlsConnector::from(Arc::new(config)) })
+        let builder = client_config()?.with_root_certificates(root_store(server_roots)?);
+        ClientTls::showing(builder, identity)
     }
 
     /// [`ClientTls::new`] from PEM files.
     pub fn from_pem_files(ca: &Path, identity: Option<(&Path, &Path)>) -> Result<Self, TlsError> {
-        let identity =
-            identity.map(|(cert, key)| Ok::<_, TlsError>((load_certificates(cert)?, load_private_key(key)?)));
-        ClientTls::new(load_certificates(ca)?, identity.transpose()?)
+        ClientTls::new(load_certificates(ca)?, load_identity(identity)?)
     }
 
     /// [`ClientTls::from_pem_files`], but the server's certificate must name `server_name`
@@ -408,14 +397,19 @@ impl ClientTls {
         let inner = rustls::client::WebPkiServerVerifier::builder_with_provider(roots, provider())
             .build()
             .map_err(|e| general("the CA certificate", e.to_string()))?;
-        let builder = rustls::ClientConfig::builder_with_provider(provider())
-            .with_protocol_versions(VERSIONS)
-            .map_err(|source| TlsError::Config { context: "the TLS versions", source })?
-            .dangerous()
-            .with_custom_certificate_verifier(Arc::new(NamedServer { inner, name }));
+        let builder =
+            client_config()?.dangerous().with_custom_certificate_verifier(Arc::new(NamedServer { inner, name }));
+        ClientTls::showing(builder, load_identity(identity)?)
+    }
+
+    /// The client of `builder`, showing `identity` if given.
+    fn showing(
+        builder: rustls::ConfigBuilder<rustls::ClientConfig, rustls::client::WantsClientCert>,
+        identity: Option<(Vec<CertificateDer<'static>>, PrivateKeyDer<'static>)>,
+    ) -> Result<Self, TlsError> {
         let config = match identity {
-            Some((cert, key)) => builder
-                .with_client_auth_cert(load_certificates(cert)?, load_private_key(key)?)
+            Some((chain, key)) => builder
+                .with_client_auth_cert(chain, key)
                 .map_err(|source| TlsError::Config { context: "the client certificate and key", source })?,
             None => builder.with_no_client_auth(),
         };
@@ -479,6 +473,20 @@ impl rustls::client::danger::ServerCertVerifier for NamedServer {
     fn supported_verify_schemes(&self) -> Vec<SignatureScheme> {
         self.inner.supported_verify_schemes()
     }
+}
+
+/// A client configuration with our provider and TLS versions, before its verifier.
+fn client_config() -> Result<rustls::ConfigBuilder<rustls::ClientConfig, rustls::WantsVerifier>, TlsError> {
+    rustls::ClientConfig::builder_with_provider(provider())
+        .with_protocol_versions(VERSIONS)
+        .map_err(|source| TlsError::Config { context: "the TLS versions", source })
+}
+
+/// A client's certificate chain and key from their PEM files, if given.
+fn load_identity(
+    identity: Option<(&Path, &Path)>,
+) -> Result<Option<(Vec<CertificateDer<'static>>, PrivateKeyDer<'static>)>, TlsError> {
+    identity.map(|(cert, key)| Ok((load_certificates(cert)?, load_private_key(key)?))).transpose()
 }
 
 /// The host of `host:port` (`[::1]:802` → `::1`).
