@@ -289,7 +289,7 @@ fn reverse_route(text: &str) -> Result<(u8, String, u8), CliError> {
 
 /// Prints every line's and unit's counters and the TCP side's on stderr.
 fn print(gateway: &Gateway, tcp: &TcpCounts, secure: bool) {
-    eprint!("{}", ferrobus::gateway::report(&gateway.stats()));
+    eprint!("{}", ferrobus::gateway::report(&gateway.stats(), &gateway.front_stats()));
     eprintln!(
         "tcp: {} connections served ({} open), {} refused over --max-connections, {} accept pauses out of file \
          descriptors; closed: {} idle, {} unfinished frame, {} bad MBAP header",
