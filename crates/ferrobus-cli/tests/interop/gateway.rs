@@ -391,7 +391,10 @@ fn a_raw_client_that_writes_200_requests_at_once_is_held_back_and_every_request_
         .and_then(|rest| rest.split(')').next())
         .and_then(|n| n.parse().ok())
         .unwrap_or_else(|| panic!("no queue maximum in {line}"));
+    // Sixteen of the flood's (all queued while the worker is between two requests), and the
+    // good client's one.
     assert!(max <= 17, "one connection of pipeline 16 (and the good one) queued {max} at once: {line}");
+    eprintln!("200 requests written at once with --pipeline 16: the line's queue held at most {max}");
     assert!(line.contains(" busy 0 "), "{line}");
 }
 
