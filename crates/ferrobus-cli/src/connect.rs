@@ -301,7 +301,8 @@ impl ConnectArgs {
             return Err(CliError::Usage("--ascii applies to a serial --port only".into()));
         }
         if let Some(addr) = &self.tcp {
-            return Ok(Target::Tcp(with_default_port(addr, default_port)?));
+            let addr = with_default_port(addr, default_port)?;
+            return Ok(if self.tls { Target::Mbaps(addr) } else { Target::Tcp(addr) });
         }
         if let Some(addr) = &self.rtu_tcp {
             if !has_port(addr) {
@@ -342,7 +343,7 @@ impl ConnectArgs {
                 config.low_latency = self.low_latency;
                 if *ascii { Transport::ascii(config) } else { Transport::rtu(config) }
             }
-            Target::Tcp(addr) => Transport::tcp(addr.clone()),
+            Target::Tcp(addr) | Target::Mbaps(addr) => Transport::tcp(addr.clone()),
             Target::RtuTcp(addr) => Transport::rtu_over_tcp(addr.clone()),
         };
         if let Some(t15) = self.t15 {
@@ -370,7 +371,7 @@ impl ConnectArgs {
     /// The client's transport for `target`: [`ConnectArgs::transport`], or TLS with `--tls`
     /// (its certificates read here: a bad file is a usage error naming it).
     pub(crate) fn client_transport(&self, target: &Target) -> Result<Transport, CliError> {
-        let (true, Target::Tcp(addr)) = (self.tls, target) else { return Ok(self.transport(target)) };
+        let Target::Mbaps(addr) = target else { return Ok(self.transport(target)) };
         let Some(ca) = &self.ca else {
             return Err(CliError::Usage(
                 "--tls needs --ca FILE: the CA certificate that issued the server's certificate".into(),
@@ -410,7 +411,7 @@ pub(crate) struct Session {
 impl Session {
     /// Whether requests to the unit are broadcasts (unit 0 on a serial framing).
     pub(crate) fn is_broadcast(&self) -> bool {
-        unit::is_broadcast(self.unit, !matches!(self.target, Target::Tcp(_)))
+        unit::is_broadcast(self.unit, !matches!(self.target, Target::Tcp(_) | Target::Mbaps(_)))
     }
 }
 

@@ -233,7 +233,7 @@ fn modbus_report(error: &Error, target: Option<&Target>, unit: u8) -> Report {
     let on = target.map(|t| format!(" on {t}")).unwrap_or_default();
     match error {
         Error::Exception { function, code, .. } => {
-            Report { message: error.to_string(), hints: exception_hint(*function, *code).into_iter().collect() }
+            Report { message: error.to_string(), hints: exception_hints(*function, *code, target) }
         }
         Error::Timeout { heard: Some(heard), .. } => {
             Report { message: format!("{error}{on}"), hints: heard_hints(heard, target, unit) }
@@ -294,7 +294,7 @@ fn heard_hints(heard: &Heard, target: Option<&Target>, unit: u8) -> Vec<String> 
     match heard {
         // Bytes damaged on the way: the line, not the device.
         Heard::BadChecksum { .. } | Heard::Garbage { .. } => match target {
-            Some(Target::Tcp(_)) => {
+            Some(Target::Tcp(_) | Target::Mbaps(_)) => {
                 hints.push(
                     "what came is not Modbus/TCP: is this an RTU-over-TCP gateway (--rtu-tcp), or another protocol \
                      on this port?"
@@ -345,6 +345,57 @@ fn heard_hints(heard: &Heard, target: Option<&Target>, unit: u8) -> Vec<String> 
     }
     hints.push(trace);
     hints
+}
+
+/// What an exception usually means; over TCP a gateway or server in between may have
+/// answered it, and its hint names the setting there that lets the request through (a hint
+/// that suggests another request is given only where that request may be let through).
+fn exception_hints(function: FunctionCode, code: ExceptionCode, target: Option<&Target>) -> Vec<String> {
+    match (code.value(), target) {
+        (0x01, Some(Target::Mbaps(_))) => vec![refused_by_role(function)],
+        (0x01, Some(Target::Tcp(_) | Target::RtuTcp(_))) => {
+            let mut hints: Vec<String> = exception_hint(function, code).into_iter().collect();
+            hints.push(refused_by_gateway(function));
+            hints
+        }
+        (0x0A, Some(Target::Tcp(_) | Target::RtuTcp(_) | Target::Mbaps(_))) => vec![
+            "a gateway has no path to the unit: check --unit and the serial line behind the gateway; `ferrobus \
+             gateway` answers 0x0A too for a unit outside its --route or --allow-units: add the unit there"
+                .into(),
+        ],
+        _ => exception_hint(function, code).into_iter().collect(),
+    }
+}
+
+/// Exception 01 over Modbus/TCP may be a gateway's rule: the settings of `ferrobus gateway`
+/// that let the request through.
+fn refused_by_gateway(function: FunctionCode) -> String {
+    let code = function.value();
+    let settings = if changes_data(function) {
+        format!("run it without --read-only, and with {code} in --allow-functions if it has one")
+    } else {
+        format!("add {code} to its --allow-functions")
+    };
+    format!("or a gateway in front of the device keeps function {code} out (`ferrobus gateway`: {settings})")
+}
+
+/// Whether a role needs write access for `function`, and a read-only gateway refuses it:
+/// the writes, 0x17 (it writes too) and 0x08 (some sub-functions restart or silence).
+fn changes_data(function: FunctionCode) -> bool {
+    function.is_write() || matches!(function.value(), 0x08 | 0x17)
+}
+
+/// Exception 01 from a Modbus/TCP Security server: most often the role in our certificate
+/// may not make the request (MB-TCP-Security R-31). No other request is suggested: the same
+/// role would be refused it too.
+fn refused_by_role(function: FunctionCode) -> String {
+    let access = if changes_data(function) { "access = \"read-write\", " } else { "" };
+    format!(
+        "a Modbus/TCP Security server answers 01 to what the role in your certificate may not do: use a certificate \
+         whose role the server's roles file (--roles) gives {access}function {} and this unit and address, or have \
+         that role's entry allow them (the server's log names the role and the request it denied)",
+        function.value()
+    )
 }
 
 fn exception_hint(function: FunctionCode, code: ExceptionCode) -> Option<String> {
@@ -498,6 +549,31 @@ mod tests {
 
     fn timeout(heard: Option<Heard>) -> CliError {
         CliError::from(Error::Timeout { unit: 2, timeout: Duration::from_millis(300), attempts: 1, heard })
+    }
+
+    fn exception_hints_on(function: FunctionCode, code: u8, target: &Target) -> String {
+        let e = Error::Exception { unit: 1, function, code: ExceptionCode::from_u8(code) };
+        report(&CliError::from(e), Some(target), 1).hints.join("\n")
+    }
+
+    #[test]
+    fn a_refusal_through_a_role_or_a_gateway_rule_names_the_setting_that_lets_it_through() {
+        let fc06 = FunctionCode::WriteSingleRegister;
+        let direct = exception_hints_on(fc06, 0x01, &serial());
+        assert!(direct.contains("try --multiple"), "{direct}");
+        // A role that may not write is refused FC10 as well: nothing but the role is offered.
+        let mbaps = exception_hints_on(fc06, 0x01, &Target::Mbaps("127.0.0.1:802".into()));
+        assert!(!mbaps.contains("--multiple"), "{mbaps}");
+        assert!(mbaps.contains("access = \"read-write\", function 6"), "{mbaps}");
+        let read = exception_hints_on(FunctionCode::ReadInputRegisters, 0x01, &Target::Mbaps("h:802".into()));
+        assert!(read.contains("gives function 4 and this unit"), "{read}");
+        let tcp = Target::Tcp("127.0.0.1:502".into());
+        let gateway = exception_hints_on(fc06, 0x01, &tcp);
+        assert!(gateway.contains("without --read-only, and with 6 in --allow-functions"), "{gateway}");
+        let read = exception_hints_on(FunctionCode::ReadCoils, 0x01, &tcp);
+        assert!(read.contains("add 1 to its --allow-functions") && !read.contains("--read-only"), "{read}");
+        let path = exception_hints_on(FunctionCode::ReadCoils, 0x0A, &tcp);
+        assert!(path.contains("--route or --allow-units"), "{path}");
     }
 
     fn exception_03(function: FunctionCode) -> String {

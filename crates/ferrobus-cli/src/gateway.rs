@@ -5,7 +5,8 @@
 //! UNITS=LINE[:UNIT]` says which units go where (with one line and no `--route`, units 1-247
 //! go to it under their own addresses); a unit in no route gets exception 0x0A. The library
 //! ([`ferrobus::gateway`]) documents every answer the gateway gives and why. The counters of
-//! every line and unit are printed on SIGUSR1 and at exit. `--reverse` turns it around: a
+//! every line and unit, and the requests the front end refused by reason, are printed on
+//! SIGUSR1 and at exit. `--reverse` turns it around: a
 //! slave on `--port` for the units of `--route UNIT=HOST:PORT[/UNIT]`, each forwarded to its
 //! Modbus/TCP server. `--lines-file FILE` gives every line its own settings and units instead
 //! (see [`lines`]).
@@ -68,7 +69,8 @@ pub(crate) struct GatewayArgs {
     #[arg(long, default_value_t = 64, value_parser = clap::value_parser!(u32).range(1..))]
     queue: u32,
 
-    /// Requests one connection may have outstanding; past it the gateway stops reading it
+    /// Requests one connection may have outstanding, queued or on the line; past it the
+    /// gateway stops reading that connection until a reply has gone out (TCP holds it back)
     #[arg(long, default_value_t = 16, value_parser = clap::value_parser!(u32).range(1..))]
     pipeline: u32,
 
@@ -289,7 +291,7 @@ fn reverse_route(text: &str) -> Result<(u8, String, u8), CliError> {
 
 /// Prints every line's and unit's counters and the TCP side's on stderr.
 fn print(gateway: &Gateway, tcp: &TcpCounts, secure: bool) {
-    eprint!("{}", ferrobus::gateway::report(&gateway.stats()));
+    eprint!("{}", ferrobus::gateway::report(&gateway.stats(), &gateway.front_stats()));
     eprintln!(
         "tcp: {} connections served ({} open), {} refused over --max-connections, {} accept pauses out of file \
          descriptors; closed: {} idle, {} unfinished frame, {} bad MBAP header",

@@ -434,7 +434,8 @@ async fn open(connection: &ConnectArgs, args: &SimArgs) -> Result<(Transport, Se
             eprintln!("sim: serving on {}", transport.describe());
             Ok((transport, Served::Port(port)))
         }
-        Target::Tcp(addr) | Target::RtuTcp(addr) => {
+        // The sim's own TLS is --tls-cert: the client's --tls (Mbaps) was refused before.
+        Target::Tcp(addr) | Target::RtuTcp(addr) | Target::Mbaps(addr) => {
             let listener = tokio::net::TcpListener::bind(addr)
                 .await
                 .map_err(|e| ferrobus::Error::io(format!("listening on {addr}"), e))?;

@@ -20,6 +20,9 @@ pub(crate) enum Target {
     },
     /// Modbus/TCP to `host:port`.
     Tcp(String),
+    /// Modbus/TCP Security (`--tls`) to `host:port`: the server may refuse a request for the
+    /// role in our certificate.
+    Mbaps(String),
     /// RTU over TCP to `host:port`.
     RtuTcp(String),
 }
@@ -31,6 +34,7 @@ impl fmt::Display for Target {
                 write!(f, "{path} at {line} ({})", if *ascii { "ASCII" } else { "RTU" })
             }
             Target::Tcp(addr) => write!(f, "{addr} (Modbus/TCP)"),
+            Target::Mbaps(addr) => write!(f, "{addr} (Modbus/TCP Security)"),
             Target::RtuTcp(addr) => write!(f, "{addr} (RTU over TCP)"),
         }
     }

@@ -141,6 +141,14 @@ impl FunctionCode {
         v != 0 && v & Self::EXCEPTION_BIT == 0
     }
 
+    /// Whether this code is in one of the two ranges the spec leaves to users, 65–72
+    /// (0x41–0x48) and 100–110 (0x64–0x6E) (§5): no public code is there, and a vendor's
+    /// device may implement its own. Every other code that is neither public nor user-defined
+    /// is reserved or unassigned.
+    pub const fn is_user_defined(self) -> bool {
+        matches!(self.value(), 0x41..=0x48 | 0x64..=0x6E)
+    }
+
     /// Whether a request with this code writes data, the only kind a broadcast should carry
     /// (MODBUS over Serial Line V1.02 §2.1).
     pub const fn is_write(self) -> bool {
@@ -467,6 +475,17 @@ mod tests {
         assert!(FunctionCode::from_u8(0x41).is_valid_request_code());
         assert!(FunctionCode::from_u8(0x7F).is_valid_request_code());
         assert!(!FunctionCode::from_u8(0x83).is_valid_request_code());
+    }
+
+    #[test]
+    fn user_defined_codes_are_65_to_72_and_100_to_110_valid_requests_and_never_public_over_all_256_values() {
+        for v in 0..=u8::MAX {
+            let code = FunctionCode::from_u8(v);
+            assert_eq!(code.is_user_defined(), (65..=72).contains(&v) || (100..=110).contains(&v), "{v}");
+            if code.is_user_defined() {
+                assert!(code.is_valid_request_code() && !code.is_public(), "{v}");
+            }
+        }
     }
 
     #[test]

@@ -33,8 +33,14 @@ pub enum Outcome {
     Reply,
     /// The device answered with an exception: it is alive, and resending will not change it.
     Exception,
-    /// No reply within the response timeout.
+    /// No reply within the response timeout to a request the master checked: a public
+    /// function code, parsed.
     Timeout,
+    /// No reply within the response timeout to a request the master could not check: a
+    /// function code the spec does not define, or a PDU sent raw. Retried like a timeout, but
+    /// never held against the unit: a device may ignore a code it does not know, and one
+    /// client's odd request must not put a live unit in backoff for every other client.
+    UncheckedTimeout,
     /// A reply that was wrong (a mismatch or a malformed PDU).
     BadReply,
     /// The port failed (opening, reading or writing).
@@ -48,7 +54,7 @@ impl Outcome {
     /// Whether an attempt that ended so is worth another: the line may have lost the request or
     /// the reply.
     pub const fn is_retryable(self) -> bool {
-        matches!(self, Outcome::Timeout | Outcome::BadReply | Outcome::Io)
+        matches!(self, Outcome::Timeout | Outcome::UncheckedTimeout | Outcome::BadReply | Outcome::Io)
     }
 }
 
@@ -61,7 +67,8 @@ pub const fn should_retry(outcome: Outcome, attempts: u32, retries: u32) -> bool
 /// How a unit that stops answering is skipped, so that it does not stall the others.
 #[derive(Clone, Copy, PartialEq, Eq, Debug)]
 pub struct Backoff {
-    /// Consecutive timed-out requests before the unit is skipped.
+    /// Consecutive timed-out requests before the unit is skipped (only [`Outcome::Timeout`]
+    /// counts: silence to a request the master checked).
     pub after: u32,
     /// How long it is skipped the first time; each failed probe doubles it.
     pub initial: Duration,
@@ -128,7 +135,7 @@ impl UnitHealth {
                 }
                 false
             }
-            Outcome::BadReply | Outcome::Io | Outcome::Other => false,
+            Outcome::UncheckedTimeout | Outcome::BadReply | Outcome::Io | Outcome::Other => false,
         }
     }
 
@@ -187,7 +194,7 @@ mod tests {
 
     #[test]
     fn timeouts_bad_replies_and_io_failures_are_retried_until_the_retries_are_spent() {
-        for outcome in [Outcome::Timeout, Outcome::BadReply, Outcome::Io] {
+        for outcome in [Outcome::Timeout, Outcome::UncheckedTimeout, Outcome::BadReply, Outcome::Io] {
             assert!(should_retry(outcome, 1, 2));
             assert!(should_retry(outcome, 2, 2));
             assert!(!should_retry(outcome, 3, 2));
@@ -244,6 +251,20 @@ mod tests {
         // Still one timeout counted: the next makes two.
         health.record(Instant::from_secs(0), Outcome::Timeout, &B);
         assert_eq!(health.check(Instant::from_secs(0)), Admit::Skip { until: Instant::from_secs(5) });
+    }
+
+    #[test]
+    fn silence_to_unchecked_requests_never_puts_a_unit_in_backoff_nor_clears_its_record() {
+        let mut health = UnitHealth::default();
+        let t = Instant::from_secs(0);
+        for _ in 0..10 {
+            assert!(!health.record(t, Outcome::UncheckedTimeout, &B));
+        }
+        assert_eq!(health, UnitHealth::default(), "ten unchecked timeouts count for nothing");
+        health.record(t, Outcome::Timeout, &B);
+        health.record(t, Outcome::UncheckedTimeout, &B);
+        health.record(t, Outcome::Timeout, &B);
+        assert_eq!(health.check(t), Admit::Skip { until: Instant::from_secs(5) }, "two checked ones still do");
     }
 
     #[test]

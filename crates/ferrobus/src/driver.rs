@@ -6,7 +6,8 @@
 //! from the channel, hands back completions, and reopens the port after an IO error. Everything else — gaps, matching, timeouts — is the engine's.
 //! On top it asks the core's [`retry`](ferrobus_proto::retry) policy what needs more than one
 //! transaction: retries, per-unit backoff so that a dead device costs one timeout per backoff
-//! period instead of one per poll, and a backoff on IO failures — after each failed open, read
+//! period instead of one per poll (only silence to a checked request counts: a raw PDU or a
+//! user or vendor code the device ignores never puts it in backoff), and a backoff on IO failures — after each failed open, read
 //! or write the next open waits [`IO_BACKOFF_INITIAL`], doubling up to [`IO_BACKOFF_MAX`], so
 //! that a dead port costs a few attempts a second instead of a busy loop, and retries span time
 //! enough to ride out a short loss.
@@ -132,11 +133,11 @@ impl<F: Framing + Send + 'static> Driver<F> {
                 Err(Error::NotSameDevice { .. }) => {}
                 _ => self.io.succeeded(),
             }
-            if should_retry(outcome(&result), attempts, retries) {
+            if should_retry(outcome(command, &result), attempts, retries) {
                 tracing::debug!(unit, %function, attempts, "retrying: {:?}", result);
                 continue;
             }
-            self.record_health(unit, &result);
+            self.record_health(command, &result);
             return match result {
                 Err(Error::Timeout { unit, timeout, .. }) => Err(Error::Timeout { unit, timeout, attempts, heard }),
                 other => other,
@@ -206,13 +207,14 @@ impl<F: Framing + Send + 'static> Driver<F> {
         }
     }
 
-    fn record_health(&mut self, unit: u8, result: &Result<Reply, Error>) {
+    fn record_health(&mut self, command: &Command, result: &Result<Reply, Error>) {
         let Some(backoff) = self.config.backoff else { return };
+        let unit = command.unit;
         // A broadcast gets no reply, so it says nothing of any unit's health.
         if ferrobus_proto::codes::unit::is_broadcast(unit, self.transport.framing() != crate::port::Framing::Mbap) {
             return;
         }
-        let outcome = outcome(result);
+        let outcome = outcome(command, result);
         let now = self.pump.clock().now();
         let health = self.health.entry(unit).or_default();
         if health.record(now, outcome, &backoff) {
@@ -250,16 +252,24 @@ impl<F: Framing> Session<Master<F>> for Transaction<'_> {
     }
 }
 
-/// What the retry policy sees of a result.
-fn outcome(result: &Result<Reply, Error>) -> Outcome {
+/// What the retry policy sees of a result: silence counts against the unit only after a
+/// request the engine checked (parsed, with a public function code); after a raw one or a
+/// user or vendor code, which a device may ignore, it is [`Outcome::UncheckedTimeout`].
+fn outcome(command: &Command, result: &Result<Reply, Error>) -> Outcome {
     match result {
         Ok(_) => Outcome::Reply,
         Err(Error::Exception { .. }) => Outcome::Exception,
+        Err(Error::Timeout { .. }) if command.raw || !is_public(&command.pdu) => Outcome::UncheckedTimeout,
         Err(Error::Timeout { .. }) => Outcome::Timeout,
         Err(Error::BadReply { .. }) => Outcome::BadReply,
         Err(Error::Io { .. }) => Outcome::Io,
         Err(_) => Outcome::Other,
     }
+}
+
+/// Whether `pdu`'s function code is one the spec defines.
+fn is_public(pdu: &[u8]) -> bool {
+    pdu.first().is_some_and(|&code| FunctionCode::from_u8(code).is_public())
 }
 
 /// Turns the engine's completion into the driver's result.

@@ -5,6 +5,7 @@
 use std::collections::BTreeMap;
 use std::time::Duration;
 
+use ferrobus::gateway::stats::Refusal;
 use ferrobus::gateway::{
     AllowAll, Authorize, Gateway, GatewayConfig, Inbound, LineConfig, Route, Routes, Rules, Timeouts,
 };
@@ -19,7 +20,8 @@ use ferrobus_proto::slave::{Admission, Handler, Slave, SlaveConfig, UnitSet};
 use tokio::io::{AsyncReadExt, AsyncWriteExt, DuplexStream};
 
 /// Devices on the line: 100 holding registers each, every request counted by unit; the
-/// units in `dead` never answer.
+/// units in `dead` never answer, and no unit answers a function code the spec does not
+/// define (as libmodbus's server, silent on codes it does not know).
 #[derive(Default)]
 struct Bus {
     registers: BTreeMap<u8, [u16; 100]>,
@@ -30,13 +32,14 @@ struct Bus {
 }
 
 impl Handler for Bus {
-    fn admit(&mut self, unit: u8, broadcast: bool, _request: &Request<'_>) -> Admission {
+    fn admit(&mut self, unit: u8, broadcast: bool, request: &Request<'_>) -> Admission {
         if broadcast {
             self.broadcasts += 1;
             return Admission::Serve;
         }
         *self.seen.entry(unit).or_default() += 1;
-        if self.dead.contains(&unit) { Admission::Ignore } else { Admission::Serve }
+        let ignored = matches!(request, Request::Custom(_));
+        if ignored || self.dead.contains(&unit) { Admission::Ignore } else { Admission::Serve }
     }
     fn read_holding_registers(&mut self, unit: u8, start: u16, out: &mut [u16]) -> Result<(), ExceptionCode> {
         let regs = self.registers.entry(unit).or_insert([0; 100]);
@@ -352,4 +355,87 @@ async fn rtu_over_tcp_in_a_framed_request_gets_a_framed_reply_with_its_crc() {
     assert_eq!(reply, request.as_slice(), "a write's echo, framed");
     assert!(crc_ok(&reply));
     assert_eq!(bus.lock().registers[&2][3], 0x2A);
+}
+
+#[tokio::test(start_paused = true)]
+async fn invalid_function_codes_and_malformed_pdus_get_01_or_03_at_once_and_never_reach_the_line() {
+    let bus = Shared::new(Bus::default());
+    let gw = gateway(&bus, Setup::default()).await;
+    let mut junk = connect(&gw, Box::new(AllowAll));
+    let cases: [(&[u8], [u8; 2]); 9] = [
+        (&[0x00, 0x00, 0x00, 0x00, 0x01], [0x80, 0x01]),
+        (&[0x83, 0x00, 0x00, 0x00, 0x01], [0x83, 0x01]),
+        (&[0xFF, 0x00, 0x00, 0x00, 0x01], [0xFF, 0x01]),
+        // Reserved by the spec (0x09, 0x5A) and unassigned (0x30): no device's to take.
+        (&[0x09, 0x00, 0x00], [0x89, 0x01]),
+        (&[0x5A, 0x00], [0xDA, 0x01]),
+        (&[0x30], [0xB0, 0x01]),
+        // Public codes with their fields missing, a count out of range, a byte count that
+        // disagrees.
+        (&[0x03, 0x00, 0x00], [0x83, 0x03]),
+        (&[0x03, 0x00, 0x00, 0x00, 0x00], [0x83, 0x03]),
+        (&[0x10, 0x00, 0x00, 0x00, 0x01, 0x04, 0x00, 0x01], [0x90, 0x03]),
+    ];
+    let started = tokio::time::Instant::now();
+    for (t, (pdu, answer)) in (1..).zip(cases) {
+        assert_eq!(ask(&mut junk, t, 1, pdu).await, answer, "{pdu:02X?}");
+    }
+    assert!(started.elapsed() < Duration::from_millis(1), "answered at once, not after {:?}", started.elapsed());
+    assert!(bus.lock().seen.is_empty(), "nothing reached the line: {:?}", bus.lock().seen);
+    assert_eq!(gw.stats()[0].total.requests, 0);
+    let front = gw.front_stats();
+    assert_eq!(
+        (front.refused(Refusal::NotARequest), front.refused(Refusal::Reserved), front.total()),
+        (3, 3, 9),
+        "{front}"
+    );
+    assert_eq!((front.refused(Refusal::Truncated), front.refused(Refusal::Quantity)), (1, 1), "{front}");
+    assert_eq!(front.refused(Refusal::ByteCount), 1, "{front}");
+    // The unit is as alive as before, for this client and another.
+    let mut other = connect(&gw, Box::new(AllowAll));
+    assert_eq!(ask(&mut other, 1, 1, &READ_0_2).await, [0x03, 0x04, 0, 0, 0, 0]);
+    assert_eq!(ask(&mut junk, 99, 1, &READ_0_2).await, [0x03, 0x04, 0, 0, 0, 0]);
+}
+
+#[tokio::test(start_paused = true)]
+async fn user_defined_codes_a_device_ignores_never_put_a_live_unit_in_backoff_for_another_client() {
+    let bus = Shared::new(Bus::default());
+    let gw = gateway(&bus, Setup::default()).await;
+    let mut odd = connect(&gw, Box::new(AllowAll));
+    let mut reader = connect(&gw, Box::new(AllowAll));
+    // Five in a row, more than the backoff's three, with nobody else asking meanwhile.
+    for t in 0..5u16 {
+        assert_eq!(ask(&mut odd, t, 1, &[0x41, 0x01, 0x02]).await, [0xC1, 0x0B], "user code {t}: silence is 0x0B");
+    }
+    for t in 0..10u16 {
+        assert_eq!(ask(&mut reader, t, 1, &READ_0_2).await, [0x03, 0x04, 0, 0, 0, 0], "read {t}");
+        assert_eq!(ask(&mut odd, 100 + t, 1, &[0x64]).await, [0xE4, 0x0B]);
+    }
+    let unit = &gw.stats()[0].units[&1];
+    assert_eq!((unit.replies, unit.timeouts, unit.skipped), (10, 15, 0), "{unit}");
+    assert_eq!(bus.lock().seen[&1], 10 + 15 * 2, "every user code forwarded, with its retry");
+    assert_eq!(gw.front_stats().total(), 0);
+}
+
+#[tokio::test(start_paused = true)]
+async fn a_client_that_writes_200_requests_at_once_never_has_more_than_its_pipeline_outstanding() {
+    let bus = Shared::new(Bus::default());
+    let gw = gateway(&bus, Setup::default()).await;
+    let (mut client, server) = tokio::io::duplex(8192);
+    let front = gw.clone();
+    let timeouts = Timeouts { pipeline: 16, ..Timeouts::default() };
+    tokio::spawn(async move {
+        let mut authorize = AllowAll;
+        front.serve_connection(server, "flood", Inbound::Mbap, &mut authorize, timeouts).await
+    });
+    let burst: Vec<u8> = (0..200u16).flat_map(|t| mbap(t, 1, &READ_0_2)).collect();
+    client.write_all(&burst).await.unwrap();
+    for t in 0..200u16 {
+        assert_eq!(reply(&mut client).await, (t, 1, vec![0x03, 0x04, 0, 0, 0, 0]), "reply {t}, in order, served");
+    }
+    let stats = &gw.stats()[0];
+    // Sixteen outstanding at most, on the line or in its queue (all sixteen in the queue while
+    // the worker is between two requests).
+    assert!(stats.queue_max <= 16, "{} requests of one connection queued at once", stats.queue_max);
+    assert_eq!((stats.total.replies, stats.total.busy), (200, 0), "{}", stats.total);
 }

@@ -270,6 +270,158 @@ fn the_gateway_counts_crc_errors_apart_from_timeouts_and_prints_them_on_sigusr1(
     assert!(unit2.contains("timeouts 1 crc-errors 0"), "{unit2}");
 }
 
+// The hostile-input and load battery, against the gateway in front of a simulated line: a
+// well-behaved client is served throughout, and no invalid PDU reaches the line.
+
+/// The well-behaved client's read: register 0 of the generic sim, answered with data.
+#[track_caller]
+fn still_served(good: &mut TcpStream, t: u16, after: &str) {
+    assert_eq!(ask(good, t, 1, &READ_0), [0x03, 0x02, 0x00, 0x00], "the good client, after {after}");
+}
+
+/// The counters the gateway prints on SIGUSR1: the line's total, and the front end's line.
+fn counters(gw: &Behind) -> (String, String) {
+    let pid = gw.gateway.id();
+    assert!(Command::new("kill").args(["-USR1", &pid.to_string()]).status().unwrap().success());
+    let line = gw.gateway.wait_for(Stream::Err, |l| l.starts_with("line "), STEP);
+    let front = gw.gateway.wait_for(Stream::Err, |l| l.starts_with("front: refused"), STEP);
+    (line, front)
+}
+
+#[test]
+fn through_garbage_a_huge_length_truncated_headers_and_slowloris_the_gateway_keeps_serving_a_good_client() {
+    let Some(_turn) = require(&[Need::Socat]) else { return };
+    let gw = behind(generic_sim, &["--frame-timeout", "2s"]);
+    let mut good = connect_to(&gw.addr);
+    still_served(&mut good, 1, "connecting");
+    // Garbage: not MBAP (protocol id 0xA5A5): closed, nothing answered.
+    let mut garbage = connect_to(&gw.addr);
+    garbage.write_all(&[0xA5; 300]).unwrap();
+    assert!(closed_silently(&mut garbage), "garbage closes its connection");
+    still_served(&mut good, 2, "garbage");
+    // A length field of 65535: closed, and the write behind it never executed.
+    let mut huge = connect_to(&gw.addr);
+    let mut input = vec![0x00, 0x01, 0x00, 0x00, 0xFF, 0xFF, 0x01];
+    input.extend(mbap(2, 1, &[0x06, 0x00, 0x00, 0x12, 0x34]));
+    huge.write_all(&input).unwrap();
+    assert!(closed_silently(&mut huge), "a huge length closes its connection");
+    still_served(&mut good, 3, "a huge length field");
+    // Truncated headers and frames, and slowloris connections that send a byte now and
+    // then: the good client is served while they hang, and each is closed at the frame timeout.
+    let mut hanging: Vec<TcpStream> = Vec::new();
+    for cut in [1, 3, 6, 8, 11] {
+        let mut stream = connect_to(&gw.addr);
+        stream.write_all(&mbap(9, 1, &READ_0)[..cut]).unwrap();
+        hanging.push(stream);
+    }
+    let slow_frame = mbap(10, 1, &[0x06, 0x00, 0x00, 0x00, 0x07]);
+    let mut slow: Vec<TcpStream> = (0..20).map(|_| connect_to(&gw.addr)).collect();
+    for (i, byte) in slow_frame.iter().take(6).enumerate() {
+        for stream in &mut slow {
+            // A connection the gateway closed meanwhile refuses the byte: that is the point.
+            let _ = stream.write_all(&[*byte]);
+        }
+        still_served(&mut good, 10 + u16::try_from(i).unwrap(), "slowloris bytes");
+        std::thread::sleep(Duration::from_millis(100));
+    }
+    for (i, stream) in hanging.iter_mut().chain(slow.iter_mut()).enumerate() {
+        assert!(closed_silently(stream), "half a frame on connection {i} is closed, never answered");
+    }
+    still_served(&mut good, 20, "the truncated and slow connections");
+    let mut fresh = connect_to(&gw.addr);
+    assert_eq!(ask(&mut fresh, 1, 1, &READ_0), [0x03, 0x02, 0x00, 0x00], "nothing of theirs was written");
+}
+
+/// Whether the gateway forwards `pdu`: the core parses it and its code is public or
+/// user-defined (the test's oracle, from the spec's code ranges).
+fn forwardable(pdu: &[u8]) -> bool {
+    use ferrobus_proto::FunctionCode;
+    use ferrobus_proto::pdu::Request;
+    let code = FunctionCode::from_u8(pdu[0]);
+    (code.is_public() || code.is_user_defined()) && Request::parse(pdu).is_ok()
+}
+
+#[test]
+fn all_256_function_codes_through_the_gateway_refused_ones_get_01_or_03_at_once_and_never_reach_the_line() {
+    let Some(_turn) = require(&[Need::Socat]) else { return };
+    let gw = behind(generic_sim, &[]);
+    let mut hostile = connect_to(&gw.addr);
+    let mut good = connect_to(&gw.addr);
+    let mut forwarded = 0u64;
+    for code in 0..=u8::MAX {
+        // Address 16: a write that gets through leaves the good client's register 0 alone.
+        let pdu = [code, 0x00, 0x10, 0x00, 0x01];
+        let t = u16::from(code);
+        let reply = ask(&mut hostile, t, 1, &pdu);
+        if forwardable(&pdu) {
+            forwarded += 1;
+            assert_eq!(reply[0] & 0x7F, code, "function {code:#04x}: the device's answer to it");
+        } else {
+            let illegal = !ferrobus_proto::FunctionCode::from_u8(code).is_public();
+            let expected = if illegal { 0x01 } else { 0x03 };
+            assert_eq!(reply, [code | 0x80, expected], "function {code:#04x}: refused by the gateway");
+        }
+        still_served(&mut good, t, &format!("function {code:#04x}"));
+    }
+    let (line, front) = counters(&gw);
+    // Every good read, and only the forwardable requests, reached the line.
+    assert!(line.contains(&format!("requests {} ", 256 + forwarded)), "{line}");
+    assert!(line.contains(" skipped 0 "), "no unit was put in backoff: {line}");
+    assert!(front.starts_with(&format!("front: refused {} invalid requests", 256 - forwarded)), "{front}");
+    assert!(front.contains("not-a-request 129"), "0x00 and the 128 codes with bit 7: {front}");
+}
+
+#[test]
+fn a_raw_client_that_writes_200_requests_at_once_is_held_back_and_every_request_answered_in_order() {
+    let Some(_turn) = require(&[Need::Socat]) else { return };
+    let gw = behind(generic_sim, &["--pipeline", "16", "--queue", "64"]);
+    let mut flood = connect_to(&gw.addr);
+    let mut good = connect_to(&gw.addr);
+    let burst: Vec<u8> = (0..200u16).flat_map(|t| mbap(t, 1, &READ_0)).collect();
+    flood.write_all(&burst).unwrap();
+    still_served(&mut good, 1, "a burst of 200 from another connection");
+    for t in 0..200u16 {
+        let reply = read_frame(&mut flood).expect("a reply to every request");
+        assert_eq!(reply, mbap(t, 1, &[0x03, 0x02, 0x00, 0x00]), "reply {t}: in order, served, never 0x06");
+    }
+    let (line, _) = counters(&gw);
+    let max: usize = line
+        .split("(max ")
+        .nth(1)
+        .and_then(|rest| rest.split(')').next())
+        .and_then(|n| n.parse().ok())
+        .unwrap_or_else(|| panic!("no queue maximum in {line}"));
+    // Sixteen of the flood's (all queued while the worker is between two requests), and the
+    // good client's one.
+    assert!(max <= 17, "one connection of pipeline 16 (and the good one) queued {max} at once: {line}");
+    eprintln!("200 requests written at once with --pipeline 16: the line's queue held at most {max}");
+    assert!(line.contains(" busy 0 "), "{line}");
+}
+
+// Refusals by the gateway's rules: the client's hint names what lets the request through.
+
+#[test]
+fn a_write_refused_by_a_read_only_gateway_gets_a_hint_naming_the_gateway_setting_and_following_it_works() {
+    let Some(_turn) = require(&[Need::Socat]) else { return };
+    let gw = behind(generic_sim, &["--read-only"]);
+    let refused = ferrobus(&gw.link()).run(&["write", "register", "5", "7"]).exception(1);
+    assert!(refused.stderr.contains("run it without --read-only"), "{}", refused.stderr);
+    // FC10 is no way round a read-only gateway, which is why the hint names the gateway.
+    ferrobus(&gw.link()).run(&["write", "register", "5", "7", "--multiple"]).exception(1);
+    drop(gw);
+    let gw = behind(generic_sim, &[]);
+    ferrobus(&gw.link()).run(&["write", "register", "5", "7"]).ok();
+    assert_eq!(ferrobus(&gw.link()).values(&["read", "holding", "5"]), words(&[7]));
+    drop(gw);
+    // FC06 kept out by the function allowlist: both ways the hint names go through.
+    let gw = behind(generic_sim, &["--allow-functions", "3,16"]);
+    let refused = ferrobus(&gw.link()).run(&["write", "register", "5", "8"]).exception(1);
+    assert!(refused.stderr.contains("try --multiple"), "{}", refused.stderr);
+    assert!(refused.stderr.contains("with 6 in --allow-functions"), "{}", refused.stderr);
+    ferrobus(&gw.link()).run(&["write", "register", "5", "8", "--multiple"]).ok();
+    assert_eq!(ferrobus(&gw.link()).values(&["read", "holding", "5"]), words(&[8]));
+}
+
 // Reverse: a serial master through the gateway to Modbus/TCP servers.
 
 /// `ferrobus gateway --reverse` on one end of a socat pair; the master's end of the line.

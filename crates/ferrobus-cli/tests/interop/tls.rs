@@ -292,3 +292,36 @@ fn the_gateway_serves_mbaps_to_a_serial_sim_with_roles_checked_per_request() {
     let refused = ferrobus(&gateway, &pki.ca(), None, &["read", "holding", "9"]);
     assert!(text(&refused.stderr).contains("requires a client certificate"), "stderr: {}", text(&refused.stderr));
 }
+
+#[test]
+fn a_write_the_gateway_refuses_for_a_role_gets_a_hint_naming_the_role_setting_and_following_it_works() {
+    let Some(_turn) = require(&[]) else { return };
+    let pki = Pki::new("test CA");
+    let (_sim, pty) = sim_pty(&["--profile", "generic"]);
+    let roles = pki.dir().join("roles.toml");
+    std::fs::write(&roles, ROLES).unwrap();
+    let server = pki.server();
+    let addr = format!("127.0.0.1:{}", free_port());
+    let mut command = Command::new(env!("CARGO_BIN_EXE_ferrobus"));
+    command.args(["--port"]).arg(&pty).args(["gateway", "--listen", &addr]);
+    command.arg("--tls-cert").arg(&server.cert).arg("--tls-key").arg(&server.key);
+    command.arg("--tls-ca").arg(pki.ca()).arg("--roles").arg(&roles);
+    let proc = Proc::spawn("ferrobus gateway (mbaps)", &mut command);
+    proc.wait_for(Stream::Err, |l| l.starts_with("gateway: listening on"), LIMIT);
+    let gateway = Mbaps { proc, addr };
+    let viewer = pki.client("viewer", Some((UTF8_STRING, "viewer")));
+    let refused = ferrobus(&gateway, &pki.ca(), Some(&viewer), &["write", "register", "9", "5"]);
+    let hint = text(&refused.stderr);
+    assert_eq!(refused.status.code(), Some(1), "stderr: {hint}");
+    // The role that may not write FC06 may not write FC10 either: no other request is offered.
+    assert!(!hint.contains("--multiple"), "{hint}");
+    assert!(hint.contains("access = \"read-write\", function 6"), "{hint}");
+    let multiple = ferrobus(&gateway, &pki.ca(), Some(&viewer), &["write", "register", "9", "5", "--multiple"]);
+    assert_eq!(multiple.status.code(), Some(1), "FC10 is refused the viewer too: {}", text(&multiple.stderr));
+    // Following the hint: a certificate whose role has access = "read-write" (ROLES' operator).
+    let operator = pki.client("operator", Some((UTF8_STRING, "operator")));
+    let wrote = ferrobus(&gateway, &pki.ca(), Some(&operator), &["write", "register", "9", "5"]);
+    assert!(wrote.status.success(), "stderr: {}", text(&wrote.stderr));
+    let read = ferrobus(&gateway, &pki.ca(), Some(&viewer), &["read", "holding", "9", "--json"]);
+    assert!(text(&read.stdout).contains('5'), "stdout: {}", text(&read.stdout));
+}

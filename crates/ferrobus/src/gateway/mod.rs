@@ -19,6 +19,7 @@
 //! | situation | answer |
 //! |---|---|
 //! | the unit's reply, or its exception | forwarded as it came |
+//! | a PDU no device could take: code 0x00, 0x80–0xFF, reserved; fields missing or out of range | 0x01 or 0x03 at once, never forwarded (see below) |
 //! | a unit in no routing table | 0x0A Gateway Path Unavailable |
 //! | a read to unit 0 (a broadcast: no device answers it) | 0x0A |
 //! | the line's queue full | 0x06 Server Device Busy, at once |
@@ -47,6 +48,24 @@
 //! guard, to a request of the same unit, function and length, cannot be told from the next
 //! one's by any gateway: size the timeout to the device.)
 //!
+//! The front end checks every request before anything else, with the core's parser and
+//! function-code table: a code that is no request code (0x00, the exception bit), or one the
+//! spec reserves, gets 0x01 Illegal Function; a public code whose PDU is malformed gets 0x03
+//! Illegal Data Value (0x02 for a range past 0xFFFF); both at once, to the sender only, and
+//! counted by reason ([`Gateway::front_stats`]). User-defined codes (65–72, 100–110) are
+//! forwarded as they came: a vendor's device may take them, and only it knows their layout.
+//! A unit's backoff counts only silence to a request the master checked (a public code,
+//! parsed), so one client's odd requests — a user code the device ignores — never make a live
+//! unit answer 0x0B to every other client.
+//!
+//! One connection may have [`Timeouts::pipeline`] requests outstanding (queued or on the
+//! line); past it the gateway stops reading that connection until a reply has gone out, so a
+//! client that writes faster than the line serves is held back by TCP's flow control. That is
+//! how a TCP server pushes back, and it loses nothing: a Modbus/TCP client that pipelines
+//! gets every request answered, in order, where a 0x06 would fail requests it could simply
+//! have waited for (the lines' queues, shared by every connection, still answer 0x06 when
+//! full).
+//!
 //! The reverse direction, a slave on the serial line forwarding to Modbus/TCP servers, is
 //! [`serve_reverse`].
 //!
@@ -59,6 +78,7 @@ mod cache;
 mod front;
 mod line;
 mod reverse;
+mod screen;
 pub mod stats;
 
 use std::io;
@@ -76,7 +96,7 @@ pub use authorize::{AllowAll, Authorize, Chain, Rules};
 use cache::Cache;
 use line::{Job, LineQueue};
 pub use reverse::{OnFailure, Upstream, serve_reverse};
-use stats::LineStats;
+use stats::{FrontStats, LineStats};
 
 use crate::server::TcpLimits;
 use crate::{Client, ClientConfig, Error, Transport};
@@ -191,7 +211,8 @@ pub struct Timeouts {
     pub idle: Option<Duration>,
     /// Close a connection whose frame begun is not finished this long after.
     pub frame: Option<Duration>,
-    /// Requests one connection may have outstanding; past it its socket is not read.
+    /// Requests one connection may have outstanding, queued or on the line (at least 1);
+    /// past it its socket is not read until a reply has gone out.
     pub pipeline: usize,
 }
 
@@ -229,6 +250,7 @@ pub(crate) struct Inner {
     broadcast_ack: bool,
     cache: Option<Arc<Cache>>,
     connections: AtomicU64,
+    front: Mutex<FrontStats>,
 }
 
 impl Gateway {
@@ -259,6 +281,7 @@ impl Gateway {
             broadcast_ack: config.broadcast_ack,
             cache,
             connections: AtomicU64::new(0),
+            front: Mutex::default(),
         };
         Ok(Gateway { inner: Arc::new(inner) })
     }
@@ -266,6 +289,11 @@ impl Gateway {
     /// What each line has counted so far.
     pub fn stats(&self) -> Vec<LineStats> {
         self.inner.lines.iter().map(|q| q.stats().clone()).collect()
+    }
+
+    /// What the front end has refused so far, before any line, by reason.
+    pub fn front_stats(&self) -> FrontStats {
+        self.inner.front().clone()
     }
 
     /// Serves one client connection on `stream` until the client closes it (`Ok`), it fails,
@@ -327,6 +355,10 @@ impl Inner {
         self.connections.fetch_add(1, Ordering::Relaxed)
     }
 
+    fn front(&self) -> std::sync::MutexGuard<'_, FrontStats> {
+        self.front.lock().unwrap_or_else(std::sync::PoisonError::into_inner)
+    }
+
     fn cached(&self, unit: u8, pdu: &[u8]) -> Option<Vec<u8>> {
         let reply = self.cache.as_ref()?.get(unit, pdu)?;
         if let Some(line) = self.routes.get(unit).and_then(|r| self.lines.get(r.line)) {
@@ -378,7 +410,10 @@ impl Inner {
     }
 }
 
-/// The counters of every line, one block each: what SIGUSR1 and the exit print.
-pub fn report(stats: &[LineStats]) -> String {
-    stats.iter().map(ToString::to_string).collect()
+/// The counters of every line, one block each, then the front end's refusals: what SIGUSR1
+/// and the exit print.
+pub fn report(stats: &[LineStats], front: &FrontStats) -> String {
+    let mut report: String = stats.iter().map(ToString::to_string).collect();
+    report.push_str(&front.to_string());
+    report
 }

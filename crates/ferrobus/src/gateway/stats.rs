@@ -1,10 +1,13 @@
-//! What a gateway counts, per line and per unit, and how it is shown.
+//! What a gateway counts, per line and per unit, and how it is shown; and what its front
+//! end refused before any line, by reason.
 
 use std::collections::BTreeMap;
 use std::fmt;
 use std::time::Duration;
 
 use hdrhistogram::Histogram;
+
+pub use super::screen::Refusal;
 
 /// How one forwarded request ended, for the counters.
 #[derive(Clone, Copy, PartialEq, Eq, Debug)]
@@ -168,5 +171,59 @@ impl fmt::Display for LineStats {
             writeln!(f, "  unit {unit}: {counters}")?;
         }
         Ok(())
+    }
+}
+
+/// What the front end refused before any line saw it ([`Refusal`]: why), over every
+/// connection.
+#[derive(Clone, Debug, Default, PartialEq, Eq)]
+pub struct FrontStats {
+    /// Requests refused, by reason.
+    pub refused: BTreeMap<Refusal, u64>,
+}
+
+impl FrontStats {
+    /// Counts one refusal.
+    pub(crate) fn count(&mut self, reason: Refusal) {
+        let n = self.refused.entry(reason).or_insert(0);
+        *n = n.saturating_add(1);
+    }
+
+    /// Requests refused for `reason`.
+    pub fn refused(&self, reason: Refusal) -> u64 {
+        self.refused.get(&reason).copied().unwrap_or(0)
+    }
+
+    /// Requests refused in all.
+    pub fn total(&self) -> u64 {
+        self.refused.values().fold(0, |sum, n| sum.saturating_add(*n))
+    }
+}
+
+/// `front: refused 3 (not-a-request 1, truncated 2)`, one line.
+impl fmt::Display for FrontStats {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        write!(f, "front: refused {} invalid requests", self.total())?;
+        let reasons: Vec<String> = self.refused.iter().map(|(reason, n)| format!("{reason} {n}")).collect();
+        if !reasons.is_empty() {
+            write!(f, " ({})", reasons.join(", "))?;
+        }
+        writeln!(f)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn front_stats_count_by_reason_and_show_each_with_the_total() {
+        let mut front = FrontStats::default();
+        assert_eq!(front.to_string(), "front: refused 0 invalid requests\n");
+        front.count(Refusal::Truncated);
+        front.count(Refusal::NotARequest);
+        front.count(Refusal::Truncated);
+        assert_eq!((front.refused(Refusal::Truncated), front.refused(Refusal::Reserved), front.total()), (2, 0, 3));
+        assert_eq!(front.to_string(), "front: refused 3 invalid requests (not-a-request 1, truncated 2)\n");
     }
 }
