@@ -575,7 +575,7 @@ mod tests {
     fn the_summary_reports_a_reply_21_ms_late_as_21_ms_not_clamped_to_microseconds() {
         let mut counters = Counters::default();
         counters.record_lateness(Duration::from_micros(40));
-        counters.record_lateness(Duration::from_micros(21_000));
+        counters.record_lateness(Duration::from_millis(21));
         let max = counters.lateness_us.max();
         assert!(counters.lateness_us.equivalent(max, 21_000), "max {max} µs");
         let line = counters.lateness_line().expect("two replies were counted");
