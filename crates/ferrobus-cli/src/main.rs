@@ -177,6 +177,19 @@ enum Command {
 }
 
 impl Command {
+    /// How the command's addresses are numbered, if it takes any (`--one-based`, `--modicon`).
+    fn address_args(&self) -> Option<address::AddressArgs> {
+        match self {
+            Command::Read(args) => Some(args.address_args),
+            Command::Write(args) => Some(args.address_args()),
+            Command::Mask(args) => Some(args.address_args),
+            Command::ReadWrite(args) => Some(args.address_args),
+            Command::Poll(args) => Some(args.address_args),
+            Command::Monitor(args) => Some(args.address_args),
+            _ => None,
+        }
+    }
+
     /// Whether the command talks to a device.
     fn needs_bus(&self) -> bool {
         !matches!(
@@ -400,7 +413,8 @@ fn main() -> ExitCode {
         Err(error) => {
             let target = cli.connection.target().ok();
             let unit = cli.connection.unit.first().copied().unwrap_or(1);
-            exit::report(&error, target.as_ref(), unit).print();
+            let numbering = cli.command.address_args().map(|a| cli.connection.numbering(a)).unwrap_or_default();
+            exit::report_numbered(&error, target.as_ref(), unit, &numbering).print();
             error.exit().into()
         }
     }

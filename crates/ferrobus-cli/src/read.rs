@@ -3,7 +3,7 @@
 use clap::Args;
 use ferrobus_proto::PduError;
 
-use crate::address::{ADDRESS_HELP, Address, AddressArgs, Table, split};
+use crate::address::{ADDRESS_HELP, AddressArgs, Table, split};
 use crate::connect::ConnectArgs;
 use crate::exit::CliError;
 use crate::interrupt::Interrupt;
@@ -70,10 +70,7 @@ pub(crate) async fn run(connection: &ConnectArgs, args: &ReadArgs) -> Result<(),
     connection.refuse_broadcast_read()?;
     let (address, values) = match connection.named(&args.address, args.table, args.values)? {
         Some(named) => named,
-        None => (
-            Address::parse(&args.address, args.table, connection.address_args(args.address_args)?)?,
-            connection.values(args.values)?,
-        ),
+        None => (connection.address(&args.address, args.table, args.address_args)?, connection.values(args.values)?),
     };
     let table = args.table;
     if table.is_bits() && values.kind != ValueType::U16 {
