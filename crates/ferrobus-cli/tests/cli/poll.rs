@@ -168,7 +168,9 @@ fn sigterm_flushes_every_record_then_prints_the_summary_and_exits_0() {
     std::io::Read::read_to_string(&mut child.stderr.take().unwrap(), &mut summary).unwrap();
     let polls = summary_count(&summary, "u1 holding 0x0000", "polls");
     assert_eq!(polls, records.len() as u64, "every poll counted was written: {summary}");
-    assert!(summary.starts_with(&format!("poll: {polls} polls, {polls} ok")), "{summary}");
+    // On a loaded machine an overrun warning may come first: the summary is the line after it.
+    let total = summary.lines().find(|l| l.starts_with("poll: ") && l.contains(" polls, ")).unwrap_or_default();
+    assert!(total.starts_with(&format!("poll: {polls} polls, {polls} ok")), "{summary}");
 }
 
 #[test]
