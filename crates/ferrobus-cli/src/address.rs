@@ -401,6 +401,33 @@ pub(crate) fn split(start: u16, total: usize, width: usize, max: usize) -> Vec<(
     out
 }
 
+/// The per-request limit: `--max-per-request` or the spec's, checked against the spec and
+/// the value width.
+pub(crate) fn per_request(
+    max: Option<u16>,
+    spec_max: usize,
+    width: usize,
+    kind: crate::value::ValueType,
+) -> Result<usize, CliError> {
+    let Some(max) = max else { return Ok(spec_max) };
+    let max = usize::from(max);
+    if max > spec_max {
+        return Err(CliError::Usage(format!("--max-per-request {max} is above the spec's {spec_max} per request")));
+    }
+    if max < width {
+        return Err(CliError::Usage(format!(
+            "--max-per-request {max} cannot hold one {} value ({width} registers)",
+            kind.name()
+        )));
+    }
+    Ok(max)
+}
+
+/// The number of items as a request quantity (every split piece is at most 65535).
+pub(crate) fn quantity(n: usize) -> u16 {
+    u16::try_from(n).unwrap_or(u16::MAX)
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

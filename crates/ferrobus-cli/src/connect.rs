@@ -173,8 +173,8 @@ impl ConnectArgs {
         given: Option<u16>,
     ) -> Result<Vec<(u16, u16)>, CliError> {
         let limit = self.max_per_request(given, table, false)?;
-        let max = crate::read::per_request(limit, table.max_read(), width, crate::value::ValueType::U16)?;
-        Ok(split(start, count, width, max).into_iter().map(|(at, n)| (at, crate::read::quantity(n))).collect())
+        let max = crate::address::per_request(limit, table.max_read(), width, crate::value::ValueType::U16)?;
+        Ok(split(start, count, width, max).into_iter().map(|(at, n)| (at, crate::address::quantity(n))).collect())
     }
 
     /// `--max-per-request` if given, else the `--device` profile's limit for `table` (reads,

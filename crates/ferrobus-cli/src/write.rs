@@ -8,11 +8,10 @@ use clap::{Args, Subcommand};
 use ferrobus_proto::pdu::{WriteCoils, WriteRegisters};
 use ferrobus_proto::{FunctionCode, PduError};
 
-use crate::address::{ADDRESS_HELP, Address, AddressArgs, Table, split};
+use crate::address::{ADDRESS_HELP, Address, AddressArgs, Table, per_request, quantity, split};
 use crate::connect::{ConnectArgs, Session};
 use crate::exit::CliError;
 use crate::output;
-use crate::read::{per_request, quantity};
 use crate::value::{ValueArgs, ValueType, parse_coil};
 
 /// The spec's most coils per FC0F request (§6.11), from the core.
