@@ -100,6 +100,111 @@ impl Table {
     }
 }
 
+impl Table {
+    /// A table by the name a user types: coils (or coil), discrete, holding, input, in any case.
+    pub(crate) fn from_name(name: &str) -> Option<Table> {
+        match name.trim().to_ascii_lowercase().as_str() {
+            "coils" | "coil" => Some(Table::Coils),
+            "discrete" => Some(Table::Discrete),
+            "holding" => Some(Table::Holding),
+            "input" => Some(Table::Input),
+            _ => None,
+        }
+    }
+}
+
+impl From<Table> for ferrobus_profile::Table {
+    fn from(table: Table) -> Self {
+        match table {
+            Table::Coils => ferrobus_profile::Table::Coils,
+            Table::Discrete => ferrobus_profile::Table::DiscreteInputs,
+            Table::Holding => ferrobus_profile::Table::Holding,
+            Table::Input => ferrobus_profile::Table::Input,
+        }
+    }
+}
+
+impl From<ferrobus_profile::Table> for Table {
+    fn from(table: ferrobus_profile::Table) -> Self {
+        match table {
+            ferrobus_profile::Table::Coils => Table::Coils,
+            ferrobus_profile::Table::DiscreteInputs => Table::Discrete,
+            ferrobus_profile::Table::Holding => Table::Holding,
+            ferrobus_profile::Table::Input => Table::Input,
+        }
+    }
+}
+
+/// A raw range written as one word, `[UNIT:]TABLE:ADDRESS[:COUNT]` (`holding:0x1000:8`,
+/// `3:input:0`): its parts as typed, the address still to be numbered
+/// ([`crate::connect::ConnectArgs::address`]). `poll` and `monitor` both take it, beside the
+/// two words `TABLE ADDRESS` with `--count`.
+#[derive(Clone, Copy, PartialEq, Eq, Debug)]
+pub(crate) struct RangeWord<'a> {
+    /// The unit, if the word names one.
+    pub(crate) unit: Option<u8>,
+    /// The table.
+    pub(crate) table: Table,
+    /// The address as typed.
+    pub(crate) address: &'a str,
+    /// The count, if the word gives one.
+    pub(crate) count: Option<u16>,
+}
+
+impl<'a> RangeWord<'a> {
+    /// The range `word` writes; `None` when it writes none (a point's name, `group:NAME`), an
+    /// error when it starts like one but is wrong.
+    pub(crate) fn parse(word: &'a str) -> Option<Result<RangeWord<'a>, CliError>> {
+        let parts: Vec<&str> = word.split(':').collect();
+        match parts.as_slice() {
+            [unit, table, rest @ ..] if Table::from_name(unit).is_none() => {
+                Table::from_name(table).map(|table| Self::checked(word, Some(unit), table, rest))
+            }
+            [table, rest @ ..] => Table::from_name(table).map(|table| Self::checked(word, None, table, rest)),
+            [] => None,
+        }
+    }
+
+    /// The range of `word`, whose unit (if any), table and the parts after the table are given.
+    fn checked(word: &'a str, unit: Option<&str>, table: Table, rest: &[&'a str]) -> Result<RangeWord<'a>, CliError> {
+        let usage = |why: String| CliError::Usage(format!("'{word}': {why}; write [UNIT:]TABLE:ADDRESS[:COUNT]"));
+        let unit = match unit {
+            None => None,
+            Some(u) => Some(
+                number(u)
+                    .and_then(|u| u8::try_from(u).ok())
+                    .filter(|u| (1..=247).contains(u))
+                    .ok_or_else(|| usage(format!("the unit '{u}' is not 1 to 247")))?,
+            ),
+        };
+        let (address, count) = match rest {
+            [address] => (*address, None),
+            [address, count] => (*address, Some(*count)),
+            [] => return Err(usage("no address".into())),
+            _ => return Err(usage("too many parts".into())),
+        };
+        let count = match count {
+            None => None,
+            Some(c) => Some(
+                number(c)
+                    .and_then(|c| u16::try_from(c).ok())
+                    .filter(|c| *c > 0)
+                    .ok_or_else(|| usage(format!("the count '{c}' is not 1 to 65535")))?,
+            ),
+        };
+        Ok(RangeWord { unit, table, address, count })
+    }
+}
+
+/// A decimal or `0x` hex number.
+fn number(text: &str) -> Option<u32> {
+    let t = text.trim();
+    match t.strip_prefix("0x").or_else(|| t.strip_prefix("0X")) {
+        Some(hex) => u32::from_str_radix(hex, 16).ok(),
+        None => t.parse().ok(),
+    }
+}
+
 impl fmt::Display for Table {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
         f.write_str(self.name())
@@ -296,9 +401,58 @@ pub(crate) fn split(start: u16, total: usize, width: usize, max: usize) -> Vec<(
     out
 }
 
+/// The per-request limit: `--max-per-request` or the spec's, checked against the spec and
+/// the value width.
+pub(crate) fn per_request(
+    max: Option<u16>,
+    spec_max: usize,
+    width: usize,
+    kind: crate::value::ValueType,
+) -> Result<usize, CliError> {
+    let Some(max) = max else { return Ok(spec_max) };
+    let max = usize::from(max);
+    if max > spec_max {
+        return Err(CliError::Usage(format!("--max-per-request {max} is above the spec's {spec_max} per request")));
+    }
+    if max < width {
+        return Err(CliError::Usage(format!(
+            "--max-per-request {max} cannot hold one {} value ({width} registers)",
+            kind.name()
+        )));
+    }
+    Ok(max)
+}
+
+/// The number of items as a request quantity (every split piece is at most 65535).
+pub(crate) fn quantity(n: usize) -> u16 {
+    u16::try_from(n).unwrap_or(u16::MAX)
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn a_range_word_gives_its_unit_table_address_and_count_and_names_are_no_range() {
+        fn word(w: &str) -> Option<Result<RangeWord<'_>, String>> {
+            RangeWord::parse(w).map(|r| r.map_err(|e| format!("{e:?}")))
+        }
+        fn range(unit: Option<u8>, table: Table, address: &str, count: Option<u16>) -> RangeWord<'_> {
+            RangeWord { unit, table, address, count }
+        }
+        assert_eq!(word("holding:0x1000:8"), Some(Ok(range(None, Table::Holding, "0x1000", Some(8)))));
+        assert_eq!(word("3:input:0"), Some(Ok(range(Some(3), Table::Input, "0", None))));
+        assert_eq!(word("Coil:7:0x10"), Some(Ok(range(None, Table::Coils, "7", Some(16)))));
+        assert_eq!(word("F002"), None);
+        assert_eq!(word("group:basic"), None);
+        assert_eq!(
+            word("holding"),
+            Some(Err("Usage(\"'holding': no address; write [UNIT:]TABLE:ADDRESS[:COUNT]\")".into()))
+        );
+        assert!(word("300:holding:0").unwrap().unwrap_err().contains("the unit '300' is not 1 to 247"));
+        assert!(word("holding:0:0").unwrap().unwrap_err().contains("the count '0' is not 1 to 65535"));
+        assert!(word("holding:0:1:2").unwrap().unwrap_err().contains("too many parts"));
+    }
 
     #[test]
     fn the_read_limits_are_the_specs_2000_bits_and_125_registers() {

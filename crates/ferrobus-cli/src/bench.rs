@@ -33,9 +33,12 @@ With --json it prints one line, the same object as the peer fixtures' bench mode
 
 Every read is made whatever the previous ones answered, until more than half of --count have
 failed: the run is then no measurement, bench stops, reports the reads made, and exits with
-the code of the first failure (3 for a timeout, 4 for the port, see ferrobus --help).
-Otherwise the exit code is 0. No retries unless --retries is given; a unit that stops
-answering is never skipped. A lost port is reopened with a growing wait between attempts.
+the code of the first failure (3 for a timeout, 4 for the port, see ferrobus --help). It
+stops too when no read has got through for --give-up (10 s unless given; at least 3 reads
+failed in a row): the server or the device is gone. It then reports the reads made and exits
+with the code of the last failure (4 for a connection refused or reset). Otherwise the exit
+code is 0. No retries unless --retries is given. A lost port is reopened with a growing wait
+between attempts.
 Ctrl-C or SIGTERM stops the run: the summary (or JSON) of the reads completed is printed,
 and the exit code is 130.
 
@@ -63,6 +66,42 @@ pub(crate) struct BenchArgs {
     /// Print one line of JSON (the peer fixtures' bench format) instead of a summary
     #[arg(long)]
     pub(crate) json: bool,
+
+    /// Stop when no read has got through for this long (at least 3 failed in a row): the
+    /// server is gone
+    #[arg(long, value_name = "DURATION", default_value = "10s", value_parser = crate::connect::parse_duration)]
+    pub(crate) give_up: Duration,
+}
+
+/// Failed reads in a row fewer than this never stop a run, however long they took.
+const GIVE_UP_READS: u32 = 3;
+
+/// The reads that failed in a row since the last that got through, and when the first of them
+/// was sent: when they have gone on for long enough, the server is gone.
+#[derive(Clone, Copy, PartialEq, Eq, Debug, Default)]
+struct Streak {
+    failures: u32,
+    since: Option<Instant>,
+}
+
+impl Streak {
+    /// A read sent at `sent` failed.
+    fn failed(&mut self, sent: Instant) {
+        self.failures = self.failures.saturating_add(1);
+        self.since.get_or_insert(sent);
+    }
+
+    /// A read got through.
+    fn succeeded(&mut self) {
+        *self = Streak::default();
+    }
+
+    /// How long no read has got through at `now`, once at least [`GIVE_UP_READS`] failed in a
+    /// row and for `bound` or longer; none while the run should go on.
+    fn gone_for(&self, now: Instant, bound: Duration) -> Option<Duration> {
+        let failing = now.saturating_duration_since(self.since?);
+        (self.failures >= GIVE_UP_READS && failing >= bound).then_some(failing)
+    }
 }
 
 /// What a run measured.
@@ -99,6 +138,7 @@ pub(crate) async fn run(connection: &ConnectArgs, args: &BenchArgs) -> Result<()
     let mut latencies = Vec::with_capacity(usize::try_from(args.count).unwrap_or(0));
     let mut errors = 0u32;
     let mut first_error = None;
+    let (mut streak, mut last_error, mut gone) = (Streak::default(), None, None);
     tracing::info!(unit, count = args.count, address = args.address, quantity = args.quantity, "bench");
     let start = Instant::now();
     let mut interrupted = false;
@@ -112,22 +152,30 @@ pub(crate) async fn run(connection: &ConnectArgs, args: &BenchArgs) -> Result<()
             break;
         };
         latencies.push(sent.elapsed());
-        match result {
-            Ok(values) if values.len() == expected => {}
+        let failure = match result {
+            Ok(values) if values.len() == expected => None,
             Ok(values) => {
-                errors += 1;
                 tracing::debug!(got = values.len(), expected, "wrong number of registers");
-                first_error.get_or_insert_with(|| {
-                    CliError::BadData(format!("{} registers instead of {expected}", values.len()))
-                });
+                Some(CliError::BadData(format!("{} registers instead of {expected}", values.len())))
             }
             Err(error) => {
-                errors += 1;
                 tracing::debug!("read failed: {error}");
-                first_error.get_or_insert_with(|| CliError::from(error));
+                Some(CliError::from(error))
             }
+        };
+        let Some(failure) = failure else {
+            streak.succeeded();
+            continue;
+        };
+        errors += 1;
+        streak.failed(sent);
+        if first_error.is_none() {
+            first_error = Some(failure);
+        } else {
+            last_error = Some(failure);
         }
-        if errors > most {
+        gone = streak.gone_for(Instant::now(), args.give_up);
+        if errors > most || gone.is_some() {
             break;
         }
     }
@@ -144,6 +192,16 @@ pub(crate) async fn run(connection: &ConnectArgs, args: &BenchArgs) -> Result<()
     if interrupted {
         eprintln!("bench: interrupted after {done} of {} reads; the figures are those of the {done}", args.count);
         return Err(CliError::Interrupted);
+    }
+    if let Some(failing) = gone {
+        eprintln!(
+            "bench: stopped after {done} of {} reads: none has got through for {:.1} s ({} failed in a row); \
+             the server or the device is gone",
+            args.count,
+            failing.as_secs_f64(),
+            streak.failures
+        );
+        return Err(last_error.or(first_error).unwrap_or_else(|| CliError::Usage("no read got through".into())));
     }
     match first_error {
         Some(error) if errors > most => {
@@ -307,6 +365,27 @@ mod tests {
 
     fn us(values: &[u64]) -> Vec<Duration> {
         values.iter().map(|&v| Duration::from_micros(v)).collect()
+    }
+
+    #[test]
+    fn a_streak_of_failures_says_gone_only_after_three_reads_and_the_bound_and_restarts_on_success() {
+        let t0 = Instant::now();
+        let at = |ms: u64| t0 + Duration::from_millis(ms);
+        let bound = Duration::from_secs(10);
+        let mut streak = Streak::default();
+        assert_eq!(streak.gone_for(at(60_000), bound), None, "no failure, nothing gone");
+        streak.failed(at(0));
+        streak.failed(at(5_000));
+        assert_eq!(streak.gone_for(at(20_000), bound), None, "two failures are not enough, however long");
+        streak.failed(at(9_000));
+        assert_eq!(streak.gone_for(at(9_999), bound), None, "three failures, the bound not reached");
+        assert_eq!(streak.gone_for(at(10_000), bound), Some(bound), "counted from the first failure's send");
+        streak.succeeded();
+        streak.failed(at(11_000));
+        streak.failed(at(12_000));
+        streak.failed(at(13_000));
+        assert_eq!(streak.gone_for(at(20_999), bound), None, "a read got through at 10 s: counted again");
+        assert_eq!(streak.gone_for(at(21_000), bound), Some(bound));
     }
 
     #[test]

@@ -38,6 +38,8 @@ use serde::Deserialize;
 use serde_json::json;
 use toml::Spanned;
 
+use ferrobus_profile::source::{self, Located, ReadError};
+
 use crate::Cli;
 use crate::connect::ConnectArgs;
 use crate::exit::CliError;
@@ -189,31 +191,25 @@ struct File {
     connections: BTreeMap<String, BTreeMap<String, Vec<String>>>,
 }
 
-/// Line and column (both from 1) of a byte offset.
-fn line_col(text: &str, offset: usize) -> (usize, usize) {
-    let before = text.get(..offset).unwrap_or(text);
-    let line = before.matches('\n').count() + 1;
-    let col = before.rsplit('\n').next().map_or(0, |l| l.chars().count()) + 1;
-    (line, col)
-}
-
 impl File {
     /// Reads and checks a settings file.
     fn read(path: &Path) -> Result<File, CliError> {
-        let text = std::fs::read_to_string(path)
-            .map_err(|e| CliError::Usage(format!("cannot read the settings file {}: {e}", path.display())))?;
+        let text = source::read(path).map_err(|e| match e {
+            ReadError::Io(e) => CliError::Usage(format!("cannot read the settings file {}: {e}", path.display())),
+            ReadError::NotText(e) => CliError::Usage(format!("settings file {}:{e}", path.display())),
+        })?;
         File::parse(path, &text)
     }
 
     /// Parses and checks the text of a settings file.
     fn parse(path: &Path, text: &str) -> Result<File, CliError> {
+        let shown = path.display().to_string();
         let shape: FileShape = toml::from_str(text)
-            .map_err(|e| CliError::Usage(format!("settings file {}: {}", path.display(), e.to_string().trim_end())))?;
+            .map_err(|e| CliError::Usage(format!("settings file {}", Located::toml(text, &e).in_file(&shown))))?;
         let options = connection_options();
         let command = Cli::command();
         let at = |span: std::ops::Range<usize>, table: &str, what: String| {
-            let (line, col) = line_col(text, span.start);
-            CliError::Usage(format!("{}:{line}:{col}: {table}: {what}", path.display()))
+            CliError::Usage(Located::new(text, Some(span), &format!("{table}: {what}")).in_file(&shown))
         };
         let table = |name: &str, table: &Table| -> Result<BTreeMap<String, Vec<String>>, CliError> {
             let mut out = BTreeMap::new();
@@ -561,23 +557,37 @@ mod tests {
     #[test]
     fn a_toml_syntax_error_and_an_unknown_table_name_the_file_and_line() {
         let error = parse("[defaults]\nbaud = \n").unwrap_err();
-        assert!(error.starts_with("settings file c.toml: "), "{error}");
-        assert!(error.contains("line 2"), "{error}");
+        assert!(error.starts_with("settings file c.toml:2:8: "), "{error}");
         let error = parse("[conection.a]\nport = \"x\"\n").unwrap_err();
-        assert!(error.contains("line 1") && error.contains("conection"), "{error}");
+        assert!(error.starts_with("settings file c.toml:1:") && error.contains("conection"), "{error}");
+    }
+
+    #[test]
+    fn a_mistake_on_a_10_mb_line_is_told_in_a_few_hundred_bytes() {
+        let huge = "9".repeat(10 << 20);
+        for text in [format!("[defaults]\nbaud = {huge}x\n"), format!("[defaults]\nparity = \"{huge}\"\n")] {
+            let error = parse(&text).unwrap_err();
+            assert!(error.len() < 2_000, "{} bytes: {}", error.len(), error.get(..200).unwrap_or(&error));
+            assert!(error.contains(":2:") && error.contains('…'), "{error}");
+        }
+    }
+
+    #[test]
+    fn a_settings_file_that_is_not_utf8_is_refused_with_its_line_and_column() {
+        let path = std::env::temp_dir().join(format!("ferrobus-settings-latin1-{}.toml", std::process::id()));
+        std::fs::write(&path, b"[defaults]\nport = \"/dev/caf\xe9\"\n").unwrap();
+        let error = match File::read(&path) {
+            Err(CliError::Usage(e)) => e,
+            other => panic!("{other:?}"),
+        };
+        let _ = std::fs::remove_file(&path);
+        assert_eq!(error, format!("settings file {}:2:17: byte 0xE9 is not UTF-8 text", path.display()));
     }
 
     #[test]
     fn two_buses_in_one_table_are_an_error_at_the_second() {
         let error = parse("[connection.a]\nport = \"/dev/ttyUSB0\"\ntcp = \"plc\"\n").unwrap_err();
         assert!(error.starts_with("c.toml:3:1: [connection.a]: 'port' and 'tcp' cannot both be set"), "{error}");
-    }
-
-    #[test]
-    fn line_and_column_count_from_one() {
-        assert_eq!(line_col("ab\ncd", 0), (1, 1));
-        assert_eq!(line_col("ab\ncd", 4), (2, 2));
-        assert_eq!(line_col("ab", 99), (1, 3));
     }
 
     #[test]

@@ -12,8 +12,8 @@ use ferrobus::{Client, ClientConfig, Rs485, SerialConfig, Transport};
 use ferrobus_proto::codes::unit;
 use ferrobus_proto::frame::{DataBits, LineConfig, Parity, StopBits};
 
-use crate::address::AddressArgs;
-use crate::exit::CliError;
+use crate::address::{Address, AddressArgs, Table, split};
+use crate::exit::{CliError, Numbering};
 use crate::value::{ValueArgs, WordOrder};
 
 /// Options that say how to reach the device.
@@ -142,24 +142,54 @@ impl ConnectArgs {
         Ok(AddressArgs { one_based: given.one_based || (!given.modicon && profile.addressing.base == 1), ..given })
     }
 
+    /// A user's ADDRESS in `table` as the address on the wire: the one rule of every command
+    /// that takes addresses (read, write, read-write, mask, poll, monitor). `--modicon` reads
+    /// a Modicon reference, `--one-based` a manual's register number; else the `--device`
+    /// profile's numbering (from 1 where its `[addressing] base` is 1, as the 3G3RX's);
+    /// else the number is the wire address.
+    pub(crate) fn address(&self, text: &str, table: Table, given: AddressArgs) -> Result<Address, CliError> {
+        Address::parse(text, table, self.address_args(given)?)
+    }
+
+    /// How the addresses of a command with `given` are numbered, for the hints of an error.
+    pub(crate) fn numbering(&self, given: AddressArgs) -> Numbering {
+        match (given.modicon, given.one_based, self.profile().ok().flatten()) {
+            (true, _, _) => Numbering::Modicon,
+            (false, true, _) => Numbering::OneBased,
+            (false, false, Some(profile)) if profile.addressing.base == 1 => Numbering::Device(profile.device.name),
+            _ => Numbering::Wire,
+        }
+    }
+
+    /// The read requests of `count` items of `table` from wire address `start`: each within
+    /// `--max-per-request` if given, else the `--device` profile's limit, else the spec's,
+    /// and never splitting a value of `width` registers; (start, quantity) pairs.
+    pub(crate) fn read_pieces(
+        &self,
+        start: u16,
+        count: usize,
+        width: usize,
+        table: Table,
+        given: Option<u16>,
+    ) -> Result<Vec<(u16, u16)>, CliError> {
+        let limit = self.max_per_request(given, table, false)?;
+        let max = crate::address::per_request(limit, table.max_read(), width, crate::value::ValueType::U16)?;
+        Ok(split(start, count, width, max).into_iter().map(|(at, n)| (at, crate::address::quantity(n))).collect())
+    }
+
     /// `--max-per-request` if given, else the `--device` profile's limit for `table` (reads,
     /// or writes with `write`), else none (the spec's).
     pub(crate) fn max_per_request(
         &self,
         given: Option<u16>,
-        table: crate::address::Table,
+        table: Table,
         write: bool,
     ) -> Result<Option<u16>, CliError> {
         if given.is_some() {
             return Ok(given);
         }
         let Some(profile) = self.profile()? else { return Ok(None) };
-        let table = match table {
-            crate::address::Table::Coils => ferrobus_profile::Table::Coils,
-            crate::address::Table::Discrete => ferrobus_profile::Table::DiscreteInputs,
-            crate::address::Table::Holding => ferrobus_profile::Table::Holding,
-            crate::address::Table::Input => ferrobus_profile::Table::Input,
-        };
+        let table = ferrobus_profile::Table::from(table);
         let limits = &profile.limits;
         Ok(match (table.is_bits(), write) {
             (true, false) => limits.read_coils,
@@ -185,9 +215,9 @@ impl ConnectArgs {
     pub(crate) fn named(
         &self,
         text: &str,
-        table: crate::address::Table,
+        table: Table,
         given: ValueArgs,
-    ) -> Result<Option<(crate::address::Address, ValueArgs)>, CliError> {
+    ) -> Result<Option<(Address, ValueArgs)>, CliError> {
         use crate::value::ValueType as Cli;
         use ferrobus_profile::ValueType as Profile;
         if text.trim().starts_with(|c: char| c.is_ascii_digit()) {
@@ -205,13 +235,7 @@ impl ConnectArgs {
                 )));
             }
         };
-        let in_table = match table {
-            crate::address::Table::Coils => ferrobus_profile::Table::Coils,
-            crate::address::Table::Discrete => ferrobus_profile::Table::DiscreteInputs,
-            crate::address::Table::Holding => ferrobus_profile::Table::Holding,
-            crate::address::Table::Input => ferrobus_profile::Table::Input,
-        };
-        if point.table != in_table {
+        if point.table != ferrobus_profile::Table::from(table) {
             return Err(CliError::Usage(format!("{} is in the {} table, not {table}", point.code, point.table.name())));
         }
         let kind = match point.value_type {
@@ -243,7 +267,7 @@ impl ConnectArgs {
             let order = if point.order.words_low_first() { WordOrder::LowFirst } else { WordOrder::HighFirst };
             values = values.or_order(Some(order));
         }
-        let address = crate::address::Address { wire: point.address, table, style: crate::address::Style::Wire };
+        let address = Address { wire: point.address, table, style: crate::address::Style::Wire };
         Ok(Some((address, values)))
     }
 }

@@ -182,10 +182,31 @@ impl Report {
     }
 }
 
-/// The report for `error`; `target` and `unit` (if a bus was named) sharpen the hints.
+/// How the command's addresses were numbered: the hint for an address the device refused
+/// (exception 02) says what to change in that mode, not in another.
+#[derive(Clone, PartialEq, Eq, Debug, Default)]
+pub(crate) enum Numbering {
+    /// Plain wire addresses.
+    #[default]
+    Wire,
+    /// `--one-based`: a manual's register numbers.
+    OneBased,
+    /// The `--device` profile (named here) numbers its registers from 1.
+    Device(String),
+    /// `--modicon`: Modicon references.
+    Modicon,
+}
+
+/// The report for `error`; `target` and `unit` (if a bus was named) sharpen the hints, the
+/// addresses taken as wire addresses.
 pub(crate) fn report(error: &CliError, target: Option<&Target>, unit: u8) -> Report {
+    report_numbered(error, target, unit, &Numbering::Wire)
+}
+
+/// [`report`], for a command whose addresses were numbered as `numbering` says.
+pub(crate) fn report_numbered(error: &CliError, target: Option<&Target>, unit: u8, numbering: &Numbering) -> Report {
     match error {
-        CliError::Modbus { error } => modbus_report(error, target, unit),
+        CliError::Modbus { error } => modbus_report(error, target, unit, numbering),
         CliError::Pdu(e) => Report { message: format!("invalid request: {}", pdu_words(e)), hints: Vec::new() },
         CliError::Usage(message)
         | CliError::BadData(message)
@@ -229,11 +250,11 @@ pub(crate) fn pdu_words(e: &PduError) -> String {
     }
 }
 
-fn modbus_report(error: &Error, target: Option<&Target>, unit: u8) -> Report {
+fn modbus_report(error: &Error, target: Option<&Target>, unit: u8, numbering: &Numbering) -> Report {
     let on = target.map(|t| format!(" on {t}")).unwrap_or_default();
     match error {
         Error::Exception { function, code, .. } => {
-            Report { message: error.to_string(), hints: exception_hints(*function, *code, target) }
+            Report { message: error.to_string(), hints: exception_hints(*function, *code, target, numbering) }
         }
         Error::Timeout { heard: Some(heard), .. } => {
             Report { message: format!("{error}{on}"), hints: heard_hints(heard, target, unit) }
@@ -350,11 +371,16 @@ fn heard_hints(heard: &Heard, target: Option<&Target>, unit: u8) -> Vec<String> 
 /// What an exception usually means; over TCP a gateway or server in between may have
 /// answered it, and its hint names the setting there that lets the request through (a hint
 /// that suggests another request is given only where that request may be let through).
-fn exception_hints(function: FunctionCode, code: ExceptionCode, target: Option<&Target>) -> Vec<String> {
+fn exception_hints(
+    function: FunctionCode,
+    code: ExceptionCode,
+    target: Option<&Target>,
+    numbering: &Numbering,
+) -> Vec<String> {
     match (code.value(), target) {
         (0x01, Some(Target::Mbaps(_))) => vec![refused_by_role(function)],
         (0x01, Some(Target::Tcp(_) | Target::RtuTcp(_))) => {
-            let mut hints: Vec<String> = exception_hint(function, code).into_iter().collect();
+            let mut hints: Vec<String> = exception_hint(function, code, numbering).into_iter().collect();
             hints.push(refused_by_gateway(function));
             hints
         }
@@ -363,7 +389,7 @@ fn exception_hints(function: FunctionCode, code: ExceptionCode, target: Option<&
              gateway` answers 0x0A too for a unit outside its --route or --allow-units: add the unit there"
                 .into(),
         ],
-        _ => exception_hint(function, code).into_iter().collect(),
+        _ => exception_hint(function, code, numbering).into_iter().collect(),
     }
 }
 
@@ -398,16 +424,13 @@ fn refused_by_role(function: FunctionCode) -> String {
     )
 }
 
-fn exception_hint(function: FunctionCode, code: ExceptionCode) -> Option<String> {
+fn exception_hint(function: FunctionCode, code: ExceptionCode, numbering: &Numbering) -> Option<String> {
     let hint = match code.value() {
+        0x02 => return Some(illegal_address_hint(numbering)),
         0x01 if function == FunctionCode::WriteSingleRegister => {
             "the device does not support FC06; try --multiple to write with FC10 (as the SDP servos need)"
         }
         0x01 => "the device does not support this function code",
-        0x02 => {
-            "the address, or address + count, is not on the device; if the manual numbers registers from 1, \
-             add --one-based (frame address = number - 1)"
-        }
         0x03 => return Some(illegal_value_hint(function)),
         0x04 => "the device failed while executing the request",
         0x05 | 0x06 => "the device is busy with a long operation; retry later",
@@ -421,6 +444,29 @@ fn exception_hint(function: FunctionCode, code: ExceptionCode) -> Option<String>
         _ => return None,
     };
     Some(hint.to_string())
+}
+
+/// Exception 02: the address, or address + count, is not on the device; what may be wrong
+/// depends on how the addresses were numbered.
+fn illegal_address_hint(numbering: &Numbering) -> String {
+    const NOT_ON: &str = "the address, or address + count, is not on the device";
+    match numbering {
+        Numbering::Wire => {
+            format!("{NOT_ON}; if the manual numbers registers from 1, add --one-based (frame address = number - 1)")
+        }
+        Numbering::OneBased => format!(
+            "{NOT_ON}; with --one-based the frame address is the number - 1: check the number in the manual, or \
+             leave --one-based out if it is a wire address"
+        ),
+        Numbering::Device(device) => format!(
+            "{NOT_ON}; addresses are numbered from 1 as the {device} profile says (frame address = number - 1): \
+             check the number in the manual, or name the parameter (`ferrobus profile show` lists them)"
+        ),
+        Numbering::Modicon => format!(
+            "{NOT_ON}; with --modicon the reference's digits after the table digit are the 1-based number: check it \
+             in the device's register map"
+        ),
+    }
 }
 
 /// Exception 03 means a count for a read and a value (or a count) for a write: the hint

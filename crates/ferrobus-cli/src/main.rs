@@ -177,6 +177,19 @@ enum Command {
 }
 
 impl Command {
+    /// How the command's addresses are numbered, if it takes any (`--one-based`, `--modicon`).
+    fn address_args(&self) -> Option<address::AddressArgs> {
+        match self {
+            Command::Read(args) => Some(args.address_args),
+            Command::Write(args) => Some(args.address_args()),
+            Command::Mask(args) => Some(args.address_args),
+            Command::ReadWrite(args) => Some(args.address_args),
+            Command::Poll(args) => Some(args.address_args),
+            Command::Monitor(args) => Some(args.address_args),
+            _ => None,
+        }
+    }
+
     /// Whether the command talks to a device.
     fn needs_bus(&self) -> bool {
         !matches!(
@@ -281,11 +294,11 @@ const CONNECTION_OPTIONS: [&str; 22] = [
     "device",
 ];
 
-/// Refuses the connection options that `--help` lists for every command but that a command
-/// opening no bus would ignore: `crc` and `demo` use none, `line` only the line settings.
-fn refuse_ignored_options(matches: &clap::ArgMatches) -> Result<(), CliError> {
-    let Some((name, sub)) = matches.subcommand() else { return Ok(()) };
-    let (used, why): (&[&str], &str) = match name {
+/// The connection options a command takes (by clap id) and why it takes no others; `None`
+/// for the commands that take them all. `--help` shows a command only those it takes
+/// ([`command`]), and the command line refuses the others ([`refuse_ignored_options`]).
+fn connection_options_of(name: &str) -> Option<(&'static [&'static str], &'static str)> {
+    Some(match name {
         "crc" => (&[], "crc works offline and opens no bus"),
         "demo" => (&[], "demo runs its own virtual line (its baud rate is --line-baud)"),
         "bridge" => (&[], "bridge takes its lines, devices and broker from the plant file (--config FILE) or --demo"),
@@ -306,8 +319,44 @@ fn refuse_ignored_options(matches: &clap::ArgMatches) -> Result<(), CliError> {
             &["port", "baud", "parity", "data_bits", "stop_bits", "rs485", "low_latency", "unit", "t15", "t35"],
             "sniff only listens: it takes the port, the line settings, --t15/--t35 and --unit as a filter",
         ),
-        _ => return Ok(()),
-    };
+        _ => return None,
+    })
+}
+
+/// The command line's definition, each command's `--help` listing only the connection
+/// options it takes (the global ones it does not are hidden there, and refused if given).
+pub(crate) fn command() -> clap::Command {
+    let mut command = Cli::command();
+    // Propagates the global options into each command, where they can then be hidden.
+    command.build();
+    let names: Vec<String> = command.get_subcommands().map(|s| s.get_name().to_string()).collect();
+    for name in names {
+        let Some((used, _)) = connection_options_of(&name) else { continue };
+        command = command.mut_subcommand(&name, |sub| hide_connection_options(sub, used));
+    }
+    command
+}
+
+/// `command` and the commands under it with the connection options not in `used` hidden.
+fn hide_connection_options(command: clap::Command, used: &[&str]) -> clap::Command {
+    let ignored = |id: &str| CONNECTION_OPTIONS.contains(&id) && !used.contains(&id);
+    // In place: `mut_arg` would move the option to the end, past the built index of names.
+    let mut command = command.mut_args(|arg| {
+        let hide = ignored(arg.get_id().as_str()) || arg.is_hide_set();
+        arg.hide(hide)
+    });
+    let names: Vec<String> = command.get_subcommands().map(|s| s.get_name().to_string()).collect();
+    for name in names {
+        command = command.mut_subcommand(&name, |sub| hide_connection_options(sub, used));
+    }
+    command
+}
+
+/// Refuses the connection options that a command opening no bus, or a bus of its own making,
+/// would ignore (see [`connection_options_of`]).
+fn refuse_ignored_options(matches: &clap::ArgMatches) -> Result<(), CliError> {
+    let Some((name, sub)) = matches.subcommand() else { return Ok(()) };
+    let Some((used, why)) = connection_options_of(name) else { return Ok(()) };
     let given: Vec<String> = CONNECTION_OPTIONS
         .iter()
         .filter(|id| !used.contains(id))
@@ -350,7 +399,7 @@ fn init_logging(verbose: u8) {
 fn main() -> ExitCode {
     // At a Tab, the shell's completion script runs ferrobus with FERROBUS_COMPLETE set: answer, exit.
     clap_complete::CompleteEnv::with_factory(completions::command).var(completions::VAR).complete();
-    let matches = Cli::command().try_get_matches().unwrap_or_else(|e| explain_parse_error(e).exit());
+    let matches = command().try_get_matches().unwrap_or_else(|e| explain_parse_error(e).exit());
     if let Err(error) = refuse_ignored_options(&matches) {
         exit::report(&error, None, 1).print();
         return error.exit().into();
@@ -400,7 +449,8 @@ fn main() -> ExitCode {
         Err(error) => {
             let target = cli.connection.target().ok();
             let unit = cli.connection.unit.first().copied().unwrap_or(1);
-            exit::report(&error, target.as_ref(), unit).print();
+            let numbering = cli.command.address_args().map(|a| cli.connection.numbering(a)).unwrap_or_default();
+            exit::report_numbered(&error, target.as_ref(), unit, &numbering).print();
             error.exit().into()
         }
     }
@@ -413,5 +463,63 @@ mod tests {
     #[test]
     fn the_command_line_definition_is_consistent() {
         Cli::command().debug_assert();
+        command().debug_assert();
+    }
+
+    /// The long options an option line of `help` names (`  -u, --unit <UNIT>  ...`).
+    fn listed_options(help: &str) -> Vec<String> {
+        help.lines()
+            .map(str::trim_start)
+            .filter(|line| line.starts_with('-'))
+            .filter_map(|line| line.split_whitespace().find(|w| w.starts_with("--")))
+            .map(|w| {
+                w.trim_start_matches("--").trim_end_matches(',').split(['=', '[']).next().unwrap_or("").to_string()
+            })
+            .collect()
+    }
+
+    /// `command` and every command under it, with the top-level command's name.
+    fn with_children<'a>(top: &'a str, command: &'a clap::Command, out: &mut Vec<(&'a str, &'a clap::Command)>) {
+        out.push((top, command));
+        // clap's own `help` subcommand lists no options.
+        for sub in command.get_subcommands().filter(|s| s.get_name() != "help") {
+            with_children(top, sub, out);
+        }
+    }
+
+    #[test]
+    fn every_connection_option_a_commands_help_lists_is_one_it_takes_and_every_other_is_unlisted() {
+        let mut cli = command();
+        cli.build();
+        let mut all = Vec::new();
+        for sub in cli.get_subcommands().filter(|s| s.get_name() != "help") {
+            with_children(sub.get_name(), sub, &mut all);
+        }
+        let mut checked = 0;
+        for (top, sub) in all {
+            let listed = listed_options(&sub.clone().render_long_help().to_string());
+            assert!(listed.iter().any(|o| o == "help"), "{top}: {listed:?}");
+            let taken = |id: &str| connection_options_of(top).is_none_or(|(used, _)| used.contains(&id));
+            for id in CONNECTION_OPTIONS {
+                let long = id.replace('_', "-");
+                let shown = listed.contains(&long);
+                assert_eq!(shown, taken(id), "`{top}` (`{}`): --{long} listed {shown}", sub.get_name());
+                checked += 1;
+            }
+        }
+        assert!(checked > 30 * CONNECTION_OPTIONS.len(), "{checked}");
+    }
+
+    #[test]
+    fn scan_help_lists_port_but_not_baud_or_parity_which_it_refuses() {
+        let mut cli = command();
+        cli.build();
+        let scan = cli.find_subcommand_mut("scan").unwrap();
+        let listed = listed_options(&scan.render_long_help().to_string());
+        assert!(listed.contains(&"port".to_string()) && listed.contains(&"t35".to_string()), "{listed:?}");
+        assert!(!listed.contains(&"baud".to_string()) && !listed.contains(&"parity".to_string()), "{listed:?}");
+        let matches = command().try_get_matches_from(["ferrobus", "--baud", "9600", "scan"]).unwrap();
+        let refused = refuse_ignored_options(&matches).unwrap_err();
+        assert!(matches!(refused, CliError::Usage(m) if m.starts_with("--baud is not used by `scan`")));
     }
 }

@@ -6,7 +6,7 @@
 use clap::Args;
 use ferrobus_proto::FunctionCode;
 
-use crate::address::{ADDRESS_HELP, Address, AddressArgs, Table};
+use crate::address::{ADDRESS_HELP, AddressArgs, Table};
 use crate::connect::ConnectArgs;
 use crate::exit::CliError;
 use crate::output;
@@ -34,7 +34,7 @@ fn mask(text: &str) -> Result<u16, CliError> {
 
 /// Runs `mask`.
 pub(crate) async fn run(connection: &ConnectArgs, args: &MaskArgs) -> Result<(), CliError> {
-    let address = Address::parse(&args.address, Table::Holding, args.address_args)?;
+    let address = connection.address(&args.address, Table::Holding, args.address_args)?;
     let and_mask = mask(&args.and_mask)?;
     let or_mask = mask(&args.or_mask)?;
     let session = connection.open().await?;

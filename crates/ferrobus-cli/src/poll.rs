@@ -18,10 +18,11 @@ use std::time::Duration;
 
 use clap::Args;
 use ferrobus::Client;
-use ferrobus::poll::session::{Session, period, table_from_name};
-use ferrobus::poll::{Event, FailureKind, Format, Group, Layout, Order, PollConfig, Poller, Sample, Table, iso8601_ms};
+use ferrobus::poll::session::{Session, period};
+use ferrobus::poll::{Event, FailureKind, Format, Group, Layout, Order, PollConfig, Poller, Sample, iso8601_ms};
 use serde_json::json;
 
+use crate::address::{AddressArgs, RangeWord};
 use crate::connect::{ConnectArgs, parse_duration};
 use crate::exit::CliError;
 use crate::interrupt::Interrupt;
@@ -33,16 +34,24 @@ use crate::output;
      ferrobus --port /dev/ttyUSB0 poll --unit 3 holding 0x1000 --count 4 --every 100ms --unit 5 input 0 --every 1s\n  \
      ferrobus --port /dev/ttyUSB0 --device omron-3g3rx poll d001 d002 --every 200ms --csv --log run.csv\n  \
      ferrobus --tcp 10.0.0.5 poll --session line3.toml --jsonl --on-change --deadband 0.5\n\n\
-     TABLE is holding, input, coils or discrete; ADDRESS a wire address (0x1000 or 4096). A --count, --every or \
-     --format given after a group is that group's; given before the first group, every group's (defaults: 1, 1s, \
+     TABLE is holding, input, coils or discrete; ADDRESS a wire address (0x1000 or 4096), numbered as read and \
+     write number it: --one-based, --modicon, or the --device profile's numbering (the 3G3RX's from 1). \
+     TABLE:ADDRESS[:COUNT] in one word is the same group (monitor's form). A group longer than the device takes \
+     in one request (the profile's limit) is read in several. A --count, --every or --format given after a group \
+     is that group's; given before the first group, every group's (defaults: 1, 1s, \
      u16). A --unit applies to the groups after it. Records: CSV has one row per point of each poll (a failed \
      poll: one row, its point the group's name); JSON lines one object per poll. status is ok, timeout, crc, \
      garbage, exception, bad-reply, port, backoff or other. The summary goes to stderr.")]
 #[expect(clippy::struct_excessive_bools, reason = "each bool is a command-line flag or one fact about them")]
 pub(crate) struct PollArgs {
-    /// Groups: TABLE ADDRESS pairs; with --device, also parameter names (codes, labels, globs)
+    /// Groups: TABLE ADDRESS pairs or TABLE:ADDRESS[:COUNT]; with --device, also parameter
+    /// names (codes, labels, globs)
     #[arg(value_name = "TABLE ADDRESS | NAME", allow_hyphen_values = false)]
     pub(crate) what: Vec<String>,
+
+    /// How ADDRESS is numbered.
+    #[command(flatten)]
+    pub(crate) address_args: AddressArgs,
 
     /// Items a group reads (registers or bits)
     #[arg(long, value_name = "N", action = clap::ArgAction::Append)]
@@ -199,8 +208,8 @@ fn units_on_both_sides(argv: &[String]) -> bool {
 #[derive(Debug, Default)]
 struct Spec {
     unit: u8,
-    /// A raw range, or named points.
-    raw: Option<(Table, u16)>,
+    /// A raw range (its address as typed, numbered later), or named points.
+    raw: Option<(crate::address::Table, String)>,
     names: Vec<String>,
     count: Option<u16>,
     every: Option<Duration>,
@@ -212,17 +221,20 @@ fn specs(args: &PollArgs, first_unit: u8) -> Result<Vec<Spec>, CliError> {
     let mut specs: Vec<Spec> = Vec::new();
     let mut defaults = Spec::default();
     let mut unit = first_unit;
-    let mut table: Option<Table> = None;
+    let mut table: Option<crate::address::Table> = None;
     let twice = |what: &str| CliError::Usage(format!("{what} is given twice for one group"));
     for (_, token) in &args.positions {
         match token {
             Token::Unit(u) => unit = *u,
             Token::What(word) => {
                 if let Some(t) = table.take() {
-                    let address = parse_address(word)?;
-                    specs.push(Spec { unit, raw: Some((t, address)), ..Spec::default() });
-                } else if let Ok(t) = table_from_name(word) {
+                    specs.push(Spec { unit, raw: Some((t, word.clone())), ..Spec::default() });
+                } else if let Some(t) = crate::address::Table::from_name(word) {
                     table = Some(t);
+                } else if let Some(range) = RangeWord::parse(word) {
+                    let range = range?;
+                    let raw = Some((range.table, range.address.to_string()));
+                    specs.push(Spec { unit: range.unit.unwrap_or(unit), raw, count: range.count, ..Spec::default() });
                 } else {
                     match specs.last_mut() {
                         Some(last)
@@ -268,14 +280,32 @@ fn specs(args: &PollArgs, first_unit: u8) -> Result<Vec<Spec>, CliError> {
     Ok(specs)
 }
 
-fn parse_address(word: &str) -> Result<u16, CliError> {
-    let t = word.trim();
-    let parsed = match t.strip_prefix("0x").or_else(|| t.strip_prefix("0X")) {
-        Some(hex) => u16::from_str_radix(hex, 16),
-        None => t.parse(),
-    };
-    parsed
-        .map_err(|_| CliError::Usage(format!("address {word:?}: give a wire address, 0 to 65535 or 0x0000 to 0xFFFF")))
+/// The groups of a raw range (`table`, its address as typed): its address numbered by the one
+/// rule ([`ConnectArgs::address`]), read in as many requests as the device's limit needs
+/// ([`ConnectArgs::read_pieces`]), never splitting a value of `layout`'s format.
+fn raw_groups(
+    connection: &ConnectArgs,
+    numbering: AddressArgs,
+    (table, address): (crate::address::Table, &str),
+    spec: &Spec,
+    every: Duration,
+    layout: &Layout,
+) -> Result<Vec<Group>, CliError> {
+    let start = connection.address(address, table, numbering)?;
+    let count = spec.count.unwrap_or(1);
+    if count == 0 {
+        return Err(CliError::Usage(format!("{} {address}: a count of 0 reads nothing", table.name())));
+    }
+    start.check_span(usize::from(count))?;
+    let width = if table.is_bits() { 1 } else { usize::from(layout.format.value_type().registers()) };
+    let mut groups = Vec::new();
+    for (at, n) in connection.read_pieces(start.wire, usize::from(count), width, table, None)? {
+        let name = format!("u{} {} {at:#06x}", spec.unit, table.name());
+        let group = Group::raw(&name, spec.unit, table.into(), at, n, every, layout)
+            .map_err(|e| CliError::Usage(e.to_string()))?;
+        groups.push(group);
+    }
+    Ok(groups)
 }
 
 /// Every group to poll: the command line's, then the session file's.
@@ -294,7 +324,7 @@ fn groups(connection: &ConnectArgs, args: &PollArgs) -> Result<Vec<Group>, CliEr
     let profile = connection.profile()?;
     for spec in specs(args, first_unit)? {
         let every = spec.every.unwrap_or(Duration::from_secs(1));
-        if let Some((table, address)) = spec.raw {
+        if let Some((table, address)) = &spec.raw {
             let format = match &spec.format {
                 Some(f) => Format::from_name(f).ok_or_else(|| {
                     let all: Vec<&str> = Format::ALL.iter().map(|f| f.name()).collect();
@@ -302,11 +332,8 @@ fn groups(connection: &ConnectArgs, args: &PollArgs) -> Result<Vec<Group>, CliEr
                 })?,
                 None => Format::U16,
             };
-            let name = format!("u{} {} {address:#06x}", spec.unit, table.name());
             let layout = Layout { format, order, ..Layout::default() };
-            let group = Group::raw(&name, spec.unit, table, address, spec.count.unwrap_or(1), every, &layout)
-                .map_err(|e| CliError::Usage(e.to_string()))?;
-            out.push(group);
+            out.extend(raw_groups(connection, args.address_args, (*table, address), &spec, every, &layout)?);
         } else {
             let Some(profile) = &profile else {
                 return Err(CliError::Usage(format!(
@@ -767,6 +794,7 @@ pub(crate) async fn run(connection: &ConnectArgs, args: &PollArgs) -> Result<(),
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::address::Table;
 
     fn sample(group: usize, result: Result<Vec<ferrobus::poll::Reading>, ferrobus::poll::Failure>) -> Sample {
         Sample {
@@ -810,8 +838,16 @@ mod tests {
 
     #[test]
     fn the_terminal_table_is_redrawn_over_itself() {
-        let g = Group::raw("u1 holding 0x0000", 1, Table::Holding, 0, 2, Duration::from_secs(1), &Layout::default())
-            .unwrap();
+        let g = Group::raw(
+            "u1 holding 0x0000",
+            1,
+            ferrobus::poll::Table::Holding,
+            0,
+            2,
+            Duration::from_secs(1),
+            &Layout::default(),
+        )
+        .unwrap();
         let mut screen = Screen::default();
         let first = screen.draw(std::slice::from_ref(&g), &[]);
         assert!(first.starts_with("group"), "{first:?}");
@@ -860,6 +896,7 @@ mod tests {
             on_change: false,
             deadband: 0.0,
             duration: None,
+            address_args: AddressArgs::default(),
             positions: tokens.into_iter().enumerate().collect(),
             units_on_both_sides: false,
         }
@@ -882,16 +919,35 @@ mod tests {
         let s = specs(&a, 1).unwrap();
         assert_eq!(s.len(), 2);
         assert_eq!(
-            (s[0].unit, s[0].raw, s[0].count, s[0].every),
-            (3, Some((Table::Holding, 0x1000)), Some(4), Some(Duration::from_millis(100)))
+            (s[0].unit, s[0].raw.clone(), s[0].count, s[0].every),
+            (3, Some((Table::Holding, "0x1000".into())), Some(4), Some(Duration::from_millis(100)))
         );
         assert_eq!(
-            (s[1].unit, s[1].raw, s[1].count, s[1].every),
-            (5, Some((Table::Input, 7)), None, Some(Duration::from_millis(500)))
+            (s[1].unit, s[1].raw.clone(), s[1].count, s[1].every),
+            (5, Some((Table::Input, "7".into())), None, Some(Duration::from_millis(500)))
         );
         let twice = args(vec![w("holding"), w("0"), Token::Count(1), Token::Count(2)]);
         assert!(matches!(specs(&twice, 1), Err(CliError::Usage(m)) if m.contains("--count is given twice")));
         let dangling = args(vec![w("holding")]);
         assert!(matches!(specs(&dangling, 1), Err(CliError::Usage(m)) if m.contains("needs an ADDRESS")));
+    }
+
+    #[test]
+    fn monitors_one_word_form_is_a_raw_group_too_with_its_unit_and_count() {
+        let w = |s: &str| Token::What(s.into());
+        let a = args(vec![w("holding:0:4"), Token::Every(Duration::from_millis(100)), w("3:input:0x10")]);
+        let s = specs(&a, 1).unwrap();
+        let got: Vec<_> = s.iter().map(|s| (s.unit, s.raw.clone(), s.count, s.every)).collect();
+        assert_eq!(
+            got,
+            [
+                (1, Some((Table::Holding, "0".into())), Some(4), Some(Duration::from_millis(100))),
+                (3, Some((Table::Input, "0x10".into())), None, None),
+            ]
+        );
+        let twice = args(vec![w("holding:0:4"), Token::Count(2)]);
+        assert!(matches!(specs(&twice, 1), Err(CliError::Usage(m)) if m.contains("--count is given twice")));
+        let bad = args(vec![w("holding:0:0")]);
+        assert!(matches!(specs(&bad, 1), Err(CliError::Usage(m)) if m.contains("the count '0'")));
     }
 }

@@ -164,9 +164,12 @@ fn show(name: &str, group: Option<&str>, format: Format) -> Result<(), CliError>
     output::print(&text)
 }
 
+/// `profile check`: a summary of a sound profile, or every mistake of the file, one a line
+/// (`file:line:col: what (in `excerpt`)`) on stderr and, with `--json`, as a list on
+/// stdout; exit 2 either way when there is one.
 fn check(file: &str, format: Format) -> Result<(), CliError> {
     // The simulator's reading too: its fault keys are part of the file.
-    let profile = ferrobus_sim::profile::load(file).map_err(CliError::Usage)?;
+    let profile = ferrobus_sim::profile::load_all(file).map_err(|mistakes| refuse(file, &mistakes, format))?;
     let count = |t: ferrobus_profile::Table| profile.points().iter().filter(|p| p.table == t).count();
     let (coils, discrete, holding, input) = (
         count(ferrobus_profile::Table::Coils),
@@ -186,4 +189,20 @@ fn check(file: &str, format: Format) -> Result<(), CliError> {
         )
     };
     output::print(&text)
+}
+
+/// Shows every mistake of `file` and sums them up in the error.
+fn refuse(file: &str, mistakes: &[String], format: Format) -> CliError {
+    let shown = if format == Format::Json {
+        output::print(&output::json_line(&json!({ "file": file, "ok": false, "mistakes": mistakes })))
+    } else {
+        let mut lines = mistakes.join("\n");
+        lines.push('\n');
+        output::write_to(&mut std::io::stderr(), "stderr", &lines)
+    };
+    if let Err(e) = shown {
+        return e;
+    }
+    let n = mistakes.len();
+    CliError::Usage(format!("{file}: {n} mistake{}", if n == 1 { "" } else { "s" }))
 }

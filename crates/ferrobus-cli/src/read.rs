@@ -3,7 +3,7 @@
 use clap::Args;
 use ferrobus_proto::PduError;
 
-use crate::address::{ADDRESS_HELP, Address, AddressArgs, Table, split};
+use crate::address::{ADDRESS_HELP, AddressArgs, Table, per_request, quantity, split};
 use crate::connect::ConnectArgs;
 use crate::exit::CliError;
 use crate::interrupt::Interrupt;
@@ -43,37 +43,12 @@ pub(crate) struct ReadArgs {
     pub(crate) output: OutputArgs,
 }
 
-/// The per-request limit: `--max-per-request` or the spec's, checked against the spec and
-/// the value width.
-pub(crate) fn per_request(max: Option<u16>, spec_max: usize, width: usize, kind: ValueType) -> Result<usize, CliError> {
-    let Some(max) = max else { return Ok(spec_max) };
-    let max = usize::from(max);
-    if max > spec_max {
-        return Err(CliError::Usage(format!("--max-per-request {max} is above the spec's {spec_max} per request")));
-    }
-    if max < width {
-        return Err(CliError::Usage(format!(
-            "--max-per-request {max} cannot hold one {} value ({width} registers)",
-            kind.name()
-        )));
-    }
-    Ok(max)
-}
-
-/// The number of items as a request quantity (every split piece is at most 65535).
-pub(crate) fn quantity(n: usize) -> u16 {
-    u16::try_from(n).unwrap_or(u16::MAX)
-}
-
 /// Runs `read`.
 pub(crate) async fn run(connection: &ConnectArgs, args: &ReadArgs) -> Result<(), CliError> {
     connection.refuse_broadcast_read()?;
     let (address, values) = match connection.named(&args.address, args.table, args.values)? {
         Some(named) => named,
-        None => (
-            Address::parse(&args.address, args.table, connection.address_args(args.address_args)?)?,
-            connection.values(args.values)?,
-        ),
+        None => (connection.address(&args.address, args.table, args.address_args)?, connection.values(args.values)?),
     };
     let table = args.table;
     if table.is_bits() && values.kind != ValueType::U16 {

@@ -3,7 +3,7 @@
 use clap::Args;
 use ferrobus_proto::FunctionCode;
 
-use crate::address::{ADDRESS_HELP, Address, AddressArgs, Table};
+use crate::address::{ADDRESS_HELP, AddressArgs, Table};
 use crate::connect::ConnectArgs;
 use crate::exit::CliError;
 use crate::output::{self, Format, OutputArgs, ReadData};
@@ -41,10 +41,10 @@ pub(crate) struct ReadWriteArgs {
 /// Runs `readwrite`.
 pub(crate) async fn run(connection: &ConnectArgs, args: &ReadWriteArgs) -> Result<(), CliError> {
     connection.refuse_broadcast_read()?;
-    let read = Address::parse(&args.read, Table::Holding, args.address_args)?;
+    let read = connection.address(&args.read, Table::Holding, args.address_args)?;
     let (write_at, texts) =
         args.write.split_first().ok_or_else(|| CliError::Usage("--write needs an address".into()))?;
-    let write = Address::parse(write_at, Table::Holding, args.address_args)?;
+    let write = connection.address(write_at, Table::Holding, args.address_args)?;
     let registers = args.values.encode_all(texts)?;
     let count = usize::from(args.count) * args.values.kind.width();
     read.check_span(count)?;

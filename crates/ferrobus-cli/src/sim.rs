@@ -104,8 +104,7 @@ struct Counters {
     other_units: u64,
     discarded: u64,
     dropped_replies: u64,
-    /// How late each reply went out after it was due, in microseconds, to three significant
-    /// digits: a fixed size however long the simulator runs.
+    /// How late each reply went out after it was due, in microseconds: see [`lateness_histogram`].
     lateness_us: Histogram<u64>,
 }
 
@@ -119,9 +118,23 @@ impl Default for Counters {
             other_units: 0,
             discarded: 0,
             dropped_replies: 0,
-            lateness_us: Histogram::new(3).expect("3 significant digits are within hdrhistogram's 0 to 5"),
+            lateness_us: lateness_histogram(),
         }
     }
+}
+
+/// The longest lateness the summary tells apart, in microseconds: an hour. A reply later than
+/// that is counted as an hour late.
+const LATENESS_BOUND_US: u64 = 3_600_000_000;
+
+/// A histogram of lateness in microseconds from 0 to [`LATENESS_BOUND_US`], to three
+/// significant digits: a fixed size however long the simulator runs. Its bounds are explicit:
+/// a histogram made with `Histogram::new` starts with a range of a few µs and a saturating
+/// record clamps to that range instead of growing it, so a reply 21 ms late was counted as
+/// 42 µs.
+fn lateness_histogram() -> Histogram<u64> {
+    Histogram::new_with_bounds(1, LATENESS_BOUND_US, 3)
+        .expect("1 µs to an hour at 3 significant digits are bounds hdrhistogram takes")
 }
 
 impl Counters {
@@ -136,16 +149,28 @@ impl Counters {
             self.discarded,
             self.dropped_replies
         );
+        if let Some(line) = self.lateness_line() {
+            eprintln!("{line}");
+        }
+    }
+
+    /// How late the replies went out, for the summary; none before the first reply.
+    fn lateness_line(&self) -> Option<String> {
         let late = &self.lateness_us;
-        if !late.is_empty() {
-            eprintln!(
+        (!late.is_empty()).then(|| {
+            format!(
                 "sim: reply start after its due time (t3.5 + wait): p50 {} µs, p99 {} µs, max {} µs over {} replies",
                 late.value_at_quantile(0.50),
                 late.value_at_quantile(0.99),
                 late.max(),
                 late.len()
-            );
-        }
+            )
+        })
+    }
+
+    /// Counts a reply that went out `late` after it was due.
+    fn record_lateness(&mut self, late: Duration) {
+        self.lateness_us.saturating_record(u64::try_from(late.as_micros()).unwrap_or(u64::MAX));
     }
 }
 
@@ -493,7 +518,7 @@ fn observe(counters: &Mutex<Counters>, event: ServerEvent) {
         ServerEvent::Sent { frame, due, at } => {
             c.replies += 1;
             let late = at.saturating_duration_since(due);
-            c.lateness_us.saturating_record(u64::try_from(late.as_micros()).unwrap_or(u64::MAX));
+            c.record_lateness(late);
             tracing::info!(frame = %crate::hex::format(&frame), late_us = late.as_micros(), "reply sent");
         }
         ServerEvent::Dropped { frame } => {
@@ -540,5 +565,34 @@ impl Signals {
             let _ = counters;
             self.interrupt.wait().await;
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_summary_reports_a_reply_21_ms_late_as_21_ms_not_clamped_to_microseconds() {
+        let mut counters = Counters::default();
+        counters.record_lateness(Duration::from_micros(40));
+        counters.record_lateness(Duration::from_millis(21));
+        let max = counters.lateness_us.max();
+        assert!(counters.lateness_us.equivalent(max, 21_000), "max {max} µs");
+        let line = counters.lateness_line().expect("two replies were counted");
+        assert!(line.ends_with(&format!("max {max} µs over 2 replies")), "{line}");
+    }
+
+    #[test]
+    fn a_reply_later_than_an_hour_counts_as_an_hour_late() {
+        let mut counters = Counters::default();
+        counters.record_lateness(Duration::from_secs(5 * 3600));
+        let max = counters.lateness_us.max();
+        assert!(counters.lateness_us.equivalent(max, LATENESS_BOUND_US), "max {max} µs");
+    }
+
+    #[test]
+    fn no_reply_gives_no_lateness_line() {
+        assert_eq!(Counters::default().lateness_line(), None);
     }
 }

@@ -8,11 +8,10 @@ use clap::{Args, Subcommand};
 use ferrobus_proto::pdu::{WriteCoils, WriteRegisters};
 use ferrobus_proto::{FunctionCode, PduError};
 
-use crate::address::{ADDRESS_HELP, Address, AddressArgs, Table, split};
+use crate::address::{ADDRESS_HELP, Address, AddressArgs, Table, per_request, quantity, split};
 use crate::connect::{ConnectArgs, Session};
 use crate::exit::CliError;
 use crate::output;
-use crate::read::{per_request, quantity};
 use crate::value::{ValueArgs, ValueType, parse_coil};
 
 /// The spec's most coils per FC0F request (§6.11), from the core.
@@ -125,13 +124,25 @@ fn on_off(bits: &[bool]) -> String {
     bits.iter().map(|&b| if b { "ON" } else { "OFF" }).collect::<Vec<_>>().join(" ")
 }
 
+impl WriteArgs {
+    /// How the address is numbered (`--one-based`, `--modicon`).
+    pub(crate) fn address_args(&self) -> AddressArgs {
+        match &self.what {
+            WriteCommand::Coil { address_args, .. }
+            | WriteCommand::Coils { address_args, .. }
+            | WriteCommand::Register { address_args, .. }
+            | WriteCommand::Registers { address_args, .. } => *address_args,
+        }
+    }
+}
+
 /// Runs `write`.
 pub(crate) async fn run(connection: &ConnectArgs, args: &WriteArgs) -> Result<(), CliError> {
     match &args.what {
         WriteCommand::Coil { address, value, address_args } => {
             let address = match connection.named(address, Table::Coils, ValueArgs::default())? {
                 Some((named, _)) => named,
-                None => Address::parse(address, Table::Coils, connection.address_args(*address_args)?)?,
+                None => connection.address(address, Table::Coils, *address_args)?,
             };
             let value = parse_coil(value)?;
             let session = &connection.open().await?;
@@ -141,7 +152,7 @@ pub(crate) async fn run(connection: &ConnectArgs, args: &WriteArgs) -> Result<()
             Ok(())
         }
         WriteCommand::Coils { address, values, max_per_request, address_args } => {
-            let address = Address::parse(address, Table::Coils, connection.address_args(*address_args)?)?;
+            let address = connection.address(address, Table::Coils, *address_args)?;
             let bits = values.iter().map(|v| parse_coil(v)).collect::<Result<Vec<_>, _>>()?;
             address.check_span(bits.len())?;
             let max_per_request = connection.max_per_request(*max_per_request, Table::Coils, true)?;
@@ -166,10 +177,7 @@ pub(crate) async fn run(connection: &ConnectArgs, args: &WriteArgs) -> Result<()
         WriteCommand::Register { address, value, multiple, values, address_args } => {
             let (address, values) = match connection.named(address, Table::Holding, *values)? {
                 Some(named) => named,
-                None => (
-                    Address::parse(address, Table::Holding, connection.address_args(*address_args)?)?,
-                    connection.values(*values)?,
-                ),
+                None => (connection.address(address, Table::Holding, *address_args)?, connection.values(*values)?),
             };
             let values = &values;
             let registers = values.encode_all(std::slice::from_ref(value))?;
@@ -187,10 +195,7 @@ pub(crate) async fn run(connection: &ConnectArgs, args: &WriteArgs) -> Result<()
         WriteCommand::Registers { address, value, max_per_request, values, address_args } => {
             let (address, values) = match connection.named(address, Table::Holding, *values)? {
                 Some(named) => named,
-                None => (
-                    Address::parse(address, Table::Holding, connection.address_args(*address_args)?)?,
-                    connection.values(*values)?,
-                ),
+                None => (connection.address(address, Table::Holding, *address_args)?, connection.values(*values)?),
             };
             let values = &values;
             let registers = values.encode_all(value)?;

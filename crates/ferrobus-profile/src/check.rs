@@ -1,31 +1,31 @@
 //! Checking a parsed profile: addresses inside the space, no overlaps, types with their
-//! keys, ranges, enumerations and bit fields that fit, references that exist; every problem
-//! with the line of the entry or field at fault.
+//! keys, ranges, enumerations and bit fields that fit, references that exist; every problem,
+//! not only the first, each with the place of the entry or field at fault.
 
 use serde::Deserialize;
 
 use crate::model::{Profile, RegisterDef, ValueType};
+use crate::source::Place;
 
-/// The line (from 1) of byte `offset` in `text`.
-pub(crate) fn line_of(text: &str, offset: usize) -> usize {
-    text.get(..offset).unwrap_or(text).matches('\n').count().saturating_add(1)
-}
-
-/// The line of `field` in the entry whose header is at `span` of `text` (up to the next
-/// header), else the header's line.
-fn field_line(text: &str, span: &std::ops::Range<usize>, field: &str) -> usize {
-    let header = line_of(text, span.start);
-    let body = text.get(span.end..).unwrap_or_default().lines().skip(1);
-    for (n, line) in (header.saturating_add(1)..).zip(body) {
-        let line = line.trim_start();
-        if line.starts_with('[') {
+/// The byte offset of `field` in the entry whose header is at `span` of `text` (up to the
+/// next header), else the header's.
+fn field_offset(text: &str, span: &std::ops::Range<usize>, field: &str) -> usize {
+    let mut offset = span.end;
+    for (n, line) in text.get(span.end..).unwrap_or_default().split_inclusive('\n').enumerate() {
+        let here = offset;
+        offset = offset.saturating_add(line.len());
+        if n == 0 {
+            continue; // the rest of the header's line
+        }
+        let key = line.trim_start();
+        if key.starts_with('[') {
             break;
         }
-        if line.strip_prefix(field).is_some_and(|rest| rest.trim_start().starts_with('=')) {
-            return n;
+        if key.strip_prefix(field).is_some_and(|rest| rest.trim_start().starts_with('=')) {
+            return here.saturating_add(line.len().saturating_sub(key.len()));
         }
     }
-    header
+    span.start
 }
 
 /// Where each entry of a profile starts, read by a second pass over the same text.
@@ -47,46 +47,46 @@ pub(crate) struct Spans {
     state: Option<toml::Spanned<toml::Table>>,
 }
 
-/// A problem with the entry at a line.
-type Problem = (Option<usize>, String);
+/// A problem, with the byte offset of the entry or field at fault when known.
+pub(crate) type Problem = (Option<usize>, String);
 
 impl Profile {
-    #[allow(clippy::too_many_lines)]
-    pub(crate) fn validate(&self, text: &str, spans: &Spans) -> Result<(), Problem> {
-        let lines = |entries: &[toml::Spanned<toml::Table>]| -> Vec<Option<usize>> {
-            entries.iter().map(|e| Some(line_of(text, e.span().start))).collect()
+    /// Every problem of the profile parsed from `text`, in the file's sections' order.
+    pub(crate) fn validate(&self, text: &str, spans: &Spans) -> Vec<Problem> {
+        let mut problems = Vec::new();
+        let starts = |entries: &[toml::Spanned<toml::Table>]| -> Vec<Option<usize>> {
+            entries.iter().map(|e| Some(e.span().start)).collect()
         };
         if self.comm.response_wait_ms > 60_000 {
-            return Err((None, format!("response_wait_ms = {} is more than a minute", self.comm.response_wait_ms)));
+            problems.push((None, format!("response_wait_ms = {} is more than a minute", self.comm.response_wait_ms)));
         }
         let base = u64::from(self.addressing.base);
         for (kind, entries, spans) in
             [("registers", &self.registers, &spans.registers), ("inputs", &self.inputs, &spans.inputs)]
         {
-            let lines = lines(spans);
-            let at = |i: usize, field: &str| spans.get(i).map(|e| field_line(text, &e.span(), field));
+            let at = |i: usize, field: &str| spans.get(i).map(|e| field_offset(text, &e.span(), field));
             for (i, r) in entries.iter().enumerate() {
                 let entry = format!("[[{kind}]] {} ({})", r.number, r.name);
-                check_register(r, &entry, base, &|field| at(i, field))?;
+                check_register(r, &entry, base, &|field| at(i, field), &mut problems);
             }
             let extents =
                 entries.iter().map(|r| (r.number, u64::from(r.count) * u64::from(r.width()), r.name.as_str()));
-            no_overlaps(kind, extents, &lines)?;
+            no_overlaps(text, kind, extents, &starts(spans), &mut problems);
         }
         for (kind, entries, spans) in
             [("coils", &self.coils, &spans.coils), ("discrete_inputs", &self.discrete_inputs, &spans.discrete_inputs)]
         {
-            let lines = lines(spans);
+            let starts = starts(spans);
             for (i, b) in entries.iter().enumerate() {
                 if u64::from(b.number) < base || u64::from(b.number) + u64::from(b.count) > 0x1_0000 + base {
-                    let at = lines.get(i).copied().flatten();
-                    return Err((
-                        at,
+                    problems.push((
+                        starts.get(i).copied().flatten(),
                         format!("[[{kind}]] {} ({}): number and count run outside the address space", b.number, b.name),
                     ));
                 }
             }
-            no_overlaps(kind, entries.iter().map(|b| (b.number, u64::from(b.count), b.name.as_str())), &lines)?;
+            let extents = entries.iter().map(|b| (b.number, u64::from(b.count), b.name.as_str()));
+            no_overlaps(text, kind, extents, &starts, &mut problems);
         }
         for t in
             [self.tables.coils, self.tables.discrete_inputs, self.tables.holding_registers, self.tables.input_registers]
@@ -94,30 +94,28 @@ impl Profile {
                 .flatten()
         {
             if t > 0x1_0000 {
-                return Err((None, format!("[tables]: a table of {t} items is larger than the address space")));
+                problems.push((None, format!("[tables]: a table of {t} items is larger than the address space")));
             }
         }
-        let span_lines = lines(&spans.span);
+        let span_starts = starts(&spans.span);
         for (i, s) in self.span.iter().enumerate() {
-            let at = span_lines.get(i).copied().flatten();
+            let at = span_starts.get(i).copied().flatten();
             if s.first > s.last {
-                return Err((
-                    at,
-                    format!("[[span]] {}: first = {} is above last = {}", s.table.name(), s.first, s.last),
-                ));
-            }
-            if u64::from(s.first) < base || u64::from(s.last) >= 0x1_0000 + base {
-                return Err((
+                problems
+                    .push((at, format!("[[span]] {}: first = {} is above last = {}", s.table.name(), s.first, s.last)));
+            } else if u64::from(s.first) < base || u64::from(s.last) >= 0x1_0000 + base {
+                problems.push((
                     at,
                     format!("[[span]] {} {}-{}: outside the address space", s.table.name(), s.first, s.last),
                 ));
             }
         }
-        self.check_references(text, spans)
+        self.check_references(text, spans, &mut problems);
+        problems
     }
 
     /// `depends_on` and `[state] running` name points that exist.
-    fn check_references(&self, text: &str, spans: &Spans) -> Result<(), Problem> {
+    fn check_references(&self, text: &str, spans: &Spans, problems: &mut Vec<Problem>) {
         let names: Vec<&str> = self
             .coils
             .iter()
@@ -129,10 +127,9 @@ impl Profile {
             [("registers", &self.registers, &spans.registers), ("inputs", &self.inputs, &spans.inputs)]
         {
             for (i, r) in entries.iter().enumerate() {
-                if let Some(missing) = r.depends_on.iter().find(|d| !names.contains(&d.as_str())) {
-                    let line = spans.get(i).map(|e| field_line(text, &e.span(), "depends_on"));
-                    return Err((
-                        line,
+                for missing in r.depends_on.iter().filter(|d| !names.contains(&d.as_str())) {
+                    problems.push((
+                        spans.get(i).map(|e| field_offset(text, &e.span(), "depends_on")),
                         format!(
                             "[[{kind}]] {} ({}): depends_on names {missing:?}, which the profile does not have",
                             r.number, r.name
@@ -143,11 +140,12 @@ impl Profile {
         }
         if let Some(running) = &self.state.running {
             if !names.contains(&running.point.as_str()) {
-                let line = spans.state.as_ref().map(|s| field_line(text, &s.span(), "running"));
-                return Err((line, format!("[state] running: point {:?} is not in the profile", running.point)));
+                problems.push((
+                    spans.state.as_ref().map(|s| field_offset(text, &s.span(), "running")),
+                    format!("[state] running: point {:?} is not in the profile", running.point),
+                ));
             }
         }
-        Ok(())
     }
 }
 
@@ -166,45 +164,50 @@ pub(crate) fn parse_key(key: &str) -> Option<i128> {
 }
 
 #[allow(clippy::too_many_lines)]
-fn check_register(r: &RegisterDef, entry: &str, base: u64, at: &dyn Fn(&str) -> Option<usize>) -> Result<(), Problem> {
+/// Pushes every problem of register entry `r` (named `entry`; `at` finds a field's place).
+fn check_register(
+    r: &RegisterDef,
+    entry: &str,
+    base: u64,
+    at: &dyn Fn(&str) -> Option<usize>,
+    problems: &mut Vec<Problem>,
+) {
+    let mut problem = |field: &str, message: String| problems.push((at(field), format!("{entry}: {message}")));
     let ty = r.value_type;
     match (ty, r.length) {
         (ValueType::String, None | Some(0)) => {
-            return Err((at("length"), format!("{entry}: a string needs length = its registers (1 or more)")));
+            problem("length", "a string needs length = its registers (1 or more)".into());
         }
         (ValueType::String, Some(_)) | (_, None) => {}
-        (_, Some(_)) => return Err((at("length"), format!("{entry}: length is for type = \"string\" only"))),
+        (_, Some(_)) => problem("length", "length is for type = \"string\" only".into()),
     }
     if r.order.is_some() && ty.registers() == 1 && ty != ValueType::String {
-        return Err((
-            at("order"),
-            format!("{entry}: order is for values of more than one register, not {}", ty.name()),
-        ));
+        problem("order", format!("order is for values of more than one register, not {}", ty.name()));
     }
     if r.count == 0 {
-        return Err((at("count"), format!("{entry}: count = 0 describes nothing")));
+        problem("count", "count = 0 describes nothing".into());
     }
     if u64::from(r.number) < base {
-        return Err((at("number"), format!("{entry}: number is below the base {base}")));
+        problem("number", format!("number is below the base {base}"));
     }
     if u64::from(r.number) + u64::from(r.count) * u64::from(r.width()) > 0x1_0000 + base {
-        return Err((at("count"), format!("{entry}: count = {} runs past the address space", r.count)));
+        problem("count", format!("count = {} runs past the address space", r.count));
     }
     for (field, value) in [("scale", r.scale), ("offset", r.offset), ("min", r.min), ("max", r.max)] {
         if value.is_some_and(|v| !v.is_finite()) {
-            return Err((at(field), format!("{entry}: {field} must be a finite number")));
+            problem(field, format!("{field} must be a finite number"));
         }
     }
     if r.scale == Some(0.0) {
-        return Err((at("scale"), format!("{entry}: scale = 0 would make every value the same")));
+        problem("scale", "scale = 0 would make every value the same".into());
     }
     if let (Some(min), Some(max)) = (r.min, r.max) {
         if min > max {
-            return Err((at("max"), format!("{entry}: min = {min} is above max = {max}")));
+            problem("max", format!("min = {min} is above max = {max}"));
         }
     }
     if ty == ValueType::String && (r.min.is_some() || r.max.is_some() || r.scale.is_some() || r.offset.is_some()) {
-        return Err((at("type"), format!("{entry}: a string has no min, max, scale or offset")));
+        problem("type", "a string has no min, max, scale or offset".into());
     }
     if ty.is_integer() {
         let (lo, hi) = ty.integer_range();
@@ -212,29 +215,26 @@ fn check_register(r: &RegisterDef, entry: &str, base: u64, at: &dyn Fn(&str) -> 
         let (lo, hi) = (lo as f64, hi as f64);
         for (field, value) in [("min", r.min), ("max", r.max)] {
             if let Some(v) = value.filter(|v| *v < lo || *v > hi || v.fract() != 0.0) {
-                return Err((at(field), format!("{entry}: {field} = {v} is not a raw {} value", ty.name())));
+                problem(field, format!("{field} = {v} is not a raw {} value", ty.name()));
             }
         }
     }
     if !r.values.is_empty() && !ty.is_integer() {
-        return Err((
-            at("values"),
-            format!("{entry}: values (an enumeration) needs an integer type, not {}", ty.name()),
-        ));
+        problem("values", format!("values (an enumeration) needs an integer type, not {}", ty.name()));
     }
     for key in r.values.keys() {
         let (lo, hi) = ty.integer_range();
         if parse_key(key).is_none_or(|k| k < lo || k > hi) {
-            return Err((at("values"), format!("{entry}: values key {key:?} is not a raw {} value", ty.name())));
+            problem("values", format!("values key {key:?} is not a raw {} value", ty.name()));
         }
     }
     if !r.bits.is_empty() && !ty.is_integer() {
-        return Err((at("bits"), format!("{entry}: bits (a bit field) needs an integer type, not {}", ty.name())));
+        problem("bits", format!("bits (a bit field) needs an integer type, not {}", ty.name()));
     }
     let bit_count = i128::from(ty.registers()) * 16;
     for key in r.bits.keys() {
         if parse_key(key).is_none_or(|k| k < 0 || k >= bit_count) {
-            return Err((at("bits"), format!("{entry}: bits key {key:?} is not a bit from 0 to {}", bit_count - 1)));
+            problem("bits", format!("bits key {key:?} is not a bit from 0 to {}", bit_count - 1));
         }
     }
     if let Some(default) = &r.default {
@@ -248,22 +248,25 @@ fn check_register(r: &RegisterDef, entry: &str, base: u64, at: &dyn Fn(&str) -> 
             _ => false,
         };
         if !fits {
-            return Err((at("default"), format!("{entry}: default = {default} is not a {} value", ty.name())));
+            problem("default", format!("default = {default} is not a {} value", ty.name()));
         }
     }
-    Ok(())
 }
 
-/// Checks that no two entries of `kind` — `(number, items, name)`, at `lines` — share an
-/// address; names the later one and the line of the earlier one.
+/// Pushes a problem for each entry of `kind` — `(number, items, name)`, starting at byte
+/// `starts` of `text` — that shares an address with an earlier one; names the later entry and
+/// the line of the earlier one.
 fn no_overlaps<'a>(
+    text: &str,
     kind: &str,
     entries: impl Iterator<Item = (u32, u64, &'a str)>,
-    lines: &[Option<usize>],
-) -> Result<(), Problem> {
+    starts: &[Option<usize>],
+    problems: &mut Vec<Problem>,
+) {
     let mut sorted: Vec<(u64, u64, &str, usize)> =
         entries.enumerate().map(|(i, (n, items, name))| (u64::from(n), items, name, i)).collect();
     sorted.sort_by_key(|&(start, _, _, i)| (start, i));
+    let start_of = |i: usize| starts.get(i).copied().flatten();
     // The entry reaching furthest so far: where it ends, and which it is.
     let mut reach: Option<(u64, usize)> = None;
     for (k, &(start, items, _, _)) in sorted.iter().enumerate() {
@@ -271,21 +274,21 @@ fn no_overlaps<'a>(
             continue;
         }
         if let Some((_, owner)) = reach.filter(|&(end, _)| start < end) {
-            let (Some(a), Some(b)) = (sorted.get(owner), sorted.get(k)) else { break };
-            // Name the entry written later, and the line of the one written first.
-            let (first, later) = if a.3 < b.3 { (a, b) } else { (b, a) };
-            let what = if a.0 == b.0 { "is at the same number as" } else { "overlaps" };
-            let line = |i: usize| lines.get(i).copied().flatten();
-            let earlier = line(first.3).map_or(String::new(), |l| format!(" on line {l}"));
-            return Err((
-                line(later.3),
-                format!("[[{kind}]] {} ({}) {what} {} ({}){earlier}", later.0, later.2, first.0, first.2),
-            ));
+            if let (Some(a), Some(b)) = (sorted.get(owner), sorted.get(k)) {
+                // Name the entry written later, and the line of the one written first.
+                let (first, later) = if a.3 < b.3 { (a, b) } else { (b, a) };
+                let what = if a.0 == b.0 { "is at the same number as" } else { "overlaps" };
+                let earlier =
+                    start_of(first.3).map_or(String::new(), |at| format!(" on line {}", Place::of(text, at).line));
+                problems.push((
+                    start_of(later.3),
+                    format!("[[{kind}]] {} ({}) {what} {} ({}){earlier}", later.0, later.2, first.0, first.2),
+                ));
+            }
         }
         let end = start.saturating_add(items);
         if reach.is_none_or(|(furthest, _)| end > furthest) {
             reach = Some((end, k));
         }
     }
-    Ok(())
 }

@@ -19,6 +19,7 @@ mod codec;
 mod model;
 mod plan;
 mod point;
+pub mod source;
 
 pub use codec::{Value, ValueError};
 pub use model::{

@@ -10,7 +10,8 @@
 //!
 //! A profile is refused when its entries of one kind overlap (two registers sharing an
 //! address, a 32-bit value covering the next register), and every error names the file, the
-//! line, and the entry and field at fault.
+//! line and column, and the entry and field at fault ([`crate::source`]);
+//! [`Profile::parse_all`] lists every mistake of a file at once.
 
 use std::collections::BTreeMap;
 use std::fmt;
@@ -18,8 +19,9 @@ use std::path::Path;
 
 use serde::Deserialize;
 
-use crate::check::{Spans, line_of};
+use crate::check::Spans;
 use crate::point::{self, Point};
+use crate::source::{self, Located, NotText, Place, ReadError};
 
 /// A device model.
 #[derive(Clone, Debug, Deserialize)]
@@ -82,12 +84,12 @@ pub struct Profile {
     /// Where the profile came from (a built-in name or a path), for messages.
     #[serde(skip)]
     pub origin: String,
-    /// The line of `faults`, if any (from 1).
+    /// Where `faults` is written, if anywhere.
     #[serde(skip)]
-    pub faults_line: Option<usize>,
-    /// The line of each `[[fault_rule]]` (from 1).
+    pub faults_place: Option<Place>,
+    /// Where each `[[fault_rule]]` starts.
     #[serde(skip)]
-    pub fault_rule_lines: Vec<Option<usize>>,
+    pub fault_rule_places: Vec<Option<Place>>,
     /// Every coil, discrete input and register entry resolved to points, in profile order.
     #[serde(skip)]
     points: Vec<Point>,
@@ -630,36 +632,30 @@ pub enum ProfileError {
         /// Why.
         source: std::io::Error,
     },
+    /// The file is not UTF-8 text (a binary file, or a text in another encoding).
+    #[error("{path}:{error}")]
+    NotText {
+        /// The file.
+        path: String,
+        /// Where the first byte that is not UTF-8 is.
+        error: NotText,
+    },
     /// The TOML is malformed, has unknown fields, or a field of the wrong type.
-    #[error("in {origin}{}: {message}", at_line(*line, text))]
+    #[error("{}", mistake.in_file(origin))]
     Parse {
         /// The profile.
         origin: String,
-        /// The line where it is wrong (from 1), if known.
-        line: Option<usize>,
-        /// That line's text.
-        text: String,
-        /// What is wrong, from the TOML reader.
-        message: String,
+        /// Where and what, from the TOML reader, with an excerpt of the line.
+        mistake: Located,
     },
     /// The TOML is well formed but does not describe a possible device.
-    #[error("in {origin}{}: {problem}", at_line(*line, ""))]
+    #[error("{}", mistake.in_file(origin))]
     Invalid {
         /// The profile.
         origin: String,
-        /// The line of the entry at fault (from 1), if known.
-        line: Option<usize>,
-        /// What is wrong, naming the entry and the field.
-        problem: String,
+        /// Where (the entry or field at fault) and what, naming the entry and the field.
+        mistake: Located,
     },
-}
-
-fn at_line(line: Option<usize>, text: &str) -> String {
-    match (line, text.trim()) {
-        (None, _) => String::new(),
-        (Some(line), "") => format!(", line {line}"),
-        (Some(line), text) => format!(", line {line} ({text})"),
-    }
 }
 
 /// The profiles compiled into the binary.
@@ -694,33 +690,60 @@ impl Profile {
                 ProfileError::Unknown { name: name_or_path.to_string() }
             });
         }
-        let text = std::fs::read_to_string(path)
-            .map_err(|source| ProfileError::Read { path: path.display().to_string(), source })?;
-        Profile::parse(&text, &path.display().to_string())
+        let shown = path.display().to_string();
+        let text = source::read(path).map_err(|e| match e {
+            ReadError::Io(source) => ProfileError::Read { path: shown.clone(), source },
+            ReadError::NotText(error) => ProfileError::NotText { path: shown.clone(), error },
+        })?;
+        Profile::parse(&text, &shown)
     }
 
-    /// Parses and checks a profile; `origin` names it in errors, with the line at fault.
+    /// A built-in profile by name, or a profile file by path, with every mistake of the file
+    /// (see [`Profile::parse_all`]).
+    pub fn load_all(name_or_path: &str) -> Result<Profile, Vec<ProfileError>> {
+        let path = Path::new(name_or_path);
+        if BUILTIN.iter().any(|(n, _)| *n == name_or_path) || !path.exists() {
+            return Profile::load(name_or_path).map_err(|e| vec![e]);
+        }
+        let shown = path.display().to_string();
+        match source::read(path) {
+            Ok(text) => Profile::parse_all(&text, &shown),
+            Err(ReadError::Io(source)) => Err(vec![ProfileError::Read { path: shown, source }]),
+            Err(ReadError::NotText(error)) => Err(vec![ProfileError::NotText { path: shown, error }]),
+        }
+    }
+
+    /// Parses and checks a profile; `origin` names it in errors, with the place at fault. The
+    /// first mistake of the file (see [`Profile::parse_all`] for every one).
     pub fn parse(text: &str, origin: &str) -> Result<Profile, ProfileError> {
+        Profile::parse_all(text, origin).map_err(|mut mistakes| mistakes.swap_remove(0))
+    }
+
+    /// Parses and checks a profile, with every mistake of the file when it has any, in the
+    /// file's order: the TOML reader stops at its first, the checks of a well-formed file
+    /// find them all. Never an empty list.
+    pub fn parse_all(text: &str, origin: &str) -> Result<Profile, Vec<ProfileError>> {
         let mut profile: Profile = toml::from_str(text).map_err(|e| {
-            let line = e.span().map(|span| line_of(text, span.start));
-            let source_line = line.and_then(|l| text.lines().nth(l.saturating_sub(1))).unwrap_or_default();
-            ProfileError::Parse {
-                origin: origin.to_string(),
-                line,
-                text: source_line.to_string(),
-                message: with_migration_hint(e.message().trim()),
-            }
+            let mut mistake = Located::toml(text, &e);
+            mistake.message = with_migration_hint(&mistake.message);
+            vec![ProfileError::Parse { origin: origin.to_string(), mistake }]
         })?;
-        // The same text has parsed once; a second reader that fails only loses the lines.
+        // The same text has parsed once; a second reader that fails only loses the places.
         let spans: Spans = toml::from_str(text).unwrap_or_default();
         profile.origin = origin.to_string();
-        profile.faults_line = spans.faults.as_ref().map(|f| line_of(text, f.span().start));
-        profile.fault_rule_lines = spans.fault_rule.iter().map(|e| Some(line_of(text, e.span().start))).collect();
-        profile.validate(text, &spans).map_err(|(line, problem)| ProfileError::Invalid {
-            origin: origin.to_string(),
-            line,
-            problem,
-        })?;
+        profile.faults_place = spans.faults.as_ref().map(|f| Place::of(text, f.span().start));
+        profile.fault_rule_places = spans.fault_rule.iter().map(|e| Some(Place::of(text, e.span().start))).collect();
+        let mut problems = profile.validate(text, &spans);
+        if !problems.is_empty() {
+            problems.sort_by_key(|(at, _)| at.unwrap_or(0));
+            return Err(problems
+                .into_iter()
+                .map(|(at, problem)| ProfileError::Invalid {
+                    origin: origin.to_string(),
+                    mistake: Located::new(text, at.map(|a| a..a), &problem),
+                })
+                .collect());
+        }
         profile.points = point::resolve(&profile);
         Ok(profile)
     }
@@ -732,9 +755,10 @@ impl Profile {
         &self.points
     }
 
-    /// The error for a problem found after parsing (e.g. by the simulator in `faults`).
-    pub fn problem(&self, line: Option<usize>, problem: String) -> ProfileError {
-        ProfileError::Invalid { origin: self.origin.clone(), line, problem }
+    /// The error for a problem found after parsing (e.g. by the simulator in `faults`), at
+    /// `place` of the file.
+    pub fn problem(&self, place: Option<Place>, problem: &str) -> ProfileError {
+        ProfileError::Invalid { origin: self.origin.clone(), mistake: Located::at(place, problem) }
     }
 }
 

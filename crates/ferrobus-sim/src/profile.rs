@@ -7,37 +7,57 @@ pub use ferrobus_profile::*;
 /// Word order of a 32-bit pair: the core's (a profile names it `order = "ABCD"` or `"CDAB"`).
 pub use ferrobus_proto::words::WordOrder;
 
+use ferrobus_profile::source::Place;
+
 use crate::{Faults, Rule};
 
 /// The simulator's reading of a profile.
 pub trait ProfileFaults {
     /// The faults the profile asks for: its `faults` string, then its `[[fault_rule]]`s; an
-    /// error names the file and the line.
-    fn faults(&self) -> Result<Faults, String>;
+    /// error names the file, the line and the column.
+    fn faults(&self) -> Result<Faults, String> {
+        self.every_fault().map_err(|mut mistakes| mistakes.swap_remove(0))
+    }
+
+    /// The same, with every mistake when there are any (never an empty list).
+    fn every_fault(&self) -> Result<Faults, Vec<String>>;
 }
 
 impl ProfileFaults for Profile {
-    fn faults(&self) -> Result<Faults, String> {
-        let problem = |line: Option<usize>, problem: String| self.problem(line, problem).to_string();
-        let mut faults: Faults = match self.faults.as_deref() {
-            Some(spec) => spec.parse().map_err(|e| problem(self.faults_line, format!("faults: {e}")))?,
+    fn every_fault(&self) -> Result<Faults, Vec<String>> {
+        let problem = |place: Option<Place>, problem: String| self.problem(place, &problem).to_string();
+        let mut mistakes = Vec::new();
+        let mut faults: Faults = match self.faults.as_deref().map(str::parse::<Faults>) {
+            Some(Ok(faults)) => faults,
+            Some(Err(e)) => {
+                mistakes.push(problem(self.faults_place, format!("faults: {e}")));
+                Faults::default()
+            }
             None => Faults::default(),
         };
         for (i, table) in self.fault_rule.iter().enumerate() {
-            let line = self.fault_rule_lines.get(i).copied().flatten();
-            let spec = rule_spec(table).map_err(|p| problem(line, format!("[[fault_rule]]: {p}")))?;
-            let rule = spec.parse::<Rule>().map_err(|p| problem(line, format!("[[fault_rule]]: {p}")))?;
-            faults.rules.push(rule);
+            let place = self.fault_rule_places.get(i).copied().flatten();
+            match rule_spec(table).and_then(|spec| spec.parse::<Rule>()) {
+                Ok(rule) => faults.rules.push(rule),
+                Err(p) => mistakes.push(problem(place, format!("[[fault_rule]]: {p}"))),
+            }
         }
-        Ok(faults)
+        if mistakes.is_empty() { Ok(faults) } else { Err(mistakes) }
     }
 }
 
 /// Loads a profile (see [`Profile::load`]) and checks the faults it asks for, so that a
-/// mistake there is reported with the file and line like any other.
+/// mistake there is reported with the file and place like any other.
 pub fn load(name_or_path: &str) -> Result<Profile, String> {
-    let profile = Profile::load(name_or_path).map_err(|e| e.to_string())?;
-    profile.faults()?;
+    load_all(name_or_path).map_err(|mut mistakes| mistakes.swap_remove(0))
+}
+
+/// [`load`] with every mistake of the file (see [`Profile::load_all`]), its faults' too when
+/// the rest is sound; never an empty list.
+pub fn load_all(name_or_path: &str) -> Result<Profile, Vec<String>> {
+    let profile = Profile::load_all(name_or_path)
+        .map_err(|mistakes| mistakes.iter().map(ToString::to_string).collect::<Vec<_>>())?;
+    profile.every_fault()?;
     Ok(profile)
 }
 
@@ -94,13 +114,22 @@ mod tests {
             ["exception 0x06 for 50% of 0x03 at 0x1000-0x100F", "no reply for every request at 0x0007-0x0007"]
         );
         let bad = format!("{DEVICE}\n[[fault_rule]]\nfc = 3\nshort = 0\n");
-        assert_eq!(error(&bad), "in mine.toml, line 7: [[fault_rule]]: short: '0' is not a number of bytes from 1");
+        assert_eq!(error(&bad), "mine.toml:7:1: [[fault_rule]]: short: '0' is not a number of bytes from 1");
         let bad_faults = format!("\nfaults = 'drop=2'\n{DEVICE}");
         assert!(
-            error(&bad_faults).starts_with("in mine.toml, line 2: faults: fault \"drop=2\": drop:"),
+            error(&bad_faults).starts_with("mine.toml:2:10: faults: fault \"drop=2\": drop:"),
             "{}",
             error(&bad_faults)
         );
         assert!(load("./nope.toml").unwrap_err().contains("no such file"));
+    }
+
+    #[test]
+    fn every_bad_fault_of_a_profile_is_listed_each_with_its_place() {
+        let text =
+            format!("faults = 'drop=2'\n{DEVICE}[[fault_rule]]\nshort = 0\n\n[[fault_rule]]\nfc = 3\nshare = 7\n");
+        let mistakes = Profile::parse(&text, "mine.toml").unwrap().every_fault().unwrap_err();
+        let places: Vec<&str> = mistakes.iter().filter_map(|m| m.split(": ").next()).collect();
+        assert_eq!(places, ["mine.toml:1:10", "mine.toml:7:1", "mine.toml:10:1"], "{mistakes:#?}");
     }
 }

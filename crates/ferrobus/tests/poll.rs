@@ -321,7 +321,11 @@ trends = ["d001"]
 #[test]
 fn a_broken_session_names_the_file_the_line_and_the_definition() {
     let e = Session::parse("[[read]]\nunit = 3\ntable = \"holding\"\naddres = 1\n", "s.toml").unwrap_err();
-    assert!(e.to_string().starts_with("s.toml, line 4:"), "{e}");
+    assert!(e.to_string().starts_with("s.toml:4:1: unknown field `addres`"), "{e}");
+    assert!(e.to_string().ends_with("(in `addres = 1`)"), "{e}");
+    let huge = format!("[[read]]\nunit = 3\ntable = \"{}\"\naddress = 1\n", "h".repeat(10 << 20));
+    let e = Session::parse(&huge, "s.toml").unwrap().groups("s.toml", |_| unreachable!()).unwrap_err();
+    assert!(e.to_string().len() < 1_000, "{} bytes", e.to_string().len());
     let s = Session::parse("[[read]]\nunit = 3\ntable = \"holdings\"\naddress = 1\n", "s.toml").unwrap();
     let e = s.groups("s.toml", |_| unreachable!()).unwrap_err();
     assert_eq!(e.to_string(), "s.toml: read 1: table \"holdings\": give holding, input, coils or discrete");

@@ -47,6 +47,7 @@ use std::time::Duration;
 use clap::ValueEnum;
 use ferrobus::Backoff;
 use ferrobus::gateway::{LineConfig, Route, Routes};
+use ferrobus_profile::source::{self, Located, Place, ReadError};
 use serde::Deserialize;
 use toml::Spanned;
 
@@ -112,17 +113,17 @@ type Problem = (Range<usize>, String);
 /// Reads `path`: the lines, with their settings on top of `connection`'s and `base`'s, and
 /// the routes. Nothing is opened.
 pub(super) fn read(path: &Path, connection: &ConnectArgs, base: Base) -> Result<(Vec<LineConfig>, Routes), CliError> {
-    let text = std::fs::read_to_string(path)
-        .map_err(|e| CliError::Usage(format!("cannot read the lines file {}: {e}", path.display())))?;
+    let text = source::read(path).map_err(|e| match e {
+        ReadError::Io(e) => CliError::Usage(format!("cannot read the lines file {}: {e}", path.display())),
+        not_text @ ReadError::NotText(_) => CliError::Usage(not_text.located().in_file(&path.display().to_string())),
+    })?;
     parse(path, &text, connection, base)
 }
 
 /// Line and column (both from 1) of a byte offset.
 fn line_col(text: &str, offset: usize) -> (usize, usize) {
-    let before = text.get(..offset).unwrap_or(text);
-    let line = before.matches('\n').count().saturating_add(1);
-    let col = before.rsplit('\n').next().map_or(0, |l| l.chars().count()).saturating_add(1);
-    (line, col)
+    let place = Place::of(text, offset);
+    (place.line, place.column)
 }
 
 /// Parses and checks the text of a lines file.
@@ -132,14 +133,10 @@ pub(super) fn parse(
     connection: &ConnectArgs,
     base: Base,
 ) -> Result<(Vec<LineConfig>, Routes), CliError> {
-    let at = |span: Range<usize>, what: &str| {
-        let (line, col) = line_col(text, span.start);
-        CliError::Usage(format!("{}:{line}:{col}: {what}", path.display()))
-    };
-    let shape: FileShape = toml::from_str(text).map_err(|e| match e.span() {
-        Some(span) => at(span, e.message().trim()),
-        None => CliError::Usage(format!("{}: {}", path.display(), e.message().trim())),
-    })?;
+    let shown = path.display().to_string();
+    let at = |span: Range<usize>, what: &str| CliError::Usage(Located::new(text, Some(span), what).in_file(&shown));
+    let shape: FileShape =
+        toml::from_str(text).map_err(|e| CliError::Usage(Located::toml(text, &e).in_file(&shown)))?;
     if shape.line.is_empty() {
         return Err(CliError::Usage(format!(
             "{}: no [[line]] table: give one per serial port, with its port = \"/dev/ttyUSB0\" and its units",

@@ -30,6 +30,7 @@ use ratatui::backend::CrosstermBackend;
 use ratatui::crossterm::event::{self, Event};
 use ratatui::crossterm::{cursor, execute, terminal};
 
+use crate::address::AddressArgs;
 use crate::connect::ConnectArgs;
 use crate::exit::CliError;
 use model::{App, Definition, Outcome, TrafficLine};
@@ -37,8 +38,11 @@ use model::{App, Definition, Outcome, TrafficLine};
 /// `monitor [DEFINITION...]`.
 #[derive(Args, Debug)]
 #[command(after_help = "DEFINITION is [UNIT:]TABLE:ADDRESS[:COUNT][@RATE] (TABLE = coils, discrete, holding, input; \
-    RATE like 250ms or 2s, default 1s), e.g. holding:0x1000:8@250ms or 3:input:0:4; with --device, a point's \
-    code or label, a glob (F0*) or group:NAME, with @RATE.\n\n\
+    RATE like 250ms or 2s, default 1s), e.g. holding:0x1000:8@250ms or 3:input:0:4, or the two words TABLE ADDRESS \
+    with --count (poll's form: holding 0x1000 --count 8); with --device, a point's code or label, a glob (F0*) or \
+    group:NAME, with @RATE. ADDRESS is numbered as read and write number it: a wire address, or with --one-based, \
+    --modicon or the --device profile's numbering (the 3G3RX's from 1); a range longer than the device takes in \
+    one request (the profile's limit) is read in several.\n\n\
     Keys: q quit, Tab next pane, arrows move, e edit (then Enter, then y to write), f format, o word/byte \
     order, a alias, t trend, p pause polling, r reset counters, Space pause traffic, PgUp/PgDn scroll \
     traffic, s save the session.")]
@@ -60,6 +64,33 @@ pub(crate) struct MonitorArgs {
     /// A cell's alias: ADDRESS=NAME
     #[arg(long = "alias", value_name = "ADDRESS=NAME")]
     pub(crate) aliases: Vec<String>,
+
+    /// Items of each definition written as the two words TABLE ADDRESS (poll's form)
+    #[arg(long, value_name = "N")]
+    pub(crate) count: Option<u16>,
+
+    /// How ADDRESS is numbered.
+    #[command(flatten)]
+    pub(crate) address_args: AddressArgs,
+}
+
+/// The definitions of the command line, each in one word: `TABLE ADDRESS[@RATE]` (two words,
+/// poll's form) becomes `TABLE:ADDRESS[:COUNT][@RATE]` with `--count`.
+fn definitions(args: &MonitorArgs) -> Result<Vec<String>, CliError> {
+    let mut out = Vec::new();
+    let mut words = args.watch.iter();
+    while let Some(word) = words.next() {
+        if crate::address::Table::from_name(word).is_none() {
+            out.push(word.clone());
+            continue;
+        }
+        let address = words.next().ok_or_else(|| CliError::Usage(format!("{word} needs an ADDRESS after it")))?;
+        let (address, rate) = address.split_once('@').map_or((address.as_str(), None), |(a, r)| (a, Some(r)));
+        let count = args.count.map(|n| format!(":{n}")).unwrap_or_default();
+        let rate = rate.map(|r| format!("@{r}")).unwrap_or_default();
+        out.push(format!("{word}:{address}{count}{rate}"));
+    }
+    Ok(out)
 }
 
 /// Applies `--format` and `--alias`.
@@ -97,13 +128,24 @@ fn apply_options(args: &MonitorArgs, panes: &mut [Definition]) -> Result<(), Cli
     Ok(())
 }
 
+/// Splits each raw pane's read into the requests the device takes (the `--device` profile's
+/// limit, else the spec's); the profile's panes are the planner's already.
+fn within_limits(connection: &ConnectArgs, panes: &mut [Definition]) -> Result<(), CliError> {
+    for pane in panes.iter_mut().filter(|p| p.cells.iter().all(|c| c.format != model::Format::Named)) {
+        let table = crate::address::Table::from(pane.table);
+        pane.reads = connection.read_pieces(pane.address, usize::from(pane.count), 1, table, None)?;
+    }
+    Ok(())
+}
+
 /// Runs `monitor`.
 pub(crate) async fn run(connection: &ConnectArgs, args: &MonitorArgs) -> Result<(), CliError> {
     let profile = connection.profile()?;
     let unit = connection.unit()?;
     let mut panes = Vec::new();
-    for definition in &args.watch {
-        panes.extend(spec::parse(definition, unit, profile.as_ref())?);
+    let number = |address: &str, table| connection.address(address, table, args.address_args).map(|a| a.wire);
+    for definition in definitions(args)? {
+        panes.extend(spec::parse_numbered(&definition, unit, profile.as_ref(), &number)?);
     }
     if let Some(path) = &args.session {
         let path = std::path::Path::new(path);
@@ -119,6 +161,7 @@ pub(crate) async fn run(connection: &ConnectArgs, args: &MonitorArgs) -> Result<
         ));
     }
     apply_options(args, &mut panes)?;
+    within_limits(connection, &mut panes)?;
     if !std::io::IsTerminal::is_terminal(&std::io::stdout()) {
         return Err(CliError::Usage("monitor needs a terminal: for a log, use `ferrobus read` in a loop".into()));
     }

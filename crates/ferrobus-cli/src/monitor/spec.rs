@@ -10,6 +10,7 @@ use ferrobus_profile::Order;
 use ferrobus_profile::{Point, Profile, Table};
 
 use super::model::{Cell, Definition, Format};
+use crate::address::RangeWord;
 use crate::exit::CliError;
 
 /// The rate of a definition that gives none.
@@ -24,16 +25,6 @@ fn number(text: &str, what: &str, spec: &str) -> Result<u32, CliError> {
     parsed.map_err(|_| CliError::Usage(format!("'{spec}': {what} '{t}' is not a number")))
 }
 
-fn table(name: &str) -> Option<Table> {
-    match name.to_ascii_lowercase().as_str() {
-        "coils" | "coil" => Some(Table::Coils),
-        "discrete" => Some(Table::DiscreteInputs),
-        "holding" => Some(Table::Holding),
-        "input" => Some(Table::Input),
-        _ => None,
-    }
-}
-
 /// Splits `@RATE` off a definition.
 fn rate(spec: &str) -> Result<(&str, Duration), CliError> {
     let Some((body, rate)) = spec.rsplit_once('@') else { return Ok((spec, DEFAULT_EVERY)) };
@@ -44,41 +35,43 @@ fn rate(spec: &str) -> Result<(&str, Duration), CliError> {
     Ok((body, every))
 }
 
-/// Parses one definition: raw, or (with a profile) points by name, glob or `group:NAME`.
+/// Parses one definition: raw, its address a wire address, or (with a profile) points by
+/// name, glob or `group:NAME`.
 pub(crate) fn parse(spec: &str, default_unit: u8, profile: Option<&Profile>) -> Result<Vec<Definition>, CliError> {
-    let (body, every) = rate(spec)?;
-    let parts: Vec<&str> = body.split(':').collect();
-    let (unit, rest) = match parts.as_slice() {
-        [first, rest @ ..] if !rest.is_empty() && table(rest[0]).is_some() && table(first).is_none() => {
-            let unit = number(first, "the unit", spec)?;
-            let unit = u8::try_from(unit)
-                .ok()
-                .filter(|u| (1..=247).contains(u))
-                .ok_or_else(|| CliError::Usage(format!("'{spec}': unit {unit} is not 1 to 247")))?;
-            (unit, rest)
-        }
-        all => (default_unit, all),
+    let wire = |address: &str, _: crate::address::Table| -> Result<u16, CliError> {
+        number(address, "the address", spec).and_then(|a| {
+            u16::try_from(a).map_err(|_| CliError::Usage(format!("'{spec}': address {a} is past 0xFFFF")))
+        })
     };
-    if let [name, address, count @ ..] = rest {
-        if let Some(table) = table(name) {
-            let address = number(address, "the address", spec)?;
-            let count = match count {
-                [] => 1,
-                [count] => number(count, "the count", spec)?,
-                _ => return Err(CliError::Usage(format!("'{spec}': use [UNIT:]TABLE:ADDRESS[:COUNT][@RATE]"))),
-            };
-            let max = if matches!(table, Table::Coils | Table::DiscreteInputs) { 2000 } else { 125 };
-            if count == 0 || count > max {
-                return Err(CliError::Usage(format!("'{spec}': the count is 1 to {max} for {name}")));
-            }
-            let address = u16::try_from(address)
-                .ok()
-                .filter(|a| u32::from(*a) + count <= 65536)
-                .ok_or_else(|| CliError::Usage(format!("'{spec}': the range passes the last address 0xFFFF")))?;
-            let count = u16::try_from(count).unwrap_or(u16::MAX);
-            return Ok(vec![Definition::raw(unit, table, address, count, every)]);
+    parse_numbered(spec, default_unit, profile, &wire)
+}
+
+/// [`parse`], a raw definition's address numbered by `address` (the command line's rule,
+/// [`crate::connect::ConnectArgs::address`]). The raw range is the one word
+/// `[UNIT:]TABLE:ADDRESS[:COUNT]` that `poll` takes too ([`RangeWord`]).
+pub(crate) fn parse_numbered(
+    spec: &str,
+    default_unit: u8,
+    profile: Option<&Profile>,
+    address: &dyn Fn(&str, crate::address::Table) -> Result<u16, CliError>,
+) -> Result<Vec<Definition>, CliError> {
+    let (body, every) = rate(spec)?;
+    if let Some(range) = RangeWord::parse(body) {
+        let range = range?;
+        let (table, count) = (range.table, range.count.unwrap_or(1));
+        let max = table.max_read();
+        if usize::from(count) > max {
+            return Err(CliError::Usage(format!("'{spec}': the count is 1 to {max} for {table}")));
         }
+        let start = address(range.address, table)?;
+        if u32::from(start) + u32::from(count) > 0x1_0000 {
+            return Err(CliError::Usage(format!("'{spec}': the range passes the last address 0xFFFF")));
+        }
+        let unit = range.unit.unwrap_or(default_unit);
+        return Ok(vec![Definition::raw(unit, table.into(), start, count, every)]);
     }
+    let parts: Vec<&str> = body.split(':').collect();
+    let (unit, rest) = (default_unit, parts.as_slice());
     let Some(profile) = profile else {
         return Err(CliError::Usage(format!(
             "'{spec}' is not a read definition ([UNIT:]TABLE:ADDRESS[:COUNT][@RATE], TABLE = coils, discrete, \

@@ -10,7 +10,7 @@ use ratatui::crossterm::event::{KeyCode, KeyEvent, KeyModifiers};
 
 use super::keys::{self, Action};
 use super::model::{App, Definition, Format, Mode, Outcome, TrafficLine};
-use super::{spec, view};
+use super::{MonitorArgs, spec, view};
 
 fn render(app: &App, width: u16, height: u16) -> String {
     let mut terminal = Terminal::new(TestBackend::new(width, height)).unwrap();
@@ -489,4 +489,45 @@ fn a_session_file_keeps_the_trends_and_each_cells_own_order_and_poll_reads_it() 
     let bad = ferrobus::poll::session::Session::parse(&bad, "s.toml").unwrap();
     let err = format!("{:?}", spec::panes_of(&bad, "s.toml").err().unwrap());
     assert!(err.contains("points 1") && err.contains("\\\"F002\\\" is not one of the points watched"), "{err}");
+}
+
+/// The connection options of a command line (`--device omron-3g3rx`, ...).
+fn connection(args: &[&str]) -> crate::connect::ConnectArgs {
+    use clap::{Args as _, FromArgMatches as _};
+    let command = crate::connect::ConnectArgs::augment_args(clap::Command::new("ferrobus"));
+    let matches = command.try_get_matches_from(std::iter::once("ferrobus").chain(args.iter().copied())).unwrap();
+    crate::connect::ConnectArgs::from_arg_matches(&matches).unwrap()
+}
+
+/// The `monitor` arguments of `words` (DEFINITIONs and options).
+fn monitor_args(words: &[&str]) -> MonitorArgs {
+    use clap::{Args as _, FromArgMatches as _};
+    let command = MonitorArgs::augment_args(clap::Command::new("monitor"));
+    let matches = command.try_get_matches_from(std::iter::once("monitor").chain(words.iter().copied())).unwrap();
+    MonitorArgs::from_arg_matches(&matches).unwrap()
+}
+
+#[test]
+fn monitor_takes_polls_two_word_form_with_count_beside_its_own() {
+    let args = monitor_args(&["holding", "0x1000@250ms", "input:7:2", "coils", "3", "--count", "4"]);
+    assert_eq!(super::definitions(&args).unwrap(), ["holding:0x1000:4@250ms", "input:7:2", "coils:3:4"]);
+    let dangling = monitor_args(&["holding"]);
+    assert!(format!("{:?}", super::definitions(&dangling).unwrap_err()).contains("holding needs an ADDRESS"));
+}
+
+#[test]
+fn with_device_a_raw_pane_is_numbered_as_read_numbers_it_and_read_within_the_profiles_limit() {
+    let rx = connection(&["--device", "omron-3g3rx"]);
+    let args = monitor_args(&["holding:0x1001:8"]);
+    let number = |address: &str, table| rx.address(address, table, args.address_args).map(|a| a.wire);
+    let mut panes = spec::parse_numbered("holding:0x1001:8", 1, None, &number).unwrap();
+    assert_eq!((panes[0].address, panes[0].count), (0x1000, 8), "one-based as the 3G3RX numbers");
+    super::within_limits(&rx, &mut panes).unwrap();
+    assert_eq!(panes[0].reads, [(0x1000, 4), (0x1004, 4)], "4 registers a request, the 3G3RX's limit");
+    // Without --device: wire addresses and the spec's limit.
+    let plain = connection(&[]);
+    let number = |address: &str, table| plain.address(address, table, args.address_args).map(|a| a.wire);
+    let mut panes = spec::parse_numbered("holding:0x1001:8", 1, None, &number).unwrap();
+    super::within_limits(&plain, &mut panes).unwrap();
+    assert_eq!(panes[0].reads, [(0x1001, 8)]);
 }

@@ -50,6 +50,23 @@ fn bench_on_a_port_that_dies_stops_once_most_reads_failed_and_exits_4() {
 }
 
 #[test]
+fn bench_stops_with_exit_4_and_its_summary_once_the_server_is_gone_for_the_give_up_bound() {
+    let port = dying_server(3).to_string();
+    let target = format!("127.0.0.1:{port}");
+    // A million reads: without the bound it would retry for days.
+    let args = ["--tcp", &target, "--timeout", "200ms", "bench", "--count", "1000000", "--quantity", "1"];
+    let assert = ferrobus().args(args).args(["--give-up", "1s"]).assert().code(4);
+    let err = stderr(&assert);
+    assert!(err.contains("bench: stopped after "), "{err}");
+    assert!(err.contains("of 1000000 reads: none has got through for "), "{err}");
+    assert!(err.contains("the server or the device is gone"), "{err}");
+    let out = stdout(&assert);
+    assert!(out.starts_with("bench: "), "the summary of what was measured: {out}");
+    let reads: u32 = out.split_whitespace().nth(1).and_then(|n| n.parse().ok()).unwrap();
+    assert!((6..1000).contains(&reads), "3 answered and at least 3 failed: {out}");
+}
+
+#[test]
 fn bench_with_most_reads_timing_out_says_it_stopped_and_exits_3() {
     let server = Server::start();
     let assert = server.run(&["--unit", "9", "bench", "--count", "4"]).code(3);

@@ -230,14 +230,13 @@ fn an_unknown_setting_is_named_with_its_line_and_the_settings_there_are() {
 #[test]
 fn a_toml_syntax_error_names_the_file_and_line() {
     let (err, path, _dir) = broken("[defaults]\nbaud = 9600\ntimeout = 500ms\n", &["config", "show"]);
-    assert!(err.contains(&format!("settings file {}", path.display())), "{err}");
-    assert!(err.contains("line 3"), "{err}");
+    assert!(err.contains(&format!("settings file {}:3:11: ", path.display())), "{err}");
 }
 
 #[test]
 fn an_unknown_table_is_an_error_not_ignored() {
-    let (err, _path, _dir) = broken("[connections.a]\nport = \"/dev/ttyUSB0\"\n", &["config", "show"]);
-    assert!(err.contains("line 1") && err.contains("connections"), "{err}");
+    let (err, path, _dir) = broken("[connections.a]\nport = \"/dev/ttyUSB0\"\n", &["config", "show"]);
+    assert!(err.contains(&format!("{}:1:2: unknown field `connections`", path.display())), "{err}");
 }
 
 #[test]

@@ -242,17 +242,59 @@ fn profile_check_names_the_file_and_line_of_a_mistake() {
     let err = stderr(&offline(&["profile", "check", &shown]).code(2));
     assert_eq!(
         err.trim(),
-        format!("error: in {shown}, line 11: [[registers]] 1 (r): bits key \"40\" is not a bit from 0 to 31")
+        format!(
+            "{shown}:11:1: [[registers]] 1 (r): bits key \"40\" is not a bit from 0 to 31 (in `bits={{ '40' = 'x' }}`)\n\
+             error: {shown}: 1 mistake"
+        )
     );
     let unknown = dir.join("unknown.toml");
     std::fs::write(&unknown, "[device]\nname='x'\nvendor='v'\nproduct_code='p'\nrevision='1'\ncolour='red'\n").unwrap();
     let err = stderr(&offline(&["profile", "check", &unknown.display().to_string()]).code(2));
-    assert!(
-        err.starts_with(&format!("error: in {}, line 6 (colour='red'): unknown field `colour`", unknown.display())),
-        "{err}"
-    );
+    assert!(err.starts_with(&format!("{}:6:1: unknown field `colour`", unknown.display())), "{err}");
     let out = stdout(&offline(&["profile", "check", &profile("types.toml")]).success());
     assert!(out.ends_with("types.toml: ok: ferrobus type test device — 0 coils, 0 discrete inputs, 13 holding and 0 input register values\n"), "{out}");
+    std::fs::remove_dir_all(&dir).unwrap();
+}
+
+#[test]
+fn profile_check_lists_every_mistake_of_a_profile_in_one_run_and_exits_2() {
+    let dir = std::env::temp_dir().join(format!("ferrobus-cli-mistakes-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let bad = dir.join("three.toml");
+    std::fs::write(
+        &bad,
+        "[device]\nname='x'\nvendor='v'\nproduct_code='p'\nrevision='1'\n\n[[registers]]\nnumber=1\nname='a'\n\
+         scale=0\n\n[[registers]]\nnumber=2\nname='b'\ntype='u16'\nvalues={ 'x' = 'on' }\n\n[[registers]]\n\
+         number=1\nname='c'\n",
+    )
+    .unwrap();
+    let shown = bad.display().to_string();
+    let err = stderr(&offline(&["profile", "check", &shown]).code(2));
+    let places: Vec<&str> = err.lines().filter_map(|l| l.split(": ").next()).collect();
+    let at = |place: &str| format!("{shown}:{place}");
+    assert_eq!(places, [at("10:1"), at("16:1"), at("18:1"), "error".to_string()], "{err}");
+    assert!(err.ends_with(&format!("error: {shown}: 3 mistakes\n")), "{err}");
+    let json = stdout(&offline(&["profile", "check", &shown, "--json"]).code(2));
+    let doc: serde_json::Value = serde_json::from_str(&json).unwrap();
+    assert_eq!(doc["ok"], false);
+    assert_eq!(doc["mistakes"].as_array().map(Vec::len), Some(3), "{json}");
+    std::fs::remove_dir_all(&dir).unwrap();
+}
+
+#[test]
+fn profile_check_of_a_10_mb_line_or_a_binary_file_prints_a_few_hundred_bytes_with_line_and_column() {
+    let dir = std::env::temp_dir().join(format!("ferrobus-cli-huge-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let huge = dir.join("huge.toml");
+    let line = format!("[device]\nname = '{}\n", "x".repeat(10 << 20));
+    std::fs::write(&huge, line).unwrap();
+    let err = stderr(&offline(&["profile", "check", &huge.display().to_string()]).code(2));
+    assert!(err.len() < 2_000, "{} bytes of stderr", err.len());
+    assert!(err.starts_with(&format!("{}:2:", huge.display())) && err.contains('…'), "{err}");
+    let binary = dir.join("binary.toml");
+    std::fs::write(&binary, b"\x7fELF\x02\x01\x01\0\0\0\0\0\0\0\0\0\n\x03\0\xff").unwrap();
+    let err = stderr(&offline(&["profile", "check", &binary.display().to_string()]).code(2));
+    assert!(err.starts_with(&format!("{}:2:3: byte 0xFF is not UTF-8 text", binary.display())), "{err}");
     std::fs::remove_dir_all(&dir).unwrap();
 }
 

@@ -183,7 +183,7 @@ fn sim_names_the_file_and_line_of_overlapping_profile_registers() {
     let shown = path.display().to_string();
     let err = stderr(&offline(&["--tcp", "127.0.0.1:1", "sim", "--profile", &shown]).code(2));
     let _ = std::fs::remove_dir_all(&dir);
-    assert!(err.contains(&format!("in {shown}, line 12: [[registers]] 2 (b) overlaps 1 (a) on line 7")), "{err}");
+    assert!(err.contains(&format!("{shown}:12:1: [[registers]] 2 (b) overlaps 1 (a) on line 7")), "{err}");
 }
 
 #[test]

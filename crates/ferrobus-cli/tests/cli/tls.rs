@@ -95,7 +95,7 @@ fn sim_names_the_file_and_line_of_a_bad_roles_file() {
         path(&roles),
     ];
     let err = stderr(&offline(&args).code(2));
-    assert!(err.contains(&format!("roles file {}:3: unit 300 is past the highest, 255", roles.display())), "{err}");
+    assert!(err.contains(&format!("roles file {}:3:10: unit 300 is past the highest, 255", roles.display())), "{err}");
     // The server's key given as its certificate.
     let mut args = args;
     args[6] = path(&server.key);

@@ -33,36 +33,37 @@ fn error(text: &str) -> String {
 fn mistakes_in_a_profile_are_reported_with_the_file_the_line_and_the_field() {
     assert_eq!(
         error(&format!("{DEVICE}colour = 'red'\n")),
-        "in mine.toml, line 6 (colour = 'red'): unknown field `colour`, expected one of `name`, `vendor`, \
+        "mine.toml:6:1: unknown field `colour`, expected one of `name`, `vendor`, \
          `product_code`, `revision`, `vendor_url`, `product_name`, `model_name`, `user_application_name`, \
-         `identification`, `server_id`"
+         `identification`, `server_id` (in `colour = 'red'`)"
     );
     let wrong_type = error(&format!("{DEVICE}[[registers]]\nnumber = 'one'\nname = 'r'\n"));
-    assert!(wrong_type.starts_with("in mine.toml, line 7 (number = 'one'): invalid type: string"), "{wrong_type}");
+    assert!(wrong_type.starts_with("mine.toml:7:10: invalid type: string"), "{wrong_type}");
     let old = error(&format!("{DEVICE}[[registers]]\nnumber=1\nname='r'\nsize=2\n"));
-    assert!(old.starts_with("in mine.toml, line 9 (size=2): unknown field `size`"), "{old}");
-    assert!(old.ends_with("(size, signed and word_order are now type and order: type = \"u32\" or \"i32\", order = \"ABCD\" for high-first or \"CDAB\" for low-first)"), "{old}");
+    assert!(old.starts_with("mine.toml:9:1: unknown field `size`"), "{old}");
+    assert!(old.ends_with("(size, signed and word_order are now type and order: type = \"u32\" or \"i32\", order = \"ABCD\" for high-first or \"CDAB\" for low-first) (in `size=2`)"), "{old}");
     let bad_type = error(&format!("{DEVICE}[[registers]]\nnumber=1\nname='r'\ntype='u24'\n"));
-    assert!(bad_type.starts_with("in mine.toml, line 9 (type='u24'): unknown variant `u24`"), "{bad_type}");
+    assert!(bad_type.starts_with("mine.toml:9:6: unknown variant `u24`"), "{bad_type}");
     assert_eq!(
         error(&format!("{DEVICE}[[registers]]\nnumber=1\nname='r'\ntype='string'\n")),
-        "in mine.toml, line 6: [[registers]] 1 (r): a string needs length = its registers (1 or more)"
+        "mine.toml:6:1: [[registers]] 1 (r): a string needs length = its registers (1 or more) (in `[[registers]]`)"
     );
     assert_eq!(
         error(&format!("{DEVICE}[[registers]]\nnumber=1\nname='r'\nvalues={{ 'x' = 'on' }}\n")),
-        "in mine.toml, line 9: [[registers]] 1 (r): values key \"x\" is not a raw u16 value"
+        "mine.toml:9:1: [[registers]] 1 (r): values key \"x\" is not a raw u16 value (in `values={ 'x' = 'on' }`)"
     );
     assert_eq!(
         error(&format!("{DEVICE}[[registers]]\nnumber=1\nname='r'\ndepends_on=['A004']\n")),
-        "in mine.toml, line 9: [[registers]] 1 (r): depends_on names \"A004\", which the profile does not have"
+        "mine.toml:9:1: [[registers]] 1 (r): depends_on names \"A004\", which the profile does not have \
+         (in `depends_on=['A004']`)"
     );
     assert_eq!(
         error(&format!("{DEVICE}[[span]]\ntable='holding'\nfirst=9\nlast=3\n")),
-        "in mine.toml, line 6: [[span]] holding: first = 9 is above last = 3"
+        "mine.toml:6:1: [[span]] holding: first = 9 is above last = 3 (in `[[span]]`)"
     );
     assert_eq!(
         error(&format!("{DEVICE}[[registers]]\nnumber=1\nname='r'\nmin=5\nmax=4\n")),
-        "in mine.toml, line 10: [[registers]] 1 (r): min = 5 is above max = 4"
+        "mine.toml:10:1: [[registers]] 1 (r): min = 5 is above max = 4 (in `max=4`)"
     );
 }
 
@@ -76,11 +77,11 @@ fn an_order_is_one_of_the_four_names_and_defaults_to_the_devices() {
     let own = Profile::parse(&pair("order='BADC'\n"), "mine.toml").unwrap();
     assert_eq!(own.points()[0].order, Order::Badc);
     let wrong = error(&pair("order='cdab'\n"));
-    assert!(wrong.starts_with("in mine.toml, line 12 (order='cdab'): unknown variant `cdab`"), "{wrong}");
+    assert!(wrong.starts_with("mine.toml:12:7: unknown variant `cdab`"), "{wrong}");
     let single = error(&format!("{DEVICE}[[registers]]\nnumber=1\nname='r'\norder='CDAB'\n"));
     assert_eq!(
         single,
-        "in mine.toml, line 9: [[registers]] 1 (r): order is for values of more than one register, not u16"
+        "mine.toml:9:1: [[registers]] 1 (r): order is for values of more than one register, not u16 (in `order='CDAB'`)"
     );
 }
 
@@ -90,14 +91,17 @@ fn overlapping_registers_are_refused_naming_both_and_their_lines() {
         "{DEVICE}[[registers]]\nnumber=10\nname='a'\ncount=4\n\n[[registers]]\nnumber=20\nname='b'\n\n\
          [[registers]]\nnumber=12\nname='c'\ntype='u32'\n"
     );
-    assert_eq!(error(&text), "in mine.toml, line 15: [[registers]] 12 (c) overlaps 10 (a) on line 6");
+    assert_eq!(error(&text), "mine.toml:15:1: [[registers]] 12 (c) overlaps 10 (a) on line 6 (in `[[registers]]`)");
     let duplicate = format!("{DEVICE}[[coils]]\nnumber=3\nname='a'\n[[coils]]\nnumber=3\nname='b'\n");
-    assert_eq!(error(&duplicate), "in mine.toml, line 9: [[coils]] 3 (b) is at the same number as 3 (a) on line 6");
+    assert_eq!(
+        error(&duplicate),
+        "mine.toml:9:1: [[coils]] 3 (b) is at the same number as 3 (a) on line 6 (in `[[coils]]`)"
+    );
     // A 32-bit pair takes two numbers; the next one may follow it.
     let pairs = format!("{DEVICE}[[inputs]]\nnumber=1\nname='a'\ntype='i32'\n[[inputs]]\nnumber=3\nname='b'\n");
     assert!(Profile::parse(&pairs, "mine.toml").is_ok());
     let clash = format!("{DEVICE}[[inputs]]\nnumber=1\nname='a'\ntype='f32'\n[[inputs]]\nnumber=2\nname='b'\n");
-    assert_eq!(error(&clash), "in mine.toml, line 10: [[inputs]] 2 (b) overlaps 1 (a) on line 6");
+    assert_eq!(error(&clash), "mine.toml:10:1: [[inputs]] 2 (b) overlaps 1 (a) on line 6 (in `[[inputs]]`)");
     // The same number in two tables is no overlap: coils and registers are apart.
     let apart = format!("{DEVICE}[[coils]]\nnumber=1\nname='a'\n[[registers]]\nnumber=1\nname='b'\n");
     assert!(Profile::parse(&apart, "mine.toml").is_ok());
@@ -111,4 +115,51 @@ fn a_missing_file_says_so_and_a_bare_unknown_name_lists_the_builtins() {
     assert!(
         Profile::load("nope").unwrap_err().to_string().starts_with("no profile named \"nope\": the built-in ones are")
     );
+}
+
+#[test]
+fn parse_all_lists_every_mistake_of_a_profile_in_the_files_order_each_with_its_place() {
+    let text = format!(
+        "{DEVICE}[[registers]]\nnumber=1\nname='a'\nmin=5\nmax=4\n\n[[registers]]\nnumber=2\nname='b'\n\
+         type='string'\n\n[[coils]]\nnumber=3\nname='c'\n[[coils]]\nnumber=3\nname='d'\n"
+    );
+    let mistakes: Vec<String> =
+        Profile::parse_all(&text, "mine.toml").unwrap_err().iter().map(ToString::to_string).collect();
+    assert_eq!(
+        mistakes,
+        [
+            "mine.toml:10:1: [[registers]] 1 (a): min = 5 is above max = 4 (in `max=4`)",
+            "mine.toml:12:1: [[registers]] 2 (b): a string needs length = its registers (1 or more) (in `[[registers]]`)",
+            "mine.toml:20:1: [[coils]] 3 (d) is at the same number as 3 (c) on line 17 (in `[[coils]]`)",
+        ]
+    );
+    // One mistake at a time, where a single error is wanted: the first.
+    assert_eq!(error(&text), mistakes[0]);
+}
+
+#[test]
+fn a_10_mb_line_gives_an_error_of_a_few_hundred_bytes_with_an_excerpt_around_the_column() {
+    let long = "x".repeat(10 << 20);
+    for text in [format!("{DEVICE}name2 = '{long}'\n"), format!("{DEVICE}[[registers]]\nnumber = '{long}'\n")] {
+        let e = error(&text);
+        assert!(e.len() < 1_000, "{} bytes: {}…", e.len(), e.get(..300).unwrap_or(&e));
+        assert!(e.starts_with("mine.toml:"), "{e}");
+        assert!(e.contains('…'), "{e}");
+    }
+}
+
+#[test]
+fn a_binary_or_non_utf8_profile_file_is_refused_with_its_line_and_column() {
+    let dir = std::env::temp_dir().join(format!("ferrobus-profile-binary-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let latin1 = dir.join("latin1.toml");
+    std::fs::write(&latin1, b"[device]\nname = 'Caf\xe9'\n").unwrap();
+    let e = Profile::load(latin1.to_str().unwrap()).unwrap_err().to_string();
+    assert_eq!(e, format!("{}:2:12: byte 0xE9 is not UTF-8 text", latin1.display()));
+    let binary = dir.join("image.toml");
+    std::fs::write(&binary, b"\x7fELF\x02\x01\x01\0\0\0\0\0\0\0\0\0\x03\0\x3e\0\xff\xfe").unwrap();
+    let e = Profile::load(binary.to_str().unwrap()).unwrap_err().to_string();
+    assert!(e.starts_with(&format!("{}:1:21: byte 0xFF", binary.display())), "{e}");
+    assert!(e.ends_with("(this looks like a binary file, not a TOML text file)"), "{e}");
+    std::fs::remove_dir_all(&dir).unwrap();
 }

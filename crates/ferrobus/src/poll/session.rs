@@ -32,6 +32,7 @@
 use std::path::Path;
 use std::time::Duration;
 
+use ferrobus_profile::source::{self, Located, ReadError};
 use ferrobus_profile::{Order, Profile, Table};
 use serde::{Deserialize, Serialize};
 
@@ -143,18 +144,18 @@ pub enum SessionError {
         #[source]
         source: std::io::Error,
     },
-    /// It is not a valid session.
-    #[error("{origin}{}: {message}", line.map(|l| format!(", line {l}")).unwrap_or_default())]
+    /// It is not a valid session: `file:line:col: message (in `excerpt`)`, a few hundred bytes
+    /// at most however long the line ([`ferrobus_profile::source`]).
+    #[error("{}", mistake.in_file(origin))]
     Parse {
         /// The file.
         origin: String,
-        /// The line at fault, when known.
-        line: Option<usize>,
-        /// What is wrong.
-        message: String,
+        /// Where and what.
+        mistake: Located,
     },
-    /// A definition names something that does not exist or does not fit.
-    #[error("{origin}: {what}: {problem}")]
+    /// A definition names something that does not exist or does not fit (what the file says
+    /// is cut to a few hundred bytes).
+    #[error("{origin}: {what}: {}", source::bounded(problem))]
     Invalid {
         /// The file.
         origin: String,
@@ -168,18 +169,20 @@ pub enum SessionError {
 impl Session {
     /// Reads and parses a session file.
     pub fn load(path: &Path) -> Result<Session, SessionError> {
-        let text = std::fs::read_to_string(path)
-            .map_err(|source| SessionError::Io { path: path.display().to_string(), source })?;
-        Session::parse(&text, &path.display().to_string())
+        let shown = path.display().to_string();
+        let text = source::read(path).map_err(|e| match e {
+            ReadError::Io(source) => SessionError::Io { path: shown.clone(), source },
+            not_text @ ReadError::NotText(_) => {
+                SessionError::Parse { origin: shown.clone(), mistake: not_text.located() }
+            }
+        })?;
+        Session::parse(&text, &shown)
     }
 
     /// Parses a session; `origin` names it in errors.
     pub fn parse(text: &str, origin: &str) -> Result<Session, SessionError> {
-        toml::from_str(text).map_err(|e| SessionError::Parse {
-            origin: origin.to_string(),
-            line: e.span().map(|s| text.get(..s.start).map_or(1, |t| t.matches('\n').count() + 1)),
-            message: e.message().trim().to_string(),
-        })
+        toml::from_str(text)
+            .map_err(|e| SessionError::Parse { origin: origin.to_string(), mistake: Located::toml(text, &e) })
     }
 
     /// The session as TOML.

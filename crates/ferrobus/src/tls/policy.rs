@@ -33,6 +33,7 @@ use std::fmt;
 use std::ops::{Range, RangeInclusive};
 use std::path::Path;
 
+use ferrobus_profile::source::{self, Located, Place};
 use ferrobus_proto::FunctionCode;
 use ferrobus_proto::pdu::{AddressRange, Request};
 use serde::Deserialize;
@@ -185,19 +186,14 @@ impl Policy {
 
     /// Reads a roles file.
     pub fn load(path: &Path) -> Result<Policy, PolicyError> {
-        let text = std::fs::read_to_string(path).map_err(|e| PolicyError {
-            file: path.display().to_string(),
-            line: None,
-            text: String::new(),
-            message: format!("cannot read it: {e}"),
-        })?;
+        let text = source::read(path).map_err(|e| PolicyError::from(e.located()).in_file(path))?;
         Policy::parse(&text).map_err(|e| e.in_file(path))
     }
 
     /// Parses the text of a roles file.
     pub fn parse(text: &str) -> Result<Policy, PolicyError> {
-        let at = |span: Option<Range<usize>>, message: String| PolicyError::at(text, span, &message);
-        let file: File = toml::from_str(text).map_err(|e| at(e.span(), e.message().to_string()))?;
+        let at = |span: Option<Range<usize>>, message: String| PolicyError::from(Located::new(text, span, &message));
+        let file: File = toml::from_str(text).map_err(|e| PolicyError::from(Located::toml(text, &e)))?;
         let mut policy = Policy::deny_all();
         for (name, section) in file.role {
             if name.is_empty() {
@@ -213,31 +209,36 @@ impl Policy {
     }
 }
 
-/// A roles file that could not be used, with where.
+/// A roles file that could not be used, with where: `file:line:col: message (in `excerpt`)`,
+/// a few hundred bytes at most however long the line ([`ferrobus_profile::source`]).
 #[derive(Clone, PartialEq, Eq, Debug, thiserror::Error)]
-#[error("{}{}: {message}{}", self.file, self.line.map(|l| format!(":{l}")).unwrap_or_default(), quoted(&self.text))]
+#[error("{}", Located { place: self.line.zip(self.column).map(|(line, column)| Place { line, column }), excerpt: self.text.clone(), message: self.message.clone() }.in_file(&self.file))]
 pub struct PolicyError {
-    /// The file (empty when parsed from text).
+    /// The file (`roles` when parsed from text).
     pub file: String,
     /// The line at fault (from 1), when known.
     pub line: Option<usize>,
-    /// That line's text.
+    /// The column at fault (from 1, in characters), when known.
+    pub column: Option<usize>,
+    /// An excerpt of that line around the column, escaped.
     pub text: String,
     /// What is wrong.
     pub message: String,
 }
 
-fn quoted(text: &str) -> String {
-    if text.trim().is_empty() { String::new() } else { format!(" (in `{}`)", text.trim()) }
+impl From<Located> for PolicyError {
+    fn from(mistake: Located) -> Self {
+        PolicyError {
+            file: "roles".to_string(),
+            line: mistake.place.map(|p| p.line),
+            column: mistake.place.map(|p| p.column),
+            text: mistake.excerpt,
+            message: mistake.message,
+        }
+    }
 }
 
 impl PolicyError {
-    fn at(text: &str, span: Option<Range<usize>>, message: &str) -> Self {
-        let line = span.map(|s| text.get(..s.start).unwrap_or(text).matches('\n').count().saturating_add(1));
-        let line_text = line.and_then(|l| text.lines().nth(l.saturating_sub(1))).unwrap_or_default().to_string();
-        PolicyError { file: "roles".to_string(), line, text: line_text, message: message.trim().to_string() }
-    }
-
     fn in_file(mut self, path: &Path) -> Self {
         self.file = path.display().to_string();
         self
@@ -443,8 +444,26 @@ mod tests {
             let error = Policy::parse(text).unwrap_err();
             assert_eq!(error.line, Some(line), "{text:?}: {error}");
             assert!(error.message.contains(message), "{text:?}: {error}");
-            assert!(error.to_string().starts_with(&format!("roles:{line}: ")), "{error}");
+            assert!(error.to_string().starts_with(&format!("roles:{line}:")), "{error}");
         }
+    }
+
+    #[test]
+    fn a_mistake_on_a_10_mb_line_is_told_in_a_few_hundred_bytes_with_its_column() {
+        let text = format!("[role.a]\naccess = \"{}\"\n", "w".repeat(10 << 20));
+        let error = Policy::parse(&text).unwrap_err();
+        let shown = error.to_string();
+        assert!(shown.len() < 2_000, "{} bytes", shown.len());
+        assert!(shown.starts_with("roles:2:") && shown.contains('…'), "{}", shown.get(..300).unwrap_or(&shown));
+    }
+
+    #[test]
+    fn a_roles_file_that_is_not_utf8_is_refused_with_its_line_and_column() {
+        let path = std::env::temp_dir().join(format!("ferrobus-roles-binary-{}.toml", std::process::id()));
+        std::fs::write(&path, b"[role.a]\naccess = \"r\xffead\"\n").unwrap();
+        let error = Policy::load(&path).unwrap_err();
+        let _ = std::fs::remove_file(&path);
+        assert_eq!(error.to_string(), format!("{}:2:12: byte 0xFF is not UTF-8 text", path.display()));
     }
 
     #[test]

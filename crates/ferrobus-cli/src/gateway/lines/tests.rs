@@ -212,3 +212,11 @@ fn the_readme_example_reads_as_it_says() {
     assert_eq!((routes.get(2), routes.get(15), routes.get(21)), (on(0, 2), on(0, 15), None));
     assert_eq!((routes.get(30), routes.get(41), routes.get(50)), (on(1, 3), on(1, 1), on(1, 10)));
 }
+
+#[test]
+fn a_mistake_on_a_10_mb_line_is_told_in_a_few_hundred_bytes_with_its_place() {
+    let huge = format!("[[line]]\nport = \"/dev/ttyUSB0\"\nunits = [1]\nparity = \"{}\"\n", "p".repeat(10 << 20));
+    let e = error(&huge);
+    assert!(e.len() < 2_000, "{} bytes", e.len());
+    assert!(e.contains(":4:") && e.contains('…'), "{}", e.get(..300).unwrap_or(&e));
+}
