@@ -25,6 +25,7 @@ use tokio::io::{AsyncRead, AsyncWrite};
 use tokio::net::TcpStream;
 
 use crate::identity::Identity;
+use crate::serial::PortInUse;
 pub use crate::serial::{Rs485, SerialConfig};
 #[cfg(unix)]
 pub use crate::sys::Pty;
@@ -45,6 +46,12 @@ pub trait Port: AsyncRead + AsyncWrite + Unpin + Send + 'static {
     fn last_arrival(&self) -> Option<tokio::time::Instant> {
         None
     }
+
+    /// Reads, without waiting, bytes already received and not read yet (a serial port's
+    /// buffer); 0 when there are none, or for a stream that cannot tell.
+    fn read_buffered(&mut self, _buf: &mut [u8]) -> io::Result<usize> {
+        Ok(0)
+    }
 }
 
 impl Port for TcpStream {}
@@ -54,6 +61,10 @@ impl Port for tokio::io::DuplexStream {}
 impl Port for TtyPort {
     fn set_rts(&mut self, on: bool) -> io::Result<()> {
         TtyPort::set_rts(self, on)
+    }
+
+    fn read_buffered(&mut self, buf: &mut [u8]) -> io::Result<usize> {
+        TtyPort::read_buffered(self, buf)
     }
 }
 
@@ -97,6 +108,8 @@ pub struct Transport {
     frame_gap: Duration,
     incomplete_timeout: Duration,
     reopen: bool,
+    /// A serial line's t3.5 at its baud: no reply may begin sooner after a request.
+    min_reply_delay: Option<Duration>,
     connector: Arc<dyn Connector>,
 }
 
@@ -124,6 +137,7 @@ impl Transport {
             frame_gap: timing.t3_5(),
             incomplete_timeout: PC_INCOMPLETE_TIMEOUT,
             reopen: true,
+            min_reply_delay: Some(timing.t3_5()),
             connector: Arc::new(SerialTarget { config, first: Mutex::new(None) }),
         }
     }
@@ -138,6 +152,7 @@ impl Transport {
             frame_gap: STREAM_FRAME_GAP,
             incomplete_timeout: STREAM_FRAME_GAP,
             reopen: true,
+            min_reply_delay: None,
             connector: Arc::new(TcpTarget(addr.into())),
         }
     }
@@ -165,6 +180,7 @@ impl Transport {
             frame_gap: timing.t3_5(),
             incomplete_timeout: timing.t3_5(),
             reopen: true,
+            min_reply_delay: None,
             connector: Arc::new(connector),
         }
     }
@@ -218,6 +234,13 @@ impl Transport {
         self.reopen
     }
 
+    /// The soonest a reply may begin after a request: on a serial port the spec's t3.5 at
+    /// the line's baud (a slave must hear that much silence first; an override of t3.5 is
+    /// ours to keep, not the slave's), `None` on streams without a line.
+    pub fn min_reply_delay(&self) -> Option<Duration> {
+        self.min_reply_delay
+    }
+
     /// The framing.
     pub fn framing(&self) -> Framing {
         self.framing
@@ -251,14 +274,19 @@ impl Transport {
         let context = || format!("opening {}", self.describe());
         match tokio::time::timeout(timeout, self.connector.connect()).await {
             Ok(Ok(port)) => Ok(port),
-            Ok(Err(e)) => match e.get_ref().and_then(|inner| inner.downcast_ref::<NotSame>()) {
-                Some(not_same) => Err(crate::Error::NotSameDevice {
-                    port: self.describe(),
-                    reason: not_same.reason.clone(),
-                    lasting: not_same.lasting,
-                }),
-                None => Err(crate::Error::io(context(), e)),
-            },
+            Ok(Err(e)) => {
+                if let Some(busy) = PortInUse::of(&e) {
+                    return Err(crate::Error::PortBusy { port: self.describe(), holder: busy.holder.clone() });
+                }
+                match e.get_ref().and_then(|inner| inner.downcast_ref::<NotSame>()) {
+                    Some(not_same) => Err(crate::Error::NotSameDevice {
+                        port: self.describe(),
+                        reason: not_same.reason.clone(),
+                        lasting: not_same.lasting,
+                    }),
+                    None => Err(crate::Error::io(context(), e)),
+                }
+            }
             Err(_) => Err(crate::Error::io(
                 context(),
                 io::Error::new(io::ErrorKind::TimedOut, format!("no connection after {} ms", timeout.as_millis())),
