@@ -186,9 +186,7 @@ pub(crate) async fn run(connection: &ConnectArgs, args: &SniffArgs) -> Result<()
         timing.t1_5().as_secs_f64() * 1e6,
         timing.t3_5().as_secs_f64() * 1e6,
     );
-    if stale > 0 {
-        eprintln!("sniff: dropped {stale} bytes that were waiting in the port before the capture began");
-    }
+    say_predating(stale);
     let mut sniffer = Sniffer::new(timing).with_incomplete_timeout(PC_INCOMPLETE_TIMEOUT);
     let stop = args.duration.map(|d| tokio::time::Instant::now() + d);
     let mut events: Vec<Heard> = Vec::new();
@@ -254,6 +252,14 @@ fn open_capture(
     // Every frame is flushed, to a file too: a capture cut short by a crash keeps what came.
     let writer = PcapngWriter::new(out, name, description).map_err(failed)?.flush_each(true);
     Ok(Some((writer, what)))
+}
+
+/// Says how many bytes were waiting in the port when it opened: dropped, as they predate the
+/// capture (they would show as noise).
+fn say_predating(stale: usize) {
+    if stale > 0 {
+        eprintln!("sniff: dropped {stale} bytes that were waiting in the port before the capture began");
+    }
 }
 
 async fn sleep_until(at: Option<tokio::time::Instant>) {
