@@ -33,6 +33,8 @@
 //!   in [`MasterStats::late_replies`]) and the line has been silent for the gap after it, or
 //!   once [`MasterConfig::late_window`] has passed since the timeout without it. Only one
 //!   reply is ever owed: a request waits for the last one to be settled before it leaves. A
+//!   unit whose owed reply never came is silent, not slow: its later timeouts owe nothing
+//!   (and cost no late window) until a frame from it is heard again. A
 //!   reply later than the timeout plus the late window, to a request of the same unit,
 //!   function and length, cannot be told from the next one's by any master: size the
 //!   timeout to the device.
@@ -428,6 +430,9 @@ struct Core {
     rx_start: Instant,
     /// The reply owed to a request that timed out, while it is awaited.
     owed: Option<Owed>,
+    /// A unit whose owed reply never came: silent, not slow, so its timeouts owe nothing
+    /// until it is heard again.
+    silent_unit: Option<u8>,
     stats: MasterStats,
 }
 
@@ -458,6 +463,7 @@ impl<F: Framing> Master<F> {
                 last_activity: None,
                 rx_start: Instant::ZERO,
                 owed: None,
+                silent_unit: None,
                 stats: MasterStats::default(),
             },
         }
@@ -573,7 +579,10 @@ impl<F: Framing> Master<F> {
         // Anything heard before our request cannot be its reply, and an owed reply not heard
         // by now is no longer awaited.
         self.framing.reset();
-        core.owed = None;
+        if let Some(owed) = core.owed.take() {
+            // The late window passed in silence: the unit is dead, not slow.
+            core.silent_unit = Some(owed.unit);
+        }
         let sent = now.saturating_add(self.framing.transmit_time(n));
         core.last_activity = Some(sent);
         core.echo_pos = 0;
@@ -701,6 +710,13 @@ impl Core {
     fn on_event(&mut self, event: &RxEvent<'_>) {
         let awaiting = matches!(self.state, State::AwaitingReply { .. });
         let asked = self.request.first().copied().unwrap_or_default();
+        let heard_from = match *event {
+            RxEvent::Frame(frame) => Some(frame.header.unit),
+            RxEvent::Discarded { head, .. } => head.map(|(unit, _)| unit),
+        };
+        if heard_from.is_some() && heard_from == self.silent_unit {
+            self.silent_unit = None;
+        }
         let frame = match *event {
             RxEvent::Frame(frame) => frame,
             RxEvent::Discarded { bytes, reason, head, .. } => {
@@ -795,7 +811,7 @@ impl Core {
     fn owe_reply(&mut self, now: Instant) {
         let answered =
             matches!(self.heard, Some(Heard::BadChecksum { head: Some((from, _)), .. }) if from == self.unit);
-        if answered || !self.serial {
+        if answered || !self.serial || self.silent_unit == Some(self.unit) {
             return;
         }
         let request = self.request.get(..self.request_len).unwrap_or_default();

@@ -762,3 +762,28 @@ fn without_a_minimum_reply_delay_a_prompt_reply_is_accepted() {
     m.on_bytes(ns(49_000), &rtu(1, &[0x03, 0x02, 0x0C, 0xE4]));
     assert_eq!(done(&mut m), Some(Done::Registers(std::vec![0x0CE4])));
 }
+
+#[test]
+fn a_unit_silent_through_its_late_window_owes_no_reply_on_its_next_timeouts_until_it_is_heard() {
+    let mut m = late_master();
+    timed_out_read(&mut m);
+    // The window passes in silence: the unit is dead, not slow.
+    let t = timeout_of(0) + 200_000_000;
+    m.submit(ns(timeout_of(0)), 1, &read_holding(0, 1)).unwrap();
+    transmit(&mut m, ns(t));
+    m.handle_timeout(ns(timeout_of(t)));
+    assert!(matches!(done(&mut m), Some(Done::Failed(MasterError::Timeout { .. }))));
+    assert!(!m.owes_reply(ns(timeout_of(t))), "a silent unit's timeout owes a reply");
+    // Once it is heard again it is slow, not silent: its next timeout owes a reply.
+    let u = timeout_of(t);
+    m.submit(ns(u), 1, &read_holding(0, 1)).unwrap();
+    transmit(&mut m, ns(u));
+    m.on_bytes(ns(u + 10_000_000), &rtu(1, &[0x03, 0x02, 0x00, 0x05]));
+    assert_eq!(done(&mut m), Some(Done::Registers(std::vec![5])));
+    let v = u + 10_000_000 + T3_5;
+    m.submit(ns(v), 1, &read_holding(0, 1)).unwrap();
+    transmit(&mut m, ns(v));
+    m.handle_timeout(ns(timeout_of(v)));
+    done(&mut m);
+    assert!(m.owes_reply(ns(timeout_of(v))));
+}
