@@ -24,8 +24,9 @@
 //!   [`Completion::Failed`] means no usable reply came.
 //! - **Time.** The response timeout runs from the end of our transmission. A reply still
 //!   arriving when it expires is given the time a whole frame takes to finish.
-//! - **Owed replies.** RTU has no transaction id, so a reply that comes after its request
-//!   timed out looks like the reply to the next request of the same shape. The engine
+//! - **Owed replies.** RTU and ASCII have no transaction id, so a reply that comes after its
+//!   request timed out looks like the reply to the next request of the same shape (over
+//!   Modbus/TCP the ids tell it apart, and nothing is owed). The engine
 //!   therefore remembers a request that timed out in silence (nothing from its unit was
 //!   heard) as *owed* a reply — its unit, function code and, where the request implies it,
 //!   the reply's length — and keeps the line closed after it: the next request (a retry, or
