@@ -557,6 +557,16 @@ fn timed_out_read(m: &mut Master<RtuCodec>) {
     assert!(matches!(done(m), Some(Done::Failed(MasterError::Timeout { .. }))));
 }
 
+/// A master whose read of one register to unit 1 timed out, with the next such read queued
+/// at the timeout `t`: a reply is owed.
+fn owing() -> (Master<RtuCodec>, u64) {
+    let mut m = late_master();
+    timed_out_read(&mut m);
+    let t = timeout_of(0);
+    m.submit(ns(t), 1, &read_holding(0, 1)).unwrap();
+    (m, t)
+}
+
 /// Feeds `frame` at `at` whole, byte by byte 1 µs apart, or after another unit's frame in
 /// one chunk; returns the instant its last byte came.
 fn feed_as(m: &mut Master<RtuCodec>, at: u64, frame: &[u8], how: Feed) -> u64 {
@@ -615,10 +625,7 @@ fn a_reply_after_the_timeout_is_dropped_as_late_and_never_taken_for_the_next_sam
 
 #[test]
 fn with_no_late_reply_the_line_opens_once_the_late_window_has_passed_in_silence() {
-    let mut m = late_master();
-    timed_out_read(&mut m);
-    let t = timeout_of(0);
-    m.submit(ns(t), 1, &read_holding(0, 1)).unwrap();
+    let (mut m, t) = owing();
     assert_eq!(m.poll_timeout(), Some(ns(t + 200_000_000)), "the late window, from the timeout");
     let mut buf = [0u8; MAX_TX_LEN];
     assert_eq!(m.poll_transmit(ns(t + 200_000_000 - 1), &mut buf), None);
@@ -628,10 +635,7 @@ fn with_no_late_reply_the_line_opens_once_the_late_window_has_passed_in_silence(
 
 #[test]
 fn another_units_frame_or_another_length_does_not_settle_the_owed_reply() {
-    let mut m = late_master();
-    timed_out_read(&mut m);
-    let t = timeout_of(0);
-    m.submit(ns(t), 1, &read_holding(0, 1)).unwrap();
+    let (mut m, t) = owing();
     m.on_bytes(ns(t + 10_000_000), &rtu(2, &[0x03, 0x02, 0x00, 0x01])); // another unit
     m.on_bytes(ns(t + 20_000_000), &rtu(1, &[0x03, 0x04, 0, 1, 0, 2])); // two registers, not one
     m.on_bytes(ns(t + 30_000_000), &rtu(1, &[0x04, 0x02, 0x00, 0x01])); // another function
@@ -669,10 +673,7 @@ fn a_retry_waits_for_the_reply_owed_to_the_attempt_before_so_it_gets_its_own() {
 
 #[test]
 fn a_late_reply_with_a_bad_crc_settles_the_owed_reply_too() {
-    let mut m = late_master();
-    timed_out_read(&mut m);
-    let t = timeout_of(0);
-    m.submit(ns(t), 1, &read_holding(0, 1)).unwrap();
+    let (mut m, t) = owing();
     m.on_bytes(ns(t + 10_000_000), &bad_crc(rtu(1, &[0x03, 0x02, 0x00, 0x01])));
     m.handle_timeout(ns(t + 10_000_000 + T3_5));
     assert_eq!(m.stats().late_replies, 1);
