@@ -204,7 +204,9 @@ impl<F: Framing + Send + 'static> Driver<F> {
             turnaround_delay: self.config.turnaround_delay,
             echo_suppression: self.config.echo_suppression,
             late_window: self.config.late_window.unwrap_or(command.options.timeout.saturating_mul(2)),
-            min_reply_delay: self.transport.min_reply_delay(),
+            // On a wire no reply can begin before the request has left; a pty or TCP says
+            // nothing of when a reply may come.
+            min_reply_delay: self.port.as_ref().is_some_and(|p| p.has_wire()).then_some(std::time::Duration::ZERO),
         });
         // Nothing is in flight between requests; make sure of it.
         self.master.abort();

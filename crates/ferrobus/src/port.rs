@@ -52,6 +52,12 @@ pub trait Port: AsyncRead + AsyncWrite + Unpin + Send + 'static {
     fn read_buffered(&mut self, _buf: &mut [u8]) -> io::Result<usize> {
         Ok(0)
     }
+
+    /// Whether bytes cross a wire at the line's baud, so that no reply can begin before our
+    /// request has left: a serial port, not a pty (which delivers at once), nor TCP.
+    fn has_wire(&self) -> bool {
+        false
+    }
 }
 
 impl Port for TcpStream {}
@@ -65,6 +71,10 @@ impl Port for TtyPort {
 
     fn read_buffered(&mut self, buf: &mut [u8]) -> io::Result<usize> {
         TtyPort::read_buffered(self, buf)
+    }
+
+    fn has_wire(&self) -> bool {
+        TtyPort::has_wire(self)
     }
 }
 
@@ -108,8 +118,6 @@ pub struct Transport {
     frame_gap: Duration,
     incomplete_timeout: Duration,
     reopen: bool,
-    /// A serial line's t3.5 at its baud: no reply may begin sooner after a request.
-    min_reply_delay: Option<Duration>,
     connector: Arc<dyn Connector>,
 }
 
@@ -137,7 +145,6 @@ impl Transport {
             frame_gap: timing.t3_5(),
             incomplete_timeout: PC_INCOMPLETE_TIMEOUT,
             reopen: true,
-            min_reply_delay: Some(timing.t3_5()),
             connector: Arc::new(SerialTarget { config, first: Mutex::new(None) }),
         }
     }
@@ -152,7 +159,6 @@ impl Transport {
             frame_gap: STREAM_FRAME_GAP,
             incomplete_timeout: STREAM_FRAME_GAP,
             reopen: true,
-            min_reply_delay: None,
             connector: Arc::new(TcpTarget(addr.into())),
         }
     }
@@ -180,7 +186,6 @@ impl Transport {
             frame_gap: timing.t3_5(),
             incomplete_timeout: timing.t3_5(),
             reopen: true,
-            min_reply_delay: None,
             connector: Arc::new(connector),
         }
     }
@@ -232,13 +237,6 @@ impl Transport {
     /// Whether a lost port is opened again.
     pub fn reopens(&self) -> bool {
         self.reopen
-    }
-
-    /// The soonest a reply may begin after a request: on a serial port the spec's t3.5 at
-    /// the line's baud (a slave must hear that much silence first; an override of t3.5 is
-    /// ours to keep, not the slave's), `None` on streams without a line.
-    pub fn min_reply_delay(&self) -> Option<Duration> {
-        self.min_reply_delay
     }
 
     /// The framing.

@@ -694,18 +694,18 @@ fn a_timeout_after_a_damaged_reply_owes_nothing() {
 
 // ---- Replies sooner than any slave may answer ---------------------------------------------
 
-/// A master on a serial line: no reply may begin sooner than t3.5 after the request began.
+/// A master on a wire: no reply may begin before the request has left (8 characters).
 fn line_master() -> Master<RtuCodec> {
     let config = MasterConfig {
         response_timeout: Duration::from_millis(100),
-        min_reply_delay: Some(Duration::from_nanos(T3_5)),
+        min_reply_delay: Some(Duration::ZERO),
         ..MasterConfig::default()
     };
     master(config)
 }
 
 #[test]
-fn a_reply_sooner_than_t3_5_after_the_request_began_is_dropped_as_stale_and_named_in_the_timeout() {
+fn a_reply_that_begins_before_the_request_has_left_is_dropped_as_stale_and_named_in_the_timeout() {
     for how in FEEDS {
         let mut m = line_master();
         m.submit(ns(0), 1, &read_holding(0, 1)).unwrap();
@@ -718,14 +718,12 @@ fn a_reply_sooner_than_t3_5_after_the_request_began_is_dropped_as_stale_and_name
         let Some(Done::Failed(e @ MasterError::Timeout { heard, .. })) = done(&mut m) else {
             panic!("{how:?}: no timeout")
         };
-        assert_eq!(
-            heard,
-            Some(Heard::TooEarly { after: Duration::from_micros(49), earliest: Duration::from_nanos(T3_5) }),
-            "{how:?}"
-        );
+        let earliest = Duration::from_nanos(8 * CHAR);
+        assert_eq!(heard, Some(Heard::TooEarly { after: Duration::from_micros(49), earliest }), "{how:?}");
         assert!(
             e.to_string().ends_with(
-                "a reply 49 µs after the request, earlier than any slave can answer (t3.5: 4010 µs): a stale reply, ignored"
+                "a reply 49 µs after the request, earlier than any slave can answer (not before 9166 µs): a stale \
+                 reply, ignored"
             ),
             "{how:?}: {e}"
         );
@@ -733,15 +731,27 @@ fn a_reply_sooner_than_t3_5_after_the_request_began_is_dropped_as_stale_and_name
 }
 
 #[test]
-fn a_reply_t3_5_after_the_request_began_is_accepted_as_a_pty_delivers_it_from_a_simulator() {
+fn a_reply_that_begins_as_the_request_has_left_is_accepted_as_a_prompt_device_sends_it() {
     for how in FEEDS {
         let mut m = line_master();
         m.submit(ns(0), 1, &read_holding(0, 1)).unwrap();
         transmit(&mut m, ns(0));
-        feed_as(&mut m, T3_5, &rtu(1, &[0x03, 0x02, 0x00, 0x2A]), how);
+        feed_as(&mut m, 8 * CHAR, &rtu(1, &[0x03, 0x02, 0x00, 0x2A]), how);
         assert_eq!(done(&mut m), Some(Done::Registers(std::vec![42])), "{how:?}");
         assert_eq!(m.stats().early_replies, 0, "{how:?}");
     }
+}
+
+#[test]
+fn with_t3_5_as_the_minimum_delay_a_reply_before_the_silence_after_the_request_is_stale() {
+    let config = MasterConfig { min_reply_delay: Some(Duration::from_nanos(T3_5)), ..MasterConfig::default() };
+    let mut m = master(config);
+    m.submit(ns(0), 1, &read_holding(0, 1)).unwrap();
+    transmit(&mut m, ns(0));
+    m.on_bytes(ns(8 * CHAR + T3_5 - 1), &rtu(1, &[0x03, 0x02, 0x0C, 0xE4]));
+    assert_eq!((done(&mut m), m.stats().early_replies), (None, 1));
+    m.on_bytes(ns(8 * CHAR + T3_5 + 10_000_000), &rtu(1, &[0x03, 0x02, 0x00, 0x2A]));
+    assert_eq!(done(&mut m), Some(Done::Registers(std::vec![42])));
 }
 
 #[test]
@@ -756,7 +766,7 @@ fn after_a_stale_reply_the_true_reply_that_follows_is_accepted() {
 
 #[test]
 fn without_a_minimum_reply_delay_a_prompt_reply_is_accepted() {
-    // TCP and RTU over TCP: nothing bounds how soon a reply may come.
+    // TCP, RTU over TCP and ptys: nothing bounds how soon a reply may come.
     let mut m = late_master();
     m.submit(ns(0), 1, &read_holding(0, 1)).unwrap();
     transmit(&mut m, ns(0));

@@ -65,6 +65,11 @@ impl TtyPort {
         self.fd.get_ref().set_rts(on)
     }
 
+    /// Whether it is a serial port with a wire, not a pty.
+    pub(crate) fn has_wire(&self) -> bool {
+        !self.pty
+    }
+
     /// Reads, without waiting, bytes the port has received and nobody has read yet; 0 when
     /// there are none.
     pub(crate) fn read_buffered(&mut self, buf: &mut [u8]) -> io::Result<usize> {

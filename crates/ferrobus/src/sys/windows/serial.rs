@@ -34,6 +34,12 @@ impl TtyPort {
         self.port.set_rts(on)
     }
 
+    /// Whether it is a serial port with a wire: a COM port is (Windows has no ptys).
+    #[expect(clippy::unused_self, reason = "the signature of every platform's")]
+    pub(crate) fn has_wire(&self) -> bool {
+        true
+    }
+
     /// Drops what the port has received and nobody has read yet. Windows' overlapped reads
     /// cannot be tried without waiting, so the bytes are discarded uncounted: 0.
     pub(crate) fn read_buffered(&mut self, _buf: &mut [u8]) -> io::Result<usize> {
