@@ -319,32 +319,6 @@ fn a_reply_later_than_the_timeout_and_the_guard_is_dropped_as_late_and_never_giv
     assert!(line.contains("late-replies 3 early-replies 0"), "{line}");
 }
 
-#[test]
-fn a_stale_reply_waiting_in_the_port_is_dropped_and_the_read_prints_the_devices_true_value() {
-    let Some(_turn) = require(&[Need::Socat]) else { return };
-    let dir = TempDir::new();
-    let pair = SocatPair::start(dir.path());
-    // A reply to an interrupted read (unit 1, one register, 33.00 = 0x0CE4) waits in the
-    // port before anyone opens it, as after Ctrl-C on a drive with a response wait.
-    {
-        let device_end = serial2::SerialPort::open(&pair.b, BAUD).unwrap();
-        device_end.write_all(&[0x01, 0x03, 0x02, 0x0C, 0xE4, 0xBD, 0x0F]).unwrap();
-    }
-    let _sim = sim_on(&pair.b, Parity::None, &["--profile", "generic"]);
-    let port = pair.a.display().to_string();
-    let out = Command::new(env!("CARGO_BIN_EXE_ferrobus"))
-        .args(["--port", &port, "--baud", &BAUD.to_string(), "--parity", "none", "-vv", "read", "holding", "3"])
-        .output()
-        .unwrap();
-    let (stdout, stderr) = (String::from_utf8_lossy(&out.stdout), String::from_utf8_lossy(&out.stderr));
-    assert!(out.status.success(), "{stderr}");
-    assert!(!stdout.contains("3300") && stdout.contains('0'), "the stale value was printed: {stdout}");
-    assert!(
-        stderr.contains("dropped bytes waiting in the port before the request") && stderr.contains("bytes=7"),
-        "{stderr}"
-    );
-}
-
 // Reverse: a serial master through the gateway to Modbus/TCP servers.
 
 /// `ferrobus gateway --reverse` on one end of a socat pair; the master's end of the line.
