@@ -249,6 +249,7 @@ fuzz_target!(|input: Input| {
         response_timeout: Duration::from_millis(1 + u64::from(input.timeout_ms)),
         turnaround_delay: Duration::from_millis(u64::from(input.turnaround_ms)),
         echo_suppression: false,
+        ..MasterConfig::default()
     };
     let mut h = Harness {
         master: Master::new(codec.clone(), config),

@@ -9,7 +9,7 @@
 //! | 1 | the device answered with an exception |
 //! | 2 | usage error (bad option, value, address or count) |
 //! | 3 | timeout: no reply |
-//! | 4 | IO error opening or using the port |
+//! | 4 | IO error opening or using the port; the port is held by another process |
 //! | 5 | bad reply (malformed, or not answering the request); `crc --check` on a bad CRC |
 //! | 6 | output error: stdout or an output file could not be written (e.g. disk full) |
 //! | 7 | incomplete: some parameters could not be read or written (backup, restore; the output says which) |
@@ -33,7 +33,7 @@ Exit codes:
      (diff: the device and the file, or the two files, differ)
   2  usage error: bad option, value, address or count
   3  timeout: no reply from the device
-  4  IO error opening or using the port or connection
+  4  IO error opening or using the port or connection, or the port is in use by another process
   5  bad reply: malformed, or not answering the request (also: crc --check on a bad CRC)
   6  output error: stdout or an output file could not be written (e.g. disk full)
   7  incomplete: some parameters could not be read or written (backup, diff, restore say which)
@@ -283,6 +283,18 @@ fn modbus_report(error: &Error, target: Option<&Target>, unit: u8, numbering: &N
                     .into(),
             ],
         },
+        Error::PortBusy { holder, .. } => Report {
+            message: error.to_string(),
+            hints: vec![match holder {
+                Some(holder) => format!(
+                    "one master per port: stop process {} first (two programs on one port take each other's replies)",
+                    holder.pid
+                ),
+                None => "one master per port: close the program that has it open (a terminal, another ferrobus, a \
+                         vendor tool); two programs on one port take each other's replies"
+                    .into(),
+            }],
+        },
         Error::BroadcastRead { .. } => {
             Report { message: error.to_string(), hints: vec!["address one device: --unit 1-247".into()] }
         }
@@ -353,6 +365,13 @@ fn heard_hints(heard: &Heard, target: Option<&Target>, unit: u8) -> Vec<String> 
             hints.push(
                 "a late reply to an earlier request: the device answers after --timeout, raise it; or a gateway \
                  that does not echo transaction ids"
+                    .into(),
+            );
+        }
+        Heard::TooEarly { .. } => {
+            hints.push(
+                "a reply was already on its way when the request left: a stale reply to an earlier request (an \
+                 interrupted command, another master on the line), dropped; try again"
                     .into(),
             );
         }

@@ -108,8 +108,9 @@ pub(crate) struct GatewayArgs {
     #[arg(long = "backoff-max", value_name = "DURATION", default_value = "60s", value_parser = parse_duration)]
     backoff_max: Duration,
 
-    /// After a request that got no usable reply, keep the line quiet this long so that a late
-    /// reply is dropped, not taken for the next request's
+    /// After a request that got no usable reply, keep the line quiet at least this long (a
+    /// timed-out request's own late reply is awaited and dropped besides, for up to twice
+    /// --timeout)
     #[arg(long = "late-guard", value_name = "DURATION", default_value = "100ms", value_parser = parse_duration)]
     late_guard: Duration,
 

@@ -168,7 +168,7 @@ pub(crate) async fn run(connection: &ConnectArgs, args: &SniffArgs) -> Result<()
         Rs485Arg::Rts => ferrobus::Rs485::Rts,
     };
     config.low_latency = connection.low_latency;
-    let mut heard = listen(config)?;
+    let (mut heard, stale) = listen(config)?;
     let clock = WallClock::now();
     let mut sinks = Sinks {
         json: args.json,
@@ -186,6 +186,7 @@ pub(crate) async fn run(connection: &ConnectArgs, args: &SniffArgs) -> Result<()
         timing.t1_5().as_secs_f64() * 1e6,
         timing.t3_5().as_secs_f64() * 1e6,
     );
+    say_predating(stale);
     let mut sniffer = Sniffer::new(timing).with_incomplete_timeout(PC_INCOMPLETE_TIMEOUT);
     let stop = args.duration.map(|d| tokio::time::Instant::now() + d);
     let mut events: Vec<Heard> = Vec::new();
@@ -253,6 +254,14 @@ fn open_capture(
     Ok(Some((writer, what)))
 }
 
+/// Says how many bytes were waiting in the port when it opened: dropped, as they predate the
+/// capture (they would show as noise).
+fn say_predating(stale: usize) {
+    if stale > 0 {
+        eprintln!("sniff: dropped {stale} bytes that were waiting in the port before the capture began");
+    }
+}
+
 async fn sleep_until(at: Option<tokio::time::Instant>) {
     match at {
         Some(at) => tokio::time::sleep_until(at).await,
@@ -261,10 +270,11 @@ async fn sleep_until(at: Option<tokio::time::Instant>) {
 }
 
 /// Opens the port in a thread of its own that only reads it, stamping each chunk as the read
-/// returns. An error opening it is returned here.
-fn listen(config: SerialConfig) -> Result<mpsc::UnboundedReceiver<Read>, CliError> {
+/// returns; also returns how many bytes were waiting in the port when it opened, which
+/// predate the capture and are dropped. An error opening it is returned here.
+fn listen(config: SerialConfig) -> Result<(mpsc::UnboundedReceiver<Read>, usize), CliError> {
     let (tx, rx) = mpsc::unbounded_channel();
-    let (opened_tx, opened_rx) = std::sync::mpsc::channel::<io::Result<()>>();
+    let (opened_tx, opened_rx) = std::sync::mpsc::channel::<io::Result<usize>>();
     let describe = format!("opening {} at {}", config.path.display(), config.line);
     std::thread::Builder::new()
         .name("sniff-reader".into())
@@ -278,9 +288,12 @@ fn listen(config: SerialConfig) -> Result<mpsc::UnboundedReceiver<Read>, CliErro
             };
             runtime.block_on(async move {
                 // Read only: nothing is ever written to the port.
-                let mut port = match ferrobus::port::open_serial(&config) {
-                    Ok(port) => {
-                        let _ = opened_tx.send(Ok(()));
+                // What the port holds already came before the capture: dropped, and said.
+                let opened = ferrobus::port::open_serial(&config)
+                    .and_then(|mut port| port.discard_input().map(|stale| (port, stale)));
+                let mut port = match opened {
+                    Ok((port, stale)) => {
+                        let _ = opened_tx.send(Ok(stale));
                         port
                     }
                     Err(e) => {
@@ -310,7 +323,7 @@ fn listen(config: SerialConfig) -> Result<mpsc::UnboundedReceiver<Read>, CliErro
         })
         .map_err(|e| ferrobus::Error::io("starting the reading thread", e))?;
     match opened_rx.recv() {
-        Ok(Ok(())) => Ok(rx),
+        Ok(Ok(stale)) => Ok((rx, stale)),
         Ok(Err(e)) => Err(ferrobus::Error::io(describe, e).into()),
         Err(_) => Err(ferrobus::Error::io(describe, io::Error::other("the reading thread ended")).into()),
     }

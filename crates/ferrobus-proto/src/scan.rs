@@ -293,7 +293,9 @@ impl Answer {
             Some(MasterHeard::BadChecksum { head, .. }) => Answer::Lead(Lead::BadChecksum { head }),
             Some(MasterHeard::Garbage { bytes, reason }) => Answer::Lead(Lead::Garbage { bytes, reason }),
             Some(MasterHeard::OtherUnit { unit, function }) => Answer::OtherTraffic { unit, function },
-            Some(MasterHeard::OtherTransaction { .. } | MasterHeard::WrongFunction { .. }) => Answer::Mismatch,
+            Some(
+                MasterHeard::OtherTransaction { .. } | MasterHeard::WrongFunction { .. } | MasterHeard::TooEarly { .. },
+            ) => Answer::Mismatch,
         }
     }
 

@@ -18,6 +18,7 @@
 //! # Ok(()) }
 //! ```
 
+use std::sync::{Arc, Mutex, PoisonError};
 use std::time::Duration;
 
 use ferrobus_proto::codes::{DiagnosticCode, ReadDeviceIdCode};
@@ -30,6 +31,7 @@ use ferrobus_proto::pdu::{
 use ferrobus_proto::{FunctionCode, PduError};
 use tokio::sync::{mpsc, oneshot};
 
+pub use crate::driver::ClientStats;
 use crate::driver::{Command, Driver, Reply, parse_reply};
 use crate::error::Error;
 use crate::port::{Framing, Transport};
@@ -65,6 +67,7 @@ pub struct Client {
     commands: mpsc::Sender<Command>,
     options: RequestOptions,
     framing: Framing,
+    stats: Arc<Mutex<ClientStats>>,
 }
 
 impl Client {
@@ -88,10 +91,13 @@ impl Client {
             response_timeout: config.timeout,
             turnaround_delay: config.turnaround_delay,
             echo_suppression: config.echo_suppression,
+            ..MasterConfig::default()
         };
         let codec = Codec::for_transport(&transport, Role::Client);
-        tokio::spawn(Driver::new(Master::new(codec, master), transport, config, port).run(rx));
-        Client { commands: tx, options, framing }
+        let driver = Driver::new(Master::new(codec, master), transport, config, port);
+        let stats = driver.stats();
+        tokio::spawn(driver.run(rx));
+        Client { commands: tx, options, framing, stats }
     }
 
     /// The same client with another timeout for its requests.
@@ -109,6 +115,11 @@ impl Client {
     /// The timeout and retries of this handle's requests.
     pub fn options(&self) -> RequestOptions {
         self.options
+    }
+
+    /// What the driver has seen on the bus so far, as of the end of the last request.
+    pub fn stats(&self) -> ClientStats {
+        *self.stats.lock().unwrap_or_else(PoisonError::into_inner)
     }
 
     /// Whether unit 0 is a broadcast here (serial framings).

@@ -26,6 +26,14 @@ pub struct ClientConfig {
     pub queue: usize,
     /// How long opening the port or connecting may take.
     pub connect_timeout: Duration,
+    /// After a request timed out, how long past its timeout its late reply is still awaited
+    /// (the line kept closed, the reply dropped when it comes) before the next request goes
+    /// out; `None`: twice the request's own timeout, so that a reply up to three timeouts
+    /// after its request is still recognised as late (a device that misses a 1 s timeout
+    /// by a second is dropped, not handed to the next request) — at the price of a silent
+    /// unit costing three timeouts per request until its backoff skips it. On serial
+    /// framings only: see the master engine's owed replies ([`ferrobus_proto::master`]).
+    pub late_window: Option<Duration>,
 }
 
 impl Default for ClientConfig {
@@ -39,6 +47,7 @@ impl Default for ClientConfig {
             backoff: Some(Backoff::default()),
             queue: 64,
             connect_timeout: Duration::from_secs(5),
+            late_window: None,
         }
     }
 }

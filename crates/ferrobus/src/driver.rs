@@ -11,11 +11,17 @@
 //! or write the next open waits [`IO_BACKOFF_INITIAL`], doubling up to [`IO_BACKOFF_MAX`], so
 //! that a dead port costs a few attempts a second instead of a busy loop, and retries span time
 //! enough to ride out a short loss.
+//!
+//! Before each request on a serial line it drops what is waiting in the port (a stale reply
+//! to a request of an earlier program, say): those bytes are handed to the engine first, so
+//! that a reply owed to a timed-out request is recognised and the line's silence is timed
+//! from them, and counted ([`ClientStats::flushed_bytes`], and a debug line).
 
 use std::collections::HashMap;
+use std::sync::{Arc, Mutex, PoisonError};
 
 use ferrobus_proto::frame::Framing;
-use ferrobus_proto::master::{Completion, Heard, MAX_TX_LEN, Master, MasterConfig, MasterError};
+use ferrobus_proto::master::{Completion, Heard, MAX_TX_LEN, Master, MasterConfig, MasterError, MasterStats};
 use ferrobus_proto::pdu::{MAX_PDU_LEN, Request, Response};
 use ferrobus_proto::retry::{Admit, IoBackoff, Outcome, UnitHealth, should_retry};
 #[cfg(doc)]
@@ -48,6 +54,17 @@ pub(crate) enum Reply {
     Sent,
 }
 
+/// What a client's driver has seen on its bus ([`Client::stats`](crate::Client::stats)).
+#[derive(Clone, Copy, PartialEq, Eq, Debug, Default)]
+#[non_exhaustive]
+pub struct ClientStats {
+    /// The master engine's counters: requests, replies, timeouts, and the late and early
+    /// replies it dropped.
+    pub master: MasterStats,
+    /// Bytes found waiting in the port before a request and dropped (a stale reply, noise).
+    pub flushed_bytes: u64,
+}
+
 pub(crate) struct Driver<F> {
     master: Master<F>,
     transport: Transport,
@@ -60,6 +77,9 @@ pub(crate) struct Driver<F> {
     health: HashMap<u8, UnitHealth>,
     tx: Box<[u8; MAX_TX_LEN]>,
     pump: Pump,
+    /// Shared with the clients, updated after each request.
+    stats: Arc<Mutex<ClientStats>>,
+    flushed_bytes: u64,
 }
 
 impl<F: Framing + Send + 'static> Driver<F> {
@@ -74,7 +94,19 @@ impl<F: Framing + Send + 'static> Driver<F> {
             port,
             health: HashMap::new(),
             tx: Box::new([0; MAX_TX_LEN]),
+            stats: Arc::default(),
+            flushed_bytes: 0,
         }
+    }
+
+    /// The counters the driver keeps up to date for its clients.
+    pub(crate) fn stats(&self) -> Arc<Mutex<ClientStats>> {
+        Arc::clone(&self.stats)
+    }
+
+    fn publish_stats(&self) {
+        let stats = ClientStats { master: self.master.stats(), flushed_bytes: self.flushed_bytes };
+        *self.stats.lock().unwrap_or_else(PoisonError::into_inner) = stats;
     }
 
     pub(crate) async fn run(mut self, mut commands: mpsc::Receiver<Command>) {
@@ -85,7 +117,12 @@ impl<F: Framing + Send + 'static> Driver<F> {
                 // No deadline: between requests the engine has nothing due.
                 Some(port) => match self.pump.step(port, &mut self.master, None, commands.recv()).await {
                     Step::Other(command) => command,
-                    Step::Read | Step::Woke => continue,
+                    Step::Read => {
+                        // A late reply, say: counted as it comes, not at the next request.
+                        self.publish_stats();
+                        continue;
+                    }
+                    Step::Woke => continue,
                     Step::Closed => {
                         tracing::warn!(port = %self.transport.describe(), "the port closed; it will be reopened");
                         self.port = None;
@@ -103,6 +140,7 @@ impl<F: Framing + Send + 'static> Driver<F> {
             };
             let Some(command) = command else { return };
             let result = self.serve(&command).await;
+            self.publish_stats();
             let _ = command.reply.send(result);
         }
     }
@@ -166,9 +204,17 @@ impl<F: Framing + Send + 'static> Driver<F> {
             response_timeout: command.options.timeout,
             turnaround_delay: self.config.turnaround_delay,
             echo_suppression: self.config.echo_suppression,
+            late_window: self.config.late_window.unwrap_or(command.options.timeout.saturating_mul(2)),
+            // On a wire no reply can begin before the request has left; a pty or TCP says
+            // nothing of when a reply may come.
+            min_reply_delay: self.port.as_ref().is_some_and(|p| p.has_wire()).then_some(std::time::Duration::ZERO),
         });
         // Nothing is in flight between requests; make sure of it.
         self.master.abort();
+        self.flush_input().map_err(|e| {
+            self.port = None;
+            Error::io(format!("reading from {}", self.transport.describe()), e)
+        })?;
         let now = self.pump.clock().now();
         let submitted = if command.raw {
             self.master.submit_raw(now, command.unit, &command.pdu)
@@ -194,6 +240,17 @@ impl<F: Framing + Send + 'static> Driver<F> {
             self.port = None;
         }
         result
+    }
+
+    /// Hands the engine what is waiting in the port, unread, and counts it as dropped.
+    fn flush_input(&mut self) -> std::io::Result<()> {
+        let Some(port) = self.port.as_mut() else { return Ok(()) };
+        let n = self.pump.drain(port, &mut self.master)?;
+        if n > 0 {
+            self.flushed_bytes = self.flushed_bytes.saturating_add(n as u64);
+            tracing::debug!(port = %self.transport.describe(), bytes = n, "dropped bytes waiting in the port before the request");
+        }
+        Ok(())
     }
 
     /// Fails fast for a unit in backoff; returns whether this request is its probe.

@@ -106,10 +106,21 @@ pub enum Error {
         /// device possibly coming back (an adapter plugged in again).
         lasting: bool,
     },
+    /// The serial port is held by another process (ours opens ports exclusively: two
+    /// masters on one port would take each other's replies).
+    #[error("{port} is in use: {}", holder.as_ref().map_or_else(|| "held by another process".to_string(), |h| format!("held by {h}")))]
+    PortBusy {
+        /// The port, as [`Transport::describe`](crate::Transport::describe) names it.
+        port: String,
+        /// Who holds it, when that can be found out (Linux, through `/proc`).
+        holder: Option<PortHolder>,
+    },
     /// The client's driver has stopped (its runtime shut down).
     #[error("the connection task has stopped")]
     Closed,
 }
+
+pub use crate::serial::PortHolder;
 
 impl Error {
     /// The exception code, if the device refused the request.

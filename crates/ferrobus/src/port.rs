@@ -25,6 +25,7 @@ use tokio::io::{AsyncRead, AsyncWrite};
 use tokio::net::TcpStream;
 
 use crate::identity::Identity;
+use crate::serial::PortInUse;
 pub use crate::serial::{Rs485, SerialConfig};
 #[cfg(unix)]
 pub use crate::sys::Pty;
@@ -45,6 +46,18 @@ pub trait Port: AsyncRead + AsyncWrite + Unpin + Send + 'static {
     fn last_arrival(&self) -> Option<tokio::time::Instant> {
         None
     }
+
+    /// Reads, without waiting, bytes already received and not read yet (a serial port's
+    /// buffer); 0 when there are none, or for a stream that cannot tell.
+    fn read_buffered(&mut self, _buf: &mut [u8]) -> io::Result<usize> {
+        Ok(0)
+    }
+
+    /// Whether bytes cross a wire at the line's baud, so that no reply can begin before our
+    /// request has left: a serial port, not a pty (which delivers at once), nor TCP.
+    fn has_wire(&self) -> bool {
+        false
+    }
 }
 
 impl Port for TcpStream {}
@@ -54,6 +67,14 @@ impl Port for tokio::io::DuplexStream {}
 impl Port for TtyPort {
     fn set_rts(&mut self, on: bool) -> io::Result<()> {
         TtyPort::set_rts(self, on)
+    }
+
+    fn read_buffered(&mut self, buf: &mut [u8]) -> io::Result<usize> {
+        TtyPort::read_buffered(self, buf)
+    }
+
+    fn has_wire(&self) -> bool {
+        TtyPort::has_wire(self)
     }
 }
 
@@ -251,14 +272,19 @@ impl Transport {
         let context = || format!("opening {}", self.describe());
         match tokio::time::timeout(timeout, self.connector.connect()).await {
             Ok(Ok(port)) => Ok(port),
-            Ok(Err(e)) => match e.get_ref().and_then(|inner| inner.downcast_ref::<NotSame>()) {
-                Some(not_same) => Err(crate::Error::NotSameDevice {
-                    port: self.describe(),
-                    reason: not_same.reason.clone(),
-                    lasting: not_same.lasting,
-                }),
-                None => Err(crate::Error::io(context(), e)),
-            },
+            Ok(Err(e)) => {
+                if let Some(busy) = PortInUse::of(&e) {
+                    return Err(crate::Error::PortBusy { port: self.describe(), holder: busy.holder.clone() });
+                }
+                match e.get_ref().and_then(|inner| inner.downcast_ref::<NotSame>()) {
+                    Some(not_same) => Err(crate::Error::NotSameDevice {
+                        port: self.describe(),
+                        reason: not_same.reason.clone(),
+                        lasting: not_same.lasting,
+                    }),
+                    None => Err(crate::Error::io(context(), e)),
+                }
+            }
             Err(_) => Err(crate::Error::io(
                 context(),
                 io::Error::new(io::ErrorKind::TimedOut, format!("no connection after {} ms", timeout.as_millis())),

@@ -200,6 +200,21 @@ impl Pump {
         true
     }
 
+    /// Hands the engine, as arrived now, every byte `port` holds unread, without waiting;
+    /// returns how many (at most 64 KiB, so that a line that never stops cannot hold it).
+    pub(crate) fn drain<E: Engine>(&mut self, port: &mut BoxPort, engine: &mut E) -> io::Result<usize> {
+        const MAX: usize = 64 * 1024;
+        let mut total = 0;
+        while total < MAX {
+            let n = port.read_buffered(&mut self.rx[..])?;
+            let Some(bytes) = self.rx.get(..n).filter(|b| !b.is_empty()) else { break };
+            tracing::trace!("rx (waiting before the request) {}", Hex(bytes));
+            engine.on_bytes(self.clock.now(), bytes);
+            total += n;
+        }
+        Ok(total)
+    }
+
     /// Tells the engine that its deadline has come.
     pub(crate) fn handle_timeout<E: Engine>(&mut self, engine: &mut E) {
         engine.handle_timeout(self.clock.now());

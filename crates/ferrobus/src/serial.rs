@@ -1,9 +1,18 @@
-//! What every platform's serial port shares: its settings, and how they become serial2's.
+//! What every platform's serial port shares: its settings, how they become serial2's, and
+//! what opening one reports when another process holds it.
 //!
 //! The ports themselves are platform code, in [`sys`](crate::sys): a tty on Unix, a COM port
 //! on Windows. Both are opened and configured through serial2, so the translation of a
 //! [`LineConfig`] is written once, here.
+//!
+//! Ports are opened exclusively: two masters on one port would each take the other's replies
+//! for their own. Unix takes an advisory lock (`flock`, which root cannot step past either and
+//! which holds on a pty too) and sets the tty exclusive (`TIOCEXCL`, which refuses even
+//! programs that do not lock); Windows itself lets one handle at a time open a COM port. A
+//! port held elsewhere fails to open with [`PortInUse`] inside the `io::Error`, which the
+//! transport turns into [`Error::PortBusy`](crate::Error::PortBusy).
 
+use std::fmt;
 use std::io;
 use std::path::PathBuf;
 
@@ -65,4 +74,66 @@ pub(crate) fn settings(line: LineConfig) -> impl FnOnce(serial2::Settings) -> io
         s.set_flow_control(serial2::FlowControl::None);
         Ok(s)
     }
+}
+
+/// A process that holds a serial port open.
+#[derive(Clone, PartialEq, Eq, Debug)]
+pub struct PortHolder {
+    /// Its process id.
+    pub pid: u32,
+    /// Its command name (Linux's `/proc/PID/comm`), as the system gives it.
+    pub command: String,
+}
+
+impl fmt::Display for PortHolder {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        // The name is another program's choice: escaped, so that it cannot forge a log line.
+        write!(f, "process {} ({})", self.pid, self.command.escape_debug())
+    }
+}
+
+/// Why a serial port did not open: another process holds it. Carried inside the platform
+/// code's `io::Error` (kind `ResourceBusy`).
+#[derive(Clone, PartialEq, Eq, Debug)]
+pub(crate) struct PortInUse {
+    /// Who, if it could be found out.
+    pub(crate) holder: Option<PortHolder>,
+}
+
+impl fmt::Display for PortInUse {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        match &self.holder {
+            Some(holder) => write!(f, "the port is held by {holder}"),
+            None => f.write_str("the port is held by another process"),
+        }
+    }
+}
+
+impl std::error::Error for PortInUse {}
+
+impl PortInUse {
+    /// The `io::Error` that carries it.
+    pub(crate) fn into_io(self) -> io::Error {
+        io::Error::new(io::ErrorKind::ResourceBusy, self)
+    }
+
+    /// The [`PortInUse`] inside `error`, if that is why it failed.
+    pub(crate) fn of(error: &io::Error) -> Option<&PortInUse> {
+        error.get_ref().and_then(|inner| inner.downcast_ref::<PortInUse>())
+    }
+}
+
+/// Reads with `read_buffered` (which never waits) until nothing is left, at most 1 MiB;
+/// returns how many bytes were read and dropped.
+pub(crate) fn discard_input(mut read_buffered: impl FnMut(&mut [u8]) -> io::Result<usize>) -> io::Result<usize> {
+    const MAX: usize = 1 << 20;
+    let mut buf = [0u8; 1024];
+    let mut total = 0usize;
+    while total < MAX {
+        match read_buffered(&mut buf)? {
+            0 => break,
+            n => total = total.saturating_add(n),
+        }
+    }
+    Ok(total)
 }

@@ -128,3 +128,26 @@ fn the_sim_with_no_reopen_ends_when_its_port_goes_away() {
     let error = format!("error: serving on {}", link.display());
     assert!(said.iter().any(|l| l.starts_with(&error)), "the error names the port: {said:#?}");
 }
+
+#[test]
+fn a_second_process_on_a_held_port_fails_at_once_saying_which_process_holds_it() {
+    let runtime = tokio::runtime::Builder::new_current_thread().enable_all().build().unwrap();
+    let _inside = runtime.enter();
+    let pty = Pty::open().unwrap();
+    let (mut holder, lines) = sim(&pty.path, &[]);
+    wait_for(&lines, "serving on");
+    // Before, two programs on one port took each other's replies; now the second one is
+    // refused before it sends a byte.
+    let out = ferrobus()
+        .args(["--port", &pty.path.display().to_string(), "--parity", "none", "--timeout", "5s"])
+        .args(["read", "holding", "0"])
+        .output()
+        .unwrap();
+    let _ = holder.kill();
+    let _ = holder.wait();
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(4), "the exit code of a port that cannot be used: {err}");
+    let said = format!("is in use: held by process {} (ferrobus)", holder.id());
+    assert!(err.contains(&said), "{err}");
+    assert!(err.contains("one master per port"), "{err}");
+}

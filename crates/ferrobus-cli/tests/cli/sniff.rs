@@ -417,3 +417,29 @@ fn noise_a_frame_cut_short_and_an_unanswered_request_are_shown_as_such_and_noise
     }
     let _ = std::fs::remove_file(&capture);
 }
+
+#[test]
+fn bytes_waiting_on_the_tap_before_sniff_opened_it_are_dropped_and_said_not_counted_as_noise() {
+    let bus = bus();
+    // Noise on the line while nobody listens on the tap: it waits in the tap's buffer.
+    let port = serial2::SerialPort::open(&bus.master, 19_200).unwrap();
+    port.write_all(&[0xFF, 0xFF, 0x00]).unwrap();
+    drop(port);
+    std::thread::sleep(Duration::from_millis(100)); // for the line to pass it on; not timed
+    let (mut sniffer, said) = sniff(&bus.tap, &["--json"], Stdio::piped());
+    let decoded = lines(sniffer.0.stdout.take().unwrap());
+    let note = wait_for(&said, usize::MAX, "dropped", "ferrobus sniff");
+    // How many of the three the line passed on to the tap is the line's business; all of
+    // them predate the capture.
+    assert!(
+        note.iter().any(|l| l.starts_with("sniff: dropped ")
+            && l.ends_with(" bytes that were waiting in the port before the capture began")),
+        "{note:#?}"
+    );
+    raw(&bus.master, "1", "03 00 00 00 01");
+    wait_for(&decoded, 2, "", "ferrobus sniff");
+    assert!(sniffer.stop().success());
+    let docs = json_lines(&decoded.iter().collect::<Vec<_>>().join("\n"));
+    let stats = docs.iter().find(|d| d["type"] == "stats").unwrap();
+    assert_eq!(stats["noise_runs"].as_u64(), Some(0), "{stats}");
+}

@@ -43,6 +43,16 @@ fn behind(device: impl FnOnce(&Path) -> Proc, gateway_args: &[&str]) -> Behind {
 }
 
 fn behind_with(device: impl FnOnce(&Path) -> Proc, gateway_args: &[&str], wrapper: &[&str]) -> Behind {
+    behind_waiting(device, "100ms", gateway_args, wrapper)
+}
+
+/// As [`behind_with`], the gateway waiting `timeout` for a reply.
+fn behind_waiting(
+    device: impl FnOnce(&Path) -> Proc,
+    timeout: &str,
+    gateway_args: &[&str],
+    wrapper: &[&str],
+) -> Behind {
     let dir = TempDir::new();
     let pair = SocatPair::start(dir.path());
     let device = device(&pair.b);
@@ -54,7 +64,7 @@ fn behind_with(device: impl FnOnce(&Path) -> Proc, gateway_args: &[&str], wrappe
     let mut command = Command::new(program);
     command.args(pre);
     command.args(["--port", &pair.a.display().to_string(), "--baud", &BAUD.to_string(), "--parity", "none"]);
-    command.args(["--timeout", "100ms", "gateway", "--listen", &addr]).args(gateway_args);
+    command.args(["--timeout", timeout, "gateway", "--listen", &addr]).args(gateway_args);
     let gateway = Proc::spawn("ferrobus gateway", &mut command);
     gateway.wait_for(Stream::Err, |l| l.starts_with("gateway: listening on"), STEP);
     Behind { gateway, _device: device, _pair: pair, _dir: dir, addr }
@@ -420,6 +430,45 @@ fn a_write_refused_by_a_read_only_gateway_gets_a_hint_naming_the_gateway_setting
     assert!(refused.stderr.contains("with 6 in --allow-functions"), "{}", refused.stderr);
     ferrobus(&gw.link()).run(&["write", "register", "5", "8", "--multiple"]).ok();
     assert_eq!(ferrobus(&gw.link()).values(&["read", "holding", "5"]), words(&[8]));
+}
+
+#[test]
+fn a_reply_later_than_the_timeout_and_the_guard_is_dropped_as_late_and_never_given_to_the_next_client() {
+    let Some(_turn) = require(&[Need::Socat]) else { return };
+    // With the defaults (timeout 1 s, guard 100 ms), registers 0x10-0x12 answer 1150, 1300
+    // and 2000 ms late: each late reply once came as the next client's register value.
+    let device = |path: &Path| {
+        let rules = ["1:fc=3,addr=0x10,delay=1150ms", "1:fc=3,addr=0x11,delay=1300ms", "1:fc=3,addr=0x12,delay=2000ms"];
+        let mut args = vec!["--profile", "generic"];
+        for rule in &rules {
+            args.extend(["--fault", *rule]);
+        }
+        sim_on(path, Parity::None, &args)
+    };
+    let gw = behind_waiting(device, "1s", &["--backoff-after", "0"], &[]);
+    let mut slow = connect_to(&gw.addr);
+    let mut other = connect_to(&gw.addr);
+    for (t, register) in [(1u16, 0x10u8), (2, 0x11), (3, 0x12)] {
+        assert_eq!(
+            ask(&mut slow, t, 1, &[0x06, 0x00, register, 0x11, register]),
+            [0x06, 0x00, register, 0x11, register]
+        );
+    }
+    assert_eq!(ask(&mut other, 9, 1, &[0x06, 0x00, 0x20, 0x22, 0x22]), [0x06, 0x00, 0x20, 0x22, 0x22]);
+    for (t, register) in [(11u16, 0x10u8), (12, 0x11), (13, 0x12)] {
+        slow.write_all(&mbap(t, 1, &[0x03, 0x00, register, 0x00, 0x01])).unwrap();
+        // Queued behind the slow read (the pause only orders the two; nothing is timed).
+        std::thread::sleep(Duration::from_millis(50));
+        let theirs = ask(&mut other, t + 100, 1, &[0x03, 0x00, 0x20, 0x00, 0x01]);
+        assert_eq!(theirs, [0x03, 0x02, 0x22, 0x22], "register 0x20 read after register {register:#04X}'s late reply");
+        assert_eq!(read_frame(&mut slow), Some(mbap(t, 1, &[0x83, 0x0B])), "register {register:#04X} timed out");
+    }
+    // A last read settles the last late reply before the counters are printed.
+    assert_eq!(ask(&mut other, 200, 1, &[0x03, 0x00, 0x20, 0x00, 0x01]), [0x03, 0x02, 0x22, 0x22]);
+    let killed = Command::new("kill").args(["-USR1", &gw.gateway.id().to_string()]).status().unwrap();
+    assert!(killed.success());
+    let line = gw.gateway.wait_for(Stream::Err, |l| l.starts_with("line "), STEP);
+    assert!(line.contains("late-replies 3 early-replies 0"), "{line}");
 }
 
 // Reverse: a serial master through the gateway to Modbus/TCP servers.

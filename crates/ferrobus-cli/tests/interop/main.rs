@@ -19,6 +19,7 @@
 //! - [`port_reopen`]: a serial port that disappears and comes back, through `ferrobus::Client`.
 //! - [`reply_timing`]: when the simulator's reply starts, with a 20 ms response wait.
 //! - [`skips`]: what a test whose peer is missing does, in and outside CI.
+//! - [`stale_reply`]: a reply left in the port by an interrupted command, dropped by the next.
 //! - [`tcp_server`]: `ferrobus sim --tcp` under pipelining, corrupt headers, unit ids over TCP,
 //!   its connection cap and timeouts, and a lowered descriptor limit.
 //! - [`tls`]: `ferrobus sim` as a Modbus/TCP Security server with roles, met by ferrobus's
@@ -39,6 +40,7 @@ mod mbpoll_vs_sim;
 mod port_reopen;
 mod reply_timing;
 mod skips;
+mod stale_reply;
 mod support;
 mod tcp_server;
 mod tls;

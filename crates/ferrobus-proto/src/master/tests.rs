@@ -530,3 +530,261 @@ fn an_ascii_reply_with_a_bad_lrc_names_the_unit_and_function_code_it_carried() {
         other => panic!("{other:?}"),
     }
 }
+
+// ---- Late replies: owed to a request that timed out ---------------------------------------
+
+/// A master with a 100 ms timeout and a 200 ms late window.
+fn late_master() -> Master<RtuCodec> {
+    let config = MasterConfig {
+        response_timeout: Duration::from_millis(100),
+        late_window: Duration::from_millis(200),
+        ..MasterConfig::default()
+    };
+    master(config)
+}
+
+/// The instant the read of one register sent at `at` times out (8 characters, then 100 ms).
+fn timeout_of(at: u64) -> u64 {
+    at + 8 * CHAR + 100_000_000
+}
+
+/// Sends a read of one register to unit 1 at t = 0 and lets it time out.
+#[track_caller]
+fn timed_out_read(m: &mut Master<RtuCodec>) {
+    m.submit(ns(0), 1, &read_holding(0, 1)).unwrap();
+    transmit(m, ns(0));
+    m.handle_timeout(ns(timeout_of(0)));
+    assert!(matches!(done(m), Some(Done::Failed(MasterError::Timeout { .. }))));
+}
+
+/// A master whose read of one register to unit 1 timed out, with the next such read queued
+/// at the timeout `t`: a reply is owed.
+fn owing() -> (Master<RtuCodec>, u64) {
+    let mut m = late_master();
+    timed_out_read(&mut m);
+    let t = timeout_of(0);
+    m.submit(ns(t), 1, &read_holding(0, 1)).unwrap();
+    (m, t)
+}
+
+/// Feeds `frame` at `at` whole, byte by byte 1 µs apart, or after another unit's frame in
+/// one chunk; returns the instant its last byte came.
+fn feed_as(m: &mut Master<RtuCodec>, at: u64, frame: &[u8], how: Feed) -> u64 {
+    match how {
+        Feed::Whole => {
+            m.on_bytes(ns(at), frame);
+            at
+        }
+        Feed::ByteByByte => {
+            for (i, b) in (0u64..).zip(frame) {
+                m.on_bytes(ns(at + i * 1_000), &[*b]);
+            }
+            at + (frame.len() as u64 - 1) * 1_000
+        }
+        Feed::BehindAnother => {
+            let mut chunk = rtu(9, &[0x03, 0x02, 0x55, 0x55]);
+            chunk.extend_from_slice(frame);
+            m.on_bytes(ns(at), &chunk);
+            at
+        }
+    }
+}
+
+#[derive(Clone, Copy, Debug)]
+enum Feed {
+    Whole,
+    ByteByByte,
+    BehindAnother,
+}
+
+const FEEDS: [Feed; 3] = [Feed::Whole, Feed::ByteByByte, Feed::BehindAnother];
+
+#[test]
+fn a_reply_after_the_timeout_is_dropped_as_late_and_never_taken_for_the_next_same_shape_request() {
+    for how in FEEDS {
+        let mut m = late_master();
+        timed_out_read(&mut m);
+        // The next request, same unit, function and length, is queued at once...
+        let t = timeout_of(0);
+        m.submit(ns(t), 1, &read_holding(0, 1)).unwrap();
+        let mut buf = [0u8; MAX_TX_LEN];
+        assert_eq!(m.poll_transmit(ns(t), &mut buf), None, "{how:?}: the line opened with a reply owed");
+        assert!(m.owes_reply(ns(t)));
+        // ...and the late reply (value 0xDEAD) comes 50 ms later, while the line is closed.
+        let end = feed_as(&mut m, t + 50_000_000, &rtu(1, &[0x03, 0x02, 0xDE, 0xAD]), how);
+        assert_eq!(m.stats().late_replies, 1, "{how:?}: the late reply was not counted");
+        assert!(!m.owes_reply(ns(end)), "{how:?}");
+        // The line opens t3.5 after it, and the next request gets its own reply.
+        assert_eq!(m.poll_timeout(), Some(ns(end + T3_5)), "{how:?}");
+        assert_eq!(m.poll_transmit(ns(end + T3_5 - 1), &mut buf), None, "{how:?}");
+        assert!(m.poll_transmit(ns(end + T3_5), &mut buf).is_some(), "{how:?}");
+        m.on_bytes(ns(end + T3_5 + 20_000_000), &rtu(1, &[0x03, 0x02, 0x00, 0x07]));
+        assert_eq!(done(&mut m), Some(Done::Registers(std::vec![7])), "{how:?}");
+    }
+}
+
+#[test]
+fn with_no_late_reply_the_line_opens_once_the_late_window_has_passed_in_silence() {
+    let (mut m, t) = owing();
+    assert_eq!(m.poll_timeout(), Some(ns(t + 200_000_000)), "the late window, from the timeout");
+    let mut buf = [0u8; MAX_TX_LEN];
+    assert_eq!(m.poll_transmit(ns(t + 200_000_000 - 1), &mut buf), None);
+    assert!(m.poll_transmit(ns(t + 200_000_000), &mut buf).is_some());
+    assert_eq!(m.stats().late_replies, 0);
+}
+
+#[test]
+fn another_units_frame_or_another_length_does_not_settle_the_owed_reply() {
+    let (mut m, t) = owing();
+    m.on_bytes(ns(t + 10_000_000), &rtu(2, &[0x03, 0x02, 0x00, 0x01])); // another unit
+    m.on_bytes(ns(t + 20_000_000), &rtu(1, &[0x03, 0x04, 0, 1, 0, 2])); // two registers, not one
+    m.on_bytes(ns(t + 30_000_000), &rtu(1, &[0x04, 0x02, 0x00, 0x01])); // another function
+    assert!(m.owes_reply(ns(t + 30_000_000)), "a frame that is not the owed reply settled it");
+    assert_eq!(m.stats().late_replies, 0);
+    assert_eq!(m.poll_timeout(), Some(ns(t + 200_000_000)));
+    // The owed unit's exception is its reply.
+    m.on_bytes(ns(t + 40_000_000), &rtu(1, &[0x83, 0x02]));
+    assert_eq!((m.owes_reply(ns(t + 40_000_000)), m.stats().late_replies), (false, 1));
+}
+
+#[test]
+fn a_retry_waits_for_the_reply_owed_to_the_attempt_before_so_it_gets_its_own() {
+    // A device that answers 150 ms after each request, against a 100 ms timeout: each late
+    // reply is dropped, the retry goes out after it, and no attempt takes another's reply.
+    let mut m = late_master();
+    timed_out_read(&mut m);
+    // The retry, submitted at once, waits; the first attempt's reply (value 1) comes.
+    let t = timeout_of(0);
+    m.submit(ns(t), 1, &read_holding(0, 1)).unwrap();
+    m.on_bytes(ns(150_000_000), &rtu(1, &[0x03, 0x02, 0x00, 0x01]));
+    let retry_at = 150_000_000 + T3_5;
+    assert_eq!(transmit(&mut m, ns(retry_at)), rtu(1, &[0x03, 0, 0, 0, 1]));
+    m.handle_timeout(ns(timeout_of(retry_at)));
+    assert!(matches!(done(&mut m), Some(Done::Failed(MasterError::Timeout { heard: None, .. }))));
+    // The next job: the retry's reply (value 2) is owed, and dropped when it comes.
+    let next = timeout_of(retry_at);
+    m.submit(ns(next), 1, &read_holding(0, 1)).unwrap();
+    m.on_bytes(ns(retry_at + 150_000_000), &rtu(1, &[0x03, 0x02, 0x00, 0x02]));
+    transmit(&mut m, ns(retry_at + 150_000_000 + T3_5));
+    m.on_bytes(ns(retry_at + 160_000_000 + T3_5), &rtu(1, &[0x03, 0x02, 0x00, 0x03]));
+    assert_eq!(done(&mut m), Some(Done::Registers(std::vec![3])));
+    assert_eq!(m.stats().late_replies, 2);
+}
+
+#[test]
+fn a_late_reply_with_a_bad_crc_settles_the_owed_reply_too() {
+    let (mut m, t) = owing();
+    m.on_bytes(ns(t + 10_000_000), &bad_crc(rtu(1, &[0x03, 0x02, 0x00, 0x01])));
+    m.handle_timeout(ns(t + 10_000_000 + T3_5));
+    assert_eq!(m.stats().late_replies, 1);
+    assert!(!m.owes_reply(ns(t + 10_000_000 + T3_5)));
+}
+
+#[test]
+fn a_timeout_after_a_damaged_reply_owes_nothing() {
+    let mut m = late_master();
+    m.submit(ns(0), 1, &read_holding(0, 1)).unwrap();
+    transmit(&mut m, ns(0));
+    m.on_bytes(ns(20_000_000), &bad_crc(rtu(1, &[0x03, 0x02, 0x00, 0x07])));
+    m.handle_timeout(ns(20_000_000 + T3_5));
+    m.handle_timeout(ns(timeout_of(0)));
+    assert!(matches!(done(&mut m), Some(Done::Failed(MasterError::Timeout { heard: Some(_), .. }))));
+    assert!(!m.owes_reply(ns(timeout_of(0))), "the unit's reply came, damaged: none is owed");
+}
+
+// ---- Replies sooner than any slave may answer ---------------------------------------------
+
+/// A master on a wire: no reply may begin before the request has left (8 characters).
+fn line_master() -> Master<RtuCodec> {
+    let config = MasterConfig {
+        response_timeout: Duration::from_millis(100),
+        min_reply_delay: Some(Duration::ZERO),
+        ..MasterConfig::default()
+    };
+    master(config)
+}
+
+#[test]
+fn a_reply_that_begins_before_the_request_has_left_is_dropped_as_stale_and_named_in_the_timeout() {
+    for how in FEEDS {
+        let mut m = line_master();
+        m.submit(ns(0), 1, &read_holding(0, 1)).unwrap();
+        transmit(&mut m, ns(0));
+        // A stale reply already in the port: 49 µs after the request began.
+        feed_as(&mut m, 49_000, &rtu(1, &[0x03, 0x02, 0x0C, 0xE4]), how);
+        assert_eq!(done(&mut m), None, "{how:?}: the stale reply was taken");
+        assert_eq!(m.stats().early_replies, 1, "{how:?}");
+        m.handle_timeout(ns(timeout_of(0)));
+        let Some(Done::Failed(e @ MasterError::Timeout { heard, .. })) = done(&mut m) else {
+            panic!("{how:?}: no timeout")
+        };
+        let earliest = Duration::from_nanos(8 * CHAR);
+        assert_eq!(heard, Some(Heard::TooEarly { after: Duration::from_micros(49), earliest }), "{how:?}");
+        assert!(
+            e.to_string().ends_with(
+                "a reply 49 µs after the request, earlier than any slave can answer (not before 9166 µs): a stale \
+                 reply, ignored"
+            ),
+            "{how:?}: {e}"
+        );
+    }
+}
+
+#[test]
+fn a_reply_that_begins_as_the_request_has_left_is_accepted_as_a_prompt_device_sends_it() {
+    for how in FEEDS {
+        let mut m = line_master();
+        m.submit(ns(0), 1, &read_holding(0, 1)).unwrap();
+        transmit(&mut m, ns(0));
+        feed_as(&mut m, 8 * CHAR, &rtu(1, &[0x03, 0x02, 0x00, 0x2A]), how);
+        assert_eq!(done(&mut m), Some(Done::Registers(std::vec![42])), "{how:?}");
+        assert_eq!(m.stats().early_replies, 0, "{how:?}");
+    }
+}
+
+#[test]
+fn with_t3_5_as_the_minimum_delay_a_reply_before_that_silence_is_stale_and_the_true_one_after_it_is_taken() {
+    let config = MasterConfig { min_reply_delay: Some(Duration::from_nanos(T3_5)), ..MasterConfig::default() };
+    let mut m = master(config);
+    m.submit(ns(0), 1, &read_holding(0, 1)).unwrap();
+    transmit(&mut m, ns(0));
+    m.on_bytes(ns(8 * CHAR + T3_5 - 1), &rtu(1, &[0x03, 0x02, 0x0C, 0xE4]));
+    assert_eq!((done(&mut m), m.stats().early_replies), (None, 1));
+    m.on_bytes(ns(8 * CHAR + T3_5 + 10_000_000), &rtu(1, &[0x03, 0x02, 0x00, 0x2A]));
+    assert_eq!(done(&mut m), Some(Done::Registers(std::vec![42])));
+}
+
+#[test]
+fn without_a_minimum_reply_delay_a_prompt_reply_is_accepted() {
+    // TCP, RTU over TCP and ptys: nothing bounds how soon a reply may come.
+    let mut m = late_master();
+    m.submit(ns(0), 1, &read_holding(0, 1)).unwrap();
+    transmit(&mut m, ns(0));
+    m.on_bytes(ns(49_000), &rtu(1, &[0x03, 0x02, 0x0C, 0xE4]));
+    assert_eq!(done(&mut m), Some(Done::Registers(std::vec![0x0CE4])));
+}
+
+#[test]
+fn a_unit_silent_through_its_late_window_owes_no_reply_on_its_next_timeouts_until_it_is_heard() {
+    let mut m = late_master();
+    timed_out_read(&mut m);
+    // The window passes in silence: the unit is dead, not slow.
+    let t = timeout_of(0) + 200_000_000;
+    m.submit(ns(timeout_of(0)), 1, &read_holding(0, 1)).unwrap();
+    transmit(&mut m, ns(t));
+    m.handle_timeout(ns(timeout_of(t)));
+    assert!(matches!(done(&mut m), Some(Done::Failed(MasterError::Timeout { .. }))));
+    assert!(!m.owes_reply(ns(timeout_of(t))), "a silent unit's timeout owes a reply");
+    // Once it is heard again it is slow, not silent: its next timeout owes a reply.
+    let u = timeout_of(t);
+    m.submit(ns(u), 1, &read_holding(0, 1)).unwrap();
+    transmit(&mut m, ns(u));
+    m.on_bytes(ns(u + 10_000_000), &rtu(1, &[0x03, 0x02, 0x00, 0x05]));
+    assert_eq!(done(&mut m), Some(Done::Registers(std::vec![5])));
+    let v = u + 10_000_000 + T3_5;
+    m.submit(ns(v), 1, &read_holding(0, 1)).unwrap();
+    transmit(&mut m, ns(v));
+    m.handle_timeout(ns(timeout_of(v)));
+    done(&mut m);
+    assert!(m.owes_reply(ns(timeout_of(v))));
+}

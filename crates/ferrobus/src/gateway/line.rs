@@ -5,10 +5,17 @@
 //! t3.5 before every frame, waits the reply timeout, retries, skips a unit in backoff and
 //! waits the turnaround after a broadcast. A reply is matched to its request by the client's
 //! master engine (unit, function code, and for a parsed request its length and echo), and the
-//! worker starts the next request only once the last has ended. After a request that got no
-//! usable reply the line stays quiet for the late-reply guard ([`super::LineConfig::late_guard`])
-//! before the next request goes out: a late reply (RTU has no transaction id) arriving then
-//! is awaited by nobody and dropped, instead of being taken for the next request's.
+//! worker starts the next request only once the last has ended.
+//!
+//! Late replies (RTU has no transaction id): after a request timed out, the client's master
+//! engine owes it its reply and keeps the line closed — for a retry and for the next job
+//! alike — until that reply has come and been dropped, or the late window (twice the reply
+//! timeout, [`crate::ClientConfig::late_window`]) has passed; so a same-shape next request
+//! cannot take it. On top, after any request that got no usable reply, the worker keeps the
+//! line quiet for the late-reply guard ([`super::LineConfig::late_guard`]), for what else a
+//! confused device may still send. The replies dropped are counted in [`LineStats`]
+//! (`late_replies`, and `early_replies` for stale ones already on their way when a request
+//! left).
 
 use std::collections::{HashMap, VecDeque};
 use std::sync::{Arc, Mutex, MutexGuard, PoisonError};
@@ -168,6 +175,7 @@ pub(crate) async fn run(queue: Arc<LineQueue>, client: Client, cache: Option<Arc
             let mut stats = queue.stats();
             stats.total.count(ended, took);
             stats.units.entry(job.unit_in).or_default().count(ended, took);
+            stats.dropped(&client.stats());
         }
         if let (Some(cache), Some(reply), Ended::Replied) = (&cache, &reply, ended) {
             cache.update(job.unit_in, &job.pdu, reply);
@@ -176,8 +184,9 @@ pub(crate) async fn run(queue: Arc<LineQueue>, client: Client, cache: Option<Arc
         // The client may have gone meanwhile: nothing to answer.
         let _ = job.reply.send(reply);
         if matches!(ended, Ended::Timeout | Ended::BadCrc | Ended::BadReply) {
-            // A reply that comes late must not be taken for the next request's: the line
-            // stays quiet a while, and what arrives meanwhile, awaited by nobody, is dropped.
+            // The engine keeps the line closed for a reply owed to a timed-out request; what
+            // else a device confused by this one may send meanwhile is awaited by nobody and
+            // dropped.
             tokio::time::sleep(late_guard).await;
         }
     }

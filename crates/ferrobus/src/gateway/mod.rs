@@ -41,12 +41,15 @@
 //!
 //! Late replies: RTU has no transaction id. The worker sends a request only when the last has
 //! ended; the client's master engine takes a reply only from the unit asked, with the
-//! function code asked and, for a request it can parse, the length and echo it must have;
-//! and after a request that got no usable reply the line stays quiet for
-//! [`LineConfig::late_guard`], so a reply that comes late is awaited by nobody and dropped
-//! instead of being taken for the next request's. (A reply later than the timeout plus the
-//! guard, to a request of the same unit, function and length, cannot be told from the next
-//! one's by any gateway: size the timeout to the device.)
+//! function code asked and, for a request it can parse, the length and echo it must have.
+//! After a request timed out, the engine owes it its reply and keeps the line closed until
+//! the reply has come and been dropped (counted as a late reply in the line's stats) or the
+//! late window — twice the reply timeout ([`ClientConfig::late_window`](crate::ClientConfig::late_window))
+//! — has passed; after any request without a usable reply the line also stays quiet for
+//! [`LineConfig::late_guard`]. So a late reply is awaited by nobody and dropped instead of
+//! being taken for the next request's, a retry's or another client's. (A reply later than the
+//! timeout plus the late window, to a request of the same unit, function and length, cannot
+//! be told from the next one's by any gateway: size the timeout to the device.)
 //!
 //! The front end checks every request before anything else, with the core's parser and
 //! function-code table: a code that is no request code (0x00, the exception bit), or one the

@@ -162,11 +162,38 @@ pub struct LineStats {
     pub queue_depth: usize,
     /// The deepest the queue has been.
     pub queue_max: usize,
+    /// Replies that came after their request had timed out, dropped by the line's master
+    /// (never handed to the next request).
+    pub late_replies: u64,
+    /// Replies that began sooner after their request than any device may answer (stale
+    /// ones), dropped.
+    pub early_replies: u64,
+    /// Bytes found waiting in the port before a request, dropped.
+    pub flushed_bytes: u64,
+}
+
+impl LineStats {
+    /// Takes the line's client's counters of what it dropped.
+    pub(crate) fn dropped(&mut self, seen: &crate::ClientStats) {
+        self.late_replies = u64::from(seen.master.late_replies);
+        self.early_replies = u64::from(seen.master.early_replies);
+        self.flushed_bytes = seen.flushed_bytes;
+    }
 }
 
 impl fmt::Display for LineStats {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
-        writeln!(f, "line {}: queue {} (max {}); {}", self.name, self.queue_depth, self.queue_max, self.total)?;
+        writeln!(
+            f,
+            "line {}: queue {} (max {}); {}; late-replies {} early-replies {} flushed-bytes {}",
+            self.name,
+            self.queue_depth,
+            self.queue_max,
+            self.total,
+            self.late_replies,
+            self.early_replies,
+            self.flushed_bytes
+        )?;
         for (unit, counters) in &self.units {
             writeln!(f, "  unit {unit}: {counters}")?;
         }

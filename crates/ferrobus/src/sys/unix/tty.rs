@@ -20,7 +20,7 @@ use tokio::io::unix::AsyncFd;
 use tokio::io::{AsyncRead, AsyncWrite, Interest, ReadBuf};
 
 use super::fd::register;
-use crate::serial::{Rs485, SerialConfig, settings};
+use crate::serial::{PortHolder, PortInUse, Rs485, SerialConfig, discard_input, settings};
 
 /// How long a write waits before trying again when the tty's output buffer is full (a line
 /// that does not drain: hardware flow control held, a stuck adapter).
@@ -63,6 +63,39 @@ impl TtyPort {
     /// Sets the RTS line (RS-485 direction control by RTS).
     pub(crate) fn set_rts(&self, on: bool) -> io::Result<()> {
         self.fd.get_ref().set_rts(on)
+    }
+
+    /// Whether it is a serial port with a wire, not a pty.
+    pub(crate) fn has_wire(&self) -> bool {
+        !self.pty
+    }
+
+    /// Reads, without waiting, bytes the port has received and nobody has read yet; 0 when
+    /// there are none.
+    pub(crate) fn read_buffered(&mut self, buf: &mut [u8]) -> io::Result<usize> {
+        // The descriptor is non-blocking: an empty buffer says WouldBlock. The reactor's
+        // readiness is left as it is; the next read finds out and waits again.
+        match retry_interrupted(|| rustix::io::read(self.fd.get_ref(), &mut *buf)) {
+            Err(e) if e.kind() == io::ErrorKind::WouldBlock => Ok(0),
+            other => other,
+        }
+    }
+}
+
+impl TtyPort {
+    /// Drops what the port has received and nobody has read yet (bytes that came before it
+    /// was opened, say); returns how many.
+    pub fn discard_input(&mut self) -> io::Result<usize> {
+        discard_input(|buf| self.read_buffered(buf))
+    }
+}
+
+impl Drop for TtyPort {
+    /// Gives up the tty's exclusive mode (the lock goes with the descriptor).
+    fn drop(&mut self) {
+        if !self.pty {
+            let _ = rustix::termios::ioctl_tiocnxcl(self.fd.get_ref());
+        }
     }
 }
 
@@ -125,29 +158,103 @@ fn retry_interrupted<T>(mut call: impl FnMut() -> rustix::io::Result<T>) -> io::
     }
 }
 
-/// Opens a serial port with `config`. Needs a tokio runtime.
+/// Opens a serial port with `config`, exclusively. Needs a tokio runtime.
+///
+/// The port is opened without touching its settings and locked before it is configured, so
+/// that a port another process holds keeps its line as it is: `flock(LOCK_EX | LOCK_NB)`,
+/// which stops root too and holds on a pty, and for a real tty `TIOCEXCL`, which refuses the
+/// opens of programs that do not lock (other than root's). A held port fails with
+/// [`PortInUse`] (kind `ResourceBusy`) naming the holder where `/proc` tells it.
 ///
 /// A pseudo-terminal cannot always hold a parity setting or 7 data bits (Linux refuses them on
 /// a pty opened a second time); the port is then opened at 8 data bits without parity and a
 /// note is logged — a pty has no wire for parity to protect, and passes 8-bit bytes.
 pub fn open_serial(config: &SerialConfig) -> io::Result<TtyPort> {
-    let plain = config.line.with_parity(Parity::None).with_data_bits(DataBits::Eight);
-    let port = match serial2::SerialPort::open(&config.path, settings(config.line)) {
-        Err(e) if plain != config.line && is_pty(&config.path) => {
-            tracing::info!(path = %config.path.display(), "this pty refuses {} ({e}); using 8 data bits, no parity", config.line);
-            serial2::SerialPort::open(&config.path, settings(plain))?
+    let pty = is_pty(&config.path);
+    let port = match serial2::SerialPort::open(&config.path, serial2::KeepSettings) {
+        // Another process set the tty exclusive.
+        Err(e) if e.raw_os_error() == Some(rustix::io::Errno::BUSY.raw_os_error()) => {
+            return Err(PortInUse { holder: holder(&config.path) }.into_io());
         }
         other => other?,
     };
+    lock(&port, &config.path, pty)?;
+    let mut port = TtyPort::new(port, pty)?;
+    port.reconfigure(config.line)?;
+    let serial = port.fd.get_ref();
     match config.rs485 {
-        Rs485::Kernel => kernel_rs485(&port)?,
-        Rs485::Rts => port.set_rts(false)?,
+        Rs485::Kernel => kernel_rs485(serial)?,
+        Rs485::Rts => serial.set_rts(false)?,
         Rs485::Auto => {}
     }
     if config.low_latency {
         set_low_latency(&config.path);
     }
-    TtyPort::new(port, is_pty(&config.path))
+    Ok(port)
+}
+
+/// Takes `port` for this process alone: the advisory lock, then (not on a pty, whose flag
+/// would outlive us while the pty's owner keeps it open) the tty's exclusive mode.
+fn lock(port: &serial2::SerialPort, path: &Path, pty: bool) -> io::Result<()> {
+    use rustix::fs::{FlockOperation, flock};
+    match flock(port, FlockOperation::NonBlockingLockExclusive) {
+        Err(rustix::io::Errno::WOULDBLOCK) => return Err(PortInUse { holder: holder(path) }.into_io()),
+        // A file system without locks (some network mounts): TIOCEXCL still guards a tty.
+        Err(e) => tracing::debug!(path = %path.display(), "cannot lock the port: {e}"),
+        Ok(()) => {}
+    }
+    if !pty {
+        rustix::termios::ioctl_tiocexcl(port)?;
+    }
+    Ok(())
+}
+
+/// The process that holds `path`, other than this one (Linux): the one whose lock on it
+/// `/proc/locks` lists, else the first with it open under `/proc/*/fd` (a program that set
+/// the tty exclusive without locking it). `None` when `/proc` does not tell (another user's
+/// processes, without the right to look).
+#[cfg(target_os = "linux")]
+fn holder(path: &Path) -> Option<PortHolder> {
+    let target = std::fs::canonicalize(path).ok()?;
+    let ours = std::process::id();
+    let pid = locker(&target, ours).or_else(|| opener(&target, ours))?;
+    let comm = std::fs::read_to_string(format!("/proc/{pid}/comm")).unwrap_or_default();
+    Some(PortHolder { pid, command: comm.trim_end_matches('\n').to_string() })
+}
+
+/// The process holding a `flock` on the file `target`, other than `ours`, from `/proc/locks`
+/// (`1: FLOCK ADVISORY WRITE PID MAJOR:MINOR:INODE 0 EOF`, the device numbers in hex).
+#[cfg(target_os = "linux")]
+fn locker(target: &Path, ours: u32) -> Option<u32> {
+    use std::os::unix::fs::MetadataExt;
+    let meta = std::fs::metadata(target).ok()?;
+    let dev = meta.dev();
+    let id = format!("{:02x}:{:02x}:{}", rustix::fs::major(dev), rustix::fs::minor(dev), meta.ino());
+    let locks = std::fs::read_to_string("/proc/locks").ok()?;
+    locks.lines().find_map(|line| {
+        let fields: Vec<&str> = line.split_whitespace().collect();
+        let (Some(&"FLOCK"), Some(pid), Some(&file)) = (fields.get(1), fields.get(4), fields.get(5)) else {
+            return None;
+        };
+        let pid: u32 = pid.parse().ok()?;
+        (file == id && pid != ours).then_some(pid)
+    })
+}
+
+/// The first process other than `ours` with `target` open, from `/proc/*/fd`.
+#[cfg(target_os = "linux")]
+fn opener(target: &Path, ours: u32) -> Option<u32> {
+    std::fs::read_dir("/proc").ok()?.flatten().find_map(|entry| {
+        let pid: u32 = entry.file_name().to_str()?.parse().ok()?;
+        let mut fds = std::fs::read_dir(entry.path().join("fd")).ok()?.flatten();
+        (pid != ours && fds.any(|fd| std::fs::read_link(fd.path()).is_ok_and(|p| p == target))).then_some(pid)
+    })
+}
+
+/// Who holds a port cannot be found out here.
+#[cfg(not(target_os = "linux"))]
+fn holder(_path: &Path) -> Option<PortHolder> {
+    None
 }
 
 /// Switches the kernel's RS-485 mode on (`TIOCSRS485`), which only Linux has.

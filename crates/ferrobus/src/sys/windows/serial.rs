@@ -17,7 +17,10 @@ use std::task::{Context, Poll};
 
 use tokio::io::{AsyncRead, AsyncWrite, ReadBuf};
 
-use crate::serial::{Rs485, SerialConfig, settings};
+use crate::serial::{PortInUse, Rs485, SerialConfig, settings};
+
+/// Win32's `ERROR_ACCESS_DENIED`, what opening a COM port another handle holds fails with.
+const ERROR_ACCESS_DENIED: i32 = 5;
 
 /// A COM port, as an async port.
 #[derive(Debug)]
@@ -29,6 +32,25 @@ impl TtyPort {
     /// Sets the RTS line (RS-485 direction control by RTS).
     pub(crate) fn set_rts(&self, on: bool) -> io::Result<()> {
         self.port.set_rts(on)
+    }
+
+    /// Whether it is a serial port with a wire: a COM port is (Windows has no ptys).
+    #[expect(clippy::unused_self, reason = "the signature of every platform's")]
+    pub(crate) fn has_wire(&self) -> bool {
+        true
+    }
+
+    /// Drops what the port has received and nobody has read yet. Windows' overlapped reads
+    /// cannot be tried without waiting, so the bytes are discarded uncounted: 0.
+    pub(crate) fn read_buffered(&mut self, _buf: &mut [u8]) -> io::Result<usize> {
+        self.port.discard_input_buffer()?;
+        Ok(0)
+    }
+
+    /// Drops what the port has received and nobody has read yet (bytes that came before it
+    /// was opened, say); returns how many, which Windows does not tell: 0.
+    pub fn discard_input(&mut self) -> io::Result<usize> {
+        crate::serial::discard_input(|buf| self.read_buffered(buf))
     }
 
     /// Changes the line settings of the open port, in place: the name is not opened again, so
@@ -49,7 +71,13 @@ pub fn open_serial(config: &SerialConfig) -> io::Result<TtyPort> {
             "the kernel's RS-485 mode (TIOCSRS485) is Linux only: use RTS direction control or an adapter that switches itself",
         ));
     }
-    let port = serial2_tokio::SerialPort::open(device_name(&config.path), settings(config.line))?;
+    let port = match serial2_tokio::SerialPort::open(device_name(&config.path), settings(config.line)) {
+        // Windows opens a COM port for one handle only, whatever share mode serial2 asks
+        // for: a second open is refused with ERROR_ACCESS_DENIED, and who holds it is not
+        // told.
+        Err(e) if e.raw_os_error() == Some(ERROR_ACCESS_DENIED) => return Err(PortInUse { holder: None }.into_io()),
+        other => other?,
+    };
     if config.rs485 == Rs485::Rts {
         port.set_rts(false)?;
     }
