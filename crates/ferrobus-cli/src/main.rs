@@ -43,6 +43,7 @@ mod output;
 mod poll;
 mod ports;
 mod profile;
+mod progress;
 mod raw;
 mod read;
 mod readwrite;

@@ -14,6 +14,7 @@ use super::param::{self, shown_toml};
 use super::view::View;
 use crate::connect::ConnectArgs;
 use crate::exit::CliError;
+use crate::interrupt::Interrupt;
 use crate::output::{self, Align, Format, OutputArgs, Rows};
 
 /// `diff FILE [OTHER]`.
@@ -175,7 +176,8 @@ pub(crate) async fn run(connection: &ConnectArgs, args: &DiffArgs) -> Result<(),
         eprintln!("note: {a_name} was made with profile {}; comparing with --device {}", a.header.profile, view.name);
     }
     connection.refuse_broadcast_read()?;
-    let session = connection.open().await?;
+    let mut interrupt = Interrupt::listen()?;
+    let session = interrupt.unless(connection.open()).await.ok_or(CliError::Interrupted)??;
     // The device's values of the parameters in the file, and of those the profile backs up.
     let mut params: Vec<&Point> = a.entries.iter().filter_map(|e| view.find(&e.code)).collect();
     for p in view.backed_up() {
@@ -183,7 +185,10 @@ pub(crate) async fn run(connection: &ConnectArgs, args: &DiffArgs) -> Result<(),
             params.push(p);
         }
     }
-    let mut readings = super::device::read(&session, &view, &params).await;
+    let mut readings = super::device::read(&session, &view, &params, &mut interrupt).await;
+    if readings.interrupted {
+        return Err(CliError::Interrupted);
+    }
     if readings.values.values().all(Result::is_err)
         && let Some(error) = readings.stopped.take()
     {

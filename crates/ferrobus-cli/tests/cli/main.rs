@@ -4,6 +4,7 @@
 #![cfg(unix)] // the servers of these tests sit on ptys as well as TCP
 
 mod backup;
+mod backup_safety;
 mod bench_failures;
 mod completions;
 mod config;
