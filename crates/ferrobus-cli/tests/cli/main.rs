@@ -25,5 +25,6 @@ mod scan;
 mod server;
 mod service;
 mod sniff;
+mod stderr;
 mod tls;
 mod write;
