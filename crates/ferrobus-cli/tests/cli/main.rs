@@ -27,4 +27,5 @@ mod service;
 mod sniff;
 mod stderr;
 mod tls;
+mod values;
 mod write;
