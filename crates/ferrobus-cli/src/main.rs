@@ -159,7 +159,7 @@ enum Command {
     Set(set::SetArgs),
     /// Save every parameter of a device (--device PROFILE) to a diffable TOML file
     Backup(backup::BackupArgs),
-    /// Compare the device with a backup, or two backups; exit 1 if they differ
+    /// Compare the device with a backup, two backups, or either with the factory defaults; exit 1 if they differ
     Diff(backup::diff::DiffArgs),
     /// Write back what differs from a backup (a dry run unless --apply)
     Restore(backup::restore::RestoreArgs),
@@ -207,7 +207,10 @@ impl Command {
                 | Command::Demo(_)
                 | Command::Sim(sim::SimArgs { pty: true, .. })
                 | Command::Profile(_)
-                | Command::Diff(backup::diff::DiffArgs { other: Some(_), .. })
+                | Command::Diff(
+                    backup::diff::DiffArgs { other: Some(_), .. }
+                        | backup::diff::DiffArgs { defaults: true, file: Some(_), .. }
+                )
                 | Command::Ports(_)
                 | Command::Config(_)
                 | Command::Completions(_)
@@ -236,6 +239,9 @@ async fn dispatch(cli: &Cli) -> Result<(), CliError> {
         Command::Get(args) => get::run(connection, args).await,
         Command::Set(args) => set::run(connection, args).await,
         Command::Backup(args) => backup::run(connection, args).await,
+        Command::Diff(args) if args.defaults => {
+            backup::defaults::run(connection, args.file.as_deref(), args.output.format()).await
+        }
         Command::Diff(args) => backup::diff::run(connection, args).await,
         Command::Restore(args) => backup::restore::run(connection, args).await,
         Command::Profile(args) => profile::run(args),

@@ -17,18 +17,28 @@ use crate::exit::CliError;
 use crate::interrupt::Interrupt;
 use crate::output::{self, Align, Format, OutputArgs, Rows};
 
-/// `diff FILE [OTHER]`.
+/// `diff FILE [OTHER]`, `diff --defaults [FILE]`.
 #[derive(Args, Debug)]
 #[command(after_help = "With one file: the device (--device PROFILE and a bus) against the backup. With two: the \
-                        two backups, offline. Exit 0 when equal, 1 when they differ, 7 when some parameters could \
-                        not be read, another code for an error.\n\nExamples:\n  ferrobus --port /dev/ttyUSB0 \
-                        --device omron-3g3rx diff drive-07.toml\n  ferrobus diff drive-07.toml drive-08.toml")]
+                        two backups, offline. With --defaults: the device (or the backup FILE, offline) against \
+                        the profile's defaults: what was changed from the factory default, with value, default \
+                        and unit; parameters whose default the profile does not give are counted, not \
+                        compared. Exit 0 when equal, 1 when they differ, 7 when some parameters could not be \
+                        read, another code for an error.\n\nExamples:\n  ferrobus --port /dev/ttyUSB0 --device \
+                        omron-3g3rx diff drive-07.toml\n  ferrobus diff drive-07.toml drive-08.toml\n  ferrobus \
+                        --port /dev/ttyUSB0 --device omron-3g3rx diff --defaults")]
 pub(crate) struct DiffArgs {
     /// A backup file
-    pub(crate) file: PathBuf,
+    #[arg(required_unless_present = "defaults")]
+    pub(crate) file: Option<PathBuf>,
 
     /// A second backup file, to compare with the first instead of the device
+    #[arg(conflicts_with = "defaults")]
     pub(crate) other: Option<PathBuf>,
+
+    /// Compare with the profile's defaults: what differs from the factory setting
+    #[arg(long)]
+    pub(crate) defaults: bool,
 
     /// Output format.
     #[command(flatten)]
@@ -80,7 +90,7 @@ impl Side {
 }
 
 /// A raw TOML value as JSON.
-fn toml_json(raw: &toml::Value) -> Value {
+pub(crate) fn toml_json(raw: &toml::Value) -> Value {
     match raw {
         toml::Value::Integer(n) => json!(n),
         toml::Value::Float(f) => json!(f),
@@ -149,10 +159,13 @@ pub(crate) fn load(path: &Path) -> Result<Backup, CliError> {
     Backup::parse(&text, &shown).map_err(CliError::Usage)
 }
 
-/// Runs `diff`.
+/// Runs `diff FILE [OTHER]` (`diff --defaults` is [`super::defaults::run`]).
 pub(crate) async fn run(connection: &ConnectArgs, args: &DiffArgs) -> Result<(), CliError> {
-    let a = load(&args.file)?;
-    let a_name = args.file.display().to_string();
+    let Some(file) = &args.file else {
+        return Err(CliError::Usage("diff needs a backup FILE, or --defaults".into()));
+    };
+    let a = load(file)?;
+    let a_name = file.display().to_string();
     if let Some(other) = &args.other {
         let b = load(other)?;
         if a.header.profile != b.header.profile {

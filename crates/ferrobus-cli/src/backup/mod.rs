@@ -39,6 +39,7 @@
 //! first, and refuses before sending anything when a value is read-only, out of range, or
 //! run-locked while the drive runs (see [`restore`]).
 
+pub(crate) mod defaults;
 pub(crate) mod device;
 pub(crate) mod diff;
 pub(crate) mod file;
