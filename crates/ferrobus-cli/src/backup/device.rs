@@ -105,7 +105,7 @@ async fn read_table_points(
             .copied()
             .filter(|p| p.address >= start && u32::from(p.address) < u32::from(start) + u32::from(count))
             .collect();
-        bar.inc(u64::try_from(inside.len()).unwrap_or(0));
+        let done = u64::try_from(inside.len()).unwrap_or(0);
         if let Some(why) = readings.why_stopped(view) {
             for p in inside {
                 readings.values.insert(p.code.clone(), Err(why.clone()));
@@ -141,6 +141,7 @@ async fn read_table_points(
                 }
             }
         }
+        bar.inc(done);
     }
 }
 

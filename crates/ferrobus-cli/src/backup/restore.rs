@@ -434,6 +434,7 @@ async fn apply(session: &Session, view: &View, items: &mut [Item<'_>], interrupt
                 stopped = Some("Ctrl-C or SIGTERM".to_string());
             }
             Some(Err(error)) => {
+                bar.inc(1);
                 let why = device::describe(&error, view);
                 if !matches!(error, Error::Exception { .. }) {
                     stopped = Some(why.clone());
