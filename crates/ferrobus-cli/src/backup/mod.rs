@@ -38,6 +38,10 @@
 //! filled across neighbouring parameters. Restore writes only what differs, dependencies
 //! first, and refuses before sending anything when a value is read-only, out of range, or
 //! run-locked while the drive runs (see [`restore`]).
+//!
+//! `backup -o FILE` never replaces a good file with a worse one, nor leaves it half-written
+//! (see [`save`]); Ctrl-C stops the reads or writes of any of the three and they say what was
+//! done; `diff --defaults` compares with the profile's factory defaults (see [`defaults`]).
 
 pub(crate) mod defaults;
 pub(crate) mod device;
