@@ -873,6 +873,27 @@ fn plain_publishes_each_point_as_json_on_its_topic_by_exception() {
 }
 
 #[test]
+fn plain_values_carry_the_points_resolution_and_enumerations_their_meaning() {
+    let mut plant = plain_plant(false);
+    let names: Vec<String> = ["F001", "status-a"].iter().map(|s| (*s).to_string()).collect();
+    let device = &mut plant.lines[0].devices[0];
+    device.groups = Group::points(&rx(), 1, &names, &[], Duration::from_secs(1)).unwrap();
+    device.deadbands = device.groups.iter().map(|g| vec![0.0; g.cells.len()]).collect();
+    let mut edge = Edge::new(&plant);
+    edge.connected(t(0));
+    let out =
+        publishes(poll_drive(&mut edge, &plant, t(1), &[("F001", Value::Int(3498)), ("status-a", Value::Int(3))]));
+    let by_topic: HashMap<&str, &Publish> = out.iter().map(|p| (p.topic.as_str(), p)).collect();
+    // 3498 × 0.01 computes to 34.980000000000004: the message carries F001's two decimals.
+    let f001 = by_topic["factory/line1/drive1/F001"];
+    let text = String::from_utf8_lossy(&f001.payload);
+    assert!(text.starts_with("{\"value\":34.98,\"unit\":\"Hz\","), "{text}");
+    assert!(json(f001).get("meaning").is_none(), "{text}");
+    let status = json(by_topic["factory/line1/drive1/status-a"]);
+    assert_eq!((status["value"].clone(), status["meaning"].clone()), (3.into(), "run".into()), "{status}");
+}
+
+#[test]
 fn plain_failures_are_bad_or_stale_once_with_the_error_and_the_device_goes_offline() {
     let plant = plain_plant(false);
     let mut edge = Edge::new(&plant);

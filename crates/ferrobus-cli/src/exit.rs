@@ -11,7 +11,7 @@
 //! | 3 | timeout: no reply |
 //! | 4 | IO error opening or using the port; the port is held by another process |
 //! | 5 | bad reply (malformed, or not answering the request); `crc --check` on a bad CRC |
-//! | 6 | output error: stdout or an output file could not be written (e.g. disk full) |
+//! | 6 | output error: stdout or an output file could not be written (e.g. disk full); or stderr, by a command that otherwise succeeded |
 //! | 7 | incomplete: some parameters could not be read or written (backup, restore; the output says which) |
 //! | 130 | interrupted (Ctrl-C or SIGTERM), after writing what was done |
 //! | 141 | stdout was closed by its reader (`| head`): the command ends quietly, as if by SIGPIPE |
@@ -35,7 +35,8 @@ Exit codes:
   3  timeout: no reply from the device
   4  IO error opening or using the port or connection, or the port is in use by another process
   5  bad reply: malformed, or not answering the request (also: crc --check on a bad CRC)
-  6  output error: stdout or an output file could not be written (e.g. disk full)
+  6  output error: stdout or an output file could not be written (e.g. disk full);
+     or stderr, by a command that otherwise succeeded (a failure keeps its own code)
   7  incomplete: some parameters could not be read or written (backup, diff, restore say which)
   130  interrupted by Ctrl-C (SIGINT) or SIGTERM, after writing what was done
   141  stdout closed by its reader (e.g. `| head -1`): ends quietly, as if by SIGPIPE";

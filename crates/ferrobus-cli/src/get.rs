@@ -238,7 +238,9 @@ pub(crate) fn raw_text(p: &Point, raw: &Value) -> String {
     }
 }
 
-/// One point as a JSON object.
+/// One point as a JSON object: `value` as shown (`50.00 Hz`, `run`), `engineering` the number
+/// at the point's resolution, `meaning` an enumeration's or a bit field's (else null), `unit`,
+/// `raw`.
 pub(crate) fn point_json(p: &Point, outcome: &Outcome) -> Json {
     let mut doc = json!({
         "code": p.code,
@@ -250,7 +252,8 @@ pub(crate) fn point_json(p: &Point, outcome: &Outcome) -> Json {
     match outcome {
         Ok(raw) => {
             doc["value"] = p.show(raw).into();
-            doc["engineering"] = p.engineering(raw).map_or(Json::Null, Json::from);
+            doc["engineering"] = output::number_json(p, raw);
+            doc["meaning"] = p.meaning(raw).map_or(Json::Null, Json::from);
             doc["unit"] = p.unit.clone().map_or(Json::Null, Json::from);
             doc["raw"] = match raw {
                 Value::Bool(b) => Json::from(*b),

@@ -1,9 +1,11 @@
 //! Ctrl-C (SIGINT) and SIGTERM, for commands that stop early but still write what they did.
 //!
-//! A command that can run long (`read` of many registers, `bench`, `line`) listens before it
-//! starts, so that a signal arriving at any moment is caught, not fatal: it then writes what is
-//! done and ends with [`crate::exit::CliError::Interrupted`] (exit 130), or, for `line`, whose
-//! normal end is an interruption, with its statistics.
+//! A command that can run long (`read` of many registers, `bench`, `line`, `get`, `set`,
+//! `backup`, `diff`, `restore`) listens before it starts, so that a signal arriving at any
+//! moment is caught, not fatal: it then writes what is done (`backup` what it read, `restore`
+//! what it wrote and verified and what not) and ends with
+//! [`crate::exit::CliError::Interrupted`] (exit 130), or, for `line`, whose normal end is an
+//! interruption, with its statistics.
 
 use crate::exit::CliError;
 

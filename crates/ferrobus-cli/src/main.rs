@@ -10,6 +10,8 @@
 //! - [`value`]: typed values (`--type`, `--word-order`);
 //! - [`output`]: tables, `--csv` and `--json`;
 //! - [`exit`]: error reports with hints, and the exit codes;
+//! - [`stderr`]: every write to stderr checked (the crate's `eprintln!` shadows std's);
+//! - [`interrupt`] and [`progress`]: Ctrl-C caught by long commands, progress bars on a terminal;
 //! - [`hex`]: hex input as people type it;
 //! - [`config`]: the settings file (`--config`, `--conn NAME`, `[defaults]`) under the command
 //!   line: every option of `ConnectArgs` is a key there by itself, checked by its own parser.
@@ -17,6 +19,23 @@
 //! To add a command: a file with an `Args` struct and an `async fn run(&ConnectArgs, &Args)`,
 //! a variant in [`Command`], and an arm in [`dispatch`] (and in [`Command::needs_bus`] if it
 //! works offline).
+
+/// `eprintln!` with its write checked: shadows std's in every module below (see [`stderr`]).
+macro_rules! eprintln {
+    () => {
+        $crate::stderr::print(format_args!("\n"))
+    };
+    ($($arg:tt)*) => {
+        $crate::stderr::print(format_args!("{}\n", format_args!($($arg)*)))
+    };
+}
+
+/// `eprint!` with its write checked: shadows std's in every module below (see [`stderr`]).
+macro_rules! eprint {
+    ($($arg:tt)*) => {
+        $crate::stderr::print(format_args!($($arg)*))
+    };
+}
 
 mod address;
 mod backup;
@@ -43,6 +62,7 @@ mod output;
 mod poll;
 mod ports;
 mod profile;
+mod progress;
 mod raw;
 mod read;
 mod readwrite;
@@ -51,6 +71,7 @@ mod server_tls;
 mod set;
 mod sim;
 mod sniff;
+mod stderr;
 mod target;
 #[cfg(not(unix))]
 mod unix_only;
@@ -138,7 +159,7 @@ enum Command {
     Set(set::SetArgs),
     /// Save every parameter of a device (--device PROFILE) to a diffable TOML file
     Backup(backup::BackupArgs),
-    /// Compare the device with a backup, or two backups; exit 1 if they differ
+    /// Compare the device with a backup, two backups, or either with the factory defaults; exit 1 if they differ
     Diff(backup::diff::DiffArgs),
     /// Write back what differs from a backup (a dry run unless --apply)
     Restore(backup::restore::RestoreArgs),
@@ -199,7 +220,10 @@ impl Command {
                 | Command::Demo(_)
                 | Command::Sim(sim::SimArgs { pty: true, .. })
                 | Command::Profile(_)
-                | Command::Diff(backup::diff::DiffArgs { other: Some(_), .. })
+                | Command::Diff(
+                    backup::diff::DiffArgs { other: Some(_), .. }
+                        | backup::diff::DiffArgs { defaults: true, file: Some(_), .. }
+                )
                 | Command::Ports(_)
                 | Command::Config(_)
                 | Command::Completions(_)
@@ -228,6 +252,9 @@ async fn dispatch(cli: &Cli) -> Result<(), CliError> {
         Command::Get(args) => get::run(connection, args).await,
         Command::Set(args) => set::run(connection, args).await,
         Command::Backup(args) => backup::run(connection, args).await,
+        Command::Diff(args) if args.defaults => {
+            backup::defaults::run(connection, args.file.as_deref(), args.output.format()).await
+        }
         Command::Diff(args) => backup::diff::run(connection, args).await,
         Command::Restore(args) => backup::restore::run(connection, args).await,
         Command::Profile(args) => profile::run(args),
@@ -390,8 +417,10 @@ fn init_logging(verbose: u8) {
         .unwrap_or_else(|_| tracing_subscriber::EnvFilter::new(level));
     tracing_subscriber::fmt()
         .with_env_filter(filter)
-        .with_writer(std::io::stderr)
+        .with_writer(stderr::Log)
         .with_ansi(std::io::stderr().is_terminal())
+        // A failed write is kept by stderr::Log; reporting it on stderr would panic.
+        .log_internal_errors(false)
         .with_target(false)
         .init();
 }
@@ -444,15 +473,24 @@ fn main() -> ExitCode {
             return Exit::Io.into();
         }
     };
-    match runtime.block_on(dispatch(&cli)) {
-        Ok(()) => Exit::Success.into(),
-        Err(error) => {
-            let target = cli.connection.target().ok();
-            let unit = cli.connection.unit.first().copied().unwrap_or(1);
-            let numbering = cli.command.address_args().map(|a| cli.connection.numbering(a)).unwrap_or_default();
-            exit::report_numbered(&error, target.as_ref(), unit, &numbering).print();
-            error.exit().into()
-        }
+    let outcome = runtime.block_on(dispatch(&cli));
+    if let Err(error) = &outcome {
+        let target = cli.connection.target().ok();
+        let unit = cli.connection.unit.first().copied().unwrap_or(1);
+        let numbering = cli.command.address_args().map(|a| cli.connection.numbering(a)).unwrap_or_default();
+        exit::report_numbered(error, target.as_ref(), unit, &numbering).print();
+    }
+    exit_code(outcome.as_ref().err(), stderr::failure()).into()
+}
+
+/// The exit code of a command that ended with `error` (or succeeded) while writing to stderr
+/// failed with `stderr_failure` (or did not): a failure's own code; for a success whose notes
+/// could not be written, the output error's (6, or 141 for a closed pipe).
+fn exit_code(error: Option<&CliError>, stderr_failure: Option<std::io::Error>) -> Exit {
+    match (error, stderr_failure) {
+        (Some(error), _) => error.exit(),
+        (None, Some(source)) => CliError::Output { what: "stderr".into(), source }.exit(),
+        (None, None) => Exit::Success,
     }
 }
 
@@ -521,5 +559,14 @@ mod tests {
         let matches = command().try_get_matches_from(["ferrobus", "--baud", "9600", "scan"]).unwrap();
         let refused = refuse_ignored_options(&matches).unwrap_err();
         assert!(matches!(refused, CliError::Usage(m) if m.starts_with("--baud is not used by `scan`")));
+    }
+
+    #[test]
+    fn a_failed_stderr_turns_only_a_success_into_an_output_error() {
+        let full = || Some(std::io::Error::from(std::io::ErrorKind::StorageFull));
+        assert_eq!(exit_code(None, full()), Exit::Output);
+        assert_eq!(exit_code(None, Some(std::io::ErrorKind::BrokenPipe.into())), Exit::BrokenPipe);
+        assert_eq!(exit_code(Some(&CliError::Usage("x".into())), full()), Exit::Usage);
+        assert_eq!(exit_code(None, None), Exit::Success);
     }
 }

@@ -251,6 +251,16 @@ pub(crate) fn write_to(out: &mut impl std::io::Write, what: &str, text: &str) ->
         .map_err(|source| CliError::Output { what: what.to_string(), source })
 }
 
+/// A point's value as a JSON number, as [`ferrobus_profile::Point::number`] writes it: at the
+/// point's resolution (34.98, not 34.980000000000004), an unscaled integer as an integer, a
+/// bit as 0 or 1; `null` for a text (or a float that is not a number).
+pub(crate) fn number_json(point: &ferrobus_profile::Point, raw: &ferrobus_profile::Value) -> Value {
+    if matches!(raw, ferrobus_profile::Value::Text(_)) {
+        return Value::Null;
+    }
+    serde_json::from_str::<serde_json::Number>(&point.number(raw)).map_or(Value::Null, Value::Number)
+}
+
 /// A JSON document on one line, as printed.
 pub(crate) fn json_line(doc: &Value) -> String {
     format!("{doc}\n")

@@ -389,7 +389,7 @@ enum Style {
     Jsonl,
 }
 
-const CSV_HEADER: &str = "time,seq,unit,group,point,raw,value,uom,status,response_ms,diagnosis\n";
+const CSV_HEADER: &str = "time,seq,unit,group,point,raw,value,meaning,uom,status,response_ms,diagnosis\n";
 
 /// The records of a sample: CSV rows (one per point, or one for a failure) or one JSON line.
 /// `keep` says which cells to write (all without --on-change).
@@ -409,7 +409,8 @@ fn records(sample: &Sample, group: &Group, style: Style, keep: &[bool]) -> Strin
                             Some(json!({
                                 "point": cell.name,
                                 "raw": r.raw.as_ref().map_or(serde_json::Value::Null, raw_json),
-                                "value": r.scaled,
+                                "value": r.raw.as_ref().map_or(serde_json::Value::Null, |v| output::number_json(&cell.point, v)),
+                                "meaning": r.raw.as_ref().ok().and_then(|v| cell.point.meaning(v)),
                                 "shown": r.shown,
                                 "uom": cell.unit(),
                             }))
@@ -439,16 +440,21 @@ fn records(sample: &Sample, group: &Group, style: Style, keep: &[bool]) -> Strin
             for r in readings.iter().filter(|r| keep.get(r.cell).copied().unwrap_or(true)) {
                 let Some(cell) = group.cells.get(r.cell) else { continue };
                 let raw = r.raw.as_ref().map(ToString::to_string).unwrap_or_default();
-                let value = r.scaled.map_or_else(|| r.shown.clone(), |v| v.to_string());
+                // The number at the point's resolution (50.00), or the text or why there is none.
+                let (value, meaning) = match &r.raw {
+                    Ok(v) => (cell.point.number(v), cell.point.meaning(v).unwrap_or_default()),
+                    Err(_) => (r.shown.clone(), String::new()),
+                };
                 let _ = writeln!(
                     out,
-                    "{time},{},{},{},{},{},{},{},ok,{ms:.3},",
+                    "{time},{},{},{},{},{},{},{},{},ok,{ms:.3},",
                     sample.seq,
                     group.unit,
                     output::csv_field(&group.name),
                     output::csv_field(&cell.name),
                     output::csv_field(&raw),
                     output::csv_field(&value),
+                    output::csv_field(&meaning),
                     output::csv_field(cell.unit().unwrap_or_default()),
                 );
             }
@@ -456,7 +462,7 @@ fn records(sample: &Sample, group: &Group, style: Style, keep: &[bool]) -> Strin
         (_, Err(f)) => {
             let _ = writeln!(
                 out,
-                "{time},{},{},{},{},,,,{},{ms:.3},{}",
+                "{time},{},{},{},{},,,,,{},{ms:.3},{}",
                 sample.seq,
                 group.unit,
                 output::csv_field(&group.name),

@@ -270,36 +270,52 @@ impl Point {
         Ok(to_registers(&bytes, self.order))
     }
 
-    /// The engineering value of a numeric raw value: raw × scale + offset.
+    /// The engineering value of a numeric raw value, raw × scale + offset, at the point's
+    /// resolution: the number [`Point::number`] writes, so that 3498 × 0.01 is 34.98, not
+    /// 34.980000000000004, and an f32's 1.1 is 1.1, not 1.100000023841858. `None` for text.
     pub fn engineering(&self, raw: &Value) -> Option<f64> {
+        let exact = self.exact(raw)?;
+        Some(self.number(raw).parse().unwrap_or(exact))
+    }
+
+    /// raw × scale + offset, as computed.
+    fn exact(&self, raw: &Value) -> Option<f64> {
         raw.as_f64().map(|x| x * self.scale + self.offset)
+    }
+
+    /// The decimals the point's scale and offset show (0.01 → 2), or `None` for an unscaled
+    /// point, whose value shows as it is.
+    fn resolution(&self) -> Option<usize> {
+        let unscaled = (self.scale - 1.0).abs() < f64::EPSILON && self.offset == 0.0;
+        (!unscaled).then(|| decimals(self.scale).max(decimals(self.offset)))
     }
 
     /// The raw value as the device's documentation shows it: scaled with its unit
     /// (`50.00 Hz`), an enumeration's meaning (`run`), a bit field's set bits (`running,
     /// trip`; `none`), a string as is, a bit as 0 or 1.
+    ///
+    /// This is the one formatting of a value for people (get, set, backup, diff, restore,
+    /// poll, monitor); scripts' formats take its parts: [`Point::number`] (with its `unit`
+    /// beside it) and [`Point::meaning`].
     pub fn show(&self, raw: &Value) -> String {
         match raw {
-            Value::Bool(b) => return u8::from(*b).to_string(),
-            Value::Text(s) => return s.clone(),
-            Value::Int(n) => {
-                if !self.values.is_empty() {
-                    return match self.values.iter().find(|(k, _)| k == n) {
-                        Some((_, meaning)) => meaning.clone(),
-                        None => format!("{n} (not in the profile's list)"),
-                    };
-                }
-                if !self.bits.is_empty() {
-                    return self.show_bits(*n);
-                }
-            }
-            Value::Float(_) => {}
+            Value::Bool(b) => u8::from(*b).to_string(),
+            Value::Text(s) => s.clone(),
+            number => self.meaning(number).unwrap_or_else(|| self.show_plain(number)),
         }
-        let number = self.show_number(raw);
-        match &self.unit {
-            Some(unit) => format!("{number} {unit}"),
-            None => number,
+    }
+
+    /// What an enumeration's or a bit field's raw value means (`run`; `running, trip`;
+    /// `5 (not in the profile's list)`); `None` for a point that is neither.
+    pub fn meaning(&self, raw: &Value) -> Option<String> {
+        let Value::Int(n) = raw else { return None };
+        if !self.values.is_empty() {
+            return Some(match self.values.iter().find(|(k, _)| k == n) {
+                Some((_, meaning)) => meaning.clone(),
+                None => format!("{n} (not in the profile's list)"),
+            });
         }
+        (!self.bits.is_empty()).then(|| self.show_bits(*n))
     }
 
     fn show_bits(&self, n: i128) -> String {
@@ -314,22 +330,29 @@ impl Point {
         if set.is_empty() { "none".to_string() } else { set.join(", ") }
     }
 
-    /// The engineering number without unit: `50.00`, `-3`, `1.5`.
-    fn show_number(&self, raw: &Value) -> String {
-        let Some(x) = self.engineering(raw) else { return raw.to_string() };
-        if self.value_type.is_float() && (self.scale - 1.0).abs() < f64::EPSILON && self.offset == 0.0 {
-            return format!("{x}");
+    /// The engineering number without unit, at the point's resolution: `50.00` for scale
+    /// 0.01, `-3`, `1.5`, an f32 in its shortest form (`1.1`), a bit as `0`/`1`, a text as is.
+    /// CSV and JSON write this (or [`Point::engineering`], the same number) as the value.
+    pub fn number(&self, raw: &Value) -> String {
+        let Some(x) = self.exact(raw) else {
+            return match raw {
+                Value::Text(s) => s.clone(),
+                other => other.to_string(),
+            };
+        };
+        match (self.resolution(), raw) {
+            (Some(d), _) => format!("{x:.d$}"),
+            (None, Value::Int(n)) => n.to_string(),
+            // Decoded from an f32, so exact as one: its shortest form is what was stored.
+            #[allow(clippy::cast_possible_truncation)]
+            (None, Value::Float(f)) if self.value_type == ValueType::F32 => format!("{}", *f as f32),
+            (None, _) => format!("{x}"),
         }
-        if let (Value::Int(n), true) = (raw, (self.scale - 1.0).abs() < f64::EPSILON && self.offset == 0.0) {
-            return n.to_string();
-        }
-        let d = decimals(self.scale).max(decimals(self.offset));
-        format!("{x:.d$}")
     }
 
     /// A raw value as an engineering number with the point's unit, for messages.
     fn show_plain(&self, raw: &Value) -> String {
-        let number = self.show_number(raw);
+        let number = self.number(raw);
         match &self.unit {
             Some(unit) => format!("{number} {unit}"),
             None => number,
@@ -552,6 +575,33 @@ mod tests {
         assert_eq!(b.show(&Value::Int(0b0100)), "bit 2");
         assert_eq!(b.show(&Value::Int(0)), "none");
         assert_eq!(point("type='i16'").show(&Value::Int(-3)), "-3");
+    }
+
+    #[test]
+    fn numbers_carry_the_points_resolution_and_no_float_noise() {
+        let f = point("type='u32'\nscale=0.01\nunit='Hz'");
+        // 3498 × 0.01 computes to 34.980000000000004.
+        assert_eq!((f.number(&Value::Int(3498)), f.engineering(&Value::Int(3498))), ("34.98".into(), Some(34.98)));
+        assert_eq!(f.number(&Value::Int(5000)), "50.00");
+        let o = point("scale=0.1\noffset=-40");
+        assert_eq!((o.number(&Value::Int(653)), o.engineering(&Value::Int(653))), ("25.3".into(), Some(25.3)));
+        let single = point("type='f32'");
+        let stored = Value::Float(f64::from(1.1f32));
+        assert_eq!((single.number(&stored), single.engineering(&stored)), ("1.1".into(), Some(1.1)));
+        let double = point("type='f64'");
+        assert_eq!(double.number(&Value::Float(0.1 + 0.2)), "0.30000000000000004", "an f64 is shown whole");
+        assert_eq!(point("type='i16'").engineering(&Value::Int(-3)), Some(-3.0));
+        assert_eq!(point("type='string'\nlength=2").number(&Value::Text("AB".into())), "AB");
+    }
+
+    #[test]
+    fn only_enumerations_and_bit_fields_have_a_meaning() {
+        let e = point("values={ '2' = 'stop', '3' = 'run' }");
+        assert_eq!(e.meaning(&Value::Int(3)).as_deref(), Some("run"));
+        assert_eq!(e.number(&Value::Int(3)), "3");
+        let b = point("bits={ '0' = 'running', '3' = 'trip' }");
+        assert_eq!(b.meaning(&Value::Int(0b1001)).as_deref(), Some("running, trip"));
+        assert_eq!(point("scale=0.1").meaning(&Value::Int(3)), None);
     }
 
     #[test]

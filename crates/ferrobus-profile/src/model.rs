@@ -433,9 +433,8 @@ pub struct BitDef {
     /// Access.
     #[serde(default)]
     pub access: Access,
-    /// The value at start (the simulator's).
-    #[serde(default)]
-    pub default: bool,
+    /// The value at start (the simulator's) and out of the factory; off when not given.
+    pub default: Option<bool>,
     /// A group name for `--group`.
     pub group: Option<String>,
     /// Whether a backup saves it (default: when read/write).
@@ -504,8 +503,8 @@ pub struct RegisterDef {
     /// False when the fact could not be confirmed.
     #[serde(default = "yes")]
     pub confirmed: bool,
-    /// The raw value at start (the simulator's): an integer, a float for f32/f64, text for a
-    /// string.
+    /// The raw value at start (the simulator's) and out of the factory: an integer, a float
+    /// for f32/f64, text for a string.
     pub default: Option<toml::Value>,
 }
 

@@ -53,8 +53,11 @@ pub struct Point {
     pub source: Option<String>,
     /// False when a fact about it could not be confirmed.
     pub confirmed: bool,
-    /// The raw value at start (the simulator's).
+    /// The raw value at start (the simulator's): the profile's `default`, else zero (off).
     pub default: crate::Value,
+    /// The profile's `default` when it gives one: the value the device leaves the factory
+    /// with (`diff --defaults` compares with it); `None` where `default` is a mere zero.
+    pub factory_default: Option<crate::Value>,
 }
 
 impl Point {
@@ -90,6 +93,7 @@ impl Point {
             source: None,
             confirmed: true,
             default: if bits { crate::Value::Bool(false) } else { crate::Value::Int(0) },
+            factory_default: None,
         }
     }
 
@@ -192,7 +196,8 @@ pub(crate) fn resolve(profile: &Profile) -> Vec<Point> {
                     backup: def.backup.unwrap_or(def.access == Access::Rw && table == Table::Coils),
                     source: def.source.clone(),
                     confirmed: def.confirmed,
-                    default: crate::Value::Bool(def.default),
+                    default: crate::Value::Bool(def.default.unwrap_or(false)),
+                    factory_default: def.default.map(crate::Value::Bool),
                 });
             }
         }
@@ -233,6 +238,10 @@ pub(crate) fn resolve(profile: &Profile) -> Vec<Point> {
                     source: def.source.clone(),
                     confirmed: def.confirmed,
                     default: crate::codec::default_value(def.value_type, def.default.as_ref()),
+                    factory_default: def
+                        .default
+                        .as_ref()
+                        .map(|given| crate::codec::default_value(def.value_type, Some(given))),
                 });
             }
         }
@@ -351,6 +360,21 @@ mod tests {
         assert!(!glob("d00", "d001"));
         assert!(glob("a*b*c", "axxbyyc"));
         assert!(!glob("a*b*c", "axxbyy"));
+    }
+
+    #[test]
+    fn a_default_is_known_only_where_the_profile_gives_one() {
+        let text = "[device]\nname='x'\nvendor='v'\nproduct_code='p'\nrevision='1'\n\
+                    [[registers]]\nnumber=0\nname='given'\ndefault=7\n\
+                    [[registers]]\nnumber=1\nname='zero'\n\
+                    [[coils]]\nnumber=0\nname='off'\ndefault=false\n\
+                    [[coils]]\nnumber=1\nname='unsaid'\n";
+        let profile = Profile::parse(text, "x.toml").unwrap();
+        let known = |code: &str| profile.point(code).map(|p| (p.default.clone(), p.factory_default.clone()));
+        assert_eq!(known("given"), Some((crate::Value::Int(7), Some(crate::Value::Int(7)))));
+        assert_eq!(known("zero"), Some((crate::Value::Int(0), None)));
+        assert_eq!(known("off"), Some((crate::Value::Bool(false), Some(crate::Value::Bool(false)))));
+        assert_eq!(known("unsaid"), Some((crate::Value::Bool(false), None)));
     }
 
     #[test]

@@ -3,6 +3,8 @@
 //!
 //! ```text
 //!   PREFIX/DEVICE/POINT          {"value":60.0,"unit":"Hz","timestamp":"2026-12-02T01:02:03.456Z","quality":"good"}
+//!                                 the value at the point's resolution; an enumeration's or a bit
+//!                                 field's with its "meaning": {"value":3,"meaning":"run",...}
 //!                                 quality "bad" (value null) when the read failed, "stale" (the last
 //!                                 value) when the device did not answer, both with an "error";
 //!                                 "historical":true when replayed from the store; retained if configured
@@ -195,7 +197,11 @@ impl PlainEdge {
             (Seen::Failed(why), None) => ("null".to_string(), Quality::Bad, Some(why.clone()), state.time),
             (Seen::Unread, None) => return None,
         };
-        let json = point_json(&value, cell.unit(), &iso8601_ms(time), quality, error.as_deref());
+        let meaning = match &state.latest {
+            Seen::Value(raw) => cell.point.meaning(raw),
+            _ => None,
+        };
+        let json = point_json(&value, meaning.as_deref(), cell.unit(), &iso8601_ms(time), quality, error.as_deref());
         Some(Publish {
             topic: format!("{}/{}/{}", self.config.prefix, device.id, cell.name),
             payload: json.into_bytes(),
@@ -322,8 +328,9 @@ fn set_text(payload: &[u8]) -> Result<String, String> {
     }
 }
 
-/// A reading's value in JSON: the engineering value of a scaled point, an integer as such, a
-/// bit as a boolean, a text as a string; `null` when there is none.
+/// A reading's value in JSON: the engineering value of a scaled point at its resolution
+/// ([`ferrobus_profile::Point::engineering`]: 34.98, not 34.980000000000004), an integer as
+/// such, a bit as a boolean, a text as a string; `null` when there is none.
 fn json_value(cell: &Cell, seen: &Seen) -> String {
     let Seen::Value(raw) = seen else { return "null".to_string() };
     match raw {
@@ -341,8 +348,21 @@ fn json_string(text: &str) -> String {
     serde_json::Value::from(text).to_string()
 }
 
-fn point_json(value: &str, unit: Option<&str>, timestamp: &str, quality: Quality, error: Option<&str>) -> String {
+/// A point's message: its value, an enumeration's or a bit field's meaning (`"run"`), unit,
+/// time, quality and error.
+fn point_json(
+    value: &str,
+    meaning: Option<&str>,
+    unit: Option<&str>,
+    timestamp: &str,
+    quality: Quality,
+    error: Option<&str>,
+) -> String {
     let mut json = format!("{{\"value\":{value}");
+    if let Some(meaning) = meaning {
+        json.push_str(",\"meaning\":");
+        json.push_str(&json_string(meaning));
+    }
     if let Some(unit) = unit.filter(|u| !u.is_empty()) {
         json.push_str(",\"unit\":");
         json.push_str(&json_string(unit));

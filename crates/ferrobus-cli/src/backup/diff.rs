@@ -14,20 +14,31 @@ use super::param::{self, shown_toml};
 use super::view::View;
 use crate::connect::ConnectArgs;
 use crate::exit::CliError;
+use crate::interrupt::Interrupt;
 use crate::output::{self, Align, Format, OutputArgs, Rows};
 
-/// `diff FILE [OTHER]`.
+/// `diff FILE [OTHER]`, `diff --defaults [FILE]`.
 #[derive(Args, Debug)]
 #[command(after_help = "With one file: the device (--device PROFILE and a bus) against the backup. With two: the \
-                        two backups, offline. Exit 0 when equal, 1 when they differ, 7 when some parameters could \
-                        not be read, another code for an error.\n\nExamples:\n  ferrobus --port /dev/ttyUSB0 \
-                        --device omron-3g3rx diff drive-07.toml\n  ferrobus diff drive-07.toml drive-08.toml")]
+                        two backups, offline. With --defaults: the device (or the backup FILE, offline) against \
+                        the profile's defaults: what was changed from the factory default, with value, default \
+                        and unit; parameters whose default the profile does not give are counted, not \
+                        compared. Exit 0 when equal, 1 when they differ, 7 when some parameters could not be \
+                        read, another code for an error.\n\nExamples:\n  ferrobus --port /dev/ttyUSB0 --device \
+                        omron-3g3rx diff drive-07.toml\n  ferrobus diff drive-07.toml drive-08.toml\n  ferrobus \
+                        --port /dev/ttyUSB0 --device omron-3g3rx diff --defaults")]
 pub(crate) struct DiffArgs {
     /// A backup file
-    pub(crate) file: PathBuf,
+    #[arg(required_unless_present = "defaults")]
+    pub(crate) file: Option<PathBuf>,
 
     /// A second backup file, to compare with the first instead of the device
+    #[arg(conflicts_with = "defaults")]
     pub(crate) other: Option<PathBuf>,
+
+    /// Compare with the profile's defaults: what differs from the factory setting
+    #[arg(long)]
+    pub(crate) defaults: bool,
 
     /// Output format.
     #[command(flatten)]
@@ -79,7 +90,7 @@ impl Side {
 }
 
 /// A raw TOML value as JSON.
-fn toml_json(raw: &toml::Value) -> Value {
+pub(crate) fn toml_json(raw: &toml::Value) -> Value {
     match raw {
         toml::Value::Integer(n) => json!(n),
         toml::Value::Float(f) => json!(f),
@@ -148,10 +159,13 @@ pub(crate) fn load(path: &Path) -> Result<Backup, CliError> {
     Backup::parse(&text, &shown).map_err(CliError::Usage)
 }
 
-/// Runs `diff`.
+/// Runs `diff FILE [OTHER]` (`diff --defaults` is [`super::defaults::run`]).
 pub(crate) async fn run(connection: &ConnectArgs, args: &DiffArgs) -> Result<(), CliError> {
-    let a = load(&args.file)?;
-    let a_name = args.file.display().to_string();
+    let Some(file) = &args.file else {
+        return Err(CliError::Usage("diff needs a backup FILE, or --defaults".into()));
+    };
+    let a = load(file)?;
+    let a_name = file.display().to_string();
     if let Some(other) = &args.other {
         let b = load(other)?;
         if a.header.profile != b.header.profile {
@@ -175,7 +189,8 @@ pub(crate) async fn run(connection: &ConnectArgs, args: &DiffArgs) -> Result<(),
         eprintln!("note: {a_name} was made with profile {}; comparing with --device {}", a.header.profile, view.name);
     }
     connection.refuse_broadcast_read()?;
-    let session = connection.open().await?;
+    let mut interrupt = Interrupt::listen()?;
+    let session = interrupt.unless(connection.open()).await.ok_or(CliError::Interrupted)??;
     // The device's values of the parameters in the file, and of those the profile backs up.
     let mut params: Vec<&Point> = a.entries.iter().filter_map(|e| view.find(&e.code)).collect();
     for p in view.backed_up() {
@@ -183,7 +198,10 @@ pub(crate) async fn run(connection: &ConnectArgs, args: &DiffArgs) -> Result<(),
             params.push(p);
         }
     }
-    let mut readings = super::device::read(&session, &view, &params).await;
+    let mut readings = super::device::read(&session, &view, &params, &mut interrupt).await;
+    if readings.interrupted {
+        return Err(CliError::Interrupted);
+    }
     if readings.values.values().all(Result::is_err)
         && let Some(error) = readings.stopped.take()
     {

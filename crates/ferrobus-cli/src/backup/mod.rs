@@ -38,16 +38,22 @@
 //! filled across neighbouring parameters. Restore writes only what differs, dependencies
 //! first, and refuses before sending anything when a value is read-only, out of range, or
 //! run-locked while the drive runs (see [`restore`]).
+//!
+//! `backup -o FILE` never replaces a good file with a worse one, nor leaves it half-written
+//! (see [`save`]); Ctrl-C stops the reads or writes of any of the three and they say what was
+//! done; `diff --defaults` compares with the profile's factory defaults (see [`defaults`]).
 
+pub(crate) mod defaults;
 pub(crate) mod device;
 pub(crate) mod diff;
 pub(crate) mod file;
 pub(crate) mod param;
 pub(crate) mod restore;
+pub(crate) mod save;
 mod sha256;
 pub(crate) mod view;
 
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 
 use clap::Args;
 use ferrobus::Error;
@@ -58,19 +64,28 @@ use self::file::{Backup, Entry, Header, State};
 use self::view::{Identification, View};
 use crate::connect::{ConnectArgs, Session};
 use crate::exit::CliError;
+use crate::interrupt::Interrupt;
 use crate::output;
 
-/// `backup [-o FILE]`.
+/// `backup [-o FILE] [--force]`.
 #[derive(Args, Debug)]
 #[command(after_help = "Needs --device PROFILE. Writes every readable parameter the profile marks for backup \
                         (by default its read-write registers) with the device's identification, the time, the \
                         unit and the connection; a parameter that cannot be read is recorded with the reason \
-                        and the exit code is 7.\n\nExample:\n  ferrobus --port /dev/ttyUSB0 --device omron-3g3rx \
-                        --unit 7 backup -o drive-07.toml")]
+                        and the exit code is 7.\n\nWith -o FILE the backup is written to a temporary file and \
+                        renamed, so FILE is never half-written; the previous FILE is kept as FILE.bak. A backup \
+                        with more unread parameters than FILE holds does not replace it: it goes to \
+                        FILE.incomplete (--force replaces FILE all the same). Ctrl-C stops the reads; what was \
+                        read is saved by the same rule and the command exits 130.\n\nExample:\n  ferrobus \
+                        --port /dev/ttyUSB0 --device omron-3g3rx --unit 7 backup -o drive-07.toml")]
 pub(crate) struct BackupArgs {
-    /// Write the backup to FILE instead of stdout
+    /// Write the backup to FILE instead of stdout (the previous FILE is kept as FILE.bak)
     #[arg(long, short = 'o', value_name = "FILE")]
     pub(crate) output: Option<PathBuf>,
+
+    /// Replace FILE even with a backup that could read fewer parameters than FILE holds
+    #[arg(long, requires = "output")]
+    pub(crate) force: bool,
 }
 
 /// The profile named by `--device`.
@@ -87,52 +102,89 @@ pub(crate) fn profile(connection: &ConnectArgs, command: &str) -> Result<View, C
 pub(crate) async fn run(connection: &ConnectArgs, args: &BackupArgs) -> Result<(), CliError> {
     let view = profile(connection, "backup")?;
     connection.refuse_broadcast_read()?;
-    let session = connection.open().await?;
-    let (identification, objects) = identify(&session, &view).await?;
-    let (backup, failed, readings) = read_backup(&session, &view, identification, objects).await;
-    let saved = backup.entries.len() - failed;
-    if saved == 0
+    let mut interrupt = Interrupt::listen()?;
+    let session = interrupt.unless(connection.open()).await.ok_or(CliError::Interrupted)??;
+    let (identification, objects) =
+        interrupt.unless(identify(&session, &view)).await.ok_or(CliError::Interrupted)??;
+    let params = view.backed_up();
+    let readings = device::read(&session, &view, &params, &mut interrupt).await;
+    let backup = backup_of(&session, &view, identification, objects, &params, &readings);
+    let (read, unread) = readings.split(&params);
+    if read.is_empty()
         && let Some(error) = readings.stopped
     {
         return Err(error.into());
     }
-    let text = backup.render();
-    match &args.output {
-        Some(path) => std::fs::write(path, &text)
-            .map_err(|source| CliError::Output { what: path.display().to_string(), source })?,
-        None => output::print(&text)?,
-    }
+    let saved = if let Some(path) = &args.output {
+        Some((save::save(path, &backup, args.force)?, path))
+    } else {
+        output::print(&backup.render())?;
+        None
+    };
     eprintln!(
-        "backup: {saved} of {} parameters of unit {} in {} requests (the plan's {}), {:.1} ms",
+        "backup: {} of {} parameters of unit {} in {} requests (the plan's {}), {:.1} ms",
+        read.len(),
         backup.entries.len(),
         session.unit,
         readings.requests,
         readings.planned,
         readings.elapsed.as_secs_f64() * 1e3
     );
-    if failed > 0 {
-        let list: Vec<&str> =
-            backup.entries.iter().filter(|e| matches!(e.state, State::Failed(_))).map(|e| e.code.as_str()).collect();
-        return Err(CliError::Incomplete(format!(
-            "{failed} parameter{} could not be read ({}); the backup records why",
-            if failed == 1 { "" } else { "s" },
-            list.join(", ")
-        )));
+    if let Some((saved, path)) = saved {
+        tell(&saved, path, &backup);
     }
-    Ok(())
+    if readings.interrupted {
+        eprintln!(
+            "backup: interrupted: {} of {} parameters read; not read: {}",
+            read.len(),
+            params.len(),
+            unread.join(", ")
+        );
+        return Err(CliError::Interrupted);
+    }
+    if unread.is_empty() {
+        return Ok(());
+    }
+    Err(CliError::Incomplete(format!(
+        "{} parameter{} could not be read ({}); the backup records why",
+        unread.len(),
+        if unread.len() == 1 { "" } else { "s" },
+        unread.join(", ")
+    )))
 }
 
-/// Reads every parameter the profile backs up into a [`Backup`]: the backup, how many failed,
-/// and the readings (requests made, what stopped them).
-pub(crate) async fn read_backup(
+/// Says where the backup went when it did not simply become `path`.
+fn tell(saved: &save::Saved, path: &Path, backup: &Backup) {
+    let new = save::Completeness::of(backup);
+    match saved {
+        save::Saved::Replaced { previous: None } => {}
+        save::Saved::Replaced { previous: Some(bak) } => {
+            eprintln!("backup: the previous {} is kept as {}", path.display(), bak.display());
+        }
+        save::Saved::KeptPrevious { new: aside, previous } => eprintln!(
+            "backup: kept {}: it holds {} of {} parameters, the new backup only {} of {}; the new backup is in {} \
+             (--force replaces {} with it)",
+            path.display(),
+            previous.read(),
+            previous.parameters,
+            new.read(),
+            new.parameters,
+            aside.display(),
+            path.display()
+        ),
+    }
+}
+
+/// The backup of what `readings` found of `params`, with its header.
+pub(crate) fn backup_of(
     session: &Session,
     view: &View,
     identification: String,
     objects: Vec<(String, String)>,
-) -> (Backup, usize, device::Readings) {
-    let params = view.backed_up();
-    let readings = device::read(session, view, &params).await;
-    let (entries, failed) = entries(&params, &readings);
+    params: &[&Point],
+    readings: &device::Readings,
+) -> Backup {
+    let (entries, _) = entries(params, readings);
     let header = Header {
         profile: view.name.clone(),
         profile_hash: view.hash.clone(),
@@ -142,7 +194,7 @@ pub(crate) async fn read_backup(
         connection: session.target.to_string(),
         identification,
     };
-    (Backup { header, identification: objects, entries }, failed, readings)
+    Backup { header, identification: objects, entries }
 }
 
 /// One entry per parameter, in `params`' order, from what was read: its value, or why it has

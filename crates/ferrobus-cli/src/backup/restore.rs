@@ -30,7 +30,9 @@ use super::param;
 use super::view::View;
 use crate::connect::{ConnectArgs, Session};
 use crate::exit::CliError;
+use crate::interrupt::Interrupt;
 use crate::output::{self, Align, Format, OutputArgs, Rows};
+use crate::progress;
 
 /// `restore FILE [--apply] [--force]`.
 #[derive(Args, Debug)]
@@ -74,8 +76,10 @@ struct Item<'a> {
 /// What happened to a parameter.
 #[derive(Clone, PartialEq, Debug)]
 enum Outcome {
-    /// Not (yet) written.
+    /// Not (yet) written; once written, written with the device's confirmation.
     Pending,
+    /// Ctrl-C came while it was being written: it may or may not have been.
+    InFlight,
     /// Written and read back equal.
     Verified,
     /// Written; the read-back differs or failed.
@@ -102,7 +106,8 @@ pub(crate) async fn run(connection: &ConnectArgs, args: &RestoreArgs) -> Result<
     }
     let candidates = checked(&backup, &view, &file, args.force)?;
     connection.refuse_broadcast_read()?;
-    let session = connection.open().await?;
+    let mut interrupt = Interrupt::listen()?;
+    let session = interrupt.unless(connection.open()).await.ok_or(CliError::Interrupted)??;
     let running_param = view.running();
     let mut to_read: Vec<&Point> = candidates.iter().map(|(p, _, _)| *p).collect();
     if let Some((p, _)) = running_param
@@ -110,7 +115,11 @@ pub(crate) async fn run(connection: &ConnectArgs, args: &RestoreArgs) -> Result<
     {
         to_read.push(p);
     }
-    let before = device::read(&session, &view, &to_read).await;
+    let before = device::read(&session, &view, &to_read, &mut interrupt).await;
+    if before.interrupted {
+        eprintln!("restore: interrupted while reading the device first: nothing was written");
+        return Err(CliError::Interrupted);
+    }
     if let Some(error) = before.stopped {
         return Err(error.into());
     }
@@ -133,9 +142,9 @@ pub(crate) async fn run(connection: &ConnectArgs, args: &RestoreArgs) -> Result<
         return Ok(());
     }
     run_lock(&items, running_param, &before)?;
-    apply(&session, &view, &mut items).await;
-    let drifted = read_back(&session, &view, &backup, &mut items).await;
-    conclude(&items, &drifted, format, &file)
+    let interrupted = apply(&session, &view, &mut items, &mut interrupt).await;
+    let drifted = read_back(&session, &view, &backup, &mut items, interrupted, &mut interrupt).await;
+    conclude(&items, &drifted, format, &file, interrupted)
 }
 
 /// The candidates whose value on the device differs from the file's; a read-only one among
@@ -181,21 +190,29 @@ fn differing<'v>(
     Ok(items)
 }
 
-/// Reads back every parameter of the file: each written item verified or not, and the
-/// parameters not written that differ from the file after the restore.
-async fn read_back(session: &Session, view: &View, backup: &Backup, items: &mut [Item<'_>]) -> Vec<String> {
-    let all: Vec<&Point> = backup.entries.iter().filter_map(|e| view.find(&e.code)).collect();
-    let after = device::read(session, view, &all).await;
-    for item in items.iter_mut() {
-        if item.outcome != Outcome::Pending {
-            continue;
-        }
-        item.outcome = match after.values.get(&item.param.code) {
-            Some(Ok(words)) if *words == item.words => Outcome::Verified,
-            Some(Ok(words)) => Outcome::Unverified(format!("written, but reads back {}", shown(item.param, words))),
-            Some(Err(why)) => Outcome::Unverified(format!("written, but not read back: {why}")),
-            None => Outcome::Unverified("written, but not read back".into()),
-        };
+/// Reads back every parameter of the file (after an interruption, only what was or may have
+/// been written): each written item verified or not, and the parameters not written that
+/// differ from the file after the restore.
+async fn read_back(
+    session: &Session,
+    view: &View,
+    backup: &Backup,
+    items: &mut [Item<'_>],
+    interrupted: bool,
+    interrupt: &mut Interrupt,
+) -> Vec<String> {
+    let written = |o: &Outcome| matches!(o, Outcome::Pending | Outcome::InFlight);
+    let all: Vec<&Point> = if interrupted {
+        items.iter().filter(|i| written(&i.outcome)).map(|i| i.param).collect()
+    } else {
+        backup.entries.iter().filter_map(|e| view.find(&e.code)).collect()
+    };
+    let after = device::read(session, view, &all, interrupt).await;
+    for item in items.iter_mut().filter(|i| written(&i.outcome)) {
+        item.outcome = verify(item, after.values.get(&item.param.code));
+    }
+    if interrupted {
+        return Vec::new();
     }
     let mut drifted = Vec::new();
     for entry in &backup.entries {
@@ -210,6 +227,23 @@ async fn read_back(session: &Session, view: &View, backup: &Backup, items: &mut 
         }
     }
     drifted
+}
+
+/// The outcome of a written (or perhaps written) item, from what it reads back.
+fn verify(item: &Item<'_>, back: Option<&Result<Vec<u16>, String>>) -> Outcome {
+    let in_flight = item.outcome == Outcome::InFlight;
+    match back {
+        Some(Ok(words)) if *words == item.words => Outcome::Verified,
+        Some(Ok(words)) if in_flight => {
+            Outcome::NotWritten(format!("interrupted while being written; it still reads {}", shown(item.param, words)))
+        }
+        Some(Ok(words)) => Outcome::Unverified(format!("written, but reads back {}", shown(item.param, words))),
+        Some(Err(why)) if in_flight => {
+            Outcome::Unverified(format!("interrupted while being written, so perhaps written; not read back: {why}"))
+        }
+        Some(Err(why)) => Outcome::Unverified(format!("written, but not read back: {why}")),
+        None => Outcome::Unverified("written, but not read back".into()),
+    }
 }
 
 /// Each value of the file with its parameter and registers, checked before anything is sent:
@@ -302,9 +336,16 @@ fn run_lock(items: &[Item<'_>], running: Option<(&Point, &[i64])>, before: &devi
     Ok(())
 }
 
-/// Prints the outcome; an error naming what was and was not written unless all is verified.
-fn conclude(items: &[Item<'_>], drifted: &[String], format: Format, file: &str) -> Result<(), CliError> {
-    let text = render(items, format, "applied", file);
+/// Prints the outcome; an error naming what was and was not written unless all is verified
+/// (after an interruption, exit 130 with the same lists).
+fn conclude(
+    items: &[Item<'_>],
+    drifted: &[String],
+    format: Format,
+    file: &str,
+    interrupted: bool,
+) -> Result<(), CliError> {
+    let text = render(items, format, if interrupted { "interrupted" } else { "applied" }, file);
     output::print(&text)?;
     let verified: Vec<&str> =
         items.iter().filter(|i| i.outcome == Outcome::Verified).map(|i| i.param.code.as_str()).collect();
@@ -313,7 +354,8 @@ fn conclude(items: &[Item<'_>], drifted: &[String], format: Format, file: &str) 
     let not_written: Vec<&str> =
         items.iter().filter(|i| matches!(i.outcome, Outcome::NotWritten(_))).map(|i| i.param.code.as_str()).collect();
     eprintln!(
-        "restore: {} written and verified{}{}",
+        "restore: {}{} written and verified{}{}",
+        if interrupted { "interrupted: " } else { "" },
         verified.len(),
         if written_unverified.is_empty() {
             String::new()
@@ -329,16 +371,21 @@ fn conclude(items: &[Item<'_>], drifted: &[String], format: Format, file: &str) 
     for note in drifted {
         eprintln!("note: not in the restore, yet differs after it: {note}");
     }
-    if written_unverified.is_empty() && not_written.is_empty() && drifted.is_empty() {
+    if written_unverified.is_empty() && not_written.is_empty() && drifted.is_empty() && !interrupted {
         return Ok(());
     }
-    Err(CliError::Incomplete(format!(
-        "the restore is incomplete: written and verified: {}; written but not verified: {}; not written: {}{}",
+    let lists = format!(
+        "written and verified: {}; written but not verified: {}; not written: {}{}",
         list(&verified),
         list(&written_unverified),
         list(&not_written),
         if drifted.is_empty() { String::new() } else { format!("; differing after it: {}", drifted.len()) }
-    )))
+    );
+    if interrupted {
+        eprintln!("restore: interrupted, so incomplete: {lists}");
+        return Err(CliError::Interrupted);
+    }
+    Err(CliError::Incomplete(format!("the restore is incomplete: {lists}")))
 }
 
 /// Registers read from the device, shown in the profile's unit.
@@ -354,12 +401,15 @@ fn plural(n: usize) -> &'static str {
     if n == 1 { "" } else { "s" }
 }
 
-/// Writes each pending item in order. After a refusal the rest go on, except what depends on
-/// it; after no reply or a lost port nothing more is sent.
-async fn apply(session: &Session, view: &View, items: &mut [Item<'_>]) {
+/// Writes each pending item in order, with a progress bar on a terminal. After a refusal
+/// the rest go on, except what depends on it; after no reply, a lost port or Ctrl-C nothing
+/// more is sent. Whether Ctrl-C came.
+async fn apply(session: &Session, view: &View, items: &mut [Item<'_>], interrupt: &mut Interrupt) -> bool {
     let mut failed: BTreeSet<String> =
         items.iter().filter(|i| matches!(i.outcome, Outcome::NotWritten(_))).map(|i| i.param.code.clone()).collect();
+    let bar = progress::bar(items.iter().filter(|i| i.outcome == Outcome::Pending).count(), "parameters written");
     let mut stopped: Option<String> = None;
+    let mut interrupted = false;
     for item in items.iter_mut() {
         if item.outcome != Outcome::Pending {
             continue;
@@ -375,9 +425,16 @@ async fn apply(session: &Session, view: &View, items: &mut [Item<'_>]) {
             continue;
         }
         tracing::info!(code = %item.param.code, words = ?item.words, "writing");
-        match device::write(session, item.param, &item.words).await {
-            Ok(()) => {}
-            Err(error) => {
+        bar.set_message(item.param.code.clone());
+        match interrupt.unless(device::write(session, item.param, &item.words)).await {
+            Some(Ok(())) => bar.inc(1),
+            None => {
+                item.outcome = Outcome::InFlight;
+                interrupted = true;
+                stopped = Some("Ctrl-C or SIGTERM".to_string());
+            }
+            Some(Err(error)) => {
+                bar.inc(1);
                 let why = device::describe(&error, view);
                 if !matches!(error, Error::Exception { .. }) {
                     stopped = Some(why.clone());
@@ -387,6 +444,8 @@ async fn apply(session: &Session, view: &View, items: &mut [Item<'_>]) {
             }
         }
     }
+    bar.finish_and_clear();
+    interrupted
 }
 
 /// Sorts the items so that each comes after those it depends on (among the items), keeping
@@ -419,6 +478,7 @@ fn render(items: &[Item<'_>], format: Format, stage: &str, file: &str) -> String
                 "written".to_string()
             }
         }
+        Outcome::InFlight => "interrupted while being written".into(),
         Outcome::Verified => "written, verified".into(),
         Outcome::Unverified(why) => why.clone(),
         Outcome::NotWritten(why) => format!("not written: {why}"),

@@ -14,14 +14,14 @@ use serde_json::Value;
 use crate::server::{ferrobus, stderr, stdout};
 
 /// A `ferrobus -v sim --tcp` on a free port, with its log of requests.
-struct TcpSim {
+pub(crate) struct TcpSim {
     child: Child,
-    addr: String,
+    pub(crate) addr: String,
     log: Arc<Mutex<Vec<String>>>,
 }
 
 impl TcpSim {
-    fn start(args: &[&str]) -> TcpSim {
+    pub(crate) fn start(args: &[&str]) -> TcpSim {
         // A free port: the simulator reports the address it was given, so it cannot take :0.
         let port = std::net::TcpListener::bind("127.0.0.1:0").unwrap().local_addr().unwrap().port();
         let given = format!("127.0.0.1:{port}");
@@ -52,7 +52,7 @@ impl TcpSim {
     }
 
     /// `ferrobus --tcp ADDR --device PROFILE ARGS`.
-    fn run(&self, device: &str, args: &[&str]) -> assert_cmd::assert::Assert {
+    pub(crate) fn run(&self, device: &str, args: &[&str]) -> assert_cmd::assert::Assert {
         ferrobus().args(["--tcp", &self.addr, "--timeout", "2s", "--device", device]).args(args).assert()
     }
 
@@ -79,7 +79,7 @@ impl TcpSim {
             .collect()
     }
 
-    fn writes(&self) -> usize {
+    pub(crate) fn writes(&self) -> usize {
         self.functions().iter().filter(|f| matches!(f, 0x05 | 0x06 | 0x0F | 0x10)).count()
     }
 }
@@ -91,12 +91,12 @@ impl Drop for TcpSim {
     }
 }
 
-fn temp(name: &str) -> PathBuf {
+pub(crate) fn temp(name: &str) -> PathBuf {
     std::env::temp_dir().join(format!("ferrobus-backup-{}-{name}", std::process::id()))
 }
 
 /// Writes through the plain `write` command (FC10, so that a fault rule on FC06 spares it).
-fn change(sim: &TcpSim, number: &str, value: &str, kind: &str) {
+pub(crate) fn change(sim: &TcpSim, number: &str, value: &str, kind: &str) {
     ferrobus()
         .args(["--tcp", &sim.addr, "write", "register", "--one-based", number, value, "--multiple", "--type", kind])
         .assert()

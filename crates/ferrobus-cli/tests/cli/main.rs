@@ -4,9 +4,11 @@
 #![cfg(unix)] // the servers of these tests sit on ptys as well as TCP
 
 mod backup;
+mod backup_safety;
 mod bench_failures;
 mod completions;
 mod config;
+mod defaults;
 mod device;
 mod errors;
 mod gateway;
@@ -24,5 +26,7 @@ mod scan;
 mod server;
 mod service;
 mod sniff;
+mod stderr;
 mod tls;
+mod values;
 mod write;

@@ -105,16 +105,16 @@ fn csv_has_a_row_per_point_and_one_per_failed_poll() {
         .success();
     let text = stdout(&out);
     let mut lines = text.lines();
-    assert_eq!(lines.next(), Some("time,seq,unit,group,point,raw,value,uom,status,response_ms,diagnosis"));
-    let rows: Vec<Vec<&str>> = lines.map(|l| l.splitn(11, ',').collect()).collect();
+    assert_eq!(lines.next(), Some("time,seq,unit,group,point,raw,value,meaning,uom,status,response_ms,diagnosis"));
+    let rows: Vec<Vec<&str>> = lines.map(|l| l.splitn(12, ',').collect()).collect();
     let ok: Vec<&Vec<&str>> = rows.iter().filter(|r| r[2] == "1").collect();
     assert_eq!(ok.len() % 3, 0, "three points a poll: {rows:?}");
     assert_eq!(ok[0][4], "0x0000");
     assert_eq!(ok[2][4], "0x0002");
-    assert!(ok.iter().all(|r| r[8] == "ok"));
+    assert!(ok.iter().all(|r| r[9] == "ok"));
     let failed: Vec<&Vec<&str>> = rows.iter().filter(|r| r[2] == "3").collect();
     assert!(!failed.is_empty());
-    assert!(failed.iter().all(|r| r[4] == "u3 input 0x0010" && r[8] == "exception"), "{failed:?}");
+    assert!(failed.iter().all(|r| r[4] == "u3 input 0x0010" && r[9] == "exception"), "{failed:?}");
 }
 
 /// `ferrobus poll ARGS` with its stdout read line by line.
