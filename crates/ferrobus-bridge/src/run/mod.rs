@@ -319,6 +319,10 @@ impl Bridge {
         match event {
             SessionEvent::Connected => self.on_connected(),
             SessionEvent::Message { topic, payload } => self.on_message(&topic, &payload),
+            SessionEvent::Oversized { topic, bytes } => {
+                self.report.discarded += 1;
+                self.say(Status::Discarded { topic, bytes, limit: mqtt::MAX_MESSAGE });
+            }
             SessionEvent::Lost(error) => self.on_lost(error),
             SessionEvent::Closed => {
                 // A Reconnect action's DISCONNECT: connect again at once with the next bdSeq.

@@ -104,6 +104,16 @@ pub enum Status {
         /// Why.
         error: String,
     },
+    /// A message on a subscribed topic was too large to take: discarded unread, the session
+    /// goes on.
+    Discarded {
+        /// Its topic.
+        topic: String,
+        /// Its size, topic and payload.
+        bytes: usize,
+        /// The most the bridge takes.
+        limit: usize,
+    },
     /// A command was written to a device (or failed on the bus).
     Written {
         /// The device.
@@ -176,6 +186,9 @@ impl fmt::Display for Status {
             Status::DeviceBack { device, first: false } => write!(f, "device {device} answers again"),
             Status::DeviceBack { device, first: true } => write!(f, "device {device} answers at last"),
             Status::Refused { topic, error } => write!(f, "command refused on {topic}: {error}"),
+            Status::Discarded { topic, bytes, limit } => {
+                write!(f, "discarded a {bytes}-byte message on {topic}: the bridge takes at most {limit} bytes")
+            }
             Status::Written { device, point, value, result: Ok(()) } => write!(f, "wrote {device} {point} = {value}"),
             Status::Written { device, point, value, result: Err(e) } => {
                 write!(f, "writing {device} {point} = {value} failed: {e}")

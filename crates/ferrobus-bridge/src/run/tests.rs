@@ -87,7 +87,8 @@ async fn start_broker_on(port: u16, name: &str, listener: &str) -> Option<Broker
 /// Every message on `spBv1.0/#`, once subscribed.
 async fn subscribe(port: u16) -> mpsc::UnboundedReceiver<(String, Vec<u8>)> {
     let mut options = MqttOptions::new(format!("watcher-{port}"), "127.0.0.1", port);
-    options.set_max_packet_size(1 << 20, 1 << 20);
+    // Large enough for the oversized messages the tests publish.
+    options.set_max_packet_size(16 << 20, 1 << 20);
     let (client, mut eventloop) = AsyncClient::new(options, 16);
     client.subscribe("spBv1.0/#", QoS::AtLeastOnce).await.expect("subscribe queued");
     let (tx, rx) = mpsc::unbounded_channel();
@@ -373,4 +374,73 @@ async fn while_the_broker_is_away_samples_are_stored_and_replayed_as_historical_
     }
     drop(broker);
     let _ = std::fs::remove_dir_all(&store);
+}
+
+/// Publishes `payload` on `topic` at QoS 1 (retained if `retain`) and returns once the broker
+/// has acknowledged it.
+async fn publish_to(port: u16, topic: &str, payload: Vec<u8>, retain: bool) {
+    let mut options = MqttOptions::new(format!("publisher-{port}"), "127.0.0.1", port);
+    options.set_max_packet_size(1 << 20, 16 << 20);
+    let (client, mut eventloop) = AsyncClient::new(options, 4);
+    client.publish(topic, QoS::AtLeastOnce, retain, payload).await.expect("publish queued");
+    let acked = async {
+        loop {
+            match eventloop.poll().await {
+                Ok(Event::Incoming(Packet::PubAck(_))) => return,
+                Ok(_) => {}
+                Err(e) => panic!("publishing on {topic}: {e}"),
+            }
+        }
+    };
+    tokio::time::timeout(Duration::from_secs(10), acked).await.expect("the broker acknowledged in time");
+    let _ = client.disconnect().await;
+}
+
+/// A DCMD to the demo's inverter setting F001 to `hz`.
+fn dcmd_f001(hz: f64) -> Vec<u8> {
+    let metric = crate::sparkplug::payload::Metric::new(
+        "F001",
+        crate::sparkplug::payload::DataType::Double,
+        Some(MetricValue::Double(hz)),
+    );
+    Payload { metrics: vec![metric], ..Payload::default() }.encode()
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn retained_2_mib_commands_are_discarded_and_counted_and_the_one_session_still_takes_a_good_dcmd() {
+    let Some(broker) = start_broker("oversized").await else { return };
+    let port = broker.port;
+    let dcmd = Topic::device("ferrobus-demo", MessageType::DCmd, "demo-edge", "inverter").to_string();
+    let ncmd = Topic::node("ferrobus-demo", MessageType::NCmd, "demo-edge").to_string();
+    // Retained: the broker hands them over at every subscription, so each session meets them.
+    for topic in [&dcmd, &ncmd] {
+        publish_to(port, topic, vec![0x0A; 2 << 20], true).await;
+    }
+    let mut watcher = subscribe(port).await;
+    let plant = demo_plant(port, &broker.dir.join("store"));
+    let (status_tx, mut statuses) = mpsc::channel(1024);
+    let (stop_tx, stop_rx) = oneshot::channel::<()>();
+    let bridge = tokio::spawn(run(plant, async move { drop(stop_rx.await) }, Some(status_tx)));
+    let seen = |s: &Status| matches!(s, Status::Discarded { .. } | Status::BrokerLost { .. });
+    for _ in 0..2 {
+        let discarded = status_where(&mut statuses, seen).await;
+        assert!(discarded.to_string().contains("discarded a 2097"), "{discarded}");
+    }
+    publish_to(port, &dcmd, dcmd_f001(45.5), false).await;
+    let written =
+        status_where(&mut statuses, |s| matches!(s, Status::Written { .. } | Status::BrokerLost { .. })).await;
+    assert!(matches!(&written, Status::Written { point, result: Ok(()), .. } if point == "F001"), "{written}");
+    stop_tx.send(()).expect("the bridge runs");
+    let report = bridge.await.expect("the bridge's task").expect("the bridge ran");
+    assert_eq!((report.connections, report.broker_lost), (1, 0), "one session, never lost: {report}");
+    assert_eq!(report.discarded, 2, "{report}");
+    assert_eq!(report.writes, 1, "{report}");
+    let mut kinds = Vec::new();
+    while let Ok(Some((topic, _))) = tokio::time::timeout(Duration::from_millis(500), watcher.recv()).await {
+        kinds.extend(Topic::parse(&topic).map(|t| t.kind));
+    }
+    let count = |kind| kinds.iter().filter(|k| **k == kind).count();
+    assert_eq!(count(MessageType::NBirth), 1, "one NBIRTH: {kinds:?}");
+    assert_eq!(count(MessageType::NDeath), 1, "only the stop's NDEATH: {kinds:?}");
+    assert_eq!(kinds.last(), Some(&MessageType::NDeath), "{kinds:?}");
 }
