@@ -8,6 +8,12 @@
 //!                                      └─ PollHandle::write_raw ◀─┘ replayed after the births
 //! ```
 //!
+//! "The broker is away" is decided by the session: a failed attempt or a lost session. The
+//! samples taken while the first attempt has no outcome yet are held (in order, up to 4096)
+//! until it has one: after its CONNACK they are live data behind the births, after its failure
+//! they are stored. So a bridge that starts beside a reachable broker never sends its first
+//! samples as history because a poll answered before the CONNACK did.
+//!
 //! One task runs the loop, in this order of priority: stop, the broker's events, the lines'
 //! samples, the results of writes, the reconnect timer, and last the replay of stored records
 //! (a batch every 10 ms while the client's queue is short, so that live data is never starved
@@ -32,6 +38,7 @@ mod report;
 pub mod state;
 mod status;
 
+use std::collections::VecDeque;
 use std::future::Future;
 use std::time::{Duration, SystemTime};
 
@@ -58,6 +65,10 @@ const REPLAY_PACE: Duration = Duration::from_millis(10);
 
 /// Replay waits while the client has this many messages queued for the broker.
 const REPLAY_QUEUE_LIMIT: usize = 256;
+
+/// The most samples held while the first connection attempt has no outcome yet: past it, the
+/// broker counts as away and they go to the edge (and so to the store).
+const HOLD_LIMIT: usize = 4096;
 
 /// How long a stop waits for the NDEATH and the DISCONNECT to go out.
 const CLOSE_WAIT: Duration = Duration::from_secs(3);
@@ -187,6 +198,10 @@ struct Bridge {
     replayed_now: u64,
     /// New records dropped in a row because the store is full.
     dropping: u64,
+    /// The samples taken while the first connection attempt has no outcome: the broker is not
+    /// known to be away, so they wait for the CONNACK (then they are live data) or the failure
+    /// (then they are stored). `None` once the first attempt has its outcome.
+    held: Option<VecDeque<(usize, Event)>>,
     report: Report,
 }
 
@@ -227,6 +242,7 @@ impl Bridge {
             stored_offline: 0,
             replayed_now: 0,
             dropping: 0,
+            held: Some(VecDeque::new()),
             report,
         };
         if let Some(note) = note {
@@ -255,7 +271,7 @@ impl Bridge {
                     Some(event) => self.on_session(event),
                     None => return,
                 },
-                Some((line, event)) = self.samples.recv() => self.on_poll(line, event),
+                Some((line, event)) = self.samples.recv() => self.take_poll(line, event),
                 Some(written) = self.written.recv() => self.on_written(written),
                 () = sleep_until(reconnect_at), if reconnect_at.is_some() => {
                     self.reconnect_at = None;
@@ -273,6 +289,7 @@ impl Bridge {
     /// Stops: NDEATH, DISCONNECT, the pollers; the report.
     async fn finish(mut self) -> Report {
         self.say(Status::Stopping);
+        self.release_held();
         if self.online {
             if let Some(death) = self.edge.shutdown(SystemTime::now()) {
                 self.publish(death);
@@ -351,11 +368,13 @@ impl Bridge {
         }
         self.replay_done = false;
         self.publish_all(births);
+        self.release_held();
     }
 
     fn on_lost(&mut self, error: String) {
         let was_online = self.online;
         self.went_offline();
+        self.release_held();
         let retry_in = self.backoff.delay();
         self.reconnect_at = Some(Instant::now() + retry_in);
         if was_online {
@@ -436,6 +455,27 @@ impl Bridge {
         self.say(Status::Written { device: name, point, value: typed, result: result.clone() });
         let publishes = self.edge.written(device, group, cell, result);
         self.publish_all(publishes);
+    }
+
+    /// A poller's event: held while the first connection attempt has no outcome (up to
+    /// [`HOLD_LIMIT`]), else handled.
+    fn take_poll(&mut self, line: usize, event: Event) {
+        match &mut self.held {
+            Some(held) if held.len() < HOLD_LIMIT => held.push_back((line, event)),
+            Some(_) => {
+                self.release_held();
+                self.on_poll(line, event);
+            }
+            None => self.on_poll(line, event),
+        }
+    }
+
+    /// The first connection attempt has its outcome (or is taking too long, or the bridge
+    /// stops): the held samples are handled in order, live after a CONNACK, stored otherwise.
+    fn release_held(&mut self) {
+        for (line, event) in self.held.take().unwrap_or_default() {
+            self.on_poll(line, event);
+        }
     }
 
     fn on_poll(&mut self, line: usize, event: Event) {

@@ -444,3 +444,51 @@ async fn retained_2_mib_commands_are_discarded_and_counted_and_the_one_session_s
     assert_eq!(count(MessageType::NDeath), 1, "only the stop's NDEATH: {kinds:?}");
     assert_eq!(kinds.last(), Some(&MessageType::NDeath), "{kinds:?}");
 }
+
+/// A TCP proxy to the broker on `broker_port` that takes one connection and passes nothing
+/// either way until `release` fires: the CONNACK waits for the test. Returns its port.
+async fn held_proxy(broker_port: u16, release: oneshot::Receiver<()>) -> u16 {
+    let listener = tokio::net::TcpListener::bind("127.0.0.1:0").await.expect("a proxy port");
+    let port = listener.local_addr().expect("the proxy's address").port();
+    tokio::spawn(async move {
+        let Ok((mut bridge, _)) = listener.accept().await else { return };
+        let _ = release.await;
+        let mut broker = tokio::net::TcpStream::connect(("127.0.0.1", broker_port)).await.expect("the broker");
+        let _ = tokio::io::copy_bidirectional(&mut bridge, &mut broker).await;
+    });
+    port
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn samples_polled_before_the_first_connack_are_live_data_after_the_births_not_history() {
+    let Some(broker) = start_broker("first-connack").await else { return };
+    let (release_tx, release) = oneshot::channel();
+    let proxy = held_proxy(broker.port, release).await;
+    let mut watcher = subscribe(broker.port).await;
+    let plant = demo_plant(proxy, &broker.dir.join("store"));
+    let (stop_tx, stop_rx) = oneshot::channel::<()>();
+    let (running_tx, running) = oneshot::channel();
+    let options = Options { running: Some(running_tx) };
+    let bridge = tokio::spawn(run_with(plant, async move { drop(stop_rx.await) }, None, options));
+    let poll = running.await.expect("the running lines")[0].poll.clone();
+    // Every group polled twice while the CONNECT waits: their first samples are in the bridge.
+    while poll.counters().iter().any(|c| c.ok < 2) {
+        tokio::time::sleep(Duration::from_millis(20)).await;
+    }
+    release_tx.send(()).expect("the proxy waits");
+    next_of(&mut watcher, MessageType::NBirth).await;
+    let (_, dbirth) = next_of(&mut watcher, MessageType::DBirth).await;
+    assert!(dbirth.metrics.iter().any(|m| m.value.is_some()), "the held samples' values are in the DBIRTH");
+    next_of(&mut watcher, MessageType::DData).await;
+    stop_tx.send(()).expect("the bridge runs");
+    let report = bridge.await.expect("the bridge's task").expect("the bridge ran");
+    assert_eq!((report.stored, report.replayed), (0, 0), "nothing went to the store: {report}");
+    let mut historical = 0;
+    while let Ok(Some((topic, payload))) = tokio::time::timeout(Duration::from_millis(500), watcher.recv()).await {
+        if Topic::parse(&topic).is_some_and(|t| t.kind == MessageType::DData) {
+            let payload = Payload::decode(&payload).expect("a Sparkplug payload");
+            historical += payload.metrics.iter().filter(|m| m.is_historical == Some(true)).count();
+        }
+    }
+    assert_eq!(historical, 0, "a DDATA metric flagged historical though the broker never went away");
+}
