@@ -125,6 +125,20 @@ pub enum Status {
         /// The bus's answer.
         result: Result<(), String>,
     },
+    /// A command's write failed on the bus after others of it were written: the bus cannot
+    /// take those back, so this says exactly which were and were not written.
+    Incomplete {
+        /// The device.
+        device: String,
+        /// The points written, in order.
+        written: Vec<String>,
+        /// The point whose write failed.
+        failed: String,
+        /// Why.
+        error: String,
+        /// The points not tried.
+        not_written: Vec<String>,
+    },
     /// A line cannot carry what it was asked to poll.
     Overload {
         /// The line.
@@ -192,6 +206,16 @@ impl fmt::Display for Status {
             Status::Written { device, point, value, result: Ok(()) } => write!(f, "wrote {device} {point} = {value}"),
             Status::Written { device, point, value, result: Err(e) } => {
                 write!(f, "writing {device} {point} = {value} failed: {e}")
+            }
+            Status::Incomplete { device, written, failed, error, not_written } => {
+                let list = |points: &[String]| if points.is_empty() { "none".to_string() } else { points.join(", ") };
+                write!(
+                    f,
+                    "command to {device} stopped at {failed}: {error}; written before it (kept: the bus cannot \
+                     undo them): {}; not written: {}",
+                    list(written),
+                    list(not_written)
+                )
             }
             Status::Overload { line, detail } => write!(f, "line {line}: {detail}"),
             Status::Note(note) => f.write_str(note),
