@@ -635,7 +635,7 @@ impl Bridge {
                 Err(EdgeError::Offline) => return,
                 Err(e) => {
                     self.report.unreplayable += 1;
-                    tracing::warn!("a stored record cannot be replayed: {e}");
+                    tracing::warn!("a stored record cannot be replayed: {}", ferrobus::log::escape(&e.to_string()));
                 }
             }
             if let Err(e) = self.store.pop() {

@@ -492,3 +492,118 @@ async fn samples_polled_before_the_first_connack_are_live_data_after_the_births_
     }
     assert_eq!(historical, 0, "a DDATA metric flagged historical though the broker never went away");
 }
+
+/// Waits for a status that `wanted` picks, keeping every status seen on the way in `seen`.
+async fn status_kept(
+    statuses: &mut mpsc::Receiver<Status>,
+    seen: &mut Vec<Status>,
+    wanted: impl Fn(&Status) -> bool,
+) -> Status {
+    loop {
+        let status = tokio::time::timeout(Duration::from_secs(20), statuses.recv())
+            .await
+            .expect("a status in time")
+            .expect("the bridge runs");
+        seen.push(status.clone());
+        if wanted(&status) {
+            return status;
+        }
+    }
+}
+
+/// What a hostile or broken client sends the edge node's topics: topic and payload.
+fn hostile_messages() -> Vec<(String, Vec<u8>)> {
+    let dcmd = Topic::device("ferrobus-demo", MessageType::DCmd, "demo-edge", "inverter").to_string();
+    let ncmd = Topic::node("ferrobus-demo", MessageType::NCmd, "demo-edge").to_string();
+    let state = crate::sparkplug::topic::state_topic("scada");
+    let named = |name: &str, value: MetricValue| {
+        let metric =
+            crate::sparkplug::payload::Metric::new(name, crate::sparkplug::payload::DataType::Double, Some(value));
+        Payload { metrics: vec![metric], ..Payload::default() }.encode()
+    };
+    let huge = vec![0xFF; 2 << 20];
+    vec![
+        (dcmd.clone(), vec![0xFF, 0xFF, 0xFF, 0x07]),
+        (dcmd.clone(), Vec::new()),
+        (dcmd.clone(), named("F001\nbridge: wrote inverter F001 = 0.00 Hz\0", MetricValue::Double(1.0))),
+        (dcmd.clone(), named("F001", MetricValue::String("45\0\n".into()))),
+        (dcmd.clone(), dcmd_f001(10.0).repeat(3000)),
+        (dcmd.clone(), huge.clone()),
+        (format!("{dcmd}-nosuch\u{202e}lave"), dcmd_f001(10.0)),
+        (ncmd.clone(), b"\x12\x00\x0a".to_vec()),
+        (ncmd.clone(), named("Node Control/Rebirth\0", MetricValue::String("true\n".into()))),
+        (ncmd, huge.clone()),
+        (state.clone(), b"not json\n\0".to_vec()),
+        (state.clone(), br#"{"online":"yes","timestamp":"now"}"#.to_vec()),
+        (state.clone(), br#"{"online":false,"timestamp":1}"#.to_vec()),
+        (state, huge),
+    ]
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn hostile_commands_and_states_keep_the_session_and_the_data_and_every_status_stays_one_line() {
+    let Some(broker) = start_broker("hostile").await else { return };
+    let port = broker.port;
+    let mut watcher = subscribe(port).await;
+    let mut plant = demo_plant(port, &broker.dir.join("store"));
+    if let Mode::Sparkplug(spb) = &mut plant.mode {
+        spb.primary_host = Some("scada".into());
+    }
+    let (status_tx, mut statuses) = mpsc::channel(1024);
+    let (stop_tx, stop_rx) = oneshot::channel::<()>();
+    let bridge = tokio::spawn(run(plant, async move { drop(stop_rx.await) }, Some(status_tx)));
+    let now_ms = SystemTime::now().duration_since(SystemTime::UNIX_EPOCH).map_or(0, |d| d.as_millis());
+    let online = format!("{{\"online\":true,\"timestamp\":{now_ms}}}");
+    publish_to(port, &crate::sparkplug::topic::state_topic("scada"), online.into_bytes(), true).await;
+    next_of(&mut watcher, MessageType::NBirth).await;
+    next_of(&mut watcher, MessageType::DBirth).await;
+
+    let mut seen = Vec::new();
+    let hostile = hostile_messages();
+    for (topic, payload) in &hostile {
+        publish_to(port, topic, payload.clone(), false).await;
+    }
+    // All but the empty DCMD (no metrics: nothing to do) and the older STATE (ignored, as the
+    // specification says) are answered by a refusal or a discard; none ends the session.
+    let answered =
+        |s: &Status| matches!(s, Status::Refused { .. } | Status::Discarded { .. } | Status::BrokerLost { .. });
+    let mut answers = 0;
+    while answers < 12 {
+        let status = status_kept(&mut statuses, &mut seen, answered).await;
+        assert!(!matches!(status, Status::BrokerLost { .. }), "{status}");
+        answers += 1;
+    }
+    publish_to(
+        port,
+        &Topic::device("ferrobus-demo", MessageType::DCmd, "demo-edge", "inverter").to_string(),
+        dcmd_f001(45.5),
+        false,
+    )
+    .await;
+    let written =
+        status_kept(&mut statuses, &mut seen, |s| matches!(s, Status::Written { .. } | Status::BrokerLost { .. }))
+            .await;
+    assert!(matches!(&written, Status::Written { result: Ok(()), .. }), "{written}");
+    // Still publishing: F001's new value comes in DDATA.
+    next_of(&mut watcher, MessageType::DData).await;
+    stop_tx.send(()).expect("the bridge runs");
+    let report = bridge.await.expect("the bridge's task").expect("the bridge ran");
+    while let Ok(status) = statuses.try_recv() {
+        seen.push(status);
+    }
+    assert_eq!((report.connections, report.broker_lost), (1, 0), "one session, never lost: {report}");
+    assert_eq!(report.discarded, 3, "the three 2 MiB messages: {report}");
+    assert_eq!(report.writes, 1, "only the good DCMD wrote: {report}");
+    for status in &seen {
+        let line = status.to_string();
+        assert!(line.lines().count() == 1 && !line.contains(['\0', '\u{202e}']), "{line:?}");
+    }
+    let forged = seen.iter().map(ToString::to_string).find(|l| l.contains(r"F001\nbridge: wrote inverter"));
+    assert!(forged.is_some_and(|l| l.contains(r"0.00 Hz\0")), "the forged name is logged escaped: {seen:?}");
+    let mut kinds = Vec::new();
+    while let Ok(Some((topic, _))) = tokio::time::timeout(Duration::from_millis(500), watcher.recv()).await {
+        kinds.extend(Topic::parse(&topic).map(|t| t.kind));
+    }
+    assert!(!kinds.contains(&MessageType::NBirth), "no second NBIRTH: {kinds:?}");
+    assert_eq!(kinds.iter().filter(|k| **k == MessageType::NDeath).count(), 1, "only the stop's NDEATH: {kinds:?}");
+}
