@@ -409,9 +409,16 @@ impl Bridge {
             }
         }
         for (device, writes) in commands {
+            let cells: Vec<(usize, usize)> = writes.iter().map(|&(group, cell, ..)| (group, cell)).collect();
             if let Err(error) = self.command(device, writes) {
                 self.report.refused += 1;
+                // Plain mode answers each `set` on its result topic (Sparkplug publishes nothing).
+                let results: Vec<Publish> = cells
+                    .into_iter()
+                    .flat_map(|(group, cell)| self.edge.written(device, group, cell, Err(error.clone())))
+                    .collect();
                 self.say(Status::Refused { topic: topic.to_string(), error });
+                self.publish_all(results);
             }
         }
     }
