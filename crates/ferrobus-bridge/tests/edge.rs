@@ -8,7 +8,7 @@ use std::time::{Duration, SystemTime};
 
 use ferrobus::poll::{Failure, FailureKind, Group, Layout, Reading, Sample, Table, Traffic};
 use ferrobus_bridge::config::{Broker, Connection, DeviceSpec, LineSpec, Mode, PlainConfig, Plant, SparkplugConfig};
-use ferrobus_bridge::edge::{Action, DeviceRef, Edge, EdgeError, Output, Publish};
+use ferrobus_bridge::edge::{Action, DeviceRef, Edge, EdgeError, MAX_METRICS_PER_COMMAND, Output, Publish};
 use ferrobus_bridge::sparkplug::convert::UintEncoding;
 use ferrobus_bridge::sparkplug::payload::{DataType, Metric, MetricValue, Payload, PropertyValueKind};
 use ferrobus_bridge::sparkplug::topic::HostState;
@@ -557,6 +557,22 @@ fn dcmd_in_range_becomes_a_write_of_the_raw_value() {
     let (_, actions, errors) = edge.message("spBv1.0/plant/DCMD/edge1/drive1", &dcmd(vec![by_name]), t(2));
     assert!(errors.is_empty(), "{errors:?}");
     assert!(matches!(&actions[..], [Action::Write { raw: Value::Int(4550), .. }]));
+}
+
+#[test]
+fn a_dcmd_of_3000_metrics_is_refused_whole_and_one_of_64_is_taken() {
+    let plant = sparkplug_plant();
+    let (mut edge, _) = online_with_drive(&plant);
+    let f001 = |hz: f64| Metric { value: Some(MetricValue::Double(hz)), ..Metric::new("F001", DataType::Double, None) };
+    let topic = "spBv1.0/plant/DCMD/edge1/drive1";
+    let (out, actions, errors) = edge.message(topic, &dcmd(vec![f001(10.0); 3000]), t(1));
+    assert!(out.is_empty() && actions.is_empty(), "nothing is written of a refused command: {actions:?}");
+    assert_eq!(errors.len(), 1, "one refusal for the command, not one per metric: {errors:?}");
+    let said = errors[0].to_string();
+    assert!(said.contains("3000 metrics") && said.contains("at most 64"), "{said}");
+    let (_, actions, errors) = edge.message(topic, &dcmd(vec![f001(10.0); MAX_METRICS_PER_COMMAND]), t(2));
+    assert!(errors.is_empty(), "{errors:?}");
+    assert_eq!(actions.len(), MAX_METRICS_PER_COMMAND);
 }
 
 #[test]

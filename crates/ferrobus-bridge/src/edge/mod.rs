@@ -53,7 +53,9 @@
 //! - **Commands.** NCMD `Node Control/Rebirth` = true: NBIRTH and the DBIRTHs of the born
 //!   devices again, same bdSeq. DCMD: each metric (by alias, else by name) is converted to the
 //!   point's raw value and checked by the profile (access, range); a command with any refused
-//!   metric writes nothing and returns an [`EdgeError`] per refusal.
+//!   metric, or with more than [`MAX_METRICS_PER_COMMAND`] metrics, writes nothing and returns
+//!   an [`EdgeError`] per refusal. The runtime writes an accepted command's metrics in order
+//!   and stops at the first the bus fails (it says which were written: a bus cannot undo).
 //! - **Primary host.** With `primary_host` set, births wait for its STATE `{"online":true}`
 //!   (held if [`Edge::connected`] came first; samples meanwhile are stored); `online:false`
 //!   while born → [`Action::Reconnect`]. A STATE older than the last one is ignored.
@@ -78,6 +80,10 @@ use crate::config::{Mode, Plant};
 use plain::PlainEdge;
 use record::Record;
 use sparkplug::SparkplugEdge;
+
+/// The most metrics one DCMD may write: a command with more is refused whole (the bus takes
+/// a write at a time, and one message must not queue thousands of them).
+pub const MAX_METRICS_PER_COMMAND: usize = 64;
 
 /// A device of the plant: indexes into `Plant.lines[line].devices[device]` (ordered by line,
 /// then device).

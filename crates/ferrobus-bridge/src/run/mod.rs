@@ -8,12 +8,19 @@
 //!                                      └─ PollHandle::write_raw ◀─┘ replayed after the births
 //! ```
 //!
+//! "The broker is away" is decided by the session: a failed attempt or a lost session. The
+//! samples taken while the first attempt has no outcome yet are held (in order, up to 4096)
+//! until it has one: after its CONNACK they are live data behind the births, after its failure
+//! they are stored. So a bridge that starts beside a reachable broker never sends its first
+//! samples as history because a poll answered before the CONNACK did.
+//!
 //! One task runs the loop, in this order of priority: stop, the broker's events, the lines'
 //! samples, the results of writes, the reconnect timer, and last the replay of stored records
 //! (a batch every 10 ms while the client's queue is short, so that live data is never starved
 //! and the replay is never put off for ever). Lines run concurrently in their own pollers: one
-//! line's failure never stops another. A write ([`Action::Write`]) runs in a task of its own
-//! and comes back as a result for [`Edge::written`].
+//! line's failure never stops another. A command's writes ([`Action::Write`]) are checked
+//! whole, then written in order in a task of their own, one command of a device at a time
+//! (`command.rs`), and come back as results for [`Edge::written`].
 //!
 //! The broker session: CONNECT with the edge's Will (NDEATH with the bdSeq, kept across
 //! restarts in a small file, see [`state`]); on CONNACK subscribe to the edge's topics and
@@ -26,13 +33,16 @@
 //! clients, pollers and simulated lines) to a caller that drives a device beside the bridge.
 
 mod broker;
+mod command;
 mod lines;
 pub mod mqtt;
 mod report;
 pub mod state;
 mod status;
 
+use std::collections::{BTreeMap, VecDeque};
 use std::future::Future;
+use std::sync::Arc;
 use std::time::{Duration, SystemTime};
 
 use ferrobus::poll::{Event, FailureKind, Sample};
@@ -47,6 +57,7 @@ use crate::config::{Mode, Plant};
 use crate::edge::{Action, DeviceRef, Edge, EdgeError, Output, Publish};
 use crate::sparkplug::topic::{MessageType, Topic};
 use crate::store::{Pushed, Store, StoreError};
+use command::{Applied, BusWrite, DeviceWrites};
 use mqtt::{Backoff, Session, SessionEvent};
 use state::{BdSeqFile, Stored};
 
@@ -58,6 +69,10 @@ const REPLAY_PACE: Duration = Duration::from_millis(10);
 
 /// Replay waits while the client has this many messages queued for the broker.
 const REPLAY_QUEUE_LIMIT: usize = 256;
+
+/// The most samples held while the first connection attempt has no outcome yet: past it, the
+/// broker counts as away and they go to the edge (and so to the store).
+const HOLD_LIMIT: usize = 4096;
 
 /// How long a stop waits for the NDEATH and the DISCONNECT to go out.
 const CLOSE_WAIT: Duration = Duration::from_secs(3);
@@ -120,7 +135,12 @@ struct LineState {
     running: RunningLine,
     map: GroupMap,
     devices: Vec<DeviceHealth>,
+    /// Each device's writes waiting for the bus.
+    writes: Vec<DeviceWrites>,
 }
+
+/// A write a command asks for: the device's group and cell, the raw value, the value as typed.
+type Asked = (usize, usize, ferrobus::poll::Value, String);
 
 /// Whether a device answers, for the status lines.
 #[derive(Clone, Debug, Default)]
@@ -151,15 +171,6 @@ impl DeviceHealth {
     }
 }
 
-/// A write's outcome, back from its task.
-struct Written {
-    device: DeviceRef,
-    group: usize,
-    cell: usize,
-    typed: String,
-    result: Result<(), String>,
-}
-
 struct Bridge {
     plant: Plant,
     edge: Edge,
@@ -169,8 +180,8 @@ struct Bridge {
     bd_seq_file: Option<BdSeqFile>,
     lines: Vec<LineState>,
     samples: mpsc::Receiver<(usize, Event)>,
-    written_tx: mpsc::Sender<Written>,
-    written: mpsc::Receiver<Written>,
+    written_tx: mpsc::Sender<Applied>,
+    written: mpsc::Receiver<Applied>,
     events: Option<mpsc::Sender<Status>>,
     backoff: Backoff,
     reconnect_at: Option<Instant>,
@@ -187,6 +198,10 @@ struct Bridge {
     replayed_now: u64,
     /// New records dropped in a row because the store is full.
     dropping: u64,
+    /// The samples taken while the first connection attempt has no outcome: the broker is not
+    /// known to be away, so they wait for the CONNACK (then they are live data) or the failure
+    /// (then they are stored). `None` once the first attempt has its outcome.
+    held: Option<VecDeque<(usize, Event)>>,
     report: Report,
 }
 
@@ -202,7 +217,8 @@ impl Bridge {
         for (index, spec) in plant.lines.iter().enumerate() {
             let (running, map) = lines::start(index, spec, samples_tx.clone()).await?;
             let devices = vec![DeviceHealth::default(); spec.devices.len()];
-            lines.push(LineState { running, map, devices });
+            let writes = vec![DeviceWrites::default(); spec.devices.len()];
+            lines.push(LineState { running, map, devices, writes });
         }
         let report = Report::new(&plant, store.stats().recovered);
         let (bd_seq_file, note) = restore_bd_seq(&plant, &mut edge);
@@ -227,6 +243,7 @@ impl Bridge {
             stored_offline: 0,
             replayed_now: 0,
             dropping: 0,
+            held: Some(VecDeque::new()),
             report,
         };
         if let Some(note) = note {
@@ -255,8 +272,8 @@ impl Bridge {
                     Some(event) => self.on_session(event),
                     None => return,
                 },
-                Some((line, event)) = self.samples.recv() => self.on_poll(line, event),
-                Some(written) = self.written.recv() => self.on_written(written),
+                Some((line, event)) = self.samples.recv() => self.take_poll(line, event),
+                Some(applied) = self.written.recv() => self.on_applied(applied),
                 () = sleep_until(reconnect_at), if reconnect_at.is_some() => {
                     self.reconnect_at = None;
                     self.connect();
@@ -273,6 +290,7 @@ impl Bridge {
     /// Stops: NDEATH, DISCONNECT, the pollers; the report.
     async fn finish(mut self) -> Report {
         self.say(Status::Stopping);
+        self.release_held();
         if self.online {
             if let Some(death) = self.edge.shutdown(SystemTime::now()) {
                 self.publish(death);
@@ -319,6 +337,10 @@ impl Bridge {
         match event {
             SessionEvent::Connected => self.on_connected(),
             SessionEvent::Message { topic, payload } => self.on_message(&topic, &payload),
+            SessionEvent::Oversized { topic, bytes } => {
+                self.report.discarded += 1;
+                self.say(Status::Discarded { topic, bytes, limit: mqtt::MAX_MESSAGE });
+            }
             SessionEvent::Lost(error) => self.on_lost(error),
             SessionEvent::Closed => {
                 // A Reconnect action's DISCONNECT: connect again at once with the next bdSeq.
@@ -347,11 +369,13 @@ impl Bridge {
         }
         self.replay_done = false;
         self.publish_all(births);
+        self.release_held();
     }
 
     fn on_lost(&mut self, error: String) {
         let was_online = self.online;
         self.went_offline();
+        self.release_held();
         let retry_in = self.backoff.delay();
         self.reconnect_at = Some(Instant::now() + retry_in);
         if was_online {
@@ -375,10 +399,26 @@ impl Bridge {
             self.say(Status::Refused { topic: topic.to_string(), error: error.to_string() });
         }
         self.publish_all(publishes);
+        let mut commands: BTreeMap<DeviceRef, Vec<Asked>> = BTreeMap::new();
         for action in actions {
             match action {
-                Action::Write { device, group, cell, raw, typed } => self.write(device, group, cell, raw, typed),
+                Action::Write { device, group, cell, raw, typed } => {
+                    commands.entry(device).or_default().push((group, cell, raw, typed));
+                }
                 Action::Reconnect => self.reconnect(),
+            }
+        }
+        for (device, writes) in commands {
+            let cells: Vec<(usize, usize)> = writes.iter().map(|&(group, cell, ..)| (group, cell)).collect();
+            if let Err(error) = self.command(device, writes) {
+                self.report.refused += 1;
+                // Plain mode answers each `set` on its result topic (Sparkplug publishes nothing).
+                let results: Vec<Publish> = cells
+                    .into_iter()
+                    .flat_map(|(group, cell)| self.edge.written(device, group, cell, Err(error.clone())))
+                    .collect();
+                self.say(Status::Refused { topic: topic.to_string(), error });
+                self.publish_all(results);
             }
         }
     }
@@ -392,46 +432,87 @@ impl Bridge {
         self.session.disconnect();
     }
 
-    /// Writes `raw` to a device's cell in a task of its own; the result comes back on
-    /// `written`.
-    fn write(&mut self, device: DeviceRef, group: usize, cell: usize, raw: ferrobus::poll::Value, typed: String) {
-        let target = self.lines.get(device.line).and_then(|line| {
-            let index = line.map.poller_group(device.device, group)?;
-            let point = line.running.poll.groups().get(index)?.cells.get(cell)?.point.clone();
-            Some((line.running.poll.clone(), index, point))
-        });
-        let tx = self.written_tx.clone();
-        let Some((poll, index, point)) = target else {
-            let result = Err(format!("no cell {cell} in group {group} of device {}", device.device));
-            self.on_written(Written { device, group, cell, typed, result });
-            return;
-        };
-        if let Err(e) = point.check_write(&raw, &typed) {
-            self.on_written(Written { device, group, cell, typed, result: Err(e.to_string()) });
-            return;
+    /// One command's writes to `device`: every one resolved and checked, and the device's
+    /// queue bound kept, before any is written (else the command is refused whole, with why);
+    /// then written in order in a task of its own, whose [`Applied`] comes back on `written`.
+    fn command(&mut self, device: DeviceRef, writes: Vec<Asked>) -> Result<(), String> {
+        let name = self.device_name(device);
+        let line = self.lines.get_mut(device.line).ok_or_else(|| format!("{name}: no such line"))?;
+        let mut resolved = Vec::with_capacity(writes.len());
+        for (group, cell, raw, typed) in writes {
+            let index = line.map.poller_group(device.device, group);
+            let found = index.and_then(|i| Some((i, line.running.poll.groups().get(i)?.cells.get(cell)?.clone())));
+            let Some((index, target)) = found else {
+                return Err(format!("{name}: no cell {cell} in group {group}: nothing written"));
+            };
+            target.point.check_write(&raw, &typed).map_err(|e| format!("{name}: {e}: nothing written"))?;
+            resolved.push(BusWrite { group, cell, index, raw, typed, point: target.name });
         }
+        let queue = line.writes.get_mut(device.device).ok_or_else(|| format!("{name}: no such device"))?;
+        queue.admit(resolved.len()).map_err(|why| format!("{name}: {why}: nothing written"))?;
+        let (poll, turn, tx) = (line.running.poll.clone(), Arc::clone(&queue.turn), self.written_tx.clone());
         tokio::spawn(async move {
-            let result = poll.write_raw(index, cell, &raw).await.map_err(|e| e.to_string());
-            let _ = tx.send(Written { device, group, cell, typed, result }).await;
+            let _turn = turn.lock().await;
+            let applied = command::apply(device, resolved, |w| {
+                let (poll, index, cell, raw) = (poll.clone(), w.index, w.cell, w.raw.clone());
+                async move { poll.write_raw(index, cell, &raw).await.map_err(|e| e.to_string()) }
+            })
+            .await;
+            let _ = tx.send(applied).await;
         });
+        Ok(())
     }
 
-    fn on_written(&mut self, written: Written) {
-        let Written { device, group, cell, typed, result } = written;
-        if result.is_ok() {
-            self.report.writes += 1;
-        } else {
-            self.report.write_failures += 1;
-        }
-        let point = self
-            .lines
-            .get(device.line)
-            .and_then(|l| l.running.poll.groups().get(l.map.poller_group(device.device, group)?)?.cells.get(cell))
-            .map_or_else(|| format!("cell {cell}"), |c| c.name.clone());
+    /// A command's writes are done: a status line per write tried, the edge told of each (plain
+    /// mode's results; a write not tried as failed), and one line saying exactly what was and
+    /// was not written if the bus failed one midway.
+    fn on_applied(&mut self, applied: Applied) {
+        let device = applied.device;
         let name = self.device_name(device);
-        self.say(Status::Written { device: name, point, value: typed, result: result.clone() });
-        let publishes = self.edge.written(device, group, cell, result);
+        let count = applied.tried.len() + applied.not_written.len();
+        if let Some(queue) = self.lines.get_mut(device.line).and_then(|l| l.writes.get_mut(device.device)) {
+            queue.done(count);
+        }
+        let incomplete = applied.incomplete();
+        let mut publishes = Vec::new();
+        for (w, result) in applied.tried {
+            if result.is_ok() {
+                self.report.writes += 1;
+            } else {
+                self.report.write_failures += 1;
+            }
+            self.say(Status::Written { device: name.clone(), point: w.point, value: w.typed, result: result.clone() });
+            publishes.extend(self.edge.written(device, w.group, w.cell, result));
+        }
+        for w in applied.not_written {
+            let why = "not written: an earlier write of the same command failed".to_string();
+            publishes.extend(self.edge.written(device, w.group, w.cell, Err(why)));
+        }
+        if let Some((written, failed, error, not_written)) = incomplete {
+            self.say(Status::Incomplete { device: name, written, failed, error, not_written });
+        }
         self.publish_all(publishes);
+    }
+
+    /// A poller's event: held while the first connection attempt has no outcome (up to
+    /// [`HOLD_LIMIT`]), else handled.
+    fn take_poll(&mut self, line: usize, event: Event) {
+        match &mut self.held {
+            Some(held) if held.len() < HOLD_LIMIT => held.push_back((line, event)),
+            Some(_) => {
+                self.release_held();
+                self.on_poll(line, event);
+            }
+            None => self.on_poll(line, event),
+        }
+    }
+
+    /// The first connection attempt has its outcome (or is taking too long, or the bridge
+    /// stops): the held samples are handled in order, live after a CONNACK, stored otherwise.
+    fn release_held(&mut self) {
+        for (line, event) in self.held.take().unwrap_or_default() {
+            self.on_poll(line, event);
+        }
     }
 
     fn on_poll(&mut self, line: usize, event: Event) {
@@ -561,7 +642,7 @@ impl Bridge {
                 Err(EdgeError::Offline) => return,
                 Err(e) => {
                     self.report.unreplayable += 1;
-                    tracing::warn!("a stored record cannot be replayed: {e}");
+                    tracing::warn!("a stored record cannot be replayed: {}", ferrobus::log::escape(&e.to_string()));
                 }
             }
             if let Err(e) = self.store.pop() {

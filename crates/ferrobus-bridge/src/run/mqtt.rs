@@ -13,6 +13,18 @@
 //! queued from the old session are dropped (`EventLoop::clean`, then a clean session): what
 //! they carried belonged to a session the broker has declared dead. Publishing never waits:
 //! a full queue is an error the bridge counts.
+//!
+//! # Incoming size
+//!
+//! rumqttc ends the connection on an incoming packet over its `max_incoming_packet_size`
+//! (`PayloadSizeLimitExceeded`, a connection error): one big message on a subscribed topic
+//! would drop the session, and a retained one would drop every session after it. So rumqttc
+//! is told to take anything MQTT 3.1.1 can frame ([`MQTT_MAX_PACKET`]), and the size is
+//! checked here: a message over [`MAX_MESSAGE`] becomes [`SessionEvent::Oversized`] (its
+//! topic and size, not its bytes), which the bridge counts and discards while the session
+//! goes on. rumqttc holds a packet whole before it hands it over, so the memory such a message
+//! costs for a moment is bounded by what the broker lets through (mosquitto's
+//! `message_size_limit`, 256 MiB by default).
 
 use std::sync::Arc;
 use std::sync::atomic::{AtomicUsize, Ordering};
@@ -27,8 +39,15 @@ use crate::edge::Publish;
 /// Requests the client may have queued for the event loop.
 const QUEUE: usize = 4096;
 
-/// The largest packet sent or taken (a DBIRTH of a big device, a replayed record).
+/// The largest packet sent (a DBIRTH of a big device, a replayed record).
 const MAX_PACKET: usize = 1 << 20;
+
+/// The largest message taken, topic and payload: a command or a STATE is far smaller.
+pub const MAX_MESSAGE: usize = 1 << 20;
+
+/// The largest packet MQTT 3.1.1 can frame (the Remaining Length's four bytes, §2.2.3): what
+/// rumqttc is told to take, so that no packet a broker delivers ends the session.
+const MQTT_MAX_PACKET: usize = 268_435_455;
 
 /// The longest wait between two connection attempts.
 pub const MAX_BACKOFF: Duration = Duration::from_secs(30);
@@ -47,6 +66,13 @@ pub enum SessionEvent {
         topic: String,
         /// Its payload.
         payload: Vec<u8>,
+    },
+    /// A message on a subscribed topic over [`MAX_MESSAGE`], discarded (the session goes on).
+    Oversized {
+        /// Its topic.
+        topic: String,
+        /// Its size, topic and payload.
+        bytes: usize,
     },
     /// The connection failed or was lost, and why.
     Lost(String),
@@ -68,7 +94,7 @@ impl Session {
     /// Starts the task with `options` (its Will is set at each [`Session::connect`]); nothing
     /// is connected yet.
     pub fn start(mut options: MqttOptions) -> Session {
-        options.set_max_packet_size(MAX_PACKET, MAX_PACKET);
+        options.set_max_packet_size(MQTT_MAX_PACKET, MAX_PACKET);
         options.set_clean_session(true);
         let (client, eventloop) = AsyncClient::new(options, QUEUE);
         let (events_tx, events) = mpsc::channel(256);
@@ -139,9 +165,7 @@ async fn drive(
         loop {
             let event = match eventloop.poll().await {
                 Ok(Event::Incoming(Packet::ConnAck(_))) => SessionEvent::Connected,
-                Ok(Event::Incoming(Packet::Publish(p))) => {
-                    SessionEvent::Message { topic: p.topic.clone(), payload: p.payload.to_vec() }
-                }
+                Ok(Event::Incoming(Packet::Publish(p))) => incoming(p),
                 Ok(Event::Outgoing(Outgoing::Publish(_))) => {
                     let _ = queued.fetch_update(Ordering::Relaxed, Ordering::Relaxed, |n| Some(n.saturating_sub(1)));
                     continue;
@@ -159,6 +183,16 @@ async fn drive(
             }
         }
     }
+}
+
+/// What an incoming PUBLISH tells the bridge: the message, or only its size when it is over
+/// [`MAX_MESSAGE`] (rumqttc has acknowledged it already, at QoS 1 and 2).
+fn incoming(publish: rumqttc::Publish) -> SessionEvent {
+    let bytes = publish.topic.len().saturating_add(publish.payload.len());
+    if bytes > MAX_MESSAGE {
+        return SessionEvent::Oversized { topic: publish.topic, bytes };
+    }
+    SessionEvent::Message { topic: publish.topic, payload: publish.payload.to_vec() }
 }
 
 /// The QoS of a level (2 and above are 2).
@@ -215,6 +249,21 @@ mod tests {
     fn a_zero_first_delay_is_not_a_busy_loop_and_a_long_one_is_capped() {
         assert_eq!(Backoff::new(Duration::ZERO).delay(), MIN_BACKOFF);
         assert_eq!(Backoff::new(Duration::from_secs(600)).delay(), MAX_BACKOFF);
+    }
+
+    #[test]
+    fn a_message_over_the_limit_is_only_its_topic_and_size_and_one_at_the_limit_is_taken() {
+        let publish = |payload: Vec<u8>| rumqttc::Publish::new("spBv1.0/g/DCMD/n/d", QoS::AtLeastOnce, payload);
+        let topic_len = "spBv1.0/g/DCMD/n/d".len();
+        let at_limit = publish(vec![0; MAX_MESSAGE - topic_len]);
+        assert!(
+            matches!(incoming(at_limit), SessionEvent::Message { payload, .. } if payload.len() == MAX_MESSAGE - topic_len)
+        );
+        let over = publish(vec![0; MAX_MESSAGE - topic_len + 1]);
+        assert_eq!(
+            incoming(over),
+            SessionEvent::Oversized { topic: "spBv1.0/g/DCMD/n/d".into(), bytes: MAX_MESSAGE + 1 }
+        );
     }
 
     #[test]

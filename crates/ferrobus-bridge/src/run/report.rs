@@ -33,6 +33,8 @@ pub struct Report {
     pub left: u64,
     /// Commands refused (nothing written).
     pub refused: u64,
+    /// Incoming messages discarded unread: over the size the bridge takes.
+    pub discarded: u64,
     /// Writes done.
     pub writes: u64,
     /// Writes the bus failed.
@@ -116,6 +118,9 @@ impl fmt::Display for Report {
             "commands: {} written, {} failed on the bus, {} refused",
             self.writes, self.write_failures, self.refused
         )?;
+        if self.discarded > 0 {
+            writeln!(f, "incoming messages discarded as too large: {}", self.discarded)?;
+        }
         for line in &self.lines {
             let failed: u64 = line.failures.values().sum();
             let kinds: Vec<String> =

@@ -1,7 +1,13 @@
 //! What the bridge says as it happens: the CLI prints these on stderr, tests wait for them.
+//!
+//! Each is one line: what came from outside (a topic, a metric name inside a refusal, a value
+//! as commanded, what a broker or a bus said) is written through [`ferrobus::log::escape`], so
+//! a newline or a NUL in an MQTT message cannot end the line and forge the next.
 
 use std::fmt;
 use std::time::Duration;
+
+use ferrobus::log::escape;
 
 /// One thing that happened.
 #[derive(Clone, Debug, PartialEq, Eq)]
@@ -104,6 +110,16 @@ pub enum Status {
         /// Why.
         error: String,
     },
+    /// A message on a subscribed topic was too large to take: discarded unread, the session
+    /// goes on.
+    Discarded {
+        /// Its topic.
+        topic: String,
+        /// Its size, topic and payload.
+        bytes: usize,
+        /// The most the bridge takes.
+        limit: usize,
+    },
     /// A command was written to a device (or failed on the bus).
     Written {
         /// The device.
@@ -114,6 +130,20 @@ pub enum Status {
         value: String,
         /// The bus's answer.
         result: Result<(), String>,
+    },
+    /// A command's write failed on the bus after others of it were written: the bus cannot
+    /// take those back, so this says exactly which were and were not written.
+    Incomplete {
+        /// The device.
+        device: String,
+        /// The points written, in order.
+        written: Vec<String>,
+        /// The point whose write failed.
+        failed: String,
+        /// Why.
+        error: String,
+        /// The points not tried.
+        not_written: Vec<String>,
     },
     /// A line cannot carry what it was asked to poll.
     Overload {
@@ -155,6 +185,7 @@ impl fmt::Display for Status {
             }
             Status::BrokerLost { broker, error, retry_in, was_online } => {
                 let what = if *was_online { "lost" } else { "unreachable" };
+                let error = escape(error);
                 write!(f, "broker {broker} {what}: {error}; next attempt in {:.1} s", retry_in.as_secs_f64())
             }
             Status::Storing { connected: false } => write!(f, "broker away: samples go to the store"),
@@ -168,21 +199,58 @@ impl fmt::Display for Status {
             Status::Dropped { records } => write!(f, "the store was full: {records} new records dropped"),
             Status::StoreError { error, count } => write!(f, "store error ({count} so far): {error}"),
             Status::DeviceDead { device, polls, why, never_answered: true } => {
-                write!(f, "device {device} does not answer ({polls} polls: {why}); it is born at its first reply")
+                write!(
+                    f,
+                    "device {device} does not answer ({polls} polls: {}); it is born at its first reply",
+                    escape(why)
+                )
             }
             Status::DeviceDead { device, polls, why, never_answered: false } => {
-                write!(f, "device {device} stopped answering ({polls} polls: {why})")
+                write!(f, "device {device} stopped answering ({polls} polls: {})", escape(why))
             }
             Status::DeviceBack { device, first: false } => write!(f, "device {device} answers again"),
             Status::DeviceBack { device, first: true } => write!(f, "device {device} answers at last"),
-            Status::Refused { topic, error } => write!(f, "command refused on {topic}: {error}"),
-            Status::Written { device, point, value, result: Ok(()) } => write!(f, "wrote {device} {point} = {value}"),
+            Status::Refused { topic, error } => write!(f, "command refused on {}: {}", escape(topic), escape(error)),
+            Status::Discarded { topic, bytes, limit } => {
+                let topic = escape(topic);
+                write!(f, "discarded a {bytes}-byte message on {topic}: the bridge takes at most {limit} bytes")
+            }
+            Status::Written { device, point, value, result: Ok(()) } => {
+                write!(f, "wrote {device} {point} = {}", escape(value))
+            }
             Status::Written { device, point, value, result: Err(e) } => {
-                write!(f, "writing {device} {point} = {value} failed: {e}")
+                write!(f, "writing {device} {point} = {} failed: {}", escape(value), escape(e))
+            }
+            Status::Incomplete { device, written, failed, error, not_written } => {
+                let list = |points: &[String]| if points.is_empty() { "none".to_string() } else { points.join(", ") };
+                write!(
+                    f,
+                    "command to {device} stopped at {failed}: {error}; written before it (kept: the bus cannot \
+                     undo them): {}; not written: {}",
+                    list(written),
+                    list(not_written),
+                    error = escape(error)
+                )
             }
             Status::Overload { line, detail } => write!(f, "line {line}: {detail}"),
-            Status::Note(note) => f.write_str(note),
+            Status::Note(note) => write!(f, "{}", escape(note)),
             Status::Stopping => f.write_str("stopping"),
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_refused_metric_name_with_a_newline_and_a_nul_stays_on_one_line() {
+        let status = Status::Refused {
+            topic: "spBv1.0/g/DCMD/n/d\0".into(),
+            error: "DCMD d: F001\nbridge: wrote d F001 = 0.00 Hz: refused: no metric of that name".into(),
+        };
+        let line = status.to_string();
+        assert_eq!(line.lines().count(), 1, "{line}");
+        assert!(line.contains(r"F001\nbridge: wrote") && line.contains(r"DCMD/n/d\0"), "{line}");
     }
 }

@@ -87,7 +87,8 @@ async fn start_broker_on(port: u16, name: &str, listener: &str) -> Option<Broker
 /// Every message on `spBv1.0/#`, once subscribed.
 async fn subscribe(port: u16) -> mpsc::UnboundedReceiver<(String, Vec<u8>)> {
     let mut options = MqttOptions::new(format!("watcher-{port}"), "127.0.0.1", port);
-    options.set_max_packet_size(1 << 20, 1 << 20);
+    // Large enough for the oversized messages the tests publish.
+    options.set_max_packet_size(16 << 20, 1 << 20);
     let (client, mut eventloop) = AsyncClient::new(options, 16);
     client.subscribe("spBv1.0/#", QoS::AtLeastOnce).await.expect("subscribe queued");
     let (tx, rx) = mpsc::unbounded_channel();
@@ -373,4 +374,236 @@ async fn while_the_broker_is_away_samples_are_stored_and_replayed_as_historical_
     }
     drop(broker);
     let _ = std::fs::remove_dir_all(&store);
+}
+
+/// Publishes `payload` on `topic` at QoS 1 (retained if `retain`) and returns once the broker
+/// has acknowledged it.
+async fn publish_to(port: u16, topic: &str, payload: Vec<u8>, retain: bool) {
+    let mut options = MqttOptions::new(format!("publisher-{port}"), "127.0.0.1", port);
+    options.set_max_packet_size(1 << 20, 16 << 20);
+    let (client, mut eventloop) = AsyncClient::new(options, 4);
+    client.publish(topic, QoS::AtLeastOnce, retain, payload).await.expect("publish queued");
+    let acked = async {
+        loop {
+            match eventloop.poll().await {
+                Ok(Event::Incoming(Packet::PubAck(_))) => return,
+                Ok(_) => {}
+                Err(e) => panic!("publishing on {topic}: {e}"),
+            }
+        }
+    };
+    tokio::time::timeout(Duration::from_secs(10), acked).await.expect("the broker acknowledged in time");
+    let _ = client.disconnect().await;
+}
+
+/// A DCMD to the demo's inverter setting F001 to `hz`.
+fn dcmd_f001(hz: f64) -> Vec<u8> {
+    let metric = crate::sparkplug::payload::Metric::new(
+        "F001",
+        crate::sparkplug::payload::DataType::Double,
+        Some(MetricValue::Double(hz)),
+    );
+    Payload { metrics: vec![metric], ..Payload::default() }.encode()
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn retained_2_mib_commands_are_discarded_and_counted_and_the_one_session_still_takes_a_good_dcmd() {
+    let Some(broker) = start_broker("oversized").await else { return };
+    let port = broker.port;
+    let dcmd = Topic::device("ferrobus-demo", MessageType::DCmd, "demo-edge", "inverter").to_string();
+    let ncmd = Topic::node("ferrobus-demo", MessageType::NCmd, "demo-edge").to_string();
+    // Retained: the broker hands them over at every subscription, so each session meets them.
+    for topic in [&dcmd, &ncmd] {
+        publish_to(port, topic, vec![0x0A; 2 << 20], true).await;
+    }
+    let mut watcher = subscribe(port).await;
+    let plant = demo_plant(port, &broker.dir.join("store"));
+    let (status_tx, mut statuses) = mpsc::channel(1024);
+    let (stop_tx, stop_rx) = oneshot::channel::<()>();
+    let bridge = tokio::spawn(run(plant, async move { drop(stop_rx.await) }, Some(status_tx)));
+    let seen = |s: &Status| matches!(s, Status::Discarded { .. } | Status::BrokerLost { .. });
+    for _ in 0..2 {
+        let discarded = status_where(&mut statuses, seen).await;
+        assert!(discarded.to_string().contains("discarded a 2097"), "{discarded}");
+    }
+    publish_to(port, &dcmd, dcmd_f001(45.5), false).await;
+    let written =
+        status_where(&mut statuses, |s| matches!(s, Status::Written { .. } | Status::BrokerLost { .. })).await;
+    assert!(matches!(&written, Status::Written { point, result: Ok(()), .. } if point == "F001"), "{written}");
+    stop_tx.send(()).expect("the bridge runs");
+    let report = bridge.await.expect("the bridge's task").expect("the bridge ran");
+    assert_eq!((report.connections, report.broker_lost), (1, 0), "one session, never lost: {report}");
+    assert_eq!(report.discarded, 2, "{report}");
+    assert_eq!(report.writes, 1, "{report}");
+    let mut kinds = Vec::new();
+    while let Ok(Some((topic, _))) = tokio::time::timeout(Duration::from_millis(500), watcher.recv()).await {
+        kinds.extend(Topic::parse(&topic).map(|t| t.kind));
+    }
+    let count = |kind| kinds.iter().filter(|k| **k == kind).count();
+    assert_eq!(count(MessageType::NBirth), 1, "one NBIRTH: {kinds:?}");
+    assert_eq!(count(MessageType::NDeath), 1, "only the stop's NDEATH: {kinds:?}");
+    assert_eq!(kinds.last(), Some(&MessageType::NDeath), "{kinds:?}");
+}
+
+/// A TCP proxy to the broker on `broker_port` that takes one connection and passes nothing
+/// either way until `release` fires: the CONNACK waits for the test. Returns its port.
+async fn held_proxy(broker_port: u16, release: oneshot::Receiver<()>) -> u16 {
+    let listener = tokio::net::TcpListener::bind("127.0.0.1:0").await.expect("a proxy port");
+    let port = listener.local_addr().expect("the proxy's address").port();
+    tokio::spawn(async move {
+        let Ok((mut bridge, _)) = listener.accept().await else { return };
+        let _ = release.await;
+        let mut broker = tokio::net::TcpStream::connect(("127.0.0.1", broker_port)).await.expect("the broker");
+        let _ = tokio::io::copy_bidirectional(&mut bridge, &mut broker).await;
+    });
+    port
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn samples_polled_before_the_first_connack_are_live_data_after_the_births_not_history() {
+    let Some(broker) = start_broker("first-connack").await else { return };
+    let (release_tx, release) = oneshot::channel();
+    let proxy = held_proxy(broker.port, release).await;
+    let mut watcher = subscribe(broker.port).await;
+    let plant = demo_plant(proxy, &broker.dir.join("store"));
+    let (stop_tx, stop_rx) = oneshot::channel::<()>();
+    let (running_tx, running) = oneshot::channel();
+    let options = Options { running: Some(running_tx) };
+    let bridge = tokio::spawn(run_with(plant, async move { drop(stop_rx.await) }, None, options));
+    let poll = running.await.expect("the running lines")[0].poll.clone();
+    // Every group polled twice while the CONNECT waits: their first samples are in the bridge.
+    while poll.counters().iter().any(|c| c.ok < 2) {
+        tokio::time::sleep(Duration::from_millis(20)).await;
+    }
+    release_tx.send(()).expect("the proxy waits");
+    next_of(&mut watcher, MessageType::NBirth).await;
+    let (_, dbirth) = next_of(&mut watcher, MessageType::DBirth).await;
+    assert!(dbirth.metrics.iter().any(|m| m.value.is_some()), "the held samples' values are in the DBIRTH");
+    next_of(&mut watcher, MessageType::DData).await;
+    stop_tx.send(()).expect("the bridge runs");
+    let report = bridge.await.expect("the bridge's task").expect("the bridge ran");
+    assert_eq!((report.stored, report.replayed), (0, 0), "nothing went to the store: {report}");
+    let mut historical = 0;
+    while let Ok(Some((topic, payload))) = tokio::time::timeout(Duration::from_millis(500), watcher.recv()).await {
+        if Topic::parse(&topic).is_some_and(|t| t.kind == MessageType::DData) {
+            let payload = Payload::decode(&payload).expect("a Sparkplug payload");
+            historical += payload.metrics.iter().filter(|m| m.is_historical == Some(true)).count();
+        }
+    }
+    assert_eq!(historical, 0, "a DDATA metric flagged historical though the broker never went away");
+}
+
+/// Waits for a status that `wanted` picks, keeping every status seen on the way in `seen`.
+async fn status_kept(
+    statuses: &mut mpsc::Receiver<Status>,
+    seen: &mut Vec<Status>,
+    wanted: impl Fn(&Status) -> bool,
+) -> Status {
+    loop {
+        let status = tokio::time::timeout(Duration::from_secs(20), statuses.recv())
+            .await
+            .expect("a status in time")
+            .expect("the bridge runs");
+        seen.push(status.clone());
+        if wanted(&status) {
+            return status;
+        }
+    }
+}
+
+/// What a hostile or broken client sends the edge node's topics: topic and payload.
+fn hostile_messages() -> Vec<(String, Vec<u8>)> {
+    let dcmd = Topic::device("ferrobus-demo", MessageType::DCmd, "demo-edge", "inverter").to_string();
+    let ncmd = Topic::node("ferrobus-demo", MessageType::NCmd, "demo-edge").to_string();
+    let state = crate::sparkplug::topic::state_topic("scada");
+    let named = |name: &str, value: MetricValue| {
+        let metric =
+            crate::sparkplug::payload::Metric::new(name, crate::sparkplug::payload::DataType::Double, Some(value));
+        Payload { metrics: vec![metric], ..Payload::default() }.encode()
+    };
+    let huge = vec![0xFF; 2 << 20];
+    vec![
+        (dcmd.clone(), vec![0xFF, 0xFF, 0xFF, 0x07]),
+        (dcmd.clone(), Vec::new()),
+        (dcmd.clone(), named("F001\nbridge: wrote inverter F001 = 0.00 Hz\0", MetricValue::Double(1.0))),
+        (dcmd.clone(), named("F001", MetricValue::String("45\0\n".into()))),
+        (dcmd.clone(), dcmd_f001(10.0).repeat(3000)),
+        (dcmd.clone(), huge.clone()),
+        (format!("{dcmd}-nosuch\u{202e}lave"), dcmd_f001(10.0)),
+        (ncmd.clone(), b"\x12\x00\x0a".to_vec()),
+        (ncmd.clone(), named("Node Control/Rebirth\0", MetricValue::String("true\n".into()))),
+        (ncmd, huge.clone()),
+        (state.clone(), b"not json\n\0".to_vec()),
+        (state.clone(), br#"{"online":"yes","timestamp":"now"}"#.to_vec()),
+        (state.clone(), br#"{"online":false,"timestamp":1}"#.to_vec()),
+        (state, huge),
+    ]
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn hostile_commands_and_states_keep_the_session_and_the_data_and_every_status_stays_one_line() {
+    let Some(broker) = start_broker("hostile").await else { return };
+    let port = broker.port;
+    let mut watcher = subscribe(port).await;
+    let mut plant = demo_plant(port, &broker.dir.join("store"));
+    if let Mode::Sparkplug(spb) = &mut plant.mode {
+        spb.primary_host = Some("scada".into());
+    }
+    let (status_tx, mut statuses) = mpsc::channel(1024);
+    let (stop_tx, stop_rx) = oneshot::channel::<()>();
+    let bridge = tokio::spawn(run(plant, async move { drop(stop_rx.await) }, Some(status_tx)));
+    let now_ms = SystemTime::now().duration_since(SystemTime::UNIX_EPOCH).map_or(0, |d| d.as_millis());
+    let online = format!("{{\"online\":true,\"timestamp\":{now_ms}}}");
+    publish_to(port, &crate::sparkplug::topic::state_topic("scada"), online.into_bytes(), true).await;
+    next_of(&mut watcher, MessageType::NBirth).await;
+    next_of(&mut watcher, MessageType::DBirth).await;
+
+    let mut seen = Vec::new();
+    let hostile = hostile_messages();
+    for (topic, payload) in &hostile {
+        publish_to(port, topic, payload.clone(), false).await;
+    }
+    // All but the empty DCMD (no metrics: nothing to do) and the older STATE (ignored, as the
+    // specification says) are answered by a refusal or a discard; none ends the session.
+    let answered =
+        |s: &Status| matches!(s, Status::Refused { .. } | Status::Discarded { .. } | Status::BrokerLost { .. });
+    let mut answers = 0;
+    while answers < 12 {
+        let status = status_kept(&mut statuses, &mut seen, answered).await;
+        assert!(!matches!(status, Status::BrokerLost { .. }), "{status}");
+        answers += 1;
+    }
+    publish_to(
+        port,
+        &Topic::device("ferrobus-demo", MessageType::DCmd, "demo-edge", "inverter").to_string(),
+        dcmd_f001(45.5),
+        false,
+    )
+    .await;
+    let written =
+        status_kept(&mut statuses, &mut seen, |s| matches!(s, Status::Written { .. } | Status::BrokerLost { .. }))
+            .await;
+    assert!(matches!(&written, Status::Written { result: Ok(()), .. }), "{written}");
+    // Still publishing: F001's new value comes in DDATA.
+    next_of(&mut watcher, MessageType::DData).await;
+    stop_tx.send(()).expect("the bridge runs");
+    let report = bridge.await.expect("the bridge's task").expect("the bridge ran");
+    while let Ok(status) = statuses.try_recv() {
+        seen.push(status);
+    }
+    assert_eq!((report.connections, report.broker_lost), (1, 0), "one session, never lost: {report}");
+    assert_eq!(report.discarded, 3, "the three 2 MiB messages: {report}");
+    assert_eq!(report.writes, 1, "only the good DCMD wrote: {report}");
+    for status in &seen {
+        let line = status.to_string();
+        assert!(line.lines().count() == 1 && !line.contains(['\0', '\u{202e}']), "{line:?}");
+    }
+    let forged = seen.iter().map(ToString::to_string).find(|l| l.contains(r"F001\nbridge: wrote inverter"));
+    assert!(forged.is_some_and(|l| l.contains(r"0.00 Hz\0")), "the forged name is logged escaped: {seen:?}");
+    let mut kinds = Vec::new();
+    while let Ok(Some((topic, _))) = tokio::time::timeout(Duration::from_millis(500), watcher.recv()).await {
+        kinds.extend(Topic::parse(&topic).map(|t| t.kind));
+    }
+    assert!(!kinds.contains(&MessageType::NBirth), "no second NBIRTH: {kinds:?}");
+    assert_eq!(kinds.iter().filter(|k| **k == MessageType::NDeath).count(), 1, "only the stop's NDEATH: {kinds:?}");
 }

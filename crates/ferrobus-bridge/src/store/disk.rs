@@ -169,8 +169,14 @@ impl Disk {
         self.bytes
     }
 
-    /// Appends `record` behind every other; `Ok(false)` when the bound leaves no room for it.
-    pub(super) fn append(&mut self, record: &[u8]) -> Result<bool, StoreError> {
+    /// Whether `bytes` more fit the bound.
+    pub(super) fn has_room(&self, bytes: u64) -> bool {
+        self.bytes.saturating_add(bytes) <= self.bound
+    }
+
+    /// Appends `record` behind every other, keeping `reserved` bytes free (the memory's
+    /// records, written at close); `Ok(false)` when the bound leaves no room for it.
+    pub(super) fn append(&mut self, record: &[u8], reserved: u64) -> Result<bool, StoreError> {
         let Some(frame) = segment::frame(record) else {
             return Ok(false);
         };
@@ -178,7 +184,7 @@ impl Disk {
         let tail_end = self.segments.back().map_or(0, |tail| tail.end);
         let start_new = self.writer.is_none() || tail_end + size > self.target;
         let needed = if start_new { HEADER_LEN + size } else { size };
-        if self.bytes.saturating_add(needed) > self.bound {
+        if !self.has_room(needed.saturating_add(reserved)) {
             return Ok(false);
         }
         if start_new {

@@ -42,10 +42,13 @@
 //! last records the OS had not yet written, and deliver again records whose pops it had not.
 //!
 //! Records in memory are volatile: [`Store::close`] (or dropping the store) writes them to a
-//! new segment numbered below the head, in front of the disk's records, even past the `disk`
-//! bound (the next run then refuses new records until the files shrink below it); a killed
-//! process loses them. The first segment of an empty directory is numbered 2^32, leaving room
-//! below.
+//! new segment numbered below the head, in front of the disk's records; a killed process
+//! loses them. With a directory, `disk` bounds the files after that close too: the room the
+//! memory's records will take there (a header, and each record with its frame) is kept free
+//! on disk while they are held, so a record goes to memory only if it would fit on disk as
+//! well, and to disk only if the memory's segment still fits beside it. The memory part is
+//! then a fast front of what the disk bounds, and a clean stop never writes past the bound.
+//! The first segment of an empty directory is numbered 2^32, leaving room below.
 //!
 //! A failed write (a full disk, a directory that became unwritable) is [`StoreError::Io`]
 //! naming the path; that record is not stored, the failed bytes are cut away, and the store
@@ -63,6 +66,7 @@ use std::io;
 use std::path::PathBuf;
 
 use disk::Disk;
+use segment::{FRAME_LEN, HEADER_LEN};
 
 /// The bounds of a [`Store`] and where its disk part lives.
 #[derive(Debug, Clone, PartialEq, Eq)]
@@ -167,17 +171,21 @@ impl Store {
     }
 
     /// Appends a record behind every other: in memory while it has room and nothing is on
-    /// disk, else on disk. Over both bounds the record is refused and counted
-    /// ([`Pushed::Dropped`]); a failed write is an error and the record is not stored.
+    /// disk (and, with a directory, the disk could take it at close), else on disk. Over both
+    /// bounds the record is refused and counted ([`Pushed::Dropped`]); a failed write is an
+    /// error and the record is not stored.
     pub fn push(&mut self, record: Vec<u8>) -> Result<Pushed, StoreError> {
         let disk_empty = self.disk.as_ref().is_none_or(|d| d.records() == 0);
         let fits = self.memory_bytes.saturating_add(record.len()) <= self.memory_bound;
-        if disk_empty && fits && u32::try_from(record.len()).is_ok() {
+        let saved = self.saved_len(Some(record.len()));
+        let savable = self.disk.as_ref().is_none_or(|d| d.has_room(saved));
+        if disk_empty && fits && savable && u32::try_from(record.len()).is_ok() {
             self.memory_bytes += record.len();
             self.memory.push_back(record);
             return Ok(Pushed::Memory);
         }
-        let stored = match self.disk.as_mut().map(|disk| disk.append(&record)) {
+        let reserved = self.saved_len(None);
+        let stored = match self.disk.as_mut().map(|disk| disk.append(&record, reserved)) {
             Some(Ok(true)) => Pushed::Disk,
             None | Some(Ok(false)) => Pushed::Dropped,
             Some(Err(e)) => {
@@ -259,6 +267,17 @@ impl Store {
     /// Dropping the store does the same, logging a failure instead of returning it.
     pub fn close(mut self) -> Result<(), StoreError> {
         self.save_memory()
+    }
+
+    /// The bytes the memory's records take as a segment on disk at close, with one more record
+    /// of `extra` bytes if given (0 when there is nothing to write).
+    fn saved_len(&self, extra: Option<usize>) -> u64 {
+        let records = self.memory.len() + usize::from(extra.is_some());
+        if records == 0 {
+            return 0;
+        }
+        let bytes = self.memory_bytes.saturating_add(extra.unwrap_or(0)) as u64;
+        HEADER_LEN.saturating_add(FRAME_LEN.saturating_mul(records as u64)).saturating_add(bytes)
     }
 
     /// Writes the records in memory to a segment in front of the disk's, and forgets them.

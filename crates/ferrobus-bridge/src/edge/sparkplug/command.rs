@@ -4,7 +4,7 @@
 use std::time::SystemTime;
 
 use super::{REBIRTH, SparkplugEdge};
-use crate::edge::{Action, EdgeError, Reply};
+use crate::edge::{Action, EdgeError, MAX_METRICS_PER_COMMAND, Reply};
 use crate::sparkplug::convert::{self, to_raw};
 use crate::sparkplug::payload::{Metric, MetricValue, Payload};
 use crate::sparkplug::topic::{MessageType, Topic, parse_state, state_topic};
@@ -97,6 +97,11 @@ impl SparkplugEdge {
             Ok(p) => p,
             Err(e) => return (Vec::new(), vec![self.malformed(topic, &e)]),
         };
+        let count = payload.metrics.len();
+        if count > MAX_METRICS_PER_COMMAND {
+            let why = format!("{count} metrics, and one DCMD writes at most {MAX_METRICS_PER_COMMAND}");
+            return (Vec::new(), vec![self.refuse("DCMD", device, "the command", &why)]);
+        }
         let mut actions = Vec::new();
         let mut errors = Vec::new();
         for metric in &payload.metrics {

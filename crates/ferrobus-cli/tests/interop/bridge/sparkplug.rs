@@ -242,6 +242,8 @@ fn a_dcmd_sets_f001_on_the_drive_by_name_or_alias_and_one_out_of_range_is_refuse
     // 500 Hz is past F001's maximum (400.00 Hz); d001 is read-only: both refused, nothing written.
     dcmd(&["--metric", "F001", "--datatype", "DOUBLE", "--value", "500"]);
     dcmd(&["--metric", "d001", "--datatype", "DOUBLE", "--value", "10"]);
+    // A name that would forge a status line if it were printed raw: refused, on one line.
+    dcmd(&["--metric", FORGED, "--datatype", "DOUBLE", "--value", "0"]);
     std::thread::sleep(Duration::from_secs(1));
     assert_eq!(f001(&scene.drive), "12.25 Hz", "a refused DCMD changed F001; the bridge said:\n{}", bridge.output());
     wait_for(&scene.recorder, "DDATA", Some("inverter"), 2, Duration::from_secs(5));
@@ -250,7 +252,7 @@ fn a_dcmd_sets_f001_on_the_drive_by_name_or_alias_and_one_out_of_range_is_refuse
 
     let verdict = finish(scene, bridge, 1, &["--no-historical", "--series", "inverter/F001"]);
     verdict.assert_clean();
-    assert_eq!(verdict.summary["commands"], 4, "{verdict}");
+    assert_eq!(verdict.summary["commands"], 5, "{verdict}");
     let f001: Vec<f64> = verdict.series("inverter", "F001").iter().filter_map(|p| p["value"].as_f64()).collect();
     // Before the writes, F001's first poll may give a DDATA of its own (the DBIRTH can come first).
     let written: Vec<f64> = f001.iter().copied().skip_while(|&f| (f - 45.5).abs() > 1e-9).collect();
@@ -258,7 +260,16 @@ fn a_dcmd_sets_f001_on_the_drive_by_name_or_alias_and_one_out_of_range_is_refuse
     assert!(f001.len() <= 3, "F001 changed more often than written:\n{verdict}");
     let said = |what: &str| output.lines().any(|l| l.contains("refused") && l.contains(what));
     assert!(said("F001") && said("out of range") && said("d001 is read-only"), "the refusals are not said:\n{output}");
+    assert!(
+        !output.lines().any(|l| l.starts_with("bridge: wrote inverter F001 = 0.00 Hz")),
+        "a forged line:\n{output}"
+    );
+    assert!(said(r"F001\nbridge: wrote inverter F001 = 0.00 Hz\r"), "the forged name is not escaped:\n{output}");
 }
+
+/// A DCMD metric name holding a newline, a forged status line and a carriage return (a command
+/// line cannot carry a NUL; the library's hostile-input test sends those).
+const FORGED: &str = "F001\nbridge: wrote inverter F001 = 0.00 Hz\r";
 
 #[test]
 fn a_drive_that_goes_silent_gets_a_ddeath_and_a_dbirth_when_it_answers_again() {
