@@ -42,6 +42,8 @@
 //!   the t3.5 rule, seeded faults, a bit-level UART for endpoints at other settings.
 //! - [`line`](mod@line): the thin adapter that runs the wire on tokio's clock, for endpoints
 //!   in this process or, on Unix, other programs behind ptys.
+//! - [`log`](mod@log): [`log::escape`], how every value from outside (a certificate's role, a
+//!   metric name, a peer's text) is written into a log line: on one line, controls spelled out.
 //! - [`pcapng`]: capture files of an RTU line that tshark and Wireshark decode as Modbus RTU
 //!   (exported PDUs with the `mbrtu` dissector and ports telling queries from responses).
 //!
@@ -61,6 +63,7 @@ pub mod error;
 pub mod gateway;
 mod identity;
 pub mod line;
+pub mod log;
 pub mod pcapng;
 pub mod poll;
 pub mod port;
