@@ -24,6 +24,7 @@
 mod accept;
 
 use std::collections::VecDeque;
+use std::future::Future;
 use std::io;
 use std::sync::{Arc, Mutex, MutexGuard, PoisonError};
 use std::time::Duration;
@@ -319,27 +320,35 @@ const ANSWERING_MAX: usize = 64;
 
 /// Runs `slave` over `port`, serving through `handler`, until the port fails or closes.
 /// Returns the engine (with its counters) and the error that ended it, if any.
-pub async fn serve<F: Framing, H: Handler + Send>(
+///
+/// The engine (4 KiB with its reply queue) and the session's buffers live on the heap, once:
+/// the future holds pointers to them. (Taken by value into an `async fn`, the engine was
+/// stored in the future twice, as the argument and as the engine, and a TCP server's task per
+/// connection with it.)
+pub fn serve<'a, F: Framing + 'a, H: Handler + Send>(
     slave: Slave<F>,
     mut port: BoxPort,
-    handler: &mut H,
-    options: &mut ServerOptions,
-) -> (Slave<F>, io::Result<()>) {
-    let mut pump = Pump::new(options.timer.sleeper());
-    let mut engine = Serving { slave, handler };
-    let mut session = Replies {
-        options,
-        tx: [0u8; MAX_TX_LEN],
-        delayed: VecDeque::new(),
-        answering: VecDeque::new(),
-        last_activity: tokio::time::Instant::now(),
-        frame_began: None,
-        idle_at: None,
-        unfinished_at: None,
-        woke: false,
-    };
-    let ended = pump.run(&mut port, &mut engine, &mut session).await;
-    (engine.slave, ended)
+    handler: &'a mut H,
+    options: &'a mut ServerOptions,
+) -> impl Future<Output = (Slave<F>, io::Result<()>)> + 'a {
+    let slave = Box::new(slave);
+    async move {
+        let mut pump = Pump::new(options.timer.sleeper());
+        let mut engine = Box::new(Serving { slave: *slave, handler });
+        let mut session = Box::new(Replies {
+            options,
+            tx: [0u8; MAX_TX_LEN],
+            delayed: VecDeque::new(),
+            answering: VecDeque::new(),
+            last_activity: tokio::time::Instant::now(),
+            frame_began: None,
+            idle_at: None,
+            unfinished_at: None,
+            woke: false,
+        });
+        let ended = pump.run(&mut port, &mut *engine, &mut *session).await;
+        (engine.slave, ended)
+    }
 }
 
 /// The server's session around the pump: reports events, passes replies through the filter
