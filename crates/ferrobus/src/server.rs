@@ -331,10 +331,9 @@ pub fn serve<'a, F: Framing + 'a, H: Handler + Send>(
     handler: &'a mut H,
     options: &'a mut ServerOptions,
 ) -> impl Future<Output = (Slave<F>, io::Result<()>)> + 'a {
-    let slave = Box::new(slave);
+    let mut engine = Box::new(Serving { slave, handler });
     async move {
         let mut pump = Pump::new(options.timer.sleeper());
-        let mut engine = Box::new(Serving { slave: *slave, handler });
         let mut session = Box::new(Replies {
             options,
             tx: [0u8; MAX_TX_LEN],

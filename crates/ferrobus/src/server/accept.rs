@@ -441,7 +441,9 @@ where
         bump(&stats.accepted);
         bump(&stats.open);
         tracing::debug!(%peer, "connection accepted");
-        let served = serve(stream, peer, handshake);
+        // Pinned on the heap before it is spawned: awaited inside the task's future, a future
+        // captured by value would be stored in it twice (as the capture and as the awaited).
+        let served = Box::pin(serve(stream, peer, handshake));
         tokio::spawn(async move {
             let ended = served.await;
             report(peer, ended, &place.stats);
