@@ -22,6 +22,7 @@
 //! TCP, not answered out of order or dropped.
 
 mod accept;
+mod trim;
 
 use std::collections::VecDeque;
 use std::future::Future;

@@ -23,6 +23,7 @@ use tokio::net::{TcpListener, TcpStream};
 use tokio::sync::OwnedSemaphorePermit;
 
 use super::Closed;
+use super::trim::Bursts;
 
 /// How long accepting pauses when the process (or system) is out of file descriptors.
 pub const ACCEPT_BACKOFF: Duration = Duration::from_millis(100);
@@ -341,11 +342,22 @@ struct Place {
     _slot: OwnedSemaphorePermit,
     _share: Share,
     stats: Arc<TcpStats>,
+    bursts: Arc<Bursts>,
+}
+
+impl Place {
+    fn new(slot: OwnedSemaphorePermit, share: Share, stats: &Arc<TcpStats>, bursts: &Arc<Bursts>) -> Place {
+        let open = stats.open.fetch_add(1, Ordering::Relaxed).saturating_add(1);
+        bursts.opened(usize::try_from(open).unwrap_or(usize::MAX));
+        Place { _slot: slot, _share: share, stats: Arc::clone(stats), bursts: Arc::clone(bursts) }
+    }
 }
 
 impl Drop for Place {
+    /// Gives the place back, and after a burst of connections their freed memory.
     fn drop(&mut self) {
-        self.stats.open.fetch_sub(1, Ordering::Relaxed);
+        let open = self.stats.open.fetch_sub(1, Ordering::Relaxed).saturating_sub(1);
+        self.bursts.closed(usize::try_from(open).unwrap_or(usize::MAX));
     }
 }
 
@@ -411,12 +423,13 @@ where
     let slots = Arc::new(tokio::sync::Semaphore::new(limits.max_connections));
     let stats = Arc::clone(&limits.stats);
     let sources = Sources::new(Arc::clone(&stats));
+    let bursts = Arc::new(Bursts::default());
     let mut refusals = Throttle::default();
     loop {
         let Some((stream, peer)) = accept(&listener, &stats).await else { continue };
         let admitted = sources.admit(Source::of(peer), limits, handshakes).and_then(|(share, handshake)| {
             let slot = Arc::clone(&slots).try_acquire_owned().map_err(|_| Refusal::Full(limits.max_connections))?;
-            Ok((Place { _slot: slot, _share: share, stats: Arc::clone(&stats) }, handshake))
+            Ok((Place::new(slot, share, &stats, &bursts), handshake))
         });
         let (place, handshake) = match admitted {
             Ok(admitted) => admitted,
@@ -439,7 +452,6 @@ where
             tracing::warn!(%peer, "setting TCP_NODELAY: {e}; serving the connection anyway");
         }
         bump(&stats.accepted);
-        bump(&stats.open);
         tracing::debug!(%peer, "connection accepted");
         // Pinned on the heap before it is spawned: awaited inside the task's future, a future
         // captured by value would be stored in it twice (as the capture and as the awaited).
