@@ -24,6 +24,7 @@ use tokio::sync::OwnedSemaphorePermit;
 
 use super::Closed;
 use super::trim::Bursts;
+use crate::log::escape;
 
 /// How long accepting pauses when the process (or system) is out of file descriptors.
 pub const ACCEPT_BACKOFF: Duration = Duration::from_millis(100);
@@ -491,7 +492,10 @@ fn report(peer: SocketAddr, ended: io::Result<()>, stats: &TcpStats) {
         Ok(()) => return tracing::debug!(%peer, "connection closed"),
         Err(e) => e,
     };
-    let Some(closed) = Closed::of(&e) else { return tracing::debug!(%peer, "connection failed: {e}") };
+    // A front end's error may quote what the peer sent: escaped.
+    let Some(closed) = Closed::of(&e) else {
+        return tracing::debug!(%peer, "connection failed: {}", escape(&e.to_string()));
+    };
     bump(match closed {
         Closed::Idle(_) => &stats.closed_idle,
         Closed::UnfinishedFrame(_) => &stats.closed_unfinished,

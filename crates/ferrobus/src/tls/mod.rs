@@ -71,6 +71,7 @@ pub use policy::{Denied, Policy, PolicyError, READ_FUNCTIONS, Rights};
 pub use role::{ROLE_OID, Role, RoleError, parse_utf8_string, role_of};
 pub use serve::serve_tls_with;
 
+use crate::log::escape;
 use crate::port::{BoxPort, Connecting, Connector, Port};
 
 /// The TCP port of Modbus/TCP Security (MB-TCP-Security v36, Appendix A).
@@ -546,7 +547,8 @@ fn explain(e: io::Error) -> io::Error {
         rustls::Error::AlertReceived(_) => "the server refused the handshake",
         _ => "TLS handshake failed",
     };
-    io::Error::new(e.kind(), format!("{hint} ({tls})"))
+    // The reason may quote the server's certificate (the names it presents): escaped.
+    io::Error::new(e.kind(), format!("{hint} ({})", escape(&tls.to_string())))
 }
 
 impl crate::Transport {
@@ -602,10 +604,12 @@ pub(crate) async fn handshake(
         }
         Err(refused) => {
             stats.note_tls_refused();
+            // rustls's reasons may quote the peer's certificate (names, parse errors): escaped.
             if let Some(role) = refused.role_error() {
-                tracing::warn!(%peer, "TLS connection refused: client certificate rejected: {role}");
+                let role = role.to_string();
+                tracing::warn!(%peer, "TLS connection refused: client certificate rejected: {}", escape(&role));
             } else {
-                tracing::warn!(%peer, "{refused}");
+                tracing::warn!(%peer, "{}", escape(&refused.to_string()));
             }
             None
         }
