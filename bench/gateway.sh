@@ -80,7 +80,7 @@ run_gateway() {
     port="$("$PYTHON" -c 'import socket; s=socket.socket(); s.bind(("127.0.0.1",0)); print(s.getsockname()[1])')"
     [ "$clients" -gt 64 ] && queue=$((clients + dead_clients))
     "$FERROBUS" --port "$B" --baud "$baud" --parity "$parity" gateway --listen "127.0.0.1:$port" \
-        --queue "$queue" --max-connections 2000 "${gateway_args[@]}" 2>"$WORK/gw.err" &
+        --queue "$queue" --max-connections 2000 --max-per-source 2000 "${gateway_args[@]}" 2>"$WORK/gw.err" &
     local gw=$!
     PIDS+=("$gw")
     wait_for "$WORK/gw.err" "gateway: listening on"

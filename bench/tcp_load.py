@@ -188,7 +188,7 @@ def main():
     args = ap.parse_args()
     servers = [
         ("ferrobus sim", [args.ferrobus, "sim", "--profile", "generic", "--max-connections", "1100",
-                          "--tcp", "127.0.0.1:{port}"], "err", lambda l: l.startswith("sim: listening on")),
+                          "--max-per-source", "1100", "--tcp", "127.0.0.1:{port}"], "err", lambda l: l.startswith("sim: listening on")),
         ("pymodbus 3.16", [args.python, str(ROOT / "tests/peers/pymodbus_server.py"), "--tcp", "{port}"],
          "out", lambda l: l == "READY"),
     ]

@@ -118,6 +118,12 @@ pub(crate) struct GatewayArgs {
     #[arg(long = "max-connections", default_value_t = 1000, value_parser = clap::value_parser!(u32).range(1..))]
     max_connections: u32,
 
+    /// Connections served at once from one client address (an IPv6 /64); past it a new one from
+    /// there is closed at once, so one host cannot take every connection
+    #[arg(long = "max-per-source", value_name = "N", default_value_t = 100,
+          value_parser = clap::value_parser!(u32).range(1..))]
+    max_per_source: u32,
+
     /// Close a connection idle this long with nothing outstanding (0: never)
     #[arg(long = "idle-timeout", value_name = "DURATION", default_value = "60s", value_parser = parse_duration)]
     idle_timeout: Duration,
@@ -192,6 +198,7 @@ pub(crate) async fn run(connection: &ConnectArgs, args: &GatewayArgs) -> Result<
         max_connections: usize::try_from(args.max_connections).unwrap_or(usize::MAX),
         idle_timeout: Some(args.idle_timeout).filter(|d| !d.is_zero()),
         frame_timeout: Some(args.frame_timeout).filter(|d| !d.is_zero()),
+        max_per_source: usize::try_from(args.max_per_source).unwrap_or(usize::MAX),
         stats: Arc::default(),
     };
     let tcp = Arc::clone(&limits.stats);
@@ -294,11 +301,12 @@ fn reverse_route(text: &str) -> Result<(u8, String, u8), CliError> {
 fn print(gateway: &Gateway, tcp: &TcpCounts, secure: bool) {
     eprint!("{}", ferrobus::gateway::report(&gateway.stats(), &gateway.front_stats()));
     eprintln!(
-        "tcp: {} connections served ({} open), {} refused over --max-connections, {} accept pauses out of file \
+        "tcp: {} connections served ({} open), {} refused over --max-connections, {} over --max-per-source, {} accept pauses out of file \
          descriptors; closed: {} idle, {} unfinished frame, {} bad MBAP header",
         tcp.accepted,
         tcp.open,
         tcp.refused,
+        tcp.refused_source,
         tcp.descriptor_waits,
         tcp.closed_idle,
         tcp.closed_unfinished,
@@ -306,8 +314,9 @@ fn print(gateway: &Gateway, tcp: &TcpCounts, secure: bool) {
     );
     if secure {
         eprintln!(
-            "tls: {} handshakes refused, {} requests denied by the roles (exception 01)",
-            tcp.tls_refused, tcp.denied
+            "tls: {} handshakes refused, {} connections refused over --tls-max-handshakes-per-source, {} requests \
+             denied by the roles (exception 01)",
+            tcp.tls_refused, tcp.refused_handshakes, tcp.denied
         );
     }
 }

@@ -71,6 +71,12 @@ pub(crate) struct SimArgs {
           value_parser = clap::value_parser!(u32).range(1..))]
     max_connections: u32,
 
+    /// TCP: connections served at once from one client address (an IPv6 /64); past it a new one
+    /// from there is closed at once, so one host cannot take every connection
+    #[arg(long = "max-per-source", value_name = "N", default_value_t = 100,
+          value_parser = clap::value_parser!(u32).range(1..))]
+    max_per_source: u32,
+
     /// TCP: close a connection when nothing arrives or leaves for this long (0: never)
     #[arg(long = "idle-timeout", value_name = "DURATION", default_value = "60s", value_parser = parse_duration)]
     idle_timeout: Duration,
@@ -194,6 +200,7 @@ pub(crate) async fn run(connection: &ConnectArgs, args: &SimArgs) -> Result<(), 
     let sim = Shared::new(sim);
     let limits = TcpLimits {
         max_connections: usize::try_from(args.max_connections).unwrap_or(usize::MAX),
+        max_per_source: usize::try_from(args.max_per_source).unwrap_or(usize::MAX),
         idle_timeout: Some(args.idle_timeout).filter(|d| !d.is_zero()),
         frame_timeout: Some(args.frame_timeout).filter(|d| !d.is_zero()),
         stats: Arc::default(),
@@ -287,20 +294,22 @@ fn tcp_units(sim: &mut Sim, any_unit: bool) -> UnitSet {
 }
 
 fn print_tcp(c: &TcpCounts, tls: bool) {
-    if c.accepted == 0 && c.refused == 0 && c.descriptor_waits == 0 && c.accept_errors == 0 {
+    let refused = c.refused.saturating_add(c.refused_source).saturating_add(c.refused_handshakes);
+    if c.accepted == 0 && refused == 0 && c.descriptor_waits == 0 && c.accept_errors == 0 {
         return;
     }
     if tls {
         eprintln!(
-            "sim: tls: {} handshakes refused, {} requests denied by the roles (exception 01)",
-            c.tls_refused, c.denied
+            "sim: tls: {} handshakes refused, {} connections refused over --tls-max-handshakes-per-source, {} requests denied by the roles (exception 01)",
+            c.tls_refused, c.refused_handshakes, c.denied
         );
     }
     eprintln!(
-        "sim: tcp: {} connections served ({} open), {} refused over --max-connections, {} accept pauses out of file descriptors, {} other accept errors, {} socket-option errors; closed: {} idle, {} unfinished frame, {} bad MBAP header",
+        "sim: tcp: {} connections served ({} open), {} refused over --max-connections, {} over --max-per-source, {} accept pauses out of file descriptors, {} other accept errors, {} socket-option errors; closed: {} idle, {} unfinished frame, {} bad MBAP header",
         c.accepted,
         c.open,
         c.refused,
+        c.refused_source,
         c.descriptor_waits,
         c.accept_errors,
         c.socket_errors,

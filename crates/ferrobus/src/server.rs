@@ -10,18 +10,23 @@
 //! Over TCP ([`serve_tcp_with`]) a connection's trouble never ends the server: running out of
 //! file descriptors pauses accepting for [`ACCEPT_BACKOFF`] while the open connections are
 //! served; other accept and socket-option errors are logged and counted ([`TcpStats`]).
-//! Past [`TcpLimits::max_connections`] a new connection is accepted and closed at once. A
-//! connection is closed when it is idle for [`ServerOptions::idle_timeout`], when a frame
-//! begun is not finished within [`ServerOptions::frame_timeout`], or when its MBAP framing
+//! Past [`TcpLimits::max_connections`], or past its source's share
+//! ([`TcpLimits::max_per_source`] connections; a TLS server also bounds its source's
+//! handshakes in progress), a new connection is accepted and closed at once, so that one
+//! host cannot take every slot; idle connections are not evicted to make room ([`TcpLimits`] says
+//! why). A connection is closed when it is idle for [`ServerOptions::idle_timeout`], when a
+//! frame begun is not finished within [`ServerOptions::frame_timeout`], or when its MBAP framing
 //! is lost (a bad header: nothing after it is executed); each is logged and counted. Requests
 //! written back to back are answered in order; while the engine's reply queue is full the
 //! driver stops reading the socket, so a client that does not read its replies is slowed by
 //! TCP, not answered out of order or dropped.
 
+mod accept;
+mod trim;
+
 use std::collections::VecDeque;
 use std::future::Future;
 use std::io;
-use std::sync::atomic::{AtomicU64, Ordering};
 use std::sync::{Arc, Mutex, MutexGuard, PoisonError};
 use std::time::Duration;
 
@@ -36,6 +41,11 @@ use tokio::net::TcpListener;
 use crate::port::{BoxPort, Rs485, Transport};
 use crate::pump::{Codec, Engine, Pump, Role, Serving, Session, write_frame};
 use crate::timer::Timer;
+
+pub(crate) use accept::accept_connections;
+pub use accept::{ACCEPT_BACKOFF, TcpCounts, TcpLimits, TcpStats};
+#[cfg(feature = "tls")]
+pub(crate) use accept::{Handshake, accept_handshaking};
 
 /// What happens to a reply on its way out.
 #[derive(Clone, Copy, PartialEq, Eq, Debug)]
@@ -311,27 +321,34 @@ const ANSWERING_MAX: usize = 64;
 
 /// Runs `slave` over `port`, serving through `handler`, until the port fails or closes.
 /// Returns the engine (with its counters) and the error that ended it, if any.
-pub async fn serve<F: Framing, H: Handler + Send>(
+///
+/// The engine (4 KiB with its reply queue) and the session's buffers live on the heap, once:
+/// the future holds pointers to them. (Taken by value into an `async fn`, the engine was
+/// stored in the future twice, as the argument and as the engine, and a TCP server's task per
+/// connection with it.)
+pub fn serve<'a, F: Framing + 'a, H: Handler + Send>(
     slave: Slave<F>,
     mut port: BoxPort,
-    handler: &mut H,
-    options: &mut ServerOptions,
-) -> (Slave<F>, io::Result<()>) {
-    let mut pump = Pump::new(options.timer.sleeper());
-    let mut engine = Serving { slave, handler };
-    let mut session = Replies {
-        options,
-        tx: [0u8; MAX_TX_LEN],
-        delayed: VecDeque::new(),
-        answering: VecDeque::new(),
-        last_activity: tokio::time::Instant::now(),
-        frame_began: None,
-        idle_at: None,
-        unfinished_at: None,
-        woke: false,
-    };
-    let ended = pump.run(&mut port, &mut engine, &mut session).await;
-    (engine.slave, ended)
+    handler: &'a mut H,
+    options: &'a mut ServerOptions,
+) -> impl Future<Output = (Slave<F>, io::Result<()>)> + 'a {
+    let mut engine = Box::new(Serving { slave, handler });
+    async move {
+        let mut pump = Pump::new(options.timer.sleeper());
+        let mut session = Box::new(Replies {
+            options,
+            tx: [0u8; MAX_TX_LEN],
+            delayed: VecDeque::new(),
+            answering: VecDeque::new(),
+            last_activity: tokio::time::Instant::now(),
+            frame_began: None,
+            idle_at: None,
+            unfinished_at: None,
+            woke: false,
+        });
+        let ended = pump.run(&mut port, &mut *engine, &mut *session).await;
+        (engine.slave, ended)
+    }
 }
 
 /// The server's session around the pump: reports events, passes replies through the filter
@@ -525,125 +542,6 @@ pub async fn serve_transport<H: Handler + Send>(
     serve(Slave::new(codec, config), port, handler, options).await.1
 }
 
-/// How long accepting pauses when the process (or system) is out of file descriptors.
-pub const ACCEPT_BACKOFF: Duration = Duration::from_millis(100);
-
-/// Limits of a TCP server.
-#[derive(Clone, Debug)]
-pub struct TcpLimits {
-    /// Connections served at once; past it a new connection is accepted and closed at once
-    /// (the client sees the connection closed, not a hang), logged and counted.
-    pub max_connections: usize,
-    /// Close a connection when nothing arrives or leaves for this long, unless its
-    /// [`ServerOptions::idle_timeout`] is set.
-    pub idle_timeout: Option<Duration>,
-    /// Close a connection whose frame begun is unfinished this long, unless its
-    /// [`ServerOptions::frame_timeout`] is set.
-    pub frame_timeout: Option<Duration>,
-    /// Counts what happened, shared with whoever reports it.
-    pub stats: Arc<TcpStats>,
-}
-
-impl Default for TcpLimits {
-    /// 1,000 connections (fits the common descriptor limit of 1,024), 60 s idle, 5 s for a frame.
-    fn default() -> Self {
-        TcpLimits {
-            max_connections: 1000,
-            idle_timeout: Some(Duration::from_secs(60)),
-            frame_timeout: Some(Duration::from_secs(5)),
-            stats: Arc::default(),
-        }
-    }
-}
-
-/// What a TCP server has seen, counted as it runs.
-#[derive(Debug, Default)]
-pub struct TcpStats {
-    accepted: AtomicU64,
-    open: AtomicU64,
-    refused: AtomicU64,
-    descriptor_waits: AtomicU64,
-    accept_errors: AtomicU64,
-    socket_errors: AtomicU64,
-    closed_idle: AtomicU64,
-    closed_unfinished: AtomicU64,
-    closed_bad_header: AtomicU64,
-    tls_refused: AtomicU64,
-    denied: Arc<AtomicU64>,
-}
-
-/// A snapshot of [`TcpStats`].
-#[derive(Clone, Copy, PartialEq, Eq, Debug, Default)]
-pub struct TcpCounts {
-    /// Connections accepted and served.
-    pub accepted: u64,
-    /// Connections open now.
-    pub open: u64,
-    /// Connections closed at once because [`TcpLimits::max_connections`] were open.
-    pub refused: u64,
-    /// Times accepting paused because file descriptors ran out (EMFILE, ENFILE).
-    pub descriptor_waits: u64,
-    /// Other accept errors.
-    pub accept_errors: u64,
-    /// Errors setting a socket option on an accepted connection (it is served anyway).
-    pub socket_errors: u64,
-    /// Connections closed for being idle.
-    pub closed_idle: u64,
-    /// Connections closed for a frame begun and never finished.
-    pub closed_unfinished: u64,
-    /// Connections closed for a bad MBAP header.
-    pub closed_bad_header: u64,
-    /// TLS connections whose handshake was refused (no client certificate, an untrusted
-    /// one, a role refused, a timeout).
-    pub tls_refused: u64,
-    /// Requests denied by the roles' rights (answered with exception 01).
-    pub denied: u64,
-}
-
-impl TcpStats {
-    /// The counts now.
-    pub fn counts(&self) -> TcpCounts {
-        let get = |c: &AtomicU64| c.load(Ordering::Relaxed);
-        TcpCounts {
-            accepted: get(&self.accepted),
-            open: get(&self.open),
-            refused: get(&self.refused),
-            descriptor_waits: get(&self.descriptor_waits),
-            accept_errors: get(&self.accept_errors),
-            socket_errors: get(&self.socket_errors),
-            closed_idle: get(&self.closed_idle),
-            closed_unfinished: get(&self.closed_unfinished),
-            closed_bad_header: get(&self.closed_bad_header),
-            tls_refused: get(&self.tls_refused),
-            denied: get(&self.denied),
-        }
-    }
-}
-
-#[cfg(feature = "tls")]
-impl TcpStats {
-    /// Counts a refused TLS handshake.
-    pub(crate) fn note_tls_refused(&self) {
-        bump(&self.tls_refused);
-    }
-
-    /// The counter of requests denied by the roles' rights, to share with the checks.
-    pub(crate) fn denied_counter(&self) -> Arc<AtomicU64> {
-        Arc::clone(&self.denied)
-    }
-}
-
-fn bump(counter: &AtomicU64) {
-    counter.fetch_add(1, Ordering::Relaxed);
-}
-
-/// Whether `e` says the process or the system is out of file descriptors.
-fn out_of_descriptors(e: &io::Error) -> bool {
-    const ENFILE: i32 = 23;
-    const EMFILE: i32 = 24;
-    matches!(e.raw_os_error(), Some(ENFILE | EMFILE))
-}
-
 /// Serves Modbus/TCP (or RTU over TCP, per `transport`'s framing) on `listener` with the
 /// default [`TcpLimits`]; see [`serve_tcp_with`].
 pub async fn serve_tcp<H, O>(
@@ -689,73 +587,4 @@ where
         }
     })
     .await
-}
-
-/// The hardened accept loop every TCP front end shares: accepts on `listener` within
-/// `limits` (past [`TcpLimits::max_connections`] a connection is accepted and closed at once;
-/// out of file descriptors, accepting pauses for [`ACCEPT_BACKOFF`]; TCP_NODELAY set) and
-/// runs `serve` for each connection on its own task, counting how it ended in
-/// [`TcpLimits::stats`] (a [`Closed`] error is the server's own close). No error of a
-/// connection or of accepting one ends it: it runs until dropped.
-pub(crate) async fn accept_connections<S, Fut>(listener: TcpListener, limits: &TcpLimits, serve: S) -> io::Result<()>
-where
-    S: Fn(tokio::net::TcpStream, std::net::SocketAddr) -> Fut,
-    Fut: Future<Output = io::Result<()>> + Send + 'static,
-{
-    let slots = Arc::new(tokio::sync::Semaphore::new(limits.max_connections));
-    let stats = Arc::clone(&limits.stats);
-    loop {
-        let (stream, peer) = match listener.accept().await {
-            Ok(accepted) => accepted,
-            Err(e) if out_of_descriptors(&e) => {
-                bump(&stats.descriptor_waits);
-                let open = stats.open.load(Ordering::Relaxed);
-                tracing::warn!("accepting: {e}; pausing {ACCEPT_BACKOFF:?}, still serving the {open} open connections");
-                tokio::time::sleep(ACCEPT_BACKOFF).await;
-                continue;
-            }
-            Err(e) => {
-                bump(&stats.accept_errors);
-                tracing::warn!("accepting: {e}; going on");
-                // Not a spin if the error repeats.
-                tokio::time::sleep(Duration::from_millis(10)).await;
-                continue;
-            }
-        };
-        let Ok(slot) = Arc::clone(&slots).try_acquire_owned() else {
-            bump(&stats.refused);
-            tracing::warn!(%peer, "refused: {} connections open, the most allowed", limits.max_connections);
-            drop(stream);
-            continue;
-        };
-        if let Err(e) = stream.set_nodelay(true) {
-            bump(&stats.socket_errors);
-            tracing::warn!(%peer, "setting TCP_NODELAY: {e}; serving the connection anyway");
-        }
-        bump(&stats.accepted);
-        bump(&stats.open);
-        tracing::debug!(%peer, "connection accepted");
-        let served = serve(stream, peer);
-        let stats = Arc::clone(&stats);
-        tokio::spawn(async move {
-            match served.await {
-                Ok(()) => tracing::debug!(%peer, "connection closed"),
-                Err(e) => {
-                    match Closed::of(&e) {
-                        Some(Closed::Idle(_)) => bump(&stats.closed_idle),
-                        Some(Closed::UnfinishedFrame(_)) => bump(&stats.closed_unfinished),
-                        Some(Closed::BadHeader) => bump(&stats.closed_bad_header),
-                        None => {}
-                    }
-                    if Closed::of(&e).is_some() {
-                        tracing::info!(%peer, "{e}");
-                    } else {
-                        tracing::debug!(%peer, "connection failed: {e}");
-                    }
-                }
-            }
-            stats.open.fetch_sub(1, Ordering::Relaxed);
-            drop(slot);
-        });
-    }
 }

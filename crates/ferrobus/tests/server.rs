@@ -161,3 +161,21 @@ async fn replies_behind_a_delayed_one_wait_for_it_and_none_is_lost() {
         assert!(began.elapsed() >= Duration::from_millis(100), "reply {t} before the delayed first one");
     }
 }
+
+#[tokio::test]
+async fn a_connections_future_holds_the_engine_by_pointer_not_inline() {
+    // What a TCP server's task keeps per connection: the engine (its reply queue is most of
+    // it) once on the heap, not copied into the future as the argument and again as the
+    // engine. The bound is the engine's own size: the future holds less than one engine.
+    let (_client, server_end) = tokio::io::duplex(64);
+    let mut device = Device { registers: [0; 100], writes: 0 };
+    let mut options = options(None, None);
+    let slave = Slave::new(MbapCodec::strict(), SlaveConfig::unit(1));
+    let engine = std::mem::size_of_val(&slave);
+    let future = serve(slave, Box::new(server_end), &mut device, &mut options);
+    assert!(
+        std::mem::size_of_val(&future) < engine / 2,
+        "{} bytes of future, {engine} of engine",
+        std::mem::size_of_val(&future)
+    );
+}

@@ -3,7 +3,9 @@
 //! role its policy allows writes; a read-only role reads and gets exception 01 for writes;
 //! the NULL role (no extension) gets what the policy gives it; a role in another encoding,
 //! two role extensions, no certificate or one from another CA fail the handshake, are
-//! logged and counted; an untrusted server is refused by the client.
+//! logged and counted; an untrusted server is refused by the client. A handshake not
+//! finished in time is closed; a host holding hundreds of half-open handshakes (from
+//! 127.0.0.2) does not lock a certified client (from 127.0.0.1) out.
 
 use std::sync::Arc;
 use std::time::Duration;
@@ -103,11 +105,20 @@ addresses = [\"0-9\"]
 
 /// A server on a loopback port with `ROLES`; returns its address and its counters.
 async fn server(ca: &Ca) -> (String, Arc<ferrobus::server::TcpStats>) {
+    server_within(ca, TcpLimits::default(), |tls| tls).await
+}
+
+/// As [`server`], within `limits`, its TLS setup changed by `tune`.
+async fn server_within(
+    ca: &Ca,
+    limits: TcpLimits,
+    tune: impl FnOnce(ServerTls) -> ServerTls,
+) -> (String, Arc<ferrobus::server::TcpStats>) {
     let (chain, key) = ca.issue(true, Vec::new());
     let tls = ServerTls::new(chain, key, vec![ca.der()]).unwrap().with_policy(Policy::parse(ROLES).unwrap());
+    let tls = tune(tls);
     let listener = tokio::net::TcpListener::bind("127.0.0.1:0").await.unwrap();
     let addr = listener.local_addr().unwrap().to_string();
-    let limits = TcpLimits::default();
     let stats = Arc::clone(&limits.stats);
     let handler = Shared::new(Device { registers: [7; 100] });
     let options = || ServerOptions::new(LineTiming::unpaced(), Timer::Tokio);
@@ -292,4 +303,65 @@ async fn a_resumed_session_keeps_the_clients_role() {
     }
     assert_eq!(kinds, [Some(rustls::HandshakeKind::Full), Some(rustls::HandshakeKind::Resumed)]);
     assert_eq!(counts(&stats).denied, 2);
+}
+
+/// A TCP connection to `addr` from `source` (an address of the loopback) that begins a TLS
+/// handshake and never finishes it: a record header and part of a ClientHello.
+async fn half_open(source: &str, addr: &str) -> tokio::net::TcpStream {
+    use tokio::io::AsyncWriteExt;
+    let socket = tokio::net::TcpSocket::new_v4().unwrap();
+    socket.bind(format!("{source}:0").parse().unwrap()).unwrap();
+    let mut stream = socket.connect(addr.parse().unwrap()).await.unwrap();
+    stream.write_all(&[0x16, 0x03, 0x01, 0x01, 0x00, 0x01]).await.unwrap();
+    stream
+}
+
+#[tokio::test(start_paused = true)]
+async fn a_handshake_not_finished_within_the_timeout_is_closed_then_and_not_before() {
+    use tokio::io::AsyncReadExt;
+    let ca = Ca::new("test CA");
+    let timeout = Duration::from_secs(5);
+    let (addr, stats) = server_within(&ca, TcpLimits::default(), |tls| tls.with_handshake_timeout(timeout)).await;
+    let began = tokio::time::Instant::now();
+    let mut stream = half_open("127.0.0.1", &addr).await;
+    let mut byte = [0u8; 1];
+    // Paused time: the clock moves only to the server's next deadline, the timeout's.
+    let read = stream.read(&mut byte).await;
+    assert!(matches!(read, Ok(0) | Err(_)), "{read:?}");
+    assert!(began.elapsed() >= timeout, "closed after {:?}", began.elapsed());
+    assert_eq!(refusals(&stats, 1).await, 1);
+    let counts = counts(&stats);
+    assert_eq!((counts.open, counts.sources), (0, 0), "{counts:?}");
+}
+
+#[tokio::test]
+async fn a_certified_client_gets_in_while_another_host_holds_hundreds_of_half_open_handshakes() {
+    // 300 half-open handshakes against a cap of 64: without the per-source bound they would
+    // take every slot. Nothing times out during the test (the timeout is long), so the
+    // figures are exact on a loaded machine too.
+    const ATTACK: usize = 300;
+    let ca = Ca::new("test CA");
+    let limits = TcpLimits { max_connections: 64, ..TcpLimits::default() };
+    let tune = |tls: ServerTls| tls.with_handshake_timeout(Duration::from_secs(600));
+    let (addr, stats) = server_within(&ca, limits, tune).await;
+    let mut attacker = Vec::with_capacity(ATTACK);
+    for _ in 0..ATTACK {
+        attacker.push(half_open("127.0.0.2", &addr).await);
+    }
+    for _ in 0..10_000 {
+        let c = counts(&stats);
+        if c.accepted + c.refused_handshakes + c.refused_source >= ATTACK as u64 {
+            break;
+        }
+        tokio::time::sleep(Duration::from_millis(2)).await;
+    }
+    let held = ferrobus::tls::HANDSHAKES_PER_SOURCE;
+    let c = counts(&stats);
+    assert_eq!((c.accepted, c.refused_handshakes, c.refused), (held as u64, (ATTACK - held) as u64, 0), "{c:?}");
+    // A certified client from another address gets in, again and again.
+    for _ in 0..3 {
+        let client = client(&addr, &ca, Some(ca.issue(false, utf8_role("operator")))).await.unwrap();
+        assert_eq!(client.read_holding_registers(1, 0, 2).await.unwrap(), vec![7, 7]);
+    }
+    assert_eq!(counts(&stats).tls_refused, 0);
 }

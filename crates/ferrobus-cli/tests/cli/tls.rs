@@ -102,3 +102,15 @@ fn sim_names_the_file_and_line_of_a_bad_roles_file() {
     let err = stderr(&offline(&args).code(2));
     assert!(err.contains(&format!("{}: holds no certificate", server.key.display())), "{err}");
 }
+
+#[test]
+fn a_zero_handshake_timeout_and_zero_limits_per_source_are_refused() {
+    let err = stderr(
+        &offline(&["sim", "--profile", "generic", "--tcp", "127.0.0.1:0", "--tls-handshake-timeout", "0"]).code(2),
+    );
+    assert!(err.contains("a handshake needs some time: give a duration above 0"), "{err}");
+    for option in ["--tls-max-handshakes-per-source", "--max-per-source"] {
+        let err = stderr(&offline(&["sim", "--profile", "generic", "--tcp", "127.0.0.1:0", option, "0"]).code(2));
+        assert!(err.contains(option) && err.contains("0 is not in 1.."), "{option}: {err}");
+    }
+}

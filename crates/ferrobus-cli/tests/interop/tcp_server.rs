@@ -1,6 +1,7 @@
 //! `ferrobus sim --tcp` as a hardened Modbus/TCP server, driven by raw frames over
 //! `std::net::TcpStream`: pipelined requests, corrupt MBAP headers, unit ids over TCP, the
-//! connection cap, idle and unfinished-frame timeouts, and running out of file descriptors.
+//! connection cap and the per-source limit (127.0.0.2 another host), idle and unfinished-frame
+//! timeouts, and running out of file descriptors.
 
 use std::io::{ErrorKind, Read, Write};
 use std::net::TcpStream;
@@ -144,6 +145,39 @@ fn past_max_connections_a_new_connection_is_closed_at_once_and_the_others_are_se
         answered
     });
     assert!(served_after.is_some(), "no connection served in {tries} tries after one was closed");
+}
+
+/// A connection to `served` from `source`, an address of the loopback (127.0.0.2 is another
+/// host as far as the per-source limit goes).
+fn connect_from(source: [u8; 4], served: &Served) -> TcpStream {
+    let Link::Tcp(addr) = &served.link else { panic!("a TCP simulator") };
+    // `std` cannot bind before it connects; tokio can, on a runtime of this call's own.
+    let runtime = tokio::runtime::Builder::new_current_thread().enable_all().build().unwrap();
+    let stream = runtime.block_on(async {
+        let socket = tokio::net::TcpSocket::new_v4().unwrap();
+        socket.bind(std::net::SocketAddr::from((source, 0))).unwrap();
+        socket.connect(addr.parse().unwrap()).await.unwrap().into_std().unwrap()
+    });
+    stream.set_nonblocking(false).unwrap();
+    stream.set_read_timeout(Some(STEP)).unwrap();
+    stream
+}
+
+#[test]
+fn past_max_per_source_a_hosts_new_connection_is_closed_and_another_host_is_served() {
+    let Some(_turn) = require(&[]) else { return };
+    let served = generic(&["--max-per-source", "2"]);
+    let (this_host, other_host) = ([127, 0, 0, 1], [127, 0, 0, 2]);
+    let mut first = connect_from(other_host, &served);
+    let mut second = connect_from(other_host, &served);
+    ask(&mut first, 1, 1, &[0x03, 0x00, 0x00, 0x00, 0x01]);
+    ask(&mut second, 1, 1, &[0x03, 0x00, 0x00, 0x00, 0x01]);
+    let mut third = connect_from(other_host, &served);
+    assert!(closed_silently(&mut third), "the other host's third connection is closed");
+    let mut ours = connect_from(this_host, &served);
+    ask(&mut ours, 1, 1, &[0x03, 0x00, 0x00, 0x00, 0x01]);
+    // The other host's first two are still served.
+    ask(&mut first, 2, 1, &[0x03, 0x00, 0x00, 0x00, 0x01]);
 }
 
 #[test]

@@ -98,6 +98,25 @@ fn a_read_only_role_reads_and_its_write_gets_exception_01_and_is_logged() {
 }
 
 #[test]
+fn a_role_holding_a_newline_is_logged_escaped_on_one_line_and_forges_no_line() {
+    let Some(_turn) = require(&[]) else { return };
+    let pki = Pki::new("test CA");
+    let server = mbaps(&pki, &pki.ca());
+    let forger = pki.client("forger", Some((UTF8_STRING, "admin\n2026-12-03T00:00:00Z INFO forged")));
+    // Not a role of the roles file: every request is denied, and the denial names the role.
+    let read = ferrobus(&server, &pki.ca(), Some(&forger), &["read", "holding", "0"]);
+    assert_eq!(read.status.code(), Some(1), "stderr: {}", text(&read.stderr));
+    let denied = server.proc.wait_for(Stream::Err, |l| l.contains("denied"), LIMIT);
+    let log = server.proc.log();
+    let escaped = r"role 'admin\n2026-12-03T00:00:00Z INFO forged'";
+    assert!(denied.contains(escaped), "{denied}");
+    let accepted = log.lines().find(|l| l.contains("TLS connection accepted")).unwrap_or_default();
+    assert!(accepted.contains(escaped), "{log}");
+    // The "forged" text is never a line of its own: each line holding it holds the whole role.
+    assert!(log.lines().filter(|l| l.contains("forged")).all(|l| l.contains(escaped)), "{log}");
+}
+
+#[test]
 fn a_role_in_the_wrong_encoding_is_refused_at_the_handshake_and_logged() {
     let Some(_turn) = require(&[]) else { return };
     let pki = Pki::new("test CA");

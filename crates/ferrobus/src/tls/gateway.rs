@@ -18,7 +18,10 @@ impl Gateway {
     /// [`TcpCounts::tls_refused`](crate::server::TcpCounts::tls_refused)), then every request
     /// passes the [`Authorize`] that `authorize` makes for its peer (the gateway's rules) and
     /// then the client's role against `tls`'s policy (a denial: exception 01, logged, counted
-    /// in [`TcpCounts::denied`](crate::server::TcpCounts::denied)). Runs until dropped.
+    /// in [`TcpCounts::denied`](crate::server::TcpCounts::denied)). A connection in its
+    /// handshake counts towards its source's handshakes
+    /// ([`ServerTls::with_max_handshakes_per_source`]) until it finishes or times out. Runs until
+    /// dropped.
     pub async fn serve_tls<A>(
         &self,
         listener: TcpListener,
@@ -34,16 +37,23 @@ impl Gateway {
         let timeouts = Timeouts { idle: limits.idle_timeout, frame: limits.frame_timeout, pipeline };
         let authorize = Arc::new(authorize);
         let stats = Arc::clone(&limits.stats);
-        crate::server::accept_connections(listener, &limits, |stream, peer| {
-            let gateway = self.clone();
-            let authorize = Arc::clone(&authorize);
-            let (tls, stats) = (tls.clone(), Arc::clone(&stats));
-            async move {
-                let Some((stream, check)) = handshake(&tls, stream, peer, &stats).await else { return Ok(()) };
-                let mut chain = Chain(vec![authorize(peer), Box::new(check)]);
-                gateway.serve_connection(stream, &peer.to_string(), inbound, &mut chain, timeouts).await
-            }
-        })
+        crate::server::accept_handshaking(
+            listener,
+            &limits,
+            tls.max_handshakes_per_source(),
+            |stream, peer, in_progress| {
+                let gateway = self.clone();
+                let authorize = Arc::clone(&authorize);
+                let (tls, stats) = (tls.clone(), Arc::clone(&stats));
+                async move {
+                    let Some((stream, check)) = handshake(&tls, stream, peer, &stats, in_progress).await else {
+                        return Ok(());
+                    };
+                    let mut chain = Chain(vec![authorize(peer), Box::new(check)]);
+                    gateway.serve_connection(stream, &peer.to_string(), inbound, &mut chain, timeouts).await
+                }
+            },
+        )
         .await
     }
 }

@@ -71,13 +71,21 @@ pub use policy::{Denied, Policy, PolicyError, READ_FUNCTIONS, Rights};
 pub use role::{ROLE_OID, Role, RoleError, parse_utf8_string, role_of};
 pub use serve::serve_tls_with;
 
+use crate::log::escape;
 use crate::port::{BoxPort, Connecting, Connector, Port};
 
 /// The TCP port of Modbus/TCP Security (MB-TCP-Security v36, Appendix A).
 pub const MBAPS_PORT: u16 = 802;
 
-/// How long a TLS handshake may take before the connection is closed.
-pub const HANDSHAKE_TIMEOUT: Duration = Duration::from_secs(10);
+/// How long a TLS handshake may take before the connection is closed: a handshake on a
+/// loaded link takes well under a second, and a half-open one holds a connection slot
+/// (see [`TcpLimits`](crate::server::TcpLimits) for the per-source limits that go with it).
+pub const HANDSHAKE_TIMEOUT: Duration = Duration::from_secs(5);
+
+/// How many TLS handshakes one source may have in progress at once by default: a host
+/// opening connections in a burst finishes them well within the limit, one that holds
+/// handshakes open holds no more than these.
+pub const HANDSHAKES_PER_SOURCE: usize = 16;
 
 /// A server-side TLS connection.
 pub type ServerStream = tokio_rustls::server::TlsStream<TcpStream>;
@@ -231,6 +239,7 @@ pub struct ServerTls {
     acceptor: tokio_rustls::TlsAcceptor,
     policy: Arc<Policy>,
     handshake_timeout: Duration,
+    handshakes_per_source: usize,
 }
 
 impl fmt::Debug for ServerTls {
@@ -265,6 +274,7 @@ impl ServerTls {
             acceptor: tokio_rustls::TlsAcceptor::from(Arc::new(config)),
             policy: Arc::new(Policy::allow_all()),
             handshake_timeout: HANDSHAKE_TIMEOUT,
+            handshakes_per_source: HANDSHAKES_PER_SOURCE,
         })
     }
 
@@ -285,6 +295,23 @@ impl ServerTls {
     pub fn with_handshake_timeout(mut self, timeout: Duration) -> Self {
         self.handshake_timeout = timeout;
         self
+    }
+
+    /// How many handshakes one source (an IPv4 address, an IPv6 /64) may have in progress
+    /// at once (default [`HANDSHAKES_PER_SOURCE`]); past it a new connection from there is
+    /// accepted and closed at once, logged and counted in
+    /// [`TcpCounts::refused_handshakes`](crate::server::TcpCounts::refused_handshakes). With
+    /// [`TcpLimits::max_per_source`](crate::server::TcpLimits::max_per_source) it keeps one
+    /// host that never finishes its handshakes from locking every other out.
+    #[must_use]
+    pub fn with_max_handshakes_per_source(mut self, n: usize) -> Self {
+        self.handshakes_per_source = n;
+        self
+    }
+
+    /// The most handshakes in progress from one source.
+    pub fn max_handshakes_per_source(&self) -> usize {
+        self.handshakes_per_source
     }
 
     /// The roles' rights.
@@ -520,7 +547,8 @@ fn explain(e: io::Error) -> io::Error {
         rustls::Error::AlertReceived(_) => "the server refused the handshake",
         _ => "TLS handshake failed",
     };
-    io::Error::new(e.kind(), format!("{hint} ({tls})"))
+    // The reason may quote the server's certificate (the names it presents): escaped.
+    io::Error::new(e.kind(), format!("{hint} ({})", escape(&tls.to_string())))
 }
 
 impl crate::Transport {
@@ -557,14 +585,18 @@ impl Connector for TlsTarget {
 
 /// The TLS handshake of a server's connection from `peer`: the stream and the check of its
 /// role's rights (counting denials in `stats`), or `None` when it was refused — counted, and
-/// logged with the reason (a role refused says which and why).
+/// logged with the reason (a role refused says which and why). `in_progress` counts against
+/// the source's handshakes until the handshake is over.
 pub(crate) async fn handshake(
     tls: &ServerTls,
     stream: TcpStream,
     peer: SocketAddr,
     stats: &crate::server::TcpStats,
+    in_progress: crate::server::Handshake,
 ) -> Option<(ServerStream, RoleCheck)> {
-    match tls.accept(stream).await {
+    let accepted = tls.accept(stream).await;
+    drop(in_progress);
+    match accepted {
         Ok((stream, role)) => {
             tracing::info!(%peer, "TLS connection accepted ({role})");
             let check = RoleCheck::new(role, Arc::clone(tls.policy())).with_peer(peer).counting(stats.denied_counter());
@@ -572,10 +604,12 @@ pub(crate) async fn handshake(
         }
         Err(refused) => {
             stats.note_tls_refused();
+            // rustls's reasons may quote the peer's certificate (names, parse errors): escaped.
             if let Some(role) = refused.role_error() {
-                tracing::warn!(%peer, "TLS connection refused: client certificate rejected: {role}");
+                let role = role.to_string();
+                tracing::warn!(%peer, "TLS connection refused: client certificate rejected: {}", escape(&role));
             } else {
-                tracing::warn!(%peer, "{refused}");
+                tracing::warn!(%peer, "{}", escape(&refused.to_string()));
             }
             None
         }

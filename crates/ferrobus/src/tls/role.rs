@@ -10,6 +10,8 @@ use std::fmt;
 
 use x509_parser::prelude::{FromDer, X509Certificate};
 
+use crate::log::escape;
+
 /// The role extension's OID, 1.3.6.1.4.1.50316.802.1 (R-21).
 pub const ROLE_OID: &str = "1.3.6.1.4.1.50316.802.1";
 
@@ -26,10 +28,12 @@ pub enum Role {
 }
 
 impl fmt::Display for Role {
+    /// The role as log lines name it: the name is the certificate's text, so it is escaped
+    /// ([`escape`]): a role cannot end the line and forge the next.
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
         match self {
             Role::Null => f.write_str("the NULL role"),
-            Role::Named(name) => write!(f, "role '{name}'"),
+            Role::Named(name) => write!(f, "role '{}'", escape(name)),
         }
     }
 }
@@ -143,6 +147,12 @@ mod tests {
         assert_eq!(parse_utf8_string(b"\x0C\x80"), Err(RoleError::Malformed));
         assert_eq!(parse_utf8_string(b"\x0C\x00"), Err(RoleError::Empty));
         assert_eq!(parse_utf8_string(b"\x0C\x02\xC3\x28"), Err(RoleError::InvalidUtf8));
+    }
+
+    #[test]
+    fn a_role_is_shown_escaped_on_one_line() {
+        let role = Role::Named("admin\n2026-12-03T00:00:00Z INFO forged\0".to_string());
+        assert_eq!(role.to_string(), r"role 'admin\n2026-12-03T00:00:00Z INFO forged\0'");
     }
 
     #[test]

@@ -16,8 +16,10 @@ use crate::server::{ServerOptions, Shared, TcpLimits, serve_transport};
 /// required; a refused handshake is logged and counted in [`TcpCounts::tls_refused`](crate::server::TcpCounts::tls_refused)), then
 /// every request is checked against `tls`'s policy for the client's role, a denied one
 /// answered with exception 01 ([`Authorized`], counted in
-/// [`TcpCounts::denied`](crate::server::TcpCounts::denied)). The handshake counts towards the connection limit; it must finish
-/// within the TLS handshake timeout.
+/// [`TcpCounts::denied`](crate::server::TcpCounts::denied)). A connection in its handshake
+/// counts towards the connection limit and towards its source's handshakes
+/// ([`ServerTls::with_max_handshakes_per_source`]); the handshake must finish within `tls`'s
+/// handshake timeout ([`HANDSHAKE_TIMEOUT`](super::HANDSHAKE_TIMEOUT) unless set).
 pub async fn serve_tls_with<H, O>(
     listener: TcpListener,
     transport: Transport,
@@ -34,19 +36,26 @@ where
     let options = Arc::new(options);
     let (idle, unfinished) = (limits.idle_timeout, limits.frame_timeout);
     let stats = Arc::clone(&limits.stats);
-    crate::server::accept_connections(listener, &limits, move |stream, peer| {
-        let transport = transport.clone();
-        let handler = handler.clone();
-        let options = Arc::clone(&options);
-        let (tls, stats) = (tls.clone(), Arc::clone(&stats));
-        async move {
-            let Some((stream, check)) = handshake(&tls, stream, peer, &stats).await else { return Ok(()) };
-            let mut handler = Authorized::new(handler, check);
-            let mut options = options();
-            options.idle_timeout = options.idle_timeout.or(idle);
-            options.frame_timeout = options.frame_timeout.or(unfinished);
-            serve_transport(&transport, Box::new(stream), config, &mut handler, &mut options).await
-        }
-    })
+    crate::server::accept_handshaking(
+        listener,
+        &limits,
+        tls.max_handshakes_per_source(),
+        move |stream, peer, in_progress| {
+            let transport = transport.clone();
+            let handler = handler.clone();
+            let options = Arc::clone(&options);
+            let (tls, stats) = (tls.clone(), Arc::clone(&stats));
+            async move {
+                let Some((stream, check)) = handshake(&tls, stream, peer, &stats, in_progress).await else {
+                    return Ok(());
+                };
+                let mut handler = Authorized::new(handler, check);
+                let mut options = options();
+                options.idle_timeout = options.idle_timeout.or(idle);
+                options.frame_timeout = options.frame_timeout.or(unfinished);
+                serve_transport(&transport, Box::new(stream), config, &mut handler, &mut options).await
+            }
+        },
+    )
     .await
 }
