@@ -5,9 +5,9 @@
 //! long-lived allocation made during the burst pins it): the memory of 1,000 closed
 //! connections stayed in the process, reused by the next ones but never returned. When a
 //! burst is over — the open connections fallen to a quarter of their peak, a peak of at least
-//! [`BURST`] — the server asks glibc to return the free pages (`malloc_trim`). Elsewhere
-//! (musl, macOS, Windows) the allocators return memory by themselves, or have no such call,
-//! and this is a no-op.
+//! [`BURST`] — the server asks the allocator to return the free pages (glibc's `malloc_trim`, behind the
+//! platform seam: [`crate::sys`]). Elsewhere (musl, macOS, Windows) the allocators return
+//! memory by themselves, or have no such call, and this is a no-op.
 
 use std::sync::atomic::{AtomicUsize, Ordering};
 
@@ -38,29 +38,10 @@ impl Bursts {
         if self.peak.compare_exchange(peak, open, Ordering::Relaxed, Ordering::Relaxed).is_err() {
             return false;
         }
-        release_free_memory();
+        crate::sys::release_free_memory();
         true
     }
 }
-
-/// Returns the heap's free pages to the OS (glibc on Linux; elsewhere nothing to do).
-#[cfg(all(target_os = "linux", target_env = "gnu"))]
-#[allow(unsafe_code, reason = "glibc's malloc_trim has no safe binding in std or rustix")]
-fn release_free_memory() {
-    unsafe extern "C" {
-        /// glibc: releases free memory at the top of the heap and, since 2.8, the free whole
-        /// pages inside it; `pad` bytes are kept at the top. Returns 1 if memory was released.
-        fn malloc_trim(pad: usize) -> std::ffi::c_int;
-    }
-    // SAFETY: malloc_trim takes a plain integer and touches only the allocator's own state,
-    // under the allocator's lock; it is safe to call at any time from any thread.
-    unsafe {
-        malloc_trim(0);
-    }
-}
-
-#[cfg(not(all(target_os = "linux", target_env = "gnu")))]
-fn release_free_memory() {}
 
 #[cfg(test)]
 mod tests {

@@ -8,6 +8,7 @@
 //! | `identify` | symlink, pty, sysfs USB ids, device number | a COM name is the device's |
 //! | `TimerFd` | Linux: a timerfd in the runtime's epoll; macOS: none | none: the timer thread ([`crate::timer`]) |
 //! | `NEAR` | 3 ms | 20 ms, more than a clock tick |
+//! | `release_free_memory` | Linux with glibc: `malloc_trim`; elsewhere nothing | nothing: the allocator returns memory itself |
 //! | [`THREAD_WAIT_GRAIN`] | zero: timed waits are precise | about a tick of the system clock |
 //!
 //! Everything else — settings ([`crate::serial`]), transports, drivers, timing — is shared.
@@ -22,6 +23,14 @@ pub(crate) use unix::TimerFd;
 pub(crate) use unix::{PeerSettings, PtyWriter, identify};
 #[cfg(unix)]
 pub use unix::{Pty, TtyPort, open_serial};
+
+#[cfg(all(target_os = "linux", target_env = "gnu"))]
+pub(crate) use unix::release_free_memory;
+
+/// Returns the heap's free pages to the OS: here the allocator does so by itself (musl,
+/// macOS, Windows), or has no call for it.
+#[cfg(not(all(target_os = "linux", target_env = "gnu")))]
+pub(crate) fn release_free_memory() {}
 
 #[cfg(windows)]
 mod windows;
