@@ -101,6 +101,23 @@ fn a_missing_file_and_a_bad_broker_are_errors_without_a_line() {
 }
 
 #[test]
+fn a_mistake_on_a_10_mb_line_is_a_bounded_message_and_a_binary_file_is_named_at_its_line() {
+    let huge = format!("{HEAD}[[line.device]]\nid = \"{}\"\nunit = 1\n", "x/".repeat(5_000_000));
+    let errors = errors_of(&huge);
+    let printed = errors.join("\n");
+    assert!(printed.len() < 2_000, "{} bytes of errors for one 10 MB line", printed.len());
+    assert!(printed.starts_with("plant.toml:12:6: device id"), "{}", printed.get(..200).unwrap_or(&printed));
+    let dir = std::env::temp_dir().join(format!("ferrobus-bridge-config-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let binary = dir.join("plant.toml");
+    std::fs::write(&binary, b"[broker]\nhost = \"a\"\n\0\xff\xfe").unwrap();
+    let error = Plant::load(&binary).unwrap_err().to_string();
+    std::fs::remove_dir_all(&dir).unwrap();
+    assert!(error.contains("plant.toml:3:2: byte 0xFF is not UTF-8 text"), "{error}");
+    assert!(error.contains("binary"), "{error}");
+}
+
+#[test]
 fn errors_print_one_a_line() {
     let text =
         format!("{HEAD}[[line.device]]\nid = \"a/b\"\nunit = 300\nprofile = \"omron-3g3rx\"\npoints = [\"d001\"]\n");

@@ -26,6 +26,7 @@ use std::time::Duration;
 
 use ferrobus::poll::Group;
 use ferrobus_profile::Profile;
+use ferrobus_profile::source::{self, Place, ReadError};
 
 use crate::sparkplug::convert::UintEncoding;
 use crate::store::StoreConfig;
@@ -180,8 +181,15 @@ impl Plant {
     /// Reads and resolves `path`; relative paths in it are taken from its folder.
     pub fn load(path: &Path) -> Result<Plant, ConfigErrors> {
         let origin = path.display().to_string();
-        let text = std::fs::read_to_string(path).map_err(|e| {
-            ConfigErrors(vec![ConfigError::whole(&origin, format!("cannot read the configuration: {e}"))])
+        let text = source::read(path).map_err(|e| {
+            let error = match &e {
+                ReadError::Io(e) => ConfigError::whole(&origin, format!("cannot read the configuration: {e}")),
+                ReadError::NotText(not_text) => {
+                    let Place { line, column } = not_text.place;
+                    ConfigError { origin: origin.clone(), line, column, message: e.located().message }
+                }
+            };
+            ConfigErrors(vec![error])
         })?;
         let base_dir = path.parent().map_or_else(|| PathBuf::from("."), Path::to_path_buf);
         Plant::parse(&text, &origin, &base_dir)

@@ -8,12 +8,13 @@ use std::sync::Arc;
 use std::time::Duration;
 
 use ferrobus_profile::Profile;
+use ferrobus_profile::source::{Place, bounded};
 use serde::Deserialize;
 use toml::Spanned;
 use toml::de::{DeTable, DeValue, ValueDeserializer};
 
 use super::raw::{self, Text};
-use super::text::{duration, host_port, line_col, size};
+use super::text::{duration, host_port, size};
 use super::{Broker, BrokerTls, ConfigError, ConfigErrors, Mode, PlainConfig, Plant, SparkplugConfig};
 use crate::sparkplug::convert::UintEncoding;
 use crate::sparkplug::topic::check_id;
@@ -70,15 +71,16 @@ struct Cx<'a> {
 }
 
 impl Cx<'_> {
-    /// A problem at `span`.
+    /// A problem at `span`; the message is bounded, as every message quoting the file is.
     fn at(&mut self, span: Range<usize>, message: impl Into<String>) {
-        let (line, column) = line_col(self.text, span.start);
-        self.errors.push(ConfigError { origin: self.origin.to_string(), line, column, message: message.into() });
+        let Place { line, column } = Place::of(self.text, span.start);
+        let message = bounded(&message.into());
+        self.errors.push(ConfigError { origin: self.origin.to_string(), line, column, message });
     }
 
     /// The line of `span`, for "first at line N".
     fn line_of(&self, span: &Range<usize>) -> usize {
-        line_col(self.text, span.start).0
+        Place::of(self.text, span.start).line
     }
 
     /// A TOML reader's error, at its span (or `fallback`'s), in the file's words.

@@ -1,17 +1,7 @@
-//! The small languages inside the file's strings: durations (`250ms`), sizes (`4MiB`),
-//! `host:port`, and where a byte offset is as line and column.
+//! The small languages inside the file's strings: durations (`250ms`), sizes (`4MiB`) and
+//! `host:port`.
 
 use std::time::Duration;
-
-/// Line and column (both from 1, the column in characters) of byte `offset` of `text`.
-pub(super) fn line_col(text: &str, offset: usize) -> (usize, usize) {
-    let offset = offset.min(text.len());
-    let before = text.get(..offset).unwrap_or(text);
-    let line = before.matches('\n').count() + 1;
-    let start = before.rfind('\n').map_or(0, |i| i + 1);
-    let column = before.get(start..).map_or(0, |s| s.chars().count()) + 1;
-    (line, column)
-}
 
 /// A duration: a number and a unit, `ms`, `s`, `m` or `h` (`250ms`, `1.5s`, `2m`).
 pub(super) fn duration(s: &str) -> Result<Duration, String> {
@@ -129,14 +119,5 @@ mod tests {
         assert!(host_port("broker:0", 1883).is_err());
         assert!(host_port("::1", 1883).is_err());
         assert!(host_port(":1883", 1883).is_err());
-    }
-
-    #[test]
-    fn positions() {
-        let text = "a = 1\nbé = 2\n";
-        assert_eq!(line_col(text, 0), (1, 1));
-        assert_eq!(line_col(text, 6), (2, 1));
-        assert_eq!(line_col(text, text.find('=').unwrap()), (1, 3));
-        assert_eq!(line_col(text, text.rfind('=').unwrap()), (2, 4));
     }
 }

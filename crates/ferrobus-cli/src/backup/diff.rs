@@ -8,6 +8,7 @@ use clap::Args;
 use serde_json::{Value, json};
 
 use ferrobus_profile::Point;
+use ferrobus_profile::source::ReadError;
 
 use super::file::{Backup, Entry, State};
 use super::param::{self, shown_toml};
@@ -155,7 +156,10 @@ pub(crate) fn compare(view: Option<&View>, a: &Backup, b: &Backup) -> Vec<Differ
 /// Reads a backup file, with its path in every error.
 pub(crate) fn load(path: &Path) -> Result<Backup, CliError> {
     let shown = path.display().to_string();
-    let text = std::fs::read_to_string(path).map_err(|e| CliError::Usage(format!("cannot read {shown}: {e}")))?;
+    let text = ferrobus_profile::source::read(path).map_err(|e| match e {
+        ReadError::Io(e) => CliError::Usage(format!("cannot read {shown}: {e}")),
+        not_text @ ReadError::NotText(_) => CliError::Usage(not_text.located().in_file(&shown)),
+    })?;
     Backup::parse(&text, &shown).map_err(CliError::Usage)
 }
 

@@ -5,6 +5,7 @@
 use std::collections::BTreeMap;
 use std::fmt::Write as _;
 
+use ferrobus_profile::source;
 use serde::Deserialize;
 
 /// The format version this build writes and reads.
@@ -123,7 +124,7 @@ impl Backup {
     pub(crate) fn parse(text: &str, origin: &str) -> Result<Backup, String> {
         let doc: Doc = toml::from_str(text).map_err(|e| {
             let at = e.span().map(|s| format!(":{}", line_of(text, s.start))).unwrap_or_default();
-            format!("{origin}{at}: not a backup file: {}", e.message().trim())
+            format!("{origin}{at}: not a backup file: {}", source::bounded(e.message().trim()))
         })?;
         let header = doc.backup.into_inner();
         if header.format != FORMAT {
@@ -200,8 +201,8 @@ struct EntryDoc {
 }
 
 /// The 1-based line of byte `offset`.
-pub(crate) fn line_of(text: &str, offset: usize) -> usize {
-    text.get(..offset).unwrap_or(text).matches('\n').count() + 1
+fn line_of(text: &str, offset: usize) -> usize {
+    source::Place::of(text, offset).line
 }
 
 /// A TOML string.
