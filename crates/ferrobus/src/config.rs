@@ -30,9 +30,10 @@ pub struct ClientConfig {
     /// (the line kept closed, the reply dropped when it comes) before the next request goes
     /// out; `None`: twice the request's own timeout, so that a reply up to three timeouts
     /// after its request is still recognised as late (a device that misses a 1 s timeout
-    /// by a second is dropped, not handed to the next request) — at the price of a silent
-    /// unit costing three timeouts per request until its backoff skips it. On serial
-    /// framings only: see the master engine's owed replies ([`ferrobus_proto::master`]).
+    /// by a second is dropped, not handed to the next request) — at the price of a unit that
+    /// falls silent costing one late window once (its later timeouts owe nothing until it is
+    /// heard again). On serial framings only: see the master engine's owed replies
+    /// ([`ferrobus_proto::master`]).
     pub late_window: Option<Duration>,
 }
 
