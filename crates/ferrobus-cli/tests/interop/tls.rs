@@ -277,23 +277,29 @@ fn openssl_negotiates_tls_1_2_with_the_ecdsa_aes_128_gcm_suite_and_is_refused_tl
     assert!(logged.contains("peer is incompatible"), "{logged}");
 }
 
-#[test]
-fn the_gateway_serves_mbaps_to_a_serial_sim_with_roles_checked_per_request() {
-    let Some(_turn) = require(&[]) else { return };
-    let pki = Pki::new("test CA");
-    let (_sim, pty) = sim_pty(&["--profile", "generic"]);
+/// `ferrobus -v gateway` serving Modbus/TCP Security with `ROLES` in front of the serial line
+/// at `pty`.
+fn mbaps_gateway(pki: &Pki, pty: &Path) -> Mbaps {
     let roles = pki.dir().join("roles.toml");
     std::fs::write(&roles, ROLES).unwrap();
     let server = pki.server();
     let addr = format!("127.0.0.1:{}", free_port());
     let mut command = Command::new(env!("CARGO_BIN_EXE_ferrobus"));
-    command.args(["-v", "--port"]).arg(&pty).args(["gateway", "--listen", &addr]);
+    command.args(["-v", "--port"]).arg(pty).args(["gateway", "--listen", &addr]);
     command.arg("--tls-cert").arg(&server.cert).arg("--tls-key").arg(&server.key);
     command.arg("--tls-ca").arg(pki.ca()).arg("--roles").arg(&roles);
     let proc = Proc::spawn("ferrobus gateway (mbaps)", &mut command);
     let ready = proc.wait_for(Stream::Err, |l| l.starts_with("gateway: listening on"), LIMIT);
     assert!(ready.contains("Modbus/TCP Security"), "{ready}");
-    let gateway = Mbaps { proc, addr };
+    Mbaps { proc, addr }
+}
+
+#[test]
+fn the_gateway_serves_mbaps_to_a_serial_sim_with_roles_checked_per_request() {
+    let Some(_turn) = require(&[]) else { return };
+    let pki = Pki::new("test CA");
+    let (_sim, pty) = sim_pty(&["--profile", "generic"]);
+    let gateway = mbaps_gateway(&pki, &pty);
     // An operator writes through to the simulated device and reads it back.
     let operator = pki.client("operator", Some((UTF8_STRING, "operator")));
     let wrote = ferrobus(&gateway, &pki.ca(), Some(&operator), &["write", "register", "9", "321"]);
@@ -317,17 +323,7 @@ fn a_write_the_gateway_refuses_for_a_role_gets_a_hint_naming_the_role_setting_an
     let Some(_turn) = require(&[]) else { return };
     let pki = Pki::new("test CA");
     let (_sim, pty) = sim_pty(&["--profile", "generic"]);
-    let roles = pki.dir().join("roles.toml");
-    std::fs::write(&roles, ROLES).unwrap();
-    let server = pki.server();
-    let addr = format!("127.0.0.1:{}", free_port());
-    let mut command = Command::new(env!("CARGO_BIN_EXE_ferrobus"));
-    command.args(["--port"]).arg(&pty).args(["gateway", "--listen", &addr]);
-    command.arg("--tls-cert").arg(&server.cert).arg("--tls-key").arg(&server.key);
-    command.arg("--tls-ca").arg(pki.ca()).arg("--roles").arg(&roles);
-    let proc = Proc::spawn("ferrobus gateway (mbaps)", &mut command);
-    proc.wait_for(Stream::Err, |l| l.starts_with("gateway: listening on"), LIMIT);
-    let gateway = Mbaps { proc, addr };
+    let gateway = mbaps_gateway(&pki, &pty);
     let viewer = pki.client("viewer", Some((UTF8_STRING, "viewer")));
     let refused = ferrobus(&gateway, &pki.ca(), Some(&viewer), &["write", "register", "9", "5"]);
     let hint = text(&refused.stderr);
