@@ -19,7 +19,7 @@
 //! rumqttc ends the connection on an incoming packet over its `max_incoming_packet_size`
 //! (`PayloadSizeLimitExceeded`, a connection error): one big message on a subscribed topic
 //! would drop the session, and a retained one would drop every session after it. So rumqttc
-//! is told to take anything MQTT 3.1.1 can frame ([`MQTT_MAX_PACKET`]), and the size is
+//! is told to take anything MQTT 3.1.1 can frame (268,435,455 bytes), and the size is
 //! checked here: a message over [`MAX_MESSAGE`] becomes [`SessionEvent::Oversized`] (its
 //! topic and size, not its bytes), which the bridge counts and discards while the session
 //! goes on. rumqttc holds a packet whole before it hands it over, so the memory such a message

@@ -163,8 +163,9 @@ fn retry_interrupted<T>(mut call: impl FnMut() -> rustix::io::Result<T>) -> io::
 /// The port is opened without touching its settings and locked before it is configured, so
 /// that a port another process holds keeps its line as it is: `flock(LOCK_EX | LOCK_NB)`,
 /// which stops root too and holds on a pty, and for a real tty `TIOCEXCL`, which refuses the
-/// opens of programs that do not lock (other than root's). A held port fails with
-/// [`PortInUse`] (kind `ResourceBusy`) naming the holder where `/proc` tells it.
+/// opens of programs that do not lock (other than root's). A held port fails with an error of
+/// kind `ResourceBusy` naming the holder where `/proc` tells it, which the transport turns into
+/// [`Error::PortBusy`](crate::Error::PortBusy).
 ///
 /// A pseudo-terminal cannot always hold a parity setting or 7 data bits (Linux refuses them on
 /// a pty opened a second time); the port is then opened at 8 data bits without parity and a
