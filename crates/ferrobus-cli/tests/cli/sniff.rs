@@ -223,6 +223,9 @@ fn tshark_decodes_the_pcapng_of_every_function_code_exceptions_a_broadcast_and_a
     let mut seen = wait_for(&decoded, usize::MAX, "\"crc_ok\":false", "ferrobus sniff");
     let (unit, pdu) = SESSION[SESSION.len() - 1];
     raw(&bus.master, unit, pdu);
+    // Stop only once sniff has shown the last reply: the master has it as soon as its bytes
+    // are in, the sniffer a silence later, and a loaded machine can put SIGTERM in between.
+    seen.extend(wait_for(&decoded, usize::MAX, "\"bytes\":\"01 03 02 ", "ferrobus sniff"));
     assert!(sniffer.stop().success(), "sniff ends well on SIGTERM");
     seen.extend(decoded.iter());
     let docs: Vec<Value> = json_lines(&seen.join("\n"));
