@@ -1,4 +1,4 @@
-//! Progress bars for long commands (backup, restore): on a terminal's stderr only, so that
+//! Progress bars for long commands (backup, restore, scan): on a terminal's stderr only, so that
 //! pipes, files and tests see nothing of them.
 
 use std::io::IsTerminal;

@@ -7,7 +7,6 @@
 //! vendor and product code (or server id) it gives.
 
 use std::fmt::Write as _;
-use std::io::IsTerminal;
 use std::time::Duration;
 
 use clap::Args;
@@ -18,7 +17,7 @@ use ferrobus_proto::codes::unit;
 use ferrobus_proto::frame::LineConfig;
 use ferrobus_proto::scan::{Answer, CharFormat, Heard, Lead, Probe, ProbeFunction, ProbeTiming, rank};
 use ferrobus_sim::profile::{BUILTIN, Profile};
-use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
+use indicatif::ProgressBar;
 use serde_json::{Value, json};
 
 use crate::connect::{ConnectArgs, Rs485Arg, parse_duration};
@@ -192,19 +191,11 @@ pub(crate) async fn run(connection: &ConnectArgs, args: &ScanArgs) -> Result<(),
     let port = open_serial(&serial).map_err(|e| ferrobus::Error::io(format!("opening {path}"), e))?;
     let mut scanner = Scanner::new(port, path.clone(), config).map_err(|e| CliError::Usage(e.to_string()))?;
     let mut interrupt = Interrupt::listen()?;
-    let bar = progress_bar(scanner.first_pass_probes());
+    let bar = crate::progress::bar(usize::try_from(scanner.first_pass_probes()).unwrap_or(usize::MAX), "probes");
     let started = std::time::Instant::now();
     let mut report = Report::default();
-    let outcome = interrupt
-        .unless(scanner.run(&mut report, |event| {
-            if let Some(bar) = &bar {
-                show(bar, event);
-            }
-        }))
-        .await;
-    if let Some(bar) = &bar {
-        bar.finish_and_clear();
-    }
+    let outcome = interrupt.unless(scanner.run(&mut report, |event| show(&bar, event))).await;
+    bar.finish_and_clear();
     let elapsed = started.elapsed();
     let text = match args.output.format() {
         Format::Json => output::json_line(&as_json(&path, &lines, &report, elapsed)),
@@ -228,19 +219,6 @@ pub(crate) async fn run(connection: &ConnectArgs, args: &ScanArgs) -> Result<(),
             Ok(())
         }
     }
-}
-
-/// A progress bar with ETA on a terminal's stderr; none when stderr is not a terminal.
-fn progress_bar(probes: u64) -> Option<ProgressBar> {
-    if !std::io::stderr().is_terminal() {
-        return None;
-    }
-    let bar = ProgressBar::with_draw_target(Some(probes), ProgressDrawTarget::stderr());
-    let style =
-        ProgressStyle::with_template("{spinner} [{elapsed_precise}] {bar:30} {pos}/{len} probes, ETA {eta} {msg}")
-            .unwrap_or_else(|_| ProgressStyle::default_bar());
-    bar.set_style(style);
-    Some(bar)
 }
 
 fn show(bar: &ProgressBar, event: &Event) {
