@@ -9,6 +9,7 @@
 //! | `TimerFd` | Linux: a timerfd in the runtime's epoll; macOS: none | none: the timer thread ([`crate::timer`]) |
 //! | `NEAR` | 3 ms | 20 ms, more than a clock tick |
 //! | `release_free_memory` | Linux with glibc: `malloc_trim`; elsewhere nothing | nothing: the allocator returns memory itself |
+//! | `out_of_sockets` | EMFILE, ENFILE, ENOBUFS, ENOMEM (by name, through rustix) | WSAEMFILE, ERROR_TOO_MANY_OPEN_FILES, WSAENOBUFS |
 //! | [`THREAD_WAIT_GRAIN`] | zero: timed waits are precise | about a tick of the system clock |
 //!
 //! Everything else — settings ([`crate::serial`]), transports, drivers, timing — is shared.
@@ -19,8 +20,10 @@ use std::time::Duration;
 mod unix;
 #[cfg(target_os = "linux")]
 pub(crate) use unix::TimerFd;
+#[cfg(all(unix, test))]
+pub(crate) use unix::descriptor_table_full;
 #[cfg(unix)]
-pub(crate) use unix::{PeerSettings, PtyWriter, identify};
+pub(crate) use unix::{PeerSettings, PtyWriter, identify, out_of_sockets};
 #[cfg(unix)]
 pub use unix::{Pty, TtyPort, open_serial};
 
@@ -34,10 +37,12 @@ pub(crate) fn release_free_memory() {}
 
 #[cfg(windows)]
 mod windows;
-#[cfg(windows)]
-pub(crate) use windows::identify;
+#[cfg(all(windows, test))]
+pub(crate) use windows::descriptor_table_full;
 #[cfg(windows)]
 pub use windows::{TtyPort, open_serial};
+#[cfg(windows)]
+pub(crate) use windows::{identify, out_of_sockets};
 
 /// How late the OS may end a thread's timed wait on a condition variable: the timer thread
 /// waits that much less, then finishes with high-resolution sleeps.
