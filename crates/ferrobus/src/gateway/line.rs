@@ -13,7 +13,7 @@
 //! timeout, [`crate::ClientConfig::late_window`]) has passed; so a same-shape next request
 //! cannot take it. On top, after any request that got no usable reply, the worker keeps the
 //! line quiet for the late-reply guard ([`super::LineConfig::late_guard`]), for what else a
-//! confused device may still send. The replies dropped are counted in [`LineStats`]
+//! confused device may still send. The replies dropped are counted in [`LineTraffic`]
 //! (`late_replies`, and `early_replies` for stale ones already on their way when a request
 //! left).
 
@@ -27,7 +27,7 @@ use ferrobus_proto::{ExceptionCode, FunctionCode};
 use tokio::sync::{Notify, oneshot};
 
 use super::cache::Cache;
-use super::stats::{Ended, LineStats};
+use super::stats::{Ended, LineTraffic};
 use crate::{Client, Error};
 
 /// A request waiting for the line.
@@ -56,7 +56,7 @@ struct Queues {
 pub(crate) struct LineQueue {
     queues: Mutex<Queues>,
     ready: Notify,
-    stats: Arc<Mutex<LineStats>>,
+    stats: Arc<Mutex<LineTraffic>>,
 }
 
 /// Why a request was not queued.
@@ -67,7 +67,7 @@ pub(crate) enum Full {
 }
 
 impl LineQueue {
-    pub(crate) fn new(capacity: usize, stats: Arc<Mutex<LineStats>>) -> Self {
+    pub(crate) fn new(capacity: usize, stats: Arc<Mutex<LineTraffic>>) -> Self {
         LineQueue {
             queues: Mutex::new(Queues {
                 per_connection: HashMap::new(),
@@ -85,7 +85,7 @@ impl LineQueue {
         self.queues.lock().unwrap_or_else(PoisonError::into_inner)
     }
 
-    pub(crate) fn stats(&self) -> MutexGuard<'_, LineStats> {
+    pub(crate) fn stats(&self) -> MutexGuard<'_, LineTraffic> {
         self.stats.lock().unwrap_or_else(PoisonError::into_inner)
     }
 
