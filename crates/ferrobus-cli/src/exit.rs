@@ -20,7 +20,7 @@ use std::io;
 use std::time::Duration;
 
 use ferrobus::Error;
-use ferrobus_proto::master::Heard;
+use ferrobus_proto::master::HeardInstead;
 use ferrobus_proto::{ExceptionCode, FunctionCode, PduError};
 
 use crate::target::Target;
@@ -322,12 +322,12 @@ fn timeout_hints(target: Option<&Target>, unit: u8) -> Vec<String> {
 }
 
 /// What to check when something came instead of the reply: the checklist for what it was.
-fn heard_hints(heard: &Heard, target: Option<&Target>, unit: u8) -> Vec<String> {
+fn heard_hints(heard: &HeardInstead, target: Option<&Target>, unit: u8) -> Vec<String> {
     let trace = "-vvv traces every byte sent and received".to_string();
     let mut hints = Vec::new();
     match heard {
         // Bytes damaged on the way: the line, not the device.
-        Heard::BadChecksum { .. } | Heard::Garbage { .. } => match target {
+        HeardInstead::BadChecksum { .. } | HeardInstead::Garbage { .. } => match target {
             Some(Target::Tcp(_) | Target::Mbaps(_)) => {
                 hints.push(
                     "what came is not Modbus/TCP: is this an RTU-over-TCP gateway (--rtu-tcp), or another protocol \
@@ -341,7 +341,7 @@ fn heard_hints(heard: &Heard, target: Option<&Target>, unit: u8) -> Vec<String> 
                 hints.push(format!(
                     "baud rate and parity: this is {line}; a device set otherwise (e.g. 8E1 vs 8N1) garbles every frame"
                 ));
-                if !ascii && matches!(heard, Heard::Garbage { .. }) {
+                if !ascii && matches!(heard, HeardInstead::Garbage { .. }) {
                     hints.push("USB adapters split frames: try --low-latency or a longer --t35".into());
                 }
             }
@@ -353,7 +353,7 @@ fn heard_hints(heard: &Heard, target: Option<&Target>, unit: u8) -> Vec<String> 
                 );
             }
         },
-        Heard::OtherUnit { unit: other, .. } => {
+        HeardInstead::OtherUnit { unit: other, .. } => {
             hints.push(format!(
                 "unit {other} answered while unit {unit} was asked: is the device at address {other} (--unit {other})? \
                  Two devices with one address, or another master on the bus, look the same"
@@ -362,21 +362,21 @@ fn heard_hints(heard: &Heard, target: Option<&Target>, unit: u8) -> Vec<String> 
                 hints.push("some gateways answer under another unit id (0 or 255)".into());
             }
         }
-        Heard::OtherTransaction { .. } => {
+        HeardInstead::OtherTransaction { .. } => {
             hints.push(
                 "a late reply to an earlier request: the device answers after --timeout, raise it; or a gateway \
                  that does not echo transaction ids"
                     .into(),
             );
         }
-        Heard::TooEarly { .. } => {
+        HeardInstead::TooEarly { .. } => {
             hints.push(
                 "a reply was already on its way when the request left: a stale reply to an earlier request (an \
                  interrupted command, another master on the line), dropped; try again"
                     .into(),
             );
         }
-        Heard::WrongFunction { .. } => {
+        HeardInstead::WrongFunction { .. } => {
             hints.push(
                 "the unit is talking but did not answer this request: it may not support the function or the \
                  quantity asked, or the reply is a late one to an earlier request"
@@ -613,7 +613,7 @@ mod tests {
         Target::Serial { path: "/dev/ttyUSB0".into(), line, ascii: false }
     }
 
-    fn timeout(heard: Option<Heard>) -> CliError {
+    fn timeout(heard: Option<HeardInstead>) -> CliError {
         CliError::from(Error::Timeout { unit: 2, timeout: Duration::from_millis(300), attempts: 1, heard })
     }
 
@@ -662,7 +662,7 @@ mod tests {
 
     #[test]
     fn a_bad_checksum_gets_the_line_checklist_not_the_silence_one() {
-        let heard = Heard::BadChecksum { head: Some((2, 0x03)), expected: (2, 0x03) };
+        let heard = HeardInstead::BadChecksum { head: Some((2, 0x03)), expected: (2, 0x03) };
         let r = report(&timeout(Some(heard)), Some(&serial()), 2);
         assert_eq!(timeout(Some(heard)).exit(), Exit::Timeout);
         assert!(r.message.contains("unit 2 answered, but the checksum was wrong"), "{}", r.message);
@@ -677,16 +677,16 @@ mod tests {
     #[test]
     fn what_came_instead_picks_the_hint() {
         let tcp = Target::Tcp("127.0.0.1:502".into());
-        let garbage = Heard::Garbage { bytes: 9, reason: ferrobus_proto::DiscardReason::BadHeader };
+        let garbage = HeardInstead::Garbage { bytes: 9, reason: ferrobus_proto::DiscardReason::BadHeader };
         let hints = report(&timeout(Some(garbage)), Some(&tcp), 2).hints.join("\n");
         assert!(hints.contains("--rtu-tcp") && !hints.contains("USB"), "{hints}");
-        let other = Heard::OtherUnit { unit: 3, function: 0x03 };
+        let other = HeardInstead::OtherUnit { unit: 3, function: 0x03 };
         let hints = report(&timeout(Some(other)), Some(&serial()), 2).hints.join("\n");
         assert!(hints.contains("unit 3 answered while unit 2 was asked") && hints.contains("--unit 3"), "{hints}");
-        let late = Heard::OtherTransaction { transaction: 4, expected: 5 };
+        let late = HeardInstead::OtherTransaction { transaction: 4, expected: 5 };
         let hints = report(&timeout(Some(late)), Some(&tcp), 2).hints.join("\n");
         assert!(hints.contains("late reply") && hints.contains("transaction ids"), "{hints}");
-        let wrong = Heard::WrongFunction { function: 0x80, expected: 0x03 };
+        let wrong = HeardInstead::WrongFunction { function: 0x80, expected: 0x03 };
         assert!(report(&timeout(Some(wrong)), Some(&tcp), 2).hints[0].contains("did not answer this request"));
     }
 

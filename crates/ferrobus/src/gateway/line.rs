@@ -21,7 +21,7 @@ use std::collections::{HashMap, VecDeque};
 use std::sync::{Arc, Mutex, MutexGuard, PoisonError};
 use std::time::Duration;
 
-use ferrobus_proto::master::Heard;
+use ferrobus_proto::master::HeardInstead;
 use ferrobus_proto::pdu::Request;
 use ferrobus_proto::{ExceptionCode, FunctionCode};
 use tokio::sync::{Notify, oneshot};
@@ -221,7 +221,7 @@ fn failure(error: &Error) -> (ExceptionCode, Ended) {
     const TARGET: ExceptionCode = ExceptionCode::GatewayTargetDeviceFailedToRespond;
     match error {
         Error::Exception { code, .. } => (*code, Ended::Replied),
-        Error::Timeout { heard: Some(Heard::BadChecksum { .. }), .. } => (TARGET, Ended::BadCrc),
+        Error::Timeout { heard: Some(HeardInstead::BadChecksum { .. }), .. } => (TARGET, Ended::BadCrc),
         Error::Timeout { .. } | Error::NoReply { .. } => (TARGET, Ended::Timeout),
         Error::BadReply { .. } => (TARGET, Ended::BadReply),
         Error::Backoff { .. } => (TARGET, Ended::Skipped),
@@ -282,7 +282,7 @@ mod tests {
     #[test]
     fn failures_map_to_the_gateway_exceptions_and_are_counted_apart() {
         let timeout = |heard| Error::Timeout { unit: 1, timeout: Duration::from_millis(5), attempts: 2, heard };
-        let crc = Heard::BadChecksum { head: Some((1, 3)), expected: (1, 3) };
+        let crc = HeardInstead::BadChecksum { head: Some((1, 3)), expected: (1, 3) };
         let target = ExceptionCode::GatewayTargetDeviceFailedToRespond;
         assert_eq!(failure(&timeout(None)), (target, Ended::Timeout));
         assert_eq!(failure(&timeout(Some(crc))), (target, Ended::BadCrc));
