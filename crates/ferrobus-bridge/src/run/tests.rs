@@ -9,6 +9,8 @@ use std::time::Duration;
 use rumqttc::{AsyncClient, Event, MqttOptions, Packet, QoS};
 use tokio::sync::{mpsc, oneshot};
 
+use ferrobus::poll::FailureKind;
+
 use super::*;
 use crate::sparkplug::payload::{MetricValue, Payload};
 
@@ -160,18 +162,45 @@ async fn one_run(port: u16, store: &Path) -> (u64, u64, Report) {
     (bd_seq(&birth).expect("NBIRTH has a bdSeq"), bd_seq(&death).expect("NDEATH has a bdSeq"), report)
 }
 
+/// The status line the bridge says for a poll of a device that failed with `kind` (`None`:
+/// values).
+fn said(health: &mut Health, kind: Option<FailureKind>) -> Option<String> {
+    let result = match kind {
+        None => Ok(Vec::new()),
+        Some(kind) => Err(ferrobus::poll::Failure { kind, exception: None, diagnosis: format!("{kind:?}") }),
+    };
+    let sample = Sample {
+        group: 0,
+        seq: 0,
+        time: SystemTime::UNIX_EPOCH,
+        due: Duration::ZERO,
+        started: Duration::ZERO,
+        response_time: Duration::ZERO,
+        overrun: false,
+        result,
+        traffic: ferrobus::poll::Traffic::default(),
+    };
+    let liveness = health.observe(answered(&sample.result), 3);
+    health_status(liveness, &sample, || "d".to_string()).map(|s| s.to_string())
+}
+
 #[test]
-fn a_device_dies_after_death_after_polls_without_a_reply_and_an_exception_is_a_reply() {
-    let mut health = DeviceHealth::default();
-    assert_eq!(health.observe(Some(FailureKind::Timeout), 3), None);
-    assert_eq!(health.observe(Some(FailureKind::Crc), 3), None);
-    assert_eq!(health.observe(Some(FailureKind::Exception), 3), None, "an answer resets the count");
-    assert_eq!(health.observe(Some(FailureKind::Timeout), 3), None);
-    assert_eq!(health.observe(Some(FailureKind::Port), 3), None);
-    assert_eq!(health.observe(Some(FailureKind::Timeout), 3), Some(true), "the third silent poll in a row");
-    assert_eq!(health.observe(Some(FailureKind::Timeout), 3), None, "said once");
-    assert_eq!(health.observe(Some(FailureKind::BadReply), 3), Some(false), "a reply: back");
-    assert_eq!(health.observe(None, 3), None);
+fn the_status_lines_follow_the_edges_liveness_rule_death_after_silent_polls_and_an_exception_is_a_reply() {
+    let mut health = Health::default();
+    assert_eq!(said(&mut health, Some(FailureKind::Timeout)), None);
+    assert_eq!(said(&mut health, Some(FailureKind::Crc)), None);
+    let never = said(&mut health, Some(FailureKind::Port)).expect("given up after 3 polls");
+    assert!(never.starts_with("device d does not answer (3 polls: Port)"), "{never}");
+    assert_eq!(said(&mut health, Some(FailureKind::Exception)).as_deref(), Some("device d answers at last"));
+    assert_eq!(said(&mut health, Some(FailureKind::Timeout)), None);
+    assert_eq!(said(&mut health, Some(FailureKind::Timeout)), None);
+    assert_eq!(said(&mut health, None), None, "an answer resets the count, and is not said while alive");
+    assert_eq!(said(&mut health, Some(FailureKind::Timeout)), None);
+    assert_eq!(said(&mut health, Some(FailureKind::Garbage)), None);
+    let died = said(&mut health, Some(FailureKind::Timeout)).expect("the third silent poll in a row");
+    assert_eq!(died, "device d stopped answering (3 polls: Timeout)");
+    assert_eq!(said(&mut health, Some(FailureKind::Timeout)), None, "said once");
+    assert_eq!(said(&mut health, Some(FailureKind::BadReply)).as_deref(), Some("device d answers again"));
 }
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
