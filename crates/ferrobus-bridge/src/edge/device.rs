@@ -109,7 +109,7 @@ impl Health {
 pub(crate) fn answered<T>(result: &Result<T, ferrobus::poll::Failure>) -> bool {
     match result {
         Ok(_) => true,
-        Err(failure) => is_answer(failure.kind),
+        Err(failure) => matches!(failure.kind, FailureKind::Exception | FailureKind::BadReply),
     }
 }
 
@@ -130,11 +130,6 @@ pub(crate) struct Device {
     pub(crate) cells: Vec<Vec<CellState>>,
     /// Whether it answers.
     health: Health,
-}
-
-/// Whether a failed poll still got a reply from the device.
-fn is_answer(kind: FailureKind) -> bool {
-    matches!(kind, FailureKind::Exception | FailureKind::BadReply)
 }
 
 impl Device {
@@ -166,7 +161,8 @@ impl Device {
     pub(crate) fn apply(&mut self, group: usize, sample: &Sample) -> Option<Liveness> {
         let time = sample.time;
         let cells = self.cells.get_mut(group)?;
-        let answered = match &sample.result {
+        let answered = answered(&sample.result);
+        match &sample.result {
             Ok(readings) => {
                 for reading in readings {
                     if let Some(cell) = cells.get_mut(reading.cell) {
@@ -177,17 +173,17 @@ impl Device {
                         cell.time = time;
                     }
                 }
-                true
             }
-            Err(failure) if is_answer(failure.kind) => {
+            // A reply, but no values: every cell of the group failed with it.
+            Err(failure) if answered => {
                 for cell in cells {
                     cell.latest = Seen::Failed(failure.diagnosis.clone());
                     cell.time = time;
                 }
-                true
             }
-            Err(_) => false,
-        };
+            // Silence: the cells keep what they last read.
+            Err(_) => {}
+        }
         Some(self.health.observe(answered, self.death_after))
     }
 
