@@ -20,6 +20,7 @@ use std::io;
 use std::time::Duration;
 
 use ferrobus::Error;
+use ferrobus::port::PortFault;
 use ferrobus_proto::master::HeardInstead;
 use ferrobus_proto::{ExceptionCode, FunctionCode, PduError};
 
@@ -525,15 +526,18 @@ fn io_hint(source: &io::Error, target: Option<&Target>) -> Vec<String> {
         Some(Target::Serial { path, .. }) => Some(path.as_str()),
         _ => None,
     };
-    let hint = match (source.kind(), source.raw_os_error(), path) {
+    // What the OS's code says of a port's trouble (its numbers differ: ferrobus asks).
+    let fault = path.and_then(|_| PortFault::of(source));
+    let hint = match (source.kind(), fault, path) {
+        // First: Windows says a COM port another program has is access denied.
+        (_, Some(PortFault::Busy), Some(path)) => format!("another program has the port open (fuser {path})"),
         (io::ErrorKind::PermissionDenied, _, _) => {
             "add yourself to the dialout group (sudo usermod -aG dialout $USER), then log in again".to_string()
         }
         (io::ErrorKind::NotFound, _, Some(_)) => {
             "check the path; is the adapter plugged in? (ls /dev/serial/by-id/)".to_string()
         }
-        (_, Some(16), Some(path)) => format!("another program has the port open (fuser {path})"),
-        (_, Some(25), Some(_)) => "this is not a serial port".to_string(),
+        (_, Some(PortFault::NotSerial), Some(_)) => "this is not a serial port".to_string(),
         (io::ErrorKind::InvalidInput | io::ErrorKind::Other, _, Some(_)) => {
             "the port refused these settings: check that it supports the baud rate, data bits and parity \
              (a pty takes neither parity nor 7 data bits)"
@@ -542,9 +546,9 @@ fn io_hint(source: &io::Error, target: Option<&Target>) -> Vec<String> {
         (io::ErrorKind::ConnectionRefused, _, _) => {
             "nothing listens there: check the host and port (Modbus/TCP uses 502) and that the server runs".to_string()
         }
-        // EOF, or EIO / ENXIO / ENODEV: what reading an unplugged USB adapter gives.
+        // EOF, or what reading an unplugged USB adapter gives (EIO on Linux).
         (io::ErrorKind::UnexpectedEof | io::ErrorKind::ConnectionReset, _, Some(_))
-        | (_, Some(5 | 6 | 19), Some(_)) => {
+        | (_, Some(PortFault::Gone), Some(_)) => {
             "the port went away: was the adapter unplugged? (ls /dev/serial/by-id/)".to_string()
         }
         (io::ErrorKind::UnexpectedEof | io::ErrorKind::ConnectionReset, _, None) => {
@@ -705,8 +709,22 @@ mod tests {
         let serial_hint = report(&eof(), Some(&serial()), 1).hints.join("\n");
         assert!(serial_hint.contains("adapter unplugged") && !serial_hint.contains("server"), "{serial_hint}");
         assert!(report(&eof(), Some(&tcp), 1).hints[0].contains("the server closed the connection"));
-        let eio = CliError::from(Error::io("reading from x", io::Error::from_raw_os_error(5)));
+        // EIO on Unix, ERROR_BAD_COMMAND on Windows: the platform's code for an adapter gone.
+        let gone = if cfg!(windows) { 22 } else { 5 };
+        let eio = CliError::from(Error::io("reading from x", io::Error::from_raw_os_error(gone)));
         assert!(report(&eio, Some(&serial()), 1).hints[0].contains("adapter unplugged"));
+    }
+
+    #[test]
+    fn a_port_another_program_has_gets_its_hint_by_the_platforms_code_and_not_the_dialout_one() {
+        // EBUSY on Unix; ERROR_ACCESS_DENIED on Windows, whose kind is PermissionDenied.
+        let busy = if cfg!(windows) { 5 } else { 16 };
+        let e = CliError::from(Error::io("opening /dev/ttyUSB0", io::Error::from_raw_os_error(busy)));
+        let hints = report(&e, Some(&serial()), 1).hints;
+        assert!(hints[0].starts_with("another program has the port open"), "{hints:?}");
+        assert!(!hints.join("\n").contains("dialout"), "{hints:?}");
+        let tcp = Target::Tcp("127.0.0.1:502".into());
+        assert!(report(&e, Some(&tcp), 1).hints.iter().all(|h| !h.contains("another program")), "a port's code only");
     }
 
     #[test]

@@ -12,7 +12,7 @@ mod tty;
 
 #[cfg(test)]
 pub(crate) use errors::descriptor_table_full;
-pub(crate) use errors::out_of_sockets;
+pub(crate) use errors::{out_of_sockets, port_fault};
 #[cfg(all(target_os = "linux", target_env = "gnu"))]
 pub(crate) use heap::release_free_memory;
 pub(crate) use identity::identify;

@@ -8,7 +8,7 @@ use std::path::Path;
 
 #[cfg(test)]
 pub(crate) use errors::descriptor_table_full;
-pub(crate) use errors::out_of_sockets;
+pub(crate) use errors::{out_of_sockets, port_fault};
 pub use serial::{TtyPort, open_serial};
 
 use crate::identity::Identity;
