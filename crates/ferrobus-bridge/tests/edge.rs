@@ -498,6 +498,21 @@ fn an_answer_between_silent_polls_restarts_the_count() {
     assert_eq!(edge.stats().device_deaths, 0);
 }
 
+/// The liveness rule Sparkplug follows (the bridge's one, `edge::Health`): a device that
+/// never answered is given up after `death_after` silent polls, with no DDEATH (it was never
+/// born), and a reply that does not fit is an answer: its DBIRTH.
+#[test]
+fn a_device_that_never_answered_is_given_up_without_a_ddeath_and_born_at_its_first_answer() {
+    let plant = sparkplug_plant();
+    let (mut edge, _) = online_with_drive(&plant);
+    for i in 0..4 {
+        assert!(edge.sample(METER, 0, &failed(0, t(1000 + i), FailureKind::Timeout)).is_empty(), "silent poll {i}");
+    }
+    assert_eq!(edge.stats().device_deaths, 0, "never born, never dead");
+    let out = publishes(edge.sample(METER, 0, &failed(0, t(2000), FailureKind::BadReply)));
+    assert_eq!(out.iter().map(|p| p.topic.as_str()).collect::<Vec<_>>(), ["spBv1.0/plant/DBIRTH/edge1/meter"]);
+}
+
 // ---------------------------------------------------------------------------------------------
 // Commands.
 // ---------------------------------------------------------------------------------------------
@@ -936,6 +951,22 @@ fn plain_failures_are_bad_or_stale_once_with_the_error_and_the_device_goes_offli
     let back = publishes(edge.sample(METER, 0, &answered(0, t(7), vec![Value::Int(20), Value::Int(7)])));
     assert_eq!(back.len(), 3, "online, then every point good again");
     assert_eq!(json(&back[1])["quality"], "good");
+}
+
+/// The liveness rule plain mode follows (the bridge's one, `edge::Health`): a device that
+/// never answered gets no "offline" status when it is given up, nor stale points; its first
+/// answer, an exception included, is "online".
+#[test]
+fn plain_a_device_that_never_answered_gets_no_offline_status_and_online_at_its_first_answer() {
+    let plant = plain_plant(false);
+    let mut edge = Edge::new(&plant);
+    edge.connected(t(0));
+    for i in 0..3 {
+        assert!(publishes(edge.sample(METER, 0, &failed(0, t(1 + i), FailureKind::Timeout))).is_empty(), "poll {i}");
+    }
+    let out = publishes(edge.sample(METER, 0, &failed(0, t(5), FailureKind::Exception)));
+    assert_eq!((out[0].topic.as_str(), out[0].payload.as_slice()), ("factory/line1/meter/status", &b"online"[..]));
+    assert_eq!(out.len(), 3, "online, then its points bad: {out:?}");
 }
 
 #[test]

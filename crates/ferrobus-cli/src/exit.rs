@@ -20,7 +20,8 @@ use std::io;
 use std::time::Duration;
 
 use ferrobus::Error;
-use ferrobus_proto::master::Heard;
+use ferrobus::port::PortFault;
+use ferrobus_proto::master::HeardInstead;
 use ferrobus_proto::{ExceptionCode, FunctionCode, PduError};
 
 use crate::target::Target;
@@ -322,12 +323,12 @@ fn timeout_hints(target: Option<&Target>, unit: u8) -> Vec<String> {
 }
 
 /// What to check when something came instead of the reply: the checklist for what it was.
-fn heard_hints(heard: &Heard, target: Option<&Target>, unit: u8) -> Vec<String> {
+fn heard_hints(heard: &HeardInstead, target: Option<&Target>, unit: u8) -> Vec<String> {
     let trace = "-vvv traces every byte sent and received".to_string();
     let mut hints = Vec::new();
     match heard {
         // Bytes damaged on the way: the line, not the device.
-        Heard::BadChecksum { .. } | Heard::Garbage { .. } => match target {
+        HeardInstead::BadChecksum { .. } | HeardInstead::Garbage { .. } => match target {
             Some(Target::Tcp(_) | Target::Mbaps(_)) => {
                 hints.push(
                     "what came is not Modbus/TCP: is this an RTU-over-TCP gateway (--rtu-tcp), or another protocol \
@@ -341,7 +342,7 @@ fn heard_hints(heard: &Heard, target: Option<&Target>, unit: u8) -> Vec<String> 
                 hints.push(format!(
                     "baud rate and parity: this is {line}; a device set otherwise (e.g. 8E1 vs 8N1) garbles every frame"
                 ));
-                if !ascii && matches!(heard, Heard::Garbage { .. }) {
+                if !ascii && matches!(heard, HeardInstead::Garbage { .. }) {
                     hints.push("USB adapters split frames: try --low-latency or a longer --t35".into());
                 }
             }
@@ -353,7 +354,7 @@ fn heard_hints(heard: &Heard, target: Option<&Target>, unit: u8) -> Vec<String> 
                 );
             }
         },
-        Heard::OtherUnit { unit: other, .. } => {
+        HeardInstead::OtherUnit { unit: other, .. } => {
             hints.push(format!(
                 "unit {other} answered while unit {unit} was asked: is the device at address {other} (--unit {other})? \
                  Two devices with one address, or another master on the bus, look the same"
@@ -362,21 +363,21 @@ fn heard_hints(heard: &Heard, target: Option<&Target>, unit: u8) -> Vec<String> 
                 hints.push("some gateways answer under another unit id (0 or 255)".into());
             }
         }
-        Heard::OtherTransaction { .. } => {
+        HeardInstead::OtherTransaction { .. } => {
             hints.push(
                 "a late reply to an earlier request: the device answers after --timeout, raise it; or a gateway \
                  that does not echo transaction ids"
                     .into(),
             );
         }
-        Heard::TooEarly { .. } => {
+        HeardInstead::TooEarly { .. } => {
             hints.push(
                 "a reply was already on its way when the request left: a stale reply to an earlier request (an \
                  interrupted command, another master on the line), dropped; try again"
                     .into(),
             );
         }
-        Heard::WrongFunction { .. } => {
+        HeardInstead::WrongFunction { .. } => {
             hints.push(
                 "the unit is talking but did not answer this request: it may not support the function or the \
                  quantity asked, or the reply is a late one to an earlier request"
@@ -525,15 +526,18 @@ fn io_hint(source: &io::Error, target: Option<&Target>) -> Vec<String> {
         Some(Target::Serial { path, .. }) => Some(path.as_str()),
         _ => None,
     };
-    let hint = match (source.kind(), source.raw_os_error(), path) {
+    // What the OS's code says of a port's trouble (its numbers differ: ferrobus asks).
+    let fault = path.and_then(|_| PortFault::of(source));
+    let hint = match (source.kind(), fault, path) {
+        // First: Windows says a COM port another program has is access denied.
+        (_, Some(PortFault::Busy), Some(path)) => format!("another program has the port open (fuser {path})"),
         (io::ErrorKind::PermissionDenied, _, _) => {
             "add yourself to the dialout group (sudo usermod -aG dialout $USER), then log in again".to_string()
         }
         (io::ErrorKind::NotFound, _, Some(_)) => {
             "check the path; is the adapter plugged in? (ls /dev/serial/by-id/)".to_string()
         }
-        (_, Some(16), Some(path)) => format!("another program has the port open (fuser {path})"),
-        (_, Some(25), Some(_)) => "this is not a serial port".to_string(),
+        (_, Some(PortFault::NotSerial), Some(_)) => "this is not a serial port".to_string(),
         (io::ErrorKind::InvalidInput | io::ErrorKind::Other, _, Some(_)) => {
             "the port refused these settings: check that it supports the baud rate, data bits and parity \
              (a pty takes neither parity nor 7 data bits)"
@@ -542,9 +546,9 @@ fn io_hint(source: &io::Error, target: Option<&Target>) -> Vec<String> {
         (io::ErrorKind::ConnectionRefused, _, _) => {
             "nothing listens there: check the host and port (Modbus/TCP uses 502) and that the server runs".to_string()
         }
-        // EOF, or EIO / ENXIO / ENODEV: what reading an unplugged USB adapter gives.
+        // EOF, or what reading an unplugged USB adapter gives (EIO on Linux).
         (io::ErrorKind::UnexpectedEof | io::ErrorKind::ConnectionReset, _, Some(_))
-        | (_, Some(5 | 6 | 19), Some(_)) => {
+        | (_, Some(PortFault::Gone), Some(_)) => {
             "the port went away: was the adapter unplugged? (ls /dev/serial/by-id/)".to_string()
         }
         (io::ErrorKind::UnexpectedEof | io::ErrorKind::ConnectionReset, _, None) => {
@@ -613,7 +617,7 @@ mod tests {
         Target::Serial { path: "/dev/ttyUSB0".into(), line, ascii: false }
     }
 
-    fn timeout(heard: Option<Heard>) -> CliError {
+    fn timeout(heard: Option<HeardInstead>) -> CliError {
         CliError::from(Error::Timeout { unit: 2, timeout: Duration::from_millis(300), attempts: 1, heard })
     }
 
@@ -662,7 +666,7 @@ mod tests {
 
     #[test]
     fn a_bad_checksum_gets_the_line_checklist_not_the_silence_one() {
-        let heard = Heard::BadChecksum { head: Some((2, 0x03)), expected: (2, 0x03) };
+        let heard = HeardInstead::BadChecksum { head: Some((2, 0x03)), expected: (2, 0x03) };
         let r = report(&timeout(Some(heard)), Some(&serial()), 2);
         assert_eq!(timeout(Some(heard)).exit(), Exit::Timeout);
         assert!(r.message.contains("unit 2 answered, but the checksum was wrong"), "{}", r.message);
@@ -677,16 +681,16 @@ mod tests {
     #[test]
     fn what_came_instead_picks_the_hint() {
         let tcp = Target::Tcp("127.0.0.1:502".into());
-        let garbage = Heard::Garbage { bytes: 9, reason: ferrobus_proto::DiscardReason::BadHeader };
+        let garbage = HeardInstead::Garbage { bytes: 9, reason: ferrobus_proto::DiscardReason::BadHeader };
         let hints = report(&timeout(Some(garbage)), Some(&tcp), 2).hints.join("\n");
         assert!(hints.contains("--rtu-tcp") && !hints.contains("USB"), "{hints}");
-        let other = Heard::OtherUnit { unit: 3, function: 0x03 };
+        let other = HeardInstead::OtherUnit { unit: 3, function: 0x03 };
         let hints = report(&timeout(Some(other)), Some(&serial()), 2).hints.join("\n");
         assert!(hints.contains("unit 3 answered while unit 2 was asked") && hints.contains("--unit 3"), "{hints}");
-        let late = Heard::OtherTransaction { transaction: 4, expected: 5 };
+        let late = HeardInstead::OtherTransaction { transaction: 4, expected: 5 };
         let hints = report(&timeout(Some(late)), Some(&tcp), 2).hints.join("\n");
         assert!(hints.contains("late reply") && hints.contains("transaction ids"), "{hints}");
-        let wrong = Heard::WrongFunction { function: 0x80, expected: 0x03 };
+        let wrong = HeardInstead::WrongFunction { function: 0x80, expected: 0x03 };
         assert!(report(&timeout(Some(wrong)), Some(&tcp), 2).hints[0].contains("did not answer this request"));
     }
 
@@ -705,8 +709,22 @@ mod tests {
         let serial_hint = report(&eof(), Some(&serial()), 1).hints.join("\n");
         assert!(serial_hint.contains("adapter unplugged") && !serial_hint.contains("server"), "{serial_hint}");
         assert!(report(&eof(), Some(&tcp), 1).hints[0].contains("the server closed the connection"));
-        let eio = CliError::from(Error::io("reading from x", io::Error::from_raw_os_error(5)));
+        // EIO on Unix, ERROR_BAD_COMMAND on Windows: the platform's code for an adapter gone.
+        let gone = if cfg!(windows) { 22 } else { 5 };
+        let eio = CliError::from(Error::io("reading from x", io::Error::from_raw_os_error(gone)));
         assert!(report(&eio, Some(&serial()), 1).hints[0].contains("adapter unplugged"));
+    }
+
+    #[test]
+    fn a_port_another_program_has_gets_its_hint_by_the_platforms_code_and_not_the_dialout_one() {
+        // EBUSY on Unix; ERROR_ACCESS_DENIED on Windows, whose kind is PermissionDenied.
+        let busy = if cfg!(windows) { 5 } else { 16 };
+        let e = CliError::from(Error::io("opening /dev/ttyUSB0", io::Error::from_raw_os_error(busy)));
+        let hints = report(&e, Some(&serial()), 1).hints;
+        assert!(hints[0].starts_with("another program has the port open"), "{hints:?}");
+        assert!(!hints.join("\n").contains("dialout"), "{hints:?}");
+        let tcp = Target::Tcp("127.0.0.1:502".into());
+        assert!(report(&e, Some(&tcp), 1).hints.iter().all(|h| !h.contains("another program")), "a port's code only");
     }
 
     #[test]

@@ -14,7 +14,7 @@
 use std::time::Duration;
 
 use clap::Args;
-use ferrobus::line::{Line, LineFaults, LineOptions, LineStats};
+use ferrobus::line::{Line, LineFaults, LineOptions, WireStats};
 
 use crate::connect::{ConnectArgs, parse_duration};
 use crate::exit::CliError;
@@ -202,7 +202,7 @@ fn record_tap(
     Ok(())
 }
 
-fn print_stats(s: &LineStats) {
+fn print_stats(s: &WireStats) {
     eprintln!(
         "line: {} characters, {} frames, {} discards, {} collisions; faults: {} bit errors, {} corrupted, {} lost, {} gaps stretched, {} noise characters",
         s.characters, s.frames, s.discards, s.collisions, s.bit_errors, s.corrupted, s.dropped, s.stretched, s.noise
@@ -222,7 +222,7 @@ fn print_stats(s: &LineStats) {
     }
 }
 
-fn stats_json(s: &LineStats) -> serde_json::Value {
+fn stats_json(s: &WireStats) -> serde_json::Value {
     serde_json::json!({
         "characters": s.characters, "frames": s.frames, "discards": s.discards, "collisions": s.collisions,
         "bit_errors": s.bit_errors, "corrupted": s.corrupted, "dropped": s.dropped, "stretched": s.stretched,

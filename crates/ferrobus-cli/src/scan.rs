@@ -15,7 +15,7 @@ use ferrobus::port::open_serial;
 use ferrobus::scan::{Device, Event, Identification, LeadFound, Report, ScanConfig, Scanner};
 use ferrobus_proto::codes::unit;
 use ferrobus_proto::frame::LineConfig;
-use ferrobus_proto::scan::{Answer, CharFormat, Heard, Lead, Probe, ProbeFunction, ProbeTiming, rank};
+use ferrobus_proto::scan::{Answer, CharFormat, Lead, LineActivity, Probe, ProbeFunction, ProbeTiming, rank};
 use ferrobus_sim::profile::{BUILTIN, Profile};
 use indicatif::ProgressBar;
 use serde_json::{Value, json};
@@ -262,19 +262,19 @@ fn describe_lead(lead: &Lead) -> String {
     }
 }
 
-fn describe_heard(heard: &Heard) -> String {
+fn describe_heard(heard: &LineActivity) -> String {
     match heard {
-        Heard::Traffic { units, requests, responses, either } => format!(
+        LineActivity::Traffic { units, requests, responses, either } => format!(
             "another master: CRC-valid frames to/from unit{} {} ({requests} requests, {responses} responses{})",
             if units.iter().count() == 1 { "" } else { "s" },
             units.iter().map(|u| u.to_string()).collect::<Vec<_>>().join(", "),
             if *either > 0 { format!(", {either} either") } else { String::new() }
         ),
-        Heard::Noise { bad_checksums, bytes } => format!(
+        LineActivity::Noise { bad_checksums, bytes } => format!(
             "{bytes} byte{} that made no valid frame ({bad_checksums} with a wrong CRC): something talks at other settings",
             plural(usize::try_from(*bytes).unwrap_or(usize::MAX))
         ),
-        Heard::Quiet => "quiet".into(),
+        LineActivity::Quiet => "quiet".into(),
     }
 }
 
@@ -493,7 +493,7 @@ fn as_json(path: &str, lines: &[LineConfig], report: &Report, elapsed: Duration)
         .masters
         .iter()
         .map(|m| match m.heard {
-            Heard::Traffic { units, requests, responses, either } => json!({
+            LineActivity::Traffic { units, requests, responses, either } => json!({
                 "settings": m.line.to_string(),
                 "units": units.iter().collect::<Vec<_>>(),
                 "requests": requests,

@@ -17,7 +17,7 @@
 //!   counted; only the reply can end the wait. A reply that does not answer the request (wrong
 //!   byte count, a write echo that differs) fails it.
 //! - **What was heard.** A timeout says what came instead of the reply, if anything
-//!   ([`Heard`]): a frame with a broken checksum, bytes that made no frame, a frame from
+//!   ([`HeardInstead`]): a frame with a broken checksum, bytes that made no frame, a frame from
 //!   another unit, under another transaction id, or with another function code. Silence,
 //!   garbage, a bad CRC and the wrong unit are different diagnoses.
 //! - **Outcomes.** An exception reply is a [`Completion::Exception`], a result like any other;
@@ -44,7 +44,7 @@
 //!   so a reply that begins sooner than [`MasterConfig::min_reply_delay`] after the end of
 //!   our transmission was on its way already (a stale reply to an earlier request, left in
 //!   the port's or the adapter's buffer): it is dropped, counted in
-//!   [`MasterStats::early_replies`] and named in the timeout ([`Heard::TooEarly`]). The
+//!   [`MasterStats::early_replies`] and named in the timeout ([`HeardInstead::TooEarly`]). The
 //!   driver sets it for ports with a wire only: a pty delivers our request at once, and a
 //!   peer on it may answer within microseconds (libmodbus does, 0.26 ms after a request that
 //!   would take 4.6 ms on a 19200-baud wire).
@@ -107,7 +107,7 @@ pub enum MasterError {
         /// The time waited after the request had left.
         waited: Duration,
         /// What came instead of the reply, if anything: `None` is silence.
-        heard: Option<Heard>,
+        heard: Option<HeardInstead>,
     },
     /// A frame from the right unit with the right function code, but a malformed PDU.
     BadResponse(PduError),
@@ -142,11 +142,12 @@ impl fmt::Display for MasterError {
 
 impl core::error::Error for MasterError {}
 
-/// What the master heard while it waited for a reply, instead of the reply: carried by
+/// What the master heard while it waited for a reply, instead of the reply (a frame, bytes,
+/// an early reply: not the activity a scan's listener sums up): carried by
 /// [`MasterError::Timeout`]. When several things came, the one that tells most about the unit
-/// asked is kept (see [`Heard::weight`]), the latest of equal weight.
+/// asked is kept (see [`HeardInstead::weight`]), the latest of equal weight.
 #[derive(Clone, Copy, PartialEq, Eq, Debug)]
-pub enum Heard {
+pub enum HeardInstead {
     /// A frame whose checksum (RTU CRC, ASCII LRC) was wrong: noise on the line, a missing
     /// termination, or a baud rate or parity that does not match.
     BadChecksum {
@@ -198,29 +199,31 @@ pub enum Heard {
     },
 }
 
-impl Heard {
+impl HeardInstead {
     /// How much it says about the unit asked: a valid frame from it (3), a broken frame that
     /// names it (2), broken bytes (1), another unit's frame, which may be other traffic (0).
     pub fn weight(&self) -> u8 {
         match *self {
-            Heard::OtherTransaction { .. } | Heard::WrongFunction { .. } | Heard::TooEarly { .. } => 3,
-            Heard::BadChecksum { head: Some((from, _)), expected: (unit, _) } if from == unit => 2,
-            Heard::BadChecksum { .. } | Heard::Garbage { .. } => 1,
-            Heard::OtherUnit { .. } => 0,
+            HeardInstead::OtherTransaction { .. }
+            | HeardInstead::WrongFunction { .. }
+            | HeardInstead::TooEarly { .. } => 3,
+            HeardInstead::BadChecksum { head: Some((from, _)), expected: (unit, _) } if from == unit => 2,
+            HeardInstead::BadChecksum { .. } | HeardInstead::Garbage { .. } => 1,
+            HeardInstead::OtherUnit { .. } => 0,
         }
     }
 
     /// Whether it is bytes damaged on the way (a bad checksum, or no frame at all): a line
     /// problem rather than a device one.
     pub fn is_damage(&self) -> bool {
-        matches!(self, Heard::BadChecksum { .. } | Heard::Garbage { .. })
+        matches!(self, HeardInstead::BadChecksum { .. } | HeardInstead::Garbage { .. })
     }
 }
 
-impl fmt::Display for Heard {
+impl fmt::Display for HeardInstead {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
         match *self {
-            Heard::BadChecksum { head: Some((from, fc)), expected: (unit, function) } if from == unit => {
+            HeardInstead::BadChecksum { head: Some((from, fc)), expected: (unit, function) } if from == unit => {
                 write!(f, "unit {unit} answered, but the checksum was wrong ")?;
                 if fc & !FunctionCode::EXCEPTION_BIT == function {
                     write!(f, "(function code 0x{fc:02X}, as asked)")
@@ -228,24 +231,24 @@ impl fmt::Display for Heard {
                     write!(f, "(function code 0x{fc:02X}, expected 0x{function:02X})")
                 }
             }
-            Heard::BadChecksum { head: Some((from, fc)), .. } => {
+            HeardInstead::BadChecksum { head: Some((from, fc)), .. } => {
                 write!(f, "a frame with a wrong checksum came (address {from}, function code 0x{fc:02X})")
             }
-            Heard::BadChecksum { head: None, .. } => f.write_str("a frame with a wrong checksum came"),
-            Heard::Garbage { bytes, reason } => {
+            HeardInstead::BadChecksum { head: None, .. } => f.write_str("a frame with a wrong checksum came"),
+            HeardInstead::Garbage { bytes, reason } => {
                 write!(f, "{bytes} byte{} came that made no frame ({reason})", if bytes == 1 { "" } else { "s" })
             }
-            Heard::OtherUnit { unit, function } => {
+            HeardInstead::OtherUnit { unit, function } => {
                 write!(f, "unit {unit} sent a frame (function code 0x{function:02X}) instead, ignored")
             }
-            Heard::OtherTransaction { transaction, expected } => {
+            HeardInstead::OtherTransaction { transaction, expected } => {
                 write!(f, "a reply came under transaction id {transaction}, not {expected}, ignored")
             }
-            Heard::WrongFunction { function, expected } => write!(
+            HeardInstead::WrongFunction { function, expected } => write!(
                 f,
                 "the unit sent a frame with function code 0x{function:02X} instead of 0x{expected:02X}, ignored"
             ),
-            Heard::TooEarly { after, earliest } => write!(
+            HeardInstead::TooEarly { after, earliest } => write!(
                 f,
                 "a reply {} µs after the request, earlier than any slave can answer (not before {} µs): a stale reply, ignored",
                 after.as_micros(),
@@ -428,7 +431,7 @@ struct Core {
     reply_len: usize,
     outcome: Option<Outcome>,
     /// What came instead of the reply during this attempt.
-    heard: Option<Heard>,
+    heard: Option<HeardInstead>,
     last_activity: Option<Instant>,
     /// When the frame now being received began: the chunk its first byte came in.
     rx_start: Instant,
@@ -705,7 +708,7 @@ impl Core {
     }
 
     /// Keeps `heard` unless something that tells more was heard already.
-    fn hear(&mut self, heard: Heard) {
+    fn hear(&mut self, heard: HeardInstead) {
         if self.heard.is_none_or(|kept| heard.weight() >= kept.weight()) {
             self.heard = Some(heard);
         }
@@ -726,8 +729,10 @@ impl Core {
             RxEvent::Discarded { bytes, reason, head, .. } => {
                 if awaiting {
                     self.hear(match reason {
-                        DiscardReason::ChecksumMismatch => Heard::BadChecksum { head, expected: (self.unit, asked) },
-                        reason => Heard::Garbage { bytes, reason },
+                        DiscardReason::ChecksumMismatch => {
+                            HeardInstead::BadChecksum { head, expected: (self.unit, asked) }
+                        }
+                        reason => HeardInstead::Garbage { bytes, reason },
                     });
                 } else if reason == DiscardReason::ChecksumMismatch && self.owed.is_some_and(|o| o.is_named_by(head)) {
                     // The owed reply, damaged: it came, so nothing is owed any more.
@@ -761,11 +766,11 @@ impl Core {
             // Not the reply (perhaps a late one to an earlier request), but worth naming if
             // the wait ends without one.
             self.hear(if !from_unit {
-                Heard::OtherUnit { unit: frame.header.unit, function }
+                HeardInstead::OtherUnit { unit: frame.header.unit, function }
             } else if !in_transaction {
-                Heard::OtherTransaction { transaction: frame.header.transaction, expected: self.transaction }
+                HeardInstead::OtherTransaction { transaction: frame.header.transaction, expected: self.transaction }
             } else {
-                Heard::WrongFunction { function, expected: asked }
+                HeardInstead::WrongFunction { function, expected: asked }
             });
             self.stats.ignored_frames = self.stats.ignored_frames.wrapping_add(1);
             return;
@@ -806,7 +811,7 @@ impl Core {
         if after >= earliest {
             return false;
         }
-        self.hear(Heard::TooEarly { after, earliest });
+        self.hear(HeardInstead::TooEarly { after, earliest });
         true
     }
 
@@ -815,7 +820,7 @@ impl Core {
     /// replies carry no transaction id (not Modbus/TCP, whose ids tell a late reply apart).
     fn owe_reply(&mut self, now: Instant) {
         let answered =
-            matches!(self.heard, Some(Heard::BadChecksum { head: Some((from, _)), .. }) if from == self.unit);
+            matches!(self.heard, Some(HeardInstead::BadChecksum { head: Some((from, _)), .. }) if from == self.unit);
         if answered || !self.serial || self.silent_unit == Some(self.unit) {
             return;
         }

@@ -16,15 +16,15 @@
 //!   that did not frame are a [`Lead`] (something answers, at other settings or over noise),
 //!   another unit's frame is other traffic, nothing is silence.
 //! - **Listening.** [`Listener`] takes (now, bytes) from a line it does not transmit on and says
-//!   whether another master is active there ([`Heard::Traffic`], with the units), whether
-//!   something talks at other settings ([`Heard::Noise`]), or whether the line is quiet.
+//!   whether another master is active there ([`LineActivity::Traffic`], with the units), whether
+//!   something talks at other settings ([`LineActivity::Noise`]), or whether the line is quiet.
 
 use core::time::Duration;
 
 use crate::codes::ExceptionCode;
 use crate::error::{DiscardReason, PduError};
 use crate::frame::{Direction, Expect, Framing, LineConfig, LineTiming, Parity, RxEvent, StopBits, expire, feed, rtu};
-use crate::master::Heard as MasterHeard;
+use crate::master::HeardInstead;
 use crate::pdu::{ReadBits, ReadRegisters, Request};
 use crate::slave::UnitSet;
 use crate::time::Instant;
@@ -287,14 +287,16 @@ pub enum Answer {
 impl Answer {
     /// What a probe that got no usable reply heard, from the master's diagnosis of its
     /// timeout (`None`: silence).
-    pub fn from_heard(heard: Option<MasterHeard>) -> Answer {
+    pub fn from_heard(heard: Option<HeardInstead>) -> Answer {
         match heard {
             None => Answer::Silence,
-            Some(MasterHeard::BadChecksum { head, .. }) => Answer::Lead(Lead::BadChecksum { head }),
-            Some(MasterHeard::Garbage { bytes, reason }) => Answer::Lead(Lead::Garbage { bytes, reason }),
-            Some(MasterHeard::OtherUnit { unit, function }) => Answer::OtherTraffic { unit, function },
+            Some(HeardInstead::BadChecksum { head, .. }) => Answer::Lead(Lead::BadChecksum { head }),
+            Some(HeardInstead::Garbage { bytes, reason }) => Answer::Lead(Lead::Garbage { bytes, reason }),
+            Some(HeardInstead::OtherUnit { unit, function }) => Answer::OtherTraffic { unit, function },
             Some(
-                MasterHeard::OtherTransaction { .. } | MasterHeard::WrongFunction { .. } | MasterHeard::TooEarly { .. },
+                HeardInstead::OtherTransaction { .. }
+                | HeardInstead::WrongFunction { .. }
+                | HeardInstead::TooEarly { .. },
             ) => Answer::Mismatch,
         }
     }
@@ -310,9 +312,11 @@ impl Answer {
     }
 }
 
-/// What a [`Listener`] made of what it heard.
+/// The activity a [`Listener`] found on a line at one setting: another master's traffic,
+/// noise, or quiet. (What a master heard instead of the reply it waited for is
+/// [`HeardInstead`].)
 #[derive(Clone, Copy, PartialEq, Eq, Debug)]
-pub enum Heard {
+pub enum LineActivity {
     /// CRC-valid frames: another master is active at these settings.
     Traffic {
         /// Every unit address seen in a valid frame (0 for broadcasts).
@@ -393,9 +397,9 @@ impl Listener {
 
     /// What was heard so far. Call [`Listener::handle_timeout`] at the end of listening first,
     /// so that a frame still open is decided.
-    pub fn heard(&self) -> Heard {
+    pub fn heard(&self) -> LineActivity {
         if !self.units.is_empty() {
-            return Heard::Traffic {
+            return LineActivity::Traffic {
                 units: self.units,
                 requests: self.requests,
                 responses: self.responses,
@@ -403,9 +407,9 @@ impl Listener {
             };
         }
         if self.discarded > 0 {
-            return Heard::Noise { bad_checksums: self.bad_checksums, bytes: self.discarded };
+            return LineActivity::Noise { bad_checksums: self.bad_checksums, bytes: self.discarded };
         }
-        Heard::Quiet
+        LineActivity::Quiet
     }
 
     fn add(&mut self, tally: &Tally) {

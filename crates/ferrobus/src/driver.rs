@@ -21,7 +21,7 @@ use std::collections::HashMap;
 use std::sync::{Arc, Mutex, PoisonError};
 
 use ferrobus_proto::frame::Framing;
-use ferrobus_proto::master::{Completion, Heard, MAX_TX_LEN, Master, MasterConfig, MasterError, MasterStats};
+use ferrobus_proto::master::{Completion, HeardInstead, MAX_TX_LEN, Master, MasterConfig, MasterError, MasterStats};
 use ferrobus_proto::pdu::{MAX_PDU_LEN, Request, Response};
 use ferrobus_proto::retry::{Admit, IoBackoff, Outcome, UnitHealth, should_retry};
 #[cfg(doc)]
@@ -156,7 +156,7 @@ impl<F: Framing + Send + 'static> Driver<F> {
         let retries = if probe { 0 } else { command.options.retries };
         let function = FunctionCode::from_u8(command.pdu.first().copied().unwrap_or_default());
         let mut attempts = 0;
-        let mut heard: Option<Heard> = None;
+        let mut heard: Option<HeardInstead> = None;
         loop {
             attempts += 1;
             let result = self.transact(command).await;

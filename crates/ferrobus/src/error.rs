@@ -9,7 +9,7 @@ use std::io;
 use std::sync::Arc;
 use std::time::Duration;
 
-use ferrobus_proto::master::{Heard, MasterError};
+use ferrobus_proto::master::{HeardInstead, MasterError};
 use ferrobus_proto::{ExceptionCode, FunctionCode, PduError};
 
 /// Everything that can go wrong with a request. New variants may come: match with a `_` arm.
@@ -44,8 +44,8 @@ pub enum Error {
         /// How many times the request was sent.
         attempts: u32,
         /// What came instead of a reply, over all attempts (the most telling, see
-        /// [`Heard::weight`]); `None` is silence.
-        heard: Option<Heard>,
+        /// [`HeardInstead::weight`]); `None` is silence.
+        heard: Option<HeardInstead>,
     },
     /// A reply came but it was malformed, or did not answer the request.
     #[error("bad reply from unit {unit}: {error}")]
@@ -171,14 +171,14 @@ mod tests {
         let t = Error::Timeout { unit: 1, timeout: Duration::from_millis(500), attempts: 3, heard: None };
         assert_eq!(t.to_string(), "no reply from unit 1 within 500 ms (3 attempts)");
         assert!(t.is_timeout());
-        let heard = Some(Heard::WrongFunction { function: 0x80, expected: 0x03 });
+        let heard = Some(HeardInstead::WrongFunction { function: 0x80, expected: 0x03 });
         let t = Error::Timeout { unit: 1, timeout: Duration::from_millis(500), attempts: 1, heard };
         assert_eq!(
             t.to_string(),
             "no valid reply from unit 1 within 500 ms (1 attempt): the unit sent a frame with function code 0x80 \
              instead of 0x03, ignored"
         );
-        let heard = Some(Heard::BadChecksum { head: Some((2, 0x1E)), expected: (2, 0x44) });
+        let heard = Some(HeardInstead::BadChecksum { head: Some((2, 0x1E)), expected: (2, 0x44) });
         let t = Error::Timeout { unit: 2, timeout: Duration::from_millis(300), attempts: 1, heard };
         assert_eq!(
             t.to_string(),

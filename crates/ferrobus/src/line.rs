@@ -49,7 +49,7 @@ use tokio::time::Instant;
 use crate::clock::Clock;
 use crate::port::{BoxPort, ConnectWith, Connecting, Framing, Port, Transport};
 use crate::timer::Timer;
-pub use crate::wire::{EndpointStats, LineFaults, LineOptions, LineStats};
+pub use crate::wire::{EndpointStats, LineFaults, LineOptions, WireStats};
 use crate::wire::{OnError, Receiver, Wire, heard};
 
 /// Pty endpoints (Unix: other platforms have no ptys).
@@ -97,7 +97,7 @@ type Inbox = Box<dyn FnMut(Chunk) + Send>;
 #[derive(Clone)]
 pub struct Line {
     cmds: mpsc::UnboundedSender<Cmd>,
-    stats: Arc<Mutex<LineStats>>,
+    stats: Arc<Mutex<WireStats>>,
     timing: LineTiming,
     options: LineOptions,
 }
@@ -107,7 +107,7 @@ impl Line {
     pub fn start(options: LineOptions) -> Line {
         let timing = LineTiming::new(&options.config);
         let (cmds, rx) = mpsc::unbounded_channel();
-        let stats = Arc::new(Mutex::new(LineStats::default()));
+        let stats = Arc::new(Mutex::new(WireStats::default()));
         let bus = Bus::new(options, Arc::clone(&stats));
         tokio::spawn(bus.run(rx));
         Line { cmds, stats, timing, options }
@@ -170,7 +170,7 @@ impl Line {
     }
 
     /// What the line has seen so far.
-    pub fn stats(&self) -> LineStats {
+    pub fn stats(&self) -> WireStats {
         self.stats.lock().unwrap_or_else(PoisonError::into_inner).clone()
     }
 }
@@ -195,7 +195,7 @@ pub struct Endpoint {
 }
 
 impl Endpoint {
-    /// Its id on the line (an index into [`LineStats::endpoints`]).
+    /// Its id on the line (an index into [`WireStats::endpoints`]).
     pub fn id(&self) -> usize {
         self.id
     }
@@ -257,12 +257,12 @@ impl AsyncWrite for Endpoint {
 struct Bus {
     wire: Wire,
     inboxes: Vec<Inbox>,
-    stats: Arc<Mutex<LineStats>>,
+    stats: Arc<Mutex<WireStats>>,
     clock: Clock,
 }
 
 impl Bus {
-    fn new(options: LineOptions, stats: Arc<Mutex<LineStats>>) -> Self {
+    fn new(options: LineOptions, stats: Arc<Mutex<WireStats>>) -> Self {
         let clock = Clock::new();
         Bus { wire: Wire::new(options, clock.now()), inboxes: Vec::new(), stats, clock }
     }

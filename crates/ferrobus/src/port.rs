@@ -29,7 +29,7 @@ use crate::serial::PortInUse;
 pub use crate::serial::{Rs485, SerialConfig};
 #[cfg(unix)]
 pub use crate::sys::Pty;
-pub use crate::sys::{TtyPort, open_serial};
+pub use crate::sys::{PortFault, TtyPort, open_serial};
 use crate::timer::Timer;
 
 /// A byte stream a driver runs an engine over.

@@ -32,7 +32,7 @@ use std::time::Duration;
 
 use ferrobus_proto::codes::{ExceptionCode, ReadDeviceIdCode, unit as unit_codes};
 use ferrobus_proto::frame::{LineConfig, LineTiming, rtu};
-use ferrobus_proto::scan::{Answer, Heard, Lead, Listener, Probe, ProbeTiming};
+use ferrobus_proto::scan::{Answer, Lead, LineActivity, Listener, Probe, ProbeTiming};
 use tokio::io::{AsyncRead, AsyncReadExt, AsyncWrite, ReadBuf};
 use tokio::sync::Notify;
 
@@ -160,8 +160,8 @@ pub struct OtherTraffic {
 pub struct OtherMaster {
     /// The setting its frames were valid at.
     pub line: LineConfig,
-    /// What was heard (always [`Heard::Traffic`]).
-    pub heard: Heard,
+    /// What was heard (always [`LineActivity::Traffic`]).
+    pub heard: LineActivity,
 }
 
 /// What a scan found so far.
@@ -176,7 +176,7 @@ pub struct Report {
     /// Other masters heard while listening.
     pub masters: Vec<OtherMaster>,
     /// Settings where listening heard only bytes that did not frame.
-    pub noise: Vec<(LineConfig, Heard)>,
+    pub noise: Vec<(LineConfig, LineActivity)>,
     /// Settings probed.
     pub settings_done: usize,
     /// Probes sent.
@@ -203,7 +203,7 @@ pub enum Event {
         /// The setting.
         line: LineConfig,
         /// What was heard.
-        heard: Heard,
+        heard: LineActivity,
     },
     /// One probe ended.
     Probed {
@@ -297,9 +297,9 @@ impl<P: Reconfigure> Scanner<P> {
                 let heard = self.listen(line).await?;
                 on_event(&Event::Listened { line, heard });
                 match heard {
-                    Heard::Traffic { .. } => report.masters.push(OtherMaster { line, heard }),
-                    Heard::Noise { .. } => report.noise.push((line, heard)),
-                    Heard::Quiet => {}
+                    LineActivity::Traffic { .. } => report.masters.push(OtherMaster { line, heard }),
+                    LineActivity::Noise { .. } => report.noise.push((line, heard)),
+                    LineActivity::Quiet => {}
                 }
             }
             if !report.masters.is_empty() && !self.config.force {
@@ -467,7 +467,7 @@ impl<P: Reconfigure> Scanner<P> {
     }
 
     /// Listens for the configured time without transmitting.
-    async fn listen(&self, line: LineConfig) -> Result<Heard, Error> {
+    async fn listen(&self, line: LineConfig) -> Result<LineActivity, Error> {
         let timing = self.timing(line);
         let mut listener = Listener::new(timing).with_frame_gap(timing.t3_5().max(PC_INCOMPLETE_TIMEOUT));
         let mut port = self.take().await?;

@@ -83,9 +83,12 @@ impl LineOptions {
     }
 }
 
-/// What a line has seen. Per-endpoint figures are indexed by endpoint id.
+/// What the virtual wire carried and did to it: characters, frames a sniffer decoded,
+/// collisions and faults, and each endpoint's share. Per-endpoint figures are indexed by
+/// endpoint id. (A gateway's counts of the requests it put on a real line are
+/// [`LineTraffic`](crate::gateway::stats::LineTraffic).)
 #[derive(Clone, PartialEq, Eq, Debug, Default)]
-pub struct LineStats {
+pub struct WireStats {
     /// Characters put on the wire (noise included).
     pub characters: u64,
     /// Frames a sniffer on the wire decoded.
@@ -195,7 +198,7 @@ pub struct Wire {
     timing: LineTiming,
     char_time: Duration,
     rng: SmallRng,
-    stats: LineStats,
+    stats: WireStats,
     /// Each endpoint: when its last scheduled character leaves the wire.
     busy_until: Vec<Option<Instant>>,
     /// Characters scheduled, by the time their last bit leaves the wire.
@@ -220,7 +223,7 @@ impl Wire {
             timing,
             char_time,
             rng: SmallRng::seed_from_u64(options.seed),
-            stats: LineStats::default(),
+            stats: WireStats::default(),
             busy_until: Vec::new(),
             scheduled: BTreeMap::new(),
             seq: 0,
@@ -243,7 +246,7 @@ impl Wire {
         if self.options.paced { self.timing } else { LineTiming::unpaced() }
     }
 
-    /// A new endpoint named `name`; returns its id (an index into [`LineStats::endpoints`]).
+    /// A new endpoint named `name`; returns its id (an index into [`WireStats::endpoints`]).
     pub fn attach(&mut self, name: impl Into<String>) -> usize {
         self.busy_until.push(None);
         self.stats.endpoints.push(EndpointStats { name: name.into(), ..EndpointStats::default() });
@@ -270,7 +273,7 @@ impl Wire {
     }
 
     /// What the wire has seen so far.
-    pub fn stats(&self) -> &LineStats {
+    pub fn stats(&self) -> &WireStats {
         &self.stats
     }
 
@@ -483,7 +486,7 @@ fn chance(rng: &mut SmallRng, p: f64) -> bool {
     rng.random_bool(p.min(1.0))
 }
 
-fn count(stats: &mut LineStats, event: &RxEvent<'_>) {
+fn count(stats: &mut WireStats, event: &RxEvent<'_>) {
     match event {
         RxEvent::Frame(_) => stats.frames += 1,
         RxEvent::Discarded { .. } => stats.discards += 1,

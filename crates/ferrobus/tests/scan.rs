@@ -14,7 +14,7 @@ use ferrobus::scan::{ConfigError, OtherTraffic, Reconfigure, Report, ScanConfig,
 use ferrobus::{Rs485, Timer};
 use ferrobus_proto::frame::rtu::encode_pdu;
 use ferrobus_proto::frame::{LineConfig, LineTiming};
-use ferrobus_proto::scan::{Answer, Heard, Lead, Probe};
+use ferrobus_proto::scan::{Answer, Lead, LineActivity, Probe};
 use tokio::io::{AsyncRead, AsyncReadExt, AsyncWrite, AsyncWriteExt, DuplexStream, ReadBuf};
 
 /// One end of a duplex stream, recording every line setting it is given.
@@ -204,7 +204,7 @@ async fn traffic_heard_while_listening_stops_the_scan_before_it_transmits() {
     let lines: Vec<LineConfig> = report.masters.iter().map(|m| m.line).collect();
     assert_eq!(lines, [baud(19_200), baud(9600)]);
     for master in &report.masters {
-        let Heard::Traffic { units, requests, responses, .. } = master.heard else { panic!("{master:?}") };
+        let LineActivity::Traffic { units, requests, responses, .. } = master.heard else { panic!("{master:?}") };
         assert_eq!(units.iter().collect::<Vec<_>>(), [9]);
         assert!(requests >= 5 && responses >= 5, "{requests} requests, {responses} responses in 500 ms");
     }

@@ -5,7 +5,8 @@
 //! reply that does not fit the read: something is alive on that unit). It is *silent* when no
 //! reply came: a timeout, a bad checksum or garbage, a failed port, the poller's back-off.
 //! `death_after` silent polls in a row, any group, and the device is dead; the next answered
-//! poll brings it back.
+//! poll brings it back. That rule is [`Health`], the bridge's only one: the Sparkplug and plain
+//! publishers follow it through [`Device::apply`], the bridge's status lines directly.
 
 use std::time::SystemTime;
 
@@ -26,19 +27,90 @@ pub(crate) struct CellState {
     pub(crate) published: Seen,
 }
 
-/// What a sample did to the device.
+/// Whether a device answers: the one liveness rule of the bridge. Every publisher
+/// (Sparkplug's DBIRTH and DDEATH, plain mode's device status) and the bridge's status lines
+/// follow it, each through [`Health::observe`].
+///
+/// A device is alive from its first answered poll; `death_after` silent polls in a row make
+/// it dead (*died* when it had answered before, *given up* when it never had), and its next
+/// answered poll brings it back.
+#[derive(Clone, Debug, Default)]
+pub(crate) struct Health {
+    /// Silent polls in a row.
+    silent: u32,
+    /// It answers: answered, and not `death_after` silent polls in a row since.
+    alive: bool,
+    /// It is dead or given up: `death_after` silent polls in a row, no answer since.
+    dead: bool,
+    /// It answered at least once in this run.
+    answered_once: bool,
+}
+
+/// What one poll did to a device's [`Health`].
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub(crate) enum Liveness {
-    /// It answered; `back` when it was dead or never answered before.
+    /// It answered.
     Answered {
-        /// It was not alive before this poll.
+        /// It was not alive before this poll (its first answer in this run, or back from
+        /// dead): it is born again.
         back: bool,
+        /// It had died or been given up: it answers again (at last, when `first`).
+        revived: bool,
+        /// Its first answer in this run.
+        first: bool,
     },
-    /// No reply; `died` when this poll made it dead.
+    /// No reply.
     Silent {
-        /// This was the `death_after`-th silent poll in a row.
+        /// It was alive and this is the `death_after`-th silent poll in a row: it is dead.
         died: bool,
+        /// It never answered in this run and this is the `death_after`-th silent poll in a
+        /// row: it is given up (never born, so nothing of it is published).
+        given_up: bool,
+        /// Silent polls in a row.
+        polls: u32,
     },
+}
+
+impl Health {
+    /// One poll: `answered` (a reply came: values, an exception, a reply that does not fit;
+    /// see [`answered`]) or not, `death_after` (at least 1) silent polls in a row being
+    /// death.
+    pub(crate) fn observe(&mut self, answered: bool, death_after: u32) -> Liveness {
+        if answered {
+            let liveness = Liveness::Answered { back: !self.alive, revived: self.dead, first: !self.answered_once };
+            self.silent = 0;
+            self.alive = true;
+            self.dead = false;
+            self.answered_once = true;
+            return liveness;
+        }
+        self.silent = self.silent.saturating_add(1);
+        let dies = !self.dead && self.silent >= death_after.max(1);
+        if dies {
+            self.dead = true;
+            self.alive = false;
+        }
+        Liveness::Silent { died: dies && self.answered_once, given_up: dies && !self.answered_once, polls: self.silent }
+    }
+
+    /// Whether it answers now.
+    pub(crate) fn alive(&self) -> bool {
+        self.alive
+    }
+
+    /// Whether it answered at least once in this run.
+    pub(crate) fn answered_once(&self) -> bool {
+        self.answered_once
+    }
+}
+
+/// Whether a poll that ended with `result` heard the device: values, or a failure that is a
+/// reply (an exception, a reply that does not fit the read: something is alive on that unit).
+pub(crate) fn answered<T>(result: &Result<T, ferrobus::poll::Failure>) -> bool {
+    match result {
+        Ok(_) => true,
+        Err(failure) => matches!(failure.kind, FailureKind::Exception | FailureKind::BadReply),
+    }
 }
 
 /// A configured device and what is known of it.
@@ -56,17 +128,8 @@ pub(crate) struct Device {
     death_after: u32,
     /// `[group][cell]`.
     pub(crate) cells: Vec<Vec<CellState>>,
-    /// Silent polls in a row.
-    silent: u32,
-    /// Whether it answers (false until its first answer).
-    pub(crate) alive: bool,
-    /// Whether it ever answered in this run.
-    pub(crate) answered_once: bool,
-}
-
-/// Whether a failed poll still got a reply from the device.
-fn is_answer(kind: FailureKind) -> bool {
-    matches!(kind, FailureKind::Exception | FailureKind::BadReply)
+    /// Whether it answers.
+    health: Health,
 }
 
 impl Device {
@@ -89,9 +152,7 @@ impl Device {
             deadbands: spec.deadbands.clone(),
             death_after: spec.death_after.max(1),
             cells,
-            silent: 0,
-            alive: false,
-            answered_once: false,
+            health: Health::default(),
         }
     }
 
@@ -100,7 +161,8 @@ impl Device {
     pub(crate) fn apply(&mut self, group: usize, sample: &Sample) -> Option<Liveness> {
         let time = sample.time;
         let cells = self.cells.get_mut(group)?;
-        let answered = match &sample.result {
+        let answered = answered(&sample.result);
+        match &sample.result {
             Ok(readings) => {
                 for reading in readings {
                     if let Some(cell) = cells.get_mut(reading.cell) {
@@ -111,34 +173,28 @@ impl Device {
                         cell.time = time;
                     }
                 }
-                true
             }
-            Err(failure) if is_answer(failure.kind) => {
+            // A reply, but no values: every cell of the group failed with it.
+            Err(failure) if answered => {
                 for cell in cells {
                     cell.latest = Seen::Failed(failure.diagnosis.clone());
                     cell.time = time;
                 }
-                true
             }
-            Err(_) => false,
-        };
-        if !answered {
-            return Some(self.silence());
+            // Silence: the cells keep what they last read.
+            Err(_) => {}
         }
-        let back = !self.alive;
-        self.alive = true;
-        self.answered_once = true;
-        self.silent = 0;
-        Some(Liveness::Answered { back })
+        Some(self.health.observe(answered, self.death_after))
     }
 
-    fn silence(&mut self) -> Liveness {
-        self.silent = self.silent.saturating_add(1);
-        let died = self.alive && self.silent >= self.death_after;
-        if died {
-            self.alive = false;
-        }
-        Liveness::Silent { died }
+    /// Whether it answers now.
+    pub(crate) fn alive(&self) -> bool {
+        self.health.alive()
+    }
+
+    /// Whether it answered at least once in this run.
+    pub(crate) fn answered_once(&self) -> bool {
+        self.health.answered_once()
     }
 
     /// The cells of `group` whose latest reading is to be published (beyond the deadband).
@@ -252,7 +308,11 @@ mod tests {
     fn an_exception_or_a_reply_that_does_not_fit_is_an_answer_noise_and_silence_are_not() {
         for kind in [FailureKind::Exception, FailureKind::BadReply] {
             let mut d = device(1);
-            assert_eq!(d.apply(0, &failure(kind)), Some(Liveness::Answered { back: true }), "{kind:?}");
+            assert_eq!(
+                d.apply(0, &failure(kind)),
+                Some(Liveness::Answered { back: true, revived: false, first: true }),
+                "{kind:?}"
+            );
             assert!(matches!(d.state(0, 0).map(|s| &s.latest), Some(Seen::Failed(_))));
         }
         for kind in
@@ -260,18 +320,56 @@ mod tests {
         {
             let mut d = device(1);
             d.apply(0, &value(1));
-            assert_eq!(d.apply(0, &failure(kind)), Some(Liveness::Silent { died: true }), "{kind:?}");
+            assert_eq!(
+                d.apply(0, &failure(kind)),
+                Some(Liveness::Silent { died: true, given_up: false, polls: 1 }),
+                "{kind:?}"
+            );
             assert_eq!(d.state(0, 0).map(|s| &s.latest), Some(&Seen::Value(Value::Int(1))), "the value is kept");
         }
     }
 
     #[test]
-    fn a_device_that_never_answered_does_not_die_and_death_after_0_counts_as_1() {
+    fn a_device_that_never_answered_is_given_up_not_dead_and_death_after_0_counts_as_1() {
         let mut d = device(0);
-        assert_eq!(d.apply(0, &failure(FailureKind::Timeout)), Some(Liveness::Silent { died: false }));
-        assert_eq!(d.apply(0, &value(1)), Some(Liveness::Answered { back: true }));
-        assert_eq!(d.apply(0, &value(1)), Some(Liveness::Answered { back: false }));
-        assert_eq!(d.apply(0, &failure(FailureKind::Timeout)), Some(Liveness::Silent { died: true }));
+        let given_up = Liveness::Silent { died: false, given_up: true, polls: 1 };
+        assert_eq!(d.apply(0, &failure(FailureKind::Timeout)), Some(given_up));
+        assert_eq!(d.apply(0, &value(1)), Some(Liveness::Answered { back: true, revived: true, first: true }));
+        assert_eq!(d.apply(0, &value(1)), Some(Liveness::Answered { back: false, revived: false, first: false }));
+        assert_eq!(
+            d.apply(0, &failure(FailureKind::Timeout)),
+            Some(Liveness::Silent { died: true, given_up: false, polls: 1 })
+        );
+        assert!(!d.alive() && d.answered_once());
+    }
+
+    #[test]
+    fn death_after_silent_polls_in_a_row_kill_once_an_answer_resets_the_count_and_brings_it_back() {
+        let mut health = Health::default();
+        let silent = |died, polls| Liveness::Silent { died, given_up: false, polls };
+        assert_eq!(health.observe(true, 3), Liveness::Answered { back: true, revived: false, first: true });
+        assert_eq!(health.observe(false, 3), silent(false, 1));
+        assert_eq!(health.observe(false, 3), silent(false, 2));
+        assert_eq!(health.observe(true, 3), Liveness::Answered { back: false, revived: false, first: false }, "reset");
+        assert_eq!(health.observe(false, 3), silent(false, 1));
+        assert_eq!(health.observe(false, 3), silent(false, 2));
+        assert_eq!(health.observe(false, 3), silent(true, 3), "the third silent poll in a row");
+        assert!(!health.alive());
+        assert_eq!(health.observe(false, 3), silent(false, 4), "dead once");
+        assert_eq!(health.observe(true, 3), Liveness::Answered { back: true, revived: true, first: false });
+        assert!(health.alive());
+    }
+
+    #[test]
+    fn values_an_exception_and_a_reply_that_does_not_fit_are_answers_silence_and_noise_are_not() {
+        let answered_by = |kind| answered::<()>(&Err(Failure { kind, exception: None, diagnosis: String::new() }));
+        assert!(answered::<()>(&Ok(())));
+        assert!(answered_by(FailureKind::Exception) && answered_by(FailureKind::BadReply));
+        for kind in
+            [FailureKind::Timeout, FailureKind::Crc, FailureKind::Garbage, FailureKind::Port, FailureKind::Backoff]
+        {
+            assert!(!answered_by(kind), "{kind:?}");
+        }
     }
 
     #[test]
@@ -280,6 +378,6 @@ mod tests {
         assert_eq!(d.apply(7, &value(1)), None);
         assert_eq!(d.apply(7, &failure(FailureKind::Timeout)), None);
         assert!(d.changes(7).is_empty());
-        assert!(!d.answered_once);
+        assert!(!d.answered_once());
     }
 }

@@ -77,6 +77,7 @@ use ferrobus::poll::Sample;
 use ferrobus_profile::Value;
 
 use crate::config::{Mode, Plant};
+pub(crate) use device::{Health, Liveness, answered};
 use plain::PlainEdge;
 use record::Record;
 use sparkplug::SparkplugEdge;

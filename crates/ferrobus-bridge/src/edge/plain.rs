@@ -103,7 +103,7 @@ impl PlainEdge {
     pub(crate) fn connected(&mut self) -> Vec<Publish> {
         self.connected = true;
         let mut out = vec![Self::status(self.status_topic(), "online")];
-        for d in self.devices.iter().filter(|d| d.device.answered_once) {
+        for d in self.devices.iter().filter(|d| d.device.answered_once()) {
             out.push(self.device_status(&d.device));
             if !self.config.retain {
                 continue;
@@ -127,7 +127,7 @@ impl PlainEdge {
     }
 
     fn device_status(&self, device: &Device) -> Publish {
-        let text = if device.alive { "online" } else { "offline" };
+        let text = if device.alive() { "online" } else { "offline" };
         Self::status(format!("{}/{}/status", self.config.prefix, device.id), text)
     }
 
@@ -143,18 +143,18 @@ impl PlainEdge {
         }
         let (cells, stale, status) = match liveness {
             // Back from stale: every point again, good; else what moved beyond its deadband.
-            Liveness::Answered { back } => {
+            Liveness::Answered { back, .. } => {
                 let cells = if was_stale { (0..count).collect() } else { d.device.changes(group) };
                 d.device.mark_published(group, &cells);
                 (cells, None, back)
             }
             // The first silent poll of the group: its points stale, once.
-            Liveness::Silent { died } => {
+            Liveness::Silent { died, .. } => {
                 let error = match &sample.result {
                     Err(failure) => failure.diagnosis.clone(),
                     Ok(_) => "no reply".to_string(),
                 };
-                let fresh = !was_stale && d.device.answered_once;
+                let fresh = !was_stale && d.device.answered_once();
                 let cells = if fresh { (0..count).collect() } else { Vec::new() };
                 (cells, Some(error), died)
             }

@@ -45,7 +45,7 @@ use std::future::Future;
 use std::sync::Arc;
 use std::time::{Duration, SystemTime};
 
-use ferrobus::poll::{Event, FailureKind, Sample};
+use ferrobus::poll::{Event, Sample};
 use tokio::sync::{mpsc, oneshot};
 use tokio::time::Instant;
 
@@ -54,7 +54,7 @@ pub use report::{LineReport, Report};
 pub use status::Status;
 
 use crate::config::{Mode, Plant};
-use crate::edge::{Action, DeviceRef, Edge, EdgeError, Output, Publish};
+use crate::edge::{Action, DeviceRef, Edge, EdgeError, Health, Liveness, Output, Publish, answered};
 use crate::sparkplug::topic::{MessageType, Topic};
 use crate::store::{Pushed, Store, StoreError};
 use command::{Applied, BusWrite, DeviceWrites};
@@ -134,42 +134,14 @@ pub async fn run_with(
 struct LineState {
     running: RunningLine,
     map: GroupMap,
-    devices: Vec<DeviceHealth>,
+    /// Each device's liveness, for the status lines (the edge's rule: [`Health`]).
+    devices: Vec<Health>,
     /// Each device's writes waiting for the bus.
     writes: Vec<DeviceWrites>,
 }
 
 /// A write a command asks for: the device's group and cell, the raw value, the value as typed.
 type Asked = (usize, usize, ferrobus::poll::Value, String);
-
-/// Whether a device answers, for the status lines.
-#[derive(Clone, Debug, Default)]
-struct DeviceHealth {
-    silent: u32,
-    dead: bool,
-    /// It has answered a poll in this run (the edge has born it).
-    answered: bool,
-}
-
-impl DeviceHealth {
-    /// One poll of the device, failed with `failure` or not: `Some(true)` when it has just
-    /// died (`death_after` polls in a row without a reply), `Some(false)` when it is back.
-    fn observe(&mut self, failure: Option<FailureKind>, death_after: u32) -> Option<bool> {
-        match failure {
-            Some(kind) if !answered(kind) => {
-                self.silent = self.silent.saturating_add(1);
-                let dies = self.silent >= death_after && !self.dead;
-                self.dead |= dies;
-                dies.then_some(true)
-            }
-            _ => {
-                self.silent = 0;
-                self.answered = true;
-                std::mem::take(&mut self.dead).then_some(false)
-            }
-        }
-    }
-}
 
 struct Bridge {
     plant: Plant,
@@ -216,7 +188,7 @@ impl Bridge {
         let mut lines = Vec::with_capacity(plant.lines.len());
         for (index, spec) in plant.lines.iter().enumerate() {
             let (running, map) = lines::start(index, spec, samples_tx.clone()).await?;
-            let devices = vec![DeviceHealth::default(); spec.devices.len()];
+            let devices = vec![Health::default(); spec.devices.len()];
             let writes = vec![DeviceWrites::default(); spec.devices.len()];
             lines.push(LineState { running, map, devices, writes });
         }
@@ -543,23 +515,16 @@ impl Bridge {
     }
 
     /// Says when a device stops answering (`death_after` polls in a row without a reply)
-    /// and when it is back.
+    /// and when it is back, by the edge's liveness rule.
     fn track_health(&mut self, device: DeviceRef, sample: &Sample) {
         let death_after = self.device_spec_death_after(device);
         let Some(health) = self.lines.get_mut(device.line).and_then(|l| l.devices.get_mut(device.device)) else {
             return;
         };
-        let failure = sample.result.as_ref().err();
-        let answered_before = health.answered;
-        let Some(died) = health.observe(failure.map(|f| f.kind), death_after) else { return };
-        let polls = health.silent;
-        let name = self.device_name(device);
-        self.say(if died {
-            let why = failure.map(|f| f.diagnosis.clone()).unwrap_or_default();
-            Status::DeviceDead { device: name, polls, why, never_answered: !answered_before }
-        } else {
-            Status::DeviceBack { device: name, first: !answered_before }
-        });
+        let liveness = health.observe(answered(&sample.result), death_after);
+        if let Some(status) = health_status(liveness, sample, || self.device_name(device)) {
+            self.say(status);
+        }
     }
 
     fn device_spec_death_after(&self, device: DeviceRef) -> u32 {
@@ -738,10 +703,17 @@ fn restore_bd_seq(plant: &Plant, edge: &mut Edge) -> (Option<BdSeqFile>, Option<
     (Some(file), note)
 }
 
-/// Whether a poll that failed this way still heard the device (an exception, a reply that
-/// did not fit): it is alive.
-fn answered(kind: FailureKind) -> bool {
-    matches!(kind, FailureKind::Exception | FailureKind::BadReply)
+/// The status line, if any, of what `sample` did to the liveness of the device `name` gives:
+/// it stopped answering (or never did), or it answers again (or at last).
+fn health_status(liveness: Liveness, sample: &Sample, name: impl FnOnce() -> String) -> Option<Status> {
+    match liveness {
+        Liveness::Silent { died, given_up, polls } if died || given_up => {
+            let why = sample.result.as_ref().err().map(|f| f.diagnosis.clone()).unwrap_or_default();
+            Some(Status::DeviceDead { device: name(), polls, why, never_answered: given_up })
+        }
+        Liveness::Answered { revived: true, first, .. } => Some(Status::DeviceBack { device: name(), first }),
+        Liveness::Answered { .. } | Liveness::Silent { .. } => None,
+    }
 }
 
 /// The kind of message on `topic`, for the counts: `NBIRTH`, `DDATA`, ... or `plain`.

@@ -9,6 +9,8 @@ use std::time::Duration;
 use rumqttc::{AsyncClient, Event, MqttOptions, Packet, QoS};
 use tokio::sync::{mpsc, oneshot};
 
+use ferrobus::poll::FailureKind;
+
 use super::*;
 use crate::sparkplug::payload::{MetricValue, Payload};
 
@@ -127,6 +129,34 @@ async fn next_of(rx: &mut mpsc::UnboundedReceiver<(String, Vec<u8>)>, kind: Mess
     tokio::time::timeout(Duration::from_secs(20), wait).await.unwrap_or_else(|_| panic!("no {} in 20 s", kind.as_str()))
 }
 
+/// Every message until the NDEATH of the bridge's stop (that one included): topic and
+/// payload. The broker passes messages in order and the NDEATH is the bridge's last, so
+/// nothing it published before is missed and no quiet spell is waited for.
+async fn until_ndeath(rx: &mut mpsc::UnboundedReceiver<(String, Vec<u8>)>) -> Vec<(String, Vec<u8>)> {
+    let wait = async {
+        let mut seen = Vec::new();
+        while let Some((topic, payload)) = rx.recv().await {
+            let death = Topic::parse(&topic).is_some_and(|t| t.kind == MessageType::NDeath);
+            seen.push((topic, payload));
+            if death {
+                return seen;
+            }
+        }
+        panic!("the watcher stopped before the NDEATH: {seen:?}");
+    };
+    tokio::time::timeout(Duration::from_secs(20), wait).await.expect("the stop's NDEATH in 20 s")
+}
+
+/// Waits (20 s at most) until `done` holds for the poller's counters of every group.
+async fn polled_until(poll: &ferrobus::poll::PollHandle, done: impl Fn(&[ferrobus::poll::Counters]) -> bool) {
+    let wait = async {
+        while !done(&poll.counters()) {
+            tokio::time::sleep(Duration::from_millis(20)).await;
+        }
+    };
+    tokio::time::timeout(Duration::from_secs(20), wait).await.expect("the poller got there in 20 s");
+}
+
 fn bd_seq(payload: &Payload) -> Option<u64> {
     payload.metrics.iter().find(|m| m.name.as_deref() == Some("bdSeq")).and_then(|m| match m.value {
         Some(MetricValue::Long(n)) => Some(n),
@@ -160,18 +190,45 @@ async fn one_run(port: u16, store: &Path) -> (u64, u64, Report) {
     (bd_seq(&birth).expect("NBIRTH has a bdSeq"), bd_seq(&death).expect("NDEATH has a bdSeq"), report)
 }
 
+/// The status line the bridge says for a poll of a device that failed with `kind` (`None`:
+/// values).
+fn said(health: &mut Health, kind: Option<FailureKind>) -> Option<String> {
+    let result = match kind {
+        None => Ok(Vec::new()),
+        Some(kind) => Err(ferrobus::poll::Failure { kind, exception: None, diagnosis: format!("{kind:?}") }),
+    };
+    let sample = Sample {
+        group: 0,
+        seq: 0,
+        time: SystemTime::UNIX_EPOCH,
+        due: Duration::ZERO,
+        started: Duration::ZERO,
+        response_time: Duration::ZERO,
+        overrun: false,
+        result,
+        traffic: ferrobus::poll::Traffic::default(),
+    };
+    let liveness = health.observe(answered(&sample.result), 3);
+    health_status(liveness, &sample, || "d".to_string()).map(|s| s.to_string())
+}
+
 #[test]
-fn a_device_dies_after_death_after_polls_without_a_reply_and_an_exception_is_a_reply() {
-    let mut health = DeviceHealth::default();
-    assert_eq!(health.observe(Some(FailureKind::Timeout), 3), None);
-    assert_eq!(health.observe(Some(FailureKind::Crc), 3), None);
-    assert_eq!(health.observe(Some(FailureKind::Exception), 3), None, "an answer resets the count");
-    assert_eq!(health.observe(Some(FailureKind::Timeout), 3), None);
-    assert_eq!(health.observe(Some(FailureKind::Port), 3), None);
-    assert_eq!(health.observe(Some(FailureKind::Timeout), 3), Some(true), "the third silent poll in a row");
-    assert_eq!(health.observe(Some(FailureKind::Timeout), 3), None, "said once");
-    assert_eq!(health.observe(Some(FailureKind::BadReply), 3), Some(false), "a reply: back");
-    assert_eq!(health.observe(None, 3), None);
+fn the_status_lines_follow_the_edges_liveness_rule_death_after_silent_polls_and_an_exception_is_a_reply() {
+    let mut health = Health::default();
+    assert_eq!(said(&mut health, Some(FailureKind::Timeout)), None);
+    assert_eq!(said(&mut health, Some(FailureKind::Crc)), None);
+    let never = said(&mut health, Some(FailureKind::Port)).expect("given up after 3 polls");
+    assert!(never.starts_with("device d does not answer (3 polls: Port)"), "{never}");
+    assert_eq!(said(&mut health, Some(FailureKind::Exception)).as_deref(), Some("device d answers at last"));
+    assert_eq!(said(&mut health, Some(FailureKind::Timeout)), None);
+    assert_eq!(said(&mut health, Some(FailureKind::Timeout)), None);
+    assert_eq!(said(&mut health, None), None, "an answer resets the count, and is not said while alive");
+    assert_eq!(said(&mut health, Some(FailureKind::Timeout)), None);
+    assert_eq!(said(&mut health, Some(FailureKind::Garbage)), None);
+    let died = said(&mut health, Some(FailureKind::Timeout)).expect("the third silent poll in a row");
+    assert_eq!(died, "device d stopped answering (3 polls: Timeout)");
+    assert_eq!(said(&mut health, Some(FailureKind::Timeout)), None, "said once");
+    assert_eq!(said(&mut health, Some(FailureKind::BadReply)).as_deref(), Some("device d answers again"));
 }
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
@@ -327,42 +384,56 @@ async fn while_the_broker_is_away_samples_are_stored_and_replayed_as_historical_
     let store = temporary_dir("outage-store");
     let plant = demo_plant(port, &store);
     let f001 = plant.lines[0].devices[0].profile.as_ref().and_then(|p| p.point("F001")).expect("F001").clone();
+    // The inverter is the line's first device: its groups are the poller's first.
+    let f001_group = plant.lines[0].devices[0]
+        .groups
+        .iter()
+        .position(|g| g.cells.iter().any(|c| c.name == "F001"))
+        .expect("F001's group");
     let mut watcher = subscribe(port).await;
     let (status_tx, mut statuses) = mpsc::channel(1024);
     let (stop_tx, stop_rx) = oneshot::channel::<()>();
     let (running_tx, running) = oneshot::channel();
     let options = Options { running: Some(running_tx) };
     let bridge = tokio::spawn(run_with(plant, async move { drop(stop_rx.await) }, Some(status_tx), options));
-    let client = running.await.expect("the running lines")[0].client.clone();
+    let running = running.await.expect("the running lines");
+    let (client, poll) = (running[0].client.clone(), running[0].poll.clone());
     let (_, first) = next_of(&mut watcher, MessageType::NBirth).await;
     next_of(&mut watcher, MessageType::DBirth).await;
 
     drop(broker);
     status_where(&mut statuses, |s| matches!(s, Status::BrokerLost { was_online: true, .. })).await;
-    // F001 (polled every second) moves while the broker is away: each poll is a record.
+    // F001 moves while the broker is away: each poll of it is a record. A poll that ends after
+    // the write has returned was sent after it (the client asks one at a time): it read the value.
     for centi_hz in [1000, 2000, 3000] {
         let words = f001.encode(&ferrobus::poll::Value::Int(centi_hz)).expect("F001 words");
         client.write_multiple_registers(1, f001.address, &words).await.expect("written");
-        tokio::time::sleep(Duration::from_millis(1100)).await;
+        let before = poll.counters()[f001_group].ok;
+        polled_until(&poll, |c| c[f001_group].ok > before).await;
     }
-    // The attempts come 1 s and 3 s after the loss, the next one 4 s later: the broker is back
-    // between them, and the watcher subscribed before the bridge is.
-    tokio::time::sleep(Duration::from_millis(700)).await;
+    // The broker comes back just after a failed attempt, the next one at least 2 s later: the
+    // watcher is subscribed before the bridge is.
+    while statuses.try_recv().is_ok() {}
+    status_where(
+        &mut statuses,
+        |s| matches!(s, Status::BrokerLost { was_online: false, retry_in, .. } if *retry_in >= Duration::from_secs(2)),
+    )
+    .await;
     let broker = start_broker_on(port, "outage-again", "").await.expect("mosquitto again");
     let mut watcher = subscribe(port).await;
     let (_, second) = next_of(&mut watcher, MessageType::NBirth).await;
     assert_eq!(bd_seq(&second), bd_seq(&first).map(|b| (b + 1) % 256), "the next session, the next bdSeq");
     let replayed = status_where(&mut statuses, |s| matches!(s, Status::Replayed { .. })).await;
+    stop_tx.send(()).expect("the bridge runs");
+    let report = bridge.await.expect("the bridge's task").expect("the bridge ran");
     let mut historical = Vec::new();
-    while let Ok(Some((topic, payload))) = tokio::time::timeout(Duration::from_millis(500), watcher.recv()).await {
+    for (topic, payload) in until_ndeath(&mut watcher).await {
         let payload = Payload::decode(&payload).expect("a Sparkplug payload");
         if Topic::parse(&topic).is_some_and(|t| t.kind == MessageType::DData) {
             historical
                 .extend(payload.metrics.iter().filter(|m| m.is_historical == Some(true)).map(|m| m.value.clone()));
         }
     }
-    stop_tx.send(()).expect("the bridge runs");
-    let report = bridge.await.expect("the bridge's task").expect("the bridge ran");
     assert!(report.stored >= 3, "a record per F001 poll at least: {report}");
     assert_eq!(report.replayed, report.stored, "every record replayed: {report} ({replayed})");
     assert_eq!(report.left, 0, "{report}");
@@ -435,10 +506,8 @@ async fn retained_2_mib_commands_are_discarded_and_counted_and_the_one_session_s
     assert_eq!((report.connections, report.broker_lost), (1, 0), "one session, never lost: {report}");
     assert_eq!(report.discarded, 2, "{report}");
     assert_eq!(report.writes, 1, "{report}");
-    let mut kinds = Vec::new();
-    while let Ok(Some((topic, _))) = tokio::time::timeout(Duration::from_millis(500), watcher.recv()).await {
-        kinds.extend(Topic::parse(&topic).map(|t| t.kind));
-    }
+    let kinds: Vec<MessageType> =
+        until_ndeath(&mut watcher).await.iter().filter_map(|(topic, _)| Topic::parse(topic).map(|t| t.kind)).collect();
     let count = |kind| kinds.iter().filter(|k| **k == kind).count();
     assert_eq!(count(MessageType::NBirth), 1, "one NBIRTH: {kinds:?}");
     assert_eq!(count(MessageType::NDeath), 1, "only the stop's NDEATH: {kinds:?}");
@@ -472,9 +541,7 @@ async fn samples_polled_before_the_first_connack_are_live_data_after_the_births_
     let bridge = tokio::spawn(run_with(plant, async move { drop(stop_rx.await) }, None, options));
     let poll = running.await.expect("the running lines")[0].poll.clone();
     // Every group polled twice while the CONNECT waits: their first samples are in the bridge.
-    while poll.counters().iter().any(|c| c.ok < 2) {
-        tokio::time::sleep(Duration::from_millis(20)).await;
-    }
+    polled_until(&poll, |c| c.iter().all(|c| c.ok >= 2)).await;
     release_tx.send(()).expect("the proxy waits");
     next_of(&mut watcher, MessageType::NBirth).await;
     let (_, dbirth) = next_of(&mut watcher, MessageType::DBirth).await;
@@ -484,7 +551,7 @@ async fn samples_polled_before_the_first_connack_are_live_data_after_the_births_
     let report = bridge.await.expect("the bridge's task").expect("the bridge ran");
     assert_eq!((report.stored, report.replayed), (0, 0), "nothing went to the store: {report}");
     let mut historical = 0;
-    while let Ok(Some((topic, payload))) = tokio::time::timeout(Duration::from_millis(500), watcher.recv()).await {
+    for (topic, payload) in until_ndeath(&mut watcher).await {
         if Topic::parse(&topic).is_some_and(|t| t.kind == MessageType::DData) {
             let payload = Payload::decode(&payload).expect("a Sparkplug payload");
             historical += payload.metrics.iter().filter(|m| m.is_historical == Some(true)).count();
@@ -600,10 +667,8 @@ async fn hostile_commands_and_states_keep_the_session_and_the_data_and_every_sta
     }
     let forged = seen.iter().map(ToString::to_string).find(|l| l.contains(r"F001\nbridge: wrote inverter"));
     assert!(forged.is_some_and(|l| l.contains(r"0.00 Hz\0")), "the forged name is logged escaped: {seen:?}");
-    let mut kinds = Vec::new();
-    while let Ok(Some((topic, _))) = tokio::time::timeout(Duration::from_millis(500), watcher.recv()).await {
-        kinds.extend(Topic::parse(&topic).map(|t| t.kind));
-    }
+    let kinds: Vec<MessageType> =
+        until_ndeath(&mut watcher).await.iter().filter_map(|(topic, _)| Topic::parse(topic).map(|t| t.kind)).collect();
     assert!(!kinds.contains(&MessageType::NBirth), "no second NBIRTH: {kinds:?}");
     assert_eq!(kinds.iter().filter(|k| **k == MessageType::NDeath).count(), 1, "only the stop's NDEATH: {kinds:?}");
 }

@@ -336,7 +336,9 @@ fn a_timeout_names_the_function_code_the_unit_sent_instead_of_a_reply() {
     m.handle_timeout(ns(1_000_000_000));
     match m.poll_event() {
         Some(Completion::Failed(
-            e @ MasterError::Timeout { heard: Some(Heard::WrongFunction { function: 0x80, expected: 0x03 }), .. },
+            e @ MasterError::Timeout {
+                heard: Some(HeardInstead::WrongFunction { function: 0x80, expected: 0x03 }), ..
+            },
         )) => {
             assert_eq!(
                 e.to_string(),
@@ -401,7 +403,7 @@ fn a_raw_request_is_sent_as_is_and_its_reply_returned_unparsed() {
 /// Sends a read of one register to `unit` at t = 0, feeds `heard` at 20 ms, and returns what
 /// the timeout 300 ms after the request left says it heard.
 #[track_caller]
-fn heard_after(unit: u8, heard: &[&[u8]]) -> (Option<Heard>, std::string::String) {
+fn heard_after(unit: u8, heard: &[&[u8]]) -> (Option<HeardInstead>, std::string::String) {
     let config = MasterConfig { response_timeout: Duration::from_millis(300), ..MasterConfig::default() };
     let mut m = master(config);
     m.submit(ns(0), unit, &read_holding(0, 1)).unwrap();
@@ -433,7 +435,7 @@ fn silence_times_out_with_nothing_heard() {
 #[test]
 fn a_reply_with_a_bad_crc_times_out_saying_the_unit_answered_with_a_wrong_checksum() {
     let (heard, text) = heard_after(2, &[&bad_crc(rtu(2, &[0x03, 0x02, 0x00, 0x07]))]);
-    assert_eq!(heard, Some(Heard::BadChecksum { head: Some((2, 0x03)), expected: (2, 0x03) }));
+    assert_eq!(heard, Some(HeardInstead::BadChecksum { head: Some((2, 0x03)), expected: (2, 0x03) }));
     assert_eq!(
         text,
         "no valid reply within 300 ms: unit 2 answered, but the checksum was wrong (function code 0x03, as asked)"
@@ -446,7 +448,7 @@ fn a_bad_crc_over_a_damaged_function_code_names_the_code_seen_and_the_one_expect
     let mut frame = rtu(2, &[0x03, 0x02, 0x00, 0x07]);
     frame[1] = 0x1E;
     let (heard, text) = heard_after(2, &[&frame]);
-    assert_eq!(heard, Some(Heard::BadChecksum { head: Some((2, 0x1E)), expected: (2, 0x03) }));
+    assert_eq!(heard, Some(HeardInstead::BadChecksum { head: Some((2, 0x1E)), expected: (2, 0x03) }));
     assert!(
         text.ends_with("unit 2 answered, but the checksum was wrong (function code 0x1E, expected 0x03)"),
         "{text}"
@@ -456,14 +458,14 @@ fn a_bad_crc_over_a_damaged_function_code_names_the_code_seen_and_the_one_expect
 #[test]
 fn bytes_that_make_no_frame_time_out_as_garbage_not_silence() {
     let (heard, text) = heard_after(2, &[&[0xFF]]);
-    assert_eq!(heard, Some(Heard::Garbage { bytes: 1, reason: DiscardReason::TooShort }));
+    assert_eq!(heard, Some(HeardInstead::Garbage { bytes: 1, reason: DiscardReason::TooShort }));
     assert_eq!(text, "no valid reply within 300 ms: 1 byte came that made no frame (frame too short)");
 }
 
 #[test]
 fn a_frame_from_another_unit_times_out_naming_that_unit() {
     let (heard, text) = heard_after(2, &[&rtu(3, &[0x03, 0x02, 0x00, 0x07])]);
-    assert_eq!(heard, Some(Heard::OtherUnit { unit: 3, function: 0x03 }));
+    assert_eq!(heard, Some(HeardInstead::OtherUnit { unit: 3, function: 0x03 }));
     assert!(text.ends_with("unit 3 sent a frame (function code 0x03) instead, ignored"), "{text}");
 }
 
@@ -471,17 +473,17 @@ fn a_frame_from_another_unit_times_out_naming_that_unit() {
 fn what_tells_most_about_the_unit_asked_is_kept_over_later_lesser_things() {
     let reply = bad_crc(rtu(2, &[0x03, 0x02, 0x00, 0x07]));
     let other = rtu(3, &[0x03, 0x02, 0x00, 0x07]);
-    let ours = Heard::BadChecksum { head: Some((2, 0x03)), expected: (2, 0x03) };
+    let ours = HeardInstead::BadChecksum { head: Some((2, 0x03)), expected: (2, 0x03) };
     assert_eq!(heard_after(2, &[&reply, &other, &[0xFF]]).0, Some(ours));
     // Garbage outweighs another unit's traffic; the latest of equal weight is kept.
-    let garbage = Heard::Garbage { bytes: 1, reason: DiscardReason::TooShort };
+    let garbage = HeardInstead::Garbage { bytes: 1, reason: DiscardReason::TooShort };
     assert_eq!(heard_after(2, &[&other, &[0xFF]]).0, Some(garbage));
     assert_eq!(
         heard_after(2, &[&other, &rtu(4, &[0x03, 0x02, 0x00, 0x07])]).0,
-        Some(Heard::OtherUnit { unit: 4, function: 0x03 })
+        Some(HeardInstead::OtherUnit { unit: 4, function: 0x03 })
     );
     // A valid frame from the unit with another code outweighs a broken one.
-    let wrong = Heard::WrongFunction { function: 0x04, expected: 0x03 };
+    let wrong = HeardInstead::WrongFunction { function: 0x04, expected: 0x03 };
     assert_eq!(heard_after(2, &[&rtu(2, &[0x04, 0x02, 0x00, 0x07]), &reply]).0, Some(wrong));
 }
 
@@ -499,7 +501,9 @@ fn a_tcp_reply_under_another_transaction_id_times_out_naming_both_ids() {
     m.handle_timeout(ns(300_000_000));
     match m.poll_event() {
         Some(Completion::Failed(
-            e @ MasterError::Timeout { heard: Some(Heard::OtherTransaction { transaction: 7, expected: 1 }), .. },
+            e @ MasterError::Timeout {
+                heard: Some(HeardInstead::OtherTransaction { transaction: 7, expected: 1 }), ..
+            },
         )) => assert_eq!(
             e.to_string(),
             "no valid reply within 300 ms: a reply came under transaction id 7, not 1, ignored"
@@ -525,7 +529,7 @@ fn an_ascii_reply_with_a_bad_lrc_names_the_unit_and_function_code_it_carried() {
     m.handle_timeout(ns(sent as u64 * CHAR + 300_000_000));
     match m.poll_event() {
         Some(Completion::Failed(MasterError::Timeout { heard, .. })) => {
-            assert_eq!(heard, Some(Heard::BadChecksum { head: Some((5, 0x03)), expected: (5, 0x03) }));
+            assert_eq!(heard, Some(HeardInstead::BadChecksum { head: Some((5, 0x03)), expected: (5, 0x03) }));
         }
         other => panic!("{other:?}"),
     }
@@ -719,7 +723,7 @@ fn a_reply_that_begins_before_the_request_has_left_is_dropped_as_stale_and_named
             panic!("{how:?}: no timeout")
         };
         let earliest = Duration::from_nanos(8 * CHAR);
-        assert_eq!(heard, Some(Heard::TooEarly { after: Duration::from_micros(49), earliest }), "{how:?}");
+        assert_eq!(heard, Some(HeardInstead::TooEarly { after: Duration::from_micros(49), earliest }), "{how:?}");
         assert!(
             e.to_string().ends_with(
                 "a reply 49 µs after the request, earlier than any slave can answer (not before 9166 µs): a stale \

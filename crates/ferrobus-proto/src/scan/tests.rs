@@ -86,7 +86,7 @@ fn the_timeout_is_the_first_byte_wait_plus_the_expected_reply_on_the_wire() {
 
 #[test]
 fn any_valid_frame_of_the_unit_proves_presence_and_broken_bytes_are_leads() {
-    use crate::master::Heard as M;
+    use crate::master::HeardInstead as M;
     assert_eq!(Answer::from_heard(None), Answer::Silence);
     let bad = Answer::from_heard(Some(M::BadChecksum { head: Some((5, 0x03)), expected: (5, 0x03) }));
     assert_eq!(bad, Answer::Lead(Lead::BadChecksum { head: Some((5, 0x03)) }));
@@ -137,7 +137,7 @@ fn a_listener_that_hears_crc_valid_requests_and_replies_reports_another_master_a
     now = send(&mut listener, &timing, now.checked_add(gap).unwrap(), 7, &[0x03, 0x02, 0x00, 0x2A], false);
     now = send(&mut listener, &timing, now.checked_add(gap).unwrap(), 12, &[0x04, 0x00, 0x10, 0x00, 0x02], false);
     settle(&mut listener, now);
-    let Heard::Traffic { units, requests, responses, either } = listener.heard() else {
+    let LineActivity::Traffic { units, requests, responses, either } = listener.heard() else {
         panic!("{:?}", listener.heard());
     };
     assert_eq!(units.iter().collect::<Vec<_>>(), [7, 12]);
@@ -148,15 +148,15 @@ fn a_listener_that_hears_crc_valid_requests_and_replies_reports_another_master_a
 fn a_listener_that_hears_only_bad_crcs_reports_noise_and_silence_is_quiet() {
     let timing = LineTiming::new(&line(9_600, CharFormat::E1));
     let mut listener = Listener::new(timing);
-    assert_eq!(listener.heard(), Heard::Quiet);
+    assert_eq!(listener.heard(), LineActivity::Quiet);
     let now = send(&mut listener, &timing, Instant::from_millis(5), 3, &[0x03, 0x00, 0x00, 0x00, 0x01], true);
     settle(&mut listener, now);
-    assert_eq!(listener.heard(), Heard::Noise { bad_checksums: 1, bytes: 8 });
+    assert_eq!(listener.heard(), LineActivity::Noise { bad_checksums: 1, bytes: 8 });
     // Then one good frame: traffic wins.
     let later = now.checked_add(timing.t3_5()).unwrap();
     let end = send(&mut listener, &timing, later, 3, &[0x03, 0x00, 0x00, 0x00, 0x01], false);
     settle(&mut listener, end);
-    assert!(matches!(listener.heard(), Heard::Traffic { requests: 1, .. }), "{:?}", listener.heard());
+    assert!(matches!(listener.heard(), LineActivity::Traffic { requests: 1, .. }), "{:?}", listener.heard());
 }
 
 #[test]
@@ -165,9 +165,9 @@ fn a_listener_decides_a_frame_of_unknown_length_only_after_the_silence() {
     let mut listener = Listener::new(timing);
     // 0x41 is a user-defined function code: its length is known only from the silence.
     let end = send(&mut listener, &timing, Instant::ZERO, 2, &[0x41, 0x01], false);
-    assert_eq!(listener.heard(), Heard::Quiet);
+    assert_eq!(listener.heard(), LineActivity::Quiet);
     let due = listener.poll_timeout().unwrap();
     assert!(due >= end.checked_add(timing.t3_5()).unwrap());
     listener.handle_timeout(due);
-    assert!(matches!(listener.heard(), Heard::Traffic { .. }), "{:?}", listener.heard());
+    assert!(matches!(listener.heard(), LineActivity::Traffic { .. }), "{:?}", listener.heard());
 }

@@ -13,7 +13,7 @@
 //! timeout, [`crate::ClientConfig::late_window`]) has passed; so a same-shape next request
 //! cannot take it. On top, after any request that got no usable reply, the worker keeps the
 //! line quiet for the late-reply guard ([`super::LineConfig::late_guard`]), for what else a
-//! confused device may still send. The replies dropped are counted in [`LineStats`]
+//! confused device may still send. The replies dropped are counted in [`LineTraffic`]
 //! (`late_replies`, and `early_replies` for stale ones already on their way when a request
 //! left).
 
@@ -21,13 +21,13 @@ use std::collections::{HashMap, VecDeque};
 use std::sync::{Arc, Mutex, MutexGuard, PoisonError};
 use std::time::Duration;
 
-use ferrobus_proto::master::Heard;
+use ferrobus_proto::master::HeardInstead;
 use ferrobus_proto::pdu::Request;
 use ferrobus_proto::{ExceptionCode, FunctionCode};
 use tokio::sync::{Notify, oneshot};
 
 use super::cache::Cache;
-use super::stats::{Ended, LineStats};
+use super::stats::{Ended, LineTraffic};
 use crate::{Client, Error};
 
 /// A request waiting for the line.
@@ -56,7 +56,7 @@ struct Queues {
 pub(crate) struct LineQueue {
     queues: Mutex<Queues>,
     ready: Notify,
-    stats: Arc<Mutex<LineStats>>,
+    stats: Arc<Mutex<LineTraffic>>,
 }
 
 /// Why a request was not queued.
@@ -67,7 +67,7 @@ pub(crate) enum Full {
 }
 
 impl LineQueue {
-    pub(crate) fn new(capacity: usize, stats: Arc<Mutex<LineStats>>) -> Self {
+    pub(crate) fn new(capacity: usize, stats: Arc<Mutex<LineTraffic>>) -> Self {
         LineQueue {
             queues: Mutex::new(Queues {
                 per_connection: HashMap::new(),
@@ -85,7 +85,7 @@ impl LineQueue {
         self.queues.lock().unwrap_or_else(PoisonError::into_inner)
     }
 
-    pub(crate) fn stats(&self) -> MutexGuard<'_, LineStats> {
+    pub(crate) fn stats(&self) -> MutexGuard<'_, LineTraffic> {
         self.stats.lock().unwrap_or_else(PoisonError::into_inner)
     }
 
@@ -221,7 +221,7 @@ fn failure(error: &Error) -> (ExceptionCode, Ended) {
     const TARGET: ExceptionCode = ExceptionCode::GatewayTargetDeviceFailedToRespond;
     match error {
         Error::Exception { code, .. } => (*code, Ended::Replied),
-        Error::Timeout { heard: Some(Heard::BadChecksum { .. }), .. } => (TARGET, Ended::BadCrc),
+        Error::Timeout { heard: Some(HeardInstead::BadChecksum { .. }), .. } => (TARGET, Ended::BadCrc),
         Error::Timeout { .. } | Error::NoReply { .. } => (TARGET, Ended::Timeout),
         Error::BadReply { .. } => (TARGET, Ended::BadReply),
         Error::Backoff { .. } => (TARGET, Ended::Skipped),
@@ -282,7 +282,7 @@ mod tests {
     #[test]
     fn failures_map_to_the_gateway_exceptions_and_are_counted_apart() {
         let timeout = |heard| Error::Timeout { unit: 1, timeout: Duration::from_millis(5), attempts: 2, heard };
-        let crc = Heard::BadChecksum { head: Some((1, 3)), expected: (1, 3) };
+        let crc = HeardInstead::BadChecksum { head: Some((1, 3)), expected: (1, 3) };
         let target = ExceptionCode::GatewayTargetDeviceFailedToRespond;
         assert_eq!(failure(&timeout(None)), (target, Ended::Timeout));
         assert_eq!(failure(&timeout(Some(crc))), (target, Ended::BadCrc));

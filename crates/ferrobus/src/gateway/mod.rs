@@ -99,7 +99,7 @@ pub use authorize::{AllowAll, Authorize, Chain, Rules};
 use cache::Cache;
 use line::{Job, LineQueue};
 pub use reverse::{OnFailure, Upstream, serve_reverse};
-use stats::{FrontStats, LineStats};
+use stats::{FrontStats, LineTraffic};
 
 use crate::server::TcpLimits;
 use crate::{Client, ClientConfig, Error, Transport};
@@ -273,7 +273,7 @@ impl Gateway {
         for line in config.lines {
             let name = line.transport.describe();
             let client = Client::connect(line.transport.clone(), line.client).await?;
-            let stats = Arc::new(Mutex::new(LineStats { name, ..LineStats::default() }));
+            let stats = Arc::new(Mutex::new(LineTraffic { name, ..LineTraffic::default() }));
             let queue = Arc::new(LineQueue::new(line.queue, stats));
             tokio::spawn(line::run(Arc::clone(&queue), client, cache.clone(), line.late_guard));
             lines.push(queue);
@@ -290,7 +290,7 @@ impl Gateway {
     }
 
     /// What each line has counted so far.
-    pub fn stats(&self) -> Vec<LineStats> {
+    pub fn stats(&self) -> Vec<LineTraffic> {
         self.inner.lines.iter().map(|q| q.stats().clone()).collect()
     }
 
@@ -415,7 +415,7 @@ impl Inner {
 
 /// The counters of every line, one block each, then the front end's refusals: what SIGUSR1
 /// and the exit print.
-pub fn report(stats: &[LineStats], front: &FrontStats) -> String {
+pub fn report(stats: &[LineTraffic], front: &FrontStats) -> String {
     let mut report: String = stats.iter().map(ToString::to_string).collect();
     report.push_str(&front.to_string());
     report

@@ -149,9 +149,11 @@ fn ms(us: u64) -> f64 {
     us as f64 / 1000.0
 }
 
-/// What one line has counted.
+/// The requests the gateway put on one of its lines and how they ended, per unit, with the
+/// line's queue and the replies its master dropped. (What a virtual wire carried, character by
+/// character, is [`WireStats`](crate::wire::WireStats).)
 #[derive(Clone, Debug, Default)]
-pub struct LineStats {
+pub struct LineTraffic {
     /// The line, as its transport describes it.
     pub name: String,
     /// Every request on the line.
@@ -172,7 +174,7 @@ pub struct LineStats {
     pub flushed_bytes: u64,
 }
 
-impl LineStats {
+impl LineTraffic {
     /// Takes the line's client's counters of what it dropped.
     pub(crate) fn dropped(&mut self, seen: &crate::ClientStats) {
         self.late_replies = u64::from(seen.master.late_replies);
@@ -181,7 +183,7 @@ impl LineStats {
     }
 }
 
-impl fmt::Display for LineStats {
+impl fmt::Display for LineTraffic {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
         writeln!(
             f,

@@ -3,7 +3,7 @@
 use std::collections::BTreeMap;
 use std::time::Duration;
 
-use ferrobus_proto::master::Heard;
+use ferrobus_proto::master::HeardInstead;
 use ferrobus_proto::schedule::Completion;
 use hdrhistogram::Histogram;
 
@@ -62,8 +62,8 @@ impl FailureKind {
     /// The kind of a client's error.
     pub fn of(error: &Error) -> FailureKind {
         match error {
-            Error::Timeout { heard: Some(Heard::BadChecksum { .. }), .. } => FailureKind::Crc,
-            Error::Timeout { heard: Some(Heard::Garbage { .. }), .. } => FailureKind::Garbage,
+            Error::Timeout { heard: Some(HeardInstead::BadChecksum { .. }), .. } => FailureKind::Crc,
+            Error::Timeout { heard: Some(HeardInstead::Garbage { .. }), .. } => FailureKind::Garbage,
             Error::Timeout { .. } => FailureKind::Timeout,
             Error::Exception { .. } => FailureKind::Exception,
             Error::BadReply { .. } | Error::NoReply { .. } => FailureKind::BadReply,

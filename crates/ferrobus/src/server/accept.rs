@@ -26,7 +26,8 @@ use super::Closed;
 use super::trim::Bursts;
 use crate::log::escape;
 
-/// How long accepting pauses when the process (or system) is out of file descriptors.
+/// How long accepting pauses when the process (or system) is out of file descriptors (handles
+/// on Windows) or socket buffers.
 pub const ACCEPT_BACKOFF: Duration = Duration::from_millis(100);
 
 /// The shortest time between two log lines about refused connections (the ones between
@@ -120,7 +121,9 @@ pub struct TcpCounts {
     /// TLS connections closed at once because as many from their source as the server's
     /// TLS setup allows were still in their handshake.
     pub refused_handshakes: u64,
-    /// Times accepting paused because file descriptors ran out (EMFILE, ENFILE).
+    /// Times accepting paused because no socket could be made: descriptors or handles ran
+    /// out, or the kernel's buffers for sockets (EMFILE, ENFILE, ENOBUFS, ENOMEM on Unix;
+    /// WSAEMFILE, ERROR_TOO_MANY_OPEN_FILES, WSAENOBUFS on Windows).
     pub descriptor_waits: u64,
     /// Other accept errors.
     pub accept_errors: u64,
@@ -382,13 +385,6 @@ impl Throttle {
     }
 }
 
-/// Whether `e` says the process or the system is out of file descriptors.
-fn out_of_descriptors(e: &io::Error) -> bool {
-    const ENFILE: i32 = 23;
-    const EMFILE: i32 = 24;
-    matches!(e.raw_os_error(), Some(ENFILE | EMFILE))
-}
-
 /// The accept loop for front ends without a handshake: as [`accept_handshaking`], the
 /// handshake over as soon as the connection is accepted.
 pub(crate) async fn accept_connections<S, Fut>(listener: TcpListener, limits: &TcpLimits, serve: S) -> io::Result<()>
@@ -406,7 +402,7 @@ where
 /// The hardened accept loop: accepts on `listener` within `limits` (past
 /// [`TcpLimits::max_connections`], past [`TcpLimits::max_per_source`] from its source or
 /// past `handshakes` from its source in their handshake, a connection is accepted and closed
-/// at once; out of file descriptors, accepting pauses for
+/// at once; out of sockets (descriptors, handles, socket buffers), accepting pauses for
 /// [`ACCEPT_BACKOFF`]; TCP_NODELAY set) and runs `serve` for each connection on its own
 /// task, counting how it ended in [`TcpLimits::stats`] (a [`Closed`] error is the server's
 /// own close). `serve` is given the connection's [`Handshake`], to drop when its handshake
@@ -469,20 +465,26 @@ where
 async fn accept(listener: &TcpListener, stats: &TcpStats) -> Option<(TcpStream, SocketAddr)> {
     match listener.accept().await {
         Ok(accepted) => Some(accepted),
-        Err(e) if out_of_descriptors(&e) => {
-            bump(&stats.descriptor_waits);
-            let open = stats.open.load(Ordering::Relaxed);
-            tracing::warn!("accepting: {e}; pausing {ACCEPT_BACKOFF:?}, still serving the {open} open connections");
-            tokio::time::sleep(ACCEPT_BACKOFF).await;
-            None
-        }
         Err(e) => {
-            bump(&stats.accept_errors);
-            tracing::warn!("accepting: {e}; going on");
-            // Not a spin if the error repeats.
-            tokio::time::sleep(Duration::from_millis(10)).await;
+            wait_out(&e, stats).await;
             None
         }
+    }
+}
+
+/// Counts, logs and waits out an accept error: [`ACCEPT_BACKOFF`] when no socket can be made
+/// now (the platform says which errors mean that), a short pause for any other.
+async fn wait_out(e: &io::Error, stats: &TcpStats) {
+    if crate::sys::out_of_sockets(e) {
+        bump(&stats.descriptor_waits);
+        let open = stats.open.load(Ordering::Relaxed);
+        tracing::warn!("accepting: {e}; pausing {ACCEPT_BACKOFF:?}, still serving the {open} open connections");
+        tokio::time::sleep(ACCEPT_BACKOFF).await;
+    } else {
+        bump(&stats.accept_errors);
+        tracing::warn!("accepting: {e}; going on");
+        // Not a spin if the error repeats.
+        tokio::time::sleep(Duration::from_millis(10)).await;
     }
 }
 

@@ -9,18 +9,23 @@
 //! | `TimerFd` | Linux: a timerfd in the runtime's epoll; macOS: none | none: the timer thread ([`crate::timer`]) |
 //! | `NEAR` | 3 ms | 20 ms, more than a clock tick |
 //! | `release_free_memory` | Linux with glibc: `malloc_trim`; elsewhere nothing | nothing: the allocator returns memory itself |
+//! | `out_of_sockets` | EMFILE, ENFILE, ENOBUFS, ENOMEM (by name, through rustix) | WSAEMFILE, ERROR_TOO_MANY_OPEN_FILES, WSAENOBUFS |
+//! | [`PortFault::of`] | EBUSY, ENOTTY, EIO, ENXIO, ENODEV (by name) | ERROR_ACCESS_DENIED, ERROR_BAD_COMMAND, ERROR_GEN_FAILURE, ERROR_DEVICE_NOT_CONNECTED |
 //! | [`THREAD_WAIT_GRAIN`] | zero: timed waits are precise | about a tick of the system clock |
 //!
 //! Everything else — settings ([`crate::serial`]), transports, drivers, timing — is shared.
 
+use std::io;
 use std::time::Duration;
 
 #[cfg(unix)]
 mod unix;
 #[cfg(target_os = "linux")]
 pub(crate) use unix::TimerFd;
+#[cfg(all(unix, test))]
+pub(crate) use unix::descriptor_table_full;
 #[cfg(unix)]
-pub(crate) use unix::{PeerSettings, PtyWriter, identify};
+pub(crate) use unix::{PeerSettings, PtyWriter, identify, out_of_sockets, port_fault};
 #[cfg(unix)]
 pub use unix::{Pty, TtyPort, open_serial};
 
@@ -34,10 +39,36 @@ pub(crate) fn release_free_memory() {}
 
 #[cfg(windows)]
 mod windows;
-#[cfg(windows)]
-pub(crate) use windows::identify;
+#[cfg(all(windows, test))]
+pub(crate) use windows::descriptor_table_full;
 #[cfg(windows)]
 pub use windows::{TtyPort, open_serial};
+#[cfg(windows)]
+pub(crate) use windows::{identify, out_of_sockets, port_fault};
+
+/// What an IO error of a serial port means, where the platform's error code says more than
+/// its [`io::ErrorKind`]: the same trouble has other numbers on each OS (an unplugged adapter
+/// is EIO on Linux, ERROR_BAD_COMMAND or ERROR_GEN_FAILURE on Windows).
+#[derive(Clone, Copy, PartialEq, Eq, Debug)]
+#[non_exhaustive]
+pub enum PortFault {
+    /// Another program has the port open (Unix: EBUSY; Windows: ERROR_ACCESS_DENIED, a COM
+    /// port being one program's at a time).
+    Busy,
+    /// The path is not a serial port (Unix: ENOTTY, the terminal calls refused).
+    NotSerial,
+    /// The port went away, as an unplugged USB adapter does (Unix: EIO, ENXIO, ENODEV;
+    /// Windows: ERROR_BAD_COMMAND, ERROR_GEN_FAILURE, ERROR_DEVICE_NOT_CONNECTED).
+    Gone,
+}
+
+impl PortFault {
+    /// What `e`, from opening, setting, reading or writing a serial port, means; `None` when
+    /// its code says nothing more than its kind.
+    pub fn of(e: &io::Error) -> Option<PortFault> {
+        port_fault(e)
+    }
+}
 
 /// How late the OS may end a thread's timed wait on a condition variable: the timer thread
 /// waits that much less, then finishes with high-resolution sleeps.

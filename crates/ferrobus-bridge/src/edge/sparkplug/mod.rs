@@ -203,9 +203,9 @@ impl SparkplugEdge {
         let mut out = vec![self.nbirth(now)];
         for i in 0..self.devices.len() {
             let Some(d) = self.devices.get_mut(i) else { continue };
-            let wanted = if all { d.device.answered_once } else { d.born };
+            let wanted = if all { d.device.answered_once() } else { d.born };
             if wanted {
-                d.death_due = !d.device.alive;
+                d.death_due = !d.device.alive();
                 out.extend(self.dbirth(i, now));
             }
         }
@@ -305,7 +305,7 @@ impl SparkplugEdge {
                     vec![Output::Store(self.record(i, group, &changes, sample.time))]
                 }
             }
-            Liveness::Silent { died } => {
+            Liveness::Silent { died, .. } => {
                 let dies = online && born && (died || d.death_due);
                 if dies { self.ddeath(i, sample.time).map(Output::Publish).into_iter().collect() } else { Vec::new() }
             }
@@ -376,7 +376,7 @@ impl SparkplugEdge {
         let mut out = Vec::new();
         if !born {
             if let Some(d) = self.devices.get_mut(i) {
-                d.death_due = !d.device.alive;
+                d.death_due = !d.device.alive();
             }
             out.extend(self.dbirth(i, now));
         }

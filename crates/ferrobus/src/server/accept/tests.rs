@@ -161,3 +161,19 @@ async fn refusals_are_logged_once_a_second_and_the_next_line_counts_the_others()
     assert_eq!(throttle.pass(), Some(4));
     assert_eq!(throttle.pass(), None);
 }
+
+#[tokio::test(start_paused = true)]
+async fn out_of_sockets_pauses_accepting_for_the_backoff_and_another_error_only_briefly() {
+    let stats = TcpStats::default();
+    let started = tokio::time::Instant::now();
+    wait_out(&crate::sys::descriptor_table_full(), &stats).await;
+    assert_eq!(started.elapsed(), ACCEPT_BACKOFF, "the platform's full descriptor table waits the backoff");
+    let counts = stats.counts();
+    assert_eq!((counts.descriptor_waits, counts.accept_errors), (1, 0));
+
+    let started = tokio::time::Instant::now();
+    wait_out(&io::Error::from(io::ErrorKind::ConnectionAborted), &stats).await;
+    assert!(started.elapsed() < ACCEPT_BACKOFF, "{:?}", started.elapsed());
+    let counts = stats.counts();
+    assert_eq!((counts.descriptor_waits, counts.accept_errors), (1, 1));
+}

@@ -1,10 +1,14 @@
 //! Windows: COM ports through serial2-tokio. There are no ptys: what needs one (a simulator on
 //! a pty, the virtual line) is Unix-only, and says so.
 
+mod errors;
 mod serial;
 
 use std::path::Path;
 
+#[cfg(test)]
+pub(crate) use errors::descriptor_table_full;
+pub(crate) use errors::{out_of_sockets, port_fault};
 pub use serial::{TtyPort, open_serial};
 
 use crate::identity::Identity;
