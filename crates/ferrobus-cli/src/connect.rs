@@ -14,7 +14,7 @@ use ferrobus_proto::frame::{DataBits, LineConfig, Parity, StopBits};
 
 use crate::address::{Address, AddressArgs, Table, split};
 use crate::exit::{CliError, Numbering};
-use crate::value::{ValueArgs, WordOrder};
+use crate::value::ValueArgs;
 
 /// Options that say how to reach the device.
 #[derive(Args, Clone, Debug)]
@@ -199,12 +199,11 @@ impl ConnectArgs {
         })
     }
 
-    /// `given` with the `--device` profile's word order where none was given (ABCD is
-    /// high-first, CDAB low-first; the byte-swapped orders have no 32-bit --word-order).
+    /// `given` with the `--device` profile's word order where none was given (the same type:
+    /// all four orders).
     pub(crate) fn values(&self, given: ValueArgs) -> Result<ValueArgs, CliError> {
         let Some(profile) = self.profile()? else { return Ok(given) };
-        let order = if profile.order().words_low_first() { WordOrder::LowFirst } else { WordOrder::HighFirst };
-        Ok(given.or_order(Some(order)))
+        Ok(given.or_order(Some(profile.order())))
     }
 }
 
@@ -257,15 +256,7 @@ impl ConnectArgs {
             values.kind = kind;
         }
         if point.width > 1 {
-            if point.order.bytes_swapped() {
-                return Err(CliError::Usage(format!(
-                    "{} is in {} order, which read and write do not take: use get or set",
-                    point.code,
-                    point.order.name()
-                )));
-            }
-            let order = if point.order.words_low_first() { WordOrder::LowFirst } else { WordOrder::HighFirst };
-            values = values.or_order(Some(order));
+            values = values.or_order(Some(point.order));
         }
         let address = Address { wire: point.address, table, style: crate::address::Style::Wire };
         Ok(Some((address, values)))

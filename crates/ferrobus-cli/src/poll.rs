@@ -65,9 +65,10 @@ pub(crate) struct PollArgs {
     #[arg(long, value_name = "FORMAT", action = clap::ArgAction::Append)]
     pub(crate) format: Vec<String>,
 
-    /// The word order of u32, i32, f32 and f64 cells: ABCD, CDAB, BADC, DCBA
-    #[arg(long, value_name = "ORDER", default_value = "ABCD")]
-    pub(crate) order: String,
+    /// The byte order of u32, i32, f32 and f64 cells over their registers: ABCD or high-first,
+    /// CDAB or low-first, BADC, DCBA (case-insensitive; as read's --word-order)
+    #[arg(long, visible_alias = "word-order", value_name = "ORDER", default_value = "ABCD", value_parser = crate::value::parse_word_order)]
+    pub(crate) order: Order,
 
     /// With --device: every point of this profile group (repeatable)
     #[arg(long, value_name = "GROUP")]
@@ -318,8 +319,7 @@ fn groups(connection: &ConnectArgs, args: &PollArgs) -> Result<Vec<Group>, CliEr
         ));
     }
     let first_unit = connection.unit.first().copied().unwrap_or(1);
-    let order = Order::from_name(&args.order)
-        .ok_or_else(|| CliError::Usage(format!("--order {:?}: give ABCD, CDAB, BADC or DCBA", args.order)))?;
+    let order = args.order;
     let mut out = Vec::new();
     let profile = connection.profile()?;
     for spec in specs(args, first_unit)? {
@@ -884,13 +884,30 @@ mod tests {
         assert!(parse_size("3 parsecs").is_err());
     }
 
+    #[test]
+    fn the_four_order_table_through_polls_order_option_and_its_cells() {
+        // 0x11223344 as A=11 B=22 C=33 D=44: the table of ferrobus_proto::words, read/write and get/set.
+        for (name, registers) in [
+            ("ABCD", [0x1122, 0x3344]),
+            ("cdab", [0x3344, 0x1122]),
+            ("BADC", [0x2211, 0x4433]),
+            ("dcba", [0x4433, 0x2211]),
+        ] {
+            let order = crate::value::parse_word_order(name).unwrap();
+            let layout = Layout { format: Format::U32, order, ..Layout::default() };
+            let group = Group::raw("g", 1, Table::Holding.into(), 0, 2, Duration::from_secs(1), &layout).unwrap();
+            assert_eq!(group.decode(&registers), [Ok(ferrobus::poll::Value::Int(0x1122_3344))], "{name}");
+        }
+        assert_eq!(crate::value::parse_word_order("low-first"), Ok(Order::Cdab), "the aliases of --word-order");
+    }
+
     fn args(tokens: Vec<Token>) -> PollArgs {
         PollArgs {
             what: Vec::new(),
             count: Vec::new(),
             every: Vec::new(),
             format: Vec::new(),
-            order: "ABCD".into(),
+            order: Order::Abcd,
             group: Vec::new(),
             session: None,
             csv: false,

@@ -1,6 +1,11 @@
 //! Values: a point's registers or bit as a typed raw value, that value in engineering units
 //! with its unit, enumeration or bit field, and a user's input ("45Hz", "12.5s", "0x10",
 //! "modbus") back to a raw value, checked against the point's type, range and access.
+//!
+//! [`Point::decode`] and [`Point::encode`] are the project's one codec between registers and
+//! values: get, set, backup, poll, monitor and the bridge use them on a profile's points,
+//! read and write on a [`Point::raw`] of the type and word order typed. The layout of bytes
+//! over registers is the core's [`Order`] (`ferrobus_proto::words`).
 
 use std::fmt;
 
@@ -165,34 +170,19 @@ pub(crate) fn default_value(ty: ValueType, default: Option<&toml::Value>) -> Val
     }
 }
 
-/// Bytes in value order (big-endian) to registers in address order, by `order`.
+/// Bytes in value order (big-endian) to registers in address order, by `order` (the core's
+/// one layout, [`Order::to_registers`]).
 fn to_registers(bytes: &[u8], order: Order) -> Vec<u16> {
-    let mut words: Vec<u16> = bytes
-        .chunks(2)
-        .map(|pair| {
-            let (hi, lo) = (pair.first().copied().unwrap_or(0), pair.get(1).copied().unwrap_or(0));
-            if order.bytes_swapped() { u16::from_be_bytes([lo, hi]) } else { u16::from_be_bytes([hi, lo]) }
-        })
-        .collect();
-    if order.words_low_first() {
-        words.reverse();
-    }
+    let mut words = vec![0; bytes.len().div_ceil(2)];
+    order.to_registers(bytes, &mut words);
     words
 }
 
 /// Registers in address order to bytes in value order (big-endian), by `order`.
 fn from_registers(words: &[u16], order: Order) -> Vec<u8> {
-    let mut words = words.to_vec();
-    if order.words_low_first() {
-        words.reverse();
-    }
-    words
-        .iter()
-        .flat_map(|w| {
-            let [hi, lo] = w.to_be_bytes();
-            if order.bytes_swapped() { [lo, hi] } else { [hi, lo] }
-        })
-        .collect()
+    let mut bytes = vec![0; words.len() * 2];
+    order.from_registers(words, &mut bytes);
+    bytes
 }
 
 /// The decimals a scale's step shows: 0.01 → 2, 0.5 → 1, 10 → 0.
