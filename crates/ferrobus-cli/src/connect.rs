@@ -479,7 +479,11 @@ pub(crate) fn with_default_port(addr: &str, default_port: u16) -> Result<String,
     Ok(format!("{addr}:{default_port}"))
 }
 
-pub(crate) use ferrobus_sim::fault::parse_duration;
+/// A duration by the one grammar, [`ferrobus::text::duration`] (a plain number is
+/// milliseconds; ns, us, ms, s, min, h; at most a year).
+pub(crate) fn parse_duration(text: &str) -> Result<Duration, String> {
+    ferrobus::text::duration(text).map_err(|e| e.to_string())
+}
 
 /// A reply timeout: a duration above zero (a timeout of 0 gives up before any reply can come).
 fn parse_timeout(text: &str) -> Result<Duration, String> {
@@ -496,15 +500,21 @@ mod tests {
 
     #[test]
     fn durations_take_units_and_plain_numbers_are_milliseconds() {
+        // The inputs every user of ferrobus::text::duration is tested with, and their values.
+        for (typed, want) in [
+            ("250", Duration::from_millis(250)),
+            ("1.5s", Duration::from_millis(1500)),
+            ("2min", Duration::from_secs(120)),
+            ("1h", Duration::from_secs(3600)),
+            ("250us", Duration::from_micros(250)),
+        ] {
+            assert_eq!(parse_duration(typed), Ok(want), "{typed}");
+        }
         assert_eq!(parse_duration("500ms"), Ok(Duration::from_millis(500)));
-        assert_eq!(parse_duration("1.5s"), Ok(Duration::from_millis(1500)));
-        assert_eq!(parse_duration("2s"), Ok(Duration::from_secs(2)));
-        assert_eq!(parse_duration("250"), Ok(Duration::from_millis(250)));
-        assert_eq!(parse_duration("750us"), Ok(Duration::from_micros(750)));
         assert!(parse_duration("-1s").is_err());
         assert!(parse_duration("fast").is_err());
         assert!(parse_duration("1.2.3s").is_err());
-        assert!(parse_duration("5h").is_err());
+        assert_eq!(parse_duration("5h"), Ok(Duration::from_secs(5 * 3600)), "poll --duration may run for hours");
         assert!(parse_duration("99999999999999999999s").is_err());
         assert!(parse_duration("").is_err());
     }

@@ -57,7 +57,7 @@ pub(crate) struct PollArgs {
     #[arg(long, value_name = "N", action = clap::ArgAction::Append)]
     pub(crate) count: Vec<u16>,
 
-    /// A group's period: 100ms, 1s, 250us (a plain number is ms)
+    /// A group's period: 100ms, 1s, 250us, 2min (a plain number is ms), at most a day
     #[arg(long, value_name = "DURATION", value_parser = parse_period, action = clap::ArgAction::Append)]
     pub(crate) every: Vec<Duration>,
 
@@ -90,7 +90,8 @@ pub(crate) struct PollArgs {
     #[arg(long, value_name = "FILE")]
     pub(crate) log: Option<PathBuf>,
 
-    /// Rotate the log when it reaches this size: 10M, 500k, 1G or bytes
+    /// Rotate the log when it reaches this size: 10MB, 500kB, 1GB (powers of 1000), 10MiB
+    /// (powers of 1024) or bytes
     #[arg(long = "rotate-size", value_name = "SIZE", value_parser = parse_size, requires = "log")]
     pub(crate) rotate_size: Option<u64>,
 
@@ -151,19 +152,13 @@ fn parse_deadband(text: &str) -> Result<f64, String> {
     }
 }
 
+/// `--rotate-size`: a size by the one grammar ([`ferrobus::text::size`]: kB, MB, GB are
+/// powers of 1000, KiB, MiB, GiB of 1024), above zero.
 fn parse_size(text: &str) -> Result<u64, String> {
-    let t = text.trim();
-    let split = t.find(|c: char| !c.is_ascii_digit()).unwrap_or(t.len());
-    let (n, unit) = t.split_at(split);
-    let n: u64 = n.parse().map_err(|_| format!("{text:?}: give a size like 10M, 500k or 4096"))?;
-    let scale: u64 = match unit.trim().to_ascii_lowercase().as_str() {
-        "" | "b" => 1,
-        "k" | "kb" => 1 << 10,
-        "m" | "mb" => 1 << 20,
-        "g" | "gb" => 1 << 30,
-        other => return Err(format!("{text:?}: unknown unit {other:?} (k, M, G)")),
-    };
-    n.checked_mul(scale).filter(|s| *s > 0).ok_or_else(|| format!("{text:?}: give a size above 0 and below 16 EiB"))
+    match ferrobus::text::size(text).map_err(|e| e.to_string())? {
+        0 => Err(format!("'{}': a log cannot rotate at 0 bytes; give e.g. 10MB", ferrobus::log::escape(text.trim()))),
+        n => Ok(n),
+    }
 }
 
 impl PollArgs {
@@ -875,9 +870,12 @@ mod tests {
     }
 
     #[test]
-    fn sizes_take_k_m_g_and_refuse_zero_and_overflow() {
-        assert_eq!(parse_size("500k"), Ok(512_000));
-        assert_eq!(parse_size("10M"), Ok(10 << 20));
+    fn sizes_are_si_and_iec_by_the_one_grammar_and_refuse_zero_and_overflow() {
+        // The inputs every user of ferrobus::text::size is tested with (the bridge's store too).
+        for (typed, want) in [("500k", 500_000), ("10MB", 10_000_000), ("10MiB", 10 << 20), ("64KiB", 65_536)] {
+            assert_eq!(parse_size(typed), Ok(want), "{typed}");
+        }
+        assert_eq!(parse_size("10M"), Ok(10_000_000));
         assert_eq!(parse_size("4096"), Ok(4096));
         assert!(parse_size("0").is_err());
         assert!(parse_size("99999999999G").is_err());

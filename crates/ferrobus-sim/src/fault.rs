@@ -199,13 +199,21 @@ mod tests {
     }
 
     #[test]
-    fn durations_take_the_usual_units() {
-        assert_eq!(parse_duration("1.5s"), Ok(Duration::from_millis(1500)));
-        assert_eq!(parse_duration("250us"), Ok(Duration::from_micros(250)));
-        assert_eq!(parse_duration("20"), Ok(Duration::from_millis(20)));
+    fn durations_take_the_one_grammar() {
+        // The inputs every user of ferrobus::text::duration is tested with, and their values.
+        for (typed, want) in [
+            ("250", Duration::from_millis(250)),
+            ("1.5s", Duration::from_millis(1500)),
+            ("2min", Duration::from_secs(120)),
+            ("1h", Duration::from_secs(3600)),
+            ("250us", Duration::from_micros(250)),
+        ] {
+            assert_eq!(parse_duration(typed), Ok(want), "{typed}");
+            assert_eq!(format!("delay={typed}").parse::<Faults>().unwrap().delay, want, "delay={typed}");
+        }
         assert!(parse_duration("-1s").is_err());
-        assert!(parse_duration("soon").is_err());
-        assert!(parse_duration("2h").is_err());
+        assert!(parse_duration("soon").unwrap_err().contains("'soon' is not a duration"));
+        assert!(parse_duration("8761h").is_err());
         assert_eq!(parse_share("5%"), Ok(0.05));
         assert!(parse_share("150%").is_err());
     }
