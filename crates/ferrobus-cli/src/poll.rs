@@ -108,7 +108,8 @@ pub(crate) struct PollArgs {
     #[arg(long = "on-change")]
     pub(crate) on_change: bool,
 
-    /// With --on-change: the smallest change of a scaled value that is written
+    /// With --on-change: a scaled value is written when it moves by more than this (a NaN
+    /// after a number and a number after a NaN are written, a NaN after a NaN is not)
     #[arg(long, value_name = "X", default_value_t = 0.0, requires = "on_change", value_parser = parse_deadband)]
     pub(crate) deadband: f64,
 
@@ -506,7 +507,7 @@ impl Changes {
                 let key = (sample.group, r.cell);
                 let moved = match (self.cells.get(&key), r.scaled) {
                     (None, _) => true,
-                    (Some((Some(last), _)), Some(now)) => (now - last).abs() > deadband,
+                    (Some((Some(last), _)), Some(now)) => ferrobus_profile::beyond_deadband(*last, now, deadband),
                     (Some((_, last)), _) => *last != r.shown,
                 };
                 let moved = moved || changed_status;
@@ -835,6 +836,25 @@ mod tests {
         assert_eq!(c.filter(&sample(0, Err(timeout())), 0.5), (vec![], false));
         // Back to ok: every cell is written again.
         assert_eq!(c.filter(&sample(0, Ok(vec![reading(0, 10.6), reading(1, 5.6)])), 0.5), (vec![true, true], true));
+    }
+
+    #[test]
+    fn on_change_writes_every_change_between_nan_and_a_number_and_nan_after_nan_once() {
+        // (last, now, deadband, written): the table of ferrobus_profile::beyond_deadband, as the bridge.
+        for (last, now, deadband, written) in [
+            (1.0, f64::NAN, 5.0, true),
+            (f64::NAN, 1.0, 5.0, true),
+            (f64::NAN, f64::NAN, 5.0, false),
+            (f64::NAN, f64::NAN, 0.0, false),
+            (10.0, 10.5, 0.5, false),
+            (10.0, 10.6, 0.5, true),
+            (f64::INFINITY, f64::INFINITY, 0.5, false),
+        ] {
+            let mut c = Changes::default();
+            c.filter(&sample(0, Ok(vec![reading(0, last)])), deadband);
+            let (cells, _) = c.filter(&sample(0, Ok(vec![reading(0, now)])), deadband);
+            assert_eq!(cells, [written], "{last} -> {now} (deadband {deadband})");
+        }
     }
 
     #[test]

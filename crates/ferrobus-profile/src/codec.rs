@@ -56,6 +56,27 @@ impl fmt::Display for Value {
     }
 }
 
+/// Whether a number read now, `now`, has moved beyond `deadband` from `last`, the one last
+/// reported: the one deadband rule of report-by-exception (`poll --on-change`, the bridge).
+///
+/// - a NaN after a number, or a number after a NaN: moved (every change between NaN and a
+///   number is reported);
+/// - a NaN after a NaN: not moved (it is not repeated);
+/// - equal numbers (an infinity after the same infinity too): not moved;
+/// - otherwise moved when `|now − last|` is more than `deadband` (exactly `deadband` is not
+///   beyond it); a deadband of 0 or below reports any change, a NaN deadband every one.
+pub fn beyond_deadband(last: f64, now: f64, deadband: f64) -> bool {
+    match (last.is_nan(), now.is_nan()) {
+        (true, true) => false,
+        (true, false) | (false, true) => true,
+        #[allow(clippy::float_cmp)]
+        (false, false) if last == now => false,
+        (false, false) => {
+            matches!((now - last).abs().partial_cmp(&deadband), Some(std::cmp::Ordering::Greater) | None)
+        }
+    }
+}
+
 /// Why a value could not be decoded, encoded, parsed or written.
 #[derive(Clone, Debug, PartialEq, thiserror::Error)]
 #[non_exhaustive]
@@ -497,6 +518,28 @@ mod tests {
             "[device]\nname='x'\nvendor='v'\nproduct_code='p'\nrevision='1'\n[[registers]]\nnumber=0\nname='p'\n{spec}\n"
         );
         Profile::parse(&text, "test.toml").unwrap().points()[0].clone()
+    }
+
+    /// (last, now, deadband, reported): the table both users (poll, the bridge) are tested with.
+    const DEADBAND: [(f64, f64, f64, bool); 11] = [
+        (1.0, f64::NAN, 5.0, true),
+        (f64::NAN, 1.0, 5.0, true),
+        (f64::NAN, f64::NAN, 5.0, false),
+        (f64::NAN, f64::NAN, 0.0, false),
+        (10.0, 10.5, 0.5, false),
+        (10.0, 10.6, 0.5, true),
+        (10.0, 9.4, 0.5, true),
+        (10.0, 10.0, 0.0, false),
+        (10.0, 10.001, 0.0, true),
+        (f64::INFINITY, f64::INFINITY, 0.5, false),
+        (f64::NEG_INFINITY, f64::INFINITY, 0.5, true),
+    ];
+
+    #[test]
+    fn the_deadband_reports_every_change_between_nan_and_a_number_and_never_repeats_nan() {
+        for (last, now, deadband, reported) in DEADBAND {
+            assert_eq!(beyond_deadband(last, now, deadband), reported, "{last} -> {now} (deadband {deadband})");
+        }
     }
 
     #[test]
