@@ -70,11 +70,9 @@ pub struct FaultError {
 const UNIT_EXAMPLE: &str = "drop=10%,delay=50ms,corrupt=0.05,exception=0x06,silent,trip=5s";
 const RULE_EXAMPLE: &str = "fc=0x03,addr=0x1000-0x100F,share=50%,exception=0x06";
 
+/// A code byte, decimal or 0x hex, by the one grammar ([`ferrobus::text::number`]).
 fn code(value: &str) -> Option<u8> {
-    match value.strip_prefix("0x").or_else(|| value.strip_prefix("0X")) {
-        Some(hex) => u8::from_str_radix(hex, 16).ok(),
-        None => value.parse().ok(),
-    }
+    ferrobus::text::number(value, u64::from(u8::MAX)).ok().and_then(|n| u8::try_from(n).ok())
 }
 
 impl FromStr for Faults {
