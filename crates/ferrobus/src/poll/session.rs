@@ -293,3 +293,26 @@ pub fn period(text: Option<&str>) -> Result<Duration, String> {
     }
     Ok(period)
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_period_is_the_one_duration_grammar_above_zero_and_at_most_a_day() {
+        // The inputs every user of crate::text::duration is tested with, and their values.
+        for (typed, want) in [
+            ("250", Duration::from_millis(250)),
+            ("1.5s", Duration::from_millis(1500)),
+            ("2min", Duration::from_secs(120)),
+            ("1h", Duration::from_secs(3600)),
+            ("250us", Duration::from_micros(250)),
+        ] {
+            assert_eq!(period(Some(typed)), Ok(want), "{typed}");
+        }
+        assert_eq!(period(None), Ok(Duration::from_secs(1)));
+        assert!(period(Some("0ms")).unwrap_err().contains("more than 0"));
+        assert!(period(Some("25h")).unwrap_err().contains("at most a day"));
+        assert!(period(Some("10 parsecs")).unwrap_err().contains("unknown unit 'parsecs'"));
+    }
+}
