@@ -191,17 +191,6 @@ pub(crate) fn decode(kind: ValueType, order: WordOrder, regs: &[u16]) -> Option<
     })
 }
 
-/// The registers of raw value `value` of type `ty` in `order`, by the one codec.
-fn registers(
-    ty: ferrobus_profile::ValueType,
-    order: WordOrder,
-    value: &Value,
-    text: &str,
-    kind: ValueType,
-) -> Result<Vec<u16>, CliError> {
-    raw_point(ty, order).encode(value).map_err(|e| bad(text, kind, &e.to_string()))
-}
-
 /// An integer as typed: decimal with an optional sign, `0x` hex or `0b` binary; `_` ignored.
 /// Returns the value and whether it was written in hex or binary (raw bits).
 fn parse_int(text: &str) -> Option<(i128, bool)> {
@@ -274,7 +263,7 @@ pub(crate) fn encode(kind: ValueType, order: WordOrder, text: &str) -> Result<Ve
             (P::U16, range(v, 0, 0xFFFF, "")?)
         }
     };
-    registers(ty, order, &Value::Int(value), text, kind)
+    raw_point(ty, order).encode(&Value::Int(value)).map_err(|e| bad(text, kind, &e.to_string()))
 }
 
 /// An f32 as typed, or its raw bits as `0x` hex.
