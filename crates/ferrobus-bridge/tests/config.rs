@@ -465,3 +465,36 @@ fn every_mistake_is_reported_at_its_place() {
     }
     assert!(failures.is_empty(), "{}", failures.join("\n"));
 }
+
+#[test]
+fn a_raw_cells_order_is_the_one_word_order_and_decodes_the_four_order_table() {
+    // 0x11223344 as A=11 B=22 C=33 D=44: the table of ferrobus_proto::words, read/write, poll and get/set.
+    for (typed, registers) in [
+        ("ABCD", [0x1122, 0x3344]),
+        ("low-first", [0x3344, 0x1122]),
+        ("badc", [0x2211, 0x4433]),
+        ("DCBA", [0x4433, 0x2211]),
+    ] {
+        let text = format!(
+            "{HEAD}[[line.device]]\nid = \"dev\"\nunit = 1\nprofile = \"generic\"\n[[line.device.raw]]\ntable = \"holding\"\naddress = 0\n\
+             type = \"u32\"\norder = \"{typed}\"\nname = \"v\"\n"
+        );
+        let plant = Plant::parse(&text, "plant.toml", Path::new(".")).unwrap_or_else(|e| panic!("{typed}: {e}"));
+        let (_, device) = plant.devices().next().expect("one device");
+        assert_eq!(device.groups[0].decode(&registers), [Ok(ferrobus_profile::Value::Int(0x1122_3344))], "{typed}");
+    }
+}
+
+#[test]
+fn durations_and_sizes_in_a_plant_file_are_the_one_grammar() {
+    // The inputs every user of ferrobus::text is tested with: a plain number is milliseconds,
+    // MB is 10^6 bytes and MiB 2^20.
+    let text = format!(
+        "{HEAD}[store]\nmemory = \"10MB\"\ndir = \"/tmp/ferrobus-grammar\"\ndisk = \"10MiB\"\n{GOOD}\
+         [[line.device.poll]]\nevery = \"250\"\npoints = [\"d002\"]\n"
+    );
+    let plant = Plant::parse(&text, "plant.toml", Path::new(".")).unwrap_or_else(|e| panic!("{e}"));
+    assert_eq!((plant.store.memory, plant.store.disk), (10_000_000, 10 << 20));
+    let (_, device) = plant.devices().next().expect("one device");
+    assert_eq!(device.groups.last().map(|g| g.every), Some(Duration::from_millis(250)));
+}

@@ -196,13 +196,9 @@ impl<'a> RangeWord<'a> {
     }
 }
 
-/// A decimal or `0x` hex number.
+/// A decimal or `0x` hex number, by the one grammar ([`ferrobus::text::number`]).
 fn number(text: &str) -> Option<u32> {
-    let t = text.trim();
-    match t.strip_prefix("0x").or_else(|| t.strip_prefix("0X")) {
-        Some(hex) => u32::from_str_radix(hex, 16).ok(),
-        None => t.parse().ok(),
-    }
+    ferrobus::text::number(text, u64::from(u32::MAX)).ok().and_then(|n| u32::try_from(n).ok())
 }
 
 impl fmt::Display for Table {
@@ -268,14 +264,9 @@ impl Address {
         }
         let bad = || CliError::Usage(format!("'{text}' is not an address: use decimal or 0x hex"));
         let typed_hex = cleaned.starts_with("0x") || cleaned.starts_with("0X");
-        let (value, digits) = if let Some(hex) = cleaned.strip_prefix("0x").or_else(|| cleaned.strip_prefix("0X")) {
-            (u32::from_str_radix(hex, 16).map_err(|_| bad())?, None)
-        } else {
-            if cleaned.is_empty() || !cleaned.bytes().all(|b| b.is_ascii_digit()) {
-                return Err(bad());
-            }
-            (cleaned.parse::<u32>().map_err(|_| bad())?, Some(cleaned.len()))
-        };
+        // The number by the one grammar; the count of decimal digits tells a Modicon reference.
+        let value = number(&cleaned).ok_or_else(bad)?;
+        let digits = (!typed_hex).then_some(cleaned.len());
         if args.modicon {
             return match modicon(value, digits) {
                 Some(address) => address.matching(table, text),
@@ -475,6 +466,19 @@ mod tests {
             Err(CliError::Usage(msg)) => msg,
             other => panic!("expected a usage error, got {other:?}"),
         }
+    }
+
+    #[test]
+    fn addresses_units_and_counts_take_the_one_number_grammar() {
+        // The numbers scan --units takes (ferrobus::text::number): decimal, 0x hex, _ grouping.
+        for (typed, want) in [("247", 247), ("0xF7", 247), ("0Xf7", 247), ("2_47", 247)] {
+            assert_eq!(number(typed), Some(want), "{typed}");
+            assert_eq!(parse(typed, Table::Holding, false).unwrap().wire, 247, "{typed}");
+        }
+        let word = RangeWord::parse("0x10:holding:0x20:0x4").unwrap().unwrap();
+        assert_eq!((word.unit, word.address, word.count), (Some(16), "0x20", Some(4)));
+        assert_eq!(number("-1"), None);
+        assert_eq!(number("0x"), None);
     }
 
     #[test]

@@ -284,12 +284,10 @@ fn round(value: f64, decimals: i32) -> f64 {
 
 /// `0x` hexadecimal or decimal, 0–65535.
 fn parse_address(text: &str) -> Result<u16, String> {
-    let text = text.trim();
-    let parsed = match text.strip_prefix("0x").or_else(|| text.strip_prefix("0X")) {
-        Some(hex) => u16::from_str_radix(hex, 16),
-        None => text.parse(),
-    };
-    parsed.map_err(|_| format!("'{text}' is not a register address from 0 to 65535 (decimal or 0x hex)"))
+    ferrobus::text::number(text, u64::from(u16::MAX))
+        .ok()
+        .and_then(|n| u16::try_from(n).ok())
+        .ok_or_else(|| format!("'{}' is not a register address from 0 to 65535 (decimal or 0x hex)", text.trim()))
 }
 
 /// User and system CPU time of the whole process; zero where it cannot be read (not Linux).

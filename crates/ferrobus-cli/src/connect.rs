@@ -14,7 +14,7 @@ use ferrobus_proto::frame::{DataBits, LineConfig, Parity, StopBits};
 
 use crate::address::{Address, AddressArgs, Table, split};
 use crate::exit::{CliError, Numbering};
-use crate::value::{ValueArgs, WordOrder};
+use crate::value::ValueArgs;
 
 /// Options that say how to reach the device.
 #[derive(Args, Clone, Debug)]
@@ -199,12 +199,11 @@ impl ConnectArgs {
         })
     }
 
-    /// `given` with the `--device` profile's word order where none was given (ABCD is
-    /// high-first, CDAB low-first; the byte-swapped orders have no 32-bit --word-order).
+    /// `given` with the `--device` profile's word order where none was given (the same type:
+    /// all four orders).
     pub(crate) fn values(&self, given: ValueArgs) -> Result<ValueArgs, CliError> {
         let Some(profile) = self.profile()? else { return Ok(given) };
-        let order = if profile.order().words_low_first() { WordOrder::LowFirst } else { WordOrder::HighFirst };
-        Ok(given.or_order(Some(order)))
+        Ok(given.or_order(Some(profile.order())))
     }
 }
 
@@ -257,15 +256,7 @@ impl ConnectArgs {
             values.kind = kind;
         }
         if point.width > 1 {
-            if point.order.bytes_swapped() {
-                return Err(CliError::Usage(format!(
-                    "{} is in {} order, which read and write do not take: use get or set",
-                    point.code,
-                    point.order.name()
-                )));
-            }
-            let order = if point.order.words_low_first() { WordOrder::LowFirst } else { WordOrder::HighFirst };
-            values = values.or_order(Some(order));
+            values = values.or_order(Some(point.order));
         }
         let address = Address { wire: point.address, table, style: crate::address::Style::Wire };
         Ok(Some((address, values)))
@@ -488,7 +479,11 @@ pub(crate) fn with_default_port(addr: &str, default_port: u16) -> Result<String,
     Ok(format!("{addr}:{default_port}"))
 }
 
-pub(crate) use ferrobus_sim::fault::parse_duration;
+/// A duration by the one grammar, [`ferrobus::text::duration`] (a plain number is
+/// milliseconds; ns, us, ms, s, min, h; at most a year).
+pub(crate) fn parse_duration(text: &str) -> Result<Duration, String> {
+    ferrobus::text::duration(text).map_err(|e| e.to_string())
+}
 
 /// A reply timeout: a duration above zero (a timeout of 0 gives up before any reply can come).
 fn parse_timeout(text: &str) -> Result<Duration, String> {
@@ -505,15 +500,21 @@ mod tests {
 
     #[test]
     fn durations_take_units_and_plain_numbers_are_milliseconds() {
+        // The inputs every user of ferrobus::text::duration is tested with, and their values.
+        for (typed, want) in [
+            ("250", Duration::from_millis(250)),
+            ("1.5s", Duration::from_millis(1500)),
+            ("2min", Duration::from_secs(120)),
+            ("1h", Duration::from_secs(3600)),
+            ("250us", Duration::from_micros(250)),
+        ] {
+            assert_eq!(parse_duration(typed), Ok(want), "{typed}");
+        }
         assert_eq!(parse_duration("500ms"), Ok(Duration::from_millis(500)));
-        assert_eq!(parse_duration("1.5s"), Ok(Duration::from_millis(1500)));
-        assert_eq!(parse_duration("2s"), Ok(Duration::from_secs(2)));
-        assert_eq!(parse_duration("250"), Ok(Duration::from_millis(250)));
-        assert_eq!(parse_duration("750us"), Ok(Duration::from_micros(750)));
         assert!(parse_duration("-1s").is_err());
         assert!(parse_duration("fast").is_err());
         assert!(parse_duration("1.2.3s").is_err());
-        assert!(parse_duration("5h").is_err());
+        assert_eq!(parse_duration("5h"), Ok(Duration::from_secs(5 * 3600)), "poll --duration may run for hours");
         assert!(parse_duration("99999999999999999999s").is_err());
         assert!(parse_duration("").is_err());
     }

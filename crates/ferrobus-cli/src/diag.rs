@@ -158,7 +158,9 @@ fn delimiter_byte(text: &str) -> Result<u8, CliError> {
         "\\n" => Some(b'\n'),
         "\\r" => Some(b'\r'),
         "\\t" => Some(b'\t'),
-        t if t.starts_with("0x") || t.starts_with("0X") => u8::from_str_radix(&t[2..], 16).ok(),
+        t if t.starts_with("0x") || t.starts_with("0X") => {
+            ferrobus::text::number(t, u64::from(u8::MAX)).ok().and_then(|n| u8::try_from(n).ok())
+        }
         t if t.len() == 1 && t.is_ascii() => t.bytes().next(),
         _ => None,
     };
@@ -166,14 +168,11 @@ fn delimiter_byte(text: &str) -> Result<u8, CliError> {
 }
 
 fn sub_code(text: &str) -> Result<DiagnosticCode, CliError> {
-    let t = text.trim();
-    let parsed = match t.strip_prefix("0x").or_else(|| t.strip_prefix("0X")) {
-        Some(h) => u16::from_str_radix(h, 16),
-        None => t.parse(),
-    };
-    parsed
+    ferrobus::text::number(text, u64::from(u16::MAX))
+        .ok()
+        .and_then(|n| u16::try_from(n).ok())
         .map(DiagnosticCode::from_u16)
-        .map_err(|_| CliError::Usage(format!("sub-function '{text}' must be 0-65535 (decimal or 0x hex)")))
+        .ok_or_else(|| CliError::Usage(format!("sub-function '{text}' must be 0-65535 (decimal or 0x hex)")))
 }
 
 /// Runs `diag`.

@@ -427,9 +427,9 @@ fn refused_by_gateway(function: FunctionCode) -> String {
 }
 
 /// Whether a role needs write access for `function`, and a read-only gateway refuses it:
-/// the writes, 0x17 (it writes too) and 0x08 (some sub-functions restart or silence).
+/// the writes (0x17 among them) and 0x08 (some sub-functions restart or silence).
 fn changes_data(function: FunctionCode) -> bool {
-    function.is_write() || matches!(function.value(), 0x08 | 0x17)
+    function.is_write() || function == FunctionCode::Diagnostics
 }
 
 /// Exception 01 from a Modbus/TCP Security server: most often the role in our certificate

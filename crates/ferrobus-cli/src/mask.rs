@@ -29,7 +29,7 @@ pub(crate) struct MaskArgs {
 }
 
 fn mask(text: &str) -> Result<u16, CliError> {
-    Ok(encode(ValueType::U16, WordOrder::HighFirst, text)?.first().copied().unwrap_or_default())
+    Ok(encode(ValueType::U16, WordOrder::Abcd, text)?.first().copied().unwrap_or_default())
 }
 
 /// Runs `mask`.

@@ -57,7 +57,7 @@ pub(crate) struct PollArgs {
     #[arg(long, value_name = "N", action = clap::ArgAction::Append)]
     pub(crate) count: Vec<u16>,
 
-    /// A group's period: 100ms, 1s, 250us (a plain number is ms)
+    /// A group's period: 100ms, 1s, 250us, 2min (a plain number is ms), at most a day
     #[arg(long, value_name = "DURATION", value_parser = parse_period, action = clap::ArgAction::Append)]
     pub(crate) every: Vec<Duration>,
 
@@ -65,9 +65,10 @@ pub(crate) struct PollArgs {
     #[arg(long, value_name = "FORMAT", action = clap::ArgAction::Append)]
     pub(crate) format: Vec<String>,
 
-    /// The word order of u32, i32, f32 and f64 cells: ABCD, CDAB, BADC, DCBA
-    #[arg(long, value_name = "ORDER", default_value = "ABCD")]
-    pub(crate) order: String,
+    /// The byte order of u32, i32, f32 and f64 cells over their registers: ABCD or high-first,
+    /// CDAB or low-first, BADC, DCBA (case-insensitive; as read's --word-order)
+    #[arg(long, visible_alias = "word-order", value_name = "ORDER", default_value = "ABCD", value_parser = crate::value::parse_word_order)]
+    pub(crate) order: Order,
 
     /// With --device: every point of this profile group (repeatable)
     #[arg(long, value_name = "GROUP")]
@@ -89,7 +90,8 @@ pub(crate) struct PollArgs {
     #[arg(long, value_name = "FILE")]
     pub(crate) log: Option<PathBuf>,
 
-    /// Rotate the log when it reaches this size: 10M, 500k, 1G or bytes
+    /// Rotate the log when it reaches this size: 10MB, 500kB, 1GB (powers of 1000), 10MiB
+    /// (powers of 1024) or bytes
     #[arg(long = "rotate-size", value_name = "SIZE", value_parser = parse_size, requires = "log")]
     pub(crate) rotate_size: Option<u64>,
 
@@ -106,7 +108,8 @@ pub(crate) struct PollArgs {
     #[arg(long = "on-change")]
     pub(crate) on_change: bool,
 
-    /// With --on-change: the smallest change of a scaled value that is written
+    /// With --on-change: a scaled value is written when it moves by more than this (a NaN
+    /// after a number and a number after a NaN are written, a NaN after a NaN is not)
     #[arg(long, value_name = "X", default_value_t = 0.0, requires = "on_change", value_parser = parse_deadband)]
     pub(crate) deadband: f64,
 
@@ -150,19 +153,13 @@ fn parse_deadband(text: &str) -> Result<f64, String> {
     }
 }
 
+/// `--rotate-size`: a size by the one grammar ([`ferrobus::text::size`]: kB, MB, GB are
+/// powers of 1000, KiB, MiB, GiB of 1024), above zero.
 fn parse_size(text: &str) -> Result<u64, String> {
-    let t = text.trim();
-    let split = t.find(|c: char| !c.is_ascii_digit()).unwrap_or(t.len());
-    let (n, unit) = t.split_at(split);
-    let n: u64 = n.parse().map_err(|_| format!("{text:?}: give a size like 10M, 500k or 4096"))?;
-    let scale: u64 = match unit.trim().to_ascii_lowercase().as_str() {
-        "" | "b" => 1,
-        "k" | "kb" => 1 << 10,
-        "m" | "mb" => 1 << 20,
-        "g" | "gb" => 1 << 30,
-        other => return Err(format!("{text:?}: unknown unit {other:?} (k, M, G)")),
-    };
-    n.checked_mul(scale).filter(|s| *s > 0).ok_or_else(|| format!("{text:?}: give a size above 0 and below 16 EiB"))
+    match ferrobus::text::size(text).map_err(|e| e.to_string())? {
+        0 => Err(format!("'{}': a log cannot rotate at 0 bytes; give e.g. 10MB", ferrobus::log::escape(text.trim()))),
+        n => Ok(n),
+    }
 }
 
 impl PollArgs {
@@ -318,8 +315,7 @@ fn groups(connection: &ConnectArgs, args: &PollArgs) -> Result<Vec<Group>, CliEr
         ));
     }
     let first_unit = connection.unit.first().copied().unwrap_or(1);
-    let order = Order::from_name(&args.order)
-        .ok_or_else(|| CliError::Usage(format!("--order {:?}: give ABCD, CDAB, BADC or DCBA", args.order)))?;
+    let order = args.order;
     let mut out = Vec::new();
     let profile = connection.profile()?;
     for spec in specs(args, first_unit)? {
@@ -511,7 +507,7 @@ impl Changes {
                 let key = (sample.group, r.cell);
                 let moved = match (self.cells.get(&key), r.scaled) {
                     (None, _) => true,
-                    (Some((Some(last), _)), Some(now)) => (now - last).abs() > deadband,
+                    (Some((Some(last), _)), Some(now)) => ferrobus_profile::beyond_deadband(*last, now, deadband),
                     (Some((_, last)), _) => *last != r.shown,
                 };
                 let moved = moved || changed_status;
@@ -843,6 +839,25 @@ mod tests {
     }
 
     #[test]
+    fn on_change_writes_every_change_between_nan_and_a_number_and_nan_after_nan_once() {
+        // (last, now, deadband, written): the table of ferrobus_profile::beyond_deadband, as the bridge.
+        for (last, now, deadband, written) in [
+            (1.0, f64::NAN, 5.0, true),
+            (f64::NAN, 1.0, 5.0, true),
+            (f64::NAN, f64::NAN, 5.0, false),
+            (f64::NAN, f64::NAN, 0.0, false),
+            (10.0, 10.5, 0.5, false),
+            (10.0, 10.6, 0.5, true),
+            (f64::INFINITY, f64::INFINITY, 0.5, false),
+        ] {
+            let mut c = Changes::default();
+            c.filter(&sample(0, Ok(vec![reading(0, last)])), deadband);
+            let (cells, _) = c.filter(&sample(0, Ok(vec![reading(0, now)])), deadband);
+            assert_eq!(cells, [written], "{last} -> {now} (deadband {deadband})");
+        }
+    }
+
+    #[test]
     fn the_terminal_table_is_redrawn_over_itself() {
         let g = Group::raw(
             "u1 holding 0x0000",
@@ -875,13 +890,33 @@ mod tests {
     }
 
     #[test]
-    fn sizes_take_k_m_g_and_refuse_zero_and_overflow() {
-        assert_eq!(parse_size("500k"), Ok(512_000));
-        assert_eq!(parse_size("10M"), Ok(10 << 20));
+    fn sizes_are_si_and_iec_by_the_one_grammar_and_refuse_zero_and_overflow() {
+        // The inputs every user of ferrobus::text::size is tested with (the bridge's store too).
+        for (typed, want) in [("500k", 500_000), ("10MB", 10_000_000), ("10MiB", 10 << 20), ("64KiB", 65_536)] {
+            assert_eq!(parse_size(typed), Ok(want), "{typed}");
+        }
+        assert_eq!(parse_size("10M"), Ok(10_000_000));
         assert_eq!(parse_size("4096"), Ok(4096));
         assert!(parse_size("0").is_err());
         assert!(parse_size("99999999999G").is_err());
         assert!(parse_size("3 parsecs").is_err());
+    }
+
+    #[test]
+    fn the_four_order_table_through_polls_order_option_and_its_cells() {
+        // 0x11223344 as A=11 B=22 C=33 D=44: the table of ferrobus_proto::words, read/write and get/set.
+        for (name, registers) in [
+            ("ABCD", [0x1122, 0x3344]),
+            ("cdab", [0x3344, 0x1122]),
+            ("BADC", [0x2211, 0x4433]),
+            ("dcba", [0x4433, 0x2211]),
+        ] {
+            let order = crate::value::parse_word_order(name).unwrap();
+            let layout = Layout { format: Format::U32, order, ..Layout::default() };
+            let group = Group::raw("g", 1, Table::Holding.into(), 0, 2, Duration::from_secs(1), &layout).unwrap();
+            assert_eq!(group.decode(&registers), [Ok(ferrobus::poll::Value::Int(0x1122_3344))], "{name}");
+        }
+        assert_eq!(crate::value::parse_word_order("low-first"), Ok(Order::Cdab), "the aliases of --word-order");
     }
 
     fn args(tokens: Vec<Token>) -> PollArgs {
@@ -890,7 +925,7 @@ mod tests {
             count: Vec::new(),
             every: Vec::new(),
             format: Vec::new(),
-            order: "ABCD".into(),
+            order: Order::Abcd,
             group: Vec::new(),
             session: None,
             csv: false,

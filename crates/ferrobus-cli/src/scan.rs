@@ -29,7 +29,8 @@ use crate::output::{self, Align, Format, OutputArgs, Rows};
 /// `scan [--units LIST] [--bauds LIST] [--framings LIST] ...`.
 #[derive(Args, Debug)]
 pub(crate) struct ScanArgs {
-    /// Unit addresses to probe: 1-247, or a list such as 1-10,17,100-120 (never 0, the broadcast)
+    /// Unit addresses to probe: 1-247, or a list such as 1-10,17,0x20-0x2F (decimal or 0x hex;
+    /// never 0, the broadcast)
     #[arg(long, default_value = "1-247", value_parser = parse_units)]
     units: UnitList,
 
@@ -81,29 +82,26 @@ pub(crate) struct ScanArgs {
 #[derive(Clone, Debug)]
 pub(crate) struct UnitList(Vec<u8>);
 
+/// `--units`: the one list grammar ([`ferrobus::text::list`]: decimal or 0x hex numbers and
+/// ranges, `1-10,0x20,247`), each unit 1 to 247.
 fn parse_units(text: &str) -> Result<UnitList, String> {
+    let ranges = ferrobus::text::list(text, u64::from(u8::MAX)).map_err(|e| match e {
+        ferrobus::text::TextError::Backwards { text, first, last } => {
+            format!("'{}': the range goes down; write {last}-{first}", ferrobus::log::escape(&text))
+        }
+        ferrobus::text::TextError::TooLarge { value, .. } => format!("unit {value} is reserved: units are 1-247"),
+        other => format!("{other} (a unit address is 1-247)"),
+    })?;
     let mut units: Vec<u8> = Vec::new();
-    let one = |s: &str| -> Result<u8, String> {
-        let n: u8 = s.trim().parse().map_err(|_| format!("'{s}' is not a unit address (1-247)"))?;
-        if (unit::MIN..=unit::MAX).contains(&n) {
-            Ok(n)
-        } else if n == 0 {
-            Err("unit 0 is the broadcast address: nothing answers it, and a scan never broadcasts".into())
-        } else {
-            Err(format!("unit {n} is reserved: units are 1-247"))
-        }
-    };
-    for part in text.split(',') {
-        let (first, last) = if let Some((a, b)) = part.split_once('-') {
-            (one(a)?, one(b)?)
-        } else {
-            let u = one(part)?;
-            (u, u)
-        };
-        if first > last {
-            return Err(format!("'{part}': the range goes down; write {last}-{first}"));
-        }
-        for u in first..=last {
+    for range in ranges {
+        for n in range {
+            let u = u8::try_from(n).unwrap_or(u8::MAX);
+            if u == unit::BROADCAST {
+                return Err("unit 0 is the broadcast address: nothing answers it, and a scan never broadcasts".into());
+            }
+            if !(unit::MIN..=unit::MAX).contains(&u) {
+                return Err(format!("unit {u} is reserved: units are 1-247"));
+            }
             if !units.contains(&u) {
                 units.push(u);
             }
@@ -113,9 +111,9 @@ fn parse_units(text: &str) -> Result<UnitList, String> {
 }
 
 fn parse_baud(text: &str) -> Result<u32, String> {
-    match text.trim().parse::<u32>() {
-        Ok(b) if b > 0 => Ok(b),
-        _ => Err(format!("'{text}' is not a baud rate (e.g. 9600, 19200)")),
+    match ferrobus::text::number(text, u64::from(u32::MAX)).map(u32::try_from) {
+        Ok(Ok(b)) if b > 0 => Ok(b),
+        _ => Err(format!("'{}' is not a baud rate (e.g. 9600, 19200)", ferrobus::log::escape(text))),
     }
 }
 
@@ -125,12 +123,10 @@ fn parse_format(text: &str) -> Result<CharFormat, String> {
 }
 
 fn parse_function(text: &str) -> Result<ProbeFunction, String> {
-    let t = text.trim();
-    let parsed = match t.strip_prefix("0x").or_else(|| t.strip_prefix("0X")) {
-        Some(digits) => u8::from_str_radix(digits, 16),
-        None => t.parse::<u8>(),
-    };
-    let code = parsed.map_err(|_| format!("'{text}' is not a function code (1-4, or 0x01-0x04)"))?;
+    let code = ferrobus::text::number(text, u64::from(u8::MAX))
+        .ok()
+        .and_then(|n| u8::try_from(n).ok())
+        .ok_or_else(|| format!("'{}' is not a function code (1-4, or 0x01-0x04)", ferrobus::log::escape(text)))?;
     ProbeFunction::from_code(code).ok_or_else(|| {
         format!("function 0x{code:02X} cannot probe: a scan only reads, with 1, 2, 3 or 4 (and never writes)")
     })
@@ -540,8 +536,14 @@ mod tests {
         assert!(parse_units("0-5").unwrap_err().contains("broadcast"));
         assert!(parse_units("248").unwrap_err().contains("reserved"));
         assert!(parse_units("9-3").unwrap_err().contains("write 3-9"));
-        assert!(parse_units("x").unwrap_err().contains("'x' is not a unit address"));
+        assert!(parse_units("x").unwrap_err().contains("'x' is not a number"), "{:?}", parse_units("x"));
         assert!(parse_units("").is_err());
+        // The one number and list grammar: hex as everywhere else.
+        assert_eq!(parse_units("0x10-0x12,0xF7").unwrap().0, [16, 17, 18, 247]);
+        assert_eq!(parse_units("1-10,0x20,247").unwrap().0.len(), 12);
+        assert!(parse_units("0x0").unwrap_err().contains("broadcast"));
+        assert!(parse_units("300").unwrap_err().contains("reserved"));
+        assert_eq!(parse_baud("0x2580"), Ok(9600));
     }
 
     #[test]

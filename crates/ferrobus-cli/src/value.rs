@@ -2,11 +2,19 @@
 //!
 //! A 32-bit value takes two registers. Which comes first differs by device: the Omron and
 //! Hitachi drives put the high word at the lower address (reference §4.9), the SDP servo
-//! example suggests the low word first (§5); hence `--word-order`.
+//! example suggests the low word first (§5), others swap the bytes of each register; hence
+//! `--word-order`, which takes the four orders of profiles (ABCD, CDAB, BADC, DCBA) by the
+//! core's one parser.
+//!
+//! Typed text becomes a raw value here (decimal, `0x` hex and `0b` binary raw bits); raw
+//! values become registers and back through the profile's one codec, [`Point::encode`] and
+//! [`Point::decode`] on a [`Point::raw`] of the type and order: the codec get, set, poll and
+//! the bridge use.
 
 use std::fmt;
 
 use clap::{Args, ValueEnum};
+use ferrobus_profile::{Point, Table, Value};
 
 use crate::exit::CliError;
 
@@ -51,13 +59,31 @@ impl ValueType {
             ValueType::Bin => "bin",
         }
     }
+
+    /// The profile's type of the same registers (hex and bin are u16 shown otherwise).
+    fn profile(self) -> ferrobus_profile::ValueType {
+        use ferrobus_profile::ValueType as P;
+        match self {
+            ValueType::U16 | ValueType::Hex | ValueType::Bin => P::U16,
+            ValueType::I16 => P::I16,
+            ValueType::U32 => P::U32,
+            ValueType::I32 => P::I32,
+            ValueType::F32 => P::F32,
+        }
+    }
 }
 
-pub(crate) use ferrobus_proto::words::WordOrder;
+/// The one word-order type (the core's, the profiles' `Order`).
+pub(crate) use ferrobus_profile::Order as WordOrder;
 
-/// `--word-order`: a name of the core's [`WordOrder`].
-fn parse_word_order(text: &str) -> Result<WordOrder, String> {
-    WordOrder::from_name(text).ok_or_else(|| format!("'{text}' is not a word order: use high-first or low-first"))
+/// `--word-order`: the one parser of word orders ([`WordOrder::from_name`]).
+pub(crate) fn parse_word_order(text: &str) -> Result<WordOrder, String> {
+    WordOrder::from_name(text).ok_or_else(|| format!("'{text}' is not a word order: use {}", WordOrder::NAMES))
+}
+
+/// A point no profile describes, of `ty` in `order`: what the one codec works on.
+fn raw_point(ty: ferrobus_profile::ValueType, order: WordOrder) -> Point {
+    Point { order, ..Point::raw(Table::Holding, 0, ty) }
 }
 
 /// The options that say how registers are typed.
@@ -68,12 +94,13 @@ pub(crate) struct ValueArgs {
     #[arg(long = "type", short = 't', value_enum, default_value_t = ValueType::U16, hide_possible_values = true)]
     pub(crate) kind: ValueType,
 
-    /// Register order of 32-bit values: high-first (Omron/Hitachi drives) or low-first
-    /// [default: high-first, or the --device profile's order]
+    /// Byte order of 32-bit values over their two registers: ABCD or high-first
+    /// (Omron/Hitachi drives), CDAB or low-first, BADC, DCBA (case-insensitive)
+    /// [default: ABCD, or the --device profile's order]
     #[arg(long = "word-order", value_parser = parse_word_order)]
     pub(crate) word_order: Option<WordOrder>,
 
-    /// Same as --word-order low-first
+    /// Same as --word-order CDAB (low-first)
     #[arg(long, conflicts_with = "word_order")]
     pub(crate) swap: bool,
 }
@@ -81,7 +108,7 @@ pub(crate) struct ValueArgs {
 impl ValueArgs {
     /// The word order, with `--swap` applied.
     pub(crate) fn order(self) -> WordOrder {
-        if self.swap { WordOrder::LowFirst } else { self.word_order.unwrap_or_default() }
+        if self.swap { WordOrder::Cdab } else { self.word_order.unwrap_or_default() }
     }
 
     /// These options with `order` where neither --word-order nor --swap was given (a
@@ -104,7 +131,7 @@ impl ValueArgs {
 
     /// Decodes registers, `width` at a time; a trailing partial value is left out.
     pub(crate) fn decode_all(self, registers: &[u16]) -> Vec<Decoded> {
-        registers.chunks_exact(self.kind.width()).map(|regs| decode(self.kind, self.order(), regs)).collect()
+        registers.chunks_exact(self.kind.width()).filter_map(|regs| decode(self.kind, self.order(), regs)).collect()
     }
 }
 
@@ -149,28 +176,19 @@ impl Decoded {
     }
 }
 
-fn split_word(value: u32, order: WordOrder) -> [u16; 2] {
-    order.split(value)
-}
-
-/// The 32-bit value of two registers in `order`.
-pub(crate) fn join_words(regs: [u16; 2], order: WordOrder) -> u32 {
-    order.join(regs)
-}
-
-/// Decodes one value from its registers (`kind.width()` of them).
-pub(crate) fn decode(kind: ValueType, order: WordOrder, regs: &[u16]) -> Decoded {
-    let first = regs.first().copied().unwrap_or_default();
-    let word = || join_words([first, regs.get(1).copied().unwrap_or_default()], order);
-    match kind {
-        ValueType::U16 => Decoded::Int(i64::from(first)),
-        ValueType::I16 => Decoded::Int(i64::from(i16::from_ne_bytes(first.to_ne_bytes()))),
-        ValueType::U32 => Decoded::Int(i64::from(word())),
-        ValueType::I32 => Decoded::Int(i64::from(i32::from_ne_bytes(word().to_ne_bytes()))),
-        ValueType::F32 => Decoded::Float(f32::from_bits(word())),
-        ValueType::Hex => Decoded::Hex(first),
-        ValueType::Bin => Decoded::Bin(first),
-    }
+/// Decodes one value from its registers (exactly `kind.width()` of them; `None` otherwise),
+/// by the one codec.
+pub(crate) fn decode(kind: ValueType, order: WordOrder, regs: &[u16]) -> Option<Decoded> {
+    let value = raw_point(kind.profile(), order).decode(regs).ok()?;
+    Some(match (kind, value) {
+        (ValueType::Hex, Value::Int(n)) => Decoded::Hex(u16::try_from(n).ok()?),
+        (ValueType::Bin, Value::Int(n)) => Decoded::Bin(u16::try_from(n).ok()?),
+        (_, Value::Int(n)) => Decoded::Int(i64::try_from(n).ok()?),
+        // Decoded from an f32: exact as one.
+        #[allow(clippy::cast_possible_truncation)]
+        (_, Value::Float(x)) => Decoded::Float(x as f32),
+        (_, Value::Bool(_) | Value::Text(_)) => return None,
+    })
 }
 
 /// An integer as typed: decimal with an optional sign, `0x` hex or `0b` binary; `_` ignored.
@@ -201,6 +219,7 @@ fn bad(text: &str, kind: ValueType, why: &str) -> CliError {
 
 /// Encodes one typed value into registers.
 pub(crate) fn encode(kind: ValueType, order: WordOrder, text: &str) -> Result<Vec<u16>, CliError> {
+    use ferrobus_profile::ValueType as P;
     let int = |text: &str| parse_int(text).ok_or_else(|| bad(text, kind, "expected a number (decimal, 0x hex)"));
     let range = |v: i128, min: i128, max: i128, hint: &str| {
         if (min..=max).contains(&v) {
@@ -209,46 +228,42 @@ pub(crate) fn encode(kind: ValueType, order: WordOrder, text: &str) -> Result<Ve
             Err(bad(text, kind, &format!("out of range {min}..={max}{hint}")))
         }
     };
-    let regs = match kind {
+    let (ty, value) = match kind {
         ValueType::U16 => {
             let (v, _) = int(text)?;
             let hint = if v < 0 { "; use --type i16 for negative values" } else { "" };
-            vec![u16::try_from(range(v, 0, 0xFFFF, hint)?).unwrap_or_default()]
+            (P::U16, range(v, 0, 0xFFFF, hint)?)
         }
-        ValueType::I16 => {
-            let v = match int(text)? {
-                (v, true) => range(v, 0, 0xFFFF, "")?,
-                (v, false) => range(v, -0x8000, 0x7FFF, "")? & 0xFFFF,
-            };
-            vec![u16::try_from(v).unwrap_or_default()]
-        }
+        // Hex and binary are the raw bits: 0xFFFF is -1.
+        ValueType::I16 => match int(text)? {
+            (v, true) => (P::U16, range(v, 0, 0xFFFF, "")?),
+            (v, false) => (P::I16, range(v, -0x8000, 0x7FFF, "")?),
+        },
         ValueType::U32 => {
             let (v, _) = int(text)?;
             let hint = if v < 0 { "; use --type i32 for negative values" } else { "" };
-            split_word(u32::try_from(range(v, 0, 0xFFFF_FFFF, hint)?).unwrap_or_default(), order).to_vec()
+            (P::U32, range(v, 0, 0xFFFF_FFFF, hint)?)
         }
-        ValueType::I32 => {
-            let v = match int(text)? {
-                (v, true) => range(v, 0, 0xFFFF_FFFF, "")?,
-                (v, false) => range(v, -0x8000_0000, 0x7FFF_FFFF, "")? & 0xFFFF_FFFF,
-            };
-            split_word(u32::try_from(v).unwrap_or_default(), order).to_vec()
-        }
-        ValueType::F32 => split_word(parse_f32(text)?, order).to_vec(),
+        ValueType::I32 => match int(text)? {
+            (v, true) => (P::U32, range(v, 0, 0xFFFF_FFFF, "")?),
+            (v, false) => (P::I32, range(v, -0x8000_0000, 0x7FFF_FFFF, "")?),
+        },
+        // Its raw bits, whether typed as a number or as 0x hex: a u32 in the same order.
+        ValueType::F32 => (P::U32, i128::from(parse_f32(text)?)),
         ValueType::Hex => {
             let t = text.trim();
             let digits = t.strip_prefix("0x").or_else(|| t.strip_prefix("0X")).unwrap_or(t);
             let v = parse_int(&format!("0x{digits}")).ok_or_else(|| bad(text, kind, "expected hex digits"))?.0;
-            vec![u16::try_from(range(v, 0, 0xFFFF, "")?).unwrap_or_default()]
+            (P::U16, range(v, 0, 0xFFFF, "")?)
         }
         ValueType::Bin => {
             let t = text.trim();
             let digits = t.strip_prefix("0b").or_else(|| t.strip_prefix("0B")).unwrap_or(t);
             let v = parse_int(&format!("0b{digits}")).ok_or_else(|| bad(text, kind, "expected binary digits"))?.0;
-            vec![u16::try_from(range(v, 0, 0xFFFF, "")?).unwrap_or_default()]
+            (P::U16, range(v, 0, 0xFFFF, "")?)
         }
     };
-    Ok(regs)
+    raw_point(ty, order).encode(&Value::Int(value)).map_err(|e| bad(text, kind, &e.to_string()))
 }
 
 /// An f32 as typed, or its raw bits as `0x` hex.
@@ -281,10 +296,33 @@ mod tests {
     use super::*;
 
     #[test]
-    fn word_order_takes_the_cores_names_and_says_what_a_wrong_one_should_be() {
-        assert_eq!(parse_word_order("high-first"), Ok(WordOrder::HighFirst));
-        assert_eq!(parse_word_order("low-first"), Ok(WordOrder::LowFirst));
-        assert_eq!(parse_word_order("abcd"), Err("'abcd' is not a word order: use high-first or low-first".into()));
+    fn word_order_takes_the_four_names_and_the_aliases_and_says_what_a_wrong_one_should_be() {
+        assert_eq!(parse_word_order("high-first"), Ok(WordOrder::Abcd));
+        assert_eq!(parse_word_order("low-first"), Ok(WordOrder::Cdab));
+        for order in WordOrder::ALL {
+            assert_eq!(parse_word_order(&order.name().to_lowercase()), Ok(order));
+        }
+        assert_eq!(
+            parse_word_order("swap"),
+            Err("'swap' is not a word order: use ABCD (or high-first), CDAB (or low-first), BADC, DCBA".into())
+        );
+    }
+
+    #[test]
+    fn the_four_order_table_through_read_and_write() {
+        // 0x11223344 as A=11 B=22 C=33 D=44: the table of ferrobus_proto::words, get/set and poll.
+        for (order, registers) in [
+            (WordOrder::Abcd, [0x1122, 0x3344]),
+            (WordOrder::Cdab, [0x3344, 0x1122]),
+            (WordOrder::Badc, [0x2211, 0x4433]),
+            (WordOrder::Dcba, [0x4433, 0x2211]),
+        ] {
+            let values = ValueArgs { kind: ValueType::U32, word_order: Some(order), swap: false };
+            assert_eq!(values.encode_all(&["0x11223344"]).unwrap(), registers, "write {order}");
+            assert_eq!(values.decode_all(&registers), [Decoded::Int(0x1122_3344)], "read {order}");
+        }
+        let swap = ValueArgs { kind: ValueType::U32, word_order: None, swap: true };
+        assert_eq!(swap.order(), WordOrder::Cdab);
     }
 
     fn enc(kind: ValueType, order: WordOrder, text: &str) -> Vec<u16> {
@@ -293,7 +331,7 @@ mod tests {
 
     #[test]
     fn sixteen_bit_values_take_decimal_hex_and_signs() {
-        use WordOrder::HighFirst as H;
+        use WordOrder::Abcd as H;
         assert_eq!(enc(ValueType::U16, H, "3000"), [3000]);
         assert_eq!(enc(ValueType::U16, H, "0x0BB8"), [0x0BB8]);
         assert_eq!(enc(ValueType::I16, H, "-1"), [0xFFFF]);
@@ -319,15 +357,15 @@ mod tests {
     #[test]
     fn thirty_two_bit_values_follow_the_word_order() {
         // 3G3RX F002 = 300000 = 0x000493E0, high word first (reference §4.9).
-        assert_eq!(enc(ValueType::U32, WordOrder::HighFirst, "300000"), [0x0004, 0x93E0]);
+        assert_eq!(enc(ValueType::U32, WordOrder::Abcd, "300000"), [0x0004, 0x93E0]);
         // SDP example: 0BB8 at 0x0112, 0000 at 0x0113: 3000 low word first.
-        assert_eq!(enc(ValueType::U32, WordOrder::LowFirst, "3000"), [0x0BB8, 0x0000]);
-        assert_eq!(enc(ValueType::I32, WordOrder::HighFirst, "-2"), [0xFFFF, 0xFFFE]);
-        assert_eq!(enc(ValueType::F32, WordOrder::HighFirst, "1.0"), [0x3F80, 0x0000]);
-        assert_eq!(enc(ValueType::F32, WordOrder::LowFirst, "0x3F800000"), [0x0000, 0x3F80]);
-        assert!(encode(ValueType::U32, WordOrder::HighFirst, "4294967296").is_err());
-        assert!(encode(ValueType::F32, WordOrder::HighFirst, "1e40").is_err());
-        assert!(encode(ValueType::F32, WordOrder::HighFirst, "pi").is_err());
+        assert_eq!(enc(ValueType::U32, WordOrder::Cdab, "3000"), [0x0BB8, 0x0000]);
+        assert_eq!(enc(ValueType::I32, WordOrder::Abcd, "-2"), [0xFFFF, 0xFFFE]);
+        assert_eq!(enc(ValueType::F32, WordOrder::Abcd, "1.0"), [0x3F80, 0x0000]);
+        assert_eq!(enc(ValueType::F32, WordOrder::Cdab, "0x3F800000"), [0x0000, 0x3F80]);
+        assert!(encode(ValueType::U32, WordOrder::Abcd, "4294967296").is_err());
+        assert!(encode(ValueType::F32, WordOrder::Abcd, "1e40").is_err());
+        assert!(encode(ValueType::F32, WordOrder::Abcd, "pi").is_err());
     }
 
     #[test]
@@ -338,14 +376,16 @@ mod tests {
             (ValueType::F32, "-2.5"),
             (ValueType::I16, "-300"),
         ] {
-            for order in [WordOrder::HighFirst, WordOrder::LowFirst] {
+            for order in WordOrder::ALL {
                 let regs = enc(kind, order, text);
-                assert_eq!(decode(kind, order, &regs).to_string(), text);
+                assert_eq!(decode(kind, order, &regs).unwrap().to_string(), text, "{order}");
             }
         }
-        assert_eq!(decode(ValueType::Hex, WordOrder::HighFirst, &[0x0A]).to_string(), "0x000A");
-        assert_eq!(decode(ValueType::Bin, WordOrder::HighFirst, &[0x0A]).to_string(), "0b0000_0000_0000_1010");
-        assert_eq!(decode(ValueType::F32, WordOrder::HighFirst, &[0x7FC0, 0]).to_json(), serde_json::Value::Null);
+        let one = |kind, regs: &[u16]| decode(kind, WordOrder::Abcd, regs).unwrap();
+        assert_eq!(one(ValueType::Hex, &[0x0A]).to_string(), "0x000A");
+        assert_eq!(one(ValueType::Bin, &[0x0A]).to_string(), "0b0000_0000_0000_1010");
+        assert_eq!(one(ValueType::F32, &[0x7FC0, 0]).to_json(), serde_json::Value::Null);
+        assert_eq!(decode(ValueType::U32, WordOrder::Abcd, &[1]), None, "one register is not a u32");
     }
 
     #[test]

@@ -1,6 +1,11 @@
 //! Values: a point's registers or bit as a typed raw value, that value in engineering units
 //! with its unit, enumeration or bit field, and a user's input ("45Hz", "12.5s", "0x10",
 //! "modbus") back to a raw value, checked against the point's type, range and access.
+//!
+//! [`Point::decode`] and [`Point::encode`] are the project's one codec between registers and
+//! values: get, set, backup, poll, monitor and the bridge use them on a profile's points,
+//! read and write on a [`Point::raw`] of the type and word order typed. The layout of bytes
+//! over registers is the core's [`Order`] (`ferrobus_proto::words`).
 
 use std::fmt;
 
@@ -47,6 +52,27 @@ impl fmt::Display for Value {
             Value::Int(n) => write!(f, "{n}"),
             Value::Float(x) => write!(f, "{x}"),
             Value::Text(s) => write!(f, "{s:?}"),
+        }
+    }
+}
+
+/// Whether a number read now, `now`, has moved beyond `deadband` from `last`, the one last
+/// reported: the one deadband rule of report-by-exception (`poll --on-change`, the bridge).
+///
+/// - a NaN after a number, or a number after a NaN: moved (every change between NaN and a
+///   number is reported);
+/// - a NaN after a NaN: not moved (it is not repeated);
+/// - equal numbers (an infinity after the same infinity too): not moved;
+/// - otherwise moved when `|now − last|` is more than `deadband` (exactly `deadband` is not
+///   beyond it); a deadband of 0 or below reports any change, a NaN deadband every one.
+pub fn beyond_deadband(last: f64, now: f64, deadband: f64) -> bool {
+    match (last.is_nan(), now.is_nan()) {
+        (true, true) => false,
+        (true, false) | (false, true) => true,
+        #[allow(clippy::float_cmp)]
+        (false, false) if last == now => false,
+        (false, false) => {
+            matches!((now - last).abs().partial_cmp(&deadband), Some(std::cmp::Ordering::Greater) | None)
         }
     }
 }
@@ -165,34 +191,19 @@ pub(crate) fn default_value(ty: ValueType, default: Option<&toml::Value>) -> Val
     }
 }
 
-/// Bytes in value order (big-endian) to registers in address order, by `order`.
+/// Bytes in value order (big-endian) to registers in address order, by `order` (the core's
+/// one layout, [`Order::to_registers`]).
 fn to_registers(bytes: &[u8], order: Order) -> Vec<u16> {
-    let mut words: Vec<u16> = bytes
-        .chunks(2)
-        .map(|pair| {
-            let (hi, lo) = (pair.first().copied().unwrap_or(0), pair.get(1).copied().unwrap_or(0));
-            if order.bytes_swapped() { u16::from_be_bytes([lo, hi]) } else { u16::from_be_bytes([hi, lo]) }
-        })
-        .collect();
-    if order.words_low_first() {
-        words.reverse();
-    }
+    let mut words = vec![0; bytes.len().div_ceil(2)];
+    order.to_registers(bytes, &mut words);
     words
 }
 
 /// Registers in address order to bytes in value order (big-endian), by `order`.
 fn from_registers(words: &[u16], order: Order) -> Vec<u8> {
-    let mut words = words.to_vec();
-    if order.words_low_first() {
-        words.reverse();
-    }
-    words
-        .iter()
-        .flat_map(|w| {
-            let [hi, lo] = w.to_be_bytes();
-            if order.bytes_swapped() { [lo, hi] } else { [hi, lo] }
-        })
-        .collect()
+    let mut bytes = vec![0; words.len() * 2];
+    order.from_registers(words, &mut bytes);
+    bytes
 }
 
 /// The decimals a scale's step shows: 0.01 → 2, 0.5 → 1, 10 → 0.
@@ -507,6 +518,28 @@ mod tests {
             "[device]\nname='x'\nvendor='v'\nproduct_code='p'\nrevision='1'\n[[registers]]\nnumber=0\nname='p'\n{spec}\n"
         );
         Profile::parse(&text, "test.toml").unwrap().points()[0].clone()
+    }
+
+    /// (last, now, deadband, reported): the table both users (poll, the bridge) are tested with.
+    const DEADBAND: [(f64, f64, f64, bool); 11] = [
+        (1.0, f64::NAN, 5.0, true),
+        (f64::NAN, 1.0, 5.0, true),
+        (f64::NAN, f64::NAN, 5.0, false),
+        (f64::NAN, f64::NAN, 0.0, false),
+        (10.0, 10.5, 0.5, false),
+        (10.0, 10.6, 0.5, true),
+        (10.0, 9.4, 0.5, true),
+        (10.0, 10.0, 0.0, false),
+        (10.0, 10.001, 0.0, true),
+        (f64::INFINITY, f64::INFINITY, 0.5, false),
+        (f64::NEG_INFINITY, f64::INFINITY, 0.5, true),
+    ];
+
+    #[test]
+    fn the_deadband_reports_every_change_between_nan_and_a_number_and_never_repeats_nan() {
+        for (last, now, deadband, reported) in DEADBAND {
+            assert_eq!(beyond_deadband(last, now, deadband), reported, "{last} -> {now} (deadband {deadband})");
+        }
     }
 
     #[test]

@@ -21,7 +21,7 @@ mod plan;
 mod point;
 pub mod source;
 
-pub use codec::{Value, ValueError};
+pub use codec::{Value, ValueError, beyond_deadband};
 pub use model::{
     Access, Addressing, BUILTIN, BitDef, Comm, DeviceSection, ExceptionMeaning, Exceptions, Fifo, Files, Limits,
     ModelSection, Order, Polarity, Profile, ProfileError, RegisterDef, RunningRule, SpanDef, State, Table, Tables,

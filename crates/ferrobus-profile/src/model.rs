@@ -130,7 +130,7 @@ pub struct Addressing {
     #[serde(default)]
     pub base: u16,
     /// The order of multi-register values whose entry names none (default ABCD).
-    #[serde(default)]
+    #[serde(default, deserialize_with = "order")]
     pub order: Order,
 }
 
@@ -359,59 +359,22 @@ impl ValueType {
     }
 }
 
-/// The order of a multi-register value's bytes over its registers, by the names integrators
-/// use. For 64-bit values the same four generalise: ABCD is big-endian, words high first;
-/// CDAB words low first (bytes big-endian in each); BADC bytes swapped in each word, words
-/// high first; DCBA fully little-endian.
-#[derive(Clone, Copy, PartialEq, Eq, Hash, Debug, Default, Deserialize)]
-pub enum Order {
-    /// Big-endian: high word first, high byte first.
-    #[default]
-    #[serde(rename = "ABCD")]
-    Abcd,
-    /// Low word first, high byte first in each word.
-    #[serde(rename = "CDAB")]
-    Cdab,
-    /// High word first, low byte first in each word.
-    #[serde(rename = "BADC")]
-    Badc,
-    /// Little-endian: low word first, low byte first.
-    #[serde(rename = "DCBA")]
-    Dcba,
+/// The order of a multi-register value's bytes over its registers: the project's one
+/// word-order type, [`ferrobus_proto::words::WordOrder`] (ABCD, CDAB, BADC, DCBA), under the
+/// name profiles use. A profile's `order` takes what [`Order::from_name`] takes: the four
+/// names in any case, `high-first` (ABCD) and `low-first` (CDAB).
+pub use ferrobus_proto::words::WordOrder as Order;
+
+/// A profile's `order = "..."`, read by the one parser of word orders.
+fn order<'de, D: serde::Deserializer<'de>>(deserializer: D) -> Result<Order, D::Error> {
+    let text = String::deserialize(deserializer)?;
+    Order::from_name(&text)
+        .ok_or_else(|| serde::de::Error::custom(format!("{text:?} is not a word order: use {}", Order::NAMES)))
 }
 
-impl Order {
-    /// All four, the default first.
-    pub const ALL: [Order; 4] = [Order::Abcd, Order::Cdab, Order::Badc, Order::Dcba];
-
-    /// The name in a profile.
-    pub const fn name(self) -> &'static str {
-        match self {
-            Order::Abcd => "ABCD",
-            Order::Cdab => "CDAB",
-            Order::Badc => "BADC",
-            Order::Dcba => "DCBA",
-        }
-    }
-
-    /// The order named `name` (case-insensitive; `high-first` is ABCD, `low-first` CDAB).
-    pub fn from_name(name: &str) -> Option<Order> {
-        match name.to_ascii_lowercase().as_str() {
-            "high-first" => Some(Order::Abcd),
-            "low-first" => Some(Order::Cdab),
-            lower => Order::ALL.into_iter().find(|o| o.name().eq_ignore_ascii_case(lower)),
-        }
-    }
-
-    /// Whether the words run low first.
-    pub const fn words_low_first(self) -> bool {
-        matches!(self, Order::Cdab | Order::Dcba)
-    }
-
-    /// Whether the bytes in each word are swapped.
-    pub const fn bytes_swapped(self) -> bool {
-        matches!(self, Order::Badc | Order::Dcba)
-    }
+/// [`order`] for an optional field.
+fn some_order<'de, D: serde::Deserializer<'de>>(deserializer: D) -> Result<Option<Order>, D::Error> {
+    order(deserializer).map(Some)
 }
 
 /// A coil or discrete input, or a run of them.
@@ -459,6 +422,7 @@ pub struct RegisterDef {
     #[serde(default, rename = "type")]
     pub value_type: ValueType,
     /// The order of a multi-register value (default: `[addressing] order`).
+    #[serde(default, deserialize_with = "some_order")]
     pub order: Option<Order>,
     /// Registers of a string.
     pub length: Option<u16>,

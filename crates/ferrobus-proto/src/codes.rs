@@ -150,7 +150,12 @@ impl FunctionCode {
     }
 
     /// Whether a request with this code writes data, the only kind a broadcast should carry
-    /// (MODBUS over Serial Line V1.02 §2.1).
+    /// (MODBUS over Serial Line V1.02 §2.1): 0x05, 0x06, 0x0F, 0x10, 0x15, 0x16 and 0x17
+    /// Read/Write Multiple Registers, which writes before it reads (§6.17).
+    ///
+    /// The one rule of "writes, by function code": which broadcasts a slave serves and a
+    /// gateway forwards, and which refusals a read-only gateway or role is named for. 0x08
+    /// Diagnostics is not a write, though some of its sub-functions restart or silence.
     pub const fn is_write(self) -> bool {
         matches!(
             self,
@@ -160,6 +165,7 @@ impl FunctionCode {
                 | FunctionCode::WriteMultipleRegisters
                 | FunctionCode::WriteFileRecord
                 | FunctionCode::MaskWriteRegister
+                | FunctionCode::ReadWriteMultipleRegisters
         )
     }
 }
@@ -467,6 +473,17 @@ mod tests {
                 0x18, 0x2B
             ]
         );
+    }
+
+    #[test]
+    fn the_writes_are_05_06_0f_10_15_16_and_17_over_all_256_values() {
+        // Hex, from the table in §5.1: the "write" rows, and 0x17 that writes then reads.
+        const WRITES: [u8; 7] = [0x05, 0x06, 0x0F, 0x10, 0x15, 0x16, 0x17];
+        for v in 0..=u8::MAX {
+            assert_eq!(FunctionCode::from_u8(v).is_write(), WRITES.contains(&v), "{v:#04x}");
+        }
+        assert!(FunctionCode::ReadWriteMultipleRegisters.is_write());
+        assert!(!FunctionCode::Diagnostics.is_write() && !FunctionCode::ReadFifoQueue.is_write());
     }
 
     #[test]

@@ -70,11 +70,9 @@ pub struct FaultError {
 const UNIT_EXAMPLE: &str = "drop=10%,delay=50ms,corrupt=0.05,exception=0x06,silent,trip=5s";
 const RULE_EXAMPLE: &str = "fc=0x03,addr=0x1000-0x100F,share=50%,exception=0x06";
 
+/// A code byte, decimal or 0x hex, by the one grammar ([`ferrobus::text::number`]).
 fn code(value: &str) -> Option<u8> {
-    match value.strip_prefix("0x").or_else(|| value.strip_prefix("0X")) {
-        Some(hex) => u8::from_str_radix(hex, 16).ok(),
-        None => value.parse().ok(),
-    }
+    ferrobus::text::number(value, u64::from(u8::MAX)).ok().and_then(|n| u8::try_from(n).ok())
 }
 
 impl FromStr for Faults {
@@ -199,13 +197,21 @@ mod tests {
     }
 
     #[test]
-    fn durations_take_the_usual_units() {
-        assert_eq!(parse_duration("1.5s"), Ok(Duration::from_millis(1500)));
-        assert_eq!(parse_duration("250us"), Ok(Duration::from_micros(250)));
-        assert_eq!(parse_duration("20"), Ok(Duration::from_millis(20)));
+    fn durations_take_the_one_grammar() {
+        // The inputs every user of ferrobus::text::duration is tested with, and their values.
+        for (typed, want) in [
+            ("250", Duration::from_millis(250)),
+            ("1.5s", Duration::from_millis(1500)),
+            ("2min", Duration::from_secs(120)),
+            ("1h", Duration::from_secs(3600)),
+            ("250us", Duration::from_micros(250)),
+        ] {
+            assert_eq!(parse_duration(typed), Ok(want), "{typed}");
+            assert_eq!(format!("delay={typed}").parse::<Faults>().unwrap().delay, want, "delay={typed}");
+        }
         assert!(parse_duration("-1s").is_err());
-        assert!(parse_duration("soon").is_err());
-        assert!(parse_duration("2h").is_err());
+        assert!(parse_duration("soon").unwrap_err().contains("'soon' is not a duration"));
+        assert!(parse_duration("8761h").is_err());
         assert_eq!(parse_share("5%"), Ok(0.05));
         assert!(parse_share("150%").is_err());
     }

@@ -1,5 +1,5 @@
 //! The number forms that fault specifications, profiles and the command line share: shares
-//! (`5%`, `0.05`) and durations (`50ms`, `1.5s`).
+//! (`5%`, `0.05`) and durations (`50ms`, `1.5s`; the grammar is [`ferrobus::text`]'s).
 
 use std::time::Duration;
 
@@ -14,23 +14,8 @@ pub fn parse_share(text: &str) -> Result<f64, String> {
     if (0.0..=1.0).contains(&value) { Ok(value) } else { Err(format!("'{text}' is not between 0 and 1 (0% and 100%)")) }
 }
 
-/// A duration written `50ms`, `1.5s`, `250us`, `2min`, or a plain number of milliseconds; at
-/// most an hour.
+/// A duration by the project's one grammar ([`ferrobus::text::duration`]): `50ms`, `1.5s`,
+/// `250us`, `2min`, `1h`, or a plain number of milliseconds; at most a year.
 pub fn parse_duration(text: &str) -> Result<Duration, String> {
-    let text = text.trim();
-    let split = text.find(|c: char| !(c.is_ascii_digit() || c == '.')).unwrap_or(text.len());
-    let (number, unit) = text.split_at(split);
-    let value: f64 = number.parse().map_err(|_| format!("'{text}' is not a duration (e.g. 500ms, 1.5s, 2s)"))?;
-    let seconds = match unit.trim() {
-        "" | "ms" => value / 1e3,
-        "s" => value,
-        "us" | "µs" => value / 1e6,
-        "ns" => value / 1e9,
-        "m" | "min" => value * 60.0,
-        other => return Err(format!("unknown unit '{other}' in '{text}'; use ns, us, ms, s or min")),
-    };
-    if seconds > 3600.0 {
-        return Err(format!("'{text}' is longer than an hour"));
-    }
-    Duration::try_from_secs_f64(seconds).map_err(|_| format!("'{text}' is not a duration"))
+    ferrobus::text::duration(text).map_err(|e| e.to_string())
 }

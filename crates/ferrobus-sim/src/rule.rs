@@ -102,14 +102,10 @@ impl Rule {
     }
 }
 
-/// A number written `0x1A` or `26`.
+/// A number written `0x1A` or `26`, by the one grammar ([`ferrobus::text::number`]).
 pub(crate) fn number<T: TryFrom<u32>>(text: &str) -> Option<T> {
-    let text = text.trim();
-    let value = match text.strip_prefix("0x").or_else(|| text.strip_prefix("0X")) {
-        Some(hex) => u32::from_str_radix(hex, 16).ok()?,
-        None => text.parse().ok()?,
-    };
-    T::try_from(value).ok()
+    let value = ferrobus::text::number(text, u64::from(u32::MAX)).ok()?;
+    T::try_from(u32::try_from(value).ok()?).ok()
 }
 
 fn parse_range(text: &str) -> Result<AddressRange, String> {

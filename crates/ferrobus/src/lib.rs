@@ -46,6 +46,9 @@
 //!   metric name, a peer's text) is written into a log line: on one line, controls spelled out.
 //! - [`pcapng`]: capture files of an RTU line that tshark and Wireshark decode as Modbus RTU
 //!   (exported PDUs with the `mbrtu` dissector and ports telling queries from responses).
+//! - [`text`]: the one grammar of what people type — durations, sizes (SI and IEC units),
+//!   decimal/hex numbers and lists of ranges — for the command line, the simulator and the
+//!   bridge alike.
 //!
 //! Linux, macOS and Windows: what differs between them — ttys and ptys on Unix, COM ports on
 //! Windows, Linux's timerfd and kernel RS-485 — is behind one seam, a folder per platform
@@ -72,6 +75,7 @@ pub mod scan;
 mod serial;
 pub mod server;
 mod sys;
+pub mod text;
 pub mod timer;
 #[cfg(feature = "tls")]
 pub mod tls;

@@ -3,49 +3,17 @@
 
 use std::time::Duration;
 
-/// A duration: a number and a unit, `ms`, `s`, `m` or `h` (`250ms`, `1.5s`, `2m`).
+/// A duration by the project's one grammar ([`ferrobus::text::duration`]): a number and
+/// `ns`, `us`, `ms`, `s`, `min` (or `m`), `h` (`250ms`, `1.5s`, `2m`); a plain number is
+/// milliseconds.
 pub(super) fn duration(s: &str) -> Result<Duration, String> {
-    let s = s.trim();
-    let split = s.find(|c: char| !(c.is_ascii_digit() || c == '.')).unwrap_or(s.len());
-    let (number, unit) = s.split_at(split);
-    let scale = match unit.trim() {
-        "ms" => 0.001,
-        "s" => 1.0,
-        "m" | "min" => 60.0,
-        "h" => 3600.0,
-        _ => {
-            return Err(format!(
-                "{s:?} is not a duration; write a number and ms, s, m or h (\"250ms\", \"1s\", \"2m\")"
-            ));
-        }
-    };
-    let value: f64 =
-        number.parse().map_err(|_| format!("{s:?} is not a duration; the number {number:?} is not one"))?;
-    Duration::try_from_secs_f64(value * scale).map_err(|_| format!("{s:?} is not a duration this bridge can wait"))
+    ferrobus::text::duration(s).map_err(|e| e.to_string())
 }
 
-/// A size in bytes: a whole number and `B`, `KiB`, `MiB`, `GiB` (or `KB`, `MB`, `GB` as
-/// powers of 1000).
+/// A size in bytes by the project's one grammar ([`ferrobus::text::size`]): `kB`, `MB`, `GB`
+/// are powers of 1000, `KiB`, `MiB`, `GiB` powers of 1024, a plain number is bytes.
 pub(super) fn size(s: &str) -> Result<u64, String> {
-    let s = s.trim();
-    let split = s.find(|c: char| !c.is_ascii_digit()).unwrap_or(s.len());
-    let (number, unit) = s.split_at(split);
-    let scale: u64 = match unit.trim() {
-        "" | "B" => 1,
-        "KiB" => 1 << 10,
-        "MiB" => 1 << 20,
-        "GiB" => 1 << 30,
-        "KB" | "kB" => 1_000,
-        "MB" => 1_000_000,
-        "GB" => 1_000_000_000,
-        _ => {
-            return Err(format!(
-                "{s:?} is not a size; write a whole number and B, KiB, MiB or GiB (\"64KiB\", \"4MiB\")"
-            ));
-        }
-    };
-    let value: u64 = number.parse().map_err(|_| format!("{s:?} is not a size; it starts with no whole number"))?;
-    value.checked_mul(scale).ok_or_else(|| format!("{s:?} is too large a size"))
+    ferrobus::text::size(s).map_err(|e| e.to_string())
 }
 
 /// `host:port`, `host` (then `default_port`), `[v6]:port` or `[v6]`.
@@ -87,23 +55,29 @@ mod tests {
     use super::*;
 
     #[test]
-    fn durations() {
-        assert_eq!(duration("250ms"), Ok(Duration::from_millis(250)));
-        assert_eq!(duration("1s"), Ok(Duration::from_secs(1)));
-        assert_eq!(duration("1.5s"), Ok(Duration::from_millis(1500)));
+    fn durations_are_the_one_grammar() {
+        // The inputs every user of ferrobus::text::duration is tested with, and their values.
+        for (typed, want) in [
+            ("250", Duration::from_millis(250)),
+            ("1.5s", Duration::from_millis(1500)),
+            ("2min", Duration::from_secs(120)),
+            ("1h", Duration::from_secs(3600)),
+            ("250us", Duration::from_micros(250)),
+        ] {
+            assert_eq!(duration(typed), Ok(want), "{typed}");
+        }
         assert_eq!(duration("2m"), Ok(Duration::from_secs(120)));
-        assert_eq!(duration("1h"), Ok(Duration::from_secs(3600)));
-        assert!(duration("250").unwrap_err().contains("ms, s, m or h"));
-        assert!(duration("fast").is_err());
+        assert!(duration("fast").unwrap_err().contains("ms, s, min (or m) or h"));
         assert!(duration("1..5s").is_err());
     }
 
     #[test]
-    fn sizes() {
-        assert_eq!(size("64KiB"), Ok(64 * 1024));
-        assert_eq!(size("4MiB"), Ok(4 << 20));
+    fn sizes_are_the_one_grammar_si_and_iec() {
+        // The inputs every user of ferrobus::text::size is tested with (poll --rotate-size too).
+        for (typed, want) in [("500k", 500_000), ("10MB", 10_000_000), ("10MiB", 10 << 20), ("64KiB", 65_536)] {
+            assert_eq!(size(typed), Ok(want), "{typed}");
+        }
         assert_eq!(size("1GiB"), Ok(1 << 30));
-        assert_eq!(size("10MB"), Ok(10_000_000));
         assert_eq!(size("512"), Ok(512));
         assert!(size("4 megs").unwrap_err().contains("KiB"));
         assert!(size("99999999999999999999GiB").is_err());

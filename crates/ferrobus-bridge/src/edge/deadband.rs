@@ -1,15 +1,14 @@
 //! Report by exception: whether a cell's latest reading differs enough from the one last
 //! published (or stored while offline) to be sent again.
 //!
-//! A number is sent when it moved *beyond* the cell's deadband, in engineering units: more
-//! than `deadband` away from the last published value (0: any change). A bit or a text is sent
-//! on any change. A cell whose read failed (an exception reply, a value that does not decode)
+//! A number is sent when it moved *beyond* the cell's deadband, in engineering units, by the
+//! one rule `poll --on-change` follows too ([`ferrobus_profile::beyond_deadband`]): more than
+//! `deadband` away from the last published value (0: any change); a NaN after a number and a
+//! number after a NaN are sent, a NaN after a NaN is not. A bit or a text is sent on any change. A cell whose read failed (an exception reply, a value that does not decode)
 //! is sent once as null, and again when it reads a value.
 
-use std::cmp::Ordering;
-
 use ferrobus::poll::Cell;
-use ferrobus_profile::Value;
+use ferrobus_profile::{Value, beyond_deadband};
 
 /// What is known of a cell.
 #[derive(Clone, Debug, PartialEq)]
@@ -36,12 +35,11 @@ fn value_moved(cell: &Cell, old: &Value, new: &Value, deadband: f64) -> bool {
         return false;
     }
     let numeric = matches!((old, new), (Value::Int(_) | Value::Float(_), Value::Int(_) | Value::Float(_)));
-    if !numeric || deadband <= 0.0 {
+    if !numeric {
         return true;
     }
     match (cell.scaled(old), cell.scaled(new)) {
-        // NaN on either side is a change.
-        (Some(a), Some(b)) => matches!((b - a).abs().partial_cmp(&deadband), Some(Ordering::Greater) | None),
+        (Some(a), Some(b)) => beyond_deadband(a, b, deadband),
         _ => true,
     }
 }
@@ -92,10 +90,20 @@ mod tests {
     }
 
     #[test]
-    fn a_nan_is_a_change() {
+    fn a_change_between_nan_and_a_number_is_sent_and_nan_after_nan_is_not() {
         let cell = scaled_cell(1.0);
         let x = |f| Seen::Value(Value::Float(f));
-        assert!(beyond(&cell, &x(1.0), &x(f64::NAN), 5.0));
-        assert!(beyond(&cell, &x(f64::NAN), &x(1.0), 5.0));
+        // (last, now, deadband, sent): the table of ferrobus_profile::beyond_deadband, as poll.
+        for (last, now, deadband, sent) in [
+            (1.0, f64::NAN, 5.0, true),
+            (f64::NAN, 1.0, 5.0, true),
+            (f64::NAN, f64::NAN, 5.0, false),
+            (f64::NAN, f64::NAN, 0.0, false),
+            (10.0, 10.5, 0.5, false),
+            (10.0, 10.6, 0.5, true),
+            (f64::INFINITY, f64::INFINITY, 0.5, false),
+        ] {
+            assert_eq!(beyond(&cell, &x(last), &x(now), deadband), sent, "{last} -> {now} (deadband {deadband})");
+        }
     }
 }

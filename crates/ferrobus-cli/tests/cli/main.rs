@@ -29,4 +29,5 @@ mod sniff;
 mod stderr;
 mod tls;
 mod values;
+mod word_order;
 mod write;

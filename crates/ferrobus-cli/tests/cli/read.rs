@@ -49,7 +49,7 @@ fn a_32_bit_read_with_four_registers_per_request_splits_at_value_boundaries() {
     assert_eq!(doc["values"], serde_json::json!([0, 1, 2, 3, 4, 5, 6, 7, 8, 9]));
     let want: Vec<u64> = (0..5).map(|i| ((2 * i) << 16) | (2 * i + 1)).collect();
     assert_eq!(doc["decoded"], serde_json::json!(want));
-    assert_eq!(doc["word_order"], "high-first");
+    assert_eq!(doc["word_order"], "ABCD");
 
     // An odd limit is rounded down to whole values: 5 registers per request carry 2 values.
     server.run(&["read", "holding", "0", "--type", "i32", "--count", "3", "--max-per-request", "5"]).success();

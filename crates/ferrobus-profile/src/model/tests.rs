@@ -68,7 +68,7 @@ fn mistakes_in_a_profile_are_reported_with_the_file_the_line_and_the_field() {
 }
 
 #[test]
-fn an_order_is_one_of_the_four_names_and_defaults_to_the_devices() {
+fn an_order_is_one_of_the_four_names_or_an_alias_in_any_case_and_defaults_to_the_devices() {
     let pair = |order: &str| {
         format!("[addressing]\norder='CDAB'\n{DEVICE}[[registers]]\nnumber=1\nname='r'\ntype='u32'\n{order}")
     };
@@ -76,8 +76,18 @@ fn an_order_is_one_of_the_four_names_and_defaults_to_the_devices() {
     assert_eq!(default.points()[0].order, Order::Cdab);
     let own = Profile::parse(&pair("order='BADC'\n"), "mine.toml").unwrap();
     assert_eq!(own.points()[0].order, Order::Badc);
-    let wrong = error(&pair("order='cdab'\n"));
-    assert!(wrong.starts_with("mine.toml:12:7: unknown variant `cdab`"), "{wrong}");
+    // The one parser of word orders, as the command line and the bridge take them.
+    for (typed, order) in [("cdab", Order::Cdab), ("high-first", Order::Abcd), ("Low-First", Order::Cdab)] {
+        let parsed = Profile::parse(&pair(&format!("order='{typed}'\n")), "mine.toml").unwrap();
+        assert_eq!(parsed.points()[0].order, order, "{typed}");
+    }
+    let wrong = error(&pair("order='swap'\n"));
+    assert!(
+        wrong.starts_with(
+            "mine.toml:12:7: \"swap\" is not a word order: use ABCD (or high-first), CDAB (or low-first), BADC, DCBA"
+        ),
+        "{wrong}"
+    );
     let single = error(&format!("{DEVICE}[[registers]]\nnumber=1\nname='r'\norder='CDAB'\n"));
     assert_eq!(
         single,

@@ -291,6 +291,17 @@ fn a_broadcast_write_is_executed_on_every_unit_and_never_answered() {
 }
 
 #[test]
+fn a_broadcast_read_write_multiple_registers_is_a_write_executed_on_every_unit_and_never_answered() {
+    let mut slave = rtu_slave(SlaveConfig { units: [1, 2].into_iter().collect(), ..SlaveConfig::unit(1) });
+    let mut device = Device::new();
+    // 0x17: read 1 from 0x0000, write 1 at 0x0005 (2 bytes: 0x1234).
+    let pdu = [0x17, 0x00, 0x00, 0x00, 0x01, 0x00, 0x05, 0x00, 0x01, 0x02, 0x12, 0x34];
+    assert_eq!(exchange(&mut slave, &mut device, Instant::ZERO, &rtu(0, &pdu)), None);
+    assert_eq!(device.writes, [(1, 5, 0x1234), (2, 5, 0x1234)]);
+    assert_eq!(slave.counters().server_no_response, 1);
+}
+
+#[test]
 fn a_broadcast_read_is_neither_executed_nor_answered() {
     let mut slave = rtu_slave(SlaveConfig::unit(1));
     assert_eq!(exchange(&mut slave, &mut Device::new(), Instant::ZERO, &rtu(0, &[0x03, 0, 0, 0, 1])), None);

@@ -283,23 +283,36 @@ fn format_of(name: Option<&str>) -> Result<Option<Format>, String> {
     .transpose()
 }
 
-/// A period: `250us`, `100ms`, `2s`, `1min`; a plain number is milliseconds; `None` is 1 s.
+/// A period by the one grammar of durations ([`crate::text::duration`]: `250us`, `100ms`,
+/// `2s`, `1min`; a plain number is milliseconds), above 0 and at most a day; `None` is 1 s.
 pub fn period(text: Option<&str>) -> Result<Duration, String> {
     let Some(text) = text else { return Ok(Duration::from_secs(1)) };
-    let t = text.trim();
-    let split = t.find(|c: char| !(c.is_ascii_digit() || c == '.')).unwrap_or(t.len());
-    let (number, unit) = t.split_at(split);
-    let n: f64 = number.parse().map_err(|_| format!("period {text:?}: give a number and a unit (100ms, 2s)"))?;
-    let scale = match unit.trim() {
-        "us" | "µs" => 1e-6,
-        "" | "ms" => 1e-3,
-        "s" => 1.0,
-        "min" => 60.0,
-        other => return Err(format!("period {text:?}: unknown unit {other:?} (us, ms, s, min)")),
-    };
-    let secs = n * scale;
-    if !secs.is_finite() || secs <= 0.0 || secs > 86_400.0 {
-        return Err(format!("period {text:?}: give more than 0 and at most a day"));
+    let period = crate::text::duration(text).map_err(|e| format!("period: {e}"))?;
+    if period.is_zero() || period > Duration::from_secs(86_400) {
+        return Err(format!("period '{}': give more than 0 and at most a day", crate::log::escape(text.trim())));
     }
-    Ok(Duration::from_secs_f64(secs))
+    Ok(period)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_period_is_the_one_duration_grammar_above_zero_and_at_most_a_day() {
+        // The inputs every user of crate::text::duration is tested with, and their values.
+        for (typed, want) in [
+            ("250", Duration::from_millis(250)),
+            ("1.5s", Duration::from_millis(1500)),
+            ("2min", Duration::from_secs(120)),
+            ("1h", Duration::from_secs(3600)),
+            ("250us", Duration::from_micros(250)),
+        ] {
+            assert_eq!(period(Some(typed)), Ok(want), "{typed}");
+        }
+        assert_eq!(period(None), Ok(Duration::from_secs(1)));
+        assert!(period(Some("0ms")).unwrap_err().contains("more than 0"));
+        assert!(period(Some("25h")).unwrap_err().contains("at most a day"));
+        assert!(period(Some("10 parsecs")).unwrap_err().contains("unknown unit 'parsecs'"));
+    }
 }
