@@ -21,7 +21,7 @@ use std::time::Duration;
 
 use clap::Args;
 use ferrobus::gateway::{
-    AllowAll, Authorize, Gateway, GatewayConfig, Inbound, LineConfig, OnFailure, Route, Routes, Rules, Upstream,
+    AllowAll, Authorize, Gateway, GatewayConfig, GatewayLine, Inbound, OnFailure, Route, Routes, Rules, Upstream,
     serve_reverse,
 };
 use ferrobus::server::{TcpCounts, TcpLimits};
@@ -345,7 +345,11 @@ fn config(connection: &ConnectArgs, args: &GatewayArgs) -> Result<GatewayConfig,
         .chain(args.lines.iter().cloned())
         .map(|path| {
             let target = Target::Serial { path, line: connection.line(), ascii: connection.ascii };
-            LineConfig { queue, late_guard: args.late_guard, ..LineConfig::new(connection.transport(&target), client) }
+            GatewayLine {
+                queue,
+                late_guard: args.late_guard,
+                ..GatewayLine::new(connection.transport(&target), client)
+            }
         })
         .collect::<Vec<_>>();
     let routes = routes(&args.routes, lines.len())?;

@@ -46,7 +46,7 @@ use std::time::Duration;
 
 use clap::ValueEnum;
 use ferrobus::Backoff;
-use ferrobus::gateway::{LineConfig, Route, Routes};
+use ferrobus::gateway::{GatewayLine, Route, Routes};
 use ferrobus_profile::source::{self, Located, Place, ReadError};
 use serde::Deserialize;
 use toml::Spanned;
@@ -112,7 +112,7 @@ type Problem = (Range<usize>, String);
 
 /// Reads `path`: the lines, with their settings on top of `connection`'s and `base`'s, and
 /// the routes. Nothing is opened.
-pub(super) fn read(path: &Path, connection: &ConnectArgs, base: Base) -> Result<(Vec<LineConfig>, Routes), CliError> {
+pub(super) fn read(path: &Path, connection: &ConnectArgs, base: Base) -> Result<(Vec<GatewayLine>, Routes), CliError> {
     let text = source::read(path).map_err(|e| match e {
         ReadError::Io(e) => CliError::Usage(format!("cannot read the lines file {}: {e}", path.display())),
         not_text @ ReadError::NotText(_) => CliError::Usage(not_text.located().in_file(&path.display().to_string())),
@@ -132,7 +132,7 @@ pub(super) fn parse(
     text: &str,
     connection: &ConnectArgs,
     base: Base,
-) -> Result<(Vec<LineConfig>, Routes), CliError> {
+) -> Result<(Vec<GatewayLine>, Routes), CliError> {
     let shown = path.display().to_string();
     let at = |span: Range<usize>, what: &str| CliError::Usage(Located::new(text, Some(span), what).in_file(&shown));
     let shape: FileShape =
@@ -236,7 +236,7 @@ fn settings(
     line: &LineShape,
     connection: &ConnectArgs,
     base: Base,
-) -> Result<(LineConfig, (String, Range<usize>)), Problem> {
+) -> Result<(GatewayLine, (String, Range<usize>)), Problem> {
     let Some(port) = &line.port else {
         return Err((table, "no port: give the serial port, e.g. port = \"/dev/ttyUSB0\"".into()));
     };
@@ -316,10 +316,10 @@ fn settings(
     if let Some(wait) = response_wait {
         client.timeout = client.timeout.saturating_add(wait);
     }
-    let config = LineConfig {
+    let config = GatewayLine {
         queue,
         late_guard: late_guard.unwrap_or(base.late_guard),
-        ..LineConfig::new(args.transport(&target), client)
+        ..GatewayLine::new(args.transport(&target), client)
     };
     Ok((config, (path, port.span())))
 }

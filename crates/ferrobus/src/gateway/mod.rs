@@ -46,7 +46,7 @@
 //! the reply has come and been dropped (counted as a late reply in the line's stats) or the
 //! late window — twice the reply timeout ([`ClientConfig::late_window`](crate::ClientConfig::late_window))
 //! — has passed; after any request without a usable reply the line also stays quiet for
-//! [`LineConfig::late_guard`]. So a late reply is awaited by nobody and dropped instead of
+//! [`GatewayLine::late_guard`]. So a late reply is awaited by nobody and dropped instead of
 //! being taken for the next request's, a retry's or another client's. (A reply later than the
 //! timeout plus the late window, to a request of the same unit, function and length, cannot
 //! be told from the next one's by any gateway: size the timeout to the device.)
@@ -167,7 +167,7 @@ impl Routes {
 
 /// One serial line behind the gateway.
 #[derive(Clone, Debug)]
-pub struct LineConfig {
+pub struct GatewayLine {
     /// The port and its framing (RTU, or ASCII) and timing.
     pub transport: Transport,
     /// Reply timeout, retries, turnaround, backoff of its master.
@@ -179,11 +179,11 @@ pub struct LineConfig {
     pub late_guard: Duration,
 }
 
-impl LineConfig {
+impl GatewayLine {
     /// A line on `transport` with `client`'s settings, a queue of 64 and a late-reply guard
     /// of 100 ms.
     pub fn new(transport: Transport, client: ClientConfig) -> Self {
-        LineConfig { transport, client, queue: 64, late_guard: Duration::from_millis(100) }
+        GatewayLine { transport, client, queue: 64, late_guard: Duration::from_millis(100) }
     }
 }
 
@@ -231,7 +231,7 @@ impl Default for Timeouts {
 #[derive(Clone, Debug)]
 pub struct GatewayConfig {
     /// The serial lines.
-    pub lines: Vec<LineConfig>,
+    pub lines: Vec<GatewayLine>,
     /// Which unit goes where.
     pub routes: Routes,
     /// Answer a broadcast with its echo once it has gone out (for clients that wait for a

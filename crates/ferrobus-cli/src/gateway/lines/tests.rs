@@ -2,7 +2,7 @@ use std::path::Path;
 use std::time::Duration;
 
 use clap::{Args, FromArgMatches};
-use ferrobus::gateway::{LineConfig, Route, Routes};
+use ferrobus::gateway::{GatewayLine, Route, Routes};
 use ferrobus_proto::frame::{LineTiming, Parity, StopBits};
 
 use super::{Base, parse};
@@ -17,7 +17,7 @@ fn connection(args: &[&str]) -> ConnectArgs {
 
 const BASE: Base = Base { backoff: None, queue: 64, late_guard: Duration::from_millis(100) };
 
-fn lines(text: &str) -> Result<(Vec<LineConfig>, Routes), CliError> {
+fn lines(text: &str) -> Result<(Vec<GatewayLine>, Routes), CliError> {
     parse(Path::new("gw.toml"), text, &connection(&[]), BASE)
 }
 
