@@ -78,6 +78,7 @@
 
 mod authorize;
 mod cache;
+pub mod config;
 mod front;
 mod line;
 mod reverse;
@@ -183,9 +184,15 @@ impl GatewayLine {
     /// A line on `transport` with `client`'s settings, a queue of 64 and a late-reply guard
     /// of 100 ms.
     pub fn new(transport: Transport, client: ClientConfig) -> Self {
-        GatewayLine { transport, client, queue: 64, late_guard: Duration::from_millis(100) }
+        GatewayLine { transport, client, queue: DEFAULT_QUEUE, late_guard: DEFAULT_LATE_GUARD }
     }
 }
+
+/// A line's queue unless set: [`GatewayLine::queue`].
+const DEFAULT_QUEUE: usize = 64;
+
+/// A line's late-reply guard unless set: [`GatewayLine::late_guard`].
+const DEFAULT_LATE_GUARD: Duration = Duration::from_millis(100);
 
 /// What the gateway receives on its connections.
 #[derive(Clone, Copy, PartialEq, Eq, Debug, Default)]
