@@ -248,6 +248,39 @@ pub struct GatewayConfig {
     pub cache_max_age: Option<Duration>,
 }
 
+/// Why a gateway did not start.
+#[derive(Clone, Debug, thiserror::Error)]
+#[non_exhaustive]
+pub enum GatewayError {
+    /// A unit is routed to a line the gateway does not have: a mistake in the settings.
+    #[error("unit {unit} is routed to line {line}, but there are {lines} lines (numbered from 0)")]
+    Routing {
+        /// The unit, as clients address it.
+        unit: u8,
+        /// The line it is routed to.
+        line: usize,
+        /// How many lines there are.
+        lines: usize,
+    },
+    /// A line's port could not be opened.
+    #[error("{source}")]
+    Io {
+        /// The line, numbered from 0.
+        line: usize,
+        /// What went wrong, with the port named.
+        #[source]
+        source: Error,
+    },
+}
+
+/// Refuses a route to a line that `config` does not have.
+fn check_routes(config: &GatewayConfig) -> Result<(), GatewayError> {
+    match config.routes.iter().find(|(_, r)| r.line >= config.lines.len()) {
+        Some((unit, route)) => Err(GatewayError::Routing { unit, line: route.line, lines: config.lines.len() }),
+        None => Ok(()),
+    }
+}
+
 /// A running gateway: the lines' workers. Clone it to serve connections from several tasks.
 #[derive(Clone)]
 pub struct Gateway {
@@ -264,22 +297,17 @@ pub(crate) struct Inner {
 }
 
 impl Gateway {
-    /// Opens every line (a port that cannot be opened fails here, named) and starts its
-    /// worker on the current tokio runtime.
-    pub async fn start(config: GatewayConfig) -> Result<Gateway, Error> {
-        if let Some((unit, route)) = config.routes.iter().find(|(_, r)| r.line >= config.lines.len()) {
-            let message = format!(
-                "unit {unit} is routed to line {}, but there are {} lines (numbered from 0)",
-                route.line,
-                config.lines.len()
-            );
-            return Err(Error::io("routing", io::Error::new(io::ErrorKind::InvalidInput, message)));
-        }
+    /// Checks the routes, opens every line (a port that cannot be opened fails here, named)
+    /// and starts its worker on the current tokio runtime.
+    pub async fn start(config: GatewayConfig) -> Result<Gateway, GatewayError> {
+        check_routes(&config)?;
         let cache = config.cache_max_age.map(|age| Arc::new(Cache::new(age)));
         let mut lines = Vec::with_capacity(config.lines.len());
-        for line in config.lines {
+        for (index, line) in config.lines.into_iter().enumerate() {
             let name = line.transport.describe();
-            let client = Client::connect(line.transport.clone(), line.client).await?;
+            let client = Client::connect(line.transport.clone(), line.client)
+                .await
+                .map_err(|source| GatewayError::Io { line: index, source })?;
             let stats = Arc::new(Mutex::new(LineStats { name, ..LineStats::default() }));
             let queue = Arc::new(LineQueue::new(line.queue, stats));
             tokio::spawn(line::run(Arc::clone(&queue), client, cache.clone(), line.late_guard));
