@@ -416,7 +416,7 @@ fn build(connection: &ConnectArgs, args: &SimArgs) -> Result<Sim, CliError> {
         if let Some(wait) = args.response_wait {
             profile.comm.response_wait_ms = u32::try_from(wait.as_millis()).unwrap_or(u32::MAX);
         }
-        let from_profile = profile.faults().map_err(CliError::Usage)?;
+        let from_profile = profile.faults().map_err(|e| CliError::Usage(e.to_string()))?;
         let unit_faults = faults.iter().find(|(u, _)| *u == unit).map_or(from_profile, |(_, f)| f.clone());
         eprintln!(
             "sim: unit {unit}: {profile} from {name}, reply wait {} ms, faults: {unit_faults}",
