@@ -301,8 +301,8 @@ fn raw_groups(
     let mut groups = Vec::new();
     for (at, n) in connection.read_pieces(start.wire, usize::from(count), width, table, None)? {
         let name = format!("u{} {} {at:#06x}", spec.unit, table.name());
-        let group = Group::raw(&name, spec.unit, table.into(), at, n, every, layout)
-            .map_err(|e| CliError::Usage(e.to_string()))?;
+        let range = ferrobus::poll::RawRange { unit: spec.unit, table: table.into(), start: at, count: n, every };
+        let group = Group::raw(&name, range, layout).map_err(|e| CliError::Usage(e.to_string()))?;
         groups.push(group);
     }
     Ok(groups)
@@ -844,16 +844,8 @@ mod tests {
 
     #[test]
     fn the_terminal_table_is_redrawn_over_itself() {
-        let g = Group::raw(
-            "u1 holding 0x0000",
-            1,
-            ferrobus::poll::Table::Holding,
-            0,
-            2,
-            Duration::from_secs(1),
-            &Layout::default(),
-        )
-        .unwrap();
+        let range = ferrobus::poll::RawRange { count: 2, ..ferrobus::poll::RawRange::default() };
+        let g = Group::raw("u1 holding 0x0000", range, &Layout::default()).unwrap();
         let mut screen = Screen::default();
         let first = screen.draw(std::slice::from_ref(&g), &[]);
         assert!(first.starts_with("group"), "{first:?}");

@@ -252,8 +252,8 @@ impl ReadDef {
         let every = period(self.every.as_deref())?;
         let name =
             self.name.clone().unwrap_or_else(|| format!("u{} {} {:#06x}", self.unit, table.name(), self.address));
-        Group::raw(&name, self.unit, table, self.address, self.count, every, &layout)
-            .map_err(|e: GroupError| e.to_string())
+        let range = super::RawRange { unit: self.unit, table, start: self.address, count: self.count, every };
+        Group::raw(&name, range, &layout).map_err(|e: GroupError| e.to_string())
     }
 }
 
