@@ -234,6 +234,28 @@ impl Default for Timeouts {
     }
 }
 
+/// How the gateway's front end listens.
+#[derive(Clone, Debug)]
+pub struct FrontConfig {
+    /// What clients send.
+    pub inbound: Inbound,
+    /// Connection caps and timeouts of the listener.
+    pub limits: TcpLimits,
+    /// Requests one connection may have outstanding ([`Timeouts::pipeline`]).
+    pub pipeline: usize,
+}
+
+impl Default for FrontConfig {
+    /// Modbus/TCP, the TCP server's limits, 16 requests outstanding per connection.
+    fn default() -> Self {
+        FrontConfig {
+            inbound: Inbound::default(),
+            limits: TcpLimits::default(),
+            pipeline: Timeouts::default().pipeline,
+        }
+    }
+}
+
 /// A gateway's settings.
 #[derive(Clone, Debug)]
 pub struct GatewayConfig {
@@ -351,20 +373,14 @@ impl Gateway {
         front::serve(&self.inner, stream, peer, inbound, authorize, timeouts).await
     }
 
-    /// Serves every connection `listener` accepts, within `limits` (the hardened TCP
-    /// server's accept loop: connection cap, descriptor backoff, counted closes), each with
-    /// the [`Authorize`] that `authorize` makes for its peer. Runs until dropped.
-    pub async fn serve_tcp<A>(
-        &self,
-        listener: TcpListener,
-        inbound: Inbound,
-        limits: TcpLimits,
-        pipeline: usize,
-        authorize: A,
-    ) -> io::Result<()>
+    /// Serves every connection `listener` accepts, as `front` says, within its limits (the
+    /// hardened TCP server's accept loop: connection cap, descriptor backoff, counted closes),
+    /// each with the [`Authorize`] that `authorize` makes for its peer. Runs until dropped.
+    pub async fn serve_tcp<A>(&self, listener: TcpListener, front: FrontConfig, authorize: A) -> io::Result<()>
     where
         A: Fn(SocketAddr) -> Box<dyn Authorize> + Send + Sync + 'static,
     {
+        let FrontConfig { inbound, limits, pipeline } = front;
         let timeouts = Timeouts { idle: limits.idle_timeout, frame: limits.frame_timeout, pipeline };
         let authorize = Arc::new(authorize);
         crate::server::accept_connections(listener, &limits, |stream, peer| {
