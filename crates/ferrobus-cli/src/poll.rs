@@ -140,7 +140,7 @@ pub(crate) enum Token {
 }
 
 fn parse_period(text: &str) -> Result<Duration, String> {
-    period(Some(text))
+    period(Some(text)).map_err(|e| e.to_string())
 }
 
 fn parse_deadband(text: &str) -> Result<f64, String> {

@@ -345,3 +345,18 @@ fn a_broken_session_names_the_file_the_line_and_the_definition() {
         Session::parse("[[read]]\nunit = 3\ntable = \"holding\"\naddress = 0\nevery = \"10 parsecs\"\n", "s").unwrap();
     assert!(s.groups("s", |_| unreachable!()).unwrap_err().to_string().contains("unknown unit"));
 }
+
+#[test]
+fn session_values_are_refused_with_typed_errors_that_say_what_they_take() {
+    use ferrobus::poll::session::{DefError, order_of, period, table_from_name};
+    assert_eq!(table_from_name(" Coils"), Ok(Table::Coils));
+    assert_eq!(table_from_name(" Holdings"), Err(DefError::Table { name: "holdings".into() }));
+    assert_eq!(order_of(None), Ok(None));
+    assert_eq!(order_of(Some("DXBA")), Err(DefError::Order { name: "DXBA".into() }));
+    assert_eq!(period(None), Ok(Duration::from_secs(1)));
+    assert_eq!(period(Some("250us")), Ok(Duration::from_micros(250)));
+    assert_eq!(period(Some("fast")), Err(DefError::PeriodNumber { text: "fast".into() }));
+    assert_eq!(period(Some("5h")), Err(DefError::PeriodUnit { text: "5h".into(), unit: "h".into() }));
+    assert_eq!(period(Some("0ms")), Err(DefError::PeriodRange { text: "0ms".into() }));
+    assert_eq!(period(Some("5h")).unwrap_err().to_string(), "period \"5h\": unknown unit \"h\" (us, ms, s, min)");
+}
