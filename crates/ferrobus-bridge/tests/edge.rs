@@ -40,7 +40,12 @@ fn drive() -> DeviceSpec {
 
 fn meter() -> DeviceSpec {
     let layout = Layout { aliases: vec![(0, "temperature".into())], ..Layout::default() };
-    let group = Group::raw("meter", 2, Table::Holding, 0, 2, Duration::from_secs(1), &layout).unwrap();
+    let group = Group::raw(
+        "meter",
+        ferrobus::poll::RawRange { unit: 2, table: Table::Holding, count: 2, ..Default::default() },
+        &layout,
+    )
+    .unwrap();
     DeviceSpec {
         id: "meter".into(),
         unit: 2,

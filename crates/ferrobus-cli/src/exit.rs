@@ -20,6 +20,7 @@ use std::io;
 use std::time::Duration;
 
 use ferrobus::Error;
+use ferrobus::gateway::GatewayError;
 use ferrobus::port::PortFault;
 use ferrobus_proto::master::HeardInstead;
 use ferrobus_proto::{ExceptionCode, FunctionCode, PduError};
@@ -88,6 +89,15 @@ pub(crate) enum CliError {
     Usage(String),
     /// None of --port, --tcp, --rtu-tcp.
     MissingTarget,
+    /// The gateway's routes send a unit to a line it does not have.
+    Routing {
+        /// The unit, as clients address it.
+        unit: u8,
+        /// The line it was routed to.
+        line: usize,
+        /// How many lines there are.
+        lines: usize,
+    },
     /// The TCP connection did not open in time.
     ConnectTimeout {
         /// What was being opened.
@@ -124,6 +134,18 @@ impl From<Error> for CliError {
     }
 }
 
+/// A routing mistake is the settings' (exit 2); a line that cannot be opened, the port's.
+impl From<GatewayError> for CliError {
+    fn from(error: GatewayError) -> Self {
+        match error {
+            GatewayError::Routing { unit, line, lines } => CliError::Routing { unit, line, lines },
+            GatewayError::Io { source, .. } => source.into(),
+            // A kind of failure this build does not know yet: as the library tells it.
+            other => CliError::Modbus { error: Error::io("starting the gateway", io::Error::other(other.to_string())) },
+        }
+    }
+}
+
 impl From<PduError> for CliError {
     fn from(e: PduError) -> Self {
         CliError::Pdu(e)
@@ -143,7 +165,7 @@ impl CliError {
                 // yet: the port's or the connection's.
                 _ => Exit::Io,
             },
-            CliError::Pdu(_) | CliError::Usage(_) | CliError::MissingTarget => Exit::Usage,
+            CliError::Pdu(_) | CliError::Usage(_) | CliError::MissingTarget | CliError::Routing { .. } => Exit::Usage,
             CliError::ConnectTimeout { .. } => Exit::Io,
             CliError::BadData(_) => Exit::BadReply,
             CliError::Output { source, .. } if source.kind() == io::ErrorKind::BrokenPipe => Exit::BrokenPipe,
@@ -217,6 +239,14 @@ pub(crate) fn report_numbered(error: &CliError, target: Option<&Target>, unit: u
         CliError::MissingTarget => Report {
             message: "no bus given: use one of --port PATH, --tcp HOST[:PORT] or --rtu-tcp HOST:PORT".into(),
             hints: Vec::new(),
+        },
+        CliError::Routing { unit, line, lines } => Report {
+            message: format!("unit {unit} is routed to line {line}, but there are {lines} lines (numbered from 0)"),
+            hints: vec![format!(
+                "lines are numbered from 0 in the order given (--port, then each --line; or the [[line]]s of \
+                 --lines-file): route unit {unit} to one of 0-{}",
+                lines.saturating_sub(1)
+            )],
         },
         CliError::ConnectTimeout { target, waited } => Report {
             message: format!("connecting to {target} timed out after {} ms", waited.as_millis()),
@@ -588,6 +618,22 @@ mod tests {
         let pipe = CliError::Output { what: "stdout".into(), source: io::ErrorKind::BrokenPipe.into() };
         assert_eq!(pipe.exit(), Exit::BrokenPipe);
         assert_eq!(CliError::Interrupted.exit(), Exit::Interrupted);
+    }
+
+    #[test]
+    fn a_gateway_routing_mistake_is_a_usage_error_with_the_lines_named_and_a_port_failure_an_io_error() {
+        let routing = CliError::from(GatewayError::Routing { unit: 7, line: 2, lines: 2 });
+        assert_eq!(routing.exit(), Exit::Usage);
+        let r = report(&routing, None, 1);
+        assert_eq!(r.message, "unit 7 is routed to line 2, but there are 2 lines (numbered from 0)");
+        assert!(r.hints[0].contains("route unit 7 to one of 0-1"), "{:?}", r.hints);
+        let source =
+            Error::Io { context: "opening /dev/ttyUSB0".into(), source: Arc::new(io::ErrorKind::NotFound.into()) };
+        let port = CliError::from(GatewayError::Io { line: 0, source });
+        assert_eq!(port.exit(), Exit::Io);
+        let r = report(&port, Some(&serial()), 1);
+        assert!(r.message.starts_with("opening /dev/ttyUSB0"), "{}", r.message);
+        assert!(r.hints.iter().any(|h| h.contains("is the adapter plugged in")), "{:?}", r.hints);
     }
 
     #[test]

@@ -21,8 +21,8 @@ use std::time::Duration;
 
 use clap::Args;
 use ferrobus::gateway::{
-    AllowAll, Authorize, Gateway, GatewayConfig, Inbound, LineConfig, OnFailure, Route, Routes, Rules, Upstream,
-    serve_reverse,
+    AllowAll, Authorize, FrontConfig, Gateway, GatewayConfig, GatewayLine, Inbound, OnFailure, Route, Routes, Rules,
+    Upstream, serve_reverse,
 };
 use ferrobus::server::{TcpCounts, TcpLimits};
 use ferrobus::{Client, Transport};
@@ -203,6 +203,7 @@ pub(crate) async fn run(connection: &ConnectArgs, args: &GatewayArgs) -> Result<
     };
     let tcp = Arc::clone(&limits.stats);
     let pipeline = usize::try_from(args.pipeline).unwrap_or(usize::MAX);
+    let front = FrontConfig { inbound, limits, pipeline };
     let serving = {
         let gateway = gateway.clone();
         tokio::spawn(async move {
@@ -210,8 +211,8 @@ pub(crate) async fn run(connection: &ConnectArgs, args: &GatewayArgs) -> Result<
                 if rules.allows_all() { Box::new(AllowAll) } else { Box::new(rules.clone()) }
             };
             match tls {
-                Some(tls) => gateway.serve_tls(listener, inbound, limits, pipeline, authorize, tls).await,
-                None => gateway.serve_tcp(listener, inbound, limits, pipeline, authorize).await,
+                Some(tls) => gateway.serve_tls(listener, front, authorize, tls).await,
+                None => gateway.serve_tcp(listener, front, authorize).await,
             }
         })
     };
@@ -345,7 +346,11 @@ fn config(connection: &ConnectArgs, args: &GatewayArgs) -> Result<GatewayConfig,
         .chain(args.lines.iter().cloned())
         .map(|path| {
             let target = Target::Serial { path, line: connection.line(), ascii: connection.ascii };
-            LineConfig { queue, late_guard: args.late_guard, ..LineConfig::new(connection.transport(&target), client) }
+            GatewayLine {
+                queue,
+                late_guard: args.late_guard,
+                ..GatewayLine::new(connection.transport(&target), client)
+            }
         })
         .collect::<Vec<_>>();
     let routes = routes(&args.routes, lines.len())?;

@@ -185,12 +185,12 @@ fn record_tap(
 ) -> Result<(), CliError> {
     let what = path.display().to_string();
     let mut file = std::fs::File::create(path).map_err(|source| CliError::Output { what: what.clone(), source })?;
-    let clock = crate::sniff::WallClock::now();
+    let clock = ferrobus::sniff::WallClock::now();
     tokio::spawn(async move {
         while let Some(run) = heard.recv().await {
             let doc = serde_json::json!({
-                "end_ns": clock.unix_ns(run.end.into_std()),
-                "written_ns": clock.unix_ns(run.written.into_std()),
+                "end_ns": clock.unix(run.end).as_nanos(),
+                "written_ns": clock.unix(run.written).as_nanos(),
                 "bytes": crate::hex::format(&run.bytes),
             });
             if let Err(e) = output::write_to(&mut file, &what, &output::json_line(&doc)) {

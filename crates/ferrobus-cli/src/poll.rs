@@ -143,7 +143,7 @@ pub(crate) enum Token {
 }
 
 fn parse_period(text: &str) -> Result<Duration, String> {
-    period(Some(text))
+    period(Some(text)).map_err(|e| e.to_string())
 }
 
 fn parse_deadband(text: &str) -> Result<f64, String> {
@@ -298,8 +298,8 @@ fn raw_groups(
     let mut groups = Vec::new();
     for (at, n) in connection.read_pieces(start.wire, usize::from(count), width, table, None)? {
         let name = format!("u{} {} {at:#06x}", spec.unit, table.name());
-        let group = Group::raw(&name, spec.unit, table.into(), at, n, every, layout)
-            .map_err(|e| CliError::Usage(e.to_string()))?;
+        let range = ferrobus::poll::RawRange { unit: spec.unit, table: table.into(), start: at, count: n, every };
+        let group = Group::raw(&name, range, layout).map_err(|e| CliError::Usage(e.to_string()))?;
         groups.push(group);
     }
     Ok(groups)
@@ -859,16 +859,8 @@ mod tests {
 
     #[test]
     fn the_terminal_table_is_redrawn_over_itself() {
-        let g = Group::raw(
-            "u1 holding 0x0000",
-            1,
-            ferrobus::poll::Table::Holding,
-            0,
-            2,
-            Duration::from_secs(1),
-            &Layout::default(),
-        )
-        .unwrap();
+        let range = ferrobus::poll::RawRange { count: 2, ..ferrobus::poll::RawRange::default() };
+        let g = Group::raw("u1 holding 0x0000", range, &Layout::default()).unwrap();
         let mut screen = Screen::default();
         let first = screen.draw(std::slice::from_ref(&g), &[]);
         assert!(first.starts_with("group"), "{first:?}");
@@ -913,7 +905,8 @@ mod tests {
         ] {
             let order = crate::value::parse_word_order(name).unwrap();
             let layout = Layout { format: Format::U32, order, ..Layout::default() };
-            let group = Group::raw("g", 1, Table::Holding.into(), 0, 2, Duration::from_secs(1), &layout).unwrap();
+            let range = ferrobus::poll::RawRange { count: 2, ..ferrobus::poll::RawRange::default() };
+            let group = Group::raw("g", range, &layout).unwrap();
             assert_eq!(group.decode(&registers), [Ok(ferrobus::poll::Value::Int(0x1122_3344))], "{name}");
         }
         assert_eq!(crate::value::parse_word_order("low-first"), Ok(Order::Cdab), "the aliases of --word-order");

@@ -169,7 +169,10 @@ fn show(name: &str, group: Option<&str>, format: Format) -> Result<(), CliError>
 /// stdout; exit 2 either way when there is one.
 fn check(file: &str, format: Format) -> Result<(), CliError> {
     // The simulator's reading too: its fault keys are part of the file.
-    let profile = ferrobus_sim::profile::load_all(file).map_err(|mistakes| refuse(file, &mistakes, format))?;
+    let profile = ferrobus_sim::profile::load_all(file).map_err(|mistakes| {
+        let mistakes: Vec<String> = mistakes.iter().map(ToString::to_string).collect();
+        refuse(file, &mistakes, format)
+    })?;
     let count = |t: ferrobus_profile::Table| profile.points().iter().filter(|p| p.table == t).count();
     let (coils, discrete, holding, input) = (
         count(ferrobus_profile::Table::Coils),

@@ -17,7 +17,9 @@ use std::time::Duration;
 use clap::Args;
 #[cfg(unix)]
 use ferrobus::Pty;
-use ferrobus::server::{ServerEvent, ServerOptions, Shared, TcpCounts, TcpLimits, serve_tcp_with, serve_transport};
+use ferrobus::server::{
+    ServerEvent, ServerOptions, Shared, TcpCounts, TcpLimits, TcpServeConfig, serve_tcp_with, serve_transport,
+};
 use ferrobus::tls::{ServerTls, serve_tls_with};
 use ferrobus::{Framing, Timer, Transport};
 use ferrobus_proto::ExceptionCode;
@@ -218,15 +220,16 @@ pub(crate) async fn run(connection: &ConnectArgs, args: &SimArgs) -> Result<(), 
     };
     let config = SlaveConfig { units, response_wait: Duration::ZERO };
     let reopen = !args.pty && transport.reopens();
+    let serve_config = TcpServeConfig { limits, ..TcpServeConfig::new(transport.clone(), config) };
     // Its own task: a request wakes the server alone, not the signal handlers below.
     let mut serving = tokio::spawn(async move {
         match port {
             Served::Port(port) => serve_port(&transport, port, reopen, config, &sim, &options).await,
             Served::Listener(listener) => match tls {
-                Some(tls) => serve_tls_with(listener, transport.clone(), config, sim.clone(), options, limits, tls)
+                Some(tls) => serve_tls_with(listener, serve_config, sim.clone(), options, tls)
                     .await
                     .map_err(|e| ferrobus::Error::io("serving", e).into()),
-                None => serve_tcp_with(listener, transport.clone(), config, sim.clone(), options, limits)
+                None => serve_tcp_with(listener, serve_config, sim.clone(), options)
                     .await
                     .map_err(|e| ferrobus::Error::io("serving", e).into()),
             },
@@ -416,7 +419,7 @@ fn build(connection: &ConnectArgs, args: &SimArgs) -> Result<Sim, CliError> {
         if let Some(wait) = args.response_wait {
             profile.comm.response_wait_ms = u32::try_from(wait.as_millis()).unwrap_or(u32::MAX);
         }
-        let from_profile = profile.faults().map_err(CliError::Usage)?;
+        let from_profile = profile.faults().map_err(|e| CliError::Usage(e.to_string()))?;
         let unit_faults = faults.iter().find(|(u, _)| *u == unit).map_or(from_profile, |(_, f)| f.clone());
         eprintln!(
             "sim: unit {unit}: {profile} from {name}, reply wait {} ms, faults: {unit_faults}",

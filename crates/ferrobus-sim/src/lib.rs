@@ -32,4 +32,4 @@ pub use fault::Faults;
 pub use profile::{Profile, ProfileFaults};
 pub use rule::Rule;
 pub use sim::{FaultFilter, Sim, Unserved};
-pub use ticker::Ticker;
+pub use ticker::{Ticker, TickerError};

@@ -15,17 +15,17 @@ use crate::{Faults, Rule};
 pub trait ProfileFaults {
     /// The faults the profile asks for: its `faults` string, then its `[[fault_rule]]`s; an
     /// error names the file, the line and the column.
-    fn faults(&self) -> Result<Faults, String> {
+    fn faults(&self) -> Result<Faults, ProfileError> {
         self.every_fault().map_err(|mut mistakes| mistakes.swap_remove(0))
     }
 
     /// The same, with every mistake when there are any (never an empty list).
-    fn every_fault(&self) -> Result<Faults, Vec<String>>;
+    fn every_fault(&self) -> Result<Faults, Vec<ProfileError>>;
 }
 
 impl ProfileFaults for Profile {
-    fn every_fault(&self) -> Result<Faults, Vec<String>> {
-        let problem = |place: Option<Place>, problem: String| self.problem(place, &problem).to_string();
+    fn every_fault(&self) -> Result<Faults, Vec<ProfileError>> {
+        let problem = |place: Option<Place>, problem: String| self.problem(place, &problem);
         let mut mistakes = Vec::new();
         let mut faults: Faults = match self.faults.as_deref().map(str::parse::<Faults>) {
             Some(Ok(faults)) => faults,
@@ -48,15 +48,14 @@ impl ProfileFaults for Profile {
 
 /// Loads a profile (see [`Profile::load`]) and checks the faults it asks for, so that a
 /// mistake there is reported with the file and place like any other.
-pub fn load(name_or_path: &str) -> Result<Profile, String> {
+pub fn load(name_or_path: &str) -> Result<Profile, ProfileError> {
     load_all(name_or_path).map_err(|mut mistakes| mistakes.swap_remove(0))
 }
 
 /// [`load`] with every mistake of the file (see [`Profile::load_all`]), its faults' too when
 /// the rest is sound; never an empty list.
-pub fn load_all(name_or_path: &str) -> Result<Profile, Vec<String>> {
-    let profile = Profile::load_all(name_or_path)
-        .map_err(|mistakes| mistakes.iter().map(ToString::to_string).collect::<Vec<_>>())?;
+pub fn load_all(name_or_path: &str) -> Result<Profile, Vec<ProfileError>> {
+    let profile = Profile::load_all(name_or_path)?;
     profile.every_fault()?;
     Ok(profile)
 }
@@ -88,7 +87,10 @@ mod tests {
     const DEVICE: &str = "[device]\nname='x'\nvendor='v'\nproduct_code='p'\nrevision='1'\n";
 
     fn error(text: &str) -> String {
-        Profile::parse(text, "mine.toml").unwrap().faults().unwrap_err()
+        let error = Profile::parse(text, "mine.toml").unwrap().faults().unwrap_err();
+        // A mistake in the file, with its place: the profile loader's own kind of error.
+        assert!(matches!(error, ProfileError::Invalid { .. }), "{error:?}");
+        error.to_string()
     }
 
     #[test]
@@ -121,14 +123,20 @@ mod tests {
             "{}",
             error(&bad_faults)
         );
-        assert!(load("./nope.toml").unwrap_err().contains("no such file"));
+        assert!(load("./nope.toml").unwrap_err().to_string().contains("no such file"));
     }
 
     #[test]
     fn every_bad_fault_of_a_profile_is_listed_each_with_its_place() {
         let text =
             format!("faults = 'drop=2'\n{DEVICE}[[fault_rule]]\nshort = 0\n\n[[fault_rule]]\nfc = 3\nshare = 7\n");
-        let mistakes = Profile::parse(&text, "mine.toml").unwrap().every_fault().unwrap_err();
+        let mistakes: Vec<String> = Profile::parse(&text, "mine.toml")
+            .unwrap()
+            .every_fault()
+            .unwrap_err()
+            .iter()
+            .map(ToString::to_string)
+            .collect();
         let places: Vec<&str> = mistakes.iter().filter_map(|m| m.split(": ").next()).collect();
         assert_eq!(places, ["mine.toml:1:10", "mine.toml:7:1", "mine.toml:10:1"], "{mistakes:#?}");
     }

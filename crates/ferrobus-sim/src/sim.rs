@@ -18,7 +18,7 @@ use crate::fault::Faults;
 use crate::memory::Table;
 use crate::reframe::{corrupt_checksum, reframe, unit_of};
 use crate::rule::Action;
-use crate::ticker::Ticker;
+use crate::ticker::{Ticker, TickerError};
 
 /// One unit on the line.
 pub struct Unit {
@@ -99,9 +99,9 @@ impl Sim {
     /// Makes `ticker`'s point of every unit count its periods (see [`crate::ticker`]); refused,
     /// naming the unit, if a unit's profile has no integer register by that name. Add the
     /// units first.
-    pub fn add_ticker(&mut self, ticker: Ticker) -> Result<(), String> {
+    pub fn add_ticker(&mut self, ticker: Ticker) -> Result<(), TickerError> {
         for (unit, u) in &self.units {
-            ticker.check(u.device.memory()).map_err(|e| format!("unit {unit}: {e}"))?;
+            ticker.check(u.device.memory()).map_err(|e| TickerError::Unit { unit: *unit, error: Box::new(e) })?;
         }
         self.tickers.push(ticker);
         Ok(())

@@ -18,6 +18,52 @@ use crate::clock::SimClock;
 use crate::memory::{Item, Memory};
 use crate::parse::parse_duration;
 
+/// Why a ticker was refused.
+#[derive(Clone, PartialEq, Eq, Debug, thiserror::Error)]
+#[non_exhaustive]
+pub enum TickerError {
+    /// A period of zero counts nothing.
+    #[error("ticker {point}: the period must be longer than zero")]
+    ZeroPeriod {
+        /// The point.
+        point: String,
+    },
+    /// Not `POINT:PERIOD`.
+    #[error("ticker {spec:?}: expected POINT:PERIOD, e.g. d005:1.1s")]
+    Spec {
+        /// What was given.
+        spec: String,
+    },
+    /// The period is no duration.
+    #[error("ticker {spec:?}: {reason}")]
+    Period {
+        /// What was given.
+        spec: String,
+        /// What is wrong with the period.
+        reason: String,
+    },
+    /// The point is not an integer register.
+    #[error("ticker {point}: not an integer register")]
+    NotInteger {
+        /// The point.
+        point: String,
+    },
+    /// The profile has no point by that name.
+    #[error("ticker {point}: the profile has no point by that name")]
+    NoPoint {
+        /// The point.
+        point: String,
+    },
+    /// One unit of a simulator cannot carry the ticker.
+    #[error("unit {unit}: {error}")]
+    Unit {
+        /// The unit.
+        unit: u8,
+        /// Why.
+        error: Box<TickerError>,
+    },
+}
+
 /// A point that counts periods of a clock (see the module docs).
 #[derive(Clone)]
 pub struct Ticker {
@@ -36,15 +82,15 @@ impl fmt::Debug for Ticker {
 impl Ticker {
     /// `point` counts `period`s of `wall`, a clock of the time since the Unix epoch; a zero
     /// period is refused.
-    pub fn new(point: &str, period: Duration, wall: SimClock) -> Result<Ticker, String> {
+    pub fn new(point: &str, period: Duration, wall: SimClock) -> Result<Ticker, TickerError> {
         if period.is_zero() {
-            return Err(format!("ticker {point}: the period must be longer than zero"));
+            return Err(TickerError::ZeroPeriod { point: point.to_string() });
         }
         Ok(Ticker { point: point.to_string(), period, wall })
     }
 
     /// `point` counts `period`s of the system clock since the Unix epoch.
-    pub fn system(point: &str, period: Duration) -> Result<Ticker, String> {
+    pub fn system(point: &str, period: Duration) -> Result<Ticker, TickerError> {
         Ticker::new(
             point,
             period,
@@ -54,12 +100,12 @@ impl Ticker {
 
     /// Parses `POINT:PERIOD` (e.g. `d005:1.1s`; the period as [`parse_duration`] takes it), on
     /// the system clock.
-    pub fn parse(spec: &str) -> Result<Ticker, String> {
+    pub fn parse(spec: &str) -> Result<Ticker, TickerError> {
         let (point, period) = spec
             .rsplit_once(':')
             .filter(|(p, _)| !p.is_empty())
-            .ok_or_else(|| format!("ticker {spec:?}: expected POINT:PERIOD, e.g. d005:1.1s"))?;
-        let period = parse_duration(period).map_err(|e| format!("ticker {spec:?}: {e}"))?;
+            .ok_or_else(|| TickerError::Spec { spec: spec.to_string() })?;
+        let period = parse_duration(period).map_err(|reason| TickerError::Period { spec: spec.to_string(), reason })?;
         Ticker::system(point, period)
     }
 
@@ -80,13 +126,13 @@ impl Ticker {
 
     /// Why `memory` cannot carry this ticker, if it cannot: it has no integer register by the
     /// point's name.
-    pub fn check(&self, memory: &Memory) -> Result<(), String> {
+    pub fn check(&self, memory: &Memory) -> Result<(), TickerError> {
         let integer =
             |item: &Item| !item.table.is_bits() && item.point.as_ref().is_some_and(|p| p.value_type.is_integer());
         match memory.item(&self.point) {
             Some(item) if integer(item) => Ok(()),
-            Some(_) => Err(format!("ticker {}: not an integer register", self.point)),
-            None => Err(format!("ticker {}: the profile has no point by that name", self.point)),
+            Some(_) => Err(TickerError::NotInteger { point: self.point.clone() }),
+            None => Err(TickerError::NoPoint { point: self.point.clone() }),
         }
     }
 
@@ -158,17 +204,23 @@ mod tests {
         let memory = inverter();
         let check = |point: &str| ticker(point, 1).0.check(&memory);
         assert_eq!(check("d005"), Ok(()));
-        assert_eq!(check("nope"), Err("ticker nope: the profile has no point by that name".into()));
-        assert_eq!(check("running"), Err("ticker running: not an integer register".into()));
+        assert_eq!(check("nope"), Err(TickerError::NoPoint { point: "nope".into() }));
+        assert_eq!(check("nope").unwrap_err().to_string(), "ticker nope: the profile has no point by that name");
+        assert_eq!(check("running"), Err(TickerError::NotInteger { point: "running".into() }));
+        assert_eq!(check("running").unwrap_err().to_string(), "ticker running: not an integer register");
     }
 
     #[test]
     fn specs_parse_and_a_zero_period_is_refused() {
         let t = Ticker::parse("d005:1.1s").expect("a spec");
         assert_eq!((t.point(), t.period()), ("d005", Duration::from_millis(1100)));
-        assert!(Ticker::parse("d005").unwrap_err().contains("expected POINT:PERIOD"));
-        assert!(Ticker::parse(":5ms").is_err());
-        assert!(Ticker::parse("d005:soon").unwrap_err().contains("not a duration"));
-        assert!(Ticker::parse("d005:0ms").unwrap_err().contains("longer than zero"));
+        assert_eq!(Ticker::parse("d005").unwrap_err(), TickerError::Spec { spec: "d005".into() });
+        assert!(Ticker::parse("d005").unwrap_err().to_string().contains("expected POINT:PERIOD"));
+        assert!(matches!(Ticker::parse(":5ms"), Err(TickerError::Spec { .. })));
+        let soon = Ticker::parse("d005:soon").unwrap_err();
+        assert!(matches!(&soon, TickerError::Period { spec, .. } if spec == "d005:soon"), "{soon:?}");
+        assert!(soon.to_string().contains("not a duration"), "{soon}");
+        assert_eq!(Ticker::parse("d005:0ms").unwrap_err(), TickerError::ZeroPeriod { point: "d005".into() });
+        assert!(Ticker::parse("d005:0ms").unwrap_err().to_string().contains("longer than zero"));
     }
 }

@@ -7,7 +7,7 @@ use std::sync::atomic::{AtomicU64, Ordering};
 use std::time::Duration;
 
 use ferrobus_proto::slave::Handler;
-use ferrobus_sim::{Device, Faults, Profile, Sim, SimClock, Ticker};
+use ferrobus_sim::{Device, Faults, Profile, Sim, SimClock, Ticker, TickerError};
 
 fn device(profile: &str) -> Device {
     Device::new(Profile::load(profile).expect("a built-in profile"))
@@ -54,5 +54,7 @@ fn a_unit_without_the_point_is_named() {
     sim.add(7, device("generic"), Faults::default());
     let (wall, _) = clock();
     let refused = sim.add_ticker(Ticker::new("d005", Duration::from_secs(1), wall).expect("a period"));
-    assert_eq!(refused, Err("unit 7: ticker d005: the profile has no point by that name".into()));
+    let refused = refused.unwrap_err();
+    assert!(matches!(&refused, TickerError::Unit { unit: 7, error } if matches!(**error, TickerError::NoPoint { .. })));
+    assert_eq!(refused.to_string(), "unit 7: ticker d005: the profile has no point by that name");
 }

@@ -44,6 +44,9 @@
 //!   in this process or, on Unix, other programs behind ptys.
 //! - [`log`](mod@log): [`log::escape`], how every value from outside (a certificate's role, a
 //!   metric name, a peer's text) is written into a log line: on one line, controls spelled out.
+//! - [`sniff`]: the passive sniffer of an RTU line — listening without transmitting, the
+//!   core's decoder on the shared clock, owned events, a unit filter, per-unit statistics and
+//!   pcapng captures.
 //! - [`pcapng`]: capture files of an RTU line that tshark and Wireshark decode as Modbus RTU
 //!   (exported PDUs with the `mbrtu` dissector and ports telling queries from responses).
 //! - [`text`]: the one grammar of what people type — durations, sizes (SI and IEC units),
@@ -74,6 +77,7 @@ mod pump;
 pub mod scan;
 mod serial;
 pub mod server;
+pub mod sniff;
 mod sys;
 pub mod text;
 pub mod timer;

@@ -555,24 +555,43 @@ where
     H: Handler + Send + 'static,
     O: Fn() -> ServerOptions + Send + Sync + 'static,
 {
-    serve_tcp_with(listener, transport, config, handler, options, TcpLimits::default()).await
+    serve_tcp_with(listener, TcpServeConfig::new(transport, config), handler, options).await
 }
 
-/// Serves Modbus/TCP (or RTU over TCP, per `transport`'s framing) on `listener`: one engine
-/// per connection, all sharing `handler`, each with the options `options` makes, within
-/// `limits`. No error of a connection or of accepting one ends it: it runs until dropped.
+/// What a TCP server serves: its connections' framing, its slave engines' settings and the
+/// listener's limits.
+#[derive(Clone, Debug)]
+pub struct TcpServeConfig {
+    /// Modbus/TCP, or RTU over TCP: the framing of every connection.
+    pub transport: Transport,
+    /// The settings of each connection's slave engine.
+    pub slave: SlaveConfig,
+    /// Connection caps and timeouts.
+    pub limits: TcpLimits,
+}
+
+impl TcpServeConfig {
+    /// `transport`'s framing and `slave`'s settings, within the default [`TcpLimits`].
+    pub fn new(transport: Transport, slave: SlaveConfig) -> Self {
+        TcpServeConfig { transport, slave, limits: TcpLimits::default() }
+    }
+}
+
+/// Serves Modbus/TCP (or RTU over TCP, per the transport's framing) on `listener`: one engine
+/// per connection, all sharing `handler`, each with the options `options` makes, within the
+/// limits of `serve`. No error of a connection or of accepting one ends it: it runs until
+/// dropped.
 pub async fn serve_tcp_with<H, O>(
     listener: TcpListener,
-    transport: Transport,
-    config: SlaveConfig,
+    serve: TcpServeConfig,
     handler: Shared<H>,
     options: O,
-    limits: TcpLimits,
 ) -> io::Result<()>
 where
     H: Handler + Send + 'static,
     O: Fn() -> ServerOptions + Send + Sync + 'static,
 {
+    let TcpServeConfig { transport, slave: config, limits } = serve;
     let options = Arc::new(options);
     let (idle, unfinished) = (limits.idle_timeout, limits.frame_timeout);
     accept_connections(listener, &limits, move |stream, _peer| {

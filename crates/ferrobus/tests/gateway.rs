@@ -7,7 +7,7 @@ use std::time::Duration;
 
 use ferrobus::gateway::stats::Refusal;
 use ferrobus::gateway::{
-    AllowAll, Authorize, Gateway, GatewayConfig, Inbound, LineConfig, Route, Routes, Rules, Timeouts,
+    AllowAll, Authorize, Gateway, GatewayConfig, GatewayLine, Inbound, Route, Routes, Rules, Timeouts,
 };
 use ferrobus::port::{BoxPort, ConnectWith, Framing};
 use ferrobus::server::{Answering, Fate, ReplyFilter, ServerOptions, Shared, serve};
@@ -133,7 +133,7 @@ impl Default for Setup {
 }
 
 async fn gateway(bus: &Shared<Bus>, setup: Setup) -> Gateway {
-    let line = LineConfig { queue: setup.queue, ..LineConfig::new(line(bus, setup.faults), client_config()) };
+    let line = GatewayLine { queue: setup.queue, ..GatewayLine::new(line(bus, setup.faults), client_config()) };
     let config = GatewayConfig {
         lines: vec![line],
         routes: setup.routes,

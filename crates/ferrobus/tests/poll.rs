@@ -8,7 +8,9 @@ use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::Duration;
 
 use ferrobus::poll::session::Session;
-use ferrobus::poll::{Event, FailureKind, Format, Group, Layout, PollConfig, Poller, Sample, Table, Value, WriteError};
+use ferrobus::poll::{
+    Event, FailureKind, Format, Group, Layout, PollConfig, Poller, RawRange, Sample, Table, Value, WriteError,
+};
 use ferrobus::port::{BoxPort, ConnectWith, Connecting};
 use ferrobus::server::{ServerOptions, Shared, serve};
 use ferrobus::{Client, ClientConfig, Framing, Transport};
@@ -81,7 +83,8 @@ async fn client(refuse: &Arc<AtomicBool>) -> Client {
 }
 
 fn group(name: &str, unit: u8, start: u16, count: u16, every_ms: u64) -> Group {
-    Group::raw(name, unit, Table::Holding, start, count, Duration::from_millis(every_ms), &Layout::default()).unwrap()
+    let range = RawRange { unit, table: Table::Holding, start, count, every: Duration::from_millis(every_ms) };
+    Group::raw(name, range, &Layout::default()).unwrap()
 }
 
 async fn samples(poller: &mut Poller, n: usize) -> Vec<Sample> {
@@ -212,7 +215,12 @@ async fn polls_that_overrun_are_counted_and_the_next_goes_at_once_on_the_origina
 async fn pause_stops_polling_reset_zeroes_the_counters_and_a_write_goes_through() {
     let refuse = Arc::new(AtomicBool::new(false));
     let layout = Layout { format: Format::U16, aliases: vec![(5, "speed".into())], ..Layout::default() };
-    let g = Group::raw("g", 1, Table::Holding, 4, 2, Duration::from_millis(10), &layout).unwrap();
+    let g = Group::raw(
+        "g",
+        RawRange { start: 4, count: 2, every: Duration::from_millis(10), ..RawRange::default() },
+        &layout,
+    )
+    .unwrap();
     assert_eq!(g.cells[1].name, "speed");
     let mut poller = Poller::start(client(&refuse).await, vec![g], PollConfig::default());
     let handle = poller.handle();
@@ -336,4 +344,22 @@ fn a_broken_session_names_the_file_the_line_and_the_definition() {
     let s =
         Session::parse("[[read]]\nunit = 3\ntable = \"holding\"\naddress = 0\nevery = \"10 parsecs\"\n", "s").unwrap();
     assert!(s.groups("s", |_| unreachable!()).unwrap_err().to_string().contains("unknown unit"));
+}
+
+#[test]
+fn session_values_are_refused_with_typed_errors_that_say_what_they_take() {
+    use ferrobus::poll::session::{DefError, order_of, period, table_from_name};
+    assert_eq!(table_from_name(" Coils"), Ok(Table::Coils));
+    assert_eq!(table_from_name(" Holdings"), Err(DefError::Table { name: "holdings".into() }));
+    assert_eq!(order_of(None), Ok(None));
+    assert_eq!(order_of(Some("DXBA")), Err(DefError::Order { name: "DXBA".into() }));
+    assert_eq!(period(None), Ok(Duration::from_secs(1)));
+    assert_eq!(period(Some("250us")), Ok(Duration::from_micros(250)));
+    assert_eq!(period(Some("5h")), Ok(Duration::from_secs(5 * 3600)));
+    assert!(matches!(period(Some("fast")), Err(DefError::Period(_))));
+    assert!(matches!(period(Some("5 parsecs")), Err(DefError::Period(_))));
+    assert_eq!(period(Some("0ms")), Err(DefError::PeriodRange { text: "0ms".into() }));
+    assert_eq!(period(Some("25h")), Err(DefError::PeriodRange { text: "25h".into() }));
+    let refused = period(Some("5 parsecs")).unwrap_err().to_string();
+    assert!(refused.starts_with("period: '5 parsecs' is not a duration: unknown unit 'parsecs'"), "{refused}");
 }

@@ -10,7 +10,7 @@
 use std::sync::Arc;
 use std::time::Duration;
 
-use ferrobus::server::{ServerOptions, Shared, TcpCounts, TcpLimits};
+use ferrobus::server::{ServerOptions, Shared, TcpCounts, TcpLimits, TcpServeConfig};
 use ferrobus::tls::{ClientTls, Policy, Role, RoleError, ServerTls, role_of, serve_tls_with};
 use ferrobus::{Client, ClientConfig, Error, Timer, Transport};
 use ferrobus_proto::ExceptionCode;
@@ -123,7 +123,8 @@ async fn server_within(
     let handler = Shared::new(Device { registers: [7; 100] });
     let options = || ServerOptions::new(LineTiming::unpaced(), Timer::Tokio);
     let transport = Transport::tcp(addr.clone());
-    tokio::spawn(serve_tls_with(listener, transport, SlaveConfig::unit(1), handler, options, limits, tls));
+    let serve = TcpServeConfig { limits, ..TcpServeConfig::new(transport, SlaveConfig::unit(1)) };
+    tokio::spawn(serve_tls_with(listener, serve, handler, options, tls));
     (addr, stats)
 }
 

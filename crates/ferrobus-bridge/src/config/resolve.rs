@@ -312,7 +312,7 @@ fn sparkplug_id(cx: &mut Cx<'_>, what: &str, id: &Text) -> bool {
     match check_id(what, id.get_ref()) {
         Ok(()) => true,
         Err(problem) => {
-            cx.at(id.span(), problem);
+            cx.at(id.span(), problem.to_string());
             false
         }
     }

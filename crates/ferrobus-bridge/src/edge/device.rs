@@ -270,7 +270,12 @@ mod tests {
     use super::*;
 
     fn device(death_after: u32) -> Device {
-        let group = Group::raw("g", 1, Table::Holding, 0, 1, Duration::from_secs(1), &Layout::default()).unwrap();
+        let group = Group::raw(
+            "g",
+            ferrobus::poll::RawRange { table: Table::Holding, ..Default::default() },
+            &Layout::default(),
+        )
+        .unwrap();
         let spec = DeviceSpec {
             id: "d".into(),
             unit: 1,

@@ -36,6 +36,21 @@ use tokio::task::JoinHandle;
 
 use crate::edge::Publish;
 
+/// The MQTT client's queue is full (or its task has ended): the request was not queued.
+#[derive(Clone, PartialEq, Eq, Debug, thiserror::Error)]
+#[non_exhaustive]
+pub enum QueueFull {
+    /// A publish.
+    #[error("the MQTT client's queue is full")]
+    Publish,
+    /// A subscription, to `filter` (escaped when shown: it comes from the configuration).
+    #[error("subscribing to {}: the MQTT client's queue is full", ferrobus::log::escape(.filter))]
+    Subscribe {
+        /// The topic filter.
+        filter: String,
+    },
+}
+
 /// Requests the client may have queued for the event loop.
 const QUEUE: usize = 4096;
 
@@ -111,19 +126,19 @@ impl Session {
     }
 
     /// Queues `message`; an error if the queue is full or the task has ended.
-    pub fn publish(&self, message: Publish) -> Result<(), String> {
+    pub fn publish(&self, message: Publish) -> Result<(), QueueFull> {
         self.client
             .try_publish(message.topic, qos(message.qos), message.retain, message.payload)
-            .map_err(|_| "the MQTT client's queue is full".to_string())?;
+            .map_err(|_| QueueFull::Publish)?;
         self.queued.fetch_add(1, Ordering::Relaxed);
         Ok(())
     }
 
     /// Subscribes to `filter`.
-    pub fn subscribe(&self, filter: &str, qos_level: u8) -> Result<(), String> {
+    pub fn subscribe(&self, filter: &str, qos_level: u8) -> Result<(), QueueFull> {
         self.client
             .try_subscribe(filter, qos(qos_level))
-            .map_err(|_| format!("subscribing to {filter}: the MQTT client's queue is full"))
+            .map_err(|_| QueueFull::Subscribe { filter: filter.to_string() })
     }
 
     /// Asks for a DISCONNECT after what is queued; [`SessionEvent::Closed`] says it went.
@@ -272,5 +287,14 @@ mod tests {
         assert_eq!(qos(1), QoS::AtLeastOnce);
         assert_eq!(qos(2), QoS::ExactlyOnce);
         assert_eq!(qos(9), QoS::ExactlyOnce);
+    }
+
+    #[test]
+    fn a_refused_subscription_names_its_filter_on_one_line() {
+        let e = QueueFull::Subscribe { filter: "spBv1.0/plant\n/#".into() };
+        let shown = e.to_string();
+        assert!(shown.starts_with("subscribing to spBv1.0/plant"), "{shown}");
+        assert!(!shown.contains('\n'), "{shown}");
+        assert_eq!(QueueFull::Publish.to_string(), "the MQTT client's queue is full");
     }
 }

@@ -184,24 +184,51 @@ pub fn parse_state(payload: &[u8]) -> Option<HostState> {
     Some(HostState { online, timestamp })
 }
 
+/// Why a string cannot be a Sparkplug id.
+#[derive(Clone, PartialEq, Eq, Debug, thiserror::Error)]
+#[non_exhaustive]
+pub enum IdError {
+    /// The id is empty.
+    #[error("{what} id is empty; Sparkplug ids are one non-empty topic level")]
+    Empty {
+        /// Which id: group, edge node, device, host.
+        what: String,
+    },
+    /// The id holds a character a topic level cannot.
+    #[error("{what} id {id:?} contains '{character}', {}", IdError::reason(*.character))]
+    Forbidden {
+        /// Which id: group, edge node, device, host.
+        what: String,
+        /// The id.
+        id: String,
+        /// The character: `/`, `+` or `#`.
+        character: char,
+    },
+}
+
+impl IdError {
+    /// Why `c` cannot be in a topic level.
+    fn reason(c: char) -> &'static str {
+        match c {
+            '/' => "which separates topic levels",
+            '+' => "which is MQTT's single-level wildcard",
+            _ => "which is MQTT's multi-level wildcard",
+        }
+    }
+}
+
 /// Whether `id` can be a group, edge node, device or host id (`what` names which, for the
 /// message): not empty, and none of `/` (a topic level's separator), `+` and `#` (MQTT's
 /// wildcards).
 ///
 /// # Errors
 /// Says which id and why, e.g. `device id "pump/1" contains '/', which separates topic levels`.
-pub fn check_id(what: &str, id: &str) -> Result<(), String> {
+pub fn check_id(what: &str, id: &str) -> Result<(), IdError> {
     if id.is_empty() {
-        return Err(format!("{what} id is empty; Sparkplug ids are one non-empty topic level"));
+        return Err(IdError::Empty { what: what.to_string() });
     }
-    let why = |c: char| match c {
-        '/' => Some("which separates topic levels"),
-        '+' => Some("which is MQTT's single-level wildcard"),
-        '#' => Some("which is MQTT's multi-level wildcard"),
-        _ => None,
-    };
-    match id.chars().find_map(|c| why(c).map(|reason| (c, reason))) {
-        Some((c, reason)) => Err(format!("{what} id {id:?} contains '{c}', {reason}")),
+    match id.chars().find(|c| matches!(c, '/' | '+' | '#')) {
+        Some(character) => Err(IdError::Forbidden { what: what.to_string(), id: id.to_string(), character }),
         None => Ok(()),
     }
 }
@@ -279,7 +306,12 @@ mod tests {
     fn ids_are_one_topic_level() {
         assert_eq!(check_id("group", "plant-1"), Ok(()));
         assert_eq!(check_id("device", "Drive 1.ä"), Ok(()));
-        let said = |what, id| check_id(what, id).unwrap_err();
+        let said = |what, id| check_id(what, id).unwrap_err().to_string();
+        assert_eq!(
+            check_id("device", "pump/1"),
+            Err(IdError::Forbidden { what: "device".into(), id: "pump/1".into(), character: '/' })
+        );
+        assert_eq!(check_id("group", ""), Err(IdError::Empty { what: "group".into() }));
         assert_eq!(said("group", ""), "group id is empty; Sparkplug ids are one non-empty topic level");
         assert_eq!(said("device", "pump/1"), "device id \"pump/1\" contains '/', which separates topic levels");
         assert_eq!(

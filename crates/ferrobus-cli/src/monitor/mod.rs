@@ -172,8 +172,8 @@ pub(crate) async fn run(connection: &ConnectArgs, args: &MonitorArgs) -> Result<
     for (index, p) in panes.iter().enumerate() {
         for &(start, count) in &p.reads {
             let name = format!("unit {} {} {start:#06x} ×{count}", p.unit, p.table_name());
-            let group = Group::raw(&name, p.unit, p.table, start, count, p.every, &Layout::default())
-                .map_err(|e| CliError::Usage(e.to_string()))?;
+            let range = ferrobus::poll::RawRange { unit: p.unit, table: p.table, start, count, every: p.every };
+            let group = Group::raw(&name, range, &Layout::default()).map_err(|e| CliError::Usage(e.to_string()))?;
             groups.push(group);
             reads.push(Read { pane: index, start, count });
         }

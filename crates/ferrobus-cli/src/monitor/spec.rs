@@ -201,9 +201,9 @@ pub(crate) fn panes_of(session: &Session, origin: &str) -> Result<Vec<Definition
     let mut panes = Vec::new();
     for (i, read) in session.reads.iter().enumerate() {
         let what = || format!("read {}", i + 1);
-        table_from_name(&read.table).map_err(|e| bad(what(), e))?;
-        let every = period(read.every.as_deref()).map_err(|e| bad(what(), e))?;
-        let order = order_of(read.order.as_deref()).map_err(|e| bad(what(), e))?.unwrap_or_default();
+        table_from_name(&read.table).map_err(|e| bad(what(), e.to_string()))?;
+        let every = period(read.every.as_deref()).map_err(|e| bad(what(), e.to_string()))?;
+        let order = order_of(read.order.as_deref()).map_err(|e| bad(what(), e.to_string()))?.unwrap_or_default();
         let spec = format!("{}:{}:{}:{}", read.unit, read.table, read.address, read.count);
         let mut pane = parse(&spec, read.unit, None).map_err(|e| bad(what(), format!("{e:?}")))?.remove(0);
         pane.every = every;
@@ -221,7 +221,7 @@ pub(crate) fn panes_of(session: &Session, origin: &str) -> Result<Vec<Definition
             if let Some(format) = &def.format {
                 cell.set_format(format_of(format)?);
             }
-            if let Some(own) = order_of(def.order.as_deref()).map_err(|e| bad(what(), e))? {
+            if let Some(own) = order_of(def.order.as_deref()).map_err(|e| bad(what(), e.to_string()))? {
                 cell.set_format(cell.format.with_order(own));
             }
             if let Some(alias) = &def.alias {
@@ -233,7 +233,7 @@ pub(crate) fn panes_of(session: &Session, origin: &str) -> Result<Vec<Definition
     }
     for (i, def) in session.points.iter().enumerate() {
         let what = || format!("points {}", i + 1);
-        let every = period(def.every.as_deref()).map_err(|e| bad(what(), e))?;
+        let every = period(def.every.as_deref()).map_err(|e| bad(what(), e.to_string()))?;
         let profile = Profile::load(&def.device).map_err(|e| bad(what(), e.to_string()))?;
         let mut points: Vec<&Point> = Vec::new();
         for name in &def.names {

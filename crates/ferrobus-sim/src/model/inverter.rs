@@ -19,6 +19,22 @@ pub const EXTERNAL_TRIP: u16 = 12;
 /// Modbus as the source of the run command and the frequency reference.
 const SOURCE_MODBUS: i64 = 3;
 
+/// An inverter's ratings, in the units of its profile's `[model]` (see
+/// [`ModelSection::Inverter`](crate::profile::ModelSection::Inverter)).
+#[derive(Clone, Copy, PartialEq, Eq, Debug)]
+pub struct InverterRatings {
+    /// How the direction coil reads.
+    pub polarity: Polarity,
+    /// A004, the highest output frequency, in 0.01 Hz.
+    pub max_frequency: u32,
+    /// The rated current, in 0.01 A.
+    pub rated_current: u32,
+    /// The rated output voltage, in 0.1 V.
+    pub rated_voltage: u32,
+    /// The DC bus voltage at rest, in 0.1 V.
+    pub dc_bus_voltage: u32,
+}
+
 /// The inverter.
 #[derive(Debug)]
 pub struct Inverter {
@@ -36,15 +52,9 @@ pub struct Inverter {
 }
 
 impl Inverter {
-    /// An inverter at rest, with its outputs written into `memory`.
-    pub fn new(
-        polarity: Polarity,
-        max_frequency: u32,
-        rated_current: u32,
-        rated_voltage: u32,
-        dc_bus_voltage: u32,
-        memory: &mut Memory,
-    ) -> Self {
+    /// An inverter at rest with `ratings`, its outputs written into `memory`.
+    pub fn new(ratings: InverterRatings, memory: &mut Memory) -> Self {
+        let InverterRatings { polarity, max_frequency, rated_current, rated_voltage, dc_bus_voltage } = ratings;
         let inverter = Inverter {
             polarity,
             max_frequency: f64::from(max_frequency.max(1)),
@@ -219,7 +229,14 @@ mod tests {
     fn drive() -> (Inverter, Memory) {
         let profile = Profile::load("omron-3g3rx").unwrap();
         let mut memory = Memory::new(&profile);
-        let inverter = Inverter::new(Polarity::OneIsReverse, 40000, 1540, 2000, 2820, &mut memory);
+        let ratings = InverterRatings {
+            polarity: Polarity::OneIsReverse,
+            max_frequency: 40000,
+            rated_current: 1540,
+            rated_voltage: 2000,
+            dc_bus_voltage: 2820,
+        };
+        let inverter = Inverter::new(ratings, &mut memory);
         (inverter, memory)
     }
 

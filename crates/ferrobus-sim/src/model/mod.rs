@@ -16,7 +16,7 @@ mod servo;
 
 use std::time::Duration;
 
-pub use inverter::{EXTERNAL_TRIP, Inverter};
+pub use inverter::{EXTERNAL_TRIP, Inverter, InverterRatings};
 pub use servo::Servo;
 
 use crate::memory::{Item, Memory, Refusal};
@@ -46,7 +46,14 @@ pub trait Model: Send {
 pub fn build(section: &ModelSection, memory: &mut Memory) -> Box<dyn Model> {
     match section {
         ModelSection::Inverter { direction, max_frequency, rated_current, rated_voltage, dc_bus_voltage } => {
-            Box::new(Inverter::new(*direction, *max_frequency, *rated_current, *rated_voltage, *dc_bus_voltage, memory))
+            let ratings = InverterRatings {
+                polarity: *direction,
+                max_frequency: *max_frequency,
+                rated_current: *rated_current,
+                rated_voltage: *rated_voltage,
+                dc_bus_voltage: *dc_bus_voltage,
+            };
+            Box::new(Inverter::new(ratings, memory))
         }
         ModelSection::Servo { rated_speed, pulses_per_revolution } => {
             Box::new(Servo::new(*rated_speed, *pulses_per_revolution))

@@ -12,7 +12,7 @@
 //! alike — until that reply has come and been dropped, or the late window (twice the reply
 //! timeout, [`crate::ClientConfig::late_window`]) has passed; so a same-shape next request
 //! cannot take it. On top, after any request that got no usable reply, the worker keeps the
-//! line quiet for the late-reply guard ([`super::LineConfig::late_guard`]), for what else a
+//! line quiet for the late-reply guard ([`super::GatewayLine::late_guard`]), for what else a
 //! confused device may still send. The replies dropped are counted in [`LineTraffic`]
 //! (`late_replies`, and `early_replies` for stale ones already on their way when a request
 //! left).

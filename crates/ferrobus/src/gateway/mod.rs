@@ -46,7 +46,7 @@
 //! the reply has come and been dropped (counted as a late reply in the line's stats) or the
 //! late window — twice the reply timeout ([`ClientConfig::late_window`](crate::ClientConfig::late_window))
 //! — has passed; after any request without a usable reply the line also stays quiet for
-//! [`LineConfig::late_guard`]. So a late reply is awaited by nobody and dropped instead of
+//! [`GatewayLine::late_guard`]. So a late reply is awaited by nobody and dropped instead of
 //! being taken for the next request's, a retry's or another client's. (A reply later than the
 //! timeout plus the late window, to a request of the same unit, function and length, cannot
 //! be told from the next one's by any gateway: size the timeout to the device.)
@@ -78,6 +78,7 @@
 
 mod authorize;
 mod cache;
+pub mod config;
 mod front;
 mod line;
 mod reverse;
@@ -167,7 +168,7 @@ impl Routes {
 
 /// One serial line behind the gateway.
 #[derive(Clone, Debug)]
-pub struct LineConfig {
+pub struct GatewayLine {
     /// The port and its framing (RTU, or ASCII) and timing.
     pub transport: Transport,
     /// Reply timeout, retries, turnaround, backoff of its master.
@@ -179,13 +180,19 @@ pub struct LineConfig {
     pub late_guard: Duration,
 }
 
-impl LineConfig {
+impl GatewayLine {
     /// A line on `transport` with `client`'s settings, a queue of 64 and a late-reply guard
     /// of 100 ms.
     pub fn new(transport: Transport, client: ClientConfig) -> Self {
-        LineConfig { transport, client, queue: 64, late_guard: Duration::from_millis(100) }
+        GatewayLine { transport, client, queue: DEFAULT_QUEUE, late_guard: DEFAULT_LATE_GUARD }
     }
 }
+
+/// A line's queue unless set: [`GatewayLine::queue`].
+const DEFAULT_QUEUE: usize = 64;
+
+/// A line's late-reply guard unless set: [`GatewayLine::late_guard`].
+const DEFAULT_LATE_GUARD: Duration = Duration::from_millis(100);
 
 /// What the gateway receives on its connections.
 #[derive(Clone, Copy, PartialEq, Eq, Debug, Default)]
@@ -227,11 +234,33 @@ impl Default for Timeouts {
     }
 }
 
+/// How the gateway's front end listens.
+#[derive(Clone, Debug)]
+pub struct FrontConfig {
+    /// What clients send.
+    pub inbound: Inbound,
+    /// Connection caps and timeouts of the listener.
+    pub limits: TcpLimits,
+    /// Requests one connection may have outstanding ([`Timeouts::pipeline`]).
+    pub pipeline: usize,
+}
+
+impl Default for FrontConfig {
+    /// Modbus/TCP, the TCP server's limits, 16 requests outstanding per connection.
+    fn default() -> Self {
+        FrontConfig {
+            inbound: Inbound::default(),
+            limits: TcpLimits::default(),
+            pipeline: Timeouts::default().pipeline,
+        }
+    }
+}
+
 /// A gateway's settings.
 #[derive(Clone, Debug)]
 pub struct GatewayConfig {
     /// The serial lines.
-    pub lines: Vec<LineConfig>,
+    pub lines: Vec<GatewayLine>,
     /// Which unit goes where.
     pub routes: Routes,
     /// Answer a broadcast with its echo once it has gone out (for clients that wait for a
@@ -239,6 +268,39 @@ pub struct GatewayConfig {
     pub broadcast_ack: bool,
     /// Answer reads from a cache of replies younger than this (`None`: no cache).
     pub cache_max_age: Option<Duration>,
+}
+
+/// Why a gateway did not start.
+#[derive(Clone, Debug, thiserror::Error)]
+#[non_exhaustive]
+pub enum GatewayError {
+    /// A unit is routed to a line the gateway does not have: a mistake in the settings.
+    #[error("unit {unit} is routed to line {line}, but there are {lines} lines (numbered from 0)")]
+    Routing {
+        /// The unit, as clients address it.
+        unit: u8,
+        /// The line it is routed to.
+        line: usize,
+        /// How many lines there are.
+        lines: usize,
+    },
+    /// A line's port could not be opened.
+    #[error("{source}")]
+    Io {
+        /// The line, numbered from 0.
+        line: usize,
+        /// What went wrong, with the port named.
+        #[source]
+        source: Error,
+    },
+}
+
+/// Refuses a route to a line that `config` does not have.
+fn check_routes(config: &GatewayConfig) -> Result<(), GatewayError> {
+    match config.routes.iter().find(|(_, r)| r.line >= config.lines.len()) {
+        Some((unit, route)) => Err(GatewayError::Routing { unit, line: route.line, lines: config.lines.len() }),
+        None => Ok(()),
+    }
 }
 
 /// A running gateway: the lines' workers. Clone it to serve connections from several tasks.
@@ -257,22 +319,17 @@ pub(crate) struct Inner {
 }
 
 impl Gateway {
-    /// Opens every line (a port that cannot be opened fails here, named) and starts its
-    /// worker on the current tokio runtime.
-    pub async fn start(config: GatewayConfig) -> Result<Gateway, Error> {
-        if let Some((unit, route)) = config.routes.iter().find(|(_, r)| r.line >= config.lines.len()) {
-            let message = format!(
-                "unit {unit} is routed to line {}, but there are {} lines (numbered from 0)",
-                route.line,
-                config.lines.len()
-            );
-            return Err(Error::io("routing", io::Error::new(io::ErrorKind::InvalidInput, message)));
-        }
+    /// Checks the routes, opens every line (a port that cannot be opened fails here, named)
+    /// and starts its worker on the current tokio runtime.
+    pub async fn start(config: GatewayConfig) -> Result<Gateway, GatewayError> {
+        check_routes(&config)?;
         let cache = config.cache_max_age.map(|age| Arc::new(Cache::new(age)));
         let mut lines = Vec::with_capacity(config.lines.len());
-        for line in config.lines {
+        for (index, line) in config.lines.into_iter().enumerate() {
             let name = line.transport.describe();
-            let client = Client::connect(line.transport.clone(), line.client).await?;
+            let client = Client::connect(line.transport.clone(), line.client)
+                .await
+                .map_err(|source| GatewayError::Io { line: index, source })?;
             let stats = Arc::new(Mutex::new(LineTraffic { name, ..LineTraffic::default() }));
             let queue = Arc::new(LineQueue::new(line.queue, stats));
             tokio::spawn(line::run(Arc::clone(&queue), client, cache.clone(), line.late_guard));
@@ -316,20 +373,14 @@ impl Gateway {
         front::serve(&self.inner, stream, peer, inbound, authorize, timeouts).await
     }
 
-    /// Serves every connection `listener` accepts, within `limits` (the hardened TCP
-    /// server's accept loop: connection cap, descriptor backoff, counted closes), each with
-    /// the [`Authorize`] that `authorize` makes for its peer. Runs until dropped.
-    pub async fn serve_tcp<A>(
-        &self,
-        listener: TcpListener,
-        inbound: Inbound,
-        limits: TcpLimits,
-        pipeline: usize,
-        authorize: A,
-    ) -> io::Result<()>
+    /// Serves every connection `listener` accepts, as `front` says, within its limits (the
+    /// hardened TCP server's accept loop: connection cap, descriptor backoff, counted closes),
+    /// each with the [`Authorize`] that `authorize` makes for its peer. Runs until dropped.
+    pub async fn serve_tcp<A>(&self, listener: TcpListener, front: FrontConfig, authorize: A) -> io::Result<()>
     where
         A: Fn(SocketAddr) -> Box<dyn Authorize> + Send + Sync + 'static,
     {
+        let FrontConfig { inbound, limits, pipeline } = front;
         let timeouts = Timeouts { idle: limits.idle_timeout, frame: limits.frame_timeout, pipeline };
         let authorize = Arc::new(authorize);
         crate::server::accept_connections(listener, &limits, |stream, peer| {

@@ -191,18 +191,33 @@ pub const fn max_count(table: Table) -> u16 {
     if table.is_bits() { 2000 } else { 125 }
 }
 
+/// A raw range to poll: `count` items of `table` from `start` at `unit`, every `every`.
+#[derive(Clone, Copy, PartialEq, Eq, Debug)]
+pub struct RawRange {
+    /// The unit read.
+    pub unit: u8,
+    /// The table read.
+    pub table: Table,
+    /// The first address.
+    pub start: u16,
+    /// How many items (registers or bits).
+    pub count: u16,
+    /// The period.
+    pub every: Duration,
+}
+
+impl Default for RawRange {
+    /// One holding register at 0 of unit 1, every second.
+    fn default() -> Self {
+        RawRange { unit: 1, table: Table::Holding, start: 0, count: 1, every: Duration::from_secs(1) }
+    }
+}
+
 impl Group {
-    /// A raw range: `count` items of `table` from `start`, cut into cells as `layout` says
-    /// (the bit tables take one bit a cell).
-    pub fn raw(
-        name: &str,
-        unit: u8,
-        table: Table,
-        start: u16,
-        count: u16,
-        every: Duration,
-        layout: &Layout,
-    ) -> Result<Group, GroupError> {
+    /// A raw range, called `name`, cut into cells as `layout` says (the bit tables take one
+    /// bit a cell).
+    pub fn raw(name: &str, range: RawRange, layout: &Layout) -> Result<Group, GroupError> {
+        let RawRange { unit, table, start, count, every } = range;
         let range = |problem: String| GroupError::Range { what: name.to_string(), problem };
         if count == 0 || count > max_count(table) {
             return Err(range(format!("a count of {count}; one request reads 1 to {}", max_count(table))));

@@ -35,7 +35,7 @@ use tokio::sync::{mpsc, watch};
 use tokio::time::Instant;
 
 pub use ferrobus_profile::{Order, Point, Profile, Table, Value};
-pub use group::{Cell, Format, Group, GroupError, Layout, max_count};
+pub use group::{Cell, Format, Group, GroupError, Layout, RawRange, max_count};
 pub use stats::{Counters, FailureKind, UnitTimes};
 
 use crate::client::Client;
@@ -573,7 +573,9 @@ mod tests {
         use ferrobus_proto::frame::LineConfig;
         let timing = LineTiming::new(&LineConfig::new(9600).expect("a baud rate"));
         let layout = Layout::default();
-        let g = Group::raw("g", 1, Table::Holding, 0, 4, Duration::from_millis(20), &layout).expect("a group");
+        let g =
+            Group::raw("g", RawRange { count: 4, every: Duration::from_millis(20), ..RawRange::default() }, &layout)
+                .expect("a group");
         let o = predict_overload(std::slice::from_ref(&g), &timing).expect("32 ms of wire time every 20 ms");
         assert!(!o.seen);
         assert!(o.detail.contains("(8 + 13) characters × 1.146 ms + 2 × t3.5 4.010 ms = 32.083 ms"), "{}", o.detail);

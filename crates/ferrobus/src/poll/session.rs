@@ -209,7 +209,7 @@ impl Session {
             out.push(r.group().map_err(|problem| SessionError::Invalid {
                 origin: origin.to_string(),
                 what,
-                problem,
+                problem: problem.to_string(),
             })?);
         }
         for (i, p) in self.points.iter().enumerate() {
@@ -218,7 +218,7 @@ impl Session {
                 what: format!("points {}", i.saturating_add(1)),
                 problem,
             };
-            let every = period(p.every.as_deref()).map_err(invalid)?;
+            let every = period(p.every.as_deref()).map_err(|e| invalid(e.to_string()))?;
             let profile = load_profile(&p.device).map_err(invalid)?;
             if p.names.is_empty() && p.groups.is_empty() {
                 return Err(invalid("give names or groups".into()));
@@ -231,9 +231,45 @@ impl Session {
     }
 }
 
+/// Why a value of a session definition was refused.
+#[derive(Clone, Debug, PartialEq, thiserror::Error)]
+#[non_exhaustive]
+pub enum DefError {
+    /// No table by that name.
+    #[error("table {name:?}: give holding, input, coils or discrete")]
+    Table {
+        /// The name, trimmed and lowercased.
+        name: String,
+    },
+    /// No word order by that name.
+    #[error("order {name:?}: give ABCD, CDAB, BADC or DCBA")]
+    Order {
+        /// The name given.
+        name: String,
+    },
+    /// No format by that name.
+    #[error("format {name:?}: give one of {}", Format::ALL.iter().map(|f| f.name()).collect::<Vec<_>>().join(", "))]
+    Format {
+        /// The name given.
+        name: String,
+    },
+    /// A period that is not a duration (the one grammar, [`crate::text::duration`]).
+    #[error("period: {0}")]
+    Period(crate::text::TextError),
+    /// A period of zero or of more than a day.
+    #[error("period {text:?}: give more than 0 and at most a day")]
+    PeriodRange {
+        /// The period given.
+        text: String,
+    },
+    /// The group cannot be made.
+    #[error(transparent)]
+    Group(#[from] GroupError),
+}
+
 impl ReadDef {
     /// The group it defines.
-    pub fn group(&self) -> Result<Group, String> {
+    pub fn group(&self) -> Result<Group, DefError> {
         let table = table_from_name(&self.table)?;
         let format = format_of(self.format.as_deref())?.unwrap_or_default();
         let order = order_of(self.order.as_deref())?.unwrap_or_default();
@@ -252,44 +288,38 @@ impl ReadDef {
         let every = period(self.every.as_deref())?;
         let name =
             self.name.clone().unwrap_or_else(|| format!("u{} {} {:#06x}", self.unit, table.name(), self.address));
-        Group::raw(&name, self.unit, table, self.address, self.count, every, &layout)
-            .map_err(|e: GroupError| e.to_string())
+        let range = super::RawRange { unit: self.unit, table, start: self.address, count: self.count, every };
+        Ok(Group::raw(&name, range, &layout)?)
     }
 }
 
 /// A table by its name: `holding`, `input`, `coils`, `discrete` (and `discrete-inputs`).
-pub fn table_from_name(name: &str) -> Result<Table, String> {
+pub fn table_from_name(name: &str) -> Result<Table, DefError> {
     match name.trim().to_ascii_lowercase().as_str() {
         "holding" => Ok(Table::Holding),
         "input" => Ok(Table::Input),
         "coils" | "coil" => Ok(Table::Coils),
         "discrete" | "discrete-inputs" => Ok(Table::DiscreteInputs),
-        other => Err(format!("table {other:?}: give holding, input, coils or discrete")),
+        other => Err(DefError::Table { name: other.to_string() }),
     }
 }
 
 /// An order by name (`ABCD`, `CDAB`, `BADC`, `DCBA`).
-pub fn order_of(name: Option<&str>) -> Result<Option<Order>, String> {
-    name.map(|o| Order::from_name(o).ok_or_else(|| format!("order {o:?}: give ABCD, CDAB, BADC or DCBA"))).transpose()
+pub fn order_of(name: Option<&str>) -> Result<Option<Order>, DefError> {
+    name.map(|o| Order::from_name(o).ok_or_else(|| DefError::Order { name: o.to_string() })).transpose()
 }
 
-fn format_of(name: Option<&str>) -> Result<Option<Format>, String> {
-    name.map(|n| {
-        Format::from_name(n).ok_or_else(|| {
-            let all: Vec<&str> = Format::ALL.iter().map(|f| f.name()).collect();
-            format!("format {n:?}: give one of {}", all.join(", "))
-        })
-    })
-    .transpose()
+fn format_of(name: Option<&str>) -> Result<Option<Format>, DefError> {
+    name.map(|n| Format::from_name(n).ok_or_else(|| DefError::Format { name: n.to_string() })).transpose()
 }
 
 /// A period by the one grammar of durations ([`crate::text::duration`]: `250us`, `100ms`,
 /// `2s`, `1min`; a plain number is milliseconds), above 0 and at most a day; `None` is 1 s.
-pub fn period(text: Option<&str>) -> Result<Duration, String> {
+pub fn period(text: Option<&str>) -> Result<Duration, DefError> {
     let Some(text) = text else { return Ok(Duration::from_secs(1)) };
-    let period = crate::text::duration(text).map_err(|e| format!("period: {e}"))?;
+    let period = crate::text::duration(text).map_err(DefError::Period)?;
     if period.is_zero() || period > Duration::from_secs(86_400) {
-        return Err(format!("period '{}': give more than 0 and at most a day", crate::log::escape(text.trim())));
+        return Err(DefError::PeriodRange { text: text.to_string() });
     }
     Ok(period)
 }
@@ -311,8 +341,8 @@ mod tests {
             assert_eq!(period(Some(typed)), Ok(want), "{typed}");
         }
         assert_eq!(period(None), Ok(Duration::from_secs(1)));
-        assert!(period(Some("0ms")).unwrap_err().contains("more than 0"));
-        assert!(period(Some("25h")).unwrap_err().contains("at most a day"));
-        assert!(period(Some("10 parsecs")).unwrap_err().contains("unknown unit 'parsecs'"));
+        assert!(period(Some("0ms")).unwrap_err().to_string().contains("more than 0"));
+        assert!(period(Some("25h")).unwrap_err().to_string().contains("at most a day"));
+        assert!(period(Some("10 parsecs")).unwrap_err().to_string().contains("unknown unit 'parsecs'"));
     }
 }

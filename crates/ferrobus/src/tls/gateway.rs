@@ -8,11 +8,11 @@ use std::sync::Arc;
 use tokio::net::TcpListener;
 
 use super::{ServerTls, handshake};
-use crate::gateway::{Authorize, Chain, Gateway, Inbound, Timeouts};
-use crate::server::TcpLimits;
+use crate::gateway::{Authorize, Chain, FrontConfig, Gateway, Timeouts};
 
 impl Gateway {
-    /// Serves Modbus/TCP Security on `listener`, as [`Gateway::serve_tcp`] serves Modbus/TCP:
+    /// Serves Modbus/TCP Security on `listener` as `front` says, as [`Gateway::serve_tcp`]
+    /// serves Modbus/TCP:
     /// each connection completes a TLS handshake with `tls` first (a client certificate
     /// required; a refused handshake is logged and counted in
     /// [`TcpCounts::tls_refused`](crate::server::TcpCounts::tls_refused)), then every request
@@ -25,15 +25,14 @@ impl Gateway {
     pub async fn serve_tls<A>(
         &self,
         listener: TcpListener,
-        inbound: Inbound,
-        limits: TcpLimits,
-        pipeline: usize,
+        front: FrontConfig,
         authorize: A,
         tls: ServerTls,
     ) -> io::Result<()>
     where
         A: Fn(SocketAddr) -> Box<dyn Authorize> + Send + Sync + 'static,
     {
+        let FrontConfig { inbound, limits, pipeline } = front;
         let timeouts = Timeouts { idle: limits.idle_timeout, frame: limits.frame_timeout, pipeline };
         let authorize = Arc::new(authorize);
         let stats = Arc::clone(&limits.stats);

@@ -4,14 +4,14 @@
 use std::io;
 use std::sync::Arc;
 
-use ferrobus_proto::slave::{Handler, SlaveConfig};
+use ferrobus_proto::slave::Handler;
 use tokio::net::TcpListener;
 
 use super::{Authorized, ServerTls, handshake};
-use crate::port::Transport;
-use crate::server::{ServerOptions, Shared, TcpLimits, serve_transport};
+use crate::server::{ServerOptions, Shared, TcpServeConfig, serve_transport};
 
-/// Serves Modbus/TCP Security (mbaps) on `listener`, as [`serve_tcp_with`](crate::server::serve_tcp_with) serves Modbus/TCP:
+/// Serves Modbus/TCP Security (mbaps) on `listener`, within `serve`'s limits, as
+/// [`serve_tcp_with`](crate::server::serve_tcp_with) serves Modbus/TCP:
 /// each connection first completes a TLS handshake with `tls` (a client certificate
 /// required; a refused handshake is logged and counted in [`TcpCounts::tls_refused`](crate::server::TcpCounts::tls_refused)), then
 /// every request is checked against `tls`'s policy for the client's role, a denied one
@@ -22,17 +22,16 @@ use crate::server::{ServerOptions, Shared, TcpLimits, serve_transport};
 /// handshake timeout ([`HANDSHAKE_TIMEOUT`](super::HANDSHAKE_TIMEOUT) unless set).
 pub async fn serve_tls_with<H, O>(
     listener: TcpListener,
-    transport: Transport,
-    config: SlaveConfig,
+    serve: TcpServeConfig,
     handler: Shared<H>,
     options: O,
-    limits: TcpLimits,
     tls: ServerTls,
 ) -> io::Result<()>
 where
     H: Handler + Send + 'static,
     O: Fn() -> ServerOptions + Send + Sync + 'static,
 {
+    let TcpServeConfig { transport, slave: config, limits } = serve;
     let options = Arc::new(options);
     let (idle, unfinished) = (limits.idle_timeout, limits.frame_timeout);
     let stats = Arc::clone(&limits.stats);

@@ -211,9 +211,9 @@ fn raw_group(cx: &mut Cx<'_>, id: &str, unit: u8, every: Duration, range: &Spann
     let layout = Layout { format, order, aliases, ..Layout::default() };
     let name =
         r.name.as_ref().map_or_else(|| format!("u{unit} {}@{address:#06x}", table.name()), |n| n.get_ref().clone());
-    let group = Group::raw(&name, unit, table, address, count, every, &layout)
-        .map_err(|e| cx.at(range.span(), format!("device {id:?}: {e}")))
-        .ok()?;
+    let span = ferrobus::poll::RawRange { unit, table, start: address, count, every };
+    let group =
+        Group::raw(&name, span, &layout).map_err(|e| cx.at(range.span(), format!("device {id:?}: {e}"))).ok()?;
     (cx.errors.len() == errors).then_some(group)
 }
 

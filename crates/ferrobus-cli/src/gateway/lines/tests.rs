@@ -1,13 +1,12 @@
-use std::path::Path;
+use std::path::PathBuf;
 use std::time::Duration;
 
 use clap::{Args, FromArgMatches};
-use ferrobus::gateway::{LineConfig, Route, Routes};
-use ferrobus_proto::frame::{LineTiming, Parity, StopBits};
+use ferrobus::gateway::Route;
 
-use super::{Base, parse};
+use super::{Base, read};
 use crate::connect::ConnectArgs;
-use crate::exit::CliError;
+use crate::exit::{CliError, Exit};
 
 /// The connection options as `args` on the command line give them.
 fn connection(args: &[&str]) -> ConnectArgs {
@@ -17,206 +16,70 @@ fn connection(args: &[&str]) -> ConnectArgs {
 
 const BASE: Base = Base { backoff: None, queue: 64, late_guard: Duration::from_millis(100) };
 
-fn lines(text: &str) -> Result<(Vec<LineConfig>, Routes), CliError> {
-    parse(Path::new("gw.toml"), text, &connection(&[]), BASE)
-}
+/// `text` in a file of its own, removed when dropped.
+struct File(PathBuf);
 
-/// The usage error `text` gives.
-fn error(text: &str) -> String {
-    match lines(text) {
-        Err(CliError::Usage(message)) => message,
-        Err(other) => panic!("not a usage error: {other:?}"),
-        Ok(_) => panic!("accepted:\n{text}"),
+impl File {
+    fn new(name: &str, text: &str) -> File {
+        let path = std::env::temp_dir().join(format!("ferrobus-lines-{}-{name}.toml", std::process::id()));
+        std::fs::write(&path, text).unwrap();
+        File(path)
     }
 }
 
-const TWO_LINES: &str = r#"
-[[line]]
-port = "/dev/ttyA"
-baud = 9600
-parity = "none"
-stop-bits = 2
-timeout = "200ms"
-response-wait = 300
-retries = 2
-units = [1, "5-6"]
-
-[[line]]
-port = "/dev/ttyB"
-baud = 38400
-parity = "odd"
-t35 = "5ms"
-queue = 8
-late-guard = "20ms"
-renumber = { 30 = 3, "41-43" = "1-3", 50 = 9 }
-"#;
-
-#[test]
-fn each_line_gets_its_own_port_framing_timing_timeout_and_queue() {
-    let (lines, _) = lines(TWO_LINES).unwrap();
-    assert_eq!(lines.len(), 2);
-    let (a, b) = (&lines[0], &lines[1]);
-    assert_eq!(a.transport.describe(), "/dev/ttyA at 9600 8N2");
-    assert_eq!(b.transport.describe(), "/dev/ttyB at 38400 8O1");
-    // t3.5 of 9600 8N2 (3.5 characters of 11 bits, 4.01 ms; 8N1 would be 3.65); above 19200
-    // the spec's fixed 1.75 ms, here overridden to 5 ms.
-    let framing = ferrobus_proto::frame::LineConfig::new(9600).unwrap().with_parity(Parity::None);
-    let at_9600 = LineTiming::new(&framing.with_stop_bits(StopBits::Two));
-    assert_eq!(a.transport.timing().t3_5(), at_9600.t3_5());
-    assert!(at_9600.t3_5() > Duration::from_millis(4));
-    assert_eq!(b.transport.timing().t3_5(), Duration::from_millis(5));
-    // The response wait is added to the line's timeout; the other line keeps --timeout's 1 s.
-    assert_eq!(a.client.timeout, Duration::from_millis(500));
-    assert_eq!(b.client.timeout, Duration::from_secs(1));
-    assert_eq!((a.client.retries, b.client.retries), (2, 0));
-    assert_eq!((a.queue, b.queue), (64, 8));
-    assert_eq!((a.late_guard, b.late_guard), (Duration::from_millis(100), Duration::from_millis(20)));
-}
-
-#[test]
-fn each_line_routes_its_units_and_renumbers_ranges_and_single_units() {
-    let (_, routes) = lines(TWO_LINES).unwrap();
-    let table: Vec<(u8, Route)> = routes.iter().collect();
-    let on = |line, unit| Route { line, unit };
-    assert_eq!(
-        table,
-        [
-            (1, on(0, 1)),
-            (5, on(0, 5)),
-            (6, on(0, 6)),
-            (30, on(1, 3)),
-            (41, on(1, 1)),
-            (42, on(1, 2)),
-            (43, on(1, 3)),
-            (50, on(1, 9)),
-        ]
-    );
+impl Drop for File {
+    fn drop(&mut self) {
+        let _ = std::fs::remove_file(&self.0);
+    }
 }
 
 #[test]
 fn keys_not_in_a_line_come_from_the_command_line_and_the_line_beats_it() {
-    let text = "[[line]]\nport = \"/dev/ttyA\"\nbaud = 9600\n";
-    let args = connection(&["--baud", "115200", "--parity", "none", "--timeout", "300ms", "--retries", "1"]);
-    let (lines, routes) = parse(Path::new("gw.toml"), text, &args, BASE).unwrap();
+    let file = File::new("precedence", "[[line]]\nport = \"/dev/ttyA\"\nbaud = 9600\n");
+    let args = connection(&[
+        "--baud",
+        "115200",
+        "--parity",
+        "none",
+        "--timeout",
+        "300ms",
+        "--retries",
+        "1",
+        "--t35",
+        "3ms",
+        "--echo",
+    ]);
+    let (lines, routes) = read(&file.0, &args, BASE).unwrap();
     assert_eq!(lines[0].transport.describe(), "/dev/ttyA at 9600 8N1");
+    assert_eq!(lines[0].transport.timing().t3_5(), Duration::from_millis(3));
     assert_eq!(lines[0].client.timeout, Duration::from_millis(300));
     assert_eq!(lines[0].client.retries, 1);
+    assert!(lines[0].client.echo_suppression);
     // One line without units: units 1-247 under their own addresses, as with --port alone.
     assert_eq!(routes.get(1), Some(Route { line: 0, unit: 1 }));
     assert_eq!(routes.get(247), Some(Route { line: 0, unit: 247 }));
-    assert_eq!(routes.get(248), None);
 }
 
 #[test]
-fn the_gateways_backoff_goes_to_every_line() {
+fn the_gateways_queue_late_guard_and_backoff_go_to_every_line_unless_it_says_otherwise() {
+    let text = "[[line]]\nport = \"/dev/ttyA\"\nunits = [1]\n[[line]]\nport = \"/dev/ttyB\"\nunits = [2]\nqueue = 3\n";
+    let file = File::new("base", text);
     let backoff = ferrobus::Backoff { after: 3, initial: Duration::from_secs(5), max: Duration::from_secs(60) };
-    let base = Base { backoff: Some(backoff), ..BASE };
-    let (lines, _) = parse(Path::new("gw.toml"), TWO_LINES, &connection(&[]), base).unwrap();
+    let base = Base { backoff: Some(backoff), queue: 9, late_guard: Duration::from_millis(40) };
+    let (lines, _) = read(&file.0, &connection(&[]), base).unwrap();
     assert!(lines.iter().all(|l| l.client.backoff == Some(backoff)));
-}
-
-/// Asserts that `text` is refused with an error that starts with `gw.toml:LINE:` and holds
-/// every one of `words`.
-#[track_caller]
-fn refused(text: &str, line: usize, words: &[&str]) {
-    let message = error(text);
-    let at = format!("gw.toml:{line}:");
-    assert!(message.starts_with(&at), "expected {at}: {message}");
-    for word in words {
-        assert!(message.contains(word), "expected {word:?} in: {message}");
-    }
+    assert_eq!((lines[0].queue, lines[1].queue), (9, 3));
+    assert!(lines.iter().all(|l| l.late_guard == Duration::from_millis(40)));
 }
 
 #[test]
-fn an_unknown_key_is_named_with_its_file_line_and_column() {
-    refused("[[line]]\nport = \"/dev/ttyA\"\nbuad = 9600\n", 3, &["gw.toml:3:1:", "buad", "baud"]);
-    refused("[[lines]]\nport = \"/dev/ttyA\"\n", 1, &["lines"]);
-}
-
-#[test]
-fn a_bad_baud_rate_is_named_with_its_line_and_what_a_baud_rate_is() {
-    let with = |value: &str| {
-        format!(
-            "[[line]]\nport = \"/dev/ttyA\"\nunits = [1]\n\n[[line]]\nport = \"/dev/ttyB\"\nunits = [2]\nbaud = {value}\n"
-        )
-    };
-    refused(&with("0"), 8, &["gw.toml:8:8:", "[[line]] 1", "baud", "0 is out of range", "bits per second"]);
-    refused(&with("-9600"), 8, &["baud", "-9600"]);
-    refused(&with("\"9600\""), 8, &["baud", "not a string"]);
-    refused(&with("9600.5"), 8, &["baud", "not a float"]);
-    refused(&with("99999999999"), 8, &["baud", "out of range"]);
-}
-
-#[test]
-fn a_unit_routed_twice_is_named_with_both_places() {
-    let across =
-        "[[line]]\nport = \"/dev/ttyA\"\nunits = [\"1-5\"]\n\n[[line]]\nport = \"/dev/ttyB\"\nunits = [7, 4]\n";
-    refused(across, 7, &["[[line]] 1", "units", "unit 4 is routed twice", "to line 0 already (gw.toml:3:10)"]);
-    let renumbered = "[[line]]\nport = \"/dev/ttyA\"\nunits = [3]\nrenumber = { \"2-4\" = 10 }\n";
-    refused(renumbered, 4, &["[[line]] 0", "renumber", "unit 3 is routed twice", "to line 0 already (gw.toml:3:10)"]);
-}
-
-#[test]
-fn wrong_values_name_the_key_and_what_it_takes() {
-    let line = |extra: &str| format!("[[line]]\nport = \"/dev/ttyA\"\n{extra}\n");
-    refused(&line("parity = \"evn\""), 3, &["parity", "'evn' is none of even, odd, none"]);
-    refused(&line("rs485 = 1"), 3, &["rs485", "auto, kernel, rts"]);
-    refused(&line("data-bits = 7"), 3, &["data-bits", "ascii"]);
-    refused(&line("stop-bits = 3"), 3, &["stop-bits", "1 or 2"]);
-    refused(&line("timeout = \"0ms\""), 3, &["timeout", "gives up"]);
-    refused(&line("t35 = \"fast\""), 3, &["t35", "'fast' is not a duration"]);
-    refused(&line("response-wait = -5"), 3, &["response-wait", "negative"]);
-    refused(&line("echo = \"yes\""), 3, &["echo", "true or false"]);
-    refused(&line("queue = 0"), 3, &["queue", "out of range"]);
-    refused(&line("units = [0]"), 3, &["units", "unit 0 is the broadcast"]);
-    refused(&line("units = [\"9-3\"]"), 3, &["units", "runs backwards"]);
-    refused(&line("units = [256]"), 3, &["units", "256 is no unit"]);
-    refused(&line("units = [\"x\"]"), 3, &["units", "'x' is neither a unit nor a range"]);
-    refused(&line("renumber = { \"1-3\" = \"5-6\" }"), 3, &["renumber", "3 units (1-3) cannot be renumbered to 2"]);
-    refused(&line("renumber = { \"250-255\" = 251 }"), 3, &["renumber", "run past unit 255"]);
-}
-
-#[test]
-fn a_port_given_twice_a_line_without_a_port_and_a_line_without_units_are_refused() {
-    let twice = "[[line]]\nport = \"/dev/ttyA\"\nunits = [1]\n[[line]]\nport = \"/dev/ttyA\"\nunits = [2]\n";
-    refused(twice, 5, &["[[line]] 1", "port", "/dev/ttyA is a line already (gw.toml:2:8)"]);
-    let no_port = "[[line]]\nbaud = 9600\n";
-    assert!(error(no_port).contains("[[line]] 0, no port"), "{}", error(no_port));
-    let no_units = "[[line]]\nport = \"/dev/ttyA\"\nunits = [1]\n[[line]]\nport = \"/dev/ttyB\"\n";
-    assert!(error(no_units).contains("[[line]] 1, routes no unit"), "{}", error(no_units));
-    let no_port_at = error(no_port);
-    assert!(no_port_at.starts_with("gw.toml:1:") || no_port_at.starts_with("gw.toml:2:"), "{no_port_at}");
-    let empty = "[[line]]\nport = \"/dev/ttyA\"\nunits = []\n";
-    assert!(error(empty).contains("[[line]] 0, routes no unit: its units and renumber are empty"), "{}", error(empty));
-}
-
-#[test]
-fn a_file_without_lines_and_a_syntax_error_are_refused_with_the_file_named() {
-    assert!(error("").starts_with("gw.toml: no [[line]] table"), "{}", error(""));
-    refused("[[line]]\nport = \"/dev/ttyA\n", 2, &["gw.toml:2:"]);
-    refused("[[line]]\nport = \"/dev/ttyA\"\nport = \"/dev/ttyB\"\n", 3, &["duplicate key"]);
-}
-
-#[test]
-fn the_readme_example_reads_as_it_says() {
-    let readme = include_str!("../../../../../README.md");
-    let start = readme.find("# ferrobus gateway --lines-file lines.toml").expect("the README's example");
-    let example = readme.get(start..).and_then(|rest| rest.split("```").next()).unwrap();
-    let (lines, routes) = lines(example).unwrap();
-    assert_eq!(lines[0].transport.describe(), "/dev/ttyUSB0 at 9600 8E1");
-    assert_eq!(lines[0].client.timeout, Duration::from_millis(320));
-    assert_eq!(lines[1].transport.describe(), "/dev/ttyUSB1 at 115200 8N1");
-    assert_eq!(lines[1].transport.timing().t3_5(), Duration::from_millis(2));
-    assert_eq!(lines[1].client.retries, 1);
-    let on = |line, unit| Some(Route { line, unit });
-    assert_eq!((routes.get(2), routes.get(15), routes.get(21)), (on(0, 2), on(0, 15), None));
-    assert_eq!((routes.get(30), routes.get(41), routes.get(50)), (on(1, 3), on(1, 1), on(1, 10)));
-}
-
-#[test]
-fn a_mistake_on_a_10_mb_line_is_told_in_a_few_hundred_bytes_with_its_place() {
-    let huge = format!("[[line]]\nport = \"/dev/ttyUSB0\"\nunits = [1]\nparity = \"{}\"\n", "p".repeat(10 << 20));
-    let e = error(&huge);
-    assert!(e.len() < 2_000, "{} bytes", e.len());
-    assert!(e.contains(":4:") && e.contains('…'), "{}", e.get(..300).unwrap_or(&e));
+fn a_mistake_in_the_file_is_a_usage_error_with_the_librarys_place_and_message() {
+    let file = File::new("mistake", "[[line]]\nport = \"/dev/ttyA\"\nbuad = 9600\n");
+    let e = read(&file.0, &connection(&[]), BASE).unwrap_err();
+    assert_eq!(e.exit(), Exit::Usage);
+    let CliError::Usage(message) = e else { panic!("{e:?}") };
+    assert!(message.starts_with(&format!("{}:3:1:", file.0.display())), "{message}");
+    assert!(message.contains("buad"), "{message}");
+    let missing = read(std::path::Path::new("/nonexistent/gw.toml"), &connection(&[]), BASE).unwrap_err();
+    assert!(matches!(&missing, CliError::Usage(m) if m.starts_with("cannot read the lines file /nonexistent/gw.toml")));
 }
