@@ -61,6 +61,7 @@ mod config;
 mod driver;
 pub mod error;
 pub mod gateway;
+pub mod guard;
 mod identity;
 pub mod line;
 pub mod log;

@@ -8,7 +8,8 @@
 //! Nothing is sent, not even a read, when the file holds a value its parameter cannot take
 //! (out of `min`..=`max`, not of its type, wider than one write request). Nothing is written
 //! when a differing parameter is read-only, or run-locked (`while_running = false`) while the
-//! drive runs: restore does not stop the drive itself — stopping a motor under load is the
+//! drive runs — the profile's write guard, the one every writer applies, says so for each —:
+//! restore does not stop the drive itself — stopping a motor under load is the
 //! operator's decision, and the profile says how to tell that the drive runs, not how to stop
 //! it safely — so it names the parameters and asks for the drive to be stopped. A file of
 //! another profile is refused unless `--force`, which restores the parameters both share.
@@ -24,7 +25,7 @@ use super::device;
 use super::diff::load;
 use super::file::{Backup, State};
 use super::param::shown_toml;
-use ferrobus_profile::{Point, Value};
+use ferrobus_profile::{Point, Profile, RunState, Value, Write};
 
 use super::param;
 use super::view::View;
@@ -136,12 +137,13 @@ pub(crate) async fn run(connection: &ConnectArgs, args: &RestoreArgs) -> Result<
                 plural(n)
             );
         }
-        if let Err(CliError::Incomplete(why)) = run_lock(&items, running_param, &before) {
+        if let Err(why) = run_lock(&items, &view.profile, running_param, &before) {
             eprintln!("note: --apply would refuse now: {why}");
         }
         return Ok(());
     }
-    run_lock(&items, running_param, &before)?;
+    run_lock(&items, &view.profile, running_param, &before)
+        .map_err(|why| CliError::Incomplete(format!("{why}; nothing was written")))?;
     let interrupted = apply(&session, &view, &mut items, &mut interrupt).await;
     let drifted = read_back(&session, &view, &backup, &mut items, interrupted, &mut interrupt).await;
     conclude(&items, &drifted, format, &file, interrupted)
@@ -275,10 +277,12 @@ fn checked<'v>(backup: &Backup, view: &'v View, file: &str, force: bool) -> Resu
             Ok(_) if param.width > limit => {
                 problems.push(format!("{at}: {} registers do not fit one write request of {limit}", param.width));
             }
-            Ok((value, words)) => match param.check_write(&value, &param.show(&value)) {
-                Err(why) if param.writable() => problems.push(format!("{file}:{}: {why}", entry.line)),
-                _ => candidates.push((param, value, words)),
-            },
+            Ok((value, words)) => {
+                match view.profile.check_value(&Write { point: param, raw: &value, typed: &param.show(&value) }) {
+                    Err(why) if param.writable() => problems.push(format!("{file}:{}: {why}", entry.line)),
+                    _ => candidates.push((param, value, words)),
+                }
+            }
         }
     }
     if !problems.is_empty() {
@@ -290,15 +294,18 @@ fn checked<'v>(backup: &Backup, view: &'v View, file: &str, force: bool) -> Resu
     Ok(candidates)
 }
 
-/// The run-lock rule, before any write: a run-locked parameter to write while the drive runs
-/// (or while it cannot be told whether it runs) refuses the restore.
-fn run_lock(items: &[Item<'_>], running: Option<(&Point, &[i64])>, before: &device::Readings) -> Result<(), CliError> {
-    let locked: Vec<&str> = items
-        .iter()
-        .filter(|i| !i.param.while_running && i.outcome == Outcome::Pending)
-        .map(|i| i.param.code.as_str())
-        .collect();
-    let Some((p, values)) = running else {
+/// The write guard, before any write: every parameter to write goes through the profile's
+/// guard (the one `set`, `monitor` and the bridge apply) with the run state read first, and one
+/// refusal refuses the restore: the refusals, one per refused parameter, saying what and why.
+fn run_lock(
+    items: &[Item<'_>],
+    profile: &Profile,
+    running: Option<(&Point, &[i64])>,
+    before: &device::Readings,
+) -> Result<(), String> {
+    let pending = || items.iter().filter(|i| i.outcome == Outcome::Pending);
+    let Some((p, _)) = running else {
+        let locked: Vec<&str> = pending().filter(|i| !i.param.while_running).map(|i| i.param.code.as_str()).collect();
         if !locked.is_empty() {
             eprintln!(
                 "note: the profile does not say how to tell that the drive runs ([state] running): {} may not be \
@@ -308,32 +315,22 @@ fn run_lock(items: &[Item<'_>], running: Option<(&Point, &[i64])>, before: &devi
         }
         return Ok(());
     };
-    if !locked.is_empty() {
-        let runs = match before.values.get(&p.code) {
-            Some(Ok(words)) => param::decode(p, words)
-                .ok()
-                .and_then(|v| v.as_int())
-                .is_some_and(|n| values.iter().any(|v| i128::from(*v) == n)),
-            Some(Err(why)) => {
-                return Err(CliError::Incomplete(format!(
-                    "cannot tell whether the drive runs ({}: {why}), and {} may not be written while it runs; \
-                     nothing was written",
-                    p.code,
-                    locked.join(", ")
-                )));
-            }
-            None => false,
-        };
-        if runs {
-            return Err(CliError::Incomplete(format!(
-                "the drive runs ({} says so): {} may not be written while it runs; stop the drive and restore \
-                 again (nothing was written)",
-                p.code,
-                locked.join(", ")
-            )));
-        }
+    let state = match before.values.get(&p.code) {
+        Some(Ok(words)) => param::decode(p, words).map_or_else(RunState::Unreadable, RunState::Read),
+        Some(Err(why)) => RunState::Unreadable(why.clone()),
+        None => RunState::NotRead,
+    };
+    let refused: Vec<String> = pending()
+        .filter_map(|i| {
+            let typed = i.param.show(&i.raw);
+            profile.guard_write(&Write { point: i.param, raw: &i.raw, typed: &typed }, &state).err()
+        })
+        .map(|refusal| refusal.to_string())
+        .collect();
+    if refused.is_empty() {
+        return Ok(());
     }
-    Ok(())
+    Err(refused.join("; "))
 }
 
 /// Prints the outcome; an error naming what was and was not written unless all is verified
