@@ -55,6 +55,7 @@
 //! Errors are one flat [`Error`], where a device's exception is kept apart from timeouts and
 //! IO failures.
 
+pub mod backup;
 pub mod client;
 pub mod clock;
 mod config;

@@ -61,7 +61,7 @@ pub(crate) async fn run(
     }
     let values = known.iter().map(|p| {
         let value = match readings.values.get(&p.code) {
-            Some(Ok(words)) => param::decode(p, words),
+            Some(Ok(words)) => param::decode(p, words).map_err(|e| e.to_string()),
             Some(Err(why)) => Err(why.clone()),
             None => Err("not read".into()),
         };
@@ -104,7 +104,7 @@ fn of_backup<'v>(view: &'v View, backup: &Backup) -> Found<'v> {
             continue;
         }
         let value = match &entry.state {
-            State::Value { raw, .. } => param::from_toml(point, raw),
+            State::Value { raw, .. } => param::from_toml(point, raw).map_err(|e| e.to_string()),
             State::Failed(why) => Err(format!("the backup holds no value: {why}")),
         };
         values.push((point, value));

@@ -1,37 +1,8 @@
 //! `backup`, `diff`, `restore`: a drive's parameters saved to a file, compared with the
 //! device or another file, and written back.
 //!
-//! # The backup file
-//!
-//! TOML, one parameter a line, in the profile's order, each under a comment with its label, so
-//! that two backups compare with any text diff:
-//!
-//! ```toml
-//! # ferrobus backup of unit 1 (Omron 3G3RX inverter), profile omron-3g3rx
-//! [backup]
-//! format = 1                         # this layout; a later one is refused, not misread
-//! profile = "omron-3g3rx"            # a built-in name, or the path of a profile file
-//! profile_hash = "sha256:…"          # only for a profile file: the exact file used
-//! device = "Omron 3G3RX inverter"
-//! time = "2026-12-01T22:00:00Z"      # ISO-8601 UTC
-//! connection = "/dev/ttyUSB0 at 19200 8E1 (RTU)"
-//! identification = "none: …"         # or "FC2B/0E", "FC11", or why it failed
-//! unit = 1
-//!
-//! [identification]                   # the objects read, if the device has them
-//! VendorName = "…"
-//!
-//! [parameters]
-//! # Acceleration time 1
-//! F002 = { raw = 1000, value = "10.00 s" }
-//! # Base frequency
-//! A003 = { error = "exception 0x22 (vendor-specific): the device restricts execution" }
-//! ```
-//!
-//! `raw` is the value the device holds: an integer (a decimal string for a `u64` past
-//! `i64::MAX`), a float for `f32`/`f64`, a string for text, `true`/`false` for a coil. Only
-//! `raw` is read back; `value` (the raw value in the profile's unit) is for people. A
-//! parameter that could not be read has `error` instead, with the reason.
+//! The backup file's format, the values in it, the profile it pins and the comparison are the
+//! library's (`ferrobus::backup`, whose doc describes the format); here are the commands.
 //!
 //! A backup saves what the profile marks `backup` (by default its read-write registers); the
 //! reads follow the profile's read plan ([`ferrobus_profile::plan`]), so the 3G3RX's 4 registers per request are
@@ -46,12 +17,11 @@
 pub(crate) mod defaults;
 pub(crate) mod device;
 pub(crate) mod diff;
-pub(crate) mod file;
-pub(crate) mod param;
 pub(crate) mod restore;
 pub(crate) mod save;
-mod sha256;
-pub(crate) mod view;
+
+// The file format, the values, the profile and the comparison are the library's.
+pub(crate) use ferrobus::backup::{file, param, view};
 
 use std::path::{Path, PathBuf};
 
@@ -95,7 +65,7 @@ pub(crate) fn profile(connection: &ConnectArgs, command: &str) -> Result<View, C
             "{command} needs the device's profile: --device NAME (omron-3g3rx, sdp-servo, generic) or --device FILE"
         )));
     };
-    View::load(name).map_err(CliError::Usage)
+    View::load(name).map_err(|e| CliError::Usage(e.to_string()))
 }
 
 /// Runs `backup`.
@@ -207,7 +177,7 @@ pub(crate) fn entries(params: &[&Point], readings: &device::Readings) -> (Vec<En
             let state = match readings.values.get(&p.code) {
                 Some(Ok(words)) => match param::decode(p, words) {
                     Ok(raw) => State::Value { shown: p.show(&raw), raw: param::to_toml(&raw) },
-                    Err(why) => State::Failed(why),
+                    Err(why) => State::Failed(why.to_string()),
                 },
                 Some(Err(why)) => State::Failed(why.clone()),
                 None => State::Failed("not read".into()),

@@ -316,7 +316,7 @@ fn run_lock(
         return Ok(());
     };
     let state = match before.values.get(&p.code) {
-        Some(Ok(words)) => param::decode(p, words).map_or_else(RunState::Unreadable, RunState::Read),
+        Some(Ok(words)) => param::decode(p, words).map_or_else(|e| RunState::Unreadable(e.to_string()), RunState::Read),
         Some(Err(why)) => RunState::Unreadable(why.clone()),
         None => RunState::NotRead,
     };

@@ -1,0 +1,56 @@
+//! Backups of a device's parameters, as a library: the backup file (TOML, one parameter a
+//! line in the profile's order, under a comment with its label; [`file`](mod@file)), a point's registers
+//! to the file's raw value and back ([`param`]), the profile a backup is made with and the
+//! hash that pins a profile file ([`view`], [`sha256`]), and the comparison of two backups
+//! ([`diff`]). The `ferrobus` command's `backup`, `diff` and `restore` are built on it.
+//!
+//! ```text
+//!   device ──read──▶ Backup ──render──▶ file.toml ──Backup::parse──▶ Backup
+//!   diff::compare(view, a, b) → the differences (through the registers, so 1.0 = 1 for an f32)
+//! ```
+//!
+//! # The backup file
+//!
+//! TOML, one parameter a line, in the profile's order, each under a comment with its label, so
+//! that two backups compare with any text diff:
+//!
+//! ```toml
+//! # ferrobus backup of unit 1 (Omron 3G3RX inverter), profile omron-3g3rx
+//! [backup]
+//! format = 1                         # this layout; a later one is refused, not misread
+//! profile = "omron-3g3rx"            # a built-in name, or the path of a profile file
+//! profile_hash = "sha256:…"          # only for a profile file: the exact file used
+//! device = "Omron 3G3RX inverter"
+//! time = "2026-12-01T22:00:00Z"      # ISO-8601 UTC
+//! connection = "/dev/ttyUSB0 at 19200 8E1 (RTU)"
+//! identification = "none: …"         # or "FC2B/0E", "FC11", or why it failed
+//! unit = 1
+//!
+//! [identification]                   # the objects read, if the device has them
+//! VendorName = "…"
+//!
+//! [parameters]
+//! # Acceleration time 1
+//! F002 = { raw = 1000, value = "10.00 s" }
+//! # Base frequency
+//! A003 = { error = "exception 0x22 (vendor-specific): the device restricts execution" }
+//! ```
+//!
+//! `raw` is the value the device holds: an integer (a decimal string for a `u64` past
+//! `i64::MAX`), a float for `f32`/`f64`, a string for text, `true`/`false` for a coil. Only
+//! `raw` is read back; `value` (the raw value in the profile's unit) is for people. A
+//! parameter that could not be read has `error` instead, with the reason.
+//!
+//! Every error is typed and names what was seen: [`BackupError`] a file and its line,
+//! [`ParamError`] a value and its point, [`ViewError`] a profile.
+
+pub mod diff;
+pub mod file;
+pub mod param;
+pub mod sha256;
+pub mod view;
+
+pub use diff::{Difference, Side, compare, same};
+pub use file::{Backup, BackupError, Entry, FORMAT, Header, State, now_utc};
+pub use param::ParamError;
+pub use view::{Identification, View, ViewError};
