@@ -1,11 +1,12 @@
-//! Backups of a device's parameters, as a library: the backup file (TOML, one parameter a
+//! Backups of a device's parameters, as a library: reading them in the profile's read plan and
+//! writing them ([`device`]), the backup file (TOML, one parameter a
 //! line in the profile's order, under a comment with its label; [`file`](mod@file)), a point's registers
 //! to the file's raw value and back ([`param`]), the profile a backup is made with and the
 //! hash that pins a profile file ([`view`], [`sha256`]), and the comparison of two backups
 //! ([`diff`]). The `ferrobus` command's `backup`, `diff` and `restore` are built on it.
 //!
 //! ```text
-//!   device ──read──▶ Backup ──render──▶ file.toml ──Backup::parse──▶ Backup
+//!   device::read(target, view, points, watch) → Readings ──▶ Backup ──render──▶ file.toml ──Backup::parse──▶ Backup
 //!   diff::compare(view, a, b) → the differences (through the registers, so 1.0 = 1 for an f32)
 //! ```
 //!
@@ -44,12 +45,14 @@
 //! Every error is typed and names what was seen: [`BackupError`] a file and its line,
 //! [`ParamError`] a value and its point, [`ViewError`] a profile.
 
+pub mod device;
 pub mod diff;
 pub mod file;
 pub mod param;
 pub mod sha256;
 pub mod view;
 
+pub use device::{Readings, Target, Unwatched, Watch};
 pub use diff::{Difference, Side, compare, same};
 pub use file::{Backup, BackupError, Entry, FORMAT, Header, State, now_utc};
 pub use param::ParamError;
