@@ -18,10 +18,9 @@ pub(crate) mod defaults;
 pub(crate) mod device;
 pub(crate) mod diff;
 pub(crate) mod restore;
-pub(crate) mod save;
 
 // The file format, the values, the profile and the comparison are the library's.
-pub(crate) use ferrobus::backup::{file, param, view};
+pub(crate) use ferrobus::backup::{file, param, save, view};
 
 use std::path::{Path, PathBuf};
 
@@ -86,7 +85,7 @@ pub(crate) async fn run(connection: &ConnectArgs, args: &BackupArgs) -> Result<(
         return Err(error.into());
     }
     let saved = if let Some(path) = &args.output {
-        Some((save::save(path, &backup, args.force)?, path))
+        Some((save::save(path, &backup, args.force).map_err(saving)?, path))
     } else {
         output::print(&backup.render())?;
         None
@@ -124,6 +123,17 @@ pub(crate) async fn run(connection: &ConnectArgs, args: &BackupArgs) -> Result<(
 }
 
 /// Says where the backup went when it did not simply become `path`.
+/// A failed save as the command's error: the file and why, or a path that names no file.
+fn saving(error: save::SaveError) -> CliError {
+    match error {
+        save::SaveError::NotAFile { path } => {
+            CliError::Usage(format!("-o {}: name a file, not a directory", path.display()))
+        }
+        save::SaveError::Io { what, source } => CliError::Output { what, source },
+        other => CliError::Usage(other.to_string()),
+    }
+}
+
 fn tell(saved: &save::Saved, path: &Path, backup: &Backup) {
     let new = save::Completeness::of(backup);
     match saved {

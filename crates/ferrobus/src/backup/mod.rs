@@ -2,8 +2,9 @@
 //! writing them ([`device`]), the backup file (TOML, one parameter a
 //! line in the profile's order, under a comment with its label; [`file`](mod@file)), a point's registers
 //! to the file's raw value and back ([`param`]), the profile a backup is made with and the
-//! hash that pins a profile file ([`view`], [`sha256`]), and the comparison of two backups
-//! ([`diff`]). The `ferrobus` command's `backup`, `diff` and `restore` are built on it.
+//! hash that pins a profile file ([`view`], [`sha256`]), the comparison of two backups
+//! ([`diff`]), and the rules that write a backup file atomically and never let a worse backup
+//! replace a better one ([`save`](mod@save)). The `ferrobus` command's `backup`, `diff` and `restore` are built on it.
 //!
 //! ```text
 //!   device::read(target, view, points, watch) → Readings ──▶ Backup ──render──▶ file.toml ──Backup::parse──▶ Backup
@@ -49,6 +50,7 @@ pub mod device;
 pub mod diff;
 pub mod file;
 pub mod param;
+pub mod save;
 pub mod sha256;
 pub mod view;
 
@@ -56,4 +58,5 @@ pub use device::{Readings, Target, Unwatched, Watch};
 pub use diff::{Difference, Side, compare, same};
 pub use file::{Backup, BackupError, Entry, FORMAT, Header, State, now_utc};
 pub use param::ParamError;
+pub use save::{Completeness, SaveError, Saved, save};
 pub use view::{Identification, View, ViewError};
