@@ -1,18 +1,20 @@
 //! The library's backup reads against a server engine on an in-memory line (paused clock): the
 //! profile's read plan, a request the device refuses read again point by point so that only the
 //! refused parameter is marked, a stop between two requests that marks the rest not read, and a
-//! backup rendered from the readings that parses back the same.
+//! backup rendered from the readings that parses back the same; a restore in dependency order
+//! whose refused write stops only what depends on it.
 
 use std::future::Future;
 use std::sync::{Arc, Mutex};
 use std::time::Duration;
 
 use ferrobus::backup::device::{self, INTERRUPTED};
+use ferrobus::backup::restore::{self, Item, Outcome};
 use ferrobus::backup::{Backup, Entry, Header, State, Target, Unwatched, View, Watch, param};
 use ferrobus::port::{BoxPort, ConnectWith, Connecting};
 use ferrobus::server::{ServerOptions, Shared, serve};
 use ferrobus::{Client, ClientConfig, Framing, Transport};
-use ferrobus_profile::Profile;
+use ferrobus_profile::{Profile, Value};
 use ferrobus_proto::ExceptionCode;
 use ferrobus_proto::frame::rtu::RtuCodec;
 use ferrobus_proto::frame::{Expect, LineConfig, LineTiming};
@@ -26,10 +28,12 @@ const PROFILE: &str = "[device]\nname='d'\nvendor='v'\nproduct_code='p'\nrevisio
     [[registers]]\nnumber=2\nname='P2'\naccess='rw'\n\
     [[registers]]\nnumber=3\nname='P3'\naccess='rw'\nunit='Hz'\nscale=0.1\n";
 
-/// Registers 0..4 = 10, 11, 12, 13; any read that covers register 2 is refused.
+/// Registers 0..4 = 10, 11, 12, 13; any read that covers register 2 is refused, and so is a
+/// write to register 1.
 #[derive(Default)]
 struct Drive {
     reads: Vec<(u16, usize)>,
+    writes: Vec<(u16, u16)>,
 }
 
 impl Handler for Drive {
@@ -42,6 +46,13 @@ impl Handler for Drive {
         for (i, word) in out.iter_mut().enumerate() {
             *word = u16::try_from(10 + from + i).unwrap();
         }
+        Ok(())
+    }
+    fn write_single_register(&mut self, _: u8, address: u16, value: u16) -> Result<(), ExceptionCode> {
+        if address == 1 {
+            return Err(ExceptionCode::IllegalDataValue);
+        }
+        self.writes.push((address, value));
         Ok(())
     }
 }
@@ -159,4 +170,43 @@ async fn a_stop_between_two_requests_sends_nothing_more_and_marks_the_rest_not_r
     assert!(readings.interrupted);
     assert_eq!((readings.values["P0"].clone(), readings.values["P1"].clone()), (Ok(vec![10]), Ok(vec![11])));
     assert_eq!(readings.values["P3"], Err(INTERRUPTED.to_string()));
+}
+
+#[tokio::test(start_paused = true)]
+async fn a_refused_write_stops_only_what_depends_on_it_and_the_order_puts_dependencies_first() {
+    let text = PROFILE
+        .replace("name='P0'", "name='P0'\ndepends_on=['P3']")
+        .replace("name='P2'", "name='P2'\ndepends_on=['P1']");
+    let view = View { name: "d.toml".into(), hash: None, profile: Profile::parse(&text, "d.toml").unwrap() };
+    let drive = Arc::new(Mutex::new(Drive::default()));
+    let client = client(&drive).await;
+    let mut items: Vec<Item<'_>> = view
+        .profile
+        .points()
+        .iter()
+        .map(|param| Item {
+            param,
+            raw: Value::Int(7),
+            words: vec![7],
+            before: String::new(),
+            outcome: Outcome::Pending,
+        })
+        .collect();
+    restore::order(&mut items).unwrap();
+    let codes: Vec<&str> = items.iter().map(|i| i.param.code.as_str()).collect();
+    assert_eq!(codes, ["P1", "P2", "P3", "P0"], "P3 before P0, P1 before P2");
+    let stopped = restore::apply(Target { client: &client, unit: 1 }, &view, &mut items, &mut Unwatched).await;
+    assert!(!stopped);
+    assert_eq!(drive.lock().unwrap().writes, [(3, 7), (0, 7)], "P3 and P0 written; P1 refused, P2 not tried");
+    let outcome = |code: &str| items.iter().find(|i| i.param.code == code).map(|i| i.outcome.clone()).unwrap();
+    assert!(
+        matches!(outcome("P1"), Outcome::NotWritten(why) if why.starts_with("exception 0x03")),
+        "{:?}",
+        outcome("P1")
+    );
+    assert_eq!(outcome("P2"), Outcome::NotWritten("it depends on P1, which was not written".into()));
+    assert_eq!((outcome("P3"), outcome("P0")), (Outcome::Pending, Outcome::Pending), "written, to be verified");
+    let p3 = items.iter().find(|i| i.param.code == "P3").unwrap();
+    assert_eq!(restore::verify(p3, Some(&Ok(vec![7]))), Outcome::Verified);
+    assert!(matches!(restore::verify(p3, Some(&Ok(vec![8]))), Outcome::Unverified(_)));
 }

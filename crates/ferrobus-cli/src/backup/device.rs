@@ -12,9 +12,21 @@ use crate::interrupt::Interrupt;
 use crate::progress;
 
 /// Ctrl-C (or SIGTERM) and a progress bar.
-struct Watched<'a> {
+pub(crate) struct Watched<'a> {
     interrupt: &'a mut Interrupt,
     bar: ProgressBar,
+}
+
+impl<'a> Watched<'a> {
+    /// Watches `interrupt`, with a bar of `len` `what` on a terminal.
+    pub(crate) fn new(interrupt: &'a mut Interrupt, len: usize, what: &str) -> Watched<'a> {
+        Watched { interrupt, bar: progress::bar(len, what) }
+    }
+
+    /// Clears the bar.
+    pub(crate) fn finish(&self) {
+        self.bar.finish_and_clear();
+    }
 }
 
 impl Watch for Watched<'_> {
@@ -24,6 +36,10 @@ impl Watch for Watched<'_> {
 
     fn progress(&mut self, done: u64) {
         self.bar.inc(done);
+    }
+
+    fn started(&mut self, code: &str) {
+        self.bar.set_message(code.to_string());
     }
 }
 
@@ -35,13 +51,8 @@ pub(crate) fn target(session: &Session) -> Target<'_> {
 /// Reads `params` ([`ferrobus::backup::device::read`]) with a progress bar on a terminal,
 /// stopped by Ctrl-C.
 pub(crate) async fn read(session: &Session, view: &View, params: &[&Point], interrupt: &mut Interrupt) -> Readings {
-    let mut watched = Watched { interrupt, bar: progress::bar(params.len(), "parameters read") };
+    let mut watched = Watched::new(interrupt, params.len(), "parameters read");
     let readings = ferrobus::backup::device::read(target(session), view, params, &mut watched).await;
-    watched.bar.finish_and_clear();
+    watched.finish();
     readings
-}
-
-/// Writes `words` to `point` ([`ferrobus::backup::device::write`]).
-pub(crate) async fn write(session: &Session, point: &Point, words: &[u16]) -> Result<(), ferrobus::Error> {
-    ferrobus::backup::device::write(target(session), point, words).await
 }

@@ -14,18 +14,17 @@
 //! it safely — so it names the parameters and asks for the drive to be stopped. A file of
 //! another profile is refused unless `--force`, which restores the parameters both share.
 
-use std::collections::BTreeSet;
 use std::path::PathBuf;
 
 use clap::Args;
-use ferrobus::Error;
 use serde_json::json;
 
-use super::device;
+use super::device::{self, Watched};
 use super::diff::load;
 use super::file::{Backup, State};
 use super::param::shown_toml;
-use ferrobus_profile::{Point, Profile, RunState, Value, Write};
+use ferrobus::backup::restore::{self as plan, Item, Outcome, shown};
+use ferrobus_profile::{Point, Value, Write};
 
 use super::param;
 use super::view::View;
@@ -33,7 +32,6 @@ use crate::connect::{ConnectArgs, Session};
 use crate::exit::CliError;
 use crate::interrupt::Interrupt;
 use crate::output::{self, Align, Format, OutputArgs, Rows};
-use crate::progress;
 
 /// `restore FILE [--apply] [--force]`.
 #[derive(Args, Debug)]
@@ -62,32 +60,6 @@ pub(crate) struct RestoreArgs {
 
 /// A value of the file to restore: its parameter, the raw value and its registers.
 type Candidate<'v> = (&'v Point, Value, Vec<u16>);
-
-/// One parameter to restore.
-struct Item<'a> {
-    param: &'a Point,
-    /// The file's raw value and its registers.
-    raw: Value,
-    words: Vec<u16>,
-    /// The device's value before, shown.
-    before: String,
-    outcome: Outcome,
-}
-
-/// What happened to a parameter.
-#[derive(Clone, PartialEq, Debug)]
-enum Outcome {
-    /// Not (yet) written; once written, written with the device's confirmation.
-    Pending,
-    /// Ctrl-C came while it was being written: it may or may not have been.
-    InFlight,
-    /// Written and read back equal.
-    Verified,
-    /// Written; the read-back differs or failed.
-    Unverified(String),
-    /// Not written, and why.
-    NotWritten(String),
-}
 
 /// Runs `restore`.
 pub(crate) async fn run(connection: &ConnectArgs, args: &RestoreArgs) -> Result<(), CliError> {
@@ -125,7 +97,7 @@ pub(crate) async fn run(connection: &ConnectArgs, args: &RestoreArgs) -> Result<
         return Err(error.into());
     }
     let mut items = differing(candidates, &before, &file)?;
-    order(&mut items).map_err(CliError::Usage)?;
+    plan::order(&mut items).map_err(|e| CliError::Usage(e.to_string()))?;
     let format = args.output.format();
     if !args.apply {
         let text = render(&items, format, "dry run", &file);
@@ -137,14 +109,17 @@ pub(crate) async fn run(connection: &ConnectArgs, args: &RestoreArgs) -> Result<
                 plural(n)
             );
         }
-        if let Err(why) = run_lock(&items, &view.profile, running_param, &before) {
+        if let Err(why) = plan::guard(&items, &view.profile, running_param, &before) {
             eprintln!("note: --apply would refuse now: {why}");
         }
         return Ok(());
     }
-    run_lock(&items, &view.profile, running_param, &before)
+    plan::guard(&items, &view.profile, running_param, &before)
         .map_err(|why| CliError::Incomplete(format!("{why}; nothing was written")))?;
-    let interrupted = apply(&session, &view, &mut items, &mut interrupt).await;
+    let pending = items.iter().filter(|i| i.outcome == Outcome::Pending).count();
+    let mut watched = Watched::new(&mut interrupt, pending, "parameters written");
+    let interrupted = plan::apply(device::target(&session), &view, &mut items, &mut watched).await;
+    watched.finish();
     let drifted = read_back(&session, &view, &backup, &mut items, interrupted, &mut interrupt).await;
     conclude(&items, &drifted, format, &file, interrupted)
 }
@@ -211,7 +186,7 @@ async fn read_back(
     };
     let after = device::read(session, view, &all, interrupt).await;
     for item in items.iter_mut().filter(|i| written(&i.outcome)) {
-        item.outcome = verify(item, after.values.get(&item.param.code));
+        item.outcome = plan::verify(item, after.values.get(&item.param.code));
     }
     if interrupted {
         return Vec::new();
@@ -229,23 +204,6 @@ async fn read_back(
         }
     }
     drifted
-}
-
-/// The outcome of a written (or perhaps written) item, from what it reads back.
-fn verify(item: &Item<'_>, back: Option<&Result<Vec<u16>, String>>) -> Outcome {
-    let in_flight = item.outcome == Outcome::InFlight;
-    match back {
-        Some(Ok(words)) if *words == item.words => Outcome::Verified,
-        Some(Ok(words)) if in_flight => {
-            Outcome::NotWritten(format!("interrupted while being written; it still reads {}", shown(item.param, words)))
-        }
-        Some(Ok(words)) => Outcome::Unverified(format!("written, but reads back {}", shown(item.param, words))),
-        Some(Err(why)) if in_flight => {
-            Outcome::Unverified(format!("interrupted while being written, so perhaps written; not read back: {why}"))
-        }
-        Some(Err(why)) => Outcome::Unverified(format!("written, but not read back: {why}")),
-        None => Outcome::Unverified("written, but not read back".into()),
-    }
 }
 
 /// Each value of the file with its parameter and registers, checked before anything is sent:
@@ -292,45 +250,6 @@ fn checked<'v>(backup: &Backup, view: &'v View, file: &str, force: bool) -> Resu
         )));
     }
     Ok(candidates)
-}
-
-/// The write guard, before any write: every parameter to write goes through the profile's
-/// guard (the one `set`, `monitor` and the bridge apply) with the run state read first, and one
-/// refusal refuses the restore: the refusals, one per refused parameter, saying what and why.
-fn run_lock(
-    items: &[Item<'_>],
-    profile: &Profile,
-    running: Option<(&Point, &[i64])>,
-    before: &device::Readings,
-) -> Result<(), String> {
-    let pending = || items.iter().filter(|i| i.outcome == Outcome::Pending);
-    let Some((p, _)) = running else {
-        let locked: Vec<&str> = pending().filter(|i| !i.param.while_running).map(|i| i.param.code.as_str()).collect();
-        if !locked.is_empty() {
-            eprintln!(
-                "note: the profile does not say how to tell that the drive runs ([state] running): {} may not be \
-                 written while it runs, and the drive may refuse them",
-                locked.join(", ")
-            );
-        }
-        return Ok(());
-    };
-    let state = match before.values.get(&p.code) {
-        Some(Ok(words)) => param::decode(p, words).map_or_else(|e| RunState::Unreadable(e.to_string()), RunState::Read),
-        Some(Err(why)) => RunState::Unreadable(why.clone()),
-        None => RunState::NotRead,
-    };
-    let refused: Vec<String> = pending()
-        .filter_map(|i| {
-            let typed = i.param.show(&i.raw);
-            profile.guard_write(&Write { point: i.param, raw: &i.raw, typed: &typed }, &state).err()
-        })
-        .map(|refusal| refusal.to_string())
-        .collect();
-    if refused.is_empty() {
-        return Ok(());
-    }
-    Err(refused.join("; "))
 }
 
 /// Prints the outcome; an error naming what was and was not written unless all is verified
@@ -385,84 +304,12 @@ fn conclude(
     Err(CliError::Incomplete(format!("the restore is incomplete: {lists}")))
 }
 
-/// Registers read from the device, shown in the profile's unit.
-fn shown(point: &Point, words: &[u16]) -> String {
-    param::decode(point, words).map_or_else(|why| format!("(undecodable: {why})"), |v| point.show(&v))
-}
-
 fn list(codes: &[&str]) -> String {
     if codes.is_empty() { "none".into() } else { codes.join(", ") }
 }
 
 fn plural(n: usize) -> &'static str {
     if n == 1 { "" } else { "s" }
-}
-
-/// Writes each pending item in order, with a progress bar on a terminal. After a refusal
-/// the rest go on, except what depends on it; after no reply, a lost port or Ctrl-C nothing
-/// more is sent. Whether Ctrl-C came.
-async fn apply(session: &Session, view: &View, items: &mut [Item<'_>], interrupt: &mut Interrupt) -> bool {
-    let mut failed: BTreeSet<String> =
-        items.iter().filter(|i| matches!(i.outcome, Outcome::NotWritten(_))).map(|i| i.param.code.clone()).collect();
-    let bar = progress::bar(items.iter().filter(|i| i.outcome == Outcome::Pending).count(), "parameters written");
-    let mut stopped: Option<String> = None;
-    let mut interrupted = false;
-    for item in items.iter_mut() {
-        if item.outcome != Outcome::Pending {
-            continue;
-        }
-        if let Some(why) = &stopped {
-            item.outcome = Outcome::NotWritten(format!("not attempted: the writes stopped after {why}"));
-            failed.insert(item.param.code.clone());
-            continue;
-        }
-        if let Some(dep) = item.param.depends_on.iter().find(|d| failed.iter().any(|f| f.eq_ignore_ascii_case(d))) {
-            item.outcome = Outcome::NotWritten(format!("it depends on {dep}, which was not written"));
-            failed.insert(item.param.code.clone());
-            continue;
-        }
-        tracing::info!(code = %item.param.code, words = ?item.words, "writing");
-        bar.set_message(item.param.code.clone());
-        match interrupt.unless(device::write(session, item.param, &item.words)).await {
-            Some(Ok(())) => bar.inc(1),
-            None => {
-                item.outcome = Outcome::InFlight;
-                interrupted = true;
-                stopped = Some("Ctrl-C or SIGTERM".to_string());
-            }
-            Some(Err(error)) => {
-                bar.inc(1);
-                let why = device::describe(&error, view);
-                if !matches!(error, Error::Exception { .. }) {
-                    stopped = Some(why.clone());
-                }
-                item.outcome = Outcome::NotWritten(why);
-                failed.insert(item.param.code.clone());
-            }
-        }
-    }
-    bar.finish_and_clear();
-    interrupted
-}
-
-/// Sorts the items so that each comes after those it depends on (among the items), keeping
-/// the profile's order otherwise; a cycle is an error.
-fn order(items: &mut Vec<Item<'_>>) -> Result<(), String> {
-    let mut rest: Vec<Item<'_>> = std::mem::take(items);
-    while !rest.is_empty() {
-        let ready = rest.iter().position(|item| {
-            !item.param.depends_on.iter().any(|d| rest.iter().any(|other| other.param.code.eq_ignore_ascii_case(d)))
-        });
-        let Some(at) = ready else {
-            let codes: Vec<&str> = rest.iter().map(|i| i.param.code.as_str()).collect();
-            return Err(format!(
-                "the profile's depends_on make a cycle among {}; nothing was written",
-                codes.join(", ")
-            ));
-        };
-        items.push(rest.remove(at));
-    }
-    Ok(())
 }
 
 /// The plan or the outcome as a table, CSV or JSON.
@@ -515,55 +362,4 @@ fn render(items: &[Item<'_>], format: Format, stage: &str, file: &str) -> String
         return format!("the device agrees with {file}: nothing to write\n");
     }
     rows.render(format)
-}
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-    use ferrobus_profile::Profile;
-    use std::fmt::Write as _;
-
-    fn profile(entries: &[(&str, &[&str])]) -> Profile {
-        let mut text = String::from("[device]\nname = \"t\"\nvendor = \"t\"\nproduct_code = \"t\"\nrevision = \"1\"\n");
-        for (number, (code, depends_on)) in entries.iter().enumerate() {
-            let list: Vec<String> = depends_on.iter().map(|d| format!("\"{d}\"")).collect();
-            let _ = write!(
-                text,
-                "[[registers]]\nnumber = {number}\nname = \"{code}\"\naccess = \"rw\"\ndepends_on = [{}]\n",
-                list.join(", ")
-            );
-        }
-        Profile::parse(&text, "t.toml").unwrap()
-    }
-
-    fn items(profile: &Profile) -> Vec<Item<'_>> {
-        profile
-            .points()
-            .iter()
-            .map(|param| Item {
-                param,
-                raw: Value::Int(0),
-                words: vec![0],
-                before: String::new(),
-                outcome: Outcome::Pending,
-            })
-            .collect()
-    }
-
-    #[test]
-    fn dependencies_come_first_and_the_profile_order_is_kept_otherwise() {
-        let profile = profile(&[("F001", &["A004"]), ("B", &[]), ("A004", &["A003"]), ("A003", &[]), ("C", &["B"])]);
-        let mut items = items(&profile);
-        order(&mut items).unwrap();
-        let codes: Vec<&str> = items.iter().map(|i| i.param.code.as_str()).collect();
-        assert_eq!(codes, ["B", "A003", "A004", "F001", "C"]);
-    }
-
-    #[test]
-    fn a_dependency_cycle_is_refused_before_any_write() {
-        let profile = profile(&[("A", &["B"]), ("B", &["A"]), ("C", &[])]);
-        let mut items = items(&profile);
-        let err = order(&mut items).unwrap_err();
-        assert_eq!(err, "the profile's depends_on make a cycle among A, B; nothing was written");
-    }
 }

@@ -12,7 +12,7 @@ use super::view::View;
 use crate::client::Client;
 use crate::error::Error;
 
-/// What reads watch besides the bus: a stop, and the progress.
+/// What reads and writes watch besides the bus: a stop, and the progress.
 pub trait Watch {
     /// Completes when the work is to stop (Ctrl-C, say): the request in flight is dropped and
     /// nothing more is sent. Never completes for work that runs to its end.
@@ -21,6 +21,11 @@ pub trait Watch {
     /// `done` more parameters have their outcome.
     fn progress(&mut self, done: u64) {
         let _ = done;
+    }
+
+    /// The parameter `code` is being written.
+    fn started(&mut self, code: &str) {
+        let _ = code;
     }
 }
 
@@ -35,7 +40,7 @@ impl Watch for Unwatched {
 }
 
 /// Runs `work` unless `watch` stops it first; `None` if it did.
-async fn unless<F: Future>(watch: &mut impl Watch, work: F) -> Option<F::Output> {
+pub(super) async fn unless<F: Future>(watch: &mut impl Watch, work: F) -> Option<F::Output> {
     tokio::select! {
         biased;
         () = watch.stop() => None,

@@ -4,7 +4,8 @@
 //! to the file's raw value and back ([`param`]), the profile a backup is made with and the
 //! hash that pins a profile file ([`view`], [`sha256`]), the comparison of two backups
 //! ([`diff`]), and the rules that write a backup file atomically and never let a worse backup
-//! replace a better one ([`save`](mod@save)). The `ferrobus` command's `backup`, `diff` and `restore` are built on it.
+//! replace a better one ([`save`](mod@save)), and a restore's plan and its writes
+//! ([`restore`]). The `ferrobus` command's `backup`, `diff` and `restore` are built on it.
 //!
 //! ```text
 //!   device::read(target, view, points, watch) → Readings ──▶ Backup ──render──▶ file.toml ──Backup::parse──▶ Backup
@@ -50,6 +51,7 @@ pub mod device;
 pub mod diff;
 pub mod file;
 pub mod param;
+pub mod restore;
 pub mod save;
 pub mod sha256;
 pub mod view;
@@ -58,5 +60,6 @@ pub use device::{Readings, Target, Unwatched, Watch};
 pub use diff::{Difference, Side, compare, same};
 pub use file::{Backup, BackupError, Entry, FORMAT, Header, State, now_utc};
 pub use param::ParamError;
+pub use restore::{Item, Outcome, RestoreError};
 pub use save::{Completeness, SaveError, Saved, save};
 pub use view::{Identification, View, ViewError};
