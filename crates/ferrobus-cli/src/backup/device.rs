@@ -2,7 +2,7 @@
 //! Ctrl-C and shown with a progress bar on a terminal.
 
 use ferrobus::backup::Watch;
-pub(crate) use ferrobus::backup::device::{Readings, describe};
+pub(crate) use ferrobus::backup::device::Readings;
 use ferrobus::backup::{Target, View};
 use ferrobus_profile::Point;
 use indicatif::ProgressBar;

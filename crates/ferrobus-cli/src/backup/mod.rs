@@ -20,17 +20,15 @@ pub(crate) mod diff;
 pub(crate) mod restore;
 
 // The file format, the values, the profile and the comparison are the library's.
-pub(crate) use ferrobus::backup::{file, param, save, view};
+pub(crate) use ferrobus::backup::{entries, file, param, save, view};
 
 use std::path::{Path, PathBuf};
 
 use clap::Args;
-use ferrobus::Error;
 use ferrobus_profile::Point;
-use ferrobus_proto::codes::{ReadDeviceIdCode, device_object};
 
-use self::file::{Backup, Entry, Header, State};
-use self::view::{Identification, View};
+use self::file::{Backup, Header};
+use self::view::View;
 use crate::connect::{ConnectArgs, Session};
 use crate::exit::CliError;
 use crate::interrupt::Interrupt;
@@ -122,7 +120,6 @@ pub(crate) async fn run(connection: &ConnectArgs, args: &BackupArgs) -> Result<(
     )))
 }
 
-/// Says where the backup went when it did not simply become `path`.
 /// A failed save as the command's error: the file and why, or a path that names no file.
 fn saving(error: save::SaveError) -> CliError {
     match error {
@@ -134,6 +131,7 @@ fn saving(error: save::SaveError) -> CliError {
     }
 }
 
+/// Says where the backup went when it did not simply become `path`.
 fn tell(saved: &save::Saved, path: &Path, backup: &Backup) {
     let new = save::Completeness::of(backup);
     match saved {
@@ -177,61 +175,8 @@ pub(crate) fn backup_of(
     Backup { header, identification: objects, entries }
 }
 
-/// One entry per parameter, in `params`' order, from what was read: its value, or why it has
-/// none; and how many have none.
-pub(crate) fn entries(params: &[&Point], readings: &device::Readings) -> (Vec<Entry>, usize) {
-    let mut failed = 0;
-    let entries = params
-        .iter()
-        .map(|p| {
-            let state = match readings.values.get(&p.code) {
-                Some(Ok(words)) => match param::decode(p, words) {
-                    Ok(raw) => State::Value { shown: p.show(&raw), raw: param::to_toml(&raw) },
-                    Err(why) => State::Failed(why.to_string()),
-                },
-                Some(Err(why)) => State::Failed(why.clone()),
-                None => State::Failed("not read".into()),
-            };
-            if matches!(state, State::Failed(_)) {
-                failed += 1;
-            }
-            Entry { code: p.code.clone(), label: param::label(p).to_string(), line: 0, state }
-        })
-        .collect();
-    (entries, failed)
-}
-
-/// How the device identifies itself: FC2B/0E's basic objects, or FC11's data, if the profile
-/// says it has them. A refusal is recorded, not fatal; no reply ends the backup.
+/// How the device identifies itself ([`ferrobus::backup::device::identify`]); no reply ends
+/// the backup.
 async fn identify(session: &Session, view: &View) -> Result<(String, Vec<(String, String)>), CliError> {
-    let (client, unit) = (&session.client, session.unit);
-    match view.identification() {
-        Identification::None => {
-            Ok(("none: the profile says the device has no identification (FC2B/0E, FC11)".into(), Vec::new()))
-        }
-        Identification::DeviceId => match client.read_device_identification(unit, ReadDeviceIdCode::Basic, 0).await {
-            Ok(info) => {
-                let objects = info
-                    .objects
-                    .into_iter()
-                    .map(|(id, bytes)| {
-                        let name = device_object::name(id).map_or_else(|| format!("object-0x{id:02X}"), str::to_string);
-                        (name, String::from_utf8_lossy(&bytes).into_owned())
-                    })
-                    .collect();
-                Ok(("FC2B/0E".into(), objects))
-            }
-            Err(error @ Error::Exception { .. }) => {
-                Ok((format!("FC2B/0E refused: {}", device::describe(&error, view)), Vec::new()))
-            }
-            Err(error) => Err(error.into()),
-        },
-        Identification::ServerId => match client.report_server_id(unit).await {
-            Ok(data) => Ok(("FC11".into(), vec![("server_id".into(), crate::hex::format(&data))])),
-            Err(error @ Error::Exception { .. }) => {
-                Ok((format!("FC11 refused: {}", device::describe(&error, view)), Vec::new()))
-            }
-            Err(error) => Err(error.into()),
-        },
-    }
+    Ok(ferrobus::backup::device::identify(device::target(session), view).await?)
 }

@@ -7,8 +7,9 @@ use std::collections::BTreeMap;
 use std::future::Future;
 
 use ferrobus_profile::{Extent, Point, Table};
+use ferrobus_proto::codes::{ReadDeviceIdCode, device_object};
 
-use super::view::View;
+use super::view::{Identification, View};
 use crate::client::Client;
 use crate::error::Error;
 
@@ -245,4 +246,45 @@ pub fn describe(error: &Error, view: &View) -> String {
         },
         other => other.to_string(),
     }
+}
+
+/// How the device identifies itself: FC2B/0E's basic objects, or FC11's data, if the profile
+/// says it has them, and how (`FC2B/0E`, `FC11`, or why not). A refusal is recorded, not an
+/// error; no reply is.
+pub async fn identify(target: Target<'_>, view: &View) -> Result<(String, Vec<(String, String)>), Error> {
+    let (client, unit) = (target.client, target.unit);
+    match view.identification() {
+        Identification::None => {
+            Ok(("none: the profile says the device has no identification (FC2B/0E, FC11)".into(), Vec::new()))
+        }
+        Identification::DeviceId => match client.read_device_identification(unit, ReadDeviceIdCode::Basic, 0).await {
+            Ok(info) => {
+                let objects = info
+                    .objects
+                    .into_iter()
+                    .map(|(id, bytes)| {
+                        let name = device_object::name(id).map_or_else(|| format!("object-0x{id:02X}"), str::to_string);
+                        (name, String::from_utf8_lossy(&bytes).into_owned())
+                    })
+                    .collect();
+                Ok(("FC2B/0E".into(), objects))
+            }
+            Err(error @ Error::Exception { .. }) => {
+                Ok((format!("FC2B/0E refused: {}", describe(&error, view)), Vec::new()))
+            }
+            Err(error) => Err(error),
+        },
+        Identification::ServerId => match client.report_server_id(unit).await {
+            Ok(data) => Ok(("FC11".into(), vec![("server_id".into(), hex(&data))])),
+            Err(error @ Error::Exception { .. }) => {
+                Ok((format!("FC11 refused: {}", describe(&error, view)), Vec::new()))
+            }
+            Err(error) => Err(error),
+        },
+    }
+}
+
+/// Bytes in hex, `01 A0 FF`.
+fn hex(bytes: &[u8]) -> String {
+    bytes.iter().map(|b| format!("{b:02X}")).collect::<Vec<_>>().join(" ")
 }

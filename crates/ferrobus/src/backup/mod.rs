@@ -63,3 +63,29 @@ pub use param::ParamError;
 pub use restore::{Item, Outcome, RestoreError};
 pub use save::{Completeness, SaveError, Saved, save};
 pub use view::{Identification, View, ViewError};
+
+use ferrobus_profile::Point;
+
+/// One entry per parameter, in `params`' order, from what was read: its value, or why it has
+/// none; and how many have none.
+pub fn entries(params: &[&Point], readings: &Readings) -> (Vec<Entry>, usize) {
+    let mut failed = 0;
+    let entries = params
+        .iter()
+        .map(|p| {
+            let state = match readings.values.get(&p.code) {
+                Some(Ok(words)) => match param::decode(p, words) {
+                    Ok(raw) => State::Value { shown: p.show(&raw), raw: param::to_toml(&raw) },
+                    Err(why) => State::Failed(why.to_string()),
+                },
+                Some(Err(why)) => State::Failed(why.clone()),
+                None => State::Failed("not read".into()),
+            };
+            if matches!(state, State::Failed(_)) {
+                failed += 1;
+            }
+            Entry { code: p.code.clone(), label: param::label(p).to_string(), line: 0, state }
+        })
+        .collect();
+    (entries, failed)
+}
