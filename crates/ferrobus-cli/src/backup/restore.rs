@@ -24,7 +24,7 @@ use super::diff::load;
 use super::file::{Backup, State};
 use super::param::shown_toml;
 use ferrobus::backup::restore::{self as plan, Item, Outcome, shown};
-use ferrobus_profile::{Point, Value, Write};
+use ferrobus_profile::Point;
 
 use super::param;
 use super::view::View;
@@ -58,9 +58,6 @@ pub(crate) struct RestoreArgs {
     pub(crate) output: OutputArgs,
 }
 
-/// A value of the file to restore: its parameter, the raw value and its registers.
-type Candidate<'v> = (&'v Point, Value, Vec<u16>);
-
 /// Runs `restore`.
 pub(crate) async fn run(connection: &ConnectArgs, args: &RestoreArgs) -> Result<(), CliError> {
     let backup = load(&args.file)?;
@@ -77,7 +74,11 @@ pub(crate) async fn run(connection: &ConnectArgs, args: &RestoreArgs) -> Result<
             view.name
         )));
     }
-    let candidates = checked(&backup, &view, &file, args.force)?;
+    let checked = plan::checked(&backup, &view, &file, args.force).map_err(|e| CliError::Usage(e.to_string()))?;
+    for note in &checked.notes {
+        eprintln!("note: {note}");
+    }
+    let candidates = checked.candidates;
     connection.refuse_broadcast_read()?;
     let mut interrupt = Interrupt::listen()?;
     let session = interrupt.unless(connection.open()).await.ok_or(CliError::Interrupted)??;
@@ -96,7 +97,7 @@ pub(crate) async fn run(connection: &ConnectArgs, args: &RestoreArgs) -> Result<
     if let Some(error) = before.stopped {
         return Err(error.into());
     }
-    let mut items = differing(candidates, &before, &file)?;
+    let mut items = plan::differing(candidates, &before, &file).map_err(|e| CliError::Usage(e.to_string()))?;
     plan::order(&mut items).map_err(|e| CliError::Usage(e.to_string()))?;
     let format = args.output.format();
     if !args.apply {
@@ -122,49 +123,6 @@ pub(crate) async fn run(connection: &ConnectArgs, args: &RestoreArgs) -> Result<
     watched.finish();
     let drifted = read_back(&session, &view, &backup, &mut items, interrupted, &mut interrupt).await;
     conclude(&items, &drifted, format, &file, interrupted)
-}
-
-/// The candidates whose value on the device differs from the file's; a read-only one among
-/// them refuses the restore.
-fn differing<'v>(
-    candidates: Vec<Candidate<'v>>,
-    before: &device::Readings,
-    file: &str,
-) -> Result<Vec<Item<'v>>, CliError> {
-    let mut items = Vec::new();
-    let mut read_only = Vec::new();
-    for (param, raw, words) in candidates {
-        let (known, before_shown) = match before.values.get(&param.code) {
-            Some(Ok(current)) if *current == words => continue,
-            Some(Ok(current)) => match param::decode(param, current) {
-                Ok(value) => (true, param.show(&value)),
-                Err(why) => (false, format!("(not read: {why})")),
-            },
-            Some(Err(why)) => (false, format!("(not read: {why})")),
-            None => (false, "(not read)".into()),
-        };
-        if !param.writable() {
-            read_only.push(format!(
-                "{}: the profile marks it read-only; the device holds {before_shown}, the file {}",
-                param.code,
-                param.show(&raw)
-            ));
-            continue;
-        }
-        let outcome = if known {
-            Outcome::Pending
-        } else {
-            Outcome::NotWritten(format!("its value could not be read first: {before_shown}"))
-        };
-        items.push(Item { param, raw, words, before: before_shown, outcome });
-    }
-    if !read_only.is_empty() {
-        return Err(CliError::Usage(format!(
-            "{file} cannot be restored; nothing was written:\n  {}",
-            read_only.join("\n  ")
-        )));
-    }
-    Ok(items)
 }
 
 /// Reads back every parameter of the file (after an interruption, only what was or may have
@@ -204,52 +162,6 @@ async fn read_back(
         }
     }
     drifted
-}
-
-/// Each value of the file with its parameter and registers, checked before anything is sent:
-/// a parameter the profile lacks (skipped with `--force`), a value not of its type, out of
-/// range, or wider than a write request.
-fn checked<'v>(backup: &Backup, view: &'v View, file: &str, force: bool) -> Result<Vec<Candidate<'v>>, CliError> {
-    let mut candidates: Vec<Candidate<'v>> = Vec::new();
-    let mut problems = Vec::new();
-    for entry in &backup.entries {
-        let at = format!("{file}:{}: {}", entry.line, entry.code);
-        let raw = match &entry.state {
-            State::Value { raw, .. } => raw,
-            State::Failed(why) => {
-                eprintln!("note: {at}: the backup holds no value (it could not be read: {why}); left as it is");
-                continue;
-            }
-        };
-        let Some(param) = view.find(&entry.code) else {
-            if force {
-                eprintln!("note: {at}: not in profile {}; skipped", view.name);
-            } else {
-                problems.push(format!("{at}: profile {} has no such parameter", view.name));
-            }
-            continue;
-        };
-        let limit = view.profile.write_limit(param.table);
-        match param::from_toml(param, raw).and_then(|v| param::encode(param, &v).map(|w| (v, w))) {
-            Err(why) => problems.push(format!("{at}: {why}")),
-            Ok(_) if param.width > limit => {
-                problems.push(format!("{at}: {} registers do not fit one write request of {limit}", param.width));
-            }
-            Ok((value, words)) => {
-                match view.profile.check_value(&Write { point: param, raw: &value, typed: &param.show(&value) }) {
-                    Err(why) if param.writable() => problems.push(format!("{file}:{}: {why}", entry.line)),
-                    _ => candidates.push((param, value, words)),
-                }
-            }
-        }
-    }
-    if !problems.is_empty() {
-        return Err(CliError::Usage(format!(
-            "{file} cannot be restored; nothing was sent:\n  {}",
-            problems.join("\n  ")
-        )));
-    }
-    Ok(candidates)
 }
 
 /// Prints the outcome; an error naming what was and was not written unless all is verified

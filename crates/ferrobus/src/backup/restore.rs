@@ -9,14 +9,44 @@ use std::collections::BTreeSet;
 use ferrobus_profile::{Point, Profile, RunState, Value, Write};
 
 use super::device::{self, Readings, Target, Watch, unless};
+use super::file::{Backup, State};
 use super::param;
 use super::view::View;
 use crate::error::Error;
+
+/// A value of the file to restore: its parameter, the raw value and its registers.
+pub type Candidate<'v> = (&'v Point, Value, Vec<u16>);
+
+/// The file's values that can be restored, and notes on those left as they are.
+#[derive(Clone, Debug)]
+pub struct Checked<'v> {
+    /// The values to compare with the device, in the file's order.
+    pub candidates: Vec<Candidate<'v>>,
+    /// What is left as it is, and why (`FILE:LINE: CODE: ...`).
+    pub notes: Vec<String>,
+}
 
 /// Why a restore cannot be planned.
 #[derive(Clone, Debug, PartialEq, Eq, thiserror::Error)]
 #[non_exhaustive]
 pub enum RestoreError {
+    /// Values of the file that cannot be restored: not in the profile, not of its type, out of
+    /// range, wider than a write request. Nothing was sent.
+    #[error("{file} cannot be restored; nothing was sent:\n  {}", problems.join("\n  "))]
+    Unrestorable {
+        /// The file.
+        file: String,
+        /// Each problem, with the file's line.
+        problems: Vec<String>,
+    },
+    /// Parameters that differ and that the profile marks read-only. Nothing was written.
+    #[error("{file} cannot be restored; nothing was written:\n  {}", read_only.join("\n  "))]
+    ReadOnly {
+        /// The file.
+        file: String,
+        /// Each parameter, with both values.
+        read_only: Vec<String>,
+    },
     /// The profile's `depends_on` make a cycle among these parameters.
     #[error("the profile's depends_on make a cycle among {}; nothing was written", codes.join(", "))]
     Cycle {
@@ -53,6 +83,91 @@ pub enum Outcome {
     Unverified(String),
     /// Not written, and why.
     NotWritten(String),
+}
+
+/// Each value of the file with its parameter and registers, checked before anything is sent:
+/// a parameter the profile lacks (skipped with `--force`), a value not of its type, out of
+/// range, or wider than a write request; `force` skips a parameter the profile lacks, with a
+/// note.
+pub fn checked<'v>(backup: &Backup, view: &'v View, file: &str, force: bool) -> Result<Checked<'v>, RestoreError> {
+    let mut candidates: Vec<Candidate<'v>> = Vec::new();
+    let mut problems = Vec::new();
+    let mut notes = Vec::new();
+    for entry in &backup.entries {
+        let at = format!("{file}:{}: {}", entry.line, entry.code);
+        let raw = match &entry.state {
+            State::Value { raw, .. } => raw,
+            State::Failed(why) => {
+                notes.push(format!("{at}: the backup holds no value (it could not be read: {why}); left as it is"));
+                continue;
+            }
+        };
+        let Some(param) = view.find(&entry.code) else {
+            if force {
+                notes.push(format!("{at}: not in profile {}; skipped", view.name));
+            } else {
+                problems.push(format!("{at}: profile {} has no such parameter", view.name));
+            }
+            continue;
+        };
+        let limit = view.profile.write_limit(param.table);
+        match param::from_toml(param, raw).and_then(|v| param::encode(param, &v).map(|w| (v, w))) {
+            Err(why) => problems.push(format!("{at}: {why}")),
+            Ok(_) if param.width > limit => {
+                problems.push(format!("{at}: {} registers do not fit one write request of {limit}", param.width));
+            }
+            Ok((value, words)) => {
+                match view.profile.check_value(&Write { point: param, raw: &value, typed: &param.show(&value) }) {
+                    Err(why) if param.writable() => problems.push(format!("{file}:{}: {why}", entry.line)),
+                    _ => candidates.push((param, value, words)),
+                }
+            }
+        }
+    }
+    if !problems.is_empty() {
+        return Err(RestoreError::Unrestorable { file: file.to_string(), problems });
+    }
+    Ok(Checked { candidates, notes })
+}
+
+/// The candidates whose value on the device differs from the file's; a read-only one among
+/// them refuses the restore.
+pub fn differing<'v>(
+    candidates: Vec<Candidate<'v>>,
+    before: &Readings,
+    file: &str,
+) -> Result<Vec<Item<'v>>, RestoreError> {
+    let mut items = Vec::new();
+    let mut read_only = Vec::new();
+    for (param, raw, words) in candidates {
+        let (known, before_shown) = match before.values.get(&param.code) {
+            Some(Ok(current)) if *current == words => continue,
+            Some(Ok(current)) => match param::decode(param, current) {
+                Ok(value) => (true, param.show(&value)),
+                Err(why) => (false, format!("(not read: {why})")),
+            },
+            Some(Err(why)) => (false, format!("(not read: {why})")),
+            None => (false, "(not read)".into()),
+        };
+        if !param.writable() {
+            read_only.push(format!(
+                "{}: the profile marks it read-only; the device holds {before_shown}, the file {}",
+                param.code,
+                param.show(&raw)
+            ));
+            continue;
+        }
+        let outcome = if known {
+            Outcome::Pending
+        } else {
+            Outcome::NotWritten(format!("its value could not be read first: {before_shown}"))
+        };
+        items.push(Item { param, raw, words, before: before_shown, outcome });
+    }
+    if !read_only.is_empty() {
+        return Err(RestoreError::ReadOnly { file: file.to_string(), read_only });
+    }
+    Ok(items)
 }
 
 /// Sorts the items so that each comes after those it depends on (among the items), keeping
@@ -226,5 +341,53 @@ mod tests {
         let err = order(&mut items).unwrap_err();
         assert_eq!(err, RestoreError::Cycle { codes: vec!["A".into(), "B".into()] });
         assert_eq!(err.to_string(), "the profile's depends_on make a cycle among A, B; nothing was written");
+    }
+
+    const RANGED: &str = "[device]\nname='t'\nvendor='t'\nproduct_code='t'\nrevision='1'\n\
+        [[registers]]\nnumber=0\nname='A'\naccess='rw'\nmax=100\n\
+        [[registers]]\nnumber=1\nname='R'\n";
+
+    fn backup_file(parameters: &str) -> Backup {
+        let text = format!(
+            "[backup]\nformat = 1\nprofile = \"t.toml\"\ndevice = \"t\"\ntime = \"x\"\nconnection = \"x\"\n\
+             identification = \"none\"\nunit = 1\n\n[parameters]\n{parameters}"
+        );
+        Backup::parse(&text, "f.toml").unwrap()
+    }
+
+    fn view() -> View {
+        View { name: "t.toml".into(), hash: None, profile: Profile::parse(RANGED, "t.toml").unwrap() }
+    }
+
+    #[test]
+    fn file_values_out_of_range_or_unknown_refuse_the_restore_with_their_lines_and_force_skips_the_unknown() {
+        let view = view();
+        let bad = backup_file("A = { raw = 101 }\nZ = { raw = 1 }\nR = { error = \"no reply\" }\n");
+        let err = checked(&bad, &view, "f.toml", false).unwrap_err();
+        let RestoreError::Unrestorable { problems, .. } = &err else { panic!("{err}") };
+        assert_eq!(problems.len(), 2, "{err}");
+        assert!(problems[0] == "f.toml:11: A: 101 is out of range: 0 to 100", "{err}");
+        assert_eq!(problems[1], "f.toml:12: Z: profile t.toml has no such parameter");
+        let forced = checked(&backup_file("A = { raw = 5 }\nZ = { raw = 1 }\n"), &view, "f.toml", true).unwrap();
+        assert_eq!(forced.candidates.len(), 1);
+        assert_eq!(forced.notes, ["f.toml:12: Z: not in profile t.toml; skipped"]);
+    }
+
+    #[test]
+    fn only_what_differs_is_written_and_a_differing_read_only_parameter_refuses_the_restore() {
+        let view = view();
+        let file = backup_file("A = { raw = 5 }\nR = { raw = 1 }\n");
+        let candidates = checked(&file, &view, "f.toml", false).unwrap().candidates;
+        let mut before = Readings::default();
+        before.values.insert("A".into(), Ok(vec![5]));
+        before.values.insert("R".into(), Ok(vec![1]));
+        assert!(differing(candidates.clone(), &before, "f.toml").unwrap().is_empty(), "nothing differs");
+        before.values.insert("A".into(), Ok(vec![6]));
+        let items = differing(candidates.clone(), &before, "f.toml").unwrap();
+        assert_eq!((items.len(), items[0].param.code.as_str(), items[0].before.as_str()), (1, "A", "6"));
+        before.values.insert("R".into(), Ok(vec![2]));
+        let err = differing(candidates, &before, "f.toml").unwrap_err();
+        assert!(matches!(&err, RestoreError::ReadOnly { read_only, .. } if read_only.len() == 1), "{err}");
+        assert!(err.to_string().contains("R: the profile marks it read-only; the device holds 2, the file 1"), "{err}");
     }
 }
