@@ -3,7 +3,8 @@
 //! line in the profile's order, under a comment with its label; [`file`](mod@file)), a point's registers
 //! to the file's raw value and back ([`param`]), the profile a backup is made with and the
 //! hash that pins a profile file ([`view`], [`sha256`]), the comparison of two backups
-//! ([`diff`]), and the rules that write a backup file atomically and never let a worse backup
+//! ([`diff`]) and of a device or a backup with the profile's factory defaults ([`defaults`]),
+//! and the rules that write a backup file atomically and never let a worse backup
 //! replace a better one ([`save`](mod@save)), and a restore's plan and its writes
 //! ([`restore`]). The `ferrobus` command's `backup`, `diff` and `restore` are built on it.
 //!
@@ -47,6 +48,7 @@
 //! Every error is typed and names what was seen: [`BackupError`] a file and its line,
 //! [`ParamError`] a value and its point, [`ViewError`] a profile.
 
+pub mod defaults;
 pub mod device;
 pub mod diff;
 pub mod file;
