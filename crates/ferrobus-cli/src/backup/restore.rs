@@ -21,14 +21,11 @@ use serde_json::json;
 
 use super::device::{self, Watched};
 use super::diff::load;
-use super::file::{Backup, State};
-use super::param::shown_toml;
-use ferrobus::backup::restore::{self as plan, Item, Outcome, shown};
+use ferrobus::backup::restore::{self as plan, Item, Outcome};
 use ferrobus_profile::Point;
 
 use super::param;
-use super::view::View;
-use crate::connect::{ConnectArgs, Session};
+use crate::connect::ConnectArgs;
 use crate::exit::CliError;
 use crate::interrupt::Interrupt;
 use crate::output::{self, Align, Format, OutputArgs, Rows};
@@ -121,47 +118,11 @@ pub(crate) async fn run(connection: &ConnectArgs, args: &RestoreArgs) -> Result<
     let mut watched = Watched::new(&mut interrupt, pending, "parameters written");
     let interrupted = plan::apply(device::target(&session), &view, &mut items, &mut watched).await;
     watched.finish();
-    let drifted = read_back(&session, &view, &backup, &mut items, interrupted, &mut interrupt).await;
+    let what = plan::ReadBack { view: &view, backup: &backup, interrupted };
+    let mut watched = Watched::new(&mut interrupt, what.points(&items).len(), "parameters read");
+    let drifted = plan::read_back(device::target(&session), what, &mut items, &mut watched).await;
+    watched.finish();
     conclude(&items, &drifted, format, &file, interrupted)
-}
-
-/// Reads back every parameter of the file (after an interruption, only what was or may have
-/// been written): each written item verified or not, and the parameters not written that
-/// differ from the file after the restore.
-async fn read_back(
-    session: &Session,
-    view: &View,
-    backup: &Backup,
-    items: &mut [Item<'_>],
-    interrupted: bool,
-    interrupt: &mut Interrupt,
-) -> Vec<String> {
-    let written = |o: &Outcome| matches!(o, Outcome::Pending | Outcome::InFlight);
-    let all: Vec<&Point> = if interrupted {
-        items.iter().filter(|i| written(&i.outcome)).map(|i| i.param).collect()
-    } else {
-        backup.entries.iter().filter_map(|e| view.find(&e.code)).collect()
-    };
-    let after = device::read(session, view, &all, interrupt).await;
-    for item in items.iter_mut().filter(|i| written(&i.outcome)) {
-        item.outcome = plan::verify(item, after.values.get(&item.param.code));
-    }
-    if interrupted {
-        return Vec::new();
-    }
-    let mut drifted = Vec::new();
-    for entry in &backup.entries {
-        let (Some(param), State::Value { raw, .. }) = (view.find(&entry.code), &entry.state) else { continue };
-        if items.iter().any(|i| i.param.code == param.code) {
-            continue;
-        }
-        if let Some(Ok(words)) = after.values.get(&param.code)
-            && param::from_toml(param, raw).and_then(|v| param::encode(param, &v)).is_ok_and(|w| w != *words)
-        {
-            drifted.push(format!("{} now reads {} (the file: {})", param.code, shown(param, words), shown_toml(raw)));
-        }
-    }
-    drifted
 }
 
 /// Prints the outcome; an error naming what was and was not written unless all is verified

@@ -10,7 +10,7 @@ use ferrobus_profile::{Point, Profile, RunState, Value, Write};
 
 use super::device::{self, Readings, Target, Watch, unless};
 use super::file::{Backup, State};
-use super::param;
+use super::param::{self, shown_toml};
 use super::view::View;
 use crate::error::Error;
 
@@ -268,6 +268,65 @@ pub async fn apply(target: Target<'_>, view: &View, items: &mut [Item<'_>], watc
         }
     }
     interrupted
+}
+
+/// What a restore reads back: the file, with the profile, and whether a stop cut the writes
+/// short (then only what was or may have been written is read).
+#[derive(Clone, Copy, Debug)]
+pub struct ReadBack<'a> {
+    /// The profile.
+    pub view: &'a View,
+    /// The file restored.
+    pub backup: &'a Backup,
+    /// Whether the writes were stopped.
+    pub interrupted: bool,
+}
+
+impl<'a> ReadBack<'a> {
+    /// The parameters read back: every one of the file the profile has, or after a stop only
+    /// those of `items` that were or may have been written.
+    pub fn points<'i>(&self, items: &'i [Item<'a>]) -> Vec<&'a Point> {
+        if self.interrupted {
+            let written = |o: &Outcome| matches!(o, Outcome::Pending | Outcome::InFlight);
+            items.iter().filter(|i| written(&i.outcome)).map(|i| i.param).collect()
+        } else {
+            self.backup.entries.iter().filter_map(|e| self.view.find(&e.code)).collect()
+        }
+    }
+}
+
+/// Reads back every parameter of the file (after an interruption, only what was or may have
+/// been written): each written item verified or not, and the parameters not written that
+/// differ from the file after the restore.
+pub async fn read_back(
+    target: Target<'_>,
+    what: ReadBack<'_>,
+    items: &mut [Item<'_>],
+    watch: &mut impl Watch,
+) -> Vec<String> {
+    let ReadBack { view, backup, interrupted } = what;
+    let all = what.points(items);
+    let written = |o: &Outcome| matches!(o, Outcome::Pending | Outcome::InFlight);
+    let after = device::read(target, view, &all, watch).await;
+    for item in items.iter_mut().filter(|i| written(&i.outcome)) {
+        item.outcome = verify(item, after.values.get(&item.param.code));
+    }
+    if interrupted {
+        return Vec::new();
+    }
+    let mut drifted = Vec::new();
+    for entry in &backup.entries {
+        let (Some(param), State::Value { raw, .. }) = (view.find(&entry.code), &entry.state) else { continue };
+        if items.iter().any(|i| i.param.code == param.code) {
+            continue;
+        }
+        if let Some(Ok(words)) = after.values.get(&param.code)
+            && param::from_toml(param, raw).and_then(|v| param::encode(param, &v)).is_ok_and(|w| w != *words)
+        {
+            drifted.push(format!("{} now reads {} (the file: {})", param.code, shown(param, words), shown_toml(raw)));
+        }
+    }
+    drifted
 }
 
 /// The outcome of a written (or perhaps written) item, from what it reads back.
