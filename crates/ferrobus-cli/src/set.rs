@@ -2,13 +2,14 @@
 //! anything is sent, written, read back and shown.
 //!
 //! The value is parsed by the profile (`45Hz`, `12.5s`, `60.00`, `0x10` raw, `modbus` by its
-//! meaning) and converted by the point's scale; its range and access are checked, and for a
-//! parameter that cannot change while the drive runs, the profile's `[state] running` point
-//! is read first. Only then is the value written: FC05 for a coil, FC06 for one register
+//! meaning) and converted by the point's scale; then the profile's write guard (the one every
+//! writer applies, `ferrobus::guard::check_write`) checks its range and access and, for a
+//! parameter that cannot change while the drive runs, reads the profile's `[state] running`
+//! point first. Only then is the value written: FC05 for a coil, FC06 for one register
 //! (FC10 when the device lacks FC06), FC10 for a value of several registers, never split.
 
 use clap::Args;
-use ferrobus_profile::{Point, Profile, Table, Value};
+use ferrobus_profile::{Point, Profile, Refusal, RunState, Table, Value, Write};
 use serde_json::json;
 
 use crate::connect::ConnectArgs;
@@ -54,7 +55,9 @@ fn one_point<'p>(profile: &'p Profile, name: &str) -> Result<&'p Point, CliError
 pub(crate) async fn run(connection: &ConnectArgs, args: &SetArgs) -> Result<(), CliError> {
     let profile = connection.require_profile("set")?;
     let point = one_point(&profile, &args.name)?;
-    let raw = point.prepare_write(&args.value).map_err(|e| CliError::Usage(format!("not sent: {e}")))?;
+    let raw = point.parse(&args.value).map_err(|e| CliError::Usage(format!("not sent: {e}")))?;
+    let write = Write { point, raw: &raw, typed: &args.value };
+    profile.check_value(&write).map_err(|e| refused(&e))?;
     let words = match &raw {
         Value::Bool(_) => Vec::new(),
         other => point.encode(other).map_err(|e| CliError::Usage(format!("not sent: {e}")))?,
@@ -72,9 +75,7 @@ pub(crate) async fn run(connection: &ConnectArgs, args: &SetArgs) -> Result<(), 
     let session = interrupt.unless(connection.open()).await.ok_or(CliError::Interrupted)??;
     let (client, unit) = (&session.client, session.unit);
     let broadcast = session.is_broadcast();
-    if !point.while_running {
-        check_stopped(&session, &profile, point, &mut interrupt).await?;
-    }
+    guard(&session, &profile, &write, &mut interrupt).await?;
     let sixteen = profile.comm.functions.as_ref().is_none_or(|f| f.contains(&0x06));
     tracing::info!(unit, address = point.address, ?words, "writing {}", point.code);
     let write = async {
@@ -149,39 +150,28 @@ pub(crate) async fn run(connection: &ConnectArgs, args: &SetArgs) -> Result<(), 
     }
 }
 
-/// Refuses a run-locked `point` while the profile's running point says the drive runs.
-async fn check_stopped(
+/// The profile's write guard for `write`, with the drive's run state read first when the
+/// point is run-locked (a broadcast cannot read it, so the guard refuses such a point).
+async fn guard(
     session: &crate::connect::Session,
     profile: &Profile,
-    point: &Point,
+    write: &Write<'_>,
     interrupt: &mut Interrupt,
 ) -> Result<(), CliError> {
-    let Some(rule) = &profile.state.running else { return Ok(()) };
-    let Some(state) = profile.point(&rule.point) else { return Ok(()) };
     if session.is_broadcast() {
-        return Err(CliError::Usage(format!(
-            "not sent: {} cannot change while the drive runs, and a broadcast cannot read whether it runs",
-            point.code
-        )));
+        let state =
+            if profile.run_state_point(write.point).is_some() { RunState::Broadcast } else { RunState::NotRead };
+        return profile.guard_write(write, &state).map_err(|e| refused(&e));
     }
-    let (outcomes, _) = read_points(&session.client, session.unit, profile, &[state], interrupt).await?;
-    match outcomes.into_iter().next() {
-        Some(Ok(value)) => {
-            let running = value.as_int().is_some_and(|v| rule.values.iter().any(|r| i128::from(*r) == v));
-            if running {
-                return Err(CliError::Usage(format!(
-                    "not sent: {} cannot change while the drive runs ({} = {}); stop it first",
-                    point.code,
-                    state.code,
-                    state.show(&value)
-                )));
-            }
-            Ok(())
-        }
-        Some(Err(error)) => Err(CliError::Refused(format!(
-            "not sent: {} cannot change while the drive runs, and reading {} failed: {error}",
-            point.code, state.code
-        ))),
-        None => Ok(()),
+    let check = ferrobus::guard::check_write(&session.client, session.unit, profile, write);
+    interrupt.unless(check).await.ok_or(CliError::Interrupted)?.map_err(|e| refused(&e))
+}
+
+/// The guard's refusal as the command's error: nothing was sent (exit 2), or, when the drive
+/// could not be asked whether it runs, the device's part (exit 7, as for a refused request).
+fn refused(refusal: &Refusal) -> CliError {
+    match refusal {
+        Refusal::Unreadable { .. } => CliError::Refused(format!("not sent: {refusal}")),
+        _ => CliError::Usage(format!("not sent: {refusal}")),
     }
 }

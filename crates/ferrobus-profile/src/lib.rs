@@ -10,18 +10,21 @@
 //!   TOML ──Profile::load──▶ Profile ──points()/find()/group()──▶ Point
 //!   Point: decode(registers) → Value → show() "50.00 Hz";  parse("45Hz") → Value → encode()
 //!   plan(wanted, mapped, spans, limit) → the fewest read requests
+//!   guard_write(Write { point, raw, typed }, RunState) → Ok | Refusal (range, access, run lock)
 //! ```
 //!
 //! Built-in profiles: `omron-3g3rx`, `sdp-servo`, `generic` (see [`BUILTIN`]).
 
 mod check;
 mod codec;
+pub mod guard;
 mod model;
 mod plan;
 mod point;
 pub mod source;
 
 pub use codec::{Value, ValueError, beyond_deadband};
+pub use guard::{Refusal, RunState, Write};
 pub use model::{
     Access, Addressing, BUILTIN, BitDef, Comm, DeviceSection, ExceptionMeaning, Exceptions, Fifo, Files, Limits,
     ModelSection, Order, Polarity, Profile, ProfileError, RegisterDef, RunningRule, SpanDef, State, Table, Tables,

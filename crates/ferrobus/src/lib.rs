@@ -61,12 +61,14 @@
 //! Errors are one flat [`Error`], where a device's exception is kept apart from timeouts and
 //! IO failures.
 
+pub mod backup;
 pub mod client;
 pub mod clock;
 mod config;
 mod driver;
 pub mod error;
 pub mod gateway;
+pub mod guard;
 mod identity;
 pub mod line;
 pub mod log;

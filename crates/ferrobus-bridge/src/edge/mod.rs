@@ -54,8 +54,10 @@
 //!   devices again, same bdSeq. DCMD: each metric (by alias, else by name) is converted to the
 //!   point's raw value and checked by the profile (access, range); a command with any refused
 //!   metric, or with more than [`MAX_METRICS_PER_COMMAND`] metrics, writes nothing and returns
-//!   an [`EdgeError`] per refusal. The runtime writes an accepted command's metrics in order
-//!   and stops at the first the bus fails (it says which were written: a bus cannot undo).
+//!   an [`EdgeError`] per refusal. The runtime puts an accepted command through the profile's
+//!   write guard (a run-locked metric while the drive runs refuses it whole), writes its
+//!   metrics in order and stops at the first the bus fails (it says which were written: a bus
+//!   cannot undo).
 //! - **Primary host.** With `primary_host` set, births wait for its STATE `{"online":true}`
 //!   (held if [`Edge::connected`] came first; samples meanwhile are stored); `online:false`
 //!   while born → [`Action::Reconnect`]. A STATE older than the last one is ignored.

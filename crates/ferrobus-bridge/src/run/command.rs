@@ -4,7 +4,10 @@
 //! A command (a DCMD, a plain `set`) comes as the [`Action::Write`](crate::edge::Action)s of one
 //! message. The bridge resolves and checks every one of them first (the cell, the profile's
 //! access and range) and refuses the command whole if one fails, or if the device already has
-//! [`MAX_QUEUED_WRITES`] writes waiting: nothing is written. Then one task writes them in the
+//! [`MAX_QUEUED_WRITES`] writes waiting: nothing is written. Then one task, once the device's
+//! turn is its, puts every write through the profile's write guard ([`guard`]: the one `set`,
+//! `restore` and `monitor` apply, with the drive's run state read first when a write is
+//! run-locked) and refuses the command whole on one refusal; else it writes them in the
 //! command's order, holding the device's turn ([`DeviceWrites`]) so that two commands never
 //! interleave, and stops at the first write the bus fails. The bus cannot take a write back:
 //! the [`Applied`] outcome says exactly which were written, which failed and which were not
@@ -13,7 +16,9 @@
 use std::future::Future;
 use std::sync::Arc;
 
+use ferrobus::Client;
 use ferrobus::poll::Value;
+use ferrobus_profile::{Point, Profile, Refusal, RunState, Write};
 
 use crate::edge::DeviceRef;
 
@@ -35,6 +40,8 @@ pub(super) struct BusWrite {
     pub(super) typed: String,
     /// The point's name, for messages.
     pub(super) point: String,
+    /// The point, for the write guard.
+    pub(super) target: Point,
 }
 
 /// What a command's task did.
@@ -44,8 +51,10 @@ pub(super) struct Applied {
     pub(super) device: DeviceRef,
     /// The writes tried, in order, with the bus's answer: all but the last succeeded.
     pub(super) tried: Vec<(BusWrite, Result<(), String>)>,
-    /// The writes not tried because one before them failed.
+    /// The writes not tried because one before them failed (or all of them, when refused).
     pub(super) not_written: Vec<BusWrite>,
+    /// The command's topic and why the write guard refused it (then nothing was tried).
+    pub(super) refused: Option<(String, String)>,
 }
 
 impl Applied {
@@ -89,6 +98,20 @@ impl DeviceWrites {
     }
 }
 
+/// The write guard over a command's writes to `unit`, before any is written: the drive's run
+/// state read once (only when a write is run-locked), then each write through
+/// [`Profile::guard_write`]. The first refusal.
+pub(super) async fn guard(client: &Client, unit: u8, profile: &Profile, writes: &[BusWrite]) -> Result<(), Refusal> {
+    let mut state = RunState::NotRead;
+    if let Some(locked) = writes.iter().find(|w| profile.run_state_point(&w.target).is_some()) {
+        state = ferrobus::guard::run_state(client, unit, profile, &locked.target).await;
+    }
+    for w in writes {
+        profile.guard_write(&Write { point: &w.target, raw: &w.raw, typed: &w.typed }, &state)?;
+    }
+    Ok(())
+}
+
 /// Writes `writes` in order with `write`, stopping at the first failure.
 pub(super) async fn apply<F, Fut>(device: DeviceRef, writes: Vec<BusWrite>, mut write: F) -> Applied
 where
@@ -105,7 +128,7 @@ where
             break;
         }
     }
-    Applied { device, tried, not_written: rest.collect() }
+    Applied { device, tried, not_written: rest.collect(), refused: None }
 }
 
 #[cfg(test)]
@@ -121,6 +144,11 @@ mod tests {
                 raw: Value::Int(0),
                 typed: "0".into(),
                 point: format!("P{i}"),
+                target: ferrobus_profile::Point::raw(
+                    ferrobus_profile::Table::Holding,
+                    0,
+                    ferrobus_profile::ValueType::U16,
+                ),
             })
             .collect()
     }

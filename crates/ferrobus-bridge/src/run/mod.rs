@@ -19,8 +19,9 @@
 //! (a batch every 10 ms while the client's queue is short, so that live data is never starved
 //! and the replay is never put off for ever). Lines run concurrently in their own pollers: one
 //! line's failure never stops another. A command's writes ([`Action::Write`]) are checked
-//! whole, then written in order in a task of their own, one command of a device at a time
-//! (`command.rs`), and come back as results for [`Edge::written`].
+//! whole, then, in a task of their own once the device's turn comes (one command of a device at
+//! a time), put through the profile's write guard with the drive's run state read first, and
+//! written in order (`command.rs`); they come back as results for [`Edge::written`].
 //!
 //! The broker session: CONNECT with the edge's Will (NDEATH with the bdSeq, kept across
 //! restarts in a small file, see [`state`]); on CONNACK subscribe to the edge's topics and
@@ -382,7 +383,7 @@ impl Bridge {
         }
         for (device, writes) in commands {
             let cells: Vec<(usize, usize)> = writes.iter().map(|&(group, cell, ..)| (group, cell)).collect();
-            if let Err(error) = self.command(device, writes) {
+            if let Err(error) = self.command(device, writes, topic) {
                 self.report.refused += 1;
                 // Plain mode answers each `set` on its result topic (Sparkplug publishes nothing).
                 let results: Vec<Publish> = cells
@@ -406,9 +407,13 @@ impl Bridge {
 
     /// One command's writes to `device`: every one resolved and checked, and the device's
     /// queue bound kept, before any is written (else the command is refused whole, with why);
-    /// then written in order in a task of its own, whose [`Applied`] comes back on `written`.
-    fn command(&mut self, device: DeviceRef, writes: Vec<Asked>) -> Result<(), String> {
+    /// then, in a task of its own, the write guard ([`command::guard`], which reads the run
+    /// state for a run-locked point) over all of them, and written in order unless it refuses;
+    /// the task's [`Applied`] comes back on `written`.
+    fn command(&mut self, device: DeviceRef, writes: Vec<Asked>, topic: &str) -> Result<(), String> {
         let name = self.device_name(device);
+        let spec = self.plant.lines.get(device.line).and_then(|l| l.devices.get(device.device));
+        let guarded = spec.and_then(|d| Some((d.profile.clone()?, d.unit)));
         let line = self.lines.get_mut(device.line).ok_or_else(|| format!("{name}: no such line"))?;
         let mut resolved = Vec::with_capacity(writes.len());
         for (group, cell, raw, typed) in writes {
@@ -418,13 +423,22 @@ impl Bridge {
                 return Err(format!("{name}: no cell {cell} in group {group}: nothing written"));
             };
             target.point.check_write(&raw, &typed).map_err(|e| format!("{name}: {e}: nothing written"))?;
-            resolved.push(BusWrite { group, cell, index, raw, typed, point: target.name });
+            resolved.push(BusWrite { group, cell, index, raw, typed, point: target.name, target: target.point });
         }
         let queue = line.writes.get_mut(device.device).ok_or_else(|| format!("{name}: no such device"))?;
         queue.admit(resolved.len()).map_err(|why| format!("{name}: {why}: nothing written"))?;
         let (poll, turn, tx) = (line.running.poll.clone(), Arc::clone(&queue.turn), self.written_tx.clone());
+        let (client, topic) = (line.running.client.clone(), topic.to_string());
         tokio::spawn(async move {
             let _turn = turn.lock().await;
+            if let Some((profile, unit)) = guarded
+                && let Err(refusal) = command::guard(&client, unit, &profile, &resolved).await
+            {
+                let why = format!("{name}: {refusal}: nothing written");
+                let refused = Applied { device, tried: Vec::new(), not_written: resolved, refused: Some((topic, why)) };
+                let _ = tx.send(refused).await;
+                return;
+            }
             let applied = command::apply(device, resolved, |w| {
                 let (poll, index, cell, raw) = (poll.clone(), w.index, w.cell, w.raw.clone());
                 async move { poll.write_raw(index, cell, &raw).await.map_err(|e| e.to_string()) }
@@ -444,6 +458,17 @@ impl Bridge {
         let count = applied.tried.len() + applied.not_written.len();
         if let Some(queue) = self.lines.get_mut(device.line).and_then(|l| l.writes.get_mut(device.device)) {
             queue.done(count);
+        }
+        if let Some((topic, error)) = applied.refused {
+            self.report.refused += 1;
+            let results: Vec<Publish> = applied
+                .not_written
+                .iter()
+                .flat_map(|w| self.edge.written(device, w.group, w.cell, Err(error.clone())))
+                .collect();
+            self.say(Status::Refused { topic, error });
+            self.publish_all(results);
+            return;
         }
         let incomplete = applied.incomplete();
         let mut publishes = Vec::new();

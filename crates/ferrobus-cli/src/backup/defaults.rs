@@ -6,35 +6,16 @@
 
 use serde_json::{Value as Json, json};
 
+use ferrobus::backup::defaults::{Found, compare, of_backup, split};
 use ferrobus_profile::{Point, Value};
 
 use super::diff::toml_json;
-use super::file::{Backup, State};
 use super::param;
 use super::view::View;
 use crate::connect::ConnectArgs;
 use crate::exit::CliError;
 use crate::interrupt::Interrupt;
 use crate::output::{self, Align, Format, Rows};
-
-/// A parameter that differs from its default.
-struct Changed<'v> {
-    point: &'v Point,
-    value: Value,
-    default: &'v Value,
-}
-
-/// What the comparison found.
-struct Found<'v> {
-    /// Parameters whose value is not the default, in the profile's order.
-    changed: Vec<Changed<'v>>,
-    /// Parameters compared (a default known, a value read).
-    compared: usize,
-    /// The codes of the parameters whose default the profile does not know.
-    unknown: Vec<&'v str>,
-    /// The codes of the parameters with a default but no value (not read), and why.
-    unread: Vec<(&'v str, String)>,
-}
 
 /// Runs `diff --defaults` on the device, or on `file` when given.
 pub(crate) async fn run(
@@ -61,7 +42,7 @@ pub(crate) async fn run(
     }
     let values = known.iter().map(|p| {
         let value = match readings.values.get(&p.code) {
-            Some(Ok(words)) => param::decode(p, words),
+            Some(Ok(words)) => param::decode(p, words).map_err(|e| e.to_string()),
             Some(Err(why)) => Err(why.clone()),
             None => Err("not read".into()),
         };
@@ -82,52 +63,6 @@ fn of_file(connection: &ConnectArgs, path: &std::path::Path, format: Format) -> 
         })?
     };
     finish(&of_backup(&view, &backup), &path.display().to_string(), format)
-}
-
-/// The parameters the profile backs up, split into those whose default it knows and the
-/// codes of the others.
-fn split(view: &View) -> (Vec<&Point>, Vec<&str>) {
-    let (known, unknown): (Vec<&Point>, Vec<&Point>) =
-        view.backed_up().into_iter().partition(|p| p.factory_default.is_some());
-    (known, unknown.into_iter().map(|p| p.code.as_str()).collect())
-}
-
-/// The backup's parameters against the profile's defaults (parameters the profile lacks are
-/// left out).
-fn of_backup<'v>(view: &'v View, backup: &Backup) -> Found<'v> {
-    let mut unknown = Vec::new();
-    let mut values = Vec::new();
-    for entry in &backup.entries {
-        let Some(point) = view.find(&entry.code) else { continue };
-        if point.factory_default.is_none() {
-            unknown.push(point.code.as_str());
-            continue;
-        }
-        let value = match &entry.state {
-            State::Value { raw, .. } => param::from_toml(point, raw),
-            State::Failed(why) => Err(format!("the backup holds no value: {why}")),
-        };
-        values.push((point, value));
-    }
-    compare(values.into_iter(), unknown)
-}
-
-/// Each value against its point's default, through the registers both encode to.
-fn compare<'v>(values: impl Iterator<Item = (&'v Point, Result<Value, String>)>, unknown: Vec<&'v str>) -> Found<'v> {
-    let mut found = Found { changed: Vec::new(), compared: 0, unknown, unread: Vec::new() };
-    for (point, value) in values {
-        let Some(default) = &point.factory_default else { continue };
-        match value {
-            Ok(value) => {
-                found.compared += 1;
-                if param::encode(point, &value).ok() != param::encode(point, default).ok() {
-                    found.changed.push(Changed { point, value, default });
-                }
-            }
-            Err(why) => found.unread.push((point.code.as_str(), why)),
-        }
-    }
-    found
 }
 
 /// A value without its unit (the unit has its own column): an enumeration's meaning, else the

@@ -1,207 +1,58 @@
-//! Reading and writing parameters on the device: the reads in the profile's read plan
-//! ([`ferrobus_profile::plan`]), the writes, and
-//! failures worded with the profile's meaning of the device's exception codes.
+//! The library's reads and writes of parameters ([`ferrobus::backup::device`]), watched by
+//! Ctrl-C and shown with a progress bar on a terminal.
 
-use std::collections::BTreeMap;
-
-use ferrobus::Error;
-
-use ferrobus_profile::{Extent, Point, Table};
-
+use ferrobus::backup::Watch;
+pub(crate) use ferrobus::backup::device::Readings;
+use ferrobus::backup::{Target, View};
+use ferrobus_profile::Point;
 use indicatif::ProgressBar;
 
-use super::view::View;
 use crate::connect::Session;
 use crate::interrupt::Interrupt;
 use crate::progress;
 
-/// What the reads found: each parameter's registers (a bit as 0 or 1), or why it was not read.
-#[derive(Debug, Default)]
-pub(crate) struct Readings {
-    /// By code.
-    pub(crate) values: BTreeMap<String, Result<Vec<u16>, String>>,
-    /// The requests sent.
-    pub(crate) requests: usize,
-    /// The planned requests, before any retry of a refused one point by point.
-    pub(crate) planned: usize,
-    /// The error that stopped the reads (no reply, the port lost), if one did.
-    pub(crate) stopped: Option<Error>,
-    /// Whether Ctrl-C (or SIGTERM) stopped the reads.
-    pub(crate) interrupted: bool,
-    /// How long the reads took, from the first request to the last reply.
-    pub(crate) elapsed: std::time::Duration,
+/// Ctrl-C (or SIGTERM) and a progress bar.
+pub(crate) struct Watched<'a> {
+    interrupt: &'a mut Interrupt,
+    bar: ProgressBar,
 }
 
-impl Readings {
-    /// Why the parameters not yet read will not be, once the reads have stopped.
-    fn why_stopped(&self, view: &View) -> Option<String> {
-        if self.interrupted {
-            return Some(INTERRUPTED.to_string());
-        }
-        self.stopped.as_ref().map(|error| format!("not read: the reads stopped after {}", describe(error, view)))
+impl<'a> Watched<'a> {
+    /// Watches `interrupt`, with a bar of `len` `what` on a terminal.
+    pub(crate) fn new(interrupt: &'a mut Interrupt, len: usize, what: &str) -> Watched<'a> {
+        Watched { interrupt, bar: progress::bar(len, what) }
     }
 
-    /// The codes of `params` that were read, and of those that were not.
-    pub(crate) fn split<'p>(&self, params: &[&'p Point]) -> (Vec<&'p str>, Vec<&'p str>) {
-        params.iter().map(|p| p.code.as_str()).partition(|code| self.values.get(*code).is_some_and(Result::is_ok))
+    /// Clears the bar.
+    pub(crate) fn finish(&self) {
+        self.bar.finish_and_clear();
     }
 }
 
-/// Why a parameter was not read when Ctrl-C stopped the reads.
-pub(crate) const INTERRUPTED: &str = "not read: interrupted (Ctrl-C or SIGTERM)";
+impl Watch for Watched<'_> {
+    fn stop(&mut self) -> impl Future<Output = ()> {
+        self.interrupt.wait()
+    }
 
-/// Reads `params` in the planned requests, with a progress bar on a terminal. A request
-/// refused with an exception is read again point by point, so that only the points the
-/// device refuses are marked; after an error that is not an exception (no reply, a lost port)
-/// or an interruption nothing more is sent and the rest are marked not read, with why.
+    fn progress(&mut self, done: u64) {
+        self.bar.inc(done);
+    }
+
+    fn started(&mut self, code: &str) {
+        self.bar.set_message(code.to_string());
+    }
+}
+
+/// The session's device, as the library names it.
+pub(crate) fn target(session: &Session) -> Target<'_> {
+    Target { client: &session.client, unit: session.unit }
+}
+
+/// Reads `params` ([`ferrobus::backup::device::read`]) with a progress bar on a terminal,
+/// stopped by Ctrl-C.
 pub(crate) async fn read(session: &Session, view: &View, params: &[&Point], interrupt: &mut Interrupt) -> Readings {
-    let began = std::time::Instant::now();
-    let bar = progress::bar(params.len(), "parameters read");
-    let mut readings = Readings::default();
-    for table in [Table::Holding, Table::Input, Table::Coils, Table::DiscreteInputs] {
-        let here: Vec<&Point> = params.iter().copied().filter(|p| p.table == table).collect();
-        if !here.is_empty() {
-            read_table_points(session, view, table, &here, interrupt, &mut readings, &bar).await;
-        }
-    }
-    // Points of a request cut short by a stop inside the point-by-point reads.
-    if let Some(why) = readings.why_stopped(view) {
-        for p in params {
-            readings.values.entry(p.code.clone()).or_insert_with(|| Err(why.clone()));
-        }
-    }
-    bar.finish_and_clear();
-    readings.elapsed = began.elapsed();
+    let mut watched = Watched::new(interrupt, params.len(), "parameters read");
+    let readings = ferrobus::backup::device::read(target(session), view, params, &mut watched).await;
+    watched.finish();
     readings
-}
-
-/// Reads the points `here` of `table` in the planned requests into `readings`.
-async fn read_table_points(
-    session: &Session,
-    view: &View,
-    table: Table,
-    here: &[&Point],
-    interrupt: &mut Interrupt,
-    readings: &mut Readings,
-    bar: &ProgressBar,
-) {
-    let profile = &view.profile;
-    let wanted: Vec<Extent> = here.iter().map(|p| Extent { start: p.address, width: p.width }).collect();
-    let requests =
-        match ferrobus_profile::plan(&wanted, &profile.mapped(table), &profile.spans(table), profile.read_limit(table))
-        {
-            Ok(requests) => requests,
-            Err(error) => {
-                for p in here {
-                    readings.values.insert(p.code.clone(), Err(format!("no read plan: {error}")));
-                }
-                return;
-            }
-        };
-    readings.planned += requests.len();
-    for ferrobus_profile::Request { start, count } in requests {
-        let inside: Vec<&Point> = here
-            .iter()
-            .copied()
-            .filter(|p| p.address >= start && u32::from(p.address) < u32::from(start) + u32::from(count))
-            .collect();
-        let done = u64::try_from(inside.len()).unwrap_or(0);
-        if let Some(why) = readings.why_stopped(view) {
-            for p in inside {
-                readings.values.insert(p.code.clone(), Err(why.clone()));
-            }
-            continue;
-        }
-        readings.requests += 1;
-        tracing::info!(table = table.name(), start, count, "read request");
-        let Some(result) = interrupt.unless(read_table(session, table, start, count)).await else {
-            readings.interrupted = true;
-            continue;
-        };
-        match result {
-            Ok(items) => {
-                for p in inside {
-                    let from = usize::from(p.address - start);
-                    let words = items.get(from..from + usize::from(p.width)).map(<[u16]>::to_vec);
-                    let value = words.ok_or_else(|| "the reply was short".to_string());
-                    readings.values.insert(p.code.clone(), value);
-                }
-            }
-            Err(error @ Error::Exception { .. }) if inside.len() > 1 => {
-                tracing::info!(start, count, %error, "refused; reading point by point");
-                read_one_by_one(session, view, table, &inside, interrupt, readings).await;
-            }
-            Err(error) => {
-                let why = describe(&error, view);
-                for p in &inside {
-                    readings.values.insert(p.code.clone(), Err(why.clone()));
-                }
-                if !matches!(error, Error::Exception { .. }) {
-                    readings.stopped = Some(error);
-                }
-            }
-        }
-        bar.inc(done);
-    }
-}
-
-/// Reads each of `points` on its own (after the device refused them together).
-async fn read_one_by_one(
-    session: &Session,
-    view: &View,
-    table: Table,
-    points: &[&Point],
-    interrupt: &mut Interrupt,
-    readings: &mut Readings,
-) {
-    for p in points {
-        readings.requests += 1;
-        let Some(result) = interrupt.unless(read_table(session, table, p.address, p.width)).await else {
-            readings.interrupted = true;
-            return;
-        };
-        let value = match result {
-            Ok(items) => Ok(items),
-            Err(error @ Error::Exception { .. }) => Err(describe(&error, view)),
-            Err(error) => {
-                let why = describe(&error, view);
-                readings.stopped = Some(error);
-                readings.values.insert(p.code.clone(), Err(why));
-                return;
-            }
-        };
-        readings.values.insert(p.code.clone(), value);
-    }
-}
-
-async fn read_table(session: &Session, table: Table, start: u16, count: u16) -> Result<Vec<u16>, Error> {
-    let (client, unit) = (&session.client, session.unit);
-    let bits = |b: Vec<bool>| b.into_iter().map(u16::from).collect();
-    match table {
-        Table::Holding => client.read_holding_registers(unit, start, count).await,
-        Table::Input => client.read_input_registers(unit, start, count).await,
-        Table::Coils => client.read_coils(unit, start, count).await.map(bits),
-        Table::DiscreteInputs => client.read_discrete_inputs(unit, start, count).await.map(bits),
-    }
-}
-
-/// Writes `words` to `point`: FC05 for a coil, FC06 for one register, FC10 for more.
-pub(crate) async fn write(session: &Session, point: &Point, words: &[u16]) -> Result<(), Error> {
-    let (client, unit) = (&session.client, session.unit);
-    match (point.table, words) {
-        (Table::Coils, [bit]) => client.write_single_coil(unit, point.address, *bit != 0).await,
-        (_, [one]) => client.write_single_register(unit, point.address, *one).await,
-        _ => client.write_multiple_registers(unit, point.address, words).await,
-    }
-}
-
-/// An error in the user's words, with the profile's meaning of an exception code.
-pub(crate) fn describe(error: &Error, view: &View) -> String {
-    match error {
-        Error::Exception { code, .. } => match view.meaning(code.value()) {
-            Some(meaning) => format!("exception {code}: {meaning}"),
-            None => format!("exception {code}"),
-        },
-        other => other.to_string(),
-    }
 }

@@ -10,13 +10,14 @@ use serde_json::{Value, json};
 use ferrobus_profile::Point;
 use ferrobus_profile::source::ReadError;
 
-use super::file::{Backup, Entry, State};
-use super::param::{self, shown_toml};
+use super::file::Backup;
+use super::param::shown_toml;
 use super::view::View;
 use crate::connect::ConnectArgs;
 use crate::exit::CliError;
 use crate::interrupt::Interrupt;
 use crate::output::{self, Align, Format, OutputArgs, Rows};
+use ferrobus::backup::{Difference, Side, compare};
 
 /// `diff FILE [OTHER]`, `diff --defaults [FILE]`.
 #[derive(Args, Debug)]
@@ -46,47 +47,12 @@ pub(crate) struct DiffArgs {
     pub(crate) output: OutputArgs,
 }
 
-/// One side of a comparison.
-#[derive(Clone, Debug)]
-pub(crate) enum Side {
-    /// A value: raw, and shown in the profile's unit.
-    Value(toml::Value, String),
-    /// It could not be read: why.
-    Failed(String),
-    /// The side has no entry for it.
-    Absent,
-}
-
-impl Side {
-    fn of(entry: Option<&Entry>, point: Option<&Point>) -> Side {
-        match entry.map(|e| &e.state) {
-            Some(State::Value { raw, shown }) => {
-                let shown = match point.and_then(|p| param::from_toml(p, raw).ok().map(|v| p.show(&v))) {
-                    Some(shown) => shown,
-                    None if shown.is_empty() => shown_toml(raw),
-                    None => shown.clone(),
-                };
-                Side::Value(raw.clone(), shown)
-            }
-            Some(State::Failed(why)) => Side::Failed(why.clone()),
-            None => Side::Absent,
-        }
-    }
-
-    fn shown(&self) -> String {
-        match self {
-            Side::Value(_, shown) => shown.clone(),
-            Side::Failed(why) => format!("(not read: {why})"),
-            Side::Absent => "(absent)".into(),
-        }
-    }
-
-    fn json(&self) -> Value {
-        match self {
-            Side::Value(raw, shown) => json!({ "raw": toml_json(raw), "value": shown }),
-            Side::Failed(why) => json!({ "error": why }),
-            Side::Absent => Value::Null,
-        }
+/// One side of a comparison as JSON.
+fn side_json(side: &Side) -> Value {
+    match side {
+        Side::Value(raw, shown) => json!({ "raw": toml_json(raw), "value": shown }),
+        Side::Failed(why) => json!({ "error": why }),
+        Side::Absent => Value::Null,
     }
 }
 
@@ -100,59 +66,6 @@ pub(crate) fn toml_json(raw: &toml::Value) -> Value {
     }
 }
 
-/// Whether two raw values are the same to the device: through the registers they encode to,
-/// when the parameter is known and both encode; as TOML values otherwise.
-pub(crate) fn same(point: Option<&Point>, a: &toml::Value, b: &toml::Value) -> bool {
-    let words = |p: &Point, raw: &toml::Value| param::from_toml(p, raw).and_then(|v| param::encode(p, &v));
-    if let Some(p) = point
-        && let (Ok(x), Ok(y)) = (words(p, a), words(p, b))
-    {
-        return x == y;
-    }
-    a == b
-}
-
-/// One difference.
-#[derive(Clone, Debug)]
-pub(crate) struct Difference {
-    /// The code.
-    pub(crate) code: String,
-    /// The label, if the profile knows it.
-    pub(crate) label: String,
-    /// The first side (the file).
-    pub(crate) a: Side,
-    /// The second side (the device, or the second file).
-    pub(crate) b: Side,
-}
-
-/// The differences between `a` and `b`, in `a`'s order then `b`'s extras.
-pub(crate) fn compare(view: Option<&View>, a: &Backup, b: &Backup) -> Vec<Difference> {
-    let mut codes: Vec<&str> = a.entries.iter().map(|e| e.code.as_str()).collect();
-    for e in &b.entries {
-        if a.entry(&e.code).is_none() {
-            codes.push(&e.code);
-        }
-    }
-    let mut out = Vec::new();
-    for code in codes {
-        let point = view.and_then(|v| v.find(code));
-        let (ea, eb) = (a.entry(code), b.entry(code));
-        let equal = match (ea.map(|e| &e.state), eb.map(|e| &e.state)) {
-            (Some(State::Value { raw: x, .. }), Some(State::Value { raw: y, .. })) => same(point, x, y),
-            _ => false,
-        };
-        if !equal {
-            out.push(Difference {
-                code: code.to_string(),
-                label: point.map(|p| param::label(p).to_string()).unwrap_or_default(),
-                a: Side::of(ea, point),
-                b: Side::of(eb, point),
-            });
-        }
-    }
-    out
-}
-
 /// Reads a backup file, with its path in every error.
 pub(crate) fn load(path: &Path) -> Result<Backup, CliError> {
     let shown = path.display().to_string();
@@ -160,7 +73,7 @@ pub(crate) fn load(path: &Path) -> Result<Backup, CliError> {
         ReadError::Io(e) => CliError::Usage(format!("cannot read {shown}: {e}")),
         not_text @ ReadError::NotText(_) => CliError::Usage(not_text.located().in_file(&shown)),
     })?;
-    Backup::parse(&text, &shown).map_err(CliError::Usage)
+    Backup::parse(&text, &shown).map_err(|e| CliError::Usage(e.to_string()))
 }
 
 /// Runs `diff FILE [OTHER]` (`diff --defaults` is [`super::defaults::run`]).
@@ -235,8 +148,8 @@ fn finish(
             "differences": differences.iter().map(|d| json!({
                 "code": d.code,
                 "label": d.label,
-                "a": d.a.json(),
-                "b": d.b.json(),
+                "a": side_json(&d.a),
+                "b": side_json(&d.b),
             })).collect::<Vec<_>>(),
         })),
         other => {

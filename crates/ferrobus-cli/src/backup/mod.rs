@@ -1,37 +1,8 @@
 //! `backup`, `diff`, `restore`: a drive's parameters saved to a file, compared with the
 //! device or another file, and written back.
 //!
-//! # The backup file
-//!
-//! TOML, one parameter a line, in the profile's order, each under a comment with its label, so
-//! that two backups compare with any text diff:
-//!
-//! ```toml
-//! # ferrobus backup of unit 1 (Omron 3G3RX inverter), profile omron-3g3rx
-//! [backup]
-//! format = 1                         # this layout; a later one is refused, not misread
-//! profile = "omron-3g3rx"            # a built-in name, or the path of a profile file
-//! profile_hash = "sha256:…"          # only for a profile file: the exact file used
-//! device = "Omron 3G3RX inverter"
-//! time = "2026-12-01T22:00:00Z"      # ISO-8601 UTC
-//! connection = "/dev/ttyUSB0 at 19200 8E1 (RTU)"
-//! identification = "none: …"         # or "FC2B/0E", "FC11", or why it failed
-//! unit = 1
-//!
-//! [identification]                   # the objects read, if the device has them
-//! VendorName = "…"
-//!
-//! [parameters]
-//! # Acceleration time 1
-//! F002 = { raw = 1000, value = "10.00 s" }
-//! # Base frequency
-//! A003 = { error = "exception 0x22 (vendor-specific): the device restricts execution" }
-//! ```
-//!
-//! `raw` is the value the device holds: an integer (a decimal string for a `u64` past
-//! `i64::MAX`), a float for `f32`/`f64`, a string for text, `true`/`false` for a coil. Only
-//! `raw` is read back; `value` (the raw value in the profile's unit) is for people. A
-//! parameter that could not be read has `error` instead, with the reason.
+//! The backup file's format, the values in it, the profile it pins and the comparison are the
+//! library's (`ferrobus::backup`, whose doc describes the format); here are the commands.
 //!
 //! A backup saves what the profile marks `backup` (by default its read-write registers); the
 //! reads follow the profile's read plan ([`ferrobus_profile::plan`]), so the 3G3RX's 4 registers per request are
@@ -46,22 +17,18 @@
 pub(crate) mod defaults;
 pub(crate) mod device;
 pub(crate) mod diff;
-pub(crate) mod file;
-pub(crate) mod param;
 pub(crate) mod restore;
-pub(crate) mod save;
-mod sha256;
-pub(crate) mod view;
+
+// The file format, the values, the profile and the comparison are the library's.
+pub(crate) use ferrobus::backup::{entries, file, param, save, view};
 
 use std::path::{Path, PathBuf};
 
 use clap::Args;
-use ferrobus::Error;
 use ferrobus_profile::Point;
-use ferrobus_proto::codes::{ReadDeviceIdCode, device_object};
 
-use self::file::{Backup, Entry, Header, State};
-use self::view::{Identification, View};
+use self::file::{Backup, Header};
+use self::view::View;
 use crate::connect::{ConnectArgs, Session};
 use crate::exit::CliError;
 use crate::interrupt::Interrupt;
@@ -95,7 +62,7 @@ pub(crate) fn profile(connection: &ConnectArgs, command: &str) -> Result<View, C
             "{command} needs the device's profile: --device NAME (omron-3g3rx, sdp-servo, generic) or --device FILE"
         )));
     };
-    View::load(name).map_err(CliError::Usage)
+    View::load(name).map_err(|e| CliError::Usage(e.to_string()))
 }
 
 /// Runs `backup`.
@@ -116,7 +83,7 @@ pub(crate) async fn run(connection: &ConnectArgs, args: &BackupArgs) -> Result<(
         return Err(error.into());
     }
     let saved = if let Some(path) = &args.output {
-        Some((save::save(path, &backup, args.force)?, path))
+        Some((save::save(path, &backup, args.force).map_err(saving)?, path))
     } else {
         output::print(&backup.render())?;
         None
@@ -151,6 +118,17 @@ pub(crate) async fn run(connection: &ConnectArgs, args: &BackupArgs) -> Result<(
         if unread.len() == 1 { "" } else { "s" },
         unread.join(", ")
     )))
+}
+
+/// A failed save as the command's error: the file and why, or a path that names no file.
+fn saving(error: save::SaveError) -> CliError {
+    match error {
+        save::SaveError::NotAFile { path } => {
+            CliError::Usage(format!("-o {}: name a file, not a directory", path.display()))
+        }
+        save::SaveError::Io { what, source } => CliError::Output { what, source },
+        other => CliError::Usage(other.to_string()),
+    }
 }
 
 /// Says where the backup went when it did not simply become `path`.
@@ -197,61 +175,8 @@ pub(crate) fn backup_of(
     Backup { header, identification: objects, entries }
 }
 
-/// One entry per parameter, in `params`' order, from what was read: its value, or why it has
-/// none; and how many have none.
-pub(crate) fn entries(params: &[&Point], readings: &device::Readings) -> (Vec<Entry>, usize) {
-    let mut failed = 0;
-    let entries = params
-        .iter()
-        .map(|p| {
-            let state = match readings.values.get(&p.code) {
-                Some(Ok(words)) => match param::decode(p, words) {
-                    Ok(raw) => State::Value { shown: p.show(&raw), raw: param::to_toml(&raw) },
-                    Err(why) => State::Failed(why),
-                },
-                Some(Err(why)) => State::Failed(why.clone()),
-                None => State::Failed("not read".into()),
-            };
-            if matches!(state, State::Failed(_)) {
-                failed += 1;
-            }
-            Entry { code: p.code.clone(), label: param::label(p).to_string(), line: 0, state }
-        })
-        .collect();
-    (entries, failed)
-}
-
-/// How the device identifies itself: FC2B/0E's basic objects, or FC11's data, if the profile
-/// says it has them. A refusal is recorded, not fatal; no reply ends the backup.
+/// How the device identifies itself ([`ferrobus::backup::device::identify`]); no reply ends
+/// the backup.
 async fn identify(session: &Session, view: &View) -> Result<(String, Vec<(String, String)>), CliError> {
-    let (client, unit) = (&session.client, session.unit);
-    match view.identification() {
-        Identification::None => {
-            Ok(("none: the profile says the device has no identification (FC2B/0E, FC11)".into(), Vec::new()))
-        }
-        Identification::DeviceId => match client.read_device_identification(unit, ReadDeviceIdCode::Basic, 0).await {
-            Ok(info) => {
-                let objects = info
-                    .objects
-                    .into_iter()
-                    .map(|(id, bytes)| {
-                        let name = device_object::name(id).map_or_else(|| format!("object-0x{id:02X}"), str::to_string);
-                        (name, String::from_utf8_lossy(&bytes).into_owned())
-                    })
-                    .collect();
-                Ok(("FC2B/0E".into(), objects))
-            }
-            Err(error @ Error::Exception { .. }) => {
-                Ok((format!("FC2B/0E refused: {}", device::describe(&error, view)), Vec::new()))
-            }
-            Err(error) => Err(error.into()),
-        },
-        Identification::ServerId => match client.report_server_id(unit).await {
-            Ok(data) => Ok(("FC11".into(), vec![("server_id".into(), crate::hex::format(&data))])),
-            Err(error @ Error::Exception { .. }) => {
-                Ok((format!("FC11 refused: {}", device::describe(&error, view)), Vec::new()))
-            }
-            Err(error) => Err(error.into()),
-        },
-    }
+    Ok(ferrobus::backup::device::identify(device::target(session), view).await?)
 }

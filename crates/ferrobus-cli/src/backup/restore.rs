@@ -8,31 +8,27 @@
 //! Nothing is sent, not even a read, when the file holds a value its parameter cannot take
 //! (out of `min`..=`max`, not of its type, wider than one write request). Nothing is written
 //! when a differing parameter is read-only, or run-locked (`while_running = false`) while the
-//! drive runs: restore does not stop the drive itself — stopping a motor under load is the
+//! drive runs — the profile's write guard, the one every writer applies, says so for each —:
+//! restore does not stop the drive itself — stopping a motor under load is the
 //! operator's decision, and the profile says how to tell that the drive runs, not how to stop
 //! it safely — so it names the parameters and asks for the drive to be stopped. A file of
 //! another profile is refused unless `--force`, which restores the parameters both share.
 
-use std::collections::BTreeSet;
 use std::path::PathBuf;
 
 use clap::Args;
-use ferrobus::Error;
 use serde_json::json;
 
-use super::device;
+use super::device::{self, Watched};
 use super::diff::load;
-use super::file::{Backup, State};
-use super::param::shown_toml;
-use ferrobus_profile::{Point, Value};
+use ferrobus::backup::restore::{self as plan, Item, Outcome};
+use ferrobus_profile::Point;
 
 use super::param;
-use super::view::View;
-use crate::connect::{ConnectArgs, Session};
+use crate::connect::ConnectArgs;
 use crate::exit::CliError;
 use crate::interrupt::Interrupt;
 use crate::output::{self, Align, Format, OutputArgs, Rows};
-use crate::progress;
 
 /// `restore FILE [--apply] [--force]`.
 #[derive(Args, Debug)]
@@ -59,35 +55,6 @@ pub(crate) struct RestoreArgs {
     pub(crate) output: OutputArgs,
 }
 
-/// A value of the file to restore: its parameter, the raw value and its registers.
-type Candidate<'v> = (&'v Point, Value, Vec<u16>);
-
-/// One parameter to restore.
-struct Item<'a> {
-    param: &'a Point,
-    /// The file's raw value and its registers.
-    raw: Value,
-    words: Vec<u16>,
-    /// The device's value before, shown.
-    before: String,
-    outcome: Outcome,
-}
-
-/// What happened to a parameter.
-#[derive(Clone, PartialEq, Debug)]
-enum Outcome {
-    /// Not (yet) written; once written, written with the device's confirmation.
-    Pending,
-    /// Ctrl-C came while it was being written: it may or may not have been.
-    InFlight,
-    /// Written and read back equal.
-    Verified,
-    /// Written; the read-back differs or failed.
-    Unverified(String),
-    /// Not written, and why.
-    NotWritten(String),
-}
-
 /// Runs `restore`.
 pub(crate) async fn run(connection: &ConnectArgs, args: &RestoreArgs) -> Result<(), CliError> {
     let backup = load(&args.file)?;
@@ -104,7 +71,11 @@ pub(crate) async fn run(connection: &ConnectArgs, args: &RestoreArgs) -> Result<
             view.name
         )));
     }
-    let candidates = checked(&backup, &view, &file, args.force)?;
+    let checked = plan::checked(&backup, &view, &file, args.force).map_err(|e| CliError::Usage(e.to_string()))?;
+    for note in &checked.notes {
+        eprintln!("note: {note}");
+    }
+    let candidates = checked.candidates;
     connection.refuse_broadcast_read()?;
     let mut interrupt = Interrupt::listen()?;
     let session = interrupt.unless(connection.open()).await.ok_or(CliError::Interrupted)??;
@@ -123,8 +94,8 @@ pub(crate) async fn run(connection: &ConnectArgs, args: &RestoreArgs) -> Result<
     if let Some(error) = before.stopped {
         return Err(error.into());
     }
-    let mut items = differing(candidates, &before, &file)?;
-    order(&mut items).map_err(CliError::Usage)?;
+    let mut items = plan::differing(candidates, &before, &file).map_err(|e| CliError::Usage(e.to_string()))?;
+    plan::order(&mut items).map_err(|e| CliError::Usage(e.to_string()))?;
     let format = args.output.format();
     if !args.apply {
         let text = render(&items, format, "dry run", &file);
@@ -136,204 +107,22 @@ pub(crate) async fn run(connection: &ConnectArgs, args: &RestoreArgs) -> Result<
                 plural(n)
             );
         }
-        if let Err(CliError::Incomplete(why)) = run_lock(&items, running_param, &before) {
+        if let Err(why) = plan::guard(&items, &view.profile, running_param, &before) {
             eprintln!("note: --apply would refuse now: {why}");
         }
         return Ok(());
     }
-    run_lock(&items, running_param, &before)?;
-    let interrupted = apply(&session, &view, &mut items, &mut interrupt).await;
-    let drifted = read_back(&session, &view, &backup, &mut items, interrupted, &mut interrupt).await;
+    plan::guard(&items, &view.profile, running_param, &before)
+        .map_err(|why| CliError::Incomplete(format!("{why}; nothing was written")))?;
+    let pending = items.iter().filter(|i| i.outcome == Outcome::Pending).count();
+    let mut watched = Watched::new(&mut interrupt, pending, "parameters written");
+    let interrupted = plan::apply(device::target(&session), &view, &mut items, &mut watched).await;
+    watched.finish();
+    let what = plan::ReadBack { view: &view, backup: &backup, interrupted };
+    let mut watched = Watched::new(&mut interrupt, what.points(&items).len(), "parameters read");
+    let drifted = plan::read_back(device::target(&session), what, &mut items, &mut watched).await;
+    watched.finish();
     conclude(&items, &drifted, format, &file, interrupted)
-}
-
-/// The candidates whose value on the device differs from the file's; a read-only one among
-/// them refuses the restore.
-fn differing<'v>(
-    candidates: Vec<Candidate<'v>>,
-    before: &device::Readings,
-    file: &str,
-) -> Result<Vec<Item<'v>>, CliError> {
-    let mut items = Vec::new();
-    let mut read_only = Vec::new();
-    for (param, raw, words) in candidates {
-        let (known, before_shown) = match before.values.get(&param.code) {
-            Some(Ok(current)) if *current == words => continue,
-            Some(Ok(current)) => match param::decode(param, current) {
-                Ok(value) => (true, param.show(&value)),
-                Err(why) => (false, format!("(not read: {why})")),
-            },
-            Some(Err(why)) => (false, format!("(not read: {why})")),
-            None => (false, "(not read)".into()),
-        };
-        if !param.writable() {
-            read_only.push(format!(
-                "{}: the profile marks it read-only; the device holds {before_shown}, the file {}",
-                param.code,
-                param.show(&raw)
-            ));
-            continue;
-        }
-        let outcome = if known {
-            Outcome::Pending
-        } else {
-            Outcome::NotWritten(format!("its value could not be read first: {before_shown}"))
-        };
-        items.push(Item { param, raw, words, before: before_shown, outcome });
-    }
-    if !read_only.is_empty() {
-        return Err(CliError::Usage(format!(
-            "{file} cannot be restored; nothing was written:\n  {}",
-            read_only.join("\n  ")
-        )));
-    }
-    Ok(items)
-}
-
-/// Reads back every parameter of the file (after an interruption, only what was or may have
-/// been written): each written item verified or not, and the parameters not written that
-/// differ from the file after the restore.
-async fn read_back(
-    session: &Session,
-    view: &View,
-    backup: &Backup,
-    items: &mut [Item<'_>],
-    interrupted: bool,
-    interrupt: &mut Interrupt,
-) -> Vec<String> {
-    let written = |o: &Outcome| matches!(o, Outcome::Pending | Outcome::InFlight);
-    let all: Vec<&Point> = if interrupted {
-        items.iter().filter(|i| written(&i.outcome)).map(|i| i.param).collect()
-    } else {
-        backup.entries.iter().filter_map(|e| view.find(&e.code)).collect()
-    };
-    let after = device::read(session, view, &all, interrupt).await;
-    for item in items.iter_mut().filter(|i| written(&i.outcome)) {
-        item.outcome = verify(item, after.values.get(&item.param.code));
-    }
-    if interrupted {
-        return Vec::new();
-    }
-    let mut drifted = Vec::new();
-    for entry in &backup.entries {
-        let (Some(param), State::Value { raw, .. }) = (view.find(&entry.code), &entry.state) else { continue };
-        if items.iter().any(|i| i.param.code == param.code) {
-            continue;
-        }
-        if let Some(Ok(words)) = after.values.get(&param.code)
-            && param::from_toml(param, raw).and_then(|v| param::encode(param, &v)).is_ok_and(|w| w != *words)
-        {
-            drifted.push(format!("{} now reads {} (the file: {})", param.code, shown(param, words), shown_toml(raw)));
-        }
-    }
-    drifted
-}
-
-/// The outcome of a written (or perhaps written) item, from what it reads back.
-fn verify(item: &Item<'_>, back: Option<&Result<Vec<u16>, String>>) -> Outcome {
-    let in_flight = item.outcome == Outcome::InFlight;
-    match back {
-        Some(Ok(words)) if *words == item.words => Outcome::Verified,
-        Some(Ok(words)) if in_flight => {
-            Outcome::NotWritten(format!("interrupted while being written; it still reads {}", shown(item.param, words)))
-        }
-        Some(Ok(words)) => Outcome::Unverified(format!("written, but reads back {}", shown(item.param, words))),
-        Some(Err(why)) if in_flight => {
-            Outcome::Unverified(format!("interrupted while being written, so perhaps written; not read back: {why}"))
-        }
-        Some(Err(why)) => Outcome::Unverified(format!("written, but not read back: {why}")),
-        None => Outcome::Unverified("written, but not read back".into()),
-    }
-}
-
-/// Each value of the file with its parameter and registers, checked before anything is sent:
-/// a parameter the profile lacks (skipped with `--force`), a value not of its type, out of
-/// range, or wider than a write request.
-fn checked<'v>(backup: &Backup, view: &'v View, file: &str, force: bool) -> Result<Vec<Candidate<'v>>, CliError> {
-    let mut candidates: Vec<Candidate<'v>> = Vec::new();
-    let mut problems = Vec::new();
-    for entry in &backup.entries {
-        let at = format!("{file}:{}: {}", entry.line, entry.code);
-        let raw = match &entry.state {
-            State::Value { raw, .. } => raw,
-            State::Failed(why) => {
-                eprintln!("note: {at}: the backup holds no value (it could not be read: {why}); left as it is");
-                continue;
-            }
-        };
-        let Some(param) = view.find(&entry.code) else {
-            if force {
-                eprintln!("note: {at}: not in profile {}; skipped", view.name);
-            } else {
-                problems.push(format!("{at}: profile {} has no such parameter", view.name));
-            }
-            continue;
-        };
-        let limit = view.profile.write_limit(param.table);
-        match param::from_toml(param, raw).and_then(|v| param::encode(param, &v).map(|w| (v, w))) {
-            Err(why) => problems.push(format!("{at}: {why}")),
-            Ok(_) if param.width > limit => {
-                problems.push(format!("{at}: {} registers do not fit one write request of {limit}", param.width));
-            }
-            Ok((value, words)) => match param.check_write(&value, &param.show(&value)) {
-                Err(why) if param.writable() => problems.push(format!("{file}:{}: {why}", entry.line)),
-                _ => candidates.push((param, value, words)),
-            },
-        }
-    }
-    if !problems.is_empty() {
-        return Err(CliError::Usage(format!(
-            "{file} cannot be restored; nothing was sent:\n  {}",
-            problems.join("\n  ")
-        )));
-    }
-    Ok(candidates)
-}
-
-/// The run-lock rule, before any write: a run-locked parameter to write while the drive runs
-/// (or while it cannot be told whether it runs) refuses the restore.
-fn run_lock(items: &[Item<'_>], running: Option<(&Point, &[i64])>, before: &device::Readings) -> Result<(), CliError> {
-    let locked: Vec<&str> = items
-        .iter()
-        .filter(|i| !i.param.while_running && i.outcome == Outcome::Pending)
-        .map(|i| i.param.code.as_str())
-        .collect();
-    let Some((p, values)) = running else {
-        if !locked.is_empty() {
-            eprintln!(
-                "note: the profile does not say how to tell that the drive runs ([state] running): {} may not be \
-                 written while it runs, and the drive may refuse them",
-                locked.join(", ")
-            );
-        }
-        return Ok(());
-    };
-    if !locked.is_empty() {
-        let runs = match before.values.get(&p.code) {
-            Some(Ok(words)) => param::decode(p, words)
-                .ok()
-                .and_then(|v| v.as_int())
-                .is_some_and(|n| values.iter().any(|v| i128::from(*v) == n)),
-            Some(Err(why)) => {
-                return Err(CliError::Incomplete(format!(
-                    "cannot tell whether the drive runs ({}: {why}), and {} may not be written while it runs; \
-                     nothing was written",
-                    p.code,
-                    locked.join(", ")
-                )));
-            }
-            None => false,
-        };
-        if runs {
-            return Err(CliError::Incomplete(format!(
-                "the drive runs ({} says so): {} may not be written while it runs; stop the drive and restore \
-                 again (nothing was written)",
-                p.code,
-                locked.join(", ")
-            )));
-        }
-    }
-    Ok(())
 }
 
 /// Prints the outcome; an error naming what was and was not written unless all is verified
@@ -388,84 +177,12 @@ fn conclude(
     Err(CliError::Incomplete(format!("the restore is incomplete: {lists}")))
 }
 
-/// Registers read from the device, shown in the profile's unit.
-fn shown(point: &Point, words: &[u16]) -> String {
-    param::decode(point, words).map_or_else(|why| format!("(undecodable: {why})"), |v| point.show(&v))
-}
-
 fn list(codes: &[&str]) -> String {
     if codes.is_empty() { "none".into() } else { codes.join(", ") }
 }
 
 fn plural(n: usize) -> &'static str {
     if n == 1 { "" } else { "s" }
-}
-
-/// Writes each pending item in order, with a progress bar on a terminal. After a refusal
-/// the rest go on, except what depends on it; after no reply, a lost port or Ctrl-C nothing
-/// more is sent. Whether Ctrl-C came.
-async fn apply(session: &Session, view: &View, items: &mut [Item<'_>], interrupt: &mut Interrupt) -> bool {
-    let mut failed: BTreeSet<String> =
-        items.iter().filter(|i| matches!(i.outcome, Outcome::NotWritten(_))).map(|i| i.param.code.clone()).collect();
-    let bar = progress::bar(items.iter().filter(|i| i.outcome == Outcome::Pending).count(), "parameters written");
-    let mut stopped: Option<String> = None;
-    let mut interrupted = false;
-    for item in items.iter_mut() {
-        if item.outcome != Outcome::Pending {
-            continue;
-        }
-        if let Some(why) = &stopped {
-            item.outcome = Outcome::NotWritten(format!("not attempted: the writes stopped after {why}"));
-            failed.insert(item.param.code.clone());
-            continue;
-        }
-        if let Some(dep) = item.param.depends_on.iter().find(|d| failed.iter().any(|f| f.eq_ignore_ascii_case(d))) {
-            item.outcome = Outcome::NotWritten(format!("it depends on {dep}, which was not written"));
-            failed.insert(item.param.code.clone());
-            continue;
-        }
-        tracing::info!(code = %item.param.code, words = ?item.words, "writing");
-        bar.set_message(item.param.code.clone());
-        match interrupt.unless(device::write(session, item.param, &item.words)).await {
-            Some(Ok(())) => bar.inc(1),
-            None => {
-                item.outcome = Outcome::InFlight;
-                interrupted = true;
-                stopped = Some("Ctrl-C or SIGTERM".to_string());
-            }
-            Some(Err(error)) => {
-                bar.inc(1);
-                let why = device::describe(&error, view);
-                if !matches!(error, Error::Exception { .. }) {
-                    stopped = Some(why.clone());
-                }
-                item.outcome = Outcome::NotWritten(why);
-                failed.insert(item.param.code.clone());
-            }
-        }
-    }
-    bar.finish_and_clear();
-    interrupted
-}
-
-/// Sorts the items so that each comes after those it depends on (among the items), keeping
-/// the profile's order otherwise; a cycle is an error.
-fn order(items: &mut Vec<Item<'_>>) -> Result<(), String> {
-    let mut rest: Vec<Item<'_>> = std::mem::take(items);
-    while !rest.is_empty() {
-        let ready = rest.iter().position(|item| {
-            !item.param.depends_on.iter().any(|d| rest.iter().any(|other| other.param.code.eq_ignore_ascii_case(d)))
-        });
-        let Some(at) = ready else {
-            let codes: Vec<&str> = rest.iter().map(|i| i.param.code.as_str()).collect();
-            return Err(format!(
-                "the profile's depends_on make a cycle among {}; nothing was written",
-                codes.join(", ")
-            ));
-        };
-        items.push(rest.remove(at));
-    }
-    Ok(())
 }
 
 /// The plan or the outcome as a table, CSV or JSON.
@@ -518,55 +235,4 @@ fn render(items: &[Item<'_>], format: Format, stage: &str, file: &str) -> String
         return format!("the device agrees with {file}: nothing to write\n");
     }
     rows.render(format)
-}
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-    use ferrobus_profile::Profile;
-    use std::fmt::Write as _;
-
-    fn profile(entries: &[(&str, &[&str])]) -> Profile {
-        let mut text = String::from("[device]\nname = \"t\"\nvendor = \"t\"\nproduct_code = \"t\"\nrevision = \"1\"\n");
-        for (number, (code, depends_on)) in entries.iter().enumerate() {
-            let list: Vec<String> = depends_on.iter().map(|d| format!("\"{d}\"")).collect();
-            let _ = write!(
-                text,
-                "[[registers]]\nnumber = {number}\nname = \"{code}\"\naccess = \"rw\"\ndepends_on = [{}]\n",
-                list.join(", ")
-            );
-        }
-        Profile::parse(&text, "t.toml").unwrap()
-    }
-
-    fn items(profile: &Profile) -> Vec<Item<'_>> {
-        profile
-            .points()
-            .iter()
-            .map(|param| Item {
-                param,
-                raw: Value::Int(0),
-                words: vec![0],
-                before: String::new(),
-                outcome: Outcome::Pending,
-            })
-            .collect()
-    }
-
-    #[test]
-    fn dependencies_come_first_and_the_profile_order_is_kept_otherwise() {
-        let profile = profile(&[("F001", &["A004"]), ("B", &[]), ("A004", &["A003"]), ("A003", &[]), ("C", &["B"])]);
-        let mut items = items(&profile);
-        order(&mut items).unwrap();
-        let codes: Vec<&str> = items.iter().map(|i| i.param.code.as_str()).collect();
-        assert_eq!(codes, ["B", "A003", "A004", "F001", "C"]);
-    }
-
-    #[test]
-    fn a_dependency_cycle_is_refused_before_any_write() {
-        let profile = profile(&[("A", &["B"]), ("B", &["A"]), ("C", &[])]);
-        let mut items = items(&profile);
-        let err = order(&mut items).unwrap_err();
-        assert_eq!(err, "the profile's depends_on make a cycle among A, B; nothing was written");
-    }
 }

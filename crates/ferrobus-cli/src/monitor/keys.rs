@@ -8,25 +8,35 @@ use ferrobus_profile::{Table, Value, ValueType};
 use super::model::{App, Mode};
 
 /// What the IO loop has to do after a key.
-#[derive(Clone, Debug, PartialEq, Eq)]
+#[derive(Clone, Debug, PartialEq)]
 pub(crate) enum Action {
     /// Nothing.
     None,
     /// Write to the device.
-    Write {
-        /// The pane (for its unit).
-        pane: usize,
-        /// The wire address.
-        address: u16,
-        /// Registers to write, or the coil.
-        registers: Vec<u16>,
-        /// The coil's value.
-        bit: Option<bool>,
-    },
+    Write(Asked),
     /// Save the session file.
     Save,
     /// The counters were reset (the poller's too).
     Reset,
+}
+
+/// A write the user confirmed.
+#[derive(Clone, Debug, PartialEq)]
+pub(crate) struct Asked {
+    /// The pane (for its unit).
+    pub(crate) pane: usize,
+    /// The cell (for its point, which the write guard checks right before the write).
+    pub(crate) cell: usize,
+    /// The raw value, as typed.
+    pub(crate) raw: Value,
+    /// What was typed.
+    pub(crate) text: String,
+    /// The wire address.
+    pub(crate) address: u16,
+    /// Registers to write, or the coil.
+    pub(crate) registers: Vec<u16>,
+    /// The coil's value.
+    pub(crate) bit: Option<bool>,
 }
 
 /// Applies `key`.
@@ -54,12 +64,12 @@ pub(crate) fn handle(app: &mut App, key: KeyEvent) -> Action {
             });
             Action::None
         }
-        Mode::Confirm { text, registers, bit } => {
+        Mode::Confirm { text, raw, registers, bit } => {
             if let KeyCode::Char('y' | 'Y') = key.code {
                 let Some((_, cell)) = app.selected() else { return Action::None };
                 let address = cell.point.address;
                 app.message = Some(format!("writing {text} to {address:#06x}"));
-                return Action::Write { pane: app.pane, address, registers, bit };
+                return Action::Write(Asked { pane: app.pane, cell: app.cell, raw, text, address, registers, bit });
             }
             app.message = Some("write cancelled".into());
             Action::None
@@ -92,15 +102,16 @@ fn check(app: &mut App, text: &str) -> Mode {
         app.message = Some(format!("{} are read-only", pane.table_name()));
         return Mode::Normal;
     }
-    let written = cell.point.prepare_write(text).and_then(|raw| match raw {
-        Value::Bool(b) => Ok((Vec::new(), Some(b))),
+    let written = cell.point.prepare_write(text).and_then(|raw| match &raw {
+        Value::Bool(b) => Ok((Vec::new(), Some(*b), raw)),
         other if cell.point.value_type == ValueType::Bit => {
-            Ok((Vec::new(), Some(other.as_int().is_some_and(|n| n != 0))))
+            let on = other.as_int().is_some_and(|n| n != 0);
+            Ok((Vec::new(), Some(on), raw))
         }
-        other => cell.point.encode(&other).map(|r| (r, None)),
+        other => cell.point.encode(other).map(|r| (r, None, raw)),
     });
     match written {
-        Ok((registers, bit)) => Mode::Confirm { text: text.trim().to_string(), registers, bit },
+        Ok((registers, bit, raw)) => Mode::Confirm { text: text.trim().to_string(), raw, registers, bit },
         Err(e) => {
             app.message = Some(format!("not written: {e}"));
             Mode::Normal

@@ -25,6 +25,7 @@ use std::time::Instant;
 use clap::Args;
 use ferrobus::Client;
 use ferrobus::poll::{Event as PollEvent, Failure, FailureKind, Group, Layout, PollConfig, Poller, Sample};
+use ferrobus_profile::Profile;
 use ratatui::Terminal;
 use ratatui::backend::CrosstermBackend;
 use ratatui::crossterm::event::{self, Event};
@@ -187,7 +188,8 @@ pub(crate) async fn run(connection: &ConnectArgs, args: &MonitorArgs) -> Result<
     let mut app = App::new(target, panes);
     let saving = SaveTo { path: args.session.clone(), device: connection.device.clone() };
     let mut screen = Screen::enter().map_err(|e| io_error("setting up the terminal", e))?;
-    let result = event_loop(&mut screen.terminal, &mut app, &session_client.client, poller, &reads, &saving).await;
+    let bus = Bus { client: &session_client.client, profile: profile.as_ref() };
+    let result = event_loop(&mut screen.terminal, &mut app, &bus, poller, &reads, &saving).await;
     drop(screen);
     result
 }
@@ -198,6 +200,13 @@ struct Read {
     pane: usize,
     start: u16,
     count: u16,
+}
+
+/// What a write goes through: the client, and the `--device` profile whose write guard it
+/// passes first.
+struct Bus<'a> {
+    client: &'a Client,
+    profile: Option<&'a Profile>,
 }
 
 /// Where `s` saves.
@@ -290,7 +299,7 @@ fn key_reader() -> tokio::sync::mpsc::Receiver<std::io::Result<Event>> {
 async fn event_loop(
     terminal: &mut Terminal<CrosstermBackend<std::io::Stdout>>,
     app: &mut App,
-    client: &Client,
+    bus: &Bus<'_>,
     mut poller: Poller,
     reads: &[Read],
     saving: &SaveTo,
@@ -321,8 +330,8 @@ async fn event_loop(
                         keys::Action::None => {}
                         keys::Action::Save => save(app, saving),
                         keys::Action::Reset => handle.reset(),
-                        keys::Action::Write { pane, address, registers, bit } => {
-                            write(app, client, start, pane, address, &registers, bit).await;
+                        keys::Action::Write(asked) => {
+                            write(app, bus, start, &asked).await;
                             // Read again at once: a resume polls every group now.
                             if !app.paused {
                                 handle.pause();
@@ -435,16 +444,26 @@ fn describe(outcome: &Outcome) -> String {
     }
 }
 
-async fn write(
-    app: &mut App,
-    client: &Client,
-    start: Instant,
-    pane: usize,
-    address: u16,
-    registers: &[u16],
-    bit: Option<bool>,
-) {
+/// Writes what the user confirmed, once the profile's write guard lets it (the one `set`,
+/// `restore` and the bridge apply: range, access, and for a run-locked parameter the drive's
+/// run state read first). A cell of a raw range over a profile's parameter is guarded as that
+/// parameter.
+async fn write(app: &mut App, bus: &Bus<'_>, start: Instant, asked: &keys::Asked) {
+    let keys::Asked { pane, cell, raw, text, address, registers, bit } = asked;
+    let (pane, address, registers, bit, client) = (*pane, *address, registers.as_slice(), *bit, bus.client);
     let Some(unit) = app.panes.get(pane).map(|p| p.unit) else { return };
+    if let (Some(profile), Some(cell)) = (bus.profile, app.panes.get(pane).and_then(|p| p.cells.get(*cell))) {
+        let point = profile
+            .points()
+            .iter()
+            .find(|p| p.table == cell.point.table && p.address == cell.point.address)
+            .unwrap_or(&cell.point);
+        let write = ferrobus_profile::Write { point, raw, typed: text };
+        if let Err(refusal) = ferrobus::guard::check_write(client, unit, profile, &write).await {
+            app.message = Some(format!("not written: {refusal}"));
+            return;
+        }
+    }
     let [ah, al] = address.to_be_bytes();
     let request: Vec<u8> = match (bit, registers) {
         (Some(b), _) => vec![0x05, ah, al, if b { 0xFF } else { 0x00 }, 0x00],

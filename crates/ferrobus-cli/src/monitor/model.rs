@@ -461,7 +461,7 @@ pub(crate) struct Trend {
 }
 
 /// What the keyboard is doing.
-#[derive(Clone, Debug, PartialEq, Eq)]
+#[derive(Clone, Debug, PartialEq)]
 pub(crate) enum Mode {
     /// Moving around.
     Normal,
@@ -473,6 +473,8 @@ pub(crate) enum Mode {
     Confirm {
         /// What the user typed.
         text: String,
+        /// Its raw value, for the write guard.
+        raw: Value,
         /// The registers to write.
         registers: Vec<u16>,
         /// The coil to write.

@@ -3,7 +3,7 @@
 
 use std::time::Duration;
 
-use ferrobus_profile::{Order, Profile, Table};
+use ferrobus_profile::{Order, Profile, Table, Value};
 use ratatui::Terminal;
 use ratatui::backend::TestBackend;
 use ratatui::crossterm::event::{KeyCode, KeyEvent, KeyModifiers};
@@ -99,11 +99,22 @@ fn the_confirmation_of_a_write_at_80x24() {
         key(&mut app, KeyCode::Char(c));
     }
     key(&mut app, KeyCode::Enter);
-    assert_eq!(app.mode, Mode::Confirm { text: "4660".into(), registers: vec![0x1234], bit: None });
+    assert_eq!(
+        app.mode,
+        Mode::Confirm { text: "4660".into(), raw: Value::Int(0x1234), registers: vec![0x1234], bit: None }
+    );
     insta::assert_snapshot!(render(&app, 80, 24));
     assert_eq!(
         key(&mut app, KeyCode::Char('y')),
-        Action::Write { pane: 0, address: 0, registers: vec![0x1234], bit: None }
+        Action::Write(keys::Asked {
+            pane: 0,
+            cell: 0,
+            raw: Value::Int(0x1234),
+            text: "4660".into(),
+            address: 0,
+            registers: vec![0x1234],
+            bit: None
+        })
     );
 }
 

@@ -261,7 +261,7 @@ fn draw_prompt(frame: &mut Frame<'_>, area: Rect, app: &App) {
         },
         Mode::Edit(text) => Line::from(format!("write {selected} = {text}_   (Enter: check, Esc: cancel)")),
         Mode::Alias(text) => Line::from(format!("alias of {selected}: {text}_   (Enter: set, Esc: cancel)")),
-        Mode::Confirm { text, registers, bit } => {
+        Mode::Confirm { text, registers, bit, .. } => {
             let what = match bit {
                 Some(b) => format!("coil {}", u8::from(*b)),
                 None => format!(

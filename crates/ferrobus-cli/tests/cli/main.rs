@@ -13,6 +13,7 @@ mod device;
 mod errors;
 mod gateway;
 mod gateway_lines;
+mod guard;
 mod line_settings;
 mod monitor;
 mod offline;

@@ -271,3 +271,37 @@ fn monitor_reads_3g3rx_points_far_apart_through_the_planner_with_no_exception() 
     assert!(screen.contains("1000 output f    0.00 Hz"), "{screen}");
     tmux.keys(&["q"]);
 }
+
+#[test]
+fn monitor_edit_takes_a_run_locked_parameter_stopped_and_refuses_it_running_with_the_guards_words() {
+    if !have_tmux() {
+        return;
+    }
+    let (_sim, addr) = start_sim_of("omron-3g3rx");
+    let tmux = Tmux { socket: format!("ferrobus-monitor-guard-{}", std::process::id()) };
+    let command = format!("{} --tcp {addr} --device omron-3g3rx monitor A003@200ms", env!("CARGO_BIN_EXE_ferrobus"));
+    let started = tmux.cmd(&["new-session", "-d", "-s", "m", "-x", "120", "-y", "30", &command]);
+    assert!(started.status.success(), "tmux new-session: {}", String::from_utf8_lossy(&started.stderr));
+    tmux.wait_for("A003 polled", |s| s.contains("1202 base fre      60 Hz"));
+    let edit = |value: &str| {
+        tmux.keys(&["e"]);
+        tmux.keys(&["-l", value]);
+        tmux.keys(&["Enter"]);
+        tmux.wait_for("the confirmation", |s| s.contains("to unit 1 0x1202? y/n"));
+        tmux.keys(&["y"]);
+    };
+    let a003 = || ferrobus(&addr, &["--device", "omron-3g3rx", "get", "A003"]);
+
+    // Stopped: written.
+    edit("50");
+    tmux.wait_for("the write's result", |s| s.contains("wrote 0x1202 on unit 1"));
+    assert!(a003().contains("50 Hz"), "the sim did not take it:\n{}", a003());
+
+    // Running: refused in the guard's words, nothing written.
+    crate::guard::make_it_run(&addr);
+    edit("55");
+    let screen = tmux.wait_for("the refusal", |s| s.contains("not written: A003 cannot change"));
+    assert!(screen.contains(&format!("not written: {}", crate::guard::REFUSAL)), "{screen}");
+    assert!(a003().contains("50 Hz"), "a refused edit changed A003:\n{}", a003());
+    tmux.keys(&["q"]);
+}

@@ -8,6 +8,7 @@
 //!   DCMD to F001, DDEATH and DBIRTH, a primary host's STATE;
 //! - [`outage`]: the broker away for 30 s, the samples meanwhile delivered as historical;
 //! - [`plain`]: plain JSON per point, writes on `.../set`, retained last values;
+//! - [`guard`]: a DCMD and a plain `.../set` of a run-locked point, taken stopped, refused running;
 //! - [`cli`]: `--check` on a broken file and the shipped examples, and `--demo`;
 //! - [`harness`] (drives, plant.toml, the bridge process) and [`spb`] (recorder, checker,
 //!   publisher, protoc) are what they are made of.
@@ -18,6 +19,7 @@
 
 mod checker;
 mod cli;
+mod guard;
 mod harness;
 mod outage;
 mod plain;

@@ -1,6 +1,7 @@
 //! The backup file: TOML, written by hand so that each parameter's label is a comment above
 //! it and the order is the profile's, read back with serde (errors name the file and line).
-//! The format is described in the module doc of [`super`].
+//! The format is described in the module doc of [`super`]. A file that is not a backup of
+//! this format is a [`BackupError`] naming the file and the line.
 
 use std::collections::BTreeMap;
 use std::fmt::Write as _;
@@ -8,44 +9,83 @@ use std::fmt::Write as _;
 use ferrobus_profile::source;
 use serde::Deserialize;
 
+/// Why a text is not a backup this build reads: each names the file and, where there is
+/// one, the line.
+#[derive(Clone, Debug, PartialEq, Eq, thiserror::Error)]
+#[non_exhaustive]
+pub enum BackupError {
+    /// Not TOML of a backup's shape (a missing field, a value of the wrong kind, ...).
+    #[error("{origin}{}: not a backup file: {message}", line.map(|l| format!(":{l}")).unwrap_or_default())]
+    NotBackup {
+        /// The file.
+        origin: String,
+        /// The line, when the parser knows it.
+        line: Option<usize>,
+        /// The parser's message (bounded).
+        message: String,
+    },
+    /// Another format version.
+    #[error("{origin}:{line}: backup format {found} is not the format {FORMAT} this ferrobus reads")]
+    Format {
+        /// The file.
+        origin: String,
+        /// The line of `format`.
+        line: usize,
+        /// The version it gives.
+        found: u32,
+    },
+    /// A parameter's entry that is neither a value nor an error, or a `raw` of the wrong kind.
+    #[error("{origin}:{line}: {code}: {problem}")]
+    Entry {
+        /// The file.
+        origin: String,
+        /// The entry's line.
+        line: usize,
+        /// The parameter.
+        code: String,
+        /// What is wrong with it.
+        problem: &'static str,
+    },
+}
+
 /// The format version this build writes and reads.
-pub(crate) const FORMAT: u32 = 1;
+pub const FORMAT: u32 = 1;
 
 /// The header of a backup: what was saved, from where, when.
 #[derive(Clone, PartialEq, Debug)]
-pub(crate) struct Header {
+pub struct Header {
     /// The profile: a built-in name or the path of the profile file.
-    pub(crate) profile: String,
+    pub profile: String,
     /// `sha256:…` of the profile file, for one that is not built in.
-    pub(crate) profile_hash: Option<String>,
+    pub profile_hash: Option<String>,
     /// The device's name in the profile.
-    pub(crate) device: String,
+    pub device: String,
     /// When, ISO-8601 UTC.
-    pub(crate) time: String,
+    pub time: String,
     /// The unit read.
-    pub(crate) unit: u8,
+    pub unit: u8,
     /// The bus it was read over.
-    pub(crate) connection: String,
+    pub connection: String,
     /// How the device identified itself, or why it did not.
-    pub(crate) identification: String,
+    pub identification: String,
 }
 
 /// One parameter's entry.
 #[derive(Clone, PartialEq, Debug)]
-pub(crate) struct Entry {
+pub struct Entry {
     /// Its code.
-    pub(crate) code: String,
+    pub code: String,
     /// Its label (written as a comment; not read back).
-    pub(crate) label: String,
+    pub label: String,
     /// The line it is on, in a file read back (0 for one not read from a file).
-    pub(crate) line: usize,
+    pub line: usize,
     /// Its value, or why there is none.
-    pub(crate) state: State,
+    pub state: State,
 }
 
 /// A parameter's value in a backup, or the reason it could not be read.
 #[derive(Clone, PartialEq, Debug)]
-pub(crate) enum State {
+pub enum State {
     /// The raw value, and as the profile shows it.
     Value {
         /// The raw value.
@@ -59,23 +99,23 @@ pub(crate) enum State {
 
 /// A whole backup.
 #[derive(Clone, PartialEq, Debug)]
-pub(crate) struct Backup {
+pub struct Backup {
     /// The header.
-    pub(crate) header: Header,
+    pub header: Header,
     /// The identification objects read from the device, by name.
-    pub(crate) identification: Vec<(String, String)>,
+    pub identification: Vec<(String, String)>,
     /// The parameters, in the profile's order.
-    pub(crate) entries: Vec<Entry>,
+    pub entries: Vec<Entry>,
 }
 
 impl Backup {
     /// The entry of `code` (case-insensitively).
-    pub(crate) fn entry(&self, code: &str) -> Option<&Entry> {
+    pub fn entry(&self, code: &str) -> Option<&Entry> {
         self.entries.iter().find(|e| e.code.eq_ignore_ascii_case(code))
     }
 
     /// The file's text.
-    pub(crate) fn render(&self) -> String {
+    pub fn render(&self) -> String {
         let h = &self.header;
         let mut out = String::new();
         let _ = writeln!(out, "# ferrobus backup of unit {} ({}), profile {}", h.unit, h.device, h.profile);
@@ -121,34 +161,37 @@ impl Backup {
     }
 
     /// Reads a backup file's text; `origin` (the path) names it in errors, with the line.
-    pub(crate) fn parse(text: &str, origin: &str) -> Result<Backup, String> {
-        let doc: Doc = toml::from_str(text).map_err(|e| {
-            let at = e.span().map(|s| format!(":{}", line_of(text, s.start))).unwrap_or_default();
-            format!("{origin}{at}: not a backup file: {}", source::bounded(e.message().trim()))
+    pub fn parse(text: &str, origin: &str) -> Result<Backup, BackupError> {
+        let doc: Doc = toml::from_str(text).map_err(|e| BackupError::NotBackup {
+            origin: origin.to_string(),
+            line: e.span().map(|s| line_of(text, s.start)),
+            message: source::bounded(e.message().trim()),
         })?;
         let header = doc.backup.into_inner();
         if header.format != FORMAT {
-            return Err(format!(
-                "{origin}:{}: backup format {} is not the format {FORMAT} this ferrobus reads",
-                line_of(text, text.find("format").unwrap_or(0)),
-                header.format
-            ));
+            return Err(BackupError::Format {
+                origin: origin.to_string(),
+                line: line_of(text, text.find("format").unwrap_or(0)),
+                found: header.format,
+            });
         }
         let mut entries = Vec::new();
         for (code, spanned) in doc.parameters {
             let line = line_of(text, spanned.span().start);
             let entry = spanned.into_inner();
+            let problem =
+                |problem| BackupError::Entry { origin: origin.to_string(), line, code: code.clone(), problem };
             let state = match (entry.raw, entry.error) {
                 (Some(raw), None) => State::Value { raw, shown: entry.value.unwrap_or_default() },
                 (None, Some(why)) => State::Failed(why),
-                (Some(_), Some(_)) => return Err(format!("{origin}:{line}: {code}: both `raw` and `error`")),
-                (None, None) => return Err(format!("{origin}:{line}: {code}: neither `raw` nor `error`")),
+                (Some(_), Some(_)) => return Err(problem("both `raw` and `error`")),
+                (None, None) => return Err(problem("neither `raw` nor `error`")),
             };
             if let State::Value {
                 raw: toml::Value::Array(_) | toml::Value::Table(_) | toml::Value::Datetime(_), ..
             } = &state
             {
-                return Err(format!("{origin}:{line}: {code}: `raw` must be a number, a string or true/false"));
+                return Err(problem("`raw` must be a number, a string or true/false"));
             }
             entries.push(Entry { code, label: String::new(), line, state });
         }
@@ -217,8 +260,8 @@ fn key(name: &str) -> String {
 }
 
 /// Now, ISO-8601 UTC to the second.
-pub(crate) fn now_utc() -> String {
-    ferrobus::poll::iso8601(std::time::SystemTime::now())
+pub fn now_utc() -> String {
+    crate::poll::iso8601(std::time::SystemTime::now())
 }
 
 #[cfg(test)]
@@ -271,14 +314,16 @@ mod tests {
     #[test]
     fn a_broken_backup_is_refused_with_its_file_and_line() {
         let text = sample().render().replace("raw = 1000", "raw = ");
-        let err = Backup::parse(&text, "b.toml").unwrap_err();
+        let err = Backup::parse(&text, "b.toml").unwrap_err().to_string();
         let line = text.lines().position(|l| l.starts_with("F002")).unwrap() + 1;
         assert!(err.starts_with(&format!("b.toml:{line}: not a backup file")), "{err}");
         let both = sample().render().replace("raw = 1000,", "raw = 1000, error = \"x\",");
-        assert!(Backup::parse(&both, "b.toml").unwrap_err().ends_with("F002: both `raw` and `error`"));
+        assert!(Backup::parse(&both, "b.toml").unwrap_err().to_string().ends_with("F002: both `raw` and `error`"));
         let later = sample().render().replace("format = 1", "format = 9");
-        assert!(Backup::parse(&later, "b.toml").unwrap_err().contains("backup format 9 is not the format 1"));
-        let err = Backup::parse("[backup]\nformat = 1\n", "c.toml").unwrap_err();
+        let later = Backup::parse(&later, "b.toml").unwrap_err();
+        assert!(matches!(later, BackupError::Format { found: 9, .. }), "{later}");
+        assert!(later.to_string().contains("backup format 9 is not the format 1"));
+        let err = Backup::parse("[backup]\nformat = 1\n", "c.toml").unwrap_err().to_string();
         assert!(err.starts_with("c.toml:") && err.contains("missing field"), "{err}");
     }
 }

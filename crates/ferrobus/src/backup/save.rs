@@ -1,10 +1,10 @@
-//! `backup -o FILE`: the file written so that a good backup is never lost.
+//! A backup written to `FILE` so that a good backup is never lost (`ferrobus backup -o FILE`).
 //!
 //! The new backup goes to a temporary file beside `FILE` (same directory, so the rename is
 //! atomic), synced to disk, then renamed over `FILE`; a crash or a full disk leaves `FILE` as
 //! it was. The previous `FILE` is kept as `FILE.bak`. One rule protects a good backup from a
 //! bad read: a new backup with more unread parameters than the `FILE` it would replace (a
-//! complete one first of all) does not replace it unless `--force`; it is written to
+//! complete one first of all) does not replace it unless forced; it is written to
 //! `FILE.incomplete` instead, so that neither is lost.
 
 use std::ffi::OsString;
@@ -12,11 +12,30 @@ use std::io::Write as _;
 use std::path::{Path, PathBuf};
 
 use super::file::{Backup, State};
-use crate::exit::CliError;
+
+/// Why a backup could not be saved; nothing is half-written then.
+#[derive(Debug, thiserror::Error)]
+#[non_exhaustive]
+pub enum SaveError {
+    /// The path names no file (a directory, `..`).
+    #[error("{path}: name a file, not a directory")]
+    NotAFile {
+        /// The path given.
+        path: PathBuf,
+    },
+    /// A file could not be read or written.
+    #[error("{what}: {source}")]
+    Io {
+        /// The file, and what was being done with it.
+        what: String,
+        /// Why.
+        source: std::io::Error,
+    },
+}
 
 /// What became of the new backup.
 #[derive(Clone, PartialEq, Eq, Debug)]
-pub(crate) enum Saved {
+pub enum Saved {
     /// It is `FILE` now; the previous `FILE`, if there was one, is in `previous`.
     Replaced {
         /// `FILE.bak`, when `FILE` existed.
@@ -33,22 +52,22 @@ pub(crate) enum Saved {
 
 /// How complete a backup is: its parameters and how many of them hold no value.
 #[derive(Clone, Copy, PartialEq, Eq, Debug)]
-pub(crate) struct Completeness {
+pub struct Completeness {
     /// Parameters recorded.
-    pub(crate) parameters: usize,
+    pub parameters: usize,
     /// Of them, not read.
-    pub(crate) unread: usize,
+    pub unread: usize,
 }
 
 impl Completeness {
     /// Of a backup.
-    pub(crate) fn of(backup: &Backup) -> Completeness {
+    pub fn of(backup: &Backup) -> Completeness {
         let unread = backup.entries.iter().filter(|e| matches!(e.state, State::Failed(_))).count();
         Completeness { parameters: backup.entries.len(), unread }
     }
 
     /// Parameters with a value.
-    pub(crate) fn read(self) -> usize {
+    pub fn read(self) -> usize {
         self.parameters.saturating_sub(self.unread)
     }
 }
@@ -65,7 +84,7 @@ enum Previous {
 
 /// Writes `backup` to `path` by the rules of the module doc; `force` lets an incomplete
 /// backup replace a better one.
-pub(crate) fn save(path: &Path, backup: &Backup, force: bool) -> Result<Saved, CliError> {
+pub fn save(path: &Path, backup: &Backup, force: bool) -> Result<Saved, SaveError> {
     let new = Completeness::of(backup);
     let text = backup.render();
     let previous = match previous(path)? {
@@ -87,7 +106,7 @@ pub(crate) fn save(path: &Path, backup: &Backup, force: bool) -> Result<Saved, C
 }
 
 /// What `path` holds now.
-fn previous(path: &Path) -> Result<Previous, CliError> {
+fn previous(path: &Path) -> Result<Previous, SaveError> {
     match std::fs::read_to_string(path) {
         Ok(text) => Ok(match Backup::parse(&text, &path.display().to_string()) {
             Ok(backup) => Previous::Backup(Completeness::of(&backup)),
@@ -96,7 +115,7 @@ fn previous(path: &Path) -> Result<Previous, CliError> {
         Err(e) if e.kind() == std::io::ErrorKind::NotFound => Ok(Previous::Nothing),
         // Not text: not a backup, but kept as FILE.bak all the same.
         Err(e) if e.kind() == std::io::ErrorKind::InvalidData => Ok(Previous::Other),
-        Err(source) => Err(CliError::Output {
+        Err(source) => Err(SaveError::Io {
             what: format!("{} (it exists but cannot be read, so it cannot be kept as .bak)", path.display()),
             source,
         }),
@@ -104,10 +123,8 @@ fn previous(path: &Path) -> Result<Previous, CliError> {
 }
 
 /// `path` with `suffix` after its file name: `drive.toml.bak`.
-pub(crate) fn sibling(path: &Path, suffix: &str) -> Result<PathBuf, CliError> {
-    let Some(name) = path.file_name() else {
-        return Err(CliError::Usage(format!("-o {}: name a file, not a directory", path.display())));
-    };
+pub fn sibling(path: &Path, suffix: &str) -> Result<PathBuf, SaveError> {
+    let Some(name) = path.file_name() else { return Err(SaveError::NotAFile { path: path.to_path_buf() }) };
     let mut name = OsString::from(name);
     name.push(suffix);
     Ok(path.with_file_name(name))
@@ -115,7 +132,7 @@ pub(crate) fn sibling(path: &Path, suffix: &str) -> Result<PathBuf, CliError> {
 
 /// Writes `bytes` to a temporary file beside `path`, syncs it and renames it to `path`: a
 /// reader sees the old file or the new one, never a part.
-fn write_atomically(path: &Path, bytes: &[u8]) -> Result<(), CliError> {
+fn write_atomically(path: &Path, bytes: &[u8]) -> Result<(), SaveError> {
     let name = path.file_name().map(|n| n.to_string_lossy().into_owned()).unwrap_or_default();
     let temporary = path.with_file_name(format!(".{name}.{}.tmp", std::process::id()));
     let written = std::fs::OpenOptions::new()
@@ -130,14 +147,15 @@ fn write_atomically(path: &Path, bytes: &[u8]) -> Result<(), CliError> {
     })
 }
 
-fn output_error(path: &Path, source: std::io::Error) -> CliError {
-    CliError::Output { what: path.display().to_string(), source }
+fn output_error(path: &Path, source: std::io::Error) -> SaveError {
+    SaveError::Io { what: path.display().to_string(), source }
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
     use crate::backup::file::{Entry, Header};
+    use std::path::PathBuf;
 
     fn backup(unread: usize, of: usize) -> Backup {
         let entries = (0..of)
@@ -231,7 +249,7 @@ mod tests {
         let dir = dir("fail");
         let path = dir.join("missing").join("drive.toml");
         let err = save(&path, &backup(0, 1), false).unwrap_err();
-        assert!(matches!(&err, CliError::Output { what, .. } if what == &path.display().to_string()), "{err:?}");
+        assert!(matches!(&err, SaveError::Io { what, .. } if what == &path.display().to_string()), "{err:?}");
         assert!(leftovers(&dir).is_empty());
         std::fs::remove_dir_all(dir).unwrap();
     }

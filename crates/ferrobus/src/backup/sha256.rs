@@ -72,7 +72,7 @@ const K: [u32; 64] = [
 
 /// The digest of `data` in lower-case hex.
 #[expect(clippy::many_single_char_names, reason = "the standard's names for the working variables")]
-pub(crate) fn hex(data: &[u8]) -> String {
+pub fn hex(data: &[u8]) -> String {
     let mut h: [u32; 8] =
         [0x6a09_e667, 0xbb67_ae85, 0x3c6e_f372, 0xa54f_f53a, 0x510e_527f, 0x9b05_688c, 0x1f83_d9ab, 0x5be0_cd19];
     let bits = u64::try_from(data.len()).unwrap_or(u64::MAX).wrapping_mul(8);

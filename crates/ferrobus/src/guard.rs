@@ -1,0 +1,56 @@
+//! The write guard with its reading: [`check_write`] reads the profile's running point with a
+//! [`Client`] (only when the point written is run-locked) and applies the profile's one guard,
+//! [`Profile::guard_write`], so no writer reads the run state its own way.
+//!
+//! ```text
+//!   check_write(client, unit, profile, write)
+//!     ├─ profile.check_value(write)             range, access: no request
+//!     ├─ run_state(client, unit, profile, point)  one read of [state] running, if run-locked
+//!     └─ profile.guard_write(write, state)        Ok | Refusal
+//! ```
+//!
+//! A broadcast reads nothing: its writer passes [`RunState::Broadcast`] to
+//! [`Profile::guard_write`] itself.
+
+use ferrobus_profile::{Point, Profile, Refusal, RunState, Table, Value, ValueType, Write};
+
+use crate::client::Client;
+
+/// Reads what the guard needs to know of the drive before `point` is written: the profile's
+/// running point, if `point` is run-locked and the profile names one ([`RunState::NotRead`]
+/// otherwise, which the guard then does not look at). A failed read is
+/// [`RunState::Unreadable`], with why.
+pub async fn run_state(client: &Client, unit: u8, profile: &Profile, point: &Point) -> RunState {
+    let Some(state) = profile.run_state_point(point) else { return RunState::NotRead };
+    match read_point(client, unit, state).await {
+        Ok(value) => RunState::Read(value),
+        Err(why) => RunState::Unreadable(why),
+    }
+}
+
+/// The guard for one write to `unit`: the value checked first (nothing is sent if it fails),
+/// then, for a run-locked point, the running point read and the run lock applied.
+pub async fn check_write(client: &Client, unit: u8, profile: &Profile, write: &Write<'_>) -> Result<(), Refusal> {
+    profile.check_value(write)?;
+    let state = run_state(client, unit, profile, write.point).await;
+    profile.guard_write(write, &state)
+}
+
+/// One point's value, read on its own.
+async fn read_point(client: &Client, unit: u8, point: &Point) -> Result<Value, String> {
+    let (start, count) = (point.address, point.width);
+    let bit = |bits: Vec<bool>| Value::Bool(bits.first().copied().unwrap_or(false));
+    let words = match point.table {
+        Table::Coils => return client.read_coils(unit, start, count).await.map(bit).map_err(|e| e.to_string()),
+        Table::DiscreteInputs => {
+            return client.read_discrete_inputs(unit, start, count).await.map(bit).map_err(|e| e.to_string());
+        }
+        Table::Holding => client.read_holding_registers(unit, start, count).await,
+        Table::Input => client.read_input_registers(unit, start, count).await,
+    }
+    .map_err(|e| e.to_string())?;
+    if point.value_type == ValueType::Bit {
+        return Ok(Value::Bool(words.first().is_some_and(|w| *w != 0)));
+    }
+    point.decode(&words).map_err(|e| e.to_string())
+}

@@ -1,0 +1,130 @@
+//! The write guard with its reading, against a server engine on an in-memory line (paused
+//! clock): a run-locked point is refused while the running coil is on, after reading only that
+//! coil; accepted when it is off; a point that may change while running costs no read; a value
+//! out of range costs no read; a running point that cannot be read refuses the write.
+
+use std::sync::{Arc, Mutex};
+use std::time::Duration;
+
+use ferrobus::guard::{check_write, run_state};
+use ferrobus::port::{BoxPort, ConnectWith, Connecting};
+use ferrobus::server::{ServerOptions, Shared, serve};
+use ferrobus::{Client, ClientConfig, Framing, Transport};
+use ferrobus_profile::{Profile, Refusal, RunState, Value, Write};
+use ferrobus_proto::ExceptionCode;
+use ferrobus_proto::frame::rtu::RtuCodec;
+use ferrobus_proto::frame::{Expect, LineConfig, LineTiming};
+use ferrobus_proto::slave::{Handler, Slave, SlaveConfig, UnitSet};
+
+const PROFILE: &str = "[device]\nname='x'\nvendor='v'\nproduct_code='p'\nrevision='1'\n\
+    [state]\nrunning = { point = 'running', values = [1] }\n\
+    [[coils]]\nnumber=0\nname='running'\n\
+    [[registers]]\nnumber=0\nname='F001'\naccess='rw'\nmax=100\n\
+    [[registers]]\nnumber=1\nname='A003'\naccess='rw'\nmax=100\nwhile_running=false\n";
+
+/// The running coil, and the requests seen as (function, start).
+#[derive(Default)]
+struct Drive {
+    running: bool,
+    refuse_coils: bool,
+    seen: Vec<(u8, u16)>,
+}
+
+impl Handler for Drive {
+    fn read_coils(&mut self, _: u8, start: u16, out: &mut [bool]) -> Result<(), ExceptionCode> {
+        self.seen.push((0x01, start));
+        if self.refuse_coils {
+            return Err(ExceptionCode::ServerDeviceFailure);
+        }
+        out.fill(false);
+        if start == 0
+            && let Some(first) = out.first_mut()
+        {
+            *first = self.running;
+        }
+        Ok(())
+    }
+    fn read_holding_registers(&mut self, _: u8, start: u16, out: &mut [u16]) -> Result<(), ExceptionCode> {
+        self.seen.push((0x03, start));
+        out.fill(0);
+        Ok(())
+    }
+}
+
+fn timing() -> LineTiming {
+    LineTiming::new(&LineConfig::new(19_200).unwrap())
+}
+
+async fn client(drive: &Arc<Mutex<Drive>>) -> Client {
+    let device = Shared(Arc::clone(drive));
+    let connector = ConnectWith::new("in-memory drive", move || -> Connecting {
+        let mut device = device.clone();
+        Box::pin(async move {
+            let (client_end, server_end) = tokio::io::duplex(4096);
+            tokio::spawn(async move {
+                let units: UnitSet = [1u8].into_iter().collect();
+                let config = SlaveConfig { units, response_wait: Duration::ZERO };
+                let slave = Slave::new(RtuCodec::new(timing(), Expect::Both), config);
+                let mut options = ServerOptions::new(timing(), ferrobus::Timer::Tokio);
+                let _ = serve(slave, Box::new(server_end), &mut device, &mut options).await;
+            });
+            Ok(Box::new(client_end) as BoxPort)
+        })
+    });
+    let config = ClientConfig { timeout: Duration::from_millis(50), backoff: None, ..ClientConfig::default() };
+    Client::connect(Transport::custom(Framing::Rtu, timing(), connector), config).await.unwrap()
+}
+
+fn seen(drive: &Arc<Mutex<Drive>>) -> Vec<(u8, u16)> {
+    std::mem::take(&mut drive.lock().unwrap().seen)
+}
+
+async fn guard(client: &Client, profile: &Profile, code: &str, raw: i128) -> Result<(), Refusal> {
+    let point = profile.point(code).unwrap();
+    let raw = Value::Int(raw);
+    let typed = point.show(&raw);
+    check_write(client, 1, profile, &Write { point, raw: &raw, typed: &typed }).await
+}
+
+#[tokio::test(start_paused = true)]
+async fn a_run_locked_point_is_refused_while_the_running_coil_is_on_after_reading_only_it() {
+    let profile = Profile::parse(PROFILE, "guard.toml").unwrap();
+    let drive = Arc::new(Mutex::new(Drive { running: true, ..Drive::default() }));
+    let client = client(&drive).await;
+    let refusal = guard(&client, &profile, "A003", 50).await.unwrap_err();
+    assert_eq!(refusal.to_string(), "A003 cannot change while the drive runs (running = 1); stop it first");
+    assert_eq!(seen(&drive), [(0x01, 0)], "one read of the running coil");
+    // The same refusal as the profile's own guard given that reading.
+    let point = profile.point("A003").unwrap();
+    let raw = Value::Int(50);
+    let typed = point.show(&raw);
+    let state = run_state(&client, 1, &profile, point).await;
+    assert_eq!(state, RunState::Read(Value::Bool(true)));
+    assert_eq!(profile.guard_write(&Write { point, raw: &raw, typed: &typed }, &state), Err(refusal));
+
+    drive.lock().unwrap().running = false;
+    seen(&drive);
+    assert_eq!(guard(&client, &profile, "A003", 50).await, Ok(()), "stopped");
+    assert_eq!(seen(&drive), [(0x01, 0)]);
+}
+
+#[tokio::test(start_paused = true)]
+async fn a_free_point_or_a_value_out_of_range_costs_no_read() {
+    let profile = Profile::parse(PROFILE, "guard.toml").unwrap();
+    let drive = Arc::new(Mutex::new(Drive { running: true, ..Drive::default() }));
+    let client = client(&drive).await;
+    assert_eq!(guard(&client, &profile, "F001", 50).await, Ok(()), "F001 may change while running");
+    let out = guard(&client, &profile, "A003", 101).await.unwrap_err();
+    assert!(matches!(out, Refusal::Value(_)) && out.to_string().contains("out of range"), "{out}");
+    assert_eq!(seen(&drive), [], "nothing read");
+}
+
+#[tokio::test(start_paused = true)]
+async fn a_running_point_that_cannot_be_read_refuses_the_write() {
+    let profile = Profile::parse(PROFILE, "guard.toml").unwrap();
+    let drive = Arc::new(Mutex::new(Drive { refuse_coils: true, ..Drive::default() }));
+    let client = client(&drive).await;
+    let refusal = guard(&client, &profile, "A003", 50).await.unwrap_err();
+    assert!(matches!(refusal, Refusal::Unreadable { .. }), "{refusal}");
+    assert!(refusal.to_string().starts_with("A003 cannot change while the drive runs, and reading running failed: "));
+}
