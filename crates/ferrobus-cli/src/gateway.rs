@@ -438,38 +438,30 @@ fn routes(given: &[String], lines: usize) -> Result<Routes, CliError> {
     Ok(routes)
 }
 
-/// `5` or `1-10`.
+/// `5` or `1-10`, by the one list grammar ([`ferrobus::text::list`]).
 fn unit_range(text: &str) -> Result<(u8, u8), String> {
-    let (first, last) = if let Some((a, b)) = text.split_once('-') {
-        (parse_u8(a)?, parse_u8(b)?)
-    } else {
-        let unit = parse_u8(text)?;
-        (unit, unit)
-    };
-    if first > last {
-        return Err(format!("'{text}' runs backwards"));
+    let ranges = ferrobus::text::list(text, u64::from(u8::MAX)).map_err(|e| e.to_string())?;
+    match ranges.as_slice() {
+        [range] => Ok((narrow(*range.start()), narrow(*range.end()))),
+        _ => Err(format!("'{}' is one unit or one range A-B", ferrobus::log::escape(text))),
     }
-    Ok((first, last))
 }
 
-/// A number 0-255, decimal or 0x hex.
+/// A number 0-255 by the one number grammar ([`ferrobus::text::number`]: decimal or 0x hex).
 fn parse_u8(text: &str) -> Result<u8, String> {
-    let text = text.trim();
-    let parsed = match text.strip_prefix("0x").or_else(|| text.strip_prefix("0X")) {
-        Some(hex) => u8::from_str_radix(hex, 16),
-        None => text.parse(),
-    };
-    parsed.map_err(|_| format!("'{text}' is not a number from 0 to 255"))
+    ferrobus::text::number(text, u64::from(u8::MAX)).map(narrow).map_err(|e| e.to_string())
 }
 
-/// A list such as `1,2,10-20`.
+/// A number the grammar has already held to 0-255.
+fn narrow(n: u64) -> u8 {
+    u8::try_from(n).unwrap_or(u8::MAX)
+}
+
+/// A list such as `1,2,10-20`, by the one list grammar.
 fn list(option: &str, text: &str) -> Result<Vec<u8>, CliError> {
-    let mut items = Vec::new();
-    for part in text.split(',') {
-        let (first, last) = unit_range(part).map_err(|e| CliError::Usage(format!("{option} '{text}': {e}")))?;
-        items.extend(first..=last);
-    }
-    Ok(items)
+    let ranges = ferrobus::text::list(text, u64::from(u8::MAX))
+        .map_err(|e| CliError::Usage(format!("{option} '{}': {e}", ferrobus::log::escape(text))))?;
+    Ok(ranges.into_iter().flatten().map(narrow).collect())
 }
 
 /// The read-only mode and allowlists.

@@ -72,15 +72,11 @@ impl SniffArgs {
     }
 }
 
+/// A function code 1-127 by the one number grammar ([`ferrobus::text::number`]).
 fn function_code(text: &str) -> Result<u8, String> {
-    let t = text.trim();
-    let parsed = match t.strip_prefix("0x").or_else(|| t.strip_prefix("0X")) {
-        Some(hex) => u8::from_str_radix(hex, 16),
-        None => t.parse(),
-    };
-    match parsed {
-        Ok(fc) if (1..0x80).contains(&fc) => Ok(fc),
-        _ => Err(format!("'{text}': a function code is 1 to 127 (0x01 to 0x7F)")),
+    match ferrobus::text::number(text, 0x7F).map(u8::try_from) {
+        Ok(Ok(fc)) if fc >= 1 => Ok(fc),
+        _ => Err(format!("'{}': a function code is 1 to 127 (0x01 to 0x7F)", ferrobus::log::escape(text))),
     }
 }
 

@@ -101,12 +101,9 @@ fn apply_options(args: &MonitorArgs, panes: &mut [Definition]) -> Result<(), Cli
             .split_once('=')
             .ok_or_else(|| CliError::Usage(format!("--{what} '{text}': use ADDRESS={}", what.to_uppercase())))?;
         let a = address.trim();
-        let parsed = match a.strip_prefix("0x").or_else(|| a.strip_prefix("0X")) {
-            Some(hex) => u16::from_str_radix(hex, 16),
-            None => a.parse(),
-        };
-        let address =
-            parsed.map_err(|_| CliError::Usage(format!("--{what} '{text}': '{a}' is not an address 0 to 65535")))?;
+        let address = ferrobus::text::number(a, u64::from(u16::MAX))
+            .map(|n| u16::try_from(n).unwrap_or(u16::MAX))
+            .map_err(|_| CliError::Usage(format!("--{what} '{text}': '{a}' is not an address 0 to 65535")))?;
         let cells = panes.iter().flat_map(|p| p.cells.iter()).filter(|c| c.point.address == address).count();
         if cells == 0 {
             return Err(CliError::Usage(format!("--{what} '{text}': no pane shows address {address:#06x}")));

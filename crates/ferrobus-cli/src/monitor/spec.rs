@@ -16,13 +16,11 @@ use crate::exit::CliError;
 /// The rate of a definition that gives none.
 pub(crate) const DEFAULT_EVERY: Duration = Duration::from_secs(1);
 
+/// A number by the one number grammar ([`ferrobus::text::number`]: decimal or 0x hex).
 fn number(text: &str, what: &str, spec: &str) -> Result<u32, CliError> {
-    let t = text.trim();
-    let parsed = match t.strip_prefix("0x").or_else(|| t.strip_prefix("0X")) {
-        Some(hex) => u32::from_str_radix(hex, 16),
-        None => t.parse(),
-    };
-    parsed.map_err(|_| CliError::Usage(format!("'{spec}': {what} '{t}' is not a number")))
+    ferrobus::text::number(text, u64::from(u32::MAX))
+        .map(|n| u32::try_from(n).unwrap_or(u32::MAX))
+        .map_err(|e| CliError::Usage(format!("'{}': {what}: {e}", ferrobus::log::escape(spec))))
 }
 
 /// Splits `@RATE` off a definition.
