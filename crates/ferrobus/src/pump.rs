@@ -18,6 +18,8 @@
 //!                                            ├─ server::serve, serve_tcp   (a Handler, a Shared one)
 //!                                            ├─ the simulator              (Shared<Sim> + FaultFilter)
 //!                                            └─ tls::serve_tls_with        (RoleCheck as the filter)
+//!                                         gateway::serve_reverse: each request forwarded to its
+//!                                            TCP server, the answer back with Slave::respond
 //! ```
 //!
 //! Every role is an [`Engine`] — the client's [`Master`], the server's [`Slave`] in its
