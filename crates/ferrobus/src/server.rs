@@ -285,7 +285,7 @@ const ANSWERING_MAX: usize = 64;
 /// [`Shared`] one), until the port fails or closes.
 /// Returns the engine (with its counters) and the error that ended it, if any.
 ///
-/// The engine (4 KiB with its reply queue) and the session's buffers live on the heap, once:
+/// The engine (some KiB with its request slots) and the session's buffers live on the heap, once:
 /// the future holds pointers to them. (Taken by value into an `async fn`, the engine was
 /// stored in the future twice, as the argument and as the engine, and a TCP server's task per
 /// connection with it.)

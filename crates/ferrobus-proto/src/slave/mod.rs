@@ -182,13 +182,14 @@ pub enum SlaveEvent {
 
 /// The events the engine holds until they are polled. A frame reports at most two (a
 /// restart and its request) and every request still waiting for its answer one more; the
-/// engine takes no frame without room for all of them.
-pub const EVENT_QUEUE: usize = 16;
+/// engine takes no frame without room for all of them, so the queue holds a full set of
+/// waiting requests and a frame's worth besides.
+pub const EVENT_QUEUE: usize = REPLY_QUEUE + 8;
 
 /// The requests that may be in the engine at once over a framing without broadcast
 /// (Modbus/TCP): waiting for their answer or for their reply to go out, the one being sent
-/// included. A serial line holds one.
-pub const REPLY_QUEUE: usize = 8;
+/// included (fewer with [`Slave::set_max_pending`]). A serial line holds one.
+pub const REPLY_QUEUE: usize = 16;
 
 /// The most events one frame can report.
 const EVENTS_PER_FRAME: usize = 2;
@@ -246,6 +247,8 @@ struct Core {
     gap: Duration,
     /// How long a request handed out may wait for its answer.
     answer_limit: Option<Duration>,
+    /// The requests that may be in the engine at once, 1..=REPLY_QUEUE (not serial).
+    max_pending: usize,
     counters: Counters,
     /// The comm event counter of 0x0B.
     comm_events: u16,
@@ -293,6 +296,7 @@ impl<F: Framing> Slave<F> {
                 serial,
                 gap,
                 answer_limit: Some(ANSWER_LIMIT),
+                max_pending: REPLY_QUEUE,
                 counters: Counters::default(),
                 comm_events: 0,
                 log: EventLog::default(),
@@ -328,6 +332,23 @@ impl<F: Framing> Slave<F> {
     /// from now on.
     pub fn set_answer_limit(&mut self, limit: Option<Duration>) {
         self.core.answer_limit = limit;
+    }
+
+    /// How many requests may be in the engine at once over a framing without broadcast: past
+    /// it the engine takes no more bytes ([`Slave::is_blocked`]) until a reply has gone out —
+    /// a gateway's bound on what one client has outstanding. At least 1, at most
+    /// [`REPLY_QUEUE`] (the default).
+    pub fn set_max_pending(&mut self, max: usize) {
+        self.core.max_pending = max.clamp(1, REPLY_QUEUE);
+    }
+
+    /// Takes a serial framing's requests as a stream's: several may be outstanding (up to
+    /// [`Slave::set_max_pending`]) and unit 0 is a unit like any other, handed out without
+    /// the broadcast flag — RTU frames over TCP to a gateway, which decides itself what unit 0
+    /// means. Without it (the default) a serial framing keeps the line's rules: one request
+    /// at a time, unit 0 a broadcast.
+    pub fn set_stream(&mut self, stream: bool) {
+        self.core.serial = !stream && self.framing.supports_broadcast();
     }
 
     /// The diagnostic counters.
@@ -370,7 +391,7 @@ impl<F: Framing> Slave<F> {
         let core = &self.core;
         let waiting = core.slots.iter().filter(|e| e.is_waiting()).count();
         core.events.len().saturating_add(EVENTS_PER_FRAME).saturating_add(waiting) > EVENT_QUEUE
-            || (!core.serial && core.pending_replies() >= REPLY_QUEUE)
+            || (!core.serial && core.pending_replies() >= core.max_pending)
     }
 
     /// Bytes arrived at `now`; returns how many were taken. Every request framed is answered
@@ -600,7 +621,7 @@ impl Core {
             }
             return silent(self);
         }
-        let busy = if self.serial { self.pending_replies() > 0 } else { self.pending_replies() >= REPLY_QUEUE };
+        let busy = if self.serial { self.pending_replies() > 0 } else { self.pending_replies() >= self.max_pending };
         // A serial line: still answering the previous request, a master that does not wait.
         // Over TCP the queue is full, which `Slave::is_blocked` prevents. A PDU longer than
         // any valid one cannot be held.

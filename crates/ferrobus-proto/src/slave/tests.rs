@@ -680,21 +680,22 @@ fn twenty_pipelined_mbap_requests_get_twenty_replies_in_order_each_with_its_tran
 }
 
 #[test]
-fn thirty_frames_in_one_chunk_report_thirty_events_and_drop_none() {
+fn sixty_frames_in_one_chunk_report_sixty_events_and_drop_none() {
     let mut slave = Slave::new(MbapCodec::strict(), SlaveConfig::unit(1));
     let mut device = Device::new();
     // Other units: each frame is one event and no reply, so only the event queue can fill.
-    let input: Vec<u8> = (0..30u16).flat_map(|t| mbap(t, 7, &[0x03, 0, 0, 0, 1])).collect();
+    let input: Vec<u8> = (0..60u16).flat_map(|t| mbap(t, 7, &[0x03, 0, 0, 0, 1])).collect();
+    const { assert!(60 > 2 * EVENT_QUEUE, "more frames than the event queue and the receiver hold") };
     let first = slave.on_bytes(Instant::ZERO, &input, &mut device);
     assert!(first < input.len(), "the event queue fills: the engine stops taking bytes");
     let mut events: Vec<SlaveEvent> = core::iter::from_fn(|| slave.poll_event()).collect();
     let (replies, more) = drive_pipelined(&mut slave, &mut device, Instant::ZERO, &input[first..]);
     events.extend(more);
     assert!(replies.is_empty());
-    assert_eq!(events.len(), 30);
+    assert_eq!(events.len(), 60);
     assert!(events.iter().all(|e| matches!(e, SlaveEvent::Ignored { unit: 7, why: Ignored::OtherUnit, .. })));
     assert_eq!(slave.dropped_events(), 0);
-    assert_eq!(slave.counters().bus_messages, 30);
+    assert_eq!(slave.counters().bus_messages, 60);
 }
 
 #[test]
@@ -796,7 +797,8 @@ fn deferred_mbap_replies_go_out_in_request_order_whatever_order_they_are_answere
 #[test]
 fn deferred_mbap_requests_past_the_reply_queue_wait_in_the_receiver_until_answered() {
     let mut slave = Slave::new(MbapCodec::strict(), SlaveConfig::unit(1));
-    let input: Vec<u8> = (0..12u16).flat_map(|t| mbap(t, 1, &[0x03, 0, 0, 0, 1])).collect();
+    let input: Vec<u8> =
+        (0..u16::try_from(REPLY_QUEUE).unwrap() + 4).flat_map(|t| mbap(t, 1, &[0x03, 0, 0, 0, 1])).collect();
     let taken = slave.receive(Instant::ZERO, &input);
     let first: Vec<RequestId> = core::iter::from_fn(|| slave.poll_request().map(|r| r.id)).collect();
     assert_eq!(first.len(), REPLY_QUEUE, "as many handed out as there are slots");
@@ -810,7 +812,7 @@ fn deferred_mbap_requests_past_the_reply_queue_wait_in_the_receiver_until_answer
     while slave.poll_event().is_some() {}
     let rest = slave.receive(Instant::ZERO, &input[taken..]);
     assert_eq!(taken + rest, input.len());
-    assert_eq!(core::iter::from_fn(|| slave.poll_request().map(|r| r.id)).count(), 12 - REPLY_QUEUE);
+    assert_eq!(core::iter::from_fn(|| slave.poll_request().map(|r| r.id)).count(), 4);
 }
 
 #[test]
@@ -893,4 +895,37 @@ fn answer_with_is_the_same_dispatch_as_answering_at_once() {
     let id = deferred.poll_request().unwrap().id;
     deferred.answer_with(id, &mut Device::new()).unwrap();
     assert_eq!(sent_at(&mut deferred, due), frame, "unit 9's own wait, the same data");
+}
+
+#[test]
+fn a_max_pending_bound_blocks_the_engine_at_that_many_requests_and_frees_it_with_a_reply() {
+    let mut slave = Slave::new(MbapCodec::strict(), SlaveConfig::unit(1));
+    slave.set_max_pending(3);
+    let input: Vec<u8> = (0..5u16).flat_map(|t| mbap(t, 1, &[0x03, 0, 0, 0, 1])).collect();
+    let taken = slave.receive(Instant::ZERO, &input);
+    let ids: Vec<RequestId> = core::iter::from_fn(|| slave.poll_request().map(|r| r.id)).collect();
+    assert_eq!(ids.len(), 3, "three handed out, the rest not framed");
+    assert!(slave.is_blocked());
+    slave.respond(ids[0], &[0x03, 0x02, 0, 0]).unwrap();
+    let mut out = [0u8; MAX_TX_LEN];
+    assert!(slave.poll_transmit(Instant::ZERO, &mut out).is_some());
+    assert!(!slave.is_blocked(), "a reply sent makes room for one more");
+    slave.receive(Instant::ZERO, &input[taken..]);
+    assert_eq!(core::iter::from_fn(|| slave.poll_request().map(|r| r.id)).count(), 1, "one more, no more");
+}
+
+#[test]
+fn rtu_taken_as_a_stream_pipelines_and_hands_unit_0_out_as_a_unit() {
+    let mut slave = rtu_slave(SlaveConfig { units: [0, 1].into_iter().collect(), ..SlaveConfig::unit(1) });
+    slave.set_stream(true);
+    let two = [rtu(1, &[0x03, 0, 0, 0, 1]), rtu(0, &[0x06, 0, 1, 0, 2])].concat();
+    slave.receive(Instant::ZERO, &two);
+    let first = slave.poll_request().map(|r| (r.id, r.unit, r.broadcast)).unwrap();
+    let second = slave.poll_request().map(|r| (r.id, r.unit, r.broadcast)).expect("a second request taken at once");
+    assert_eq!((first.1, first.2, second.1, second.2), (1, false, 0, false));
+    slave.respond(second.0, &[0x06, 0, 1, 0, 2]).unwrap();
+    slave.respond(first.0, &[0x03, 0x02, 0, 0]).unwrap();
+    let due = slave.reply_due().expect("the first reply is due");
+    assert_eq!(sent_at(&mut slave, due), rtu(1, &[0x03, 0x02, 0, 0]), "in request order");
+    assert_eq!(slave.poll_transmit(due, &mut [0u8; MAX_TX_LEN]).map(|_| ()), Some(()), "unit 0 answered too");
 }
