@@ -145,6 +145,12 @@ pub trait Session<E: Engine> {
     fn deadline(&mut self, _engine: &E) -> Option<tokio::time::Instant> {
         None
     }
+    /// Something else the session waits for besides the port and the deadlines (the
+    /// gateway's line replies); when it finishes the loop turns, and [`Session::serve`]
+    /// takes what it brought. It must be cancel-safe: a read or a deadline may come first.
+    async fn wait(&mut self) {
+        std::future::pending::<()>().await;
+    }
     /// Bytes were read.
     fn on_read(&mut self) {}
     /// A deadline came, before the engine is told; `Some` ends the loop.
@@ -256,7 +262,7 @@ impl Pump {
                 continue;
             }
             let deadline = [self.deadline(engine), session.deadline(engine)].into_iter().flatten().min();
-            match self.step(port, engine, deadline, std::future::pending::<()>()).await {
+            match self.step(port, engine, deadline, session.wait()).await {
                 Step::Read => session.on_read(),
                 Step::Closed => return session.on_end(None),
                 Step::Failed(e) => return session.on_end(Some(e)),
