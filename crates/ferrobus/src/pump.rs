@@ -18,6 +18,9 @@
 //!                                            ├─ server::serve, serve_tcp   (a Handler, a Shared one)
 //!                                            ├─ the simulator              (Shared<Sim> + FaultFilter)
 //!                                            └─ tls::serve_tls_with        (RoleCheck as the filter)
+//!                                         gateway front (serve_tcp, serve_tls, serve_connection):
+//!                                            screen, Authorize, each request to its line's queue,
+//!                                            the line's reply back with Slave::respond (Session::wait)
 //!                                         gateway::serve_reverse: each request forwarded to its
 //!                                            TCP server, the answer back with Slave::respond
 //! ```

@@ -1,13 +1,16 @@
-//! The one reply timing of every role on the pump, on paused time: the plain server and the
-//! reverse gateway answer an RTU request no earlier than t3.5 after its last byte (the slave
-//! engine's rule, not one of their own), and the reverse gateway keeps reading the line while
-//! a TCP answer is awaited.
+//! The one reply timing of every role on the pump, on paused time: the plain server, the
+//! reverse gateway and the gateway front answer an RTU request no earlier than t3.5 after its
+//! last byte (the slave engine's rule, not one of their own), and the reverse gateway keeps
+//! reading the line while a TCP answer is awaited.
 
 use std::collections::BTreeMap;
 use std::sync::{Arc, Mutex};
 use std::time::Duration;
 
-use ferrobus::gateway::{OnFailure, Upstream, serve_reverse};
+use ferrobus::gateway::{
+    AllowAll, Gateway, GatewayConfig, Inbound, LineConfig as GatewayLine, OnFailure, Routes, Timeouts, Upstream,
+    serve_reverse,
+};
 use ferrobus::port::{BoxPort, ConnectWith, Framing};
 use ferrobus::server::{Answering, Fate, ReplyFilter, ServerOptions, serve};
 use ferrobus::{Client, ClientConfig, Timer, Transport};
@@ -155,4 +158,49 @@ async fn the_reverse_gateway_reads_the_line_while_it_awaits_the_tcp_answer_and_a
     let late = tokio::time::timeout(Duration::from_secs(2), line.read(&mut more)).await;
     assert!(late.is_err(), "the request sent while one was forwarded got a reply");
     assert_eq!(*device.requests.lock().unwrap(), 1, "the second request was forwarded");
+}
+
+/// A gateway whose one line is an in-memory stream to the plain server of `device` (unit 5),
+/// with a read cache.
+async fn gateway(device: &Device) -> Gateway {
+    let device = device.clone();
+    let connector = ConnectWith::new("test line", move || {
+        let (ours, theirs) = tokio::io::duplex(4096);
+        let mut device = device.clone();
+        tokio::spawn(async move {
+            let slave = Slave::new(RtuCodec::new(timing(), Expect::Requests), SlaveConfig::unit(5));
+            let options = &mut ServerOptions::new(timing(), Timer::Tokio);
+            let _ = serve(slave, Box::new(theirs) as BoxPort, &mut device, options).await;
+        });
+        Box::pin(async move { Ok(Box::new(ours) as BoxPort) })
+    });
+    let line = Transport::custom(Framing::Rtu, timing(), connector).with_timer(Timer::Tokio);
+    let client = ClientConfig { timeout: Duration::from_secs(1), retries: 0, ..ClientConfig::default() };
+    let config = GatewayConfig {
+        lines: vec![GatewayLine::new(line, client)],
+        routes: Routes::all_on(0),
+        broadcast_ack: false,
+        cache_max_age: Some(Duration::from_secs(60)),
+    };
+    Gateway::start(config).await.unwrap()
+}
+
+#[tokio::test(start_paused = true)]
+async fn the_gateway_front_answers_rtu_over_tcp_no_earlier_than_t3_5_even_from_its_cache() {
+    let device = Device::default();
+    let gw = gateway(&device).await;
+    let (mut client, server) = tokio::io::duplex(4096);
+    tokio::spawn(async move {
+        gw.serve_connection(server, "rtu client", Inbound::RtuOverTcp, &mut AllowAll, Timeouts::default()).await
+    });
+    let t3_5 = *Transport::rtu_over_tcp("the gateway's clients").timing();
+    let t3_5 = t3_5.t3_5();
+    let (first, _) = exchange(&mut client, &rtu(5, &READ), 7).await;
+    assert_eq!(first, read_reply(5), "the line's reply");
+    // The same read again: the cache has it, and the engine still holds it for t3.5.
+    let (cached, after) = exchange(&mut client, &rtu(5, &READ), 7).await;
+    assert_eq!(cached, read_reply(5), "the cached reply");
+    assert_eq!(*device.requests.lock().unwrap(), 1, "the second read reached the line");
+    assert!(after >= t3_5, "the cached reply went out {after:?} after the request, before t3.5 ({t3_5:?})");
+    assert!(after <= t3_5 + Duration::from_millis(1), "the cached reply went out {after:?} after the request");
 }
