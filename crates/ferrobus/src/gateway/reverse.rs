@@ -78,8 +78,9 @@ pub async fn serve_reverse(
         while let Some(request) = slave.poll_request() {
             let (id, unit, pdu) = (request.id, request.unit, request.pdu.to_vec());
             if request.broadcast {
-                // Executed as far as the line can tell; forwarded behind what came before.
-                let _ = slave.ignore(id);
+                // Executed as far as the line can tell (no reply); forwarded behind what came
+                // before.
+                let _ = slave.respond(id, &pdu);
                 forwards.push_back((None, Box::pin(broadcast(upstreams, pdu))));
             } else {
                 forwards.push_back((Some(id), Box::pin(forward(upstreams, unit, pdu, on_failure))));
