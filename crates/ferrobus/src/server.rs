@@ -26,6 +26,7 @@
 //! TCP, not answered out of order or dropped.
 
 mod accept;
+mod authorize;
 mod trim;
 
 use std::collections::VecDeque;
@@ -42,7 +43,6 @@ use ferrobus_proto::pdu::AddressRange;
 use ferrobus_proto::slave::{Disposition, Handler, RequestId, Slave, SlaveConfig, SlaveEvent};
 use tokio::net::TcpListener;
 
-use crate::gateway::Authorize;
 use crate::port::{BoxPort, Rs485, Transport};
 use crate::pump::{Codec, Pump, Role, Session, write_frame};
 use crate::timer::Timer;
@@ -51,6 +51,7 @@ pub(crate) use accept::accept_connections;
 pub use accept::{ACCEPT_BACKOFF, TcpCounts, TcpLimits, TcpStats};
 #[cfg(feature = "tls")]
 pub(crate) use accept::{Handshake, accept_handshaking};
+pub use authorize::Authorize;
 
 /// What happens to a reply on its way out.
 #[derive(Clone, Copy, PartialEq, Eq, Debug)]
