@@ -69,9 +69,10 @@ pub(crate) struct GatewayArgs {
     #[arg(long, default_value_t = 64, value_parser = clap::value_parser!(u32).range(1..))]
     queue: u32,
 
-    /// Requests one connection may have outstanding, queued or on the line; past it the
-    /// gateway stops reading that connection until a reply has gone out (TCP holds it back)
-    #[arg(long, default_value_t = 16, value_parser = clap::value_parser!(u32).range(1..))]
+    /// Requests one connection may have outstanding, queued or on the line (1 to 16, the
+    /// slave engine's slots); past it the gateway stops reading that connection until a reply
+    /// has gone out (TCP holds it back)
+    #[arg(long, default_value_t = 16, value_parser = clap::value_parser!(u32).range(1..=16))]
     pipeline: u32,
 
     /// Answer a broadcast (unit 0) with its echo once it has gone out (the spec: no reply)

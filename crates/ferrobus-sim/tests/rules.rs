@@ -60,7 +60,7 @@ fn filtered(sim: &Shared<Sim>, framing: Framing, answering: &Answering, frame: &
 fn an_exception_rule_refuses_only_its_function_and_addresses() {
     let sim = sim(&["fc=3,addr=0x10-0x1F,exception=0x06"]);
     let mut handler = sim.clone();
-    let admit = |h: &mut Shared<Sim>, pdu: &[u8]| h.admit(1, false, &Request::parse(pdu).unwrap());
+    let admit = |h: &mut Shared<Sim>, pdu: &[u8]| h.lock().admit(1, false, &Request::parse(pdu).unwrap());
     // 03 000F 0002 touches 0x10.
     assert_eq!(
         admit(&mut handler, &[0x03, 0x00, 0x0F, 0x00, 0x02]),
@@ -69,15 +69,24 @@ fn an_exception_rule_refuses_only_its_function_and_addresses() {
     assert_eq!(admit(&mut handler, &[0x03, 0x00, 0x20, 0x00, 0x02]), Admission::Serve);
     assert_eq!(admit(&mut handler, &[0x04, 0x00, 0x10, 0x00, 0x01]), Admission::Serve);
     // A broadcast is never answered: no rule refuses it.
-    assert_eq!(handler.admit(1, true, &Request::parse(&[0x06, 0x00, 0x10, 0x00, 0x01]).unwrap()), Admission::Serve);
+    assert_eq!(
+        handler.lock().admit(1, true, &Request::parse(&[0x06, 0x00, 0x10, 0x00, 0x01]).unwrap()),
+        Admission::Serve
+    );
 }
 
 #[test]
 fn a_no_reply_rule_ignores_the_request() {
     let sim = sim(&["fc=6,addr=7,no-reply"]);
-    let mut handler = sim.clone();
-    assert_eq!(handler.admit(1, false, &Request::parse(&[0x06, 0x00, 0x07, 0x00, 0x01]).unwrap()), Admission::Ignore);
-    assert_eq!(handler.admit(1, false, &Request::parse(&[0x06, 0x00, 0x08, 0x00, 0x01]).unwrap()), Admission::Serve);
+    let handler = sim.clone();
+    assert_eq!(
+        handler.lock().admit(1, false, &Request::parse(&[0x06, 0x00, 0x07, 0x00, 0x01]).unwrap()),
+        Admission::Ignore
+    );
+    assert_eq!(
+        handler.lock().admit(1, false, &Request::parse(&[0x06, 0x00, 0x08, 0x00, 0x01]).unwrap()),
+        Admission::Serve
+    );
 }
 
 #[test]
@@ -159,9 +168,9 @@ fn a_reply_without_a_known_request_meets_only_the_unit_wide_faults() {
 fn a_unit_answered_by_another_units_device_meets_that_devices_rules() {
     let sim = sim(&["fc=3,exception=0x06", "fc=4,trickle=1ms"]);
     sim.lock().alias(0xFF, 1);
-    let mut handler = sim.clone();
+    let handler = sim.clone();
     let read = Request::parse(&[0x03, 0x00, 0x00, 0x00, 0x01]).unwrap();
-    assert_eq!(handler.admit(0xFF, false, &read), Admission::Refuse(ExceptionCode::ServerDeviceBusy));
+    assert_eq!(handler.lock().admit(0xFF, false, &read), Admission::Refuse(ExceptionCode::ServerDeviceBusy));
     let input = Answering { unit: 0xFF, function: FunctionCode::ReadInputRegisters, ..read_holding(0, 1) };
     let (fate, _) = filtered(&sim, Framing::Mbap, &input, &tcp_reply(1, &[0x04, 0x02, 0x00, 0x01]));
     assert_eq!(fate, Fate::Trickle { gap: Duration::from_millis(1) });

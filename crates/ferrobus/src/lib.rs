@@ -6,8 +6,8 @@
 //!
 //! ```text
 //!   Client (clone it) ──requests──▶ client session ─┐
-//!                                                    ├─▶ pump ─┬─ Engine: Master, or Slave + Handler
-//!   server::serve(Slave engine, port, Handler) ─────┘          └─ port: serial, TCP, pty, your stream
+//!                                                    ├─▶ pump ─┬─ Engine: Master, or Slave (deferred)
+//!   server::serve(Slave engine, port, Service) ─────┘          └─ port: serial, TCP, pty, your stream
 //! ```
 //!
 //! One driver loop, the pump, runs every role: it reads with the arrival time and hands the
@@ -75,7 +75,7 @@ pub mod log;
 pub mod pcapng;
 pub mod poll;
 pub mod port;
-mod pump;
+pub mod pump;
 pub mod scan;
 mod serial;
 pub mod server;

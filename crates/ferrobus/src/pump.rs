@@ -9,16 +9,37 @@
 //!   Engine::poll_event ──▶ the session: the client's completions, the server's observer
 //! ```
 //!
-//! Every role is an [`Engine`] — the client's [`Master`], the server's [`Slave`] with its
-//! handler ([`Serving`]) — driven by the one loop, [`Pump::run`], so reading, keeping what a
+//! Who runs on the pump:
+//!
+//! ```text
+//!   ferrobus_proto::master::Master ◀── Engine ──▶ ferrobus_proto::slave::Slave (deferred)
+//!            │                                                  │ poll_request / respond
+//!   driver::Transaction (Client)          server::Replies: authorize filter, then Service::answer
+//!                                            ├─ server::serve, serve_tcp   (a Handler, a Shared one)
+//!                                            ├─ the simulator              (Shared<Sim> + FaultFilter)
+//!                                            └─ tls::serve_tls_with        (RoleCheck as the filter)
+//!                                         gateway front (serve_tcp, serve_tls, serve_connection):
+//!                                            screen, Authorize, each request to its line's queue,
+//!                                            the line's reply back with Slave::respond (Session::wait)
+//!                                         gateway::serve_reverse: each request forwarded to its
+//!                                            TCP server, the answer back with Slave::respond
+//! ```
+//!
+//! Every role is an [`Engine`] — the client's [`Master`], the server's [`Slave`] in its
+//! deferred mode (it frames and admits requests and keeps their order and reply timing; the
+//! session answers them) — driven by the one loop, [`Pump::run`], so reading, keeping what a
 //! blocked engine did not take, sleeping and waking are written once. The role-specific parts
 //! are a [`Session`] the loop calls at fixed points (serve the engine's output, add deadlines,
 //! note a read, act on a wake before the engine, end with the port): the client's request
-//! (`driver::Transaction`) and the server's replies with their filter, observer and idle
+//! (`driver::Transaction`) and the server's replies with their filters, observer and idle
 //! timeouts (`server::Replies`). Between requests the client waits on its command channel
-//! and the port at once with [`Pump::step`], the loop's one turn. Which codec a [`Transport`] takes is decided once too
-//! ([`Codec::for_transport`]). Echo suppression is the master engine's own (it counts its
-//! echo off the bytes it is fed), so the pump feeds every byte unchanged.
+//! and the port at once with the loop's one turn (`Pump::step`). Which codec a transport
+//! takes is decided once too (`Codec::for_transport`). Echo suppression is the master
+//! engine's own (it counts its echo off the bytes it is fed), so the pump feeds every byte
+//! unchanged.
+//!
+//! Outside this crate, a program drives an engine of its own with [`Pump::new`] and
+//! [`Pump::run`], writing its frames with [`write_frame`].
 
 use std::future::Future;
 use std::io;
@@ -30,7 +51,7 @@ use ferrobus_proto::frame::mbap::MbapCodec;
 use ferrobus_proto::frame::rtu::RtuCodec;
 use ferrobus_proto::frame::{AduHeader, Framing, LineTiming, RxEvent, RxStats};
 use ferrobus_proto::master::{Completion, Master};
-use ferrobus_proto::slave::{Handler, Slave, SlaveEvent};
+use ferrobus_proto::slave::{Slave, SlaveEvent};
 use tokio::io::{AsyncReadExt, AsyncWriteExt};
 
 use crate::clock::Clock;
@@ -38,7 +59,7 @@ use crate::port::{BoxPort, Rs485, Transport};
 use crate::timer::Sleeper;
 
 /// The contract every engine the pump drives keeps: the five verbs of the sans-IO core.
-pub(crate) trait Engine {
+pub trait Engine {
     /// What the engine reports.
     type Event<'a>
     where
@@ -84,40 +105,40 @@ impl<F: Framing> Engine for Master<F> {
     }
 }
 
-/// A slave engine with the handler that serves its requests: the server's engine.
-pub(crate) struct Serving<'h, F, H: ?Sized> {
-    pub(crate) slave: Slave<F>,
-    pub(crate) handler: &'h mut H,
-}
-
-impl<F: Framing, H: Handler + ?Sized> Engine for Serving<'_, F, H> {
+/// The slave engine, deferred: it frames and admits requests, the session answers them
+/// ([`Slave::poll_request`], then one of its answers), the engine keeps their order and timing.
+impl<F: Framing> Engine for Slave<F> {
     type Event<'a>
         = SlaveEvent
     where
-        Self: 'a;
+        F: 'a;
 
     fn on_bytes(&mut self, now: Instant, bytes: &[u8]) -> usize {
-        self.slave.on_bytes(now, bytes, self.handler)
+        self.receive(now, bytes)
     }
     fn poll_timeout(&self) -> Option<Instant> {
-        self.slave.poll_timeout()
+        Slave::poll_timeout(self)
     }
     fn handle_timeout(&mut self, now: Instant) {
-        self.slave.handle_timeout(now, self.handler);
+        self.wake(now);
     }
     fn poll_transmit(&mut self, now: Instant, buf: &mut [u8]) -> Option<usize> {
-        self.slave.poll_transmit(now, buf)
+        Slave::poll_transmit(self, now, buf)
     }
     fn poll_event(&mut self) -> Option<SlaveEvent> {
-        self.slave.poll_event()
+        Slave::poll_event(self)
     }
     fn is_blocked(&self) -> bool {
-        self.slave.is_blocked()
+        Slave::is_blocked(self)
     }
 }
 
 /// What a role does around the pump, at the loop's fixed points ([`Pump::run`]).
-pub(crate) trait Session<E: Engine> {
+#[expect(
+    async_fn_in_trait,
+    reason = "the sessions are driven in place by `Pump::run`; no caller needs to name the future's bounds"
+)]
+pub trait Session<E: Engine> {
     /// What the loop ends with.
     type Output;
     /// Takes the engine's events and writes what it hands out, at the top of every turn;
@@ -126,6 +147,12 @@ pub(crate) trait Session<E: Engine> {
     /// The session's own earliest deadline, besides the engine's.
     fn deadline(&mut self, _engine: &E) -> Option<tokio::time::Instant> {
         None
+    }
+    /// Something else the session waits for besides the port and the deadlines (the
+    /// gateway's line replies); when it finishes the loop turns, and [`Session::serve`]
+    /// takes what it brought. It must be cancel-safe: a read or a deadline may come first.
+    async fn wait(&mut self) {
+        std::future::pending::<()>().await;
     }
     /// Bytes were read.
     fn on_read(&mut self) {}
@@ -154,7 +181,7 @@ pub(crate) enum Step<T> {
 
 /// The loop's state that does not depend on the role: the clock, the sleeper, the read
 /// buffer and the bytes a blocked engine has not taken yet.
-pub(crate) struct Pump {
+pub struct Pump {
     clock: Clock,
     sleeper: Sleeper,
     rx: Box<[u8; 1024]>,
@@ -167,7 +194,7 @@ pub(crate) struct Pump {
 
 impl Pump {
     /// A pump waiting with `sleeper`.
-    pub(crate) fn new(sleeper: Sleeper) -> Self {
+    pub fn new(sleeper: Sleeper) -> Self {
         Pump {
             clock: Clock::new(),
             sleeper,
@@ -179,7 +206,7 @@ impl Pump {
     }
 
     /// The pump's clock.
-    pub(crate) fn clock(&self) -> &Clock {
+    pub fn clock(&self) -> &Clock {
         &self.clock
     }
 
@@ -224,7 +251,7 @@ impl Pump {
     /// The one driver loop: serves the engine's output through `session`, hands the engine
     /// the bytes it did not take before, then reads or sleeps until the earliest of the
     /// engine's and the session's deadlines; until the session or the port ends it.
-    pub(crate) async fn run<E: Engine, S: Session<E>>(
+    pub async fn run<E: Engine, S: Session<E>>(
         &mut self,
         port: &mut BoxPort,
         engine: &mut E,
@@ -238,7 +265,7 @@ impl Pump {
                 continue;
             }
             let deadline = [self.deadline(engine), session.deadline(engine)].into_iter().flatten().min();
-            match self.step(port, engine, deadline, std::future::pending::<()>()).await {
+            match self.step(port, engine, deadline, session.wait()).await {
                 Step::Read => session.on_read(),
                 Step::Closed => return session.on_end(None),
                 Step::Failed(e) => return session.on_end(Some(e)),
@@ -290,7 +317,7 @@ impl Pump {
 
 /// Writes `frame` and flushes it, raising RTS around it for [`Rs485::Rts`]: the one writer
 /// of every role.
-pub(crate) async fn write_frame(port: &mut BoxPort, frame: &[u8], rs485: Rs485, timing: &LineTiming) -> io::Result<()> {
+pub async fn write_frame(port: &mut BoxPort, frame: &[u8], rs485: Rs485, timing: &LineTiming) -> io::Result<()> {
     tracing::trace!("tx {}", Hex(frame));
     let rts = rs485 == Rs485::Rts;
     if rts {

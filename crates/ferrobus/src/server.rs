@@ -4,8 +4,12 @@
 //! Like the client's driver it knows no Modbus, and runs on the same one driver loop (see the
 //! crate's opening doc): it feeds bytes with their arrival time, sleeps until the engine's
 //! next deadline ([`Timer::Precise`] on serial lines, so that a reply due at t3.5 + wait is
-//! not a millisecond late), writes the reply the engine hands it, and reports what happened. A [`ReplyFilter`] may drop, delay or alter replies on
-//! their way out: the simulator's fault injection.
+//! not a millisecond late), writes the reply the engine hands it, and reports what happened.
+//! The engine runs deferred: it frames and admits each request and keeps its slot, its order
+//! and its reply timing; the session hands each one to the [`Service`] — one call per request,
+//! a [`Shared`] handler locked once for it — after the [`ServerOptions::authorize`] filter
+//! (a TLS client's role). A [`ReplyFilter`] may drop, delay or alter replies on their way out:
+//! the simulator's fault injection.
 //!
 //! Over TCP ([`serve_tcp_with`]) a connection's trouble never ends the server: running out of
 //! file descriptors pauses accepting for [`ACCEPT_BACKOFF`] while the open connections are
@@ -22,6 +26,7 @@
 //! TCP, not answered out of order or dropped.
 
 mod accept;
+mod authorize;
 mod trim;
 
 use std::collections::VecDeque;
@@ -30,22 +35,23 @@ use std::io;
 use std::sync::{Arc, Mutex, MutexGuard, PoisonError};
 use std::time::Duration;
 
+use ferrobus_proto::FunctionCode;
 use ferrobus_proto::error::DiscardReason;
 use ferrobus_proto::frame::{Framing, LineTiming};
 use ferrobus_proto::master::MAX_TX_LEN;
-use ferrobus_proto::pdu::{AddressRange, Bits, MaskWrite, ReadWriteRegisters, Registers, Request};
-use ferrobus_proto::slave::{Admission, Disposition, Handler, Slave, SlaveConfig, SlaveEvent};
-use ferrobus_proto::{ExceptionCode, FunctionCode};
+use ferrobus_proto::pdu::AddressRange;
+use ferrobus_proto::slave::{Disposition, Handler, RequestId, Slave, SlaveConfig, SlaveEvent};
 use tokio::net::TcpListener;
 
 use crate::port::{BoxPort, Rs485, Transport};
-use crate::pump::{Codec, Engine, Pump, Role, Serving, Session, write_frame};
+use crate::pump::{Codec, Pump, Role, Session, write_frame};
 use crate::timer::Timer;
 
 pub(crate) use accept::accept_connections;
 pub use accept::{ACCEPT_BACKOFF, TcpCounts, TcpLimits, TcpStats};
 #[cfg(feature = "tls")]
 pub(crate) use accept::{Handshake, accept_handshaking};
+pub use authorize::Authorize;
 
 /// What happens to a reply on its way out.
 #[derive(Clone, Copy, PartialEq, Eq, Debug)]
@@ -149,77 +155,28 @@ impl<H> Shared<H> {
     }
 }
 
-impl<H: Handler> Handler for Shared<H> {
-    fn admit(&mut self, unit: u8, broadcast: bool, request: &Request<'_>) -> Admission {
-        self.lock().admit(unit, broadcast, request)
+/// What answers the requests a server's engine hands out: one call per request, which
+/// finishes it ([`Slave::answer_with`] through a [`Handler`], or [`Slave::respond`],
+/// [`Slave::refuse`], [`Slave::ignore`]). A request left unfinished gets no reply once the
+/// engine's answer limit passes.
+///
+/// Every [`Handler`] is one, and so is a [`Shared`] handler, locked once per request.
+pub trait Service: Send {
+    /// Finishes request `id`, just handed out by `slave`.
+    fn answer<F: Framing>(&mut self, slave: &mut Slave<F>, id: RequestId);
+}
+
+impl<H: Handler + Send + ?Sized> Service for H {
+    fn answer<F: Framing>(&mut self, slave: &mut Slave<F>, id: RequestId) {
+        // The id was just handed out: it is known.
+        let _ = slave.answer_with(id, self);
     }
-    fn response_wait(&self, unit: u8) -> Option<Duration> {
-        self.lock().response_wait(unit)
-    }
-    fn read_coils(&mut self, unit: u8, start: u16, out: &mut [bool]) -> Result<(), ExceptionCode> {
-        self.lock().read_coils(unit, start, out)
-    }
-    fn read_discrete_inputs(&mut self, unit: u8, start: u16, out: &mut [bool]) -> Result<(), ExceptionCode> {
-        self.lock().read_discrete_inputs(unit, start, out)
-    }
-    fn read_holding_registers(&mut self, unit: u8, start: u16, out: &mut [u16]) -> Result<(), ExceptionCode> {
-        self.lock().read_holding_registers(unit, start, out)
-    }
-    fn read_input_registers(&mut self, unit: u8, start: u16, out: &mut [u16]) -> Result<(), ExceptionCode> {
-        self.lock().read_input_registers(unit, start, out)
-    }
-    fn write_single_coil(&mut self, unit: u8, address: u16, value: bool) -> Result<(), ExceptionCode> {
-        self.lock().write_single_coil(unit, address, value)
-    }
-    fn write_single_register(&mut self, unit: u8, address: u16, value: u16) -> Result<(), ExceptionCode> {
-        self.lock().write_single_register(unit, address, value)
-    }
-    fn write_multiple_coils(&mut self, unit: u8, start: u16, values: Bits<'_>) -> Result<(), ExceptionCode> {
-        self.lock().write_multiple_coils(unit, start, values)
-    }
-    fn write_multiple_registers(&mut self, unit: u8, start: u16, values: Registers<'_>) -> Result<(), ExceptionCode> {
-        self.lock().write_multiple_registers(unit, start, values)
-    }
-    fn mask_write_register(&mut self, unit: u8, mask: MaskWrite) -> Result<(), ExceptionCode> {
-        self.lock().mask_write_register(unit, mask)
-    }
-    fn read_write_multiple_registers(
-        &mut self,
-        unit: u8,
-        request: &ReadWriteRegisters<'_>,
-        out: &mut [u16],
-    ) -> Result<(), ExceptionCode> {
-        self.lock().read_write_multiple_registers(unit, request, out)
-    }
-    fn read_exception_status(&mut self, unit: u8) -> Result<u8, ExceptionCode> {
-        self.lock().read_exception_status(unit)
-    }
-    fn report_server_id(&mut self, unit: u8, out: &mut [u8]) -> Result<usize, ExceptionCode> {
-        self.lock().report_server_id(unit, out)
-    }
-    fn read_file_record(&mut self, unit: u8, file: u16, record: u16, out: &mut [u16]) -> Result<(), ExceptionCode> {
-        self.lock().read_file_record(unit, file, record, out)
-    }
-    fn write_file_record(
-        &mut self,
-        unit: u8,
-        file: u16,
-        record: u16,
-        values: Registers<'_>,
-    ) -> Result<(), ExceptionCode> {
-        self.lock().write_file_record(unit, file, record, values)
-    }
-    fn read_fifo_queue(&mut self, unit: u8, address: u16, out: &mut [u16; 31]) -> Result<usize, ExceptionCode> {
-        self.lock().read_fifo_queue(unit, address, out)
-    }
-    fn device_object(&mut self, unit: u8, id: u8, out: &mut [u8]) -> Option<usize> {
-        self.lock().device_object(unit, id, out)
-    }
-    fn encapsulated(&mut self, unit: u8, mei_type: u8, data: &[u8], out: &mut [u8]) -> Result<usize, ExceptionCode> {
-        self.lock().encapsulated(unit, mei_type, data, out)
-    }
-    fn custom(&mut self, unit: u8, function: u8, data: &[u8], out: &mut [u8]) -> Result<usize, ExceptionCode> {
-        self.lock().custom(unit, function, data, out)
+}
+
+impl<H: Handler + Send> Service for Shared<H> {
+    fn answer<F: Framing>(&mut self, slave: &mut Slave<F>, id: RequestId) {
+        // One lock for the whole request: admission, the data call, the response wait.
+        let _ = slave.answer_with(id, &mut *self.lock());
     }
 }
 
@@ -241,6 +198,10 @@ pub struct ServerOptions {
     /// Close the port when a frame begun is not complete this long after its first byte
     /// (framings that end frames by time never are; `None`: never).
     pub frame_timeout: Option<Duration>,
+    /// Checks every request before it is answered (a TLS client's role): `Err(code)`
+    /// answers it with exception `code` (a broadcast: not at all) and the [`Service`] never
+    /// sees it.
+    pub authorize: Option<Box<dyn Authorize>>,
 }
 
 /// Why the server closed a connection: the payload of the error [`serve`] returns for it.
@@ -292,6 +253,7 @@ impl ServerOptions {
             observer: None,
             idle_timeout: None,
             frame_timeout: None,
+            authorize: None,
         }
     }
 
@@ -305,6 +267,7 @@ impl ServerOptions {
             observer: None,
             idle_timeout: None,
             frame_timeout: None,
+            authorize: None,
         }
     }
 
@@ -319,23 +282,25 @@ impl ServerOptions {
 /// replies the engine never sends, cannot grow the queue).
 const ANSWERING_MAX: usize = 64;
 
-/// Runs `slave` over `port`, serving through `handler`, until the port fails or closes.
+/// Runs `slave` over `port`, answering every request through `service` (a [`Handler`], a
+/// [`Shared`] one), until the port fails or closes.
 /// Returns the engine (with its counters) and the error that ended it, if any.
 ///
-/// The engine (4 KiB with its reply queue) and the session's buffers live on the heap, once:
+/// The engine (some KiB with its request slots) and the session's buffers live on the heap, once:
 /// the future holds pointers to them. (Taken by value into an `async fn`, the engine was
 /// stored in the future twice, as the argument and as the engine, and a TCP server's task per
 /// connection with it.)
-pub fn serve<'a, F: Framing + 'a, H: Handler + Send>(
+pub fn serve<'a, F: Framing + 'a, S: Service + ?Sized>(
     slave: Slave<F>,
     mut port: BoxPort,
-    handler: &'a mut H,
+    service: &'a mut S,
     options: &'a mut ServerOptions,
 ) -> impl Future<Output = (Slave<F>, io::Result<()>)> + 'a {
-    let mut engine = Box::new(Serving { slave, handler });
+    let mut engine = Box::new(slave);
     async move {
         let mut pump = Pump::new(options.timer.sleeper());
         let mut session = Box::new(Replies {
+            service,
             options,
             tx: [0u8; MAX_TX_LEN],
             delayed: VecDeque::new(),
@@ -347,13 +312,16 @@ pub fn serve<'a, F: Framing + 'a, H: Handler + Send>(
             woke: false,
         });
         let ended = pump.run(&mut port, &mut *engine, &mut *session).await;
-        (engine.slave, ended)
+        (*engine, ended)
     }
 }
 
-/// The server's session around the pump: reports events, passes replies through the filter
-/// and writes them in order, and closes the port on the idle and unfinished-frame timeouts.
-struct Replies<'o> {
+/// The server's session around the pump: answers the requests the engine hands out (the
+/// authorization filter first, then the service), reports events, passes replies through
+/// the reply filter and writes them in order, and closes the port on the idle and
+/// unfinished-frame timeouts.
+struct Replies<'o, S: ?Sized> {
+    service: &'o mut S,
     options: &'o mut ServerOptions,
     tx: [u8; MAX_TX_LEN],
     /// Replies held back by the filter, in order, with when to send them. Over TCP several
@@ -371,10 +339,11 @@ struct Replies<'o> {
     woke: bool,
 }
 
-impl<F: Framing, H: Handler + ?Sized> Session<Serving<'_, F, H>> for Replies<'_> {
+impl<F: Framing, S: Service + ?Sized> Session<Slave<F>> for Replies<'_, S> {
     type Output = io::Result<()>;
 
-    async fn serve(&mut self, pump: &Pump, port: &mut BoxPort, engine: &mut Serving<'_, F, H>) -> Option<Self::Output> {
+    async fn serve(&mut self, pump: &Pump, port: &mut BoxPort, engine: &mut Slave<F>) -> Option<Self::Output> {
+        answer_requests(engine, &mut *self.service, &mut self.options.authorize);
         if std::mem::take(&mut self.woke) {
             while self.delayed.front().is_some_and(|(_, at)| *at <= tokio::time::Instant::now()) {
                 let Some((reply, _)) = self.delayed.pop_front() else { break };
@@ -388,7 +357,7 @@ impl<F: Framing, H: Handler + ?Sized> Session<Serving<'_, F, H>> for Replies<'_>
         // Events first: a request is known before its reply leaves (on TCP, at once).
         let lost = take_events(engine, &mut self.answering, self.options);
         loop {
-            let due = engine.slave.reply_due().map_or_else(tokio::time::Instant::now, |t| pump.clock().to_tokio(t));
+            let due = engine.reply_due().map_or_else(tokio::time::Instant::now, |t| pump.clock().to_tokio(t));
             let Some(n) = engine.poll_transmit(now, &mut self.tx) else { break };
             let mut frame = self.tx.get(..n).unwrap_or_default().to_vec();
             let request = self.answering.pop_front();
@@ -423,9 +392,9 @@ impl<F: Framing, H: Handler + ?Sized> Session<Serving<'_, F, H>> for Replies<'_>
         lost.then(|| Err(Closed::BadHeader.error()))
     }
 
-    fn deadline(&mut self, engine: &Serving<'_, F, H>) -> Option<tokio::time::Instant> {
+    fn deadline(&mut self, engine: &Slave<F>) -> Option<tokio::time::Instant> {
         self.frame_began =
-            if engine.slave.framing().is_mid_frame() { self.frame_began.or(Some(self.last_activity)) } else { None };
+            if engine.framing().is_mid_frame() { self.frame_began.or(Some(self.last_activity)) } else { None };
         // A timeout too long to add to an instant is no deadline at all.
         self.idle_at = self.options.idle_timeout.and_then(|d| self.last_activity.checked_add(d));
         self.unfinished_at =
@@ -447,10 +416,29 @@ impl<F: Framing, H: Handler + ?Sized> Session<Serving<'_, F, H>> for Replies<'_>
     }
 }
 
+/// Answers, one call each, the requests `slave` hands out: a request `authorize` refuses is
+/// answered with its exception (a broadcast not at all) and never reaches `service`.
+pub(crate) fn answer_requests<F: Framing, S: Service + ?Sized>(
+    slave: &mut Slave<F>,
+    service: &mut S,
+    authorize: &mut Option<Box<dyn Authorize>>,
+) {
+    while let Some(request) = slave.poll_request() {
+        let (id, broadcast) = (request.id, request.broadcast);
+        let refused = authorize.as_mut().and_then(|a| a.authorize(request.unit, request.pdu).err());
+        match refused {
+            // The id was just handed out: it is known.
+            Some(_) if broadcast => drop(slave.ignore(id)),
+            Some(code) => drop(slave.refuse(id, code)),
+            None => service.answer(slave, id),
+        }
+    }
+}
+
 /// Reports the engine's events and notes what each reply to come answers. Returns whether
 /// the MBAP framing was lost (a bad header): the connection must close.
-fn take_events<F: Framing, H: Handler + ?Sized>(
-    engine: &mut Serving<'_, F, H>,
+fn take_events<F: Framing>(
+    engine: &mut Slave<F>,
     answering: &mut VecDeque<Answering>,
     options: &mut ServerOptions,
 ) -> bool {
@@ -529,17 +517,17 @@ async fn write(
 }
 
 /// Runs a slave engine for `config` over `port` with the framing and timing of `transport`,
-/// serving through `handler`, until the port fails or closes.
-pub async fn serve_transport<H: Handler + Send>(
+/// answering through `service`, until the port fails or closes.
+pub async fn serve_transport<S: Service + ?Sized>(
     transport: &Transport,
     port: BoxPort,
     config: SlaveConfig,
-    handler: &mut H,
+    service: &mut S,
     options: &mut ServerOptions,
 ) -> io::Result<()> {
     // A server's MBAP receiver is strict: a stream whose framing is lost is closed.
     let codec = Codec::for_transport(transport, Role::Server);
-    serve(Slave::new(codec, config), port, handler, options).await.1
+    serve(Slave::new(codec, config), port, service, options).await.1
 }
 
 /// Serves Modbus/TCP (or RTU over TCP, per `transport`'s framing) on `listener` with the

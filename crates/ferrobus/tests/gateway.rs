@@ -439,3 +439,75 @@ async fn a_client_that_writes_200_requests_at_once_never_has_more_than_its_pipel
     assert!(stats.queue_max <= 16, "{} requests of one connection queued at once", stats.queue_max);
     assert_eq!((stats.total.replies, stats.total.busy), (200, 0), "{}", stats.total);
 }
+
+/// A connection served with `timeouts`, and the task serving it.
+fn connect_with(gateway: &Gateway, timeouts: Timeouts) -> (DuplexStream, tokio::task::JoinHandle<std::io::Result<()>>) {
+    let (client, server) = tokio::io::duplex(4096);
+    let gateway = gateway.clone();
+    let task = tokio::spawn(async move {
+        gateway.serve_connection(server, "test client", Inbound::Mbap, &mut AllowAll, timeouts).await
+    });
+    (client, task)
+}
+
+#[tokio::test(start_paused = true)]
+async fn a_bad_mbap_header_closes_the_connection_after_the_request_before_it_is_answered_and_the_write_after_it_never_runs()
+ {
+    let bus = Shared::new(Bus::default());
+    let gw = gateway(&bus, Setup::default()).await;
+    let (mut client, task) = connect_with(&gw, Timeouts::default());
+    let mut input = mbap(1, 1, &READ_0_2);
+    input.extend([0x00, 0x02, 0x00, 0x07, 0x00, 0x06, 0x01]);
+    input.extend(mbap(3, 1, &[0x06, 0x00, 0x05, 0x12, 0x34]));
+    client.write_all(&input).await.unwrap();
+    assert_eq!(reply(&mut client).await, (1, 1, vec![0x03, 0x04, 0, 0, 0, 0]), "the request before the header");
+    let err = task.await.unwrap().expect_err("closed");
+    assert_eq!(ferrobus::server::Closed::of(&err), Some(ferrobus::server::Closed::BadHeader), "{err}");
+    let mut rest = Vec::new();
+    client.read_to_end(&mut rest).await.unwrap();
+    assert!(rest.is_empty(), "answered after the bad header: {rest:02X?}");
+    assert_eq!(bus.lock().registers.get(&1).map_or(0, |r| r[5]), 0, "the write behind the header ran");
+}
+
+#[tokio::test(start_paused = true)]
+async fn an_idle_connection_is_closed_after_the_idle_timeout_but_never_while_a_request_is_outstanding() {
+    let bus = Shared::new(Bus { dead: vec![7], ..Bus::default() });
+    let gw = gateway(&bus, Setup::default()).await;
+    // The dead unit's answer (two attempts of 50 ms) takes longer than the idle timeout.
+    let idle = Duration::from_millis(30);
+    let (mut client, task) = connect_with(&gw, Timeouts { idle: Some(idle), ..Timeouts::default() });
+    let asked = tokio::time::Instant::now();
+    assert_eq!(ask(&mut client, 1, 7, &READ_0_2).await, [0x83, 0x0B], "closed while the line was asked");
+    let answered = tokio::time::Instant::now();
+    assert!(answered - asked > idle, "the answer came within the idle timeout: the test shows nothing");
+    let err = task.await.unwrap().expect_err("closed");
+    assert_eq!(ferrobus::server::Closed::of(&err), Some(ferrobus::server::Closed::Idle(idle)), "{err}");
+    let closed = tokio::time::Instant::now() - answered;
+    assert!(closed >= idle && closed <= idle + Duration::from_millis(2), "closed {closed:?} after the reply");
+}
+
+#[tokio::test(start_paused = true)]
+async fn a_frame_begun_and_never_finished_closes_the_connection_after_the_frame_timeout() {
+    let bus = Shared::new(Bus::default());
+    let gw = gateway(&bus, Setup::default()).await;
+    let frame = Duration::from_secs(5);
+    let (mut client, server) = tokio::io::duplex(4096);
+    let timeouts = Timeouts { frame: Some(frame), ..Timeouts::default() };
+    let front = gw.clone();
+    let began = tokio::time::Instant::now();
+    let task = tokio::spawn(async move {
+        let ended = front.serve_connection(server, "slow", Inbound::Mbap, &mut AllowAll, timeouts).await;
+        (ended, began.elapsed())
+    });
+    // One byte a second: never idle, the frame never complete.
+    for byte in [0x00, 0x01, 0x00, 0x00, 0x00, 0x06, 0x01] {
+        if client.write_all(&[byte]).await.is_err() || task.is_finished() {
+            break;
+        }
+        tokio::time::sleep(Duration::from_secs(1)).await;
+    }
+    let (ended, after) = task.await.unwrap();
+    let err = ended.expect_err("closed");
+    assert_eq!(ferrobus::server::Closed::of(&err), Some(ferrobus::server::Closed::UnfinishedFrame(frame)), "{err}");
+    assert!(after >= frame && after < frame + Duration::from_secs(1), "closed after {after:?}");
+}

@@ -1,15 +1,16 @@
 //! The server driver over Modbus/TCP framing, with paused time: connections closed when idle,
 //! on an unfinished frame and on a bad MBAP header, and pipelined requests answered in order
-//! to a client that reads nothing until it has written them all.
+//! to a client that reads nothing until it has written them all; every request one call of the
+//! service, an owned or a shared handler, and the authorization filter before it.
 
 use std::time::Duration;
 
 use ferrobus::Timer;
-use ferrobus::server::{Answering, Closed, Fate, ReplyFilter, ServerOptions, serve};
+use ferrobus::server::{Answering, Closed, Fate, ReplyFilter, ServerOptions, Service, Shared, serve};
 use ferrobus_proto::ExceptionCode;
 use ferrobus_proto::frame::mbap::MbapCodec;
-use ferrobus_proto::frame::{LineConfig, LineTiming};
-use ferrobus_proto::slave::{Handler, Slave, SlaveConfig};
+use ferrobus_proto::frame::{Framing, LineConfig, LineTiming};
+use ferrobus_proto::slave::{Handler, RequestId, Slave, SlaveConfig};
 use tokio::io::{AsyncReadExt, AsyncWriteExt, DuplexStream};
 use tokio::time::Instant;
 
@@ -178,4 +179,86 @@ async fn a_connections_future_holds_the_engine_by_pointer_not_inline() {
         "{} bytes of future, {engine} of engine",
         std::mem::size_of_val(&future)
     );
+}
+
+/// Answers through `device`, counting its calls: one per request handed out.
+struct Counting {
+    device: Device,
+    calls: u32,
+}
+
+impl Service for Counting {
+    fn answer<F: Framing>(&mut self, slave: &mut Slave<F>, id: RequestId) {
+        self.calls += 1;
+        slave.answer_with(id, &mut self.device).unwrap();
+    }
+}
+
+#[tokio::test(start_paused = true)]
+async fn every_request_is_one_call_of_the_service_and_the_replies_keep_request_order() {
+    let (mut client, server_end) = tokio::io::duplex(4096);
+    let server = tokio::spawn(async move {
+        let mut service = Counting { device: Device { registers: [0; 100], writes: 0 }, calls: 0 };
+        let slave = Slave::new(MbapCodec::strict(), SlaveConfig::unit(1));
+        let (_, ended) = serve(slave, Box::new(server_end), &mut service, &mut options(None, None)).await;
+        (ended, service)
+    });
+    let input: Vec<u8> = (0..20u16).flat_map(write_request).collect();
+    client.write_all(&input).await.unwrap();
+    let mut reply = [0u8; 12];
+    for t in 0..20u16 {
+        client.read_exact(&mut reply).await.unwrap();
+        assert_eq!(reply.as_slice(), write_request(t).as_slice(), "reply {t}");
+    }
+    drop(client);
+    let (ended, service) = server.await.unwrap();
+    assert!(ended.is_ok(), "{ended:?}");
+    assert_eq!((service.calls, service.device.writes), (20, 20), "one call per request, no more");
+}
+
+#[tokio::test(start_paused = true)]
+async fn a_shared_handler_serves_through_the_same_session_as_an_owned_one() {
+    let (mut client, server_end) = tokio::io::duplex(1024);
+    let shared = Shared::new(Device { registers: [7; 100], writes: 0 });
+    let mut handler = shared.clone();
+    let server = tokio::spawn(async move {
+        let slave = Slave::new(MbapCodec::strict(), SlaveConfig::unit(1));
+        serve(slave, Box::new(server_end), &mut handler, &mut options(None, None)).await.1
+    });
+    client.write_all(&write_request(3)).await.unwrap();
+    client.write_all(&mbap(9, 1, &[0x03, 0x00, 0x03, 0x00, 0x02])).await.unwrap();
+    let mut reply = [0u8; 12];
+    client.read_exact(&mut reply).await.unwrap();
+    assert_eq!(reply.as_slice(), write_request(3).as_slice());
+    let mut read = [0u8; 13];
+    client.read_exact(&mut read).await.unwrap();
+    assert_eq!(read.as_slice(), mbap(9, 1, &[0x03, 0x04, 0x40, 0x03, 0x00, 0x07]).as_slice());
+    drop(client);
+    assert!(server.await.unwrap().is_ok());
+    assert_eq!(shared.lock().writes, 1);
+}
+
+#[tokio::test(start_paused = true)]
+async fn the_authorize_filter_answers_a_refused_request_itself_and_the_handler_never_sees_it() {
+    let mut options = options(None, None);
+    // Writes refused with exception 01, reads through.
+    options.authorize =
+        Some(Box::new(
+            |_unit: u8, pdu: &[u8]| {
+                if pdu.first() == Some(&0x06) { Err(ExceptionCode::IllegalFunction) } else { Ok(()) }
+            },
+        ));
+    let (mut client, server) = start(1024, options);
+    client.write_all(&write_request(4)).await.unwrap();
+    let mut refused = [0u8; 9];
+    client.read_exact(&mut refused).await.unwrap();
+    assert_eq!(refused.as_slice(), mbap(4, 1, &[0x86, 0x01]).as_slice());
+    client.write_all(&mbap(5, 1, &[0x03, 0x00, 0x04, 0x00, 0x01])).await.unwrap();
+    let mut read = [0u8; 11];
+    client.read_exact(&mut read).await.unwrap();
+    assert_eq!(read.as_slice(), mbap(5, 1, &[0x03, 0x02, 0x00, 0x00]).as_slice(), "the read was not served");
+    drop(client);
+    let (ended, device, _) = server.await.unwrap();
+    assert!(ended.is_ok(), "{ended:?}");
+    assert_eq!((device.writes, device.registers[4]), (0, 0), "a refused write reached the handler");
 }

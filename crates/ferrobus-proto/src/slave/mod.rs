@@ -24,8 +24,10 @@
 //!   rest, stops reading, and hands them in again once replies are written and events
 //!   polled ([`Slave::is_blocked`]). Nothing is dropped; over TCP that is back-pressure.
 
+mod deferred;
 mod diag;
 mod handler;
+mod pending;
 mod ring;
 mod serve;
 #[cfg(test)]
@@ -33,18 +35,19 @@ mod tests;
 
 use core::time::Duration;
 
+pub use deferred::{ANSWER_LIMIT, AnswerError, Incoming};
 pub use diag::{Counters, EventLog, event};
 pub use handler::{Admission, Handler};
+pub use pending::RequestId;
 
 use crate::codes::{DiagnosticCode, ExceptionCode, FunctionCode, unit};
 use crate::error::DiscardReason;
-use crate::frame::{Adu, AduHeader, Direction, Framing, RxEvent};
+use crate::frame::{Adu, Direction, Framing, RxEvent};
 use crate::master::MAX_TX_LEN;
-use crate::pdu::{
-    AddressRange, CommEventCounter, CommEventLog, Diagnostic, ExceptionResponse, MAX_PDU_LEN, Request, Response,
-};
+use crate::pdu::{AddressRange, CommEventLog, Diagnostic, ExceptionResponse, MAX_PDU_LEN, Request, Response};
 use crate::time::{Instant, earliest};
 use diag::bump;
+use pending::{Entry, Slots, State};
 use ring::Ring;
 
 /// A set of unit addresses.
@@ -177,28 +180,41 @@ pub enum SlaveEvent {
     },
 }
 
-/// A reply built from a request, waiting to be framed.
-#[derive(Clone, Copy, Debug)]
-struct Reply {
-    header: AduHeader,
-    pdu: [u8; MAX_PDU_LEN],
-    len: usize,
-    due: Instant,
-    exception: Option<ExceptionCode>,
-}
-
 /// The events the engine holds until they are polled. A frame reports at most two (a
-/// restart and its request); the engine takes no frame without room for both.
-pub const EVENT_QUEUE: usize = 8;
+/// restart and its request) and every request still waiting for its answer one more; the
+/// engine takes no frame without room for all of them, so the queue holds a full set of
+/// waiting requests and a frame's worth besides.
+pub const EVENT_QUEUE: usize = REPLY_QUEUE + 8;
 
-/// The replies that may be pending at once over a framing without broadcast (Modbus/TCP),
-/// the one being sent included. A serial line holds one.
-pub const REPLY_QUEUE: usize = 8;
+/// The requests that may be in the engine at once over a framing without broadcast
+/// (Modbus/TCP): waiting for their answer or for their reply to go out, the one being sent
+/// included (fewer with [`Slave::set_max_pending`]). A serial line holds one.
+pub const REPLY_QUEUE: usize = 16;
 
 /// The most events one frame can report.
 const EVENTS_PER_FRAME: usize = 2;
 
 /// The slave engine over a framing `F`.
+///
+/// # One engine, two ways to answer
+///
+/// Every request the engine admits (addressed to one of its units, not refused by
+/// listen-only mode or a busy serial line) takes a slot, in request order, and is answered
+/// one of two ways:
+///
+/// - **Deferred.** [`Slave::receive`] takes bytes, [`Slave::poll_request`] hands each request
+///   out ([`Incoming`]: an id, the unit, the broadcast flag and the PDU), and
+///   [`Slave::respond`], [`Slave::refuse`], [`Slave::ignore`] or [`Slave::answer_with`]
+///   finish it, whenever the answer is ready. A gateway forwards the PDU and responds with
+///   the line's reply; a server locks its handler once per request and calls `answer_with`.
+/// - **At once.** [`Slave::on_bytes`] and [`Slave::handle_timeout`] take a [`Handler`] and
+///   answer every request through [`Slave::answer_with`] as soon as it is framed: the same
+///   slots, the same timing, no request ever waits.
+///
+/// Either way the engine keeps the timing: a reply goes out no earlier than t3.5 after the
+/// request plus the response wait, and replies go out in request order (pipelined
+/// Modbus/TCP). A request not finished within the answer limit ([`ANSWER_LIMIT`] unless
+/// [`Slave::set_answer_limit`]) gets no reply, and its id is refused from then on.
 ///
 /// # Driving it
 ///
@@ -212,6 +228,10 @@ const EVENTS_PER_FRAME: usize = 2;
 ///     on timeout: slave.handle_timeout(now, &mut handler)
 /// }
 /// ```
+///
+/// Deferred, `receive` and `wake` take the place of `on_bytes` and `handle_timeout`, and
+/// after each of them `while let Some(request) = slave.poll_request() { … }` hands the
+/// requests on.
 #[derive(Clone, Debug)]
 pub struct Slave<F> {
     framing: F,
@@ -225,16 +245,20 @@ struct Core {
     serial: bool,
     /// The silent interval before a reply (t3.5).
     gap: Duration,
+    /// How long a request handed out may wait for its answer.
+    answer_limit: Option<Duration>,
+    /// The requests that may be in the engine at once, 1..=REPLY_QUEUE (not serial).
+    max_pending: usize,
     counters: Counters,
     /// The comm event counter of 0x0B.
     comm_events: u16,
     log: EventLog,
     listen_only: bool,
     diagnostic_register: u16,
-    /// The reply just decided, framed by [`Slave::apply`].
-    reply: Option<Reply>,
-    /// Replies waiting behind the one in `tx` (Modbus/TCP only).
-    queued: Ring<Reply, { REPLY_QUEUE - 1 }>,
+    /// The requests admitted and not yet sent, in request order.
+    slots: Slots,
+    /// The id of the next request admitted.
+    next_id: u32,
     /// The reply framed for sending, due at `tx_due`.
     tx: [u8; MAX_TX_LEN],
     tx_len: usize,
@@ -245,6 +269,19 @@ struct Core {
     restart: bool,
     events: Ring<SlaveEvent, EVENT_QUEUE>,
     events_dropped: u32,
+}
+
+/// How a request was finished.
+#[derive(Clone, Copy, Debug)]
+enum Outcome<'a> {
+    /// This reply PDU (a broadcast's is not sent: the broadcast counts as executed).
+    Reply(&'a [u8]),
+    /// This exception (none for a broadcast).
+    Exception(ExceptionCode),
+    /// Executed without a reply (a broadcast).
+    Executed,
+    /// No reply.
+    Silent,
 }
 
 impl<F: Framing> Slave<F> {
@@ -258,13 +295,15 @@ impl<F: Framing> Slave<F> {
                 config,
                 serial,
                 gap,
+                answer_limit: Some(ANSWER_LIMIT),
+                max_pending: REPLY_QUEUE,
                 counters: Counters::default(),
                 comm_events: 0,
                 log: EventLog::default(),
                 listen_only: false,
                 diagnostic_register: 0,
-                reply: None,
-                queued: Ring::new(),
+                slots: Slots::new(),
+                next_id: 0,
                 tx: [0; MAX_TX_LEN],
                 tx_len: 0,
                 tx_due: None,
@@ -285,6 +324,31 @@ impl<F: Framing> Slave<F> {
     /// Changes the settings (for the next request).
     pub fn set_config(&mut self, config: SlaveConfig) {
         self.core.config = config;
+    }
+
+    /// How long a request may wait for its answer after its last byte arrived (`None`: as
+    /// long as it takes). Past it the engine finishes the request without a reply, counts it
+    /// in [`Counters::server_no_response`], and refuses its id. Applies to requests admitted
+    /// from now on.
+    pub fn set_answer_limit(&mut self, limit: Option<Duration>) {
+        self.core.answer_limit = limit;
+    }
+
+    /// How many requests may be in the engine at once over a framing without broadcast: past
+    /// it the engine takes no more bytes ([`Slave::is_blocked`]) until a reply has gone out —
+    /// a gateway's bound on what one client has outstanding. At least 1, at most
+    /// [`REPLY_QUEUE`] (the default).
+    pub fn set_max_pending(&mut self, max: usize) {
+        self.core.max_pending = max.clamp(1, REPLY_QUEUE);
+    }
+
+    /// Takes a serial framing's requests as a stream's: several may be outstanding (up to
+    /// [`Slave::set_max_pending`]) and unit 0 is a unit like any other, handed out without
+    /// the broadcast flag — RTU frames over TCP to a gateway, which decides itself what unit 0
+    /// means. Without it (the default) a serial framing keeps the line's rules: one request
+    /// at a time, unit 0 a broadcast.
+    pub fn set_stream(&mut self, stream: bool) {
+        self.core.serial = !stream && self.framing.supports_broadcast();
     }
 
     /// The diagnostic counters.
@@ -314,7 +378,8 @@ impl<F: Framing> Slave<F> {
         self.core.events_dropped
     }
 
-    /// The replies pending: decided and not yet handed out by [`Slave::poll_transmit`].
+    /// The requests in the engine: waiting for their answer, or answered and not yet handed
+    /// out by [`Slave::poll_transmit`].
     pub fn pending_replies(&self) -> usize {
         self.core.pending_replies()
     }
@@ -324,18 +389,26 @@ impl<F: Framing> Slave<F> {
     /// queue is full.
     pub fn is_blocked(&self) -> bool {
         let core = &self.core;
-        core.events.len().saturating_add(EVENTS_PER_FRAME) > EVENT_QUEUE
-            || (!core.serial && core.pending_replies() >= REPLY_QUEUE)
+        let waiting = core.slots.iter().filter(|e| e.is_waiting()).count();
+        core.events.len().saturating_add(EVENTS_PER_FRAME).saturating_add(waiting) > EVENT_QUEUE
+            || (!core.serial && core.pending_replies() >= core.max_pending)
     }
 
-    /// Bytes arrived at `now`; returns how many were taken. Fewer than `bytes.len()` means the
+    /// Bytes arrived at `now`; returns how many were taken. Every request framed is answered
+    /// through `handler` at once ([`Slave::answer_with`]). Fewer than `bytes.len()` means the
     /// engine is blocked ([`Slave::is_blocked`]): hand the rest in again, with the same `now`,
     /// once replies are sent or events polled. A call with no bytes also delivers frames the
     /// receiver already holds.
     pub fn on_bytes<H: Handler + ?Sized>(&mut self, now: Instant, bytes: &[u8], handler: &mut H) -> usize {
+        self.feed(now, bytes, Some(handler))
+    }
+
+    /// Takes bytes into the receiver, frame by frame, while the engine has room; with a
+    /// handler, answers each request through it as soon as it is framed.
+    fn feed<H: Handler + ?Sized>(&mut self, now: Instant, bytes: &[u8], mut handler: Option<&mut H>) -> usize {
         let mut consumed = 0usize;
         // Frames a previous call left in the receiver come first.
-        self.drain(handler);
+        self.drain(handler.as_deref_mut());
         loop {
             if self.is_blocked() {
                 return consumed;
@@ -343,7 +416,7 @@ impl<F: Framing> Slave<F> {
             let rest = bytes.get(consumed..).unwrap_or_default();
             let n = self.framing.push(now, rest);
             consumed = consumed.saturating_add(n).min(bytes.len());
-            let any = self.drain(handler);
+            let any = self.drain(handler.as_deref_mut());
             if !any && (consumed >= bytes.len() || n == 0) {
                 return consumed;
             }
@@ -352,28 +425,54 @@ impl<F: Framing> Slave<F> {
 
     /// Hands the receiver's events to the engine while it has room for them; returns whether
     /// it handed any.
-    fn drain<H: Handler + ?Sized>(&mut self, handler: &mut H) -> bool {
+    fn drain<H: Handler + ?Sized>(&mut self, mut handler: Option<&mut H>) -> bool {
         let mut any = false;
+        if let Some(handler) = handler.as_deref_mut() {
+            self.answer_queued(handler);
+        }
         while !self.is_blocked() {
             let Slave { framing, core } = self;
             let Some(event) = framing.poll_event() else { break };
-            core.on_event(&event, handler);
+            core.on_event(&event);
             any = true;
             self.apply();
+            if let Some(handler) = handler.as_deref_mut() {
+                self.answer_queued(handler);
+            }
         }
         any
     }
 
-    /// The next instant [`Slave::handle_timeout`] must be called.
-    pub fn poll_timeout(&self) -> Option<Instant> {
-        earliest(self.framing.poll_timeout(), self.core.tx_due)
+    /// Answers through `handler` every request not yet handed out.
+    fn answer_queued<H: Handler + ?Sized>(&mut self, handler: &mut H) {
+        while let Some(id) = self.poll_request().map(|r| r.id) {
+            let _ = self.answer_with(id, handler);
+        }
     }
 
-    /// `now` has come: ends silent intervals. Spurious calls do nothing.
+    /// The next instant [`Slave::handle_timeout`] (or [`Slave::wake`]) must be called.
+    pub fn poll_timeout(&self) -> Option<Instant> {
+        let limit = self.core.slots.iter().filter(|e| e.is_waiting()).filter_map(|e| e.limit).min();
+        earliest(earliest(self.framing.poll_timeout(), self.core.tx_due), limit)
+    }
+
+    /// `now` has come: ends silent intervals and answers, through `handler`, the requests the
+    /// receiver then frames. Spurious calls do nothing.
     pub fn handle_timeout<H: Handler + ?Sized>(&mut self, now: Instant, handler: &mut H) {
+        self.expire(now);
         self.framing.handle_timeout(now);
         // A frame found at the gap may leave buffered bytes behind it; let them be examined.
         self.on_bytes(now, &[], handler);
+    }
+
+    /// Finishes, without a reply, the requests whose answer limit has passed at `now`.
+    fn expire(&mut self, now: Instant) {
+        loop {
+            let expired = self.core.slots.iter().find(|e| e.is_waiting() && e.limit.is_some_and(|l| now >= l));
+            let Some(id) = expired.map(|e| e.id) else { break };
+            let _ = self.core.complete(id, Outcome::Silent, Duration::ZERO);
+        }
+        self.apply();
     }
 
     /// When the pending reply is due, if there is one.
@@ -402,16 +501,25 @@ impl<F: Framing> Slave<F> {
         copied
     }
 
-    /// Frames the next queued reply into `tx` if nothing is there.
+    /// Frames the oldest answered reply into `tx` if nothing is there; requests finished
+    /// without a reply leave their place. A request still waiting holds back those behind it.
     fn load_next(&mut self) {
         let core = &mut self.core;
         while core.tx_due.is_none() {
-            let Some(reply) = core.queued.pop() else { return };
-            let pdu = reply.pdu.get(..reply.len).unwrap_or_default();
-            if let Ok(n) = self.framing.encode(reply.header, pdu, &mut core.tx) {
+            let Some(front) = core.slots.front() else { return };
+            let (due, exception) = match front.state {
+                State::Answered { due, exception } => (due, exception),
+                State::Finished => {
+                    let _ = core.slots.pop();
+                    continue;
+                }
+                State::Queued | State::HandedOut => return,
+            };
+            let Some(reply) = core.slots.pop() else { return };
+            if let Ok(n) = self.framing.encode(reply.header, reply.pdu(), &mut core.tx) {
                 core.tx_len = n;
-                core.tx_due = Some(reply.due);
-                core.tx_exception = reply.exception;
+                core.tx_due = Some(due);
+                core.tx_exception = exception;
             }
         }
     }
@@ -421,15 +529,10 @@ impl<F: Framing> Slave<F> {
         self.core.events.pop()
     }
 
-    /// Frames the reply decided while the framing was borrowed, and applies 0x08 actions.
+    /// Frames the replies now at the front, and applies 0x08 actions decided while the
+    /// framing was borrowed.
     fn apply(&mut self) {
-        if let Some(reply) = self.core.reply.take() {
-            // `dispatch` decides no reply without room for it.
-            if self.core.queued.push(reply).is_err() {
-                bump(&mut self.core.counters.server_no_response);
-            }
-            self.load_next();
-        }
+        self.load_next();
         let core = &mut self.core;
         if let Some(delimiter) = core.new_delimiter.take() {
             self.framing.set_delimiter(delimiter);
@@ -452,14 +555,12 @@ impl Core {
         let _ = self.events.push(event);
     }
 
-    /// Replies decided and not yet handed out.
+    /// Requests in the engine, and the reply being sent.
     fn pending_replies(&self) -> usize {
-        usize::from(self.reply.is_some())
-            .saturating_add(usize::from(self.tx_due.is_some()))
-            .saturating_add(self.queued.len())
+        self.slots.len().saturating_add(usize::from(self.tx_due.is_some()))
     }
 
-    fn on_event<H: Handler + ?Sized>(&mut self, event: &RxEvent<'_>, handler: &mut H) {
+    fn on_event(&mut self, event: &RxEvent<'_>) {
         match *event {
             RxEvent::Discarded { bytes, reason, at, .. } => {
                 let flag = match reason {
@@ -478,7 +579,7 @@ impl Core {
                 }
                 self.push_event(SlaveEvent::Discarded { bytes, reason, at });
             }
-            RxEvent::Frame(ref frame) => self.on_frame(frame, handler),
+            RxEvent::Frame(ref frame) => self.on_frame(frame),
         }
     }
 
@@ -486,7 +587,9 @@ impl Core {
         if self.listen_only { event::RECEIVE_LISTEN_ONLY } else { 0 }
     }
 
-    fn on_frame<H: Handler + ?Sized>(&mut self, frame: &Adu<'_>, handler: &mut H) {
+    /// A frame: ignored, finished at once (listen-only mode, a busy serial line), or
+    /// admitted into a slot to wait for its answer.
+    fn on_frame(&mut self, frame: &Adu<'_>) {
         bump(&mut self.counters.bus_messages);
         let unit = frame.header.unit;
         let function = FunctionCode::from_u8(frame.pdu.first().copied().unwrap_or_default());
@@ -502,17 +605,13 @@ impl Core {
         bump(&mut self.counters.server_messages);
         let broadcast_flag = if broadcast { event::RECEIVE_BROADCAST } else { 0 };
         self.log.push(event::RECEIVE | self.listen_flag() | broadcast_flag);
-        let disposition = self.dispatch(frame, broadcast, handler);
-        if matches!(disposition, Disposition::Silent | Disposition::Executed) {
-            bump(&mut self.counters.server_no_response);
-        }
-        let addresses = Request::parse(frame.pdu).map(|r| r.address_ranges()).unwrap_or_default();
-        self.push_event(SlaveEvent::Request { unit, function, addresses, end: frame.end, disposition });
-    }
-
-    fn dispatch<H: Handler + ?Sized>(&mut self, frame: &Adu<'_>, broadcast: bool, handler: &mut H) -> Disposition {
-        let unit = frame.header.unit;
         let request = Request::parse(frame.pdu);
+        let addresses = request.as_ref().map(Request::address_ranges).unwrap_or_default();
+        let silent = |core: &mut Core| {
+            bump(&mut core.counters.server_no_response);
+            let disposition = Disposition::Silent;
+            core.push_event(SlaveEvent::Request { unit, function, addresses, end: frame.end, disposition });
+        };
         if self.listen_only {
             // Only 0x08/0x01 is heard; it leaves listen-only mode without a reply.
             if let Ok(Request::Diagnostics(d)) = request {
@@ -520,85 +619,89 @@ impl Core {
                     self.restart(d.word() == Some(0xFF00));
                 }
             }
-            return Disposition::Silent;
+            return silent(self);
         }
-        let busy = if self.serial { self.pending_replies() > 0 } else { self.pending_replies() >= REPLY_QUEUE };
-        if busy {
-            // A serial line: still answering the previous request, a master that does not
-            // wait. Over TCP the queue is full, which `Slave::is_blocked` prevents.
-            return Disposition::Silent;
-        }
-        let request = match request {
-            Ok(request) => request,
-            Err(_) if broadcast => return Disposition::Silent,
-            Err(e) => return self.refuse(frame, e.exception_code(), handler),
-        };
-        if broadcast {
-            return self.broadcast(&request, handler);
-        }
-        match handler.admit(unit, false, &request) {
-            Admission::Serve => {}
-            Admission::Refuse(code) => return self.refuse(frame, code, handler),
-            Admission::Ignore => return Disposition::Silent,
-        }
+        let busy = if self.serial { self.pending_replies() > 0 } else { self.pending_replies() >= self.max_pending };
+        // A serial line: still answering the previous request, a master that does not wait.
+        // Over TCP the queue is full, which `Slave::is_blocked` prevents. A PDU longer than
+        // any valid one cannot be held.
         let mut pdu = [0u8; MAX_PDU_LEN];
-        let served = match request {
-            Request::Diagnostics(d) => match self.diagnostics(&d, &mut pdu) {
-                Ok(Some(n)) => Ok(n),
-                Ok(None) => return Disposition::Silent,
-                Err(code) => Err(code),
-            },
-            Request::GetCommEventCounter(_) => {
-                let reply = CommEventCounter { status: 0, event_count: self.comm_events };
-                Response::GetCommEventCounter(reply).emit(&mut pdu).map_err(|_| ExceptionCode::ServerDeviceFailure)
-            }
-            Request::GetCommEventLog(_) => self.event_log_reply(&mut pdu),
-            ref other => serve::serve(handler, unit, other, &mut pdu),
+        let Some(held) = pdu.get_mut(..frame.pdu.len()).filter(|_| !busy) else { return silent(self) };
+        held.copy_from_slice(frame.pdu);
+        let id = RequestId(self.next_id);
+        self.next_id = self.next_id.wrapping_add(1);
+        let entry = Entry {
+            id,
+            header: frame.header,
+            broadcast,
+            end: frame.end,
+            function,
+            addresses,
+            limit: self.answer_limit.map(|d| frame.end.saturating_add(d)),
+            pdu,
+            len: frame.pdu.len(),
+            state: State::Queued,
         };
-        match served {
-            Ok(len) => {
-                if !matches!(request, Request::GetCommEventCounter(_) | Request::GetCommEventLog(_)) {
-                    bump(&mut self.comm_events);
+        if !self.slots.push(&entry) {
+            silent(self);
+        }
+    }
+
+    /// Finishes the waiting request `id` with `outcome`, its reply due t3.5 plus `wait`
+    /// after its end; reports it and counts it.
+    fn complete(&mut self, id: RequestId, outcome: Outcome<'_>, wait: Duration) -> Result<Disposition, AnswerError> {
+        let gap = self.gap;
+        let entry = self.slots.get_mut(id).filter(|e| e.is_waiting()).ok_or(AnswerError::Unknown(id))?;
+        let due = entry.end.saturating_add(gap).saturating_add(wait);
+        let mut exception_pdu = [0u8; 2];
+        let (disposition, state, reply): (_, _, Option<&[u8]>) = match outcome {
+            Outcome::Reply(_) | Outcome::Executed if entry.broadcast => (Disposition::Executed, State::Finished, None),
+            Outcome::Exception(code) if !entry.broadcast => {
+                let function = FunctionCode::from_u8(
+                    entry.pdu.first().copied().unwrap_or_default() & !FunctionCode::EXCEPTION_BIT,
+                );
+                match ExceptionResponse::new(function, code) {
+                    Ok(exception) => {
+                        let _ = Response::Exception(exception).emit(&mut exception_pdu);
+                    }
+                    // Function code 0x00 is no valid request code, yet it is refused like any
+                    // unknown one: 0x80, then the exception code.
+                    Err(_) => exception_pdu = [function.value() | FunctionCode::EXCEPTION_BIT, code.value()],
                 }
-                let due = self.due(frame, handler);
-                self.reply = Some(Reply { header: frame.header, pdu, len, due, exception: None });
-                Disposition::Replied(due)
+                let answered = State::Answered { due, exception: Some(code) };
+                (Disposition::Refused(code, due), answered, Some(&exception_pdu[..]))
             }
-            Err(code) => self.refuse(frame, code, handler),
-        }
-    }
-
-    /// When the reply to `frame` is due: t3.5 after its end, plus the unit's wait.
-    fn due<H: Handler + ?Sized>(&self, frame: &Adu<'_>, handler: &H) -> Instant {
-        let wait = handler.response_wait(frame.header.unit).unwrap_or(self.config.response_wait);
-        frame.end.saturating_add(self.gap).saturating_add(wait)
-    }
-
-    fn refuse<H: Handler + ?Sized>(&mut self, frame: &Adu<'_>, code: ExceptionCode, handler: &H) -> Disposition {
-        let function =
-            FunctionCode::from_u8(frame.pdu.first().copied().unwrap_or_default() & !FunctionCode::EXCEPTION_BIT);
-        let mut pdu = [0u8; MAX_PDU_LEN];
-        let len = if let Ok(exception) = ExceptionResponse::new(function, code) {
-            let Ok(len) = Response::Exception(exception).emit(&mut pdu) else { return Disposition::Silent };
-            len
-        } else {
-            // Function code 0x00 is no valid request code, yet it is refused like any unknown
-            // one: 0x80, then the exception code.
-            let [first, second, ..] = &mut pdu;
-            *first = function.value() | FunctionCode::EXCEPTION_BIT;
-            *second = code.value();
-            2
+            Outcome::Reply(pdu) => {
+                let function = pdu.first().copied().unwrap_or_default();
+                let exception = pdu
+                    .get(1)
+                    .filter(|_| function & FunctionCode::EXCEPTION_BIT != 0)
+                    .map(|&code| ExceptionCode::from_u8(code));
+                let disposition = exception.map_or(Disposition::Replied(due), |code| Disposition::Refused(code, due));
+                (disposition, State::Answered { due, exception }, Some(pdu))
+            }
+            Outcome::Exception(_) | Outcome::Silent | Outcome::Executed => (Disposition::Silent, State::Finished, None),
         };
-        self.counters.count_exception(code);
-        let due = self.due(frame, handler);
-        self.reply = Some(Reply { header: frame.header, pdu, len, due, exception: Some(code) });
-        Disposition::Refused(code, due)
+        if let Some(pdu) = reply {
+            let dst = entry.pdu.get_mut(..pdu.len()).ok_or(AnswerError::BadLength(pdu.len()))?;
+            dst.copy_from_slice(pdu);
+            entry.len = pdu.len();
+        }
+        entry.state = state;
+        let (unit, function, addresses, end) = (entry.header.unit, entry.function, entry.addresses, entry.end);
+        match disposition {
+            Disposition::Refused(code, _) => self.counters.count_exception(code),
+            Disposition::Silent | Disposition::Executed => bump(&mut self.counters.server_no_response),
+            Disposition::Replied(_) => {}
+        }
+        self.push_event(SlaveEvent::Request { unit, function, addresses, end, disposition });
+        Ok(disposition)
     }
 
     /// Executes a broadcast on every unit whose handler admits it.
-    fn broadcast<H: Handler + ?Sized>(&mut self, request: &Request<'_>, handler: &mut H) -> Disposition {
+    fn broadcast<H: Handler + ?Sized>(&mut self, request: &Request<'_>, handler: &mut H) -> Outcome<'static> {
         if matches!(request, Request::Diagnostics(_) | Request::GetCommEventCounter(_) | Request::GetCommEventLog(_)) {
-            return Disposition::Silent;
+            return Outcome::Silent;
         }
         let mut executed = false;
         let mut scratch = [0u8; MAX_PDU_LEN];
@@ -612,9 +715,9 @@ impl Core {
         }
         if executed {
             bump(&mut self.comm_events);
-            Disposition::Executed
+            Outcome::Executed
         } else {
-            Disposition::Silent
+            Outcome::Silent
         }
     }
 

@@ -691,21 +691,22 @@ fn twenty_pipelined_mbap_requests_get_twenty_replies_in_order_each_with_its_tran
 }
 
 #[test]
-fn thirty_frames_in_one_chunk_report_thirty_events_and_drop_none() {
+fn sixty_frames_in_one_chunk_report_sixty_events_and_drop_none() {
     let mut slave = Slave::new(MbapCodec::strict(), SlaveConfig::unit(1));
     let mut device = Device::new();
     // Other units: each frame is one event and no reply, so only the event queue can fill.
-    let input: Vec<u8> = (0..30u16).flat_map(|t| mbap(t, 7, &[0x03, 0, 0, 0, 1])).collect();
+    let input: Vec<u8> = (0..60u16).flat_map(|t| mbap(t, 7, &[0x03, 0, 0, 0, 1])).collect();
+    const { assert!(60 > 2 * EVENT_QUEUE, "more frames than the event queue and the receiver hold") };
     let first = slave.on_bytes(Instant::ZERO, &input, &mut device);
     assert!(first < input.len(), "the event queue fills: the engine stops taking bytes");
     let mut events: Vec<SlaveEvent> = core::iter::from_fn(|| slave.poll_event()).collect();
     let (replies, more) = drive_pipelined(&mut slave, &mut device, Instant::ZERO, &input[first..]);
     events.extend(more);
     assert!(replies.is_empty());
-    assert_eq!(events.len(), 30);
+    assert_eq!(events.len(), 60);
     assert!(events.iter().all(|e| matches!(e, SlaveEvent::Ignored { unit: 7, why: Ignored::OtherUnit, .. })));
     assert_eq!(slave.dropped_events(), 0);
-    assert_eq!(slave.counters().bus_messages, 30);
+    assert_eq!(slave.counters().bus_messages, 60);
 }
 
 #[test]
@@ -734,4 +735,208 @@ fn over_mbap_function_code_0x00_gets_exception_01_like_any_unknown_code() {
     let mut slave = Slave::new(MbapCodec::strict(), SlaveConfig::unit(1));
     let (frame, _) = exchange(&mut slave, &mut Device::new(), Instant::ZERO, &mbap(5, 1, &[0x00])).unwrap();
     assert_eq!(frame, mbap(5, 1, &[0x80, 0x01]));
+}
+
+// ---- Deferred: requests out, responses in ------------------------------------------------
+
+/// The reply due at `at`, checking that nothing went out a nanosecond before.
+#[track_caller]
+fn sent_at<F: Framing>(slave: &mut Slave<F>, at: Instant) -> Vec<u8> {
+    let mut out = [0xA5u8; MAX_TX_LEN];
+    if at > Instant::ZERO {
+        assert_eq!(slave.poll_transmit(at.saturating_sub(Duration::from_nanos(1)), &mut out), None, "sent early");
+    }
+    let n = slave.poll_transmit(at, &mut out).expect("a reply due");
+    out[..n].to_vec()
+}
+
+#[test]
+fn a_deferred_request_is_handed_out_once_and_its_answer_goes_out_no_earlier_than_t3_5_plus_the_wait() {
+    let wait = Duration::from_millis(20);
+    let mut slave = rtu_slave(SlaveConfig { response_wait: wait, ..SlaveConfig::unit(1) });
+    let request = rtu(1, &[0x03, 0x00, 0x10, 0x00, 0x01]);
+    assert_eq!(slave.receive(Instant::ZERO, &request), request.len());
+    let got = slave.poll_request().expect("the request handed out");
+    assert_eq!((got.unit, got.broadcast, got.pdu), (1, false, &[0x03, 0x00, 0x10, 0x00, 0x01][..]));
+    let id = got.id;
+    assert!(slave.poll_request().is_none(), "a request is handed out once");
+    let mut out = [0u8; MAX_TX_LEN];
+    assert_eq!(slave.poll_transmit(Instant::from_secs(1), &mut out), None, "nothing is sent before the answer");
+    // Answered early: the reply still waits for t3.5 + the wait after the request's end.
+    slave.respond(id, &[0x03, 0x02, 0x12, 0x34]).unwrap();
+    let end = match slave.poll_event() {
+        Some(SlaveEvent::Request { end, disposition: Disposition::Replied(due), .. }) => {
+            assert_eq!(due, end.saturating_add(timing_9600().t3_5() + wait));
+            end
+        }
+        other => panic!("not the request's report: {other:?}"),
+    };
+    assert_eq!(sent_at(&mut slave, end.saturating_add(timing_9600().t3_5() + wait)), rtu(1, &[0x03, 0x02, 0x12, 0x34]));
+    // Answered late: it goes out at once.
+    slave.receive(Instant::from_secs(2), &rtu(1, &[0x03, 0x00, 0x10, 0x00, 0x01]));
+    let id = slave.poll_request().unwrap().id;
+    assert_eq!(slave.reply_due(), None);
+    slave.refuse(id, ExceptionCode::ServerDeviceBusy).unwrap();
+    assert_eq!(
+        slave.poll_transmit(Instant::from_secs(3), &mut out).map(|n| out[..n].to_vec()),
+        Some(rtu(1, &[0x83, 0x06]))
+    );
+    assert_eq!(slave.counters().server_busy, 1);
+}
+
+#[test]
+fn deferred_mbap_replies_go_out_in_request_order_whatever_order_they_are_answered_in() {
+    let mut slave = Slave::new(MbapCodec::strict(), SlaveConfig::unit(1));
+    let input: Vec<u8> = (0..3u16).flat_map(|t| mbap(t, 1, &[0x03, 0, u8::try_from(t).unwrap(), 0, 1])).collect();
+    assert_eq!(slave.receive(Instant::ZERO, &input), input.len());
+    let ids: Vec<RequestId> = core::iter::from_fn(|| slave.poll_request().map(|r| r.id)).collect();
+    assert_eq!(ids.len(), 3);
+    let mut out = [0u8; MAX_TX_LEN];
+    slave.respond(ids[2], &[0x03, 0x02, 0, 2]).unwrap();
+    slave.respond(ids[1], &[0x03, 0x02, 0, 1]).unwrap();
+    assert_eq!(slave.poll_transmit(Instant::ZERO, &mut out), None, "the first request's reply holds back the rest");
+    slave.respond(ids[0], &[0x03, 0x02, 0, 0]).unwrap();
+    let sent: Vec<Vec<u8>> =
+        core::iter::from_fn(|| slave.poll_transmit(Instant::ZERO, &mut out).map(|n| out[..n].to_vec())).collect();
+    assert_eq!(
+        sent,
+        [mbap(0, 1, &[0x03, 0x02, 0, 0]), mbap(1, 1, &[0x03, 0x02, 0, 1]), mbap(2, 1, &[0x03, 0x02, 0, 2])]
+    );
+    assert_eq!(slave.pending_replies(), 0);
+}
+
+#[test]
+fn deferred_mbap_requests_past_the_reply_queue_wait_in_the_receiver_until_answered() {
+    let mut slave = Slave::new(MbapCodec::strict(), SlaveConfig::unit(1));
+    let input: Vec<u8> =
+        (0..u16::try_from(REPLY_QUEUE).unwrap() + 4).flat_map(|t| mbap(t, 1, &[0x03, 0, 0, 0, 1])).collect();
+    let taken = slave.receive(Instant::ZERO, &input);
+    let first: Vec<RequestId> = core::iter::from_fn(|| slave.poll_request().map(|r| r.id)).collect();
+    assert_eq!(first.len(), REPLY_QUEUE, "as many handed out as there are slots");
+    assert!(slave.is_blocked(), "a full set of unanswered requests blocks the engine");
+    assert_eq!(slave.receive(Instant::ZERO, &input[taken..]), 0, "no byte taken while blocked");
+    for id in first {
+        slave.respond(id, &[0x03, 0x02, 0, 0]).unwrap();
+    }
+    let mut out = [0u8; MAX_TX_LEN];
+    while slave.poll_transmit(Instant::ZERO, &mut out).is_some() {}
+    while slave.poll_event().is_some() {}
+    let rest = slave.receive(Instant::ZERO, &input[taken..]);
+    assert_eq!(taken + rest, input.len());
+    assert_eq!(core::iter::from_fn(|| slave.poll_request().map(|r| r.id)).count(), 4);
+}
+
+#[test]
+fn a_deferred_broadcast_is_handed_out_flagged_and_never_answered_whatever_the_response() {
+    let mut slave = rtu_slave(SlaveConfig::unit(1));
+    slave.receive(Instant::ZERO, &rtu(0, &[0x06, 0x00, 0x05, 0x12, 0x34]));
+    let got = slave.poll_request().unwrap();
+    assert!(got.broadcast && got.unit == 0);
+    let id = got.id;
+    slave.respond(id, &[0x06, 0x00, 0x05, 0x12, 0x34]).unwrap();
+    let mut out = [0u8; MAX_TX_LEN];
+    assert_eq!(slave.poll_transmit(Instant::from_secs(1), &mut out), None, "a broadcast got a reply");
+    assert_eq!(slave.reply_due(), None);
+    assert!(matches!(
+        slave.poll_event(),
+        Some(SlaveEvent::Request { unit: 0, disposition: Disposition::Executed, .. })
+    ));
+    // The slot is free again: the next request is taken.
+    slave.receive(Instant::from_millis(100), &rtu(1, &[0x03, 0, 0, 0, 1]));
+    assert!(slave.poll_request().is_some(), "the line was left busy after the broadcast");
+}
+
+#[test]
+fn an_unknown_or_answered_id_is_refused_and_a_bad_length_too() {
+    let mut slave = rtu_slave(SlaveConfig::unit(1));
+    assert_eq!(slave.respond(RequestId(7), &[0x03, 0x02, 0, 0]), Err(AnswerError::Unknown(RequestId(7))));
+    slave.receive(Instant::ZERO, &rtu(1, &[0x03, 0, 0, 0, 1]));
+    let id = slave.poll_request().unwrap().id;
+    assert_eq!(slave.respond(id, &[]), Err(AnswerError::BadLength(0)));
+    assert_eq!(slave.respond(id, &[0u8; MAX_PDU_LEN + 1]), Err(AnswerError::BadLength(MAX_PDU_LEN + 1)));
+    slave.respond(id, &[0x03, 0x02, 0, 0]).unwrap();
+    assert_eq!(slave.respond(id, &[0x03, 0x02, 0, 0]), Err(AnswerError::Unknown(id)), "answered twice");
+    assert_eq!(slave.ignore(id), Err(AnswerError::Unknown(id)));
+    assert_eq!(slave.answer_with(id, &mut Device::new()), Err(AnswerError::Unknown(id)));
+}
+
+#[test]
+fn a_request_whose_answer_never_comes_is_given_up_at_the_answer_limit_without_a_reply() {
+    let mut slave = rtu_slave(SlaveConfig::unit(1));
+    slave.set_answer_limit(Some(Duration::from_millis(500)));
+    let request = rtu(1, &[0x03, 0, 0, 0, 1]);
+    slave.receive(Instant::ZERO, &request);
+    let id = slave.poll_request().unwrap().id;
+    while slave.poll_event().is_some() {}
+    // Step through the engine's deadlines: the request is dropped at the limit, not before.
+    let limit = Instant::from_millis(500);
+    loop {
+        let at = slave.poll_timeout().expect("the engine wants to be woken at the limit");
+        slave.wake(at.saturating_sub(Duration::from_nanos(1)));
+        assert_eq!(slave.pending_replies(), 1, "given up before {at:?}");
+        slave.wake(at);
+        if slave.pending_replies() == 0 {
+            assert_eq!(at, limit, "given up at {at:?}");
+            break;
+        }
+    }
+    assert!(matches!(slave.poll_event(), Some(SlaveEvent::Request { disposition: Disposition::Silent, .. })));
+    assert_eq!(slave.counters().server_no_response, 1);
+    assert_eq!(slave.respond(id, &[0x03, 0x02, 0, 0]), Err(AnswerError::Unknown(id)), "a stale id was taken");
+    let mut out = [0u8; MAX_TX_LEN];
+    assert_eq!(slave.poll_transmit(Instant::from_secs(10), &mut out), None);
+    // The line is free for the next request.
+    slave.receive(Instant::from_secs(1), &request);
+    assert!(slave.poll_request().is_some());
+}
+
+#[test]
+fn answer_with_is_the_same_dispatch_as_answering_at_once() {
+    // The same request, answered at once by on_bytes and deferred through answer_with, gives
+    // the same frame at the same instant.
+    let request = rtu(9, &[0x03, 0x00, 0x02, 0x00, 0x02]);
+    let config = SlaveConfig { units: [1, 9].into_iter().collect(), ..SlaveConfig::unit(1) };
+    let mut at_once = rtu_slave(config);
+    let (frame, due) = exchange(&mut at_once, &mut Device::new(), Instant::ZERO, &request).unwrap();
+    let mut deferred = rtu_slave(config);
+    deferred.receive(Instant::ZERO, &request);
+    if deferred.pending_replies() == 0 {
+        deferred.wake(deferred.poll_timeout().unwrap());
+    }
+    let id = deferred.poll_request().unwrap().id;
+    deferred.answer_with(id, &mut Device::new()).unwrap();
+    assert_eq!(sent_at(&mut deferred, due), frame, "unit 9's own wait, the same data");
+}
+
+#[test]
+fn a_max_pending_bound_blocks_the_engine_at_that_many_requests_and_frees_it_with_a_reply() {
+    let mut slave = Slave::new(MbapCodec::strict(), SlaveConfig::unit(1));
+    slave.set_max_pending(3);
+    let input: Vec<u8> = (0..5u16).flat_map(|t| mbap(t, 1, &[0x03, 0, 0, 0, 1])).collect();
+    let taken = slave.receive(Instant::ZERO, &input);
+    let ids: Vec<RequestId> = core::iter::from_fn(|| slave.poll_request().map(|r| r.id)).collect();
+    assert_eq!(ids.len(), 3, "three handed out, the rest not framed");
+    assert!(slave.is_blocked());
+    slave.respond(ids[0], &[0x03, 0x02, 0, 0]).unwrap();
+    let mut out = [0u8; MAX_TX_LEN];
+    assert!(slave.poll_transmit(Instant::ZERO, &mut out).is_some());
+    assert!(!slave.is_blocked(), "a reply sent makes room for one more");
+    slave.receive(Instant::ZERO, &input[taken..]);
+    assert_eq!(core::iter::from_fn(|| slave.poll_request().map(|r| r.id)).count(), 1, "one more, no more");
+}
+
+#[test]
+fn rtu_taken_as_a_stream_pipelines_and_hands_unit_0_out_as_a_unit() {
+    let mut slave = rtu_slave(SlaveConfig { units: [0, 1].into_iter().collect(), ..SlaveConfig::unit(1) });
+    slave.set_stream(true);
+    let two = [rtu(1, &[0x03, 0, 0, 0, 1]), rtu(0, &[0x06, 0, 1, 0, 2])].concat();
+    slave.receive(Instant::ZERO, &two);
+    let first = slave.poll_request().map(|r| (r.id, r.unit, r.broadcast)).unwrap();
+    let second = slave.poll_request().map(|r| (r.id, r.unit, r.broadcast)).expect("a second request taken at once");
+    assert_eq!((first.1, first.2, second.1, second.2), (1, false, 0, false));
+    slave.respond(second.0, &[0x06, 0, 1, 0, 2]).unwrap();
+    slave.respond(first.0, &[0x03, 0x02, 0, 0]).unwrap();
+    let due = slave.reply_due().expect("the first reply is due");
+    assert_eq!(sent_at(&mut slave, due), rtu(1, &[0x03, 0x02, 0, 0]), "in request order");
+    assert_eq!(slave.poll_transmit(due, &mut [0u8; MAX_TX_LEN]).map(|_| ()), Some(()), "unit 0 answered too");
 }

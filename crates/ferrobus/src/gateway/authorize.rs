@@ -14,22 +14,7 @@
 
 use ferrobus_proto::ExceptionCode;
 
-/// Decides, per request, whether it is forwarded.
-pub trait Authorize: Send {
-    /// `Ok(())` forwards the request for `unit` (the unit as the client addressed it) with
-    /// `pdu` (function code first); `Err(code)` answers it with exception `code` and forwards
-    /// nothing.
-    fn authorize(&mut self, unit: u8, pdu: &[u8]) -> Result<(), ExceptionCode>;
-}
-
-impl<F> Authorize for F
-where
-    F: FnMut(u8, &[u8]) -> Result<(), ExceptionCode> + Send,
-{
-    fn authorize(&mut self, unit: u8, pdu: &[u8]) -> Result<(), ExceptionCode> {
-        self(unit, pdu)
-    }
-}
+pub use crate::server::Authorize;
 
 /// Lets everything through.
 #[derive(Clone, Copy, Debug, Default)]

@@ -221,7 +221,8 @@ pub struct Timeouts {
     pub idle: Option<Duration>,
     /// Close a connection whose frame begun is not finished this long after.
     pub frame: Option<Duration>,
-    /// Requests one connection may have outstanding, queued or on the line (at least 1);
+    /// Requests one connection may have outstanding, queued or on the line (at least 1, at
+    /// most [`REPLY_QUEUE`](ferrobus_proto::slave::REPLY_QUEUE), the slave engine's slots);
     /// past it its socket is not read until a reply has gone out.
     pub pipeline: usize,
 }
@@ -368,7 +369,7 @@ impl Gateway {
         timeouts: Timeouts,
     ) -> io::Result<()>
     where
-        S: AsyncRead + AsyncWrite + Unpin + Send,
+        S: AsyncRead + AsyncWrite + Unpin + Send + 'static,
     {
         front::serve(&self.inner, stream, peer, inbound, authorize, timeouts).await
     }

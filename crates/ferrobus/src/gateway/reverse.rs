@@ -2,27 +2,33 @@
 //! request to the Modbus/TCP server that unit stands for, so that a serial PLC master reaches
 //! TCP devices.
 //!
-//! The serial side is the slave's receiver (the RTU codec, frames found by length first and
-//! by t3.5 second); the master waits for one reply at a time, so requests are forwarded one
-//! at a time, in the order they came. A reply goes out no earlier than t3.5 after the
-//! request's last character, through the one RS-485-aware writer. A request for a unit not
-//! listed, a frame that can only be another slave's reply, and a broadcast get no reply (a
-//! broadcast write is forwarded to every server). When the TCP side gives no answer —
+//! The serial side is the slave engine, deferred, on the one driver loop (the pump): the RTU
+//! codec finds frames by length first and by t3.5 second, the engine admits each request
+//! for a listed unit and hands it out, and the TCP server's answer comes back into it. The
+//! line is read all the while; the master waits for one reply at a time, and the engine's
+//! serial rule answers one at a time (a request sent while one is forwarded gets none).
+//! Requests are forwarded one at a time, in the order they came. A reply goes out no
+//! earlier than t3.5 after the request's last character — the engine's timing, the same as
+//! every server's — through the one RS-485-aware writer. A request for a unit not listed, a
+//! frame that can only be another slave's reply, and a broadcast get no reply (a broadcast
+//! write is forwarded to every server). When the TCP side gives no answer —
 //! a timeout, a refused connection — the line gets silence or, with
 //! [`OnFailure::Exception`], 0x0B (0x0A when the server cannot be reached at all).
 
-use std::collections::BTreeMap;
+use std::collections::{BTreeMap, VecDeque};
+use std::future::Future;
 use std::io;
+use std::pin::Pin;
+use std::time::Duration;
 
-use ferrobus_proto::frame::{AduHeader, Direction, Framing, RxEvent, feed};
+use ferrobus_proto::master::MAX_TX_LEN;
 use ferrobus_proto::pdu::Request;
+use ferrobus_proto::slave::{RequestId, Slave, SlaveConfig};
 use ferrobus_proto::{ExceptionCode, FunctionCode};
-use tokio::io::AsyncReadExt;
 
 use super::line::exception;
-use crate::clock::Clock;
 use crate::port::{BoxPort, Transport};
-use crate::pump::{Codec, Hex, Role, write_frame};
+use crate::pump::{Codec, Hex, Pump, Role, Step, write_frame};
 use crate::{Client, Error};
 
 /// What the line gets when the TCP server gives no answer.
@@ -52,73 +58,87 @@ pub async fn serve_reverse(
     upstreams: &BTreeMap<u8, Upstream>,
     on_failure: OnFailure,
 ) -> io::Result<()> {
-    let mut codec = Codec::for_transport(transport, Role::Server);
-    let clock = Clock::new();
+    let config = SlaveConfig { units: upstreams.keys().copied().collect(), response_wait: Duration::ZERO };
+    let mut slave = Slave::new(Codec::for_transport(transport, Role::Server), config);
+    // The TCP side's client has its own timeout; the engine waits for its word.
+    slave.set_answer_limit(None);
+    let mut pump = Pump::new(transport.timer().sleeper());
     let (rs485, timing) = (transport.rs485(), *transport.timing());
-    let mut rx = vec![0u8; 1024];
-    let mut tx = [0u8; 300];
+    let mut tx = [0u8; MAX_TX_LEN];
+    // The forwards under way, oldest first, one at a time: each with the request it answers
+    // (none for a broadcast, finished at once: it gets no reply).
+    let mut forwards: VecDeque<(Option<RequestId>, Forward<'_>)> = VecDeque::new();
     loop {
-        let deadline = codec.poll_timeout().map(|t| clock.to_tokio(t));
-        let sleep = async {
-            match deadline {
-                Some(at) => tokio::time::sleep_until(at).await,
+        while let Some(n) = slave.poll_transmit(pump.clock().now(), &mut tx) {
+            write_frame(&mut port, tx.get(..n).unwrap_or_default(), rs485, &timing).await?;
+        }
+        while let Some(event) = slave.poll_event() {
+            tracing::debug!("{event:?}");
+        }
+        while let Some(request) = slave.poll_request() {
+            let (id, unit, pdu) = (request.id, request.unit, request.pdu.to_vec());
+            if request.broadcast {
+                // Executed as far as the line can tell (no reply); forwarded behind what came
+                // before.
+                let _ = slave.respond(id, &pdu);
+                forwards.push_back((None, Box::pin(broadcast(upstreams, pdu))));
+            } else {
+                forwards.push_back((Some(id), Box::pin(forward(upstreams, unit, pdu, on_failure))));
+            }
+        }
+        if pump.feed_kept(&mut slave) {
+            continue;
+        }
+        let deadline = pump.deadline(&slave);
+        let answer = async {
+            match forwards.front_mut() {
+                Some((_, forward)) => forward.as_mut().await,
                 None => std::future::pending().await,
             }
         };
-        let mut requests = Vec::new();
-        tokio::select! {
-            read = port.read(&mut rx) => {
-                let n = read?;
-                if n == 0 {
-                    return Ok(());
-                }
-                let at = port.last_arrival().map_or_else(|| clock.now(), |t| clock.from_tokio(t));
-                let bytes = rx.get(..n).unwrap_or_default();
-                feed(&mut codec, at, bytes, |event| take(&event, &mut requests));
+        // The line is read while a forward is under way: the engine keeps the request's slot
+        // and its timing, and stays silent on a master that does not wait.
+        match pump.step(&mut port, &mut slave, deadline, answer).await {
+            Step::Read => {}
+            Step::Closed => return Ok(()),
+            Step::Failed(e) => return Err(e),
+            Step::Woke => pump.handle_timeout(&mut slave),
+            Step::Other(reply) => {
+                let Some((id, _)) = forwards.pop_front() else { continue };
+                let Some(id) = id else { continue };
+                // The engine gives no limit, so the id is still known.
+                let _ = match reply {
+                    Some(pdu) => {
+                        tracing::info!("reply {}", Hex(&pdu));
+                        slave.respond(id, &pdu)
+                    }
+                    None => slave.ignore(id),
+                };
             }
-            () = sleep => {
-                codec.handle_timeout(clock.now());
-                while let Some(event) = codec.poll_event() {
-                    take(&event, &mut requests);
-                }
-            }
-        }
-        for (unit, pdu, end) in requests {
-            let Some(reply) = forward(upstreams, unit, &pdu, on_failure).await else { continue };
-            let Ok(n) = codec.encode(AduHeader::unit(unit), &reply, &mut tx) else { continue };
-            // Never before t3.5 after the request's last character.
-            tokio::time::sleep_until(
-                clock.to_tokio(end).checked_add(codec.inter_frame_gap()).unwrap_or_else(tokio::time::Instant::now),
-            )
-            .await;
-            tracing::info!(unit, "reply {}", Hex(&reply));
-            write_frame(&mut port, tx.get(..n).unwrap_or_default(), rs485, &timing).await?;
         }
     }
 }
 
-/// Keeps a request frame: (unit, PDU, when its last byte came).
-fn take(event: &RxEvent<'_>, requests: &mut Vec<(u8, Vec<u8>, ferrobus_proto::Instant)>) {
-    if let RxEvent::Frame(frame) = *event {
-        if frame.direction != Direction::Response {
-            requests.push((frame.header.unit, frame.pdu.to_vec(), frame.end));
+/// One forward to the TCP side: the reply for the line, if any.
+type Forward<'a> = Pin<Box<dyn Future<Output = Option<Vec<u8>>> + Send + 'a>>;
+
+/// A broadcast write, to every server; nothing comes back to the line.
+async fn broadcast(upstreams: &BTreeMap<u8, Upstream>, pdu: Vec<u8>) -> Option<Vec<u8>> {
+    let function = pdu.first().copied().unwrap_or_default();
+    if FunctionCode::from_u8(function).is_write() {
+        for upstream in upstreams.values() {
+            if let Err(e) = upstream.client.raw(upstream.unit, &pdu).await {
+                tracing::info!("broadcast to unit {}: {e}", upstream.unit);
+            }
         }
     }
+    None
 }
 
 /// The reply for the line, if any.
-async fn forward(upstreams: &BTreeMap<u8, Upstream>, unit: u8, pdu: &[u8], on_failure: OnFailure) -> Option<Vec<u8>> {
+async fn forward(upstreams: &BTreeMap<u8, Upstream>, unit: u8, pdu: Vec<u8>, on_failure: OnFailure) -> Option<Vec<u8>> {
+    let pdu = pdu.as_slice();
     let function = pdu.first().copied().unwrap_or_default();
-    if unit == 0 {
-        if FunctionCode::from_u8(function).is_write() {
-            for upstream in upstreams.values() {
-                if let Err(e) = upstream.client.raw(upstream.unit, pdu).await {
-                    tracing::info!("broadcast to unit {}: {e}", upstream.unit);
-                }
-            }
-        }
-        return None;
-    }
     let upstream = upstreams.get(&unit)?;
     tracing::info!(unit, "request {}", Hex(pdu));
     let result = match Request::parse(pdu) {

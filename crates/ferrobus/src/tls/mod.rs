@@ -5,8 +5,8 @@
 //!   client ──TLS 1.2/1.3, both sides show a certificate──▶ ServerTls::accept
 //!                                                             │ role from the client's
 //!                                                             │ certificate (role_of)
-//!   each request ──▶ Authorized<handler>: Policy::check(role, unit, request)
-//!                        allowed → the handler;  denied → exception 01, logged
+//!   each request the engine hands out ──▶ RoleCheck (the session's Authorize filter):
+//!       Policy::check(role, unit, request)   allowed → the handler;  denied → exception 01, logged
 //! ```
 //!
 //! - The server ([`ServerTls`]) speaks TLS 1.2 or 1.3, never older (R-01, R-32, R-34); it
@@ -66,7 +66,7 @@ use rustls::server::danger::{ClientCertVerified, ClientCertVerifier};
 use rustls::{CertificateError, DigitallySignedStruct, DistinguishedName, OtherError, RootCertStore, SignatureScheme};
 use tokio::net::TcpStream;
 
-pub use authz::{Authorized, RoleCheck};
+pub use authz::RoleCheck;
 pub use policy::{Denied, Policy, PolicyError, READ_FUNCTIONS, Rights};
 pub use role::{ROLE_OID, Role, RoleError, parse_utf8_string, role_of};
 pub use serve::serve_tls_with;

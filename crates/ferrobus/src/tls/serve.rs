@@ -1,5 +1,5 @@
 //! Modbus/TCP Security served by the TCP server: the handshake, then the role checked on
-//! every request by the slave engine's handler.
+//! every request the engine hands out, before the handler sees it.
 
 use std::io;
 use std::sync::Arc;
@@ -7,7 +7,7 @@ use std::sync::Arc;
 use ferrobus_proto::slave::Handler;
 use tokio::net::TcpListener;
 
-use super::{Authorized, ServerTls, handshake};
+use super::{ServerTls, handshake};
 use crate::server::{ServerOptions, Shared, TcpServeConfig, serve_transport};
 
 /// Serves Modbus/TCP Security (mbaps) on `listener`, within `serve`'s limits, as
@@ -15,7 +15,8 @@ use crate::server::{ServerOptions, Shared, TcpServeConfig, serve_transport};
 /// each connection first completes a TLS handshake with `tls` (a client certificate
 /// required; a refused handshake is logged and counted in [`TcpCounts::tls_refused`](crate::server::TcpCounts::tls_refused)), then
 /// every request is checked against `tls`'s policy for the client's role, a denied one
-/// answered with exception 01 ([`Authorized`], counted in
+/// answered with exception 01 (the [`RoleCheck`](super::RoleCheck) as the session's
+/// [`ServerOptions::authorize`] filter, counted in
 /// [`TcpCounts::denied`](crate::server::TcpCounts::denied)). A connection in its handshake
 /// counts towards the connection limit and towards its source's handshakes
 /// ([`ServerTls::with_max_handshakes_per_source`]); the handshake must finish within `tls`'s
@@ -41,15 +42,15 @@ where
         tls.max_handshakes_per_source(),
         move |stream, peer, in_progress| {
             let transport = transport.clone();
-            let handler = handler.clone();
+            let mut handler = handler.clone();
             let options = Arc::clone(&options);
             let (tls, stats) = (tls.clone(), Arc::clone(&stats));
             async move {
                 let Some((stream, check)) = handshake(&tls, stream, peer, &stats, in_progress).await else {
                     return Ok(());
                 };
-                let mut handler = Authorized::new(handler, check);
                 let mut options = options();
+                options.authorize = Some(Box::new(check));
                 options.idle_timeout = options.idle_timeout.or(idle);
                 options.frame_timeout = options.frame_timeout.or(unfinished);
                 serve_transport(&transport, Box::new(stream), config, &mut handler, &mut options).await
