@@ -28,7 +28,7 @@ use ferrobus_proto::{ExceptionCode, FunctionCode};
 use tokio::io::{AsyncRead, AsyncWrite, AsyncWriteExt};
 use tokio::sync::oneshot;
 
-use super::line::{Job, exception};
+use super::back::{Job, exception};
 use super::{Authorize, Inbound, Inner, Timeouts, screen};
 use crate::port::{BoxPort, Port};
 use crate::pump::{Codec, Hex, Pump, Role, Session};

@@ -77,10 +77,10 @@
 //! a roles policy serves its connections through the same function.
 
 mod authorize;
+mod back;
 mod cache;
 pub mod config;
 mod front;
-mod line;
 mod reverse;
 mod screen;
 pub mod stats;
@@ -97,8 +97,8 @@ use tokio::net::TcpListener;
 use tokio::sync::oneshot;
 
 pub use authorize::{AllowAll, Authorize, Chain, Rules};
+use back::{Job, LineQueue};
 use cache::Cache;
-use line::{Job, LineQueue};
 pub use reverse::{OnFailure, Upstream, serve_reverse};
 use stats::{FrontStats, LineTraffic};
 
@@ -333,7 +333,7 @@ impl Gateway {
                 .map_err(|source| GatewayError::Io { line: index, source })?;
             let stats = Arc::new(Mutex::new(LineTraffic { name, ..LineTraffic::default() }));
             let queue = Arc::new(LineQueue::new(line.queue, stats));
-            tokio::spawn(line::run(Arc::clone(&queue), client, cache.clone(), line.late_guard));
+            tokio::spawn(back::run(Arc::clone(&queue), client, cache.clone(), line.late_guard));
             lines.push(queue);
         }
         let inner = Inner {
@@ -458,7 +458,7 @@ impl Inner {
                     return;
                 }
             }
-            let busy = busy.then(|| line::exception(function, ferrobus_proto::ExceptionCode::ServerDeviceBusy.value()));
+            let busy = busy.then(|| back::exception(function, ferrobus_proto::ExceptionCode::ServerDeviceBusy.value()));
             let _ = ack.send(busy);
         });
         Some(rx)

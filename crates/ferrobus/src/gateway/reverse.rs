@@ -26,7 +26,7 @@ use ferrobus_proto::pdu::Request;
 use ferrobus_proto::slave::{RequestId, Slave, SlaveConfig};
 use ferrobus_proto::{ExceptionCode, FunctionCode};
 
-use super::line::exception;
+use super::back::exception;
 use crate::port::{BoxPort, Transport};
 use crate::pump::{Codec, Hex, Pump, Role, Step, write_frame};
 use crate::{Client, Error};

@@ -343,11 +343,9 @@ fn ranges(items: Vec<Spanned<Item>>, what: &str, max: u64) -> Result<Vec<(u64, u
     Ok(out)
 }
 
+/// A number by the one number grammar ([`crate::text::number`]: decimal or 0x hex).
 fn parse_number(text: &str) -> Option<u64> {
-    match text.strip_prefix("0x").or_else(|| text.strip_prefix("0X")) {
-        Some(hex) => u64::from_str_radix(hex, 16).ok(),
-        None => text.parse().ok(),
-    }
+    crate::text::number(text, u64::MAX).ok()
 }
 
 #[cfg(test)]

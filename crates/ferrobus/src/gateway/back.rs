@@ -1,5 +1,6 @@
-//! One serial line behind the gateway: its bounded queue, served round-robin per client
-//! connection, and the worker that is the line's one master.
+//! The gateway's back end (the [`front`](super::front) is the clients' side): one serial line
+//! behind the gateway, its bounded queue, served round-robin per client connection, and the
+//! worker that is the line's one master. (The virtual RS-485 line is [`crate::line`].)
 //!
 //! The worker takes one request at a time and hands it to the line's [`Client`], which keeps
 //! t3.5 before every frame, waits the reply timeout, retries, skips a unit in backoff and
