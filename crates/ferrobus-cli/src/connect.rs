@@ -500,14 +500,7 @@ mod tests {
 
     #[test]
     fn durations_take_units_and_plain_numbers_are_milliseconds() {
-        // The inputs every user of ferrobus::text::duration is tested with, and their values.
-        for (typed, want) in [
-            ("250", Duration::from_millis(250)),
-            ("1.5s", Duration::from_millis(1500)),
-            ("2min", Duration::from_secs(120)),
-            ("1h", Duration::from_secs(3600)),
-            ("250us", Duration::from_micros(250)),
-        ] {
+        for (typed, want) in ferrobus::text::DURATION_EXAMPLES {
             assert_eq!(parse_duration(typed), Ok(want), "{typed}");
         }
         assert_eq!(parse_duration("500ms"), Ok(Duration::from_millis(500)));

@@ -198,14 +198,7 @@ mod tests {
 
     #[test]
     fn durations_take_the_one_grammar() {
-        // The inputs every user of ferrobus::text::duration is tested with, and their values.
-        for (typed, want) in [
-            ("250", Duration::from_millis(250)),
-            ("1.5s", Duration::from_millis(1500)),
-            ("2min", Duration::from_secs(120)),
-            ("1h", Duration::from_secs(3600)),
-            ("250us", Duration::from_micros(250)),
-        ] {
+        for (typed, want) in ferrobus::text::DURATION_EXAMPLES {
             assert_eq!(parse_duration(typed), Ok(want), "{typed}");
             assert_eq!(format!("delay={typed}").parse::<Faults>().unwrap().delay, want, "delay={typed}");
         }

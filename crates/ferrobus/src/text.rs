@@ -27,6 +27,17 @@ pub const DURATION_UNITS: &str = "ns, us, ms, s, min (or m) or h; a plain number
 pub const SIZE_UNITS: &str =
     "B, kB, MB, GB (powers of 1000) or KiB, MiB, GiB (powers of 1024); a plain number is bytes";
 
+/// Durations as typed, with their values: the grammar's examples, which the test of every
+/// user of [`duration`] (the CLI, the simulator, poll sessions, the bridge's plant file)
+/// runs, so that each shows it reads durations the one way.
+pub const DURATION_EXAMPLES: [(&str, Duration); 5] = [
+    ("250", Duration::from_millis(250)),
+    ("1.5s", Duration::from_millis(1500)),
+    ("2min", Duration::from_secs(120)),
+    ("1h", Duration::from_secs(3600)),
+    ("250us", Duration::from_micros(250)),
+];
+
 /// The longest duration [`duration`] takes: 365 days.
 pub const MAX_DURATION: Duration = Duration::from_secs(365 * 24 * 3600);
 
@@ -274,7 +285,10 @@ mod tests {
             (" 0 ", Duration::ZERO),
             ("8760h", MAX_DURATION),
             (".5s", ms(500)),
-        ] {
+        ]
+        .into_iter()
+        .chain(DURATION_EXAMPLES)
+        {
             assert_eq!(duration(typed), Ok(want), "{typed:?}");
         }
     }

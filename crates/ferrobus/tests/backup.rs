@@ -4,6 +4,8 @@
 //! backup rendered from the readings that parses back the same; a restore in dependency order
 //! whose refused write stops only what depends on it.
 
+mod support;
+
 use std::future::Future;
 use std::sync::{Arc, Mutex};
 use std::time::Duration;
@@ -11,14 +13,11 @@ use std::time::Duration;
 use ferrobus::backup::device::{self, INTERRUPTED};
 use ferrobus::backup::restore::{self, Item, Outcome};
 use ferrobus::backup::{Backup, Entry, Header, State, Target, Unwatched, View, Watch, param};
-use ferrobus::port::{BoxPort, ConnectWith, Connecting};
-use ferrobus::server::{ServerOptions, Shared, serve};
-use ferrobus::{Client, ClientConfig, Framing, Transport};
+use ferrobus::server::Shared;
+use ferrobus::{Client, ClientConfig};
 use ferrobus_profile::{Profile, Value};
 use ferrobus_proto::ExceptionCode;
-use ferrobus_proto::frame::rtu::RtuCodec;
-use ferrobus_proto::frame::{Expect, LineConfig, LineTiming};
-use ferrobus_proto::slave::{Handler, Slave, SlaveConfig, UnitSet};
+use ferrobus_proto::slave::Handler;
 
 /// Four parameters at 0..4, read at most 4 registers a request; P2 is refused.
 const PROFILE: &str = "[device]\nname='d'\nvendor='v'\nproduct_code='p'\nrevision='1'\n\
@@ -57,28 +56,10 @@ impl Handler for Drive {
     }
 }
 
-fn timing() -> LineTiming {
-    LineTiming::new(&LineConfig::new(19_200).unwrap())
-}
-
 async fn client(drive: &Arc<Mutex<Drive>>) -> Client {
-    let device = Shared(Arc::clone(drive));
-    let connector = ConnectWith::new("in-memory drive", move || -> Connecting {
-        let mut device = device.clone();
-        Box::pin(async move {
-            let (client_end, server_end) = tokio::io::duplex(4096);
-            tokio::spawn(async move {
-                let units: UnitSet = [1u8].into_iter().collect();
-                let config = SlaveConfig { units, response_wait: Duration::ZERO };
-                let slave = Slave::new(RtuCodec::new(timing(), Expect::Both), config);
-                let mut options = ServerOptions::new(timing(), ferrobus::Timer::Tokio);
-                let _ = serve(slave, Box::new(server_end), &mut device, &mut options).await;
-            });
-            Ok(Box::new(client_end) as BoxPort)
-        })
-    });
+    let transport = support::in_memory("in-memory drive", Shared(Arc::clone(drive)));
     let config = ClientConfig { timeout: Duration::from_millis(50), backoff: None, ..ClientConfig::default() };
-    Client::connect(Transport::custom(Framing::Rtu, timing(), connector), config).await.unwrap()
+    Client::connect(transport, config).await.unwrap()
 }
 
 fn view() -> View {

@@ -3,18 +3,17 @@
 //! coil; accepted when it is off; a point that may change while running costs no read; a value
 //! out of range costs no read; a running point that cannot be read refuses the write.
 
+mod support;
+
 use std::sync::{Arc, Mutex};
 use std::time::Duration;
 
 use ferrobus::guard::{check_write, run_state};
-use ferrobus::port::{BoxPort, ConnectWith, Connecting};
-use ferrobus::server::{ServerOptions, Shared, serve};
-use ferrobus::{Client, ClientConfig, Framing, Transport};
+use ferrobus::server::Shared;
+use ferrobus::{Client, ClientConfig};
 use ferrobus_profile::{Profile, Refusal, RunState, Value, Write};
 use ferrobus_proto::ExceptionCode;
-use ferrobus_proto::frame::rtu::RtuCodec;
-use ferrobus_proto::frame::{Expect, LineConfig, LineTiming};
-use ferrobus_proto::slave::{Handler, Slave, SlaveConfig, UnitSet};
+use ferrobus_proto::slave::Handler;
 
 const PROFILE: &str = "[device]\nname='x'\nvendor='v'\nproduct_code='p'\nrevision='1'\n\
     [state]\nrunning = { point = 'running', values = [1] }\n\
@@ -51,28 +50,10 @@ impl Handler for Drive {
     }
 }
 
-fn timing() -> LineTiming {
-    LineTiming::new(&LineConfig::new(19_200).unwrap())
-}
-
 async fn client(drive: &Arc<Mutex<Drive>>) -> Client {
-    let device = Shared(Arc::clone(drive));
-    let connector = ConnectWith::new("in-memory drive", move || -> Connecting {
-        let mut device = device.clone();
-        Box::pin(async move {
-            let (client_end, server_end) = tokio::io::duplex(4096);
-            tokio::spawn(async move {
-                let units: UnitSet = [1u8].into_iter().collect();
-                let config = SlaveConfig { units, response_wait: Duration::ZERO };
-                let slave = Slave::new(RtuCodec::new(timing(), Expect::Both), config);
-                let mut options = ServerOptions::new(timing(), ferrobus::Timer::Tokio);
-                let _ = serve(slave, Box::new(server_end), &mut device, &mut options).await;
-            });
-            Ok(Box::new(client_end) as BoxPort)
-        })
-    });
+    let transport = support::in_memory("in-memory drive", Shared(Arc::clone(drive)));
     let config = ClientConfig { timeout: Duration::from_millis(50), backoff: None, ..ClientConfig::default() };
-    Client::connect(Transport::custom(Framing::Rtu, timing(), connector), config).await.unwrap()
+    Client::connect(transport, config).await.unwrap()
 }
 
 fn seen(drive: &Arc<Mutex<Drive>>) -> Vec<(u8, u16)> {

@@ -3,6 +3,8 @@
 //! failure a sample with its kind and counted, pause, reset and the write-through; the
 //! session file.
 
+mod support;
+
 use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::Duration;
@@ -11,13 +13,10 @@ use ferrobus::poll::session::Session;
 use ferrobus::poll::{
     Event, FailureKind, Format, Group, Layout, PollConfig, Poller, RawRange, Sample, Table, Value, WriteError,
 };
-use ferrobus::port::{BoxPort, ConnectWith, Connecting};
-use ferrobus::server::{ServerOptions, Shared, serve};
-use ferrobus::{Client, ClientConfig, Framing, Transport};
+use ferrobus::server::Shared;
+use ferrobus::{Client, ClientConfig, Transport};
 use ferrobus_proto::ExceptionCode;
-use ferrobus_proto::frame::rtu::RtuCodec;
-use ferrobus_proto::frame::{Expect, LineConfig, LineTiming};
-use ferrobus_proto::slave::{Handler, Slave, SlaveConfig, UnitSet};
+use ferrobus_proto::slave::Handler;
 
 /// 100 holding registers; reads of register 50 are refused while `refuse` is set.
 struct Device {
@@ -52,29 +51,11 @@ impl Handler for Device {
     }
 }
 
-fn timing() -> LineTiming {
-    LineTiming::new(&LineConfig::new(19_200).unwrap())
-}
+use support::timing;
 
-/// A transport to a server engine answering unit 1 (its bytes paced at 19200 baud by the
-/// server's pump only as far as t3.5 goes; the in-memory pipe itself is instant).
+/// A transport to a server engine answering unit 1.
 fn transport(refuse: Arc<AtomicBool>) -> Transport {
-    let device = Shared::new(Device { registers: (0..100).collect(), refuse });
-    let connector = ConnectWith::new("in-memory bus", move || -> Connecting {
-        let mut device = device.clone();
-        Box::pin(async move {
-            let (client_end, server_end) = tokio::io::duplex(4096);
-            tokio::spawn(async move {
-                let units: UnitSet = [1u8].into_iter().collect();
-                let config = SlaveConfig { units, response_wait: Duration::ZERO };
-                let slave = Slave::new(RtuCodec::new(timing(), Expect::Both), config);
-                let mut options = ServerOptions::new(timing(), ferrobus::Timer::Tokio);
-                let _ = serve(slave, Box::new(server_end), &mut device, &mut options).await;
-            });
-            Ok(Box::new(client_end) as BoxPort)
-        })
-    });
-    Transport::custom(Framing::Rtu, timing(), connector)
+    support::in_memory("in-memory bus", Shared::new(Device { registers: (0..100).collect(), refuse }))
 }
 
 async fn client(refuse: &Arc<AtomicBool>) -> Client {

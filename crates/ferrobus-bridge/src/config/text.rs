@@ -56,14 +56,7 @@ mod tests {
 
     #[test]
     fn durations_are_the_one_grammar() {
-        // The inputs every user of ferrobus::text::duration is tested with, and their values.
-        for (typed, want) in [
-            ("250", Duration::from_millis(250)),
-            ("1.5s", Duration::from_millis(1500)),
-            ("2min", Duration::from_secs(120)),
-            ("1h", Duration::from_secs(3600)),
-            ("250us", Duration::from_micros(250)),
-        ] {
+        for (typed, want) in ferrobus::text::DURATION_EXAMPLES {
             assert_eq!(duration(typed), Ok(want), "{typed}");
         }
         assert_eq!(duration("2m"), Ok(Duration::from_secs(120)));

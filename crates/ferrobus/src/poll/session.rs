@@ -330,14 +330,7 @@ mod tests {
 
     #[test]
     fn a_period_is_the_one_duration_grammar_above_zero_and_at_most_a_day() {
-        // The inputs every user of crate::text::duration is tested with, and their values.
-        for (typed, want) in [
-            ("250", Duration::from_millis(250)),
-            ("1.5s", Duration::from_millis(1500)),
-            ("2min", Duration::from_secs(120)),
-            ("1h", Duration::from_secs(3600)),
-            ("250us", Duration::from_micros(250)),
-        ] {
+        for (typed, want) in crate::text::DURATION_EXAMPLES {
             assert_eq!(period(Some(typed)), Ok(want), "{typed}");
         }
         assert_eq!(period(None), Ok(Duration::from_secs(1)));

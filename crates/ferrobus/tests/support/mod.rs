@@ -1,0 +1,37 @@
+//! What the library's tests share: a unit on an in-memory line, served by the server engine
+//! (the bytes are paced by the server's pump only as far as t3.5 goes; the pipe itself is
+//! instant). Each test crate takes what it needs of it.
+#![allow(dead_code)]
+
+use std::time::Duration;
+
+use ferrobus::Transport;
+use ferrobus::port::{BoxPort, ConnectWith, Connecting};
+use ferrobus::server::{ServerOptions, Shared, serve};
+use ferrobus_proto::frame::rtu::RtuCodec;
+use ferrobus_proto::frame::{Expect, LineConfig, LineTiming};
+use ferrobus_proto::slave::{Handler, Slave, SlaveConfig, UnitSet};
+
+/// The line's timing: 19200 baud.
+pub(crate) fn timing() -> LineTiming {
+    LineTiming::new(&LineConfig::new(19_200).unwrap())
+}
+
+/// An RTU transport to `device` answering unit 1, each connection a new in-memory line.
+pub(crate) fn in_memory<H: Handler + Send + 'static>(name: &str, device: Shared<H>) -> Transport {
+    let connector = ConnectWith::new(name.to_string(), move || -> Connecting {
+        let mut device = device.clone();
+        Box::pin(async move {
+            let (client_end, server_end) = tokio::io::duplex(4096);
+            tokio::spawn(async move {
+                let units: UnitSet = [1u8].into_iter().collect();
+                let config = SlaveConfig { units, response_wait: Duration::ZERO };
+                let slave = Slave::new(RtuCodec::new(timing(), Expect::Both), config);
+                let mut options = ServerOptions::new(timing(), ferrobus::Timer::Tokio);
+                let _ = serve(slave, Box::new(server_end), &mut device, &mut options).await;
+            });
+            Ok(Box::new(client_end) as BoxPort)
+        })
+    });
+    Transport::custom(ferrobus::Framing::Rtu, timing(), connector)
+}
