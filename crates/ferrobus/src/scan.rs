@@ -8,7 +8,8 @@
 //!    ([`Reconfigure`]): it is never closed and opened again, so its path cannot come to name
 //!    another device halfway through.
 //! 2. **Listen first** (when [`ScanConfig::listen`] is not zero): before anything is sent, the
-//!    port is read at every setting in turn without transmitting; CRC-valid frames mean another
+//!    port is read at every setting in turn without transmitting (the core's listener on the
+//!    one loop, [`Pump`](crate::pump::Pump), as every other role); CRC-valid frames mean another
 //!    master is active at that setting. It is reported with the units it talks to, and then
 //!    nothing is transmitted at all unless [`ScanConfig::force`]. (Bytes that never frame are
 //!    reported as noise: something talks at other settings.)
@@ -33,11 +34,11 @@ use std::time::Duration;
 use ferrobus_proto::codes::{ExceptionCode, ReadDeviceIdCode, unit as unit_codes};
 use ferrobus_proto::frame::{LineConfig, LineTiming, rtu};
 use ferrobus_proto::scan::{Answer, Lead, LineActivity, Listener, Probe, ProbeTiming};
-use tokio::io::{AsyncRead, AsyncReadExt, AsyncWrite, ReadBuf};
+use tokio::io::{AsyncRead, AsyncWrite, ReadBuf};
 use tokio::sync::Notify;
 
-use crate::clock::Clock;
 use crate::port::{BoxPort, Connecting, Connector, PC_INCOMPLETE_TIMEOUT, Port, TtyPort};
+use crate::pump::{Engine, Pump, Session};
 use crate::{Client, ClientConfig, Error, Framing, Rs485, Timer, Transport};
 
 /// A port whose line settings can be changed while it is open.
@@ -466,38 +467,23 @@ impl<P: Reconfigure> Scanner<P> {
         result.map_err(|e| Error::io(context(), e))
     }
 
-    /// Listens for the configured time without transmitting.
+    /// Listens for the configured time without transmitting: the core's listener driven by
+    /// the one loop ([`Pump::run`]), as every other role is.
     async fn listen(&self, line: LineConfig) -> Result<LineActivity, Error> {
         let timing = self.timing(line);
         let mut listener = Listener::new(timing).with_frame_gap(timing.t3_5().max(PC_INCOMPLETE_TIMEOUT));
-        let mut port = self.take().await?;
-        let clock = Clock::new();
-        let end = tokio::time::Instant::now() + self.config.listen;
-        let mut buf = [0u8; 512];
-        let result = loop {
-            let wake = listener.poll_timeout().map_or(end, |t| clock.to_tokio(t).min(end));
-            match tokio::time::timeout_at(wake, port.read(&mut buf)).await {
-                Ok(Ok(0)) => break Err(io::Error::new(io::ErrorKind::UnexpectedEof, "the port closed")),
-                Ok(Ok(n)) => {
-                    let at = port.last_arrival().map_or_else(|| clock.now(), |t| clock.from_tokio(t));
-                    listener.on_bytes(at, buf.get(..n).unwrap_or_default());
-                }
-                Ok(Err(e)) => break Err(e),
-                Err(_) => {
-                    let now = tokio::time::Instant::now();
-                    listener.handle_timeout(clock.from_tokio(now));
-                    if now >= end {
-                        // A frame still open is decided as if the silence had come.
-                        if let Some(due) = listener.poll_timeout() {
-                            listener.handle_timeout(due);
-                        }
-                        break Ok(listener.heard());
-                    }
-                }
-            }
-        };
-        self.put(port);
-        result.map_err(|e| Error::io(format!("listening on {} at {line}", self.name), e))
+        // Lent, so that the port comes home when listening ends, whatever ended it.
+        let mut port: BoxPort = Box::new(Lent { port: Some(self.take().await?), home: Arc::clone(&self.home) });
+        let mut pump = Pump::new(self.config.timer.sleeper());
+        let mut session = Listening { end: tokio::time::Instant::now() + self.config.listen };
+        let result = pump.run(&mut port, &mut listener, &mut session).await;
+        drop(port);
+        result.map_err(|e| Error::io(format!("listening on {} at {line}", self.name), e))?;
+        // A frame still open is decided as if the silence had come.
+        if let Some(due) = listener.poll_timeout() {
+            listener.handle_timeout(due);
+        }
+        Ok(listener.heard())
     }
 
     /// A client at `line` over the port, with `timeout` and `retries`.
@@ -657,5 +643,50 @@ impl<P: Reconfigure> Port for Lent<P> {
 
     fn last_arrival(&self) -> Option<tokio::time::Instant> {
         self.port.as_ref().and_then(Port::last_arrival)
+    }
+}
+
+/// The core's listener is an engine that never transmits and reports nothing on the way: what
+/// it heard is read once listening ends ([`Listener::heard`]).
+impl Engine for Listener {
+    type Event<'a> = ();
+
+    fn on_bytes(&mut self, now: ferrobus_proto::Instant, bytes: &[u8]) -> usize {
+        Listener::on_bytes(self, now, bytes);
+        bytes.len()
+    }
+    fn poll_timeout(&self) -> Option<ferrobus_proto::Instant> {
+        Listener::poll_timeout(self)
+    }
+    fn handle_timeout(&mut self, now: ferrobus_proto::Instant) {
+        Listener::handle_timeout(self, now);
+    }
+    fn poll_transmit(&mut self, _: ferrobus_proto::Instant, _: &mut [u8]) -> Option<usize> {
+        None
+    }
+    fn poll_event(&mut self) -> Option<()> {
+        None
+    }
+}
+
+/// The listen phase's session: nothing to serve, one deadline (the end of listening).
+struct Listening {
+    end: tokio::time::Instant,
+}
+
+impl Session<Listener> for Listening {
+    type Output = io::Result<()>;
+
+    async fn serve(&mut self, _: &Pump, _: &mut BoxPort, _: &mut Listener) -> Option<io::Result<()>> {
+        None
+    }
+    fn deadline(&mut self, _: &Listener) -> Option<tokio::time::Instant> {
+        Some(self.end)
+    }
+    fn on_wake(&mut self) -> Option<io::Result<()>> {
+        (tokio::time::Instant::now() >= self.end).then_some(Ok(()))
+    }
+    fn on_end(&mut self, error: Option<io::Error>) -> io::Result<()> {
+        Err(error.unwrap_or_else(|| io::Error::new(io::ErrorKind::UnexpectedEof, "the port closed")))
     }
 }
