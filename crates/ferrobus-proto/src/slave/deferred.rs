@@ -25,6 +25,8 @@ pub struct Incoming<'a> {
     pub id: RequestId,
     /// The unit it was sent to (0 for a broadcast on a serial line).
     pub unit: u8,
+    /// Its MBAP transaction id (0 on a serial line), for what logs the request.
+    pub transaction: u16,
     /// Whether it was sent to all: it gets no reply, whatever it is answered with.
     pub broadcast: bool,
     /// Its PDU as it came (function code first), parsed or not.
@@ -79,7 +81,13 @@ impl<F: Framing> Slave<F> {
     pub fn poll_request(&mut self) -> Option<Incoming<'_>> {
         let entry = self.core.slots.first_mut(State::Queued)?;
         entry.state = State::HandedOut;
-        Some(Incoming { id: entry.id, unit: entry.header.unit, broadcast: entry.broadcast, pdu: entry.pdu() })
+        Some(Incoming {
+            id: entry.id,
+            unit: entry.header.unit,
+            transaction: entry.header.transaction,
+            broadcast: entry.broadcast,
+            pdu: entry.pdu(),
+        })
     }
 
     /// Answers request `id` with `pdu` (a response PDU, an exception one too), due t3.5

@@ -789,8 +789,10 @@ fn deferred_mbap_replies_go_out_in_request_order_whatever_order_they_are_answere
     let mut slave = Slave::new(MbapCodec::strict(), SlaveConfig::unit(1));
     let input: Vec<u8> = (0..3u16).flat_map(|t| mbap(t, 1, &[0x03, 0, u8::try_from(t).unwrap(), 0, 1])).collect();
     assert_eq!(slave.receive(Instant::ZERO, &input), input.len());
-    let ids: Vec<RequestId> = core::iter::from_fn(|| slave.poll_request().map(|r| r.id)).collect();
-    assert_eq!(ids.len(), 3);
+    let handed: Vec<(RequestId, u16)> =
+        core::iter::from_fn(|| slave.poll_request().map(|r| (r.id, r.transaction))).collect();
+    assert_eq!(handed.iter().map(|&(_, t)| t).collect::<Vec<_>>(), [0, 1, 2], "each with its transaction id");
+    let ids: Vec<RequestId> = handed.iter().map(|&(id, _)| id).collect();
     let mut out = [0u8; MAX_TX_LEN];
     slave.respond(ids[2], &[0x03, 0x02, 0, 2]).unwrap();
     slave.respond(ids[1], &[0x03, 0x02, 0, 1]).unwrap();

@@ -159,7 +159,7 @@ impl<F: Framing> Session<Slave<F>> for Front<'_> {
         // came before it, and is still answered.
         while let Some(request) = engine.poll_request() {
             let (id, unit, pdu) = (request.id, request.unit, request.pdu.to_vec());
-            tracing::info!(%peer, unit, "request {}", Hex(&pdu));
+            tracing::info!(%peer, unit, transaction = request.transaction, "request {}", Hex(&pdu));
             self.admit(engine, id, unit, &pdu);
         }
         if let Err(e) = self.send_due(pump, port, engine).await {
