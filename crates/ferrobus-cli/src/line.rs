@@ -88,7 +88,7 @@ use ferrobus_sim::fault::parse_share as rate;
 
 fn stretch(text: &str) -> Result<(f64, Duration), String> {
     let (r, d) = text.split_once(':').ok_or_else(|| format!("'{text}': expected RATE:DURATION, e.g. 1%:3ms"))?;
-    Ok((rate(r)?, parse_duration(d)?))
+    Ok((rate(r).map_err(|e| e.to_string())?, parse_duration(d)?))
 }
 
 fn noise(text: &str) -> Result<(f64, usize), String> {

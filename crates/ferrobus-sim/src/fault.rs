@@ -93,7 +93,7 @@ impl FromStr for Faults {
                     ("silent", None) => faults.silent = true,
                     ("trip", None) => faults.trip_after = Some(Duration::ZERO),
                     ("trip", Some(v)) => {
-                        faults.trip_after = Some(parse_duration(v).map_err(&err)?);
+                        faults.trip_after = Some(parse_duration(v).map_err(|e| err(e.to_string()))?);
                     }
                     _ => return Err(err(format!("{key} takes no value"))),
                 }
@@ -105,9 +105,9 @@ impl FromStr for Faults {
             let value = value.ok_or_else(|| err(format!("{key} needs a value")))?;
             let invalid = |what: &str| err(format!("{key}: {what}"));
             match key {
-                "drop" => faults.drop = parse_share(value).map_err(|e| invalid(&e))?,
-                "corrupt" => faults.corrupt = parse_share(value).map_err(|e| invalid(&e))?,
-                "delay" => faults.delay = parse_duration(value).map_err(|e| invalid(&e))?,
+                "drop" => faults.drop = parse_share(value).map_err(|e| invalid(&e.to_string()))?,
+                "corrupt" => faults.corrupt = parse_share(value).map_err(|e| invalid(&e.to_string()))?,
+                "delay" => faults.delay = parse_duration(value).map_err(|e| invalid(&e.to_string()))?,
                 "exception" => {
                     faults.exception =
                         Some(code(value).filter(|c| *c != 0).ok_or_else(|| invalid("a code from 0x01 to 0xFF"))?);
@@ -203,7 +203,7 @@ mod tests {
             assert_eq!(format!("delay={typed}").parse::<Faults>().unwrap().delay, want, "delay={typed}");
         }
         assert!(parse_duration("-1s").is_err());
-        assert!(parse_duration("soon").unwrap_err().contains("'soon' is not a duration"));
+        assert!(parse_duration("soon").unwrap_err().to_string().contains("'soon' is not a duration"));
         assert!(parse_duration("8761h").is_err());
         assert_eq!(parse_share("5%"), Ok(0.05));
         assert!(parse_share("150%").is_err());

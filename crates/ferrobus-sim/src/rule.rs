@@ -139,7 +139,7 @@ impl FromStr for Rule {
                     continue;
                 }
                 "share" => {
-                    share = parse_share(needs()?).map_err(invalid)?;
+                    share = parse_share(needs()?).map_err(|e| invalid(e.to_string()))?;
                     continue;
                 }
                 "exception" => {
@@ -161,8 +161,8 @@ impl FromStr for Rule {
                             .ok_or_else(|| invalid(format!("'{v}' is not a number of bytes from 1")))?,
                     ),
                 }),
-                "delay" => Action::Delay(parse_duration(needs()?).map_err(invalid)?),
-                "trickle" => Action::Trickle(parse_duration(needs()?).map_err(invalid)?),
+                "delay" => Action::Delay(parse_duration(needs()?).map_err(|e| invalid(e.to_string()))?),
+                "trickle" => Action::Trickle(parse_duration(needs()?).map_err(|e| invalid(e.to_string()))?),
                 "unit" => {
                     let value = needs()?;
                     Action::Unit(

@@ -40,7 +40,7 @@ pub enum TickerError {
         /// What was given.
         spec: String,
         /// What is wrong with the period.
-        reason: String,
+        reason: ferrobus::text::TextError,
     },
     /// The point is not an integer register.
     #[error("ticker {point}: not an integer register")]
