@@ -130,6 +130,9 @@ pub(crate) struct Device {
     pub(crate) cells: Vec<Vec<CellState>>,
     /// Whether it answers.
     health: Health,
+    /// What the last poll applied did to its health (`None` before the first, or when the
+    /// last sample named no group of it): what the bridge's status lines say.
+    last: Option<Liveness>,
 }
 
 impl Device {
@@ -153,12 +156,14 @@ impl Device {
             death_after: spec.death_after.max(1),
             cells,
             health: Health::default(),
+            last: None,
         }
     }
 
     /// Takes a poll of group `group`: the cells' latest readings and the device's liveness;
     /// `None` (nothing changes) for a group the device does not have.
     pub(crate) fn apply(&mut self, group: usize, sample: &Sample) -> Option<Liveness> {
+        self.last = None;
         let time = sample.time;
         let cells = self.cells.get_mut(group)?;
         let answered = answered(&sample.result);
@@ -184,7 +189,14 @@ impl Device {
             // Silence: the cells keep what they last read.
             Err(_) => {}
         }
-        Some(self.health.observe(answered, self.death_after))
+        let liveness = self.health.observe(answered, self.death_after);
+        self.last = Some(liveness);
+        Some(liveness)
+    }
+
+    /// What the last sample [`Device::apply`] took did to its health.
+    pub(crate) fn last_liveness(&self) -> Option<Liveness> {
+        self.last
     }
 
     /// Whether it answers now.

@@ -79,7 +79,9 @@ use ferrobus::poll::Sample;
 use ferrobus_profile::Value;
 
 use crate::config::{Mode, Plant};
-pub(crate) use device::{Health, Liveness, answered};
+pub(crate) use device::{Device, Liveness};
+#[cfg(test)]
+pub(crate) use device::{Health, answered};
 use plain::PlainEdge;
 use record::Record;
 use sparkplug::SparkplugEdge;
@@ -303,6 +305,16 @@ impl Edge {
             Inner::Sparkplug(s) => s.sample(device, group, sample),
             Inner::Plain(p) => p.sample(device, group, sample),
         }
+    }
+
+    /// What the last sample of `device` did to its liveness (the one rule, [`Health`]), for
+    /// the bridge's status lines: `None` before its first sample.
+    pub(crate) fn liveness(&self, device: DeviceRef) -> Option<Liveness> {
+        match &self.inner {
+            Inner::Sparkplug(s) => s.device(device),
+            Inner::Plain(p) => p.device(device),
+        }
+        .and_then(Device::last_liveness)
     }
 
     /// A stored record as historical data (the next seq, the original timestamps); `None` when

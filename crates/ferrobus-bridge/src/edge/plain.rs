@@ -131,6 +131,12 @@ impl PlainEdge {
         Self::status(format!("{}/{}/status", self.config.prefix, device.id), text)
     }
 
+    /// The device at `at`.
+    pub(crate) fn device(&self, at: DeviceRef) -> Option<&Device> {
+        let i = self.devices.binary_search_by_key(&at, |d| d.device.at).ok()?;
+        self.devices.get(i).map(|d| &d.device)
+    }
+
     pub(crate) fn sample(&mut self, at: DeviceRef, group: usize, sample: &Sample) -> Vec<Output> {
         let Some(i) = self.devices.binary_search_by_key(&at, |d| d.device.at).ok() else { return Vec::new() };
         let Some(d) = self.devices.get_mut(i) else { return Vec::new() };

@@ -55,7 +55,7 @@ pub use report::{LineReport, Report};
 pub use status::Status;
 
 use crate::config::{Mode, Plant};
-use crate::edge::{Action, DeviceRef, Edge, EdgeError, Health, Liveness, Output, Publish, answered};
+use crate::edge::{Action, DeviceRef, Edge, EdgeError, Liveness, Output, Publish};
 use crate::sparkplug::topic::{MessageType, Topic};
 use crate::store::{Pushed, Store, StoreError};
 use command::{Applied, BusWrite, DeviceWrites};
@@ -135,8 +135,6 @@ pub async fn run_with(
 struct LineState {
     running: RunningLine,
     map: GroupMap,
-    /// Each device's liveness, for the status lines (the edge's rule: [`Health`]).
-    devices: Vec<Health>,
     /// Each device's writes waiting for the bus.
     writes: Vec<DeviceWrites>,
 }
@@ -189,9 +187,8 @@ impl Bridge {
         let mut lines = Vec::with_capacity(plant.lines.len());
         for (index, spec) in plant.lines.iter().enumerate() {
             let (running, map) = lines::start(index, spec, samples_tx.clone()).await?;
-            let devices = vec![Health::default(); spec.devices.len()];
             let writes = vec![DeviceWrites::default(); spec.devices.len()];
-            lines.push(LineState { running, map, devices, writes });
+            lines.push(LineState { running, map, writes });
         }
         let report = Report::new(&plant, store.stats().recovered);
         let (bd_seq_file, note) = restore_bd_seq(&plant, &mut edge);
@@ -526,9 +523,10 @@ impl Bridge {
         let Some((device, group)) = self.lines.get(line).and_then(|l| l.map.device(line, sample.group)) else {
             return;
         };
-        self.track_health(device, sample);
+        let outputs = self.edge.sample(device, group, sample);
+        self.say_health(device, sample);
         let mut messages = Vec::new();
-        for output in self.edge.sample(device, group, sample) {
+        for output in outputs {
             match output {
                 Output::Publish(message) => messages.push(message),
                 Output::Store(record) => self.keep(record),
@@ -540,20 +538,12 @@ impl Bridge {
     }
 
     /// Says when a device stops answering (`death_after` polls in a row without a reply)
-    /// and when it is back, by the edge's liveness rule.
-    fn track_health(&mut self, device: DeviceRef, sample: &Sample) {
-        let death_after = self.device_spec_death_after(device);
-        let Some(health) = self.lines.get_mut(device.line).and_then(|l| l.devices.get_mut(device.device)) else {
-            return;
-        };
-        let liveness = health.observe(answered(&sample.result), death_after);
+    /// and when it is back: what the edge's one liveness state made of the sample it took.
+    fn say_health(&mut self, device: DeviceRef, sample: &Sample) {
+        let Some(liveness) = self.edge.liveness(device) else { return };
         if let Some(status) = health_status(liveness, sample, || self.device_name(device)) {
             self.say(status);
         }
-    }
-
-    fn device_spec_death_after(&self, device: DeviceRef) -> u32 {
-        self.plant.lines.get(device.line).and_then(|l| l.devices.get(device.device)).map_or(3, |d| d.death_after.max(1))
     }
 
     fn device_name(&self, device: DeviceRef) -> String {

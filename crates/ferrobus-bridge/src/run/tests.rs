@@ -12,6 +12,7 @@ use tokio::sync::{mpsc, oneshot};
 use ferrobus::poll::FailureKind;
 
 use super::*;
+use crate::edge::{Health, answered};
 use crate::sparkplug::payload::{MetricValue, Payload};
 
 /// A mosquitto of this test, stopped when dropped.

@@ -282,6 +282,11 @@ impl SparkplugEdge {
         self.devices.binary_search_by_key(&at, |d| d.device.at).ok()
     }
 
+    /// The device at `at`.
+    pub(crate) fn device(&self, at: DeviceRef) -> Option<&Device> {
+        self.devices.get(self.index(at)?).map(|d| &d.device)
+    }
+
     pub(crate) fn sample(&mut self, at: DeviceRef, group: usize, sample: &Sample) -> Vec<Output> {
         let Some(i) = self.index(at) else { return Vec::new() };
         let online = self.node_born;
