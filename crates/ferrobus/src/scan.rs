@@ -9,7 +9,7 @@
 //!    another device halfway through.
 //! 2. **Listen first** (when [`ScanConfig::listen`] is not zero): before anything is sent, the
 //!    port is read at every setting in turn without transmitting (the core's listener on the
-//!    one loop, [`Pump`](crate::pump::Pump), as every other role); CRC-valid frames mean another
+//!    one loop, [`Pump`], as every other role); CRC-valid frames mean another
 //!    master is active at that setting. It is reported with the units it talks to, and then
 //!    nothing is transmitted at all unless [`ScanConfig::force`]. (Bytes that never frame are
 //!    reported as noise: something talks at other settings.)
