@@ -262,6 +262,17 @@ pub fn list(text: &str, max: u64) -> Result<Vec<RangeInclusive<u64>>, TextError>
     Ok(out)
 }
 
+/// One item of a list in a TOML file (the gateway's lines file, the TLS roles policy): a
+/// number, `5`, or a text for the grammar, `"1-10"` or `"0x20"`.
+#[derive(serde::Deserialize)]
+#[serde(untagged)]
+pub(crate) enum Item {
+    /// A TOML integer.
+    Number(i64),
+    /// A TOML string.
+    Text(String),
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

@@ -50,6 +50,7 @@ use serde::Deserialize;
 use toml::Spanned;
 
 use super::{GatewayLine, Route, Routes};
+use crate::text::Item;
 use crate::{ClientConfig, Rs485, SerialConfig, Transport};
 
 /// What every line of a lines file starts from, before its own keys.
@@ -164,14 +165,6 @@ struct LineShape {
     late_guard: Option<Spanned<toml::Value>>,
     units: Option<Vec<Spanned<Item>>>,
     renumber: Option<BTreeMap<Spanned<String>, Spanned<Item>>>,
-}
-
-/// A unit or a range of units: `5`, `"1-10"` (decimal or 0x hex).
-#[derive(Deserialize)]
-#[serde(untagged)]
-enum Item {
-    Number(i64),
-    Text(String),
 }
 
 /// What is wrong, and where in the file.

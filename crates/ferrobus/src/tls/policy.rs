@@ -40,6 +40,7 @@ use serde::Deserialize;
 use toml::Spanned;
 
 use super::Role;
+use crate::text::Item;
 
 /// The function codes `access = "read"` allows: reads of data, status, counters, logs and
 /// identification (0x01 0x02 0x03 0x04 0x07 0x0B 0x0C 0x11 0x14 0x18 0x2B).
@@ -261,14 +262,6 @@ struct Section {
     units: Option<Vec<Spanned<Item>>>,
     functions: Option<Vec<Spanned<Item>>>,
     addresses: Option<Vec<Spanned<Item>>>,
-}
-
-/// A number, or a range "A-B" (decimal or 0x hex).
-#[derive(Deserialize)]
-#[serde(untagged)]
-enum Item {
-    Number(i64),
-    Text(String),
 }
 
 type Problem = (Range<usize>, String);
