@@ -330,18 +330,36 @@ fn config(connection: &ConnectArgs, args: &GatewayArgs) -> Result<GatewayConfig,
     }
     let first = match connection.target()? {
         Target::Serial { path, .. } => path,
-        other => {
+        Target::Mbaps(addr) => {
             return Err(CliError::Usage(format!(
-                "the gateway's lines are serial ports: give --port PATH (and --line PATH for more), not {other}"
+                "a gateway line is a serial port, a Modbus/TCP server (--tcp) or RTU over TCP (--rtu-tcp), not \
+                 Modbus/TCP Security ({addr})"
             )));
+        }
+        tcp @ (Target::Tcp(_) | Target::RtuTcp(_)) => {
+            if !args.lines.is_empty() {
+                return Err(CliError::Usage(
+                    "--line adds serial lines beside --port; for several TCP lines use --lines-file".into(),
+                ));
+            }
+            let mut client = connection.client_config();
+            client.backoff = backoff(args);
+            let line = GatewayLine {
+                queue: usize::try_from(args.queue).unwrap_or(usize::MAX),
+                late_guard: args.late_guard,
+                ..GatewayLine::new(connection.transport(&tcp), client)
+            };
+            let routes = routes(&args.routes, 1)?;
+            return Ok(GatewayConfig {
+                lines: vec![line],
+                routes,
+                broadcast_ack: args.broadcast_ack,
+                cache_max_age: args.cache_max_age,
+            });
         }
     };
     let mut client = connection.client_config();
-    client.backoff = (args.backoff_after > 0).then_some(ferrobus::Backoff {
-        after: args.backoff_after,
-        initial: args.backoff_skip,
-        max: args.backoff_max,
-    });
+    client.backoff = backoff(args);
     let queue = usize::try_from(args.queue).unwrap_or(usize::MAX);
     let lines = std::iter::once(first)
         .chain(args.lines.iter().cloned())
@@ -371,11 +389,7 @@ fn lines_file(path: &std::path::Path, connection: &ConnectArgs, args: &GatewayAr
         )));
     }
     let base = lines::Base {
-        backoff: (args.backoff_after > 0).then_some(ferrobus::Backoff {
-            after: args.backoff_after,
-            initial: args.backoff_skip,
-            max: args.backoff_max,
-        }),
+        backoff: backoff(args),
         queue: usize::try_from(args.queue).unwrap_or(usize::MAX),
         late_guard: args.late_guard,
     };
@@ -395,6 +409,15 @@ fn lines_file(path: &std::path::Path, connection: &ConnectArgs, args: &GatewayAr
         );
     }
     Ok(GatewayConfig { lines, routes, broadcast_ack: args.broadcast_ack, cache_max_age: args.cache_max_age })
+}
+
+/// Each line's per-unit backoff from `--backoff-after`, `--backoff-skip`, `--backoff-max`.
+fn backoff(args: &GatewayArgs) -> Option<ferrobus::Backoff> {
+    (args.backoff_after > 0).then_some(ferrobus::Backoff {
+        after: args.backoff_after,
+        initial: args.backoff_skip,
+        max: args.backoff_max,
+    })
 }
 
 /// The routing table from `--route`s; none with one line: every unit to it.
