@@ -114,12 +114,31 @@ pub(crate) struct ConnectArgs {
     /// order and numbering, and names its parameters for get and set
     #[arg(long, global = true, value_name = "PROFILE")]
     pub(crate) device: Option<String>,
+
+    /// SunSpec model definitions (a directory of model_*.json, or one file) beside the built-in
+    /// ones, for `scan --sunspec` and `--device sunspec` (also FERROBUS_SUNSPEC_MODELS)
+    #[arg(long = "sunspec-models", global = true, value_name = "PATH")]
+    pub(crate) sunspec_models: Option<PathBuf>,
+
+    /// The profile `--device sunspec` discovered (get, poll and backup discover it first).
+    #[arg(skip)]
+    pub(crate) sunspec: Option<std::sync::Arc<ferrobus_profile::Profile>>,
 }
 
 impl ConnectArgs {
     /// The `--device` profile, if one was given; a profile that does not load is a usage error
     /// naming the file and the line.
     pub(crate) fn profile(&self) -> Result<Option<ferrobus_profile::Profile>, CliError> {
+        if self.device.as_deref() == Some(crate::sunspec::DEVICE) {
+            return match &self.sunspec {
+                Some(profile) => Ok(Some(profile.as_ref().clone())),
+                None => Err(CliError::Usage(
+                    "--device sunspec works with get, poll and backup, which discover the device's SunSpec models \
+                     first; `ferrobus scan --sunspec` lists them"
+                        .into(),
+                )),
+            };
+        }
         self.device.as_deref().map(load_profile).transpose()
     }
 

@@ -72,6 +72,7 @@ mod set;
 mod sim;
 mod sniff;
 mod stderr;
+mod sunspec;
 mod target;
 #[cfg(not(unix))]
 mod unix_only;
@@ -249,16 +250,16 @@ async fn dispatch(cli: &Cli) -> Result<(), CliError> {
         Command::Diag(args) => diag::run(connection, args).await,
         Command::Info(args) => info::run(connection, args).await,
         Command::Raw(args) => raw::run(connection, args).await,
-        Command::Get(args) => get::run(connection, args).await,
+        Command::Get(args) => get::run(&sunspec::resolve(connection).await?, args).await,
         Command::Set(args) => set::run(connection, args).await,
-        Command::Backup(args) => backup::run(connection, args).await,
+        Command::Backup(args) => backup::run(&sunspec::resolve(connection).await?, args).await,
         Command::Diff(args) if args.defaults => {
             backup::defaults::run(connection, args.file.as_deref(), args.output.format()).await
         }
         Command::Diff(args) => backup::diff::run(connection, args).await,
         Command::Restore(args) => backup::restore::run(connection, args).await,
         Command::Profile(args) => profile::run(args),
-        Command::Poll(args) => poll::run(connection, args).await,
+        Command::Poll(args) => poll::run(&sunspec::resolve(connection).await?, args).await,
         Command::Monitor(args) => monitor::run(connection, args).await,
         Command::Scan(args) => scan::run(connection, args).await,
         Command::Sniff(args) => sniff::run(connection, args).await,
@@ -296,7 +297,7 @@ fn explain_parse_error(error: clap::Error) -> clap::Error {
 }
 
 /// The connection options, by clap id (the long option is the id with `-` for `_`).
-const CONNECTION_OPTIONS: [&str; 22] = [
+const CONNECTION_OPTIONS: [&str; 23] = [
     "port",
     "tcp",
     "rtu_tcp",
@@ -319,6 +320,7 @@ const CONNECTION_OPTIONS: [&str; 22] = [
     "key",
     "ca",
     "device",
+    "sunspec_models",
 ];
 
 /// The connection options a command takes (by clap id) and why it takes no others; `None`
@@ -338,9 +340,23 @@ fn connection_options_of(name: &str) -> Option<(&'static [&'static str], &'stati
             "line makes its own ptys and takes only the line settings --baud, --parity, --data-bits, --stop-bits",
         ),
         "scan" => (
-            &["port", "rs485", "low_latency", "t15", "t35", "echo"],
+            &[
+                "port",
+                "rs485",
+                "low_latency",
+                "t15",
+                "t35",
+                "echo",
+                "tcp",
+                "rtu_tcp",
+                "unit",
+                "timeout",
+                "retries",
+                "sunspec_models",
+            ],
             "scan sweeps its own settings and units (--bauds, --framings, --units, --probe-timeout); \
-             it takes --port, --rs485, --low-latency, --t15, --t35 and --echo",
+             it takes --port, --rs485, --low-latency, --t15, --t35 and --echo, and with --sunspec \
+             --tcp, --rtu-tcp, --unit, --timeout, --retries and --sunspec-models",
         ),
         "sniff" => (
             &["port", "baud", "parity", "data_bits", "stop_bits", "rs485", "low_latency", "unit", "t15", "t35"],

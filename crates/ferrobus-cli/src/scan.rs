@@ -73,6 +73,11 @@ pub(crate) struct ScanArgs {
     #[arg(long = "no-identify")]
     no_identify: bool,
 
+    /// Walk the SunSpec model chain of --unit on --tcp or --rtu-tcp instead of sweeping a serial
+    /// port: "SunS" at 40000, 0 or 50000, then each model's id, name, start and length
+    #[arg(long)]
+    sunspec: bool,
+
     /// Output format.
     #[command(flatten)]
     output: OutputArgs,
@@ -142,8 +147,25 @@ fn parse_wait(text: &str) -> Result<Duration, String> {
 
 /// Runs `scan`.
 pub(crate) async fn run(connection: &ConnectArgs, args: &ScanArgs) -> Result<(), CliError> {
+    if args.sunspec {
+        if connection.port.is_some() {
+            return Err(CliError::Usage(
+                "scan --sunspec walks one unit over --tcp or --rtu-tcp; on a serial port, scan first, then \
+                 `ferrobus --port PATH --unit N get --device sunspec` reads a unit found"
+                    .into(),
+            ));
+        }
+        return crate::sunspec::scan(connection, args.output.format()).await;
+    }
+    if connection.tcp.is_some() || connection.rtu_tcp.is_some() {
+        return Err(CliError::Usage(
+            "scan sweeps a serial --port; over --tcp or --rtu-tcp it walks a SunSpec device with --sunspec".into(),
+        ));
+    }
     let Some(path) = connection.port.clone() else {
-        return Err(CliError::Usage("scan needs a serial --port: it sweeps line settings and unit addresses".into()));
+        return Err(CliError::Usage(
+            "scan needs a serial --port: it sweeps line settings and unit addresses (or --tcp HOST --sunspec)".into(),
+        ));
     };
     if connection.ascii {
         return Err(CliError::Usage("scan probes with RTU frames; leave --ascii out".into()));

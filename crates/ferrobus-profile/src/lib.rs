@@ -13,7 +13,7 @@
 //!   guard_write(Write { point, raw, typed }, RunState) → Ok | Refusal (range, access, run lock)
 //! ```
 //!
-//! Built-in profiles: `omron-3g3rx`, `sdp-servo`, `generic` (see [`BUILTIN`]).
+//! Built-in profiles: `omron-3g3rx`, `sdp-servo`, `generic`, `sunspec-inverter` (see [`BUILTIN`]).
 
 mod check;
 mod codec;

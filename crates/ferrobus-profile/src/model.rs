@@ -626,6 +626,7 @@ pub const BUILTIN: &[(&str, &str)] = &[
     ("omron-3g3rx", include_str!("../profiles/omron-3g3rx.toml")),
     ("sdp-servo", include_str!("../profiles/sdp-servo.toml")),
     ("generic", include_str!("../profiles/generic.toml")),
+    ("sunspec-inverter", include_str!("../profiles/sunspec-inverter.toml")),
 ];
 
 impl Profile {

@@ -279,7 +279,12 @@ impl ModelDef {
         let raw: RawModel = serde_json::from_str(text)
             .map_err(|e| DefError::Json { origin: origin.to_string(), reason: e.to_string() })?;
         let id = raw.id;
-        let invalid = |place: String, problem: String| DefError::Invalid { origin: origin.to_string(), model: id, place, problem };
+        let invalid = |place: String, problem: String| DefError::Invalid {
+            origin: origin.to_string(),
+            model: id,
+            place,
+            problem,
+        };
         let group = convert_group(raw.group, true, &invalid)?;
         let model = ModelDef { id, group };
         model.check(&invalid)?;
@@ -298,7 +303,8 @@ impl ModelDef {
     }
 
     fn check(&self, invalid: &dyn Fn(String, String) -> DefError) -> Result<(), DefError> {
-        let header: Vec<(&str, PointType)> = self.group.points.iter().take(2).map(|p| (p.name.as_str(), p.kind)).collect();
+        let header: Vec<(&str, PointType)> =
+            self.group.points.iter().take(2).map(|p| (p.name.as_str(), p.kind)).collect();
         if header != [("ID", PointType::Uint16), ("L", PointType::Uint16)] {
             return Err(invalid(
                 format!("group {}", self.group.name),
@@ -329,9 +335,9 @@ fn convert_group(raw: RawGroup, top: bool, invalid: &dyn Fn(String, String) -> D
         None => Count::One,
         Some(serde_json::Value::Number(n)) => match n.as_u64() {
             Some(0) => Count::Fill,
-            Some(n) => Count::Fixed(
-                u16::try_from(n).map_err(|_| invalid(place.clone(), format!("count {n} is over 65535")))?,
-            ),
+            Some(n) => {
+                Count::Fixed(u16::try_from(n).map_err(|_| invalid(place.clone(), format!("count {n} is over 65535")))?)
+            }
             None => return Err(invalid(place, format!("count {n} is not a number of groups"))),
         },
         Some(serde_json::Value::String(name)) => Count::Point(name),
@@ -340,17 +346,16 @@ fn convert_group(raw: RawGroup, top: bool, invalid: &dyn Fn(String, String) -> D
     if top && count != Count::One {
         return Err(invalid(place, "the model's top group does not repeat".into()));
     }
-    let points = raw
-        .points
-        .into_iter()
-        .map(|p| convert_point(p, &raw.name, invalid))
-        .collect::<Result<Vec<_>, _>>()?;
-    let groups =
-        raw.groups.into_iter().map(|g| convert_group(g, false, invalid)).collect::<Result<Vec<_>, _>>()?;
+    let points = raw.points.into_iter().map(|p| convert_point(p, &raw.name, invalid)).collect::<Result<Vec<_>, _>>()?;
+    let groups = raw.groups.into_iter().map(|g| convert_group(g, false, invalid)).collect::<Result<Vec<_>, _>>()?;
     Ok(GroupDef { name: raw.name, label: raw.label, points, groups, count })
 }
 
-fn convert_point(raw: RawPoint, group: &str, invalid: &dyn Fn(String, String) -> DefError) -> Result<PointDef, DefError> {
+fn convert_point(
+    raw: RawPoint,
+    group: &str,
+    invalid: &dyn Fn(String, String) -> DefError,
+) -> Result<PointDef, DefError> {
     let place = format!("group {group}, point {}", raw.name);
     let Some(kind) = PointType::from_name(&raw.kind) else {
         return Err(invalid(
@@ -431,7 +436,10 @@ fn check_group<'d>(
         if let Count::Point(name) = &g.count
             && !matches!(find(scope, name), Some(PointType::Count | PointType::Uint16))
         {
-            return Err(invalid(format!("group {}", g.name), format!("count names {name}, which is no count point before it")));
+            return Err(invalid(
+                format!("group {}", g.name),
+                format!("count names {name}, which is no count point before it"),
+            ));
         }
         check_group(g, scope, invalid)?;
     }

@@ -113,10 +113,9 @@ pub async fn discover(client: &Client, unit: u8, defs: &Definitions, limit: u16)
                 base = Some(at);
                 break;
             }
-            Ok(regs) => seen.push(format!(
-                "{at}: {}",
-                regs.iter().map(|r| format!("0x{r:04X}")).collect::<Vec<_>>().join(" ")
-            )),
+            Ok(regs) => {
+                seen.push(format!("{at}: {}", regs.iter().map(|r| format!("0x{r:04X}")).collect::<Vec<_>>().join(" ")))
+            }
             Err(error) => seen.push(format!("{at}: {error}")),
         }
     }

@@ -130,7 +130,11 @@ impl<'d> State<'d, '_> {
                     ));
                     break;
                 }
-                let name = if sub.count == Count::One { format!("{prefix}{}.", sub.name) } else { format!("{prefix}{}{i}.", sub.name) };
+                let name = if sub.count == Count::One {
+                    format!("{prefix}{}.", sub.name)
+                } else {
+                    format!("{prefix}{}{i}.", sub.name)
+                };
                 self.group(sub, &name, scope);
                 if self.stopped || self.mismatch.is_some() {
                     break;

@@ -112,7 +112,9 @@ impl Definitions {
     /// those of the same id; how many were read.
     pub fn load(&mut self, path: &Path) -> Result<usize, LoadError> {
         let shown = path.display().to_string();
-        let read = |p: &Path| std::fs::read_to_string(p).map_err(|source| LoadError::Read { path: p.display().to_string(), source });
+        let read = |p: &Path| {
+            std::fs::read_to_string(p).map_err(|source| LoadError::Read { path: p.display().to_string(), source })
+        };
         let files = if path.is_dir() {
             let mut files: Vec<_> = std::fs::read_dir(path)
                 .map_err(|source| LoadError::Read { path: shown.clone(), source })?

@@ -25,10 +25,10 @@ use std::collections::BTreeMap;
 use ferrobus_profile::{Profile, ProfileError};
 use toml::{Table, Value};
 
+use crate::Definitions;
 use crate::def::PointType;
 use crate::discover::{Discovery, Found};
 use crate::layout::{SfAt, layout};
-use crate::Definitions;
 
 /// Whether `raw` (the point's registers) is SunSpec's "not implemented" value of `kind`.
 pub fn not_implemented(kind: PointType, raw: &[u16]) -> bool {
@@ -39,10 +39,15 @@ pub fn not_implemented(kind: PointType, raw: &[u16]) -> bool {
         PointType::Uint32 | PointType::Enum32 | PointType::Bitfield32 | PointType::Uint64 | PointType::Bitfield64 => {
             all(0xFFFF)
         }
-        PointType::Int32 | PointType::Int64 => raw.split_first().is_some_and(|(h, rest)| *h == 0x8000 && rest.iter().all(|r| *r == 0)),
-        PointType::Acc16 | PointType::Acc32 | PointType::Acc64 | PointType::Ipaddr | PointType::Ipv6addr | PointType::Eui48 => {
-            all(0)
+        PointType::Int32 | PointType::Int64 => {
+            raw.split_first().is_some_and(|(h, rest)| *h == 0x8000 && rest.iter().all(|r| *r == 0))
         }
+        PointType::Acc16
+        | PointType::Acc32
+        | PointType::Acc64
+        | PointType::Ipaddr
+        | PointType::Ipv6addr
+        | PointType::Eui48 => all(0),
         PointType::Float32 | PointType::Float64 => raw.first() == Some(&0x7FC0),
         PointType::String => all(0),
         PointType::Pad => false,

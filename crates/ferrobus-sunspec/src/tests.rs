@@ -29,7 +29,10 @@ fn a_model_file_reads_into_points_with_types_sizes_scale_factors_and_symbols() {
     assert_eq!(m.name(), "toy");
     assert_eq!(m.fixed_length(), 10, "W, W_SF, Nm (4), St, Pad, WH (2)");
     let w = &m.group.points[2];
-    assert_eq!((w.kind, w.size, w.sf.clone(), w.units.as_deref()), (PointType::Int16, 1, Some(ScaleFactor::Point("W_SF".into())), Some("W")));
+    assert_eq!(
+        (w.kind, w.size, w.sf.clone(), w.units.as_deref()),
+        (PointType::Int16, 1, Some(ScaleFactor::Point("W_SF".into())), Some("W"))
+    );
     let st = &m.group.points[5];
     assert!(st.writable);
     assert_eq!(st.symbols, vec![(1, "OFF".to_string()), (2, "ON".to_string())]);
@@ -41,7 +44,10 @@ fn a_model_file_reads_into_points_with_types_sizes_scale_factors_and_symbols() {
 fn an_unknown_point_type_is_refused_naming_the_model_and_the_point() {
     let text = TOY.replace(r#""type": "acc32""#, r#""type": "acc128""#);
     let err = ModelDef::parse(&text, "toy.json").unwrap_err().to_string();
-    assert!(err.starts_with("toy.json: model 64900, group toy, point WH: type \"acc128\" is not a SunSpec point type"), "{err}");
+    assert!(
+        err.starts_with("toy.json: model 64900, group toy, point WH: type \"acc128\" is not a SunSpec point type"),
+        "{err}"
+    );
 }
 
 #[test]
@@ -97,7 +103,10 @@ fn a_filling_group_repeats_to_the_length_and_names_its_instances() {
 fn a_length_that_is_no_whole_number_of_groups_is_a_mismatch_saying_what_was_seen() {
     let m = toy();
     let l = layout(&m, 13, &[]);
-    assert_eq!(l.mismatch.as_deref(), Some("3 registers are left for the repeating group ch, not a whole number of its 2"));
+    assert_eq!(
+        l.mismatch.as_deref(),
+        Some("3 registers are left for the repeating group ch, not a whole number of its 2")
+    );
     let l = layout(&m, 8, &[]);
     assert!(l.mismatch.is_some(), "{l:?}");
 }

@@ -62,6 +62,11 @@ pub(crate) fn profile(connection: &ConnectArgs, command: &str) -> Result<View, C
             "{command} needs the device's profile: --device NAME (omron-3g3rx, sdp-servo, generic) or --device FILE"
         )));
     };
+    if name == crate::sunspec::DEVICE {
+        // The profile `--device sunspec` discovered (an error if this command does not discover).
+        let profile = connection.require_profile(command)?;
+        return Ok(View { name: name.clone(), hash: None, profile });
+    }
     View::load(name).map_err(|e| CliError::Usage(e.to_string()))
 }
 

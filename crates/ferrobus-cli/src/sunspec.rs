@@ -1,0 +1,102 @@
+//! SunSpec devices: `scan --sunspec` lists a device's model chain, `--device sunspec` makes
+//! its models the profile of `get`, `poll` and `backup`.
+//!
+//! Both are thin over [`ferrobus_sunspec`]: open the bus, [`ferrobus_sunspec::discover`],
+//! then print the models or build the profile. `--sunspec-models PATH` (or
+//! `FERROBUS_SUNSPEC_MODELS` at run time) adds model definitions to the built-in ones.
+
+use std::sync::Arc;
+
+use ferrobus_sunspec::{Definitions, Discovery};
+use serde_json::json;
+
+use crate::connect::ConnectArgs;
+use crate::exit::CliError;
+use crate::output::{self, Align, Format, Rows};
+
+/// The `--device` name that discovers the profile.
+pub(crate) const DEVICE: &str = "sunspec";
+
+/// The model definitions: built-in plus `--sunspec-models`.
+fn definitions(connection: &ConnectArgs) -> Result<Definitions, CliError> {
+    Definitions::with(connection.sunspec_models.as_deref()).map_err(CliError::Usage)
+}
+
+/// Opens the bus and walks the unit's model chain.
+async fn walk(connection: &ConnectArgs, defs: &Definitions) -> Result<(Discovery, String), CliError> {
+    let session = connection.open().await?;
+    let limit = connection.max_per_request(None, crate::address::Table::Holding, false).ok().flatten().unwrap_or(125);
+    let found = ferrobus_sunspec::discover(&session.client, session.unit, defs, limit)
+        .await
+        .map_err(|e| CliError::Usage(format!("{} unit {}: {e}", session.target, session.unit)))?;
+    Ok((found, format!("sunspec at {} unit {}", session.target, session.unit)))
+}
+
+/// `connection` with its `--device sunspec` discovered into a profile; `connection` itself for
+/// any other device.
+pub(crate) async fn resolve(connection: &ConnectArgs) -> Result<ConnectArgs, CliError> {
+    let mut resolved = connection.clone();
+    if connection.device.as_deref() != Some(DEVICE) {
+        return Ok(resolved);
+    }
+    let defs = definitions(connection)?;
+    let (found, origin) = walk(connection, &defs).await?;
+    let profile = ferrobus_sunspec::profile(&found, &defs, &origin, 125).map_err(|e| CliError::Usage(e.to_string()))?;
+    if profile.points().is_empty() {
+        return Err(CliError::Usage(format!(
+            "{origin}: none of the models found ({}) has a definition that fits: `ferrobus scan --sunspec` lists them",
+            found.models.iter().map(|m| m.id.to_string()).collect::<Vec<_>>().join(", ")
+        )));
+    }
+    resolved.sunspec = Some(Arc::new(profile));
+    Ok(resolved)
+}
+
+/// `scan --sunspec`: the unit's models, as a table or `--json`.
+pub(crate) async fn scan(connection: &ConnectArgs, format: Format) -> Result<(), CliError> {
+    let defs = definitions(connection)?;
+    let (found, origin) = walk(connection, &defs).await?;
+    let fit = |m: &ferrobus_sunspec::Found| match &m.fits {
+        None => "no definition".to_string(),
+        Some(Ok(())) => "ok".to_string(),
+        Some(Err(why)) => why.clone(),
+    };
+    let text = match format {
+        Format::Json => output::json_line(&json!({
+            "device": origin,
+            "base": found.base,
+            "models": found.models.iter().map(|m| json!({
+                "id": m.id,
+                "name": m.name,
+                "start": m.start,
+                "length": m.length,
+                "fits": m.fits.as_ref().map(Result::is_ok),
+                "problem": m.fits.as_ref().and_then(|f| f.as_ref().err()),
+            })).collect::<Vec<_>>(),
+        })),
+        Format::Csv | Format::Table => {
+            let mut rows = Rows::new(&[
+                ("model", Align::Right),
+                ("name", Align::Left),
+                ("start", Align::Right),
+                ("length", Align::Right),
+                ("definition", Align::Left),
+            ]);
+            for m in &found.models {
+                rows.push(vec![
+                    m.id.to_string(),
+                    m.name.clone().unwrap_or_else(|| "?".into()),
+                    m.start.to_string(),
+                    m.length.to_string(),
+                    fit(m),
+                ]);
+            }
+            if format == Format::Csv {
+                rows.csv()
+            } else {
+                format!("{origin}: \"SunS\" at {}, {} models\n{}", found.base, found.models.len(), rows.table())
+            }
+        }
+    };
+    output::print(&text)
+}
