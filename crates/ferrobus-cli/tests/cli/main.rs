@@ -28,6 +28,7 @@ mod server;
 mod service;
 mod sniff;
 mod stderr;
+mod sunspec;
 mod tls;
 mod values;
 mod word_order;

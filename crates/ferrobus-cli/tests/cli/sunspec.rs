@@ -1,0 +1,240 @@
+//! SunSpec: `scan --sunspec` and `--device sunspec` against `ferrobus sim --profile
+//! sunspec-inverter --tcp` (common model 1 and inverter model 103 at 40000), the same layout
+//! moved to 0 and 50000, and broken chains. Needs the model definitions built in (pysunspec2,
+//! installed by .ci/setup-peers.sh).
+
+use std::net::{TcpListener, TcpStream};
+use std::path::PathBuf;
+use std::process::{Child, Command, Stdio};
+use std::time::{Duration, Instant};
+
+use assert_cmd::assert::{Assert, OutputAssertExt};
+use serde_json::Value;
+
+use crate::server::{ferrobus, no_settings, stderr, stdout};
+
+/// The built-in profile's text.
+fn inverter() -> String {
+    let path = format!("{}/../ferrobus-profile/profiles/sunspec-inverter.toml", env!("CARGO_MANIFEST_DIR"));
+    std::fs::read_to_string(path).unwrap()
+}
+
+/// `text` with every `number = N` moved by `to - 40000`.
+fn moved(text: &str, to: u32) -> String {
+    text.lines()
+        .map(|line| match line.strip_prefix("number = ").and_then(|n| n.parse::<u32>().ok()) {
+            Some(n) => format!("number = {}", n - 40000 + to),
+            None => line.to_string(),
+        })
+        .collect::<Vec<_>>()
+        .join("\n")
+}
+
+/// A `ferrobus sim --tcp` serving `profile` (a built-in name or TOML text written to a file).
+struct TcpSim {
+    child: Child,
+    addr: String,
+    _file: Option<PathBuf>,
+}
+
+impl TcpSim {
+    fn builtin() -> TcpSim {
+        TcpSim::start("sunspec-inverter", None)
+    }
+
+    fn text(name: &str, text: &str) -> TcpSim {
+        let path = std::env::temp_dir().join(format!("ferrobus-sunspec-{}-{name}.toml", std::process::id()));
+        std::fs::write(&path, text).unwrap();
+        TcpSim::start(path.to_str().unwrap(), Some(path.clone()))
+    }
+
+    fn start(profile: &str, file: Option<PathBuf>) -> TcpSim {
+        let port = TcpListener::bind("127.0.0.1:0").and_then(|l| l.local_addr()).unwrap().port();
+        let addr = format!("127.0.0.1:{port}");
+        let child = Command::new(env!("CARGO_BIN_EXE_ferrobus"))
+            .env("XDG_CONFIG_HOME", no_settings())
+            .args(["--tcp", &addr, "sim", "--profile", profile, "--duration", "60s"])
+            .stdout(Stdio::null())
+            .stderr(Stdio::null())
+            .spawn()
+            .unwrap();
+        let started = Instant::now();
+        while TcpStream::connect(&addr).is_err() {
+            assert!(started.elapsed() < Duration::from_secs(10), "the sim listens on {addr}");
+            std::thread::sleep(Duration::from_millis(20));
+        }
+        TcpSim { child, addr, _file: file }
+    }
+
+    fn run(&self, args: &[&str]) -> Assert {
+        ferrobus().args(["--tcp", &self.addr, "--timeout", "500ms"]).args(args).assert()
+    }
+}
+
+impl Drop for TcpSim {
+    fn drop(&mut self) {
+        let _ = self.child.kill();
+        let _ = self.child.wait();
+        if let Some(file) = &self._file {
+            let _ = std::fs::remove_file(file);
+        }
+    }
+}
+
+fn models(doc: &Value) -> Vec<(u64, String, u64, u64, bool)> {
+    doc["models"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|m| {
+            (
+                m["id"].as_u64().unwrap(),
+                m["name"].as_str().unwrap_or("?").to_string(),
+                m["start"].as_u64().unwrap(),
+                m["length"].as_u64().unwrap(),
+                m["fits"].as_bool().unwrap_or(false),
+            )
+        })
+        .collect()
+}
+
+#[test]
+fn scan_sunspec_lists_the_simulated_inverters_models_with_their_starts_and_lengths() {
+    let sim = TcpSim::builtin();
+    let table = stdout(&sim.run(&["scan", "--sunspec"]).success());
+    assert!(table.contains("\"SunS\" at 40000, 2 models"), "{table}");
+    let rows: Vec<Vec<&str>> = table.lines().skip(2).map(|l| l.split_whitespace().collect()).collect();
+    assert_eq!(rows, [["1", "common", "40002", "66", "ok"], ["103", "inverter_three_phase", "40070", "50", "ok"]]);
+    let doc: Value = serde_json::from_str(&stdout(&sim.run(&["scan", "--sunspec", "--json"]).success())).unwrap();
+    assert_eq!(doc["base"], 40000);
+    assert_eq!(
+        models(&doc),
+        [(1, "common".into(), 40002, 66, true), (103, "inverter_three_phase".into(), 40070, 50, true)]
+    );
+}
+
+#[test]
+fn the_chain_is_found_at_0_and_at_50000_as_well() {
+    for base in [0, 50000] {
+        let sim = TcpSim::text(&format!("at{base}"), &moved(&inverter(), base));
+        let doc: Value = serde_json::from_str(&stdout(&sim.run(&["scan", "--sunspec", "--json"]).success())).unwrap();
+        assert_eq!(doc["base"], base);
+        let starts: Vec<(u64, u64)> = models(&doc).iter().map(|m| (m.0, m.2)).collect();
+        assert_eq!(starts, [(1, u64::from(base) + 2), (103, u64::from(base) + 70)]);
+    }
+}
+
+#[test]
+fn a_length_that_does_not_fit_the_definition_is_listed_with_what_differs() {
+    let text = inverter().replace(
+        "name = \"inverter.L\"\ngroup = \"inverter\"\ndefault = 50",
+        "name = \"inverter.L\"\ngroup = \"inverter\"\ndefault = 48",
+    );
+    assert_ne!(text, inverter());
+    let sim = TcpSim::text("short", &text);
+    let doc: Value = serde_json::from_str(&stdout(&sim.run(&["scan", "--sunspec", "--json"]).success())).unwrap();
+    let inverter = &doc["models"][1];
+    assert_eq!(
+        (inverter["id"].as_u64(), inverter["length"].as_u64(), inverter["fits"].as_bool()),
+        (Some(103), Some(48), Some(false))
+    );
+    assert_eq!(inverter["problem"], "the definition takes 50 registers after the header, the device says L = 48");
+}
+
+#[test]
+fn a_chain_without_an_end_marker_or_without_suns_is_a_clear_error() {
+    let cut = inverter().split("[[registers]]\nnumber = 40122").next().unwrap().to_string();
+    let sim = TcpSim::text("noend", &cut);
+    let err = stderr(&sim.run(&["scan", "--sunspec"]).failure());
+    assert!(err.contains("reading 2 registers at 40122 (the header after model 103 at 40070)"), "{err}");
+    assert!(err.contains("exception"), "{err}");
+
+    let sim = TcpSim::text("nomarker", &inverter().replace("default = \"SunS\"", "default = \"Sun?\""));
+    let err = stderr(&sim.run(&["scan", "--sunspec"]).failure());
+    assert!(err.contains("not a SunSpec device: no \"SunS\" at 40000, 0 or 50000 (40000: 0x5375 0x6E3F; 0: "), "{err}");
+}
+
+#[test]
+fn get_with_device_sunspec_reads_named_points_with_the_scale_factors_applied() {
+    let sim = TcpSim::builtin();
+    let out = stdout(
+        &sim.run(&[
+            "get",
+            "--device",
+            "sunspec",
+            "inverter_three_phase.Hz",
+            "inverter_three_phase.PhVphA",
+            "inverter_three_phase.A",
+            "inverter_three_phase.St",
+            "inverter_three_phase.WH",
+            "common.Mn",
+            "--json",
+        ])
+        .success(),
+    );
+    let doc: Value = serde_json::from_str(&out).unwrap();
+    let shown: Vec<(String, String)> = doc["points"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|p| (p["code"].as_str().unwrap().to_string(), p["value"].as_str().unwrap_or_default().to_string()))
+        .collect();
+    let want = [
+        ("inverter_three_phase.Hz", "50.00 Hz"),
+        ("inverter_three_phase.PhVphA", "230.0 V"),
+        ("inverter_three_phase.A", "15.2 A"),
+        ("inverter_three_phase.St", "MPPT"),
+        ("inverter_three_phase.WH", "12345678 Wh"),
+        ("common.Mn", "ferrobus"),
+    ];
+    assert_eq!(shown, want.map(|(c, s)| (c.to_string(), s.to_string())), "{out}");
+}
+
+#[test]
+fn a_scale_factor_is_read_from_the_device_at_discovery() {
+    let text = inverter().replace(
+        "name = \"inverter.Hz_SF\"\ntype = \"i16\"\ngroup = \"inverter\"\ndefault = -2",
+        "name = \"inverter.Hz_SF\"\ntype = \"i16\"\ngroup = \"inverter\"\ndefault = -1",
+    );
+    assert_ne!(text, inverter());
+    let sim = TcpSim::text("sf", &text);
+    let out = stdout(&sim.run(&["get", "--device", "sunspec", "inverter_three_phase.Hz", "--csv"]).success());
+    assert!(out.lines().nth(1).is_some_and(|l| l.contains("500.0")), "Hz 5000 with Hz_SF -1: {out}");
+}
+
+#[test]
+fn poll_and_backup_with_device_sunspec_read_the_discovered_points() {
+    let sim = TcpSim::builtin();
+    let out = stdout(
+        &sim.run(&[
+            "poll",
+            "--device",
+            "sunspec",
+            "inverter_three_phase.W",
+            "--every",
+            "50ms",
+            "--duration",
+            "120ms",
+            "--csv",
+        ])
+        .success(),
+    );
+    let row = out.lines().nth(1).unwrap();
+    assert!(row.contains(",inverter_three_phase.W,10000,10000,,W,ok,"), "{out}");
+
+    let file = std::env::temp_dir().join(format!("ferrobus-sunspec-{}-backup.toml", std::process::id()));
+    sim.run(&["backup", "--device", "sunspec", "-o", file.to_str().unwrap()]).success();
+    let backup = std::fs::read_to_string(&file).unwrap();
+    let _ = std::fs::remove_file(&file);
+    assert!(backup.contains("profile = \"sunspec\""), "{backup}");
+    assert!(backup.contains("\"common.DA\" = { raw = 1"), "the read/write point is saved: {backup}");
+}
+
+#[test]
+fn device_sunspec_is_refused_where_nothing_discovers_it_and_scan_sunspec_wants_tcp() {
+    let sim = TcpSim::builtin();
+    let err = stderr(&sim.run(&["set", "--device", "sunspec", "common.DA", "2"]).failure());
+    assert!(err.contains("--device sunspec works with get, poll and backup"), "{err}");
+    let out = ferrobus().args(["--port", "/dev/null", "scan", "--sunspec"]).assert().failure();
+    assert!(stderr(&out).contains("scan --sunspec walks one unit over --tcp or --rtu-tcp"), "{}", stderr(&out));
+}
