@@ -5,8 +5,9 @@
  * RTU on a tty (e.g. one end of a socat pty pair) or over TCP on 127.0.0.1.
  *
  *   libmodbus_server --rtu PATH [--baud B] [--parity N|E|O] [--data-bits 8]
- *                    [--stop-bits 1|2] [--unit U] [--response-timeout-ms N] [--debug]
- *   libmodbus_server --tcp PORT [--unit U] [--response-timeout-ms N] [--debug]
+ *                    [--stop-bits 1|2] [--unit U] [--response-timeout-ms N]
+ *                    [--service-us N] [--debug]
+ *   libmodbus_server --tcp PORT [--unit U] [--response-timeout-ms N] [--service-us N] [--debug]
  *
  * Contract:
  *   - stdout carries exactly one line, "READY", written and flushed once
@@ -32,12 +33,17 @@
  *     RTU keeps reading, TCP closes that connection and accepts the next one.
  *     TCP connections are served one after another, never in parallel, so an
  *     idle connected client holds the server until it disconnects.
+ *   - --service-us N models a device that takes time per request: the server
+ *     sleeps N microseconds (default 0: not at all) after it has received a
+ *     request it is going to execute (unit U; on RTU also a broadcast) and
+ *     before it executes and answers it.
  */
 #include <errno.h>
 #include <signal.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
+#include <time.h>
 #include <unistd.h>
 
 #include <modbus.h>
@@ -48,14 +54,18 @@ static void usage(FILE *out)
 {
     fprintf(out,
             "usage: libmodbus_server --rtu PATH [--baud B] [--parity N|E|O] [--data-bits 5..8]\n"
-            "                        [--stop-bits 1|2] [--unit U] [--response-timeout-ms N] [--debug]\n"
-            "       libmodbus_server --tcp PORT [--unit U] [--response-timeout-ms N] [--debug]\n"
+            "                        [--stop-bits 1|2] [--unit U] [--response-timeout-ms N]\n"
+            "                        [--service-us N] [--debug]\n"
+            "       libmodbus_server --tcp PORT [--unit U] [--response-timeout-ms N] [--service-us N]\n"
+            "                        [--debug]\n"
             "\n"
             "Serves the ferrobus peer data map for unit U (default 1, range 1..247).\n"
             "Prints READY on stdout when serving; exits 0 on SIGTERM/SIGINT.\n"
             "--tcp binds 127.0.0.1:PORT and serves one connection after another.\n"
             "--response-timeout-ms sets libmodbus's response timeout (default 500), which the\n"
-            "server uses to skip another unit's reply and to delay exceptions 03 and 01.\n");
+            "server uses to skip another unit's reply and to delay exceptions 03 and 01.\n"
+            "--service-us N sleeps N microseconds (0..10000000, default 0) before each request it\n"
+            "executes and answers: a device that takes time per request.\n");
 }
 
 /*
@@ -131,6 +141,19 @@ static void say_ready(int ready_fd)
     /* ready_fd stays open: closing it would look like an early EOF. */
 }
 
+/* Sleeps us microseconds (none for 0), to the end even when a signal interrupts it. */
+static void service_wait(long us)
+{
+    struct timespec left;
+
+    if (us <= 0)
+        return;
+    left.tv_sec = us / 1000000;
+    left.tv_nsec = (us % 1000000) * 1000;
+    while (nanosleep(&left, &left) != 0 && errno == EINTR) {
+    }
+}
+
 /* True for errors that say "this frame was bad" rather than "the port is gone". */
 static int is_frame_error(int err)
 {
@@ -139,7 +162,8 @@ static int is_frame_error(int err)
            (err > MODBUS_ENOBASE && err <= EMBXGTAR);
 }
 
-static int serve_rtu(const struct peer_conn *c, long resp_ms, modbus_mapping_t *map, int ready_fd)
+static int serve_rtu(const struct peer_conn *c, long resp_ms, long service_us, modbus_mapping_t *map,
+                     int ready_fd)
 {
     uint8_t query[MODBUS_RTU_MAX_ADU_LENGTH];
     modbus_t *ctx = modbus_new_rtu(c->path, (int)c->baud, c->parity, (int)c->data_bits, (int)c->stop_bits);
@@ -176,6 +200,7 @@ static int serve_rtu(const struct peer_conn *c, long resp_ms, modbus_mapping_t *
         rc = modbus_receive(ctx, query);
         if (rc > 0) {
             io_errors = 0;
+            service_wait(service_us);
             /*
              * modbus_reply() also executes broadcast writes and then stays
              * silent. It returns -1 for function codes it refuses to answer
@@ -208,7 +233,8 @@ static int serve_rtu(const struct peer_conn *c, long resp_ms, modbus_mapping_t *
     }
 }
 
-static int serve_tcp(const struct peer_conn *c, long port, long resp_ms, modbus_mapping_t *map, int ready_fd)
+static int serve_tcp(const struct peer_conn *c, long port, long resp_ms, long service_us, modbus_mapping_t *map,
+                     int ready_fd)
 {
     uint8_t query[MODBUS_TCP_MAX_ADU_LENGTH];
     modbus_t *ctx;
@@ -250,6 +276,7 @@ static int serve_tcp(const struct peer_conn *c, long port, long resp_ms, modbus_
                         fprintf(stderr, "libmodbus_server: ignoring unit %u\n", query[unit_pos]);
                     continue;
                 }
+                service_wait(service_us);
                 if (modbus_reply(ctx, query, rc, map) < 0 && !is_frame_error(errno))
                     break; /* the send failed: the connection is gone */
                 continue;
@@ -275,6 +302,7 @@ int main(int argc, char **argv)
     modbus_mapping_t *map;
     long port = 0;
     long resp_ms = -1; /* -1: keep libmodbus's default */
+    long service_us = 0;
     int ready_fd;
     int i;
 
@@ -289,6 +317,15 @@ int main(int argc, char **argv)
         if (strcmp(argv[i], "--response-timeout-ms") == 0) {
             if (i + 1 >= argc || parse_long(argv[i + 1], 0, 60000, &resp_ms) != 0) {
                 fprintf(stderr, "error: --response-timeout-ms needs a number in 0..60000\n");
+                usage(stderr);
+                return 2;
+            }
+            i++;
+            continue;
+        }
+        if (strcmp(argv[i], "--service-us") == 0) {
+            if (i + 1 >= argc || parse_long(argv[i + 1], 0, 10000000, &service_us) != 0) {
+                fprintf(stderr, "error: --service-us needs a number in 0..10000000\n");
                 usage(stderr);
                 return 2;
             }
@@ -329,6 +366,6 @@ int main(int argc, char **argv)
         return 1;
     }
     if (c.transport == PEER_RTU)
-        return serve_rtu(&c, resp_ms, map, ready_fd);
-    return serve_tcp(&c, port, resp_ms, map, ready_fd);
+        return serve_rtu(&c, resp_ms, service_us, map, ready_fd);
+    return serve_tcp(&c, port, resp_ms, service_us, map, ready_fd);
 }
