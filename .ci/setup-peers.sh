@@ -10,7 +10,7 @@
 # (npm sparkplug-payload, pinned by tests/peers/sparkplug/tahu/package-lock.json;
 # nodejs and npm from apt when missing).
 # Installs what the peers need (apt: socat, libmodbus-dev, mbpoll, libudev-dev,
-# pkg-config, gcc; pip: pymodbus==3.16.1, pyserial==3.5), compiles the
+# pkg-config, gcc; pip: pymodbus==3.16.1, pyserial==3.5, pysunspec2==1.3.7), compiles the
 # libmodbus fixtures into target/peers/ and builds tokio-modbus-peer (release,
 # its own target dir target/peers/tokio-modbus-peer, --locked). Prints a
 # one-line version summary at the end.
@@ -36,6 +36,9 @@ PYTHON="${PYTHON:-python3}"
 CARGO="${CARGO:-cargo}"
 PYMODBUS_VERSION="3.16.1"
 PYSERIAL_VERSION="3.5"
+# pysunspec2: the SunSpec Alliance's own client, and the source of the model
+# definitions crates/ferrobus-sunspec embeds at build time (sunspec2/models/json).
+PYSUNSPEC2_VERSION="1.3.7"
 APT_PACKAGES=(socat libmodbus-dev mbpoll libudev-dev pkg-config gcc)
 # tshark decodes the captures of `ferrobus sniff` in its tests.
 APT_PACKAGES+=(tshark)
@@ -126,10 +129,11 @@ fi
 
 # ---- python packages ---------------------------------------------------------
 py_versions_ok() {
-    "$PYTHON" - "$PYMODBUS_VERSION" <<'EOF' 2>/dev/null
+    "$PYTHON" - "$PYMODBUS_VERSION" "$PYSUNSPEC2_VERSION" <<'EOF' 2>/dev/null
 import sys
-import pymodbus, serial
-sys.exit(0 if pymodbus.__version__ == sys.argv[1] else 1)
+from importlib.metadata import version
+import pymodbus, serial, sunspec2
+sys.exit(0 if (pymodbus.__version__, version("pysunspec2")) == tuple(sys.argv[1:3]) else 1)
 EOF
 }
 
@@ -143,7 +147,7 @@ if ! py_versions_ok; then
         missing python3 "$PYTHON not found and could not be installed"
     else
         PIP=("$PYTHON" -m pip install --quiet --disable-pip-version-check
-            "pymodbus==$PYMODBUS_VERSION" "pyserial==$PYSERIAL_VERSION")
+            "pymodbus==$PYMODBUS_VERSION" "pyserial==$PYSERIAL_VERSION" "pysunspec2==$PYSUNSPEC2_VERSION")
         log "${PIP[*]}"
         PIP_LOG="$(mktemp)"
         if ! "${PIP[@]}" >"$PIP_LOG" 2>&1; then
@@ -156,7 +160,7 @@ if ! py_versions_ok; then
         if ! py_versions_ok; then
             cat "$PIP_LOG" >&2
             rm -f "$PIP_LOG"
-            missing pymodbus "cannot install pymodbus==$PYMODBUS_VERSION / pyserial==$PYSERIAL_VERSION for $PYTHON"
+            missing pymodbus "cannot install pymodbus==$PYMODBUS_VERSION / pyserial==$PYSERIAL_VERSION / pysunspec2==$PYSUNSPEC2_VERSION for $PYTHON"
         fi
         rm -f "$PIP_LOG"
     fi
@@ -247,6 +251,7 @@ have protoc || missing protoc "protoc (protobuf-compiler) not installed"
 v_libmodbus="$(pkg-config --modversion libmodbus 2>/dev/null || echo missing)"
 v_pymodbus="$("$PYTHON" -c 'import pymodbus; print(pymodbus.__version__)' 2>/dev/null || echo missing)"
 v_pyserial="$("$PYTHON" -c 'import serial; print(serial.__version__)' 2>/dev/null || echo missing)"
+v_pysunspec2="$("$PYTHON" -c 'from importlib.metadata import version; print(version("pysunspec2"))' 2>/dev/null || echo missing)"
 v_python="$("$PYTHON" -c 'import platform; print(platform.python_version())' 2>/dev/null || echo missing)"
 v_tokio_modbus="$(awk '/^name = "tokio-modbus"$/ { getline; gsub(/"/, "", $3); print $3; exit }' \
     "$PEERS_SRC/tokio-modbus-peer/Cargo.lock" 2>/dev/null)"
@@ -255,7 +260,7 @@ v_mbpoll="$(dpkg-query -W -f='${Version}' mbpoll 2>/dev/null || echo '?')"
 v_gcc="$(gcc -dumpfullversion 2>/dev/null || echo missing)"
 v_rustc="$(rustc --version 2>/dev/null | awk '{ print $2 }')"
 
-echo "peers: libmodbus ${v_libmodbus}, pymodbus ${v_pymodbus} (python ${v_python}, pyserial ${v_pyserial})," \
+echo "peers: libmodbus ${v_libmodbus}, pymodbus ${v_pymodbus} (python ${v_python}, pyserial ${v_pyserial}), pysunspec2 ${v_pysunspec2}," \
     "tokio-modbus ${v_tokio_modbus:-?} (rustc ${v_rustc:-missing}), socat ${v_socat:-missing}," \
     "mbpoll ${v_mbpoll}, gcc ${v_gcc} -> target/peers/"
 
