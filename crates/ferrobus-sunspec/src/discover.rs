@@ -114,7 +114,7 @@ pub async fn discover(client: &Client, unit: u8, defs: &Definitions, limit: u16)
                 break;
             }
             Ok(regs) => {
-                seen.push(format!("{at}: {}", regs.iter().map(|r| format!("0x{r:04X}")).collect::<Vec<_>>().join(" ")))
+                seen.push(format!("{at}: {}", regs.iter().map(|r| format!("0x{r:04X}")).collect::<Vec<_>>().join(" ")));
             }
             Err(error) => seen.push(format!("{at}: {error}")),
         }

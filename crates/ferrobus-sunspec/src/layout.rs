@@ -99,18 +99,16 @@ impl<'d> State<'d, '_> {
                 Count::Fixed(n) => u32::from(*n),
                 Count::Point(name) => {
                     let at = find(scope, name);
-                    match at.and_then(|at| usize::try_from(at).ok()).and_then(|at| self.data.get(at)) {
-                        Some(n) => u32::from(*n),
-                        None => {
-                            self.stopped = true;
-                            break;
-                        }
-                    }
+                    let Some(n) = at.and_then(|at| usize::try_from(at).ok()).and_then(|at| self.data.get(at)) else {
+                        self.stopped = true;
+                        break;
+                    };
+                    u32::from(*n)
                 }
                 Count::Fill => {
                     let once = sub.registers_once();
                     let left = self.total.saturating_sub(self.offset);
-                    if once == 0 || left % once != 0 {
+                    if once == 0 || !left.is_multiple_of(once) {
                         self.mismatch = Some(format!(
                             "{left} registers are left for the repeating group {}, not a whole number of its {once}",
                             sub.name

@@ -123,7 +123,7 @@ impl Definitions {
                 .filter(|p| {
                     p.file_name()
                         .and_then(|n| n.to_str())
-                        .is_some_and(|n| n.starts_with("model_") && n.ends_with(".json"))
+                        .is_some_and(|n| n.starts_with("model_") && n.to_ascii_lowercase().ends_with(".json"))
                 })
                 .collect();
             files.sort();

@@ -47,9 +47,9 @@ pub fn not_implemented(kind: PointType, raw: &[u16]) -> bool {
         | PointType::Acc64
         | PointType::Ipaddr
         | PointType::Ipv6addr
-        | PointType::Eui48 => all(0),
+        | PointType::Eui48
+        | PointType::String => all(0),
         PointType::Float32 | PointType::Float64 => raw.first() == Some(&0x7FC0),
-        PointType::String => all(0),
         PointType::Pad => false,
     }
 }

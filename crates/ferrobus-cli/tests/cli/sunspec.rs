@@ -34,7 +34,7 @@ fn moved(text: &str, to: u32) -> String {
 struct TcpSim {
     child: Child,
     addr: String,
-    _file: Option<PathBuf>,
+    file: Option<PathBuf>,
 }
 
 impl TcpSim {
@@ -63,7 +63,7 @@ impl TcpSim {
             assert!(started.elapsed() < Duration::from_secs(10), "the sim listens on {addr}");
             std::thread::sleep(Duration::from_millis(20));
         }
-        TcpSim { child, addr, _file: file }
+        TcpSim { child, addr, file }
     }
 
     fn run(&self, args: &[&str]) -> Assert {
@@ -75,7 +75,7 @@ impl Drop for TcpSim {
     fn drop(&mut self) {
         let _ = self.child.kill();
         let _ = self.child.wait();
-        if let Some(file) = &self._file {
+        if let Some(file) = &self.file {
             let _ = std::fs::remove_file(file);
         }
     }
