@@ -17,6 +17,7 @@
 
 mod check;
 mod codec;
+pub mod exchange;
 pub mod guard;
 mod model;
 mod plan;

@@ -19,7 +19,7 @@ fn an_unknown_name_lists_the_builtins() {
     let e = Profile::load("omron-3g3xx").unwrap_err();
     assert_eq!(
         e.to_string(),
-        "no profile named \"omron-3g3xx\": the built-in ones are omron-3g3rx, sdp-servo, generic, or give a path to a .toml file"
+        "no profile named \"omron-3g3xx\": the built-in ones are omron-3g3rx, sdp-servo, generic, sunspec-inverter, or give a path to a .toml file"
     );
 }
 

@@ -1,0 +1,452 @@
+//! Register lists as CSV: ours (the columns [`export_csv`] writes), and the vendor variants of
+//! the same facts under other column names (`Register`, `Data Type`, `Factor`, `R/W`, ...).
+//!
+//! The header is the first line that is not blank and not a `#` comment; its delimiter (`,`,
+//! `;` or a tab, whichever it has most of) is the file's. Only the address column is needed: a
+//! row without a name is named after its table and address, a row without a table is a holding
+//! register, without a type a u16 (a bit in the bit tables), without an access read/write in
+//! the writable tables (coils, holding registers) and read-only in the others.
+//! A column of no meaning in a profile is listed once, with how many rows had a value in it.
+
+use std::collections::HashMap;
+
+use super::{Draft, Entry, ImportError};
+use crate::model::{Access, Order, Profile, Table, ValueType};
+use crate::{Point, Value};
+
+/// The columns [`export_csv`] writes, in its order; the import takes them and their aliases.
+const COLUMNS: [&str; 18] = [
+    "name",
+    "table",
+    "address",
+    "type",
+    "length",
+    "order",
+    "scale",
+    "offset",
+    "unit",
+    "access",
+    "min",
+    "max",
+    "group",
+    "label",
+    "description",
+    "values",
+    "bits",
+    "default",
+];
+
+/// Other names of each column, as vendors' lists and other tools write them (compared in
+/// lower case with blanks, `_`, `-`, `.` and `/` removed).
+const ALIASES: &[(&str, &[&str])] = &[
+    ("name", &["code", "tag", "tagname", "parameter", "param", "point", "signal", "variable", "registername"]),
+    (
+        "table",
+        &[
+            "registertype",
+            "area",
+            "objecttype",
+            "kind",
+            "function",
+            "fc",
+            "functioncode",
+            "modbusfc",
+            "modbusfunction",
+            "inputtype",
+        ],
+    ),
+    (
+        "address",
+        &["addr", "register", "reg", "registeraddress", "modbusaddress", "startaddress", "start", "number", "no"],
+    ),
+    ("type", &["datatype", "valuetype", "format", "dtype"]),
+    ("length", &["registers", "words", "quantity", "size", "len"]),
+    ("order", &["wordorder", "byteorder", "endian", "endianness", "swap"]),
+    ("scale", &["factor", "multiplier", "gain", "scaling", "resolution"]),
+    ("unit", &["units", "uom", "engunit", "engineeringunit", "unitofmeasurement"]),
+    ("access", &["rw", "mode", "permission", "permissions", "readwrite"]),
+    ("min", &["minimum", "minvalue", "low", "rangemin"]),
+    ("max", &["maximum", "maxvalue", "high", "rangemax"]),
+    ("group", &["category", "section"]),
+    ("label", &["title", "displayname", "caption"]),
+    ("description", &["desc", "comment", "comments", "notes", "note", "remark", "remarks", "meaning"]),
+    ("values", &["enum", "enumeration", "options", "states"]),
+    ("bits", &["bitfield", "flags"]),
+    ("default", &["defaultvalue", "factorydefault", "initial", "init"]),
+];
+
+/// A header cell as compared: lower case, without blanks and `_-./`.
+fn folded(cell: &str) -> String {
+    cell.chars().filter(|c| !c.is_whitespace() && !"_-./".contains(*c)).flat_map(char::to_lowercase).collect()
+}
+
+/// The column a header cell names, if any.
+fn column_of(cell: &str) -> Option<&'static str> {
+    let cell = folded(cell);
+    COLUMNS
+        .iter()
+        .copied()
+        .find(|c| *c == cell)
+        .or_else(|| ALIASES.iter().find(|(_, aliases)| aliases.contains(&cell.as_str())).map(|(column, _)| *column))
+}
+
+/// Reads the CSV `text` into `draft`.
+pub(super) fn read(text: &str, draft: &mut Draft) -> Result<(), ImportError> {
+    let text = text.strip_prefix('\u{feff}').unwrap_or(text);
+    let header_line =
+        text.lines().map(str::trim).find(|l| !l.is_empty() && !l.starts_with('#')).ok_or_else(|| {
+            draft.malformed("no header line: the first line names the columns (name,table,address,...)")
+        })?;
+    let delimiter =
+        [b',', b';', b'\t'].into_iter().max_by_key(|d| header_line.bytes().filter(|b| b == d).count()).unwrap_or(b',');
+    let mut reader = ::csv::ReaderBuilder::new()
+        .delimiter(delimiter)
+        .comment(Some(b'#'))
+        .flexible(true)
+        .trim(::csv::Trim::All)
+        .from_reader(text.as_bytes());
+    let headers = reader.headers().map_err(|e| draft.malformed(format!("the header line: {e}")))?.clone();
+    let mut columns: HashMap<&'static str, usize> = HashMap::new();
+    let mut ignored: Vec<(usize, String)> = Vec::new();
+    for (i, cell) in headers.iter().enumerate() {
+        match column_of(cell) {
+            Some(column) if !columns.contains_key(column) => {
+                columns.insert(column, i);
+            }
+            Some(column) => {
+                let why = format!("a second {column} column: the first one is read");
+                draft.unmapped("header", cell, "", &why);
+            }
+            None if cell.is_empty() => {}
+            None => ignored.push((i, cell.to_string())),
+        }
+    }
+    if !columns.contains_key("address") {
+        return Err(draft.malformed(format!(
+            "the header line {:?} has no address column (address, register, addr, ...)",
+            super::shown(header_line)
+        )));
+    }
+    let mut ignored_counts = vec![0usize; ignored.len()];
+    for (n, record) in reader.records().enumerate() {
+        let record = record.map_err(|e| draft.malformed(format!("row {}: {e}", n + 1)))?;
+        let line = record.position().map_or(n + 2, |p| usize::try_from(p.line()).unwrap_or(usize::MAX));
+        let place = format!("line {line}");
+        if record.iter().all(str::is_empty) {
+            continue;
+        }
+        for (k, (i, _)) in ignored.iter().enumerate() {
+            if record.get(*i).is_some_and(|v| !v.is_empty()) {
+                ignored_counts[k] += 1;
+            }
+        }
+        let cell = |column: &str| columns.get(column).and_then(|i| record.get(*i)).filter(|v| !v.is_empty());
+        row(&cell, &place, draft);
+    }
+    for ((_, name), count) in ignored.iter().zip(ignored_counts) {
+        let why = format!("no such column in a profile ({count} rows have a value in it)");
+        draft.unmapped("header", name, "", &why);
+    }
+    Ok(())
+}
+
+/// One row, its cells by column.
+fn row<'a>(cell: &dyn Fn(&str) -> Option<&'a str>, place: &str, draft: &mut Draft) {
+    let table = match cell("table") {
+        None => Table::Holding,
+        Some(text) => {
+            let Some(table) = table_of(text) else {
+                let why = "not a table (coils, discrete, holding, input, or 0x/1x/4x/3x, FC 1-4): row skipped";
+                draft.unmapped(place, "table", text, why);
+                return;
+            };
+            table
+        }
+    };
+    let Some(address_text) = cell("address") else {
+        draft.unmapped(place, "address", "", "no address: row skipped");
+        return;
+    };
+    let Some(address) = number(address_text).and_then(|a| a.checked_sub(u32::from(draft.options.base))) else {
+        let why = if draft.options.base > 0 {
+            format!("not an address from {} up to 65535 + {0}: row skipped", draft.options.base)
+        } else {
+            "not an address (0-65535, decimal or 0x hex): row skipped".to_string()
+        };
+        draft.unmapped(place, "address", address_text, &why);
+        return;
+    };
+    let Ok(address) = u16::try_from(address) else {
+        draft.unmapped(place, "address", address_text, "beyond the address space (65535): row skipped");
+        return;
+    };
+    let default_name = format!("{}_{address}", table.name());
+    let mut entry = Entry::new(table, address, cell("name").unwrap_or(&default_name), place.to_string());
+    entry.access = if matches!(table, Table::Coils | Table::Holding) { Access::Rw } else { Access::Ro };
+    shape(cell, &mut entry, place, draft);
+    if let Some(text) = cell("scale") {
+        match scale_of(text) {
+            Some(scale) if !super::is(scale, 0.0) => entry.scale = Some(scale).filter(|s| !super::is(*s, 1.0)),
+            _ => draft.unmapped(place, "scale", text, "not a scale (0.1, 1/10, x10): left 1"),
+        }
+    }
+    for (column, field) in [("offset", &mut entry.offset), ("min", &mut entry.min), ("max", &mut entry.max)] {
+        if let Some(text) = cell(column) {
+            match real(text) {
+                Some(value) => *field = Some(value),
+                None => draft.unmapped(place, column, text, "not a number"),
+            }
+        }
+    }
+    entry.offset = entry.offset.filter(|o| !super::is(*o, 0.0));
+    entry.unit = cell("unit").map(str::to_string);
+    if let Some(text) = cell("access") {
+        match access_of(text) {
+            Some(access) => entry.access = access,
+            None => {
+                draft.unmapped(place, "access", text, "not an access (ro, rw, wo, R, R/W, W): left as the table's");
+            }
+        }
+    }
+    entry.group = cell("group").map(str::to_string);
+    if let Some(label) = cell("label") {
+        entry.label = Some(label.to_string());
+    }
+    entry.description = cell("description").unwrap_or_default().to_string();
+    for (column, bits) in [("values", false), ("bits", true)] {
+        if let Some(text) = cell(column) {
+            match pairs(text, bits) {
+                Some(list) if bits => entry.bits = list,
+                Some(list) => entry.values = list,
+                None => {
+                    let form = if bits { "BIT=MEANING; ... (bits 0-63)" } else { "VALUE=MEANING; ..." };
+                    draft.unmapped(place, column, text, &format!("not a list of {form}"));
+                }
+            }
+        }
+    }
+    if let Some(text) = cell("default") {
+        entry.default = default_of(text, entry.value_type);
+        if entry.default.is_none() {
+            let why = format!("not a value of a {}", entry.value_type.name());
+            draft.unmapped(place, "default", text, &why);
+        }
+    }
+    draft.add(entry);
+}
+
+/// The cells that say what a register holds: `type`, `length`, `order`.
+fn shape<'a>(cell: &dyn Fn(&str) -> Option<&'a str>, entry: &mut Entry, place: &str, draft: &mut Draft) {
+    let table = entry.table;
+    if let Some(text) = cell("type") {
+        match type_of(text) {
+            Some(ValueType::Bit) if !table.is_bits() => {
+                draft.unmapped(place, "type", text, "a bit is a coil or discrete input: read as u16");
+            }
+            Some(value_type) => entry.value_type = value_type,
+            None => draft.unmapped(
+                place,
+                "type",
+                text,
+                "not a type (u16, i16, u32, i32, u64, i64, f32, f64, string): read as u16",
+            ),
+        }
+    }
+    if let Some(text) = cell("length") {
+        match text.parse::<u16>() {
+            Ok(length) if entry.value_type == ValueType::String && length > 0 => entry.length = Some(length),
+            Ok(length) if length == entry.value_type.registers() => {}
+            _ if entry.value_type == ValueType::String => {
+                draft.unmapped(place, "length", text, "not a number of registers: the string is given 1");
+            }
+            _ => {
+                let why = format!("a {} takes {} registers", entry.value_type.name(), entry.value_type.registers());
+                draft.unmapped(place, "length", text, &why);
+            }
+        }
+    }
+    if entry.value_type == ValueType::String && entry.length.is_none() {
+        entry.length = Some(1);
+    }
+    if let Some(text) = cell("order") {
+        match order_of(text) {
+            Some(order) if entry.value_type.registers() > 1 => entry.order = Some(order),
+            Some(Order::Abcd) => {}
+            Some(_) => draft.unmapped(place, "order", text, "a value of one register has no word order"),
+            None => draft.unmapped(
+                place,
+                "order",
+                text,
+                "not a word order (ABCD, CDAB, BADC, DCBA, big-endian, word-swapped); ambiguous names such as \
+                 little-endian are not guessed",
+            ),
+        }
+    }
+}
+
+/// A table by any of its names.
+fn table_of(text: &str) -> Option<Table> {
+    Some(match folded(text).as_str() {
+        "coils" | "coil" | "0x" | "0" | "1" | "01" | "fc1" | "fc01" | "co" | "do" | "digitaloutput" => Table::Coils,
+        "discrete" | "discreteinput" | "discreteinputs" | "di" | "1x" | "2" | "02" | "fc2" | "fc02"
+        | "digitalinput" | "inputstatus" => Table::DiscreteInputs,
+        "holding" | "holdingregister" | "holdingregisters" | "hr" | "4x" | "3" | "03" | "fc3" | "fc03" | "holdings" => {
+            Table::Holding
+        }
+        "input" | "inputregister" | "inputregisters" | "ir" | "3x" | "4" | "04" | "fc4" | "fc04" => Table::Input,
+        _ => return None,
+    })
+}
+
+/// A value type by any of its names.
+fn type_of(text: &str) -> Option<ValueType> {
+    Some(match folded(text).as_str() {
+        "u16" | "uint16" | "uint" | "unsigned" | "unsigned16" | "word" | "ushort" => ValueType::U16,
+        "i16" | "int16" | "int" | "signed" | "signed16" | "sint16" | "short" => ValueType::I16,
+        "u32" | "uint32" | "unsigned32" | "dword" | "udint" | "ulong" => ValueType::U32,
+        "i32" | "int32" | "signed32" | "sint32" | "dint" | "long" => ValueType::I32,
+        "u64" | "uint64" | "unsigned64" | "ulint" | "lword" => ValueType::U64,
+        "i64" | "int64" | "signed64" | "sint64" | "lint" => ValueType::I64,
+        "f32" | "float" | "float32" | "real" | "single" | "ieee754" => ValueType::F32,
+        "f64" | "double" | "float64" | "lreal" => ValueType::F64,
+        "string" | "str" | "ascii" | "char" | "text" => ValueType::String,
+        "bit" | "bool" | "boolean" => ValueType::Bit,
+        _ => return None,
+    })
+}
+
+/// A word order by its names, and the unambiguous descriptions of them.
+fn order_of(text: &str) -> Option<Order> {
+    Order::from_name(text).or_else(|| {
+        Some(match folded(text).as_str() {
+            "big" | "bigendian" | "be" | "msbfirst" | "highfirst" | "none" | "normal" => Order::Abcd,
+            "wordswap" | "wordswapped" | "swapped" | "lowfirst" | "word" => Order::Cdab,
+            "byteswap" | "byteswapped" | "byte" => Order::Badc,
+            "wordbyteswap" | "wordbyte" | "byteandwordswapped" => Order::Dcba,
+            _ => return None,
+        })
+    })
+}
+
+/// An access by any of its names.
+fn access_of(text: &str) -> Option<Access> {
+    Some(match folded(text).as_str() {
+        "ro" | "r" | "read" | "readonly" => Access::Ro,
+        "rw" | "wr" | "readwrite" | "writeread" => Access::Rw,
+        "wo" | "w" | "write" | "writeonly" => Access::Wo,
+        _ => return None,
+    })
+}
+
+/// A non-negative integer, decimal, `0x` hex or `h`-suffixed hex.
+fn number(text: &str) -> Option<u32> {
+    let text = text.trim();
+    if let Some(hex) = text.strip_prefix("0x").or_else(|| text.strip_prefix("0X")) {
+        return u32::from_str_radix(hex, 16).ok();
+    }
+    if let Some(hex) = text.strip_suffix('h').or_else(|| text.strip_suffix('H')) {
+        return u32::from_str_radix(hex, 16).ok();
+    }
+    text.parse().ok()
+}
+
+/// A finite number; a decimal comma (`0,1`) is read as a point.
+fn real(text: &str) -> Option<f64> {
+    let text = text.trim();
+    let value: f64 = text.parse().or_else(|_| text.replace(',', ".").parse()).ok()?;
+    value.is_finite().then_some(value)
+}
+
+/// A scale: `0.1`, `1/10`, `x10`, `×0.01`, `/100`.
+fn scale_of(text: &str) -> Option<f64> {
+    let text = text.trim();
+    let text = text.strip_prefix(['x', 'X', '×', '*']).unwrap_or(text).trim();
+    if let Some(divisor) = text.strip_prefix('/') {
+        return real(divisor).filter(|d| *d != 0.0).map(|d| 1.0 / d);
+    }
+    if let Some((n, d)) = text.split_once('/') {
+        let (n, d) = (real(n)?, real(d)?);
+        return (d != 0.0).then(|| n / d);
+    }
+    real(text)
+}
+
+/// `KEY=MEANING` pairs separated by `;` (or `|`); keys are raw values (bit indices for `bits`).
+fn pairs(text: &str, bits: bool) -> Option<Vec<(String, String)>> {
+    let separator = if text.contains(';') { ';' } else { '|' };
+    let mut out = Vec::new();
+    for pair in text.split(separator).map(str::trim).filter(|p| !p.is_empty()) {
+        let (key, meaning) = pair.split_once('=').or_else(|| pair.split_once(':'))?;
+        let key = crate::check::parse_key(key)?;
+        if bits && !(0..64).contains(&key) {
+            return None;
+        }
+        out.push((key.to_string(), meaning.trim().to_string()));
+    }
+    (!out.is_empty()).then_some(out)
+}
+
+/// A default value of `value_type`.
+fn default_of(text: &str, value_type: ValueType) -> Option<toml::Value> {
+    match value_type {
+        ValueType::Bit => match folded(text).as_str() {
+            "1" | "on" | "true" | "yes" => Some(toml::Value::Boolean(true)),
+            "0" | "off" | "false" | "no" => Some(toml::Value::Boolean(false)),
+            _ => None,
+        },
+        ValueType::String => Some(toml::Value::String(text.to_string())),
+        ValueType::F32 | ValueType::F64 => real(text).map(toml::Value::Float),
+        _ => {
+            let value = crate::check::parse_key(text)?;
+            let (low, high) = value_type.integer_range();
+            (low..=high).contains(&value).then(|| i64::try_from(value).ok().map(toml::Value::Integer))?
+        }
+    }
+}
+
+/// `profile` as CSV: a header of [`COLUMNS`], then one row per point in profile order
+/// (a run of `count` items gives `count` rows). Addresses are the frame's; the cells of
+/// a point's defaults (a scale of 1, the table's word order) are left empty.
+pub fn export_csv(profile: &Profile) -> String {
+    let mut writer = ::csv::WriterBuilder::new().terminator(::csv::Terminator::Any(b'\n')).from_writer(Vec::new());
+    // Writing to a Vec cannot fail; a record is the same width as the header.
+    let _ = writer.write_record(COLUMNS);
+    for point in profile.points() {
+        let _ = writer.write_record(cells(point));
+    }
+    let bytes = writer.into_inner().unwrap_or_default();
+    String::from_utf8(bytes).unwrap_or_default()
+}
+
+/// The cells of one point, in [`COLUMNS`]' order.
+fn cells(p: &Point) -> [String; 18] {
+    let bits = p.table.is_bits();
+    let number = |v: f64| format!("{v:?}");
+    let joined = |pairs: Vec<String>| pairs.join("; ");
+    [
+        p.code.clone(),
+        p.table.name().to_string(),
+        p.address.to_string(),
+        if bits { String::new() } else { p.value_type.name().to_string() },
+        if p.value_type == ValueType::String { p.width.to_string() } else { String::new() },
+        if !bits && p.value_type.registers() > 1 { p.order.name().to_string() } else { String::new() },
+        if super::is(p.scale, 1.0) { String::new() } else { number(p.scale) },
+        if super::is(p.offset, 0.0) { String::new() } else { number(p.offset) },
+        p.unit.clone().unwrap_or_default(),
+        p.access.name().to_string(),
+        p.min.map(number).unwrap_or_default(),
+        p.max.map(number).unwrap_or_default(),
+        p.group.clone().unwrap_or_default(),
+        p.label.clone(),
+        p.description.clone(),
+        joined(p.values.iter().map(|(k, v)| format!("{k}={v}")).collect()),
+        joined(p.bits.iter().map(|(k, v)| format!("{k}={v}")).collect()),
+        match &p.factory_default {
+            None => String::new(),
+            Some(Value::Bool(b)) => u8::from(*b).to_string(),
+            Some(Value::Int(n)) => n.to_string(),
+            Some(Value::Float(x)) => number(*x),
+            Some(Value::Text(t)) => t.clone(),
+        },
+    ]
+}

@@ -1,0 +1,472 @@
+//! Device maps users already have, to and from profiles: a vendor's CSV register list, the
+//! YAML of a Home Assistant `modbus:` configuration, and the YAML of an evcc configuration.
+//!
+//! ```text
+//!   CSV / HA YAML / evcc YAML ──import()──▶ Imported { toml, unmapped }   (a profile, checked)
+//!   Profile ──export_csv()──▶ CSV (the columns of our own format, one row per point)
+//! ```
+//!
+//! An import writes a profile that reads like a hand-written one: a comment naming the source
+//! and its format, `[device]`, then one entry per point, in the file's order, each table in
+//! its own list. Everything of the source that has no place in a profile — a Home Assistant
+//! display setting, an evcc template expression, a CSV column of no meaning here, a byte swap
+//! of a 16-bit value, a second entry at an address already taken — is listed in
+//! [`Imported::unmapped`] with where it is in the source (a CSV row, a YAML path such as
+//! `modbus[0].sensors[3]`) and why; nothing is dropped silently. The profile text is parsed and
+//! checked before it is returned, so what `import` gives passes `profile check`.
+//!
+//! Addresses: the YAML formats carry the address the frame carries (from 0), and so does our
+//! CSV unless [`ImportOptions::base`] says the file numbers from 1 (a manual's register
+//! numbers); the profile written has `base = 0`.
+//!
+//! The YAML reader is serde_yaml_ng, the maintained fork of serde_yaml: Home Assistant and
+//! evcc read YAML 1.1, and so does it. CSV is the `csv` crate, the delimiter (`,`, `;` or a
+//! tab) taken from the header line. The formats and their mapping tables are documented in
+//! `docs/device-maps.md`.
+
+mod csv;
+mod evcc;
+mod ha;
+mod write;
+mod yaml;
+
+use std::collections::HashMap;
+use std::fmt;
+
+pub use csv::export_csv;
+
+use crate::model::{Access, Order, Table, ValueType};
+
+/// What a map file is.
+#[derive(Clone, Copy, PartialEq, Eq, Debug)]
+pub enum Format {
+    /// A register list as CSV: ferrobus's own columns, and the common vendor variants.
+    Csv,
+    /// A Home Assistant `modbus:` configuration (sensors, binary sensors, switches, ...).
+    HaYaml,
+    /// An evcc configuration: every `source: modbus` block with a `register`.
+    EvccYaml,
+}
+
+impl Format {
+    /// The name on the command line: `csv`, `ha-yaml`, `evcc-yaml`.
+    pub const fn name(self) -> &'static str {
+        match self {
+            Format::Csv => "csv",
+            Format::HaYaml => "ha-yaml",
+            Format::EvccYaml => "evcc-yaml",
+        }
+    }
+}
+
+/// How to read a map.
+#[derive(Clone, Debug, Default)]
+pub struct ImportOptions {
+    /// The profile's `[device] name`; by default the source file's name.
+    pub name: Option<String>,
+    /// Only the entries of this unit (Home Assistant's `slave`/`device_address`, evcc's `id`):
+    /// needed when a file describes several devices.
+    pub unit: Option<u8>,
+    /// The number a CSV file gives the first address (1 for a manual's register numbers);
+    /// subtracted from every CSV address. 0 unless given.
+    pub base: u16,
+}
+
+/// Something of the source that the profile does not carry.
+#[derive(Clone, PartialEq, Eq, Debug)]
+pub struct Unmapped {
+    /// Where in the source: `row 7`, `modbus[0].sensors[3]`.
+    pub place: String,
+    /// The field, the column or the key.
+    pub field: String,
+    /// Its value as written (bounded, control characters escaped).
+    pub value: String,
+    /// Why it could not be mapped.
+    pub why: String,
+}
+
+impl fmt::Display for Unmapped {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        if self.value.is_empty() {
+            write!(f, "{}: {}: {}", self.place, self.field, self.why)
+        } else {
+            write!(f, "{}: {} = {}: {}", self.place, self.field, self.value, self.why)
+        }
+    }
+}
+
+/// A map turned into a profile.
+#[derive(Clone, Debug)]
+pub struct Imported {
+    /// The profile, as TOML text that `Profile::parse` accepts.
+    pub toml: String,
+    /// How many points (entries) it has.
+    pub points: usize,
+    /// What of the source it does not carry, in the source's order.
+    pub unmapped: Vec<Unmapped>,
+}
+
+/// Why a map could not be imported.
+#[derive(Debug, thiserror::Error)]
+#[non_exhaustive]
+pub enum ImportError {
+    /// The file is not what its format says: CSV without a header or an address column, YAML
+    /// that does not parse, a YAML tree without the format's sections.
+    #[error("{origin}: {message}")]
+    Malformed {
+        /// The source, as named.
+        origin: String,
+        /// What is wrong, and where.
+        message: String,
+    },
+    /// The file describes several devices and no `unit` picks one.
+    #[error("{origin} describes units {units}: pick one with --unit")]
+    SeveralUnits {
+        /// The source, as named.
+        origin: String,
+        /// The units found, comma-separated.
+        units: String,
+    },
+    /// Nothing of the file could be mapped to a point.
+    #[error("{origin}: no entry could be mapped to a profile point{}", if *unmapped == 0 { String::new() } else { format!(" ({unmapped} things not mapped)") })]
+    Nothing {
+        /// The source, as named.
+        origin: String,
+        /// How many things were listed as unmapped.
+        unmapped: usize,
+        /// What was listed.
+        list: Vec<Unmapped>,
+    },
+    /// The profile written does not pass the profile checks: a bug of the importer, with the
+    /// checker's words.
+    #[error("{origin}: the profile written from it does not check: {message}")]
+    Invalid {
+        /// The source, as named.
+        origin: String,
+        /// The checker's first complaint.
+        message: String,
+    },
+}
+
+/// Reads the map `text` (called `origin` in messages and in the profile's header) as `format`.
+pub fn import(text: &str, origin: &str, format: Format, options: &ImportOptions) -> Result<Imported, ImportError> {
+    let mut draft = Draft::new(origin, format, options);
+    match format {
+        Format::Csv => csv::read(text, &mut draft)?,
+        Format::HaYaml => ha::read(text, &mut draft)?,
+        Format::EvccYaml => evcc::read(text, &mut draft)?,
+    }
+    draft.finish()
+}
+
+/// One point of the profile to write.
+#[derive(Clone, Debug)]
+pub(crate) struct Entry {
+    pub(crate) table: Table,
+    /// The frame's address.
+    pub(crate) address: u16,
+    pub(crate) name: String,
+    pub(crate) label: Option<String>,
+    pub(crate) description: String,
+    pub(crate) value_type: ValueType,
+    /// Registers of a string.
+    pub(crate) length: Option<u16>,
+    pub(crate) order: Option<Order>,
+    pub(crate) scale: Option<f64>,
+    pub(crate) offset: Option<f64>,
+    pub(crate) unit: Option<String>,
+    pub(crate) access: Access,
+    pub(crate) min: Option<f64>,
+    pub(crate) max: Option<f64>,
+    pub(crate) group: Option<String>,
+    pub(crate) values: Vec<(String, String)>,
+    pub(crate) bits: Vec<(String, String)>,
+    pub(crate) default: Option<toml::Value>,
+    /// Where it came from, for the messages about it.
+    pub(crate) place: String,
+}
+
+impl Entry {
+    /// A point of `table` at `address` named `name`, everything else unset: u16 (a bit for
+    /// the bit tables), read-only.
+    pub(crate) fn new(table: Table, address: u16, name: &str, place: String) -> Entry {
+        let (code, label) = code_and_label(name);
+        Entry {
+            table,
+            address,
+            name: code,
+            label,
+            description: String::new(),
+            value_type: if table.is_bits() { ValueType::Bit } else { ValueType::U16 },
+            length: None,
+            order: None,
+            scale: None,
+            offset: None,
+            unit: None,
+            access: Access::Ro,
+            min: None,
+            max: None,
+            group: None,
+            values: Vec::new(),
+            bits: Vec::new(),
+            default: None,
+            place,
+        }
+    }
+
+    /// Registers (or bits) it takes.
+    pub(crate) fn width(&self) -> u16 {
+        match self.value_type {
+            ValueType::String => self.length.unwrap_or(1),
+            other => other.registers(),
+        }
+    }
+}
+
+/// A profile being built from a map.
+pub(crate) struct Draft {
+    origin: String,
+    format: Format,
+    pub(crate) options: ImportOptions,
+    entries: Vec<Entry>,
+    pub(crate) unmapped: Vec<Unmapped>,
+    /// Per table, the addresses taken: (first, end, entry index).
+    taken: HashMap<Table, Vec<(u32, u32, usize)>>,
+    /// What [`Draft::unmapped_once`] listed: (field, value, why) -> index in `unmapped`.
+    repeated: HashMap<(String, String, String), usize>,
+    /// How many more places each of those was seen at: (index in `unmapped`, count).
+    more: Vec<(usize, usize)>,
+}
+
+impl Draft {
+    fn new(origin: &str, format: Format, options: &ImportOptions) -> Draft {
+        Draft {
+            origin: origin.to_string(),
+            format,
+            options: options.clone(),
+            entries: Vec::new(),
+            unmapped: Vec::new(),
+            taken: HashMap::new(),
+            repeated: HashMap::new(),
+            more: Vec::new(),
+        }
+    }
+
+    /// The error for a file that is not what its format says.
+    pub(crate) fn malformed(&self, message: impl Into<String>) -> ImportError {
+        ImportError::Malformed { origin: self.origin.clone(), message: message.into() }
+    }
+
+    /// The error for a file of several units when none was picked.
+    pub(crate) fn several_units(&self, units: &[u8]) -> ImportError {
+        let units = units.iter().map(ToString::to_string).collect::<Vec<_>>().join(", ");
+        ImportError::SeveralUnits { origin: self.origin.clone(), units }
+    }
+
+    /// Lists `field = value` at `place` as not mapped, for `why`, unless the same was listed
+    /// before: then that listing counts one more place (a connection setting every block of a
+    /// file repeats is listed once).
+    pub(crate) fn unmapped_once(&mut self, place: &str, field: &str, value: &str, why: &str) {
+        let key = (shown(field), shown(value), why.to_string());
+        if let Some(&index) = self.repeated.get(&key) {
+            if let Some((_, more)) = self.more.iter_mut().find(|(i, _)| *i == index) {
+                *more += 1;
+            } else {
+                self.more.push((index, 1));
+            }
+            return;
+        }
+        self.repeated.insert(key, self.unmapped.len());
+        self.unmapped(place, field, value, why);
+    }
+
+    /// Lists `field = value` at `place` as not mapped, for `why`.
+    pub(crate) fn unmapped(&mut self, place: &str, field: &str, value: &str, why: &str) {
+        self.unmapped.push(Unmapped {
+            place: place.to_string(),
+            field: shown(field),
+            value: shown(value),
+            why: why.to_string(),
+        });
+    }
+
+    /// Adds `entry`, unless it shares an address with one added before (then it is listed);
+    /// a name taken already gets a suffix (listed too).
+    pub(crate) fn add(&mut self, mut entry: Entry) {
+        if entry.table.is_bits() {
+            self.bits_only(&mut entry);
+        }
+        if matches!(entry.table, Table::Input | Table::DiscreteInputs) && entry.access != Access::Ro {
+            let why = format!("{} cannot be written (no function code writes them): read-only", entry.table.name());
+            let at = entry.place.clone();
+            self.unmapped(&at, "access", entry.access.name(), &why);
+            entry.access = Access::Ro;
+        }
+        let first = u32::from(entry.address);
+        let end = first + u32::from(entry.width());
+        if end > 0x1_0000 {
+            let why = format!("{} registers from address {} run past the address space", entry.width(), entry.address);
+            self.unmapped(&entry.place.clone(), "address", &entry.address.to_string(), &why);
+            return;
+        }
+        let taken = self.taken.entry(entry.table).or_default();
+        if let Some(&(a, b, owner)) = taken.iter().find(|(a, b, _)| first < *b && *a < end) {
+            let Some(kept) = self.entries.get_mut(owner) else {
+                return;
+            };
+            let (name, place) = (kept.name.clone(), kept.place.clone());
+            let at = entry.place.clone();
+            if (a, b) == (first, end) && kept.value_type == entry.value_type && kept.order == entry.order {
+                // The same value read in one place and written in another (evcc's `enabled`
+                // and `enable`), or shown twice: one point, writable if either writes it.
+                if entry.access != Access::Ro && kept.access != entry.access {
+                    kept.access = Access::Rw;
+                }
+                let why = format!(
+                    "the same {} {} as {name} ({place}): one point, {}",
+                    entry.table.name(),
+                    entry.address,
+                    kept.access.name()
+                );
+                self.unmapped(&at, "name", &entry.name, &why);
+                return;
+            }
+            let why =
+                format!("{} {} shares its address with {name} ({place}), kept", entry.table.name(), entry.address);
+            self.unmapped(&at, "address", &entry.address.to_string(), &why);
+            return;
+        }
+        taken.push((first, end, self.entries.len()));
+        // Codes are unique in a table (a profile may give a register and an input one code).
+        let taken = |entries: &[Entry], name: &str| entries.iter().any(|e| e.table == entry.table && e.name == name);
+        if taken(&self.entries, &entry.name) {
+            let base = entry.name.clone();
+            // Fewer entries than suffixes: one of the first `len + 2` is free.
+            let free = (2..self.entries.len() + 3).map(|n| format!("{base}_{n}")).find(|n| !taken(&self.entries, n));
+            if let Some(free) = free {
+                let at = entry.place.clone();
+                self.unmapped(&at, "name", &base, &format!("taken by an earlier entry: written as {free}"));
+                entry.name = free;
+            }
+        }
+        self.entries.push(entry);
+    }
+
+    /// Lists and clears what a coil or discrete input cannot have: a type, a scale, a unit, ...
+    fn bits_only(&mut self, entry: &mut Entry) {
+        let place = entry.place.clone();
+        let why = "a coil or discrete input is one bit: it has no type, scale, unit or range";
+        if entry.value_type != ValueType::Bit {
+            self.unmapped(&place, "type", entry.value_type.name(), why);
+            entry.value_type = ValueType::Bit;
+        }
+        for (field, value) in [("scale", entry.scale), ("offset", entry.offset), ("min", entry.min), ("max", entry.max)]
+        {
+            if let Some(value) = value {
+                self.unmapped(&place, field, &value.to_string(), why);
+            }
+        }
+        if let Some(unit) = entry.unit.take() {
+            self.unmapped(&place, "unit", &unit, why);
+        }
+        if let Some(order) = entry.order.take() {
+            self.unmapped(&place, "order", order.name(), why);
+        }
+        entry.scale = None;
+        entry.offset = None;
+        entry.min = None;
+        entry.max = None;
+        entry.length = None;
+        if !entry.values.is_empty() || !entry.bits.is_empty() {
+            self.unmapped(&place, "values", "", why);
+            entry.values.clear();
+            entry.bits.clear();
+        }
+    }
+
+    /// Writes and checks the profile.
+    fn finish(mut self) -> Result<Imported, ImportError> {
+        for (index, more) in std::mem::take(&mut self.more) {
+            if let Some(listed) = self.unmapped.get_mut(index) {
+                listed.place = format!("{} (and {more} more)", listed.place);
+            }
+        }
+        if self.entries.is_empty() {
+            return Err(ImportError::Nothing {
+                origin: self.origin,
+                unmapped: self.unmapped.len(),
+                list: self.unmapped,
+            });
+        }
+        let name = self.options.name.clone().unwrap_or_else(|| default_name(&self.origin));
+        let toml = write::profile(&name, &self.origin, self.format, &self.entries);
+        if let Err(mistakes) = crate::Profile::parse_all(&toml, &self.origin) {
+            let message = mistakes.first().map(ToString::to_string).unwrap_or_default();
+            return Err(ImportError::Invalid { origin: self.origin, message });
+        }
+        Ok(Imported { toml, points: self.entries.len(), unmapped: self.unmapped })
+    }
+}
+
+/// Whether `value` is exactly `default` (a scale of 1, an offset of 0): then it is left out.
+#[allow(clippy::float_cmp)] // exactly the default, not near it: 1.0000001 is a scale to keep
+pub(crate) fn is(value: f64, default: f64) -> bool {
+    value == default
+}
+
+/// The profile's name from the source's: its file name without the extension.
+fn default_name(origin: &str) -> String {
+    let file = origin.rsplit(['/', '\\']).next().unwrap_or(origin);
+    let stem = file.rsplit_once('.').map_or(file, |(stem, _)| stem);
+    if stem.is_empty() { "imported map".to_string() } else { stem.to_string() }
+}
+
+/// A point's code from a source's name (runs of blanks and control characters become `_`),
+/// and the name itself as its label when the two differ.
+pub(crate) fn code_and_label(name: &str) -> (String, Option<String>) {
+    let name = name.trim();
+    let mut code = String::with_capacity(name.len());
+    for c in name.chars() {
+        if c.is_whitespace() || c.is_control() {
+            if !code.ends_with('_') {
+                code.push('_');
+            }
+        } else {
+            code.push(c);
+        }
+    }
+    let label = (code != name).then(|| name.to_string());
+    (code, label)
+}
+
+/// `text` bounded to 80 characters, control characters escaped: a value from a file is shown,
+/// never obeyed.
+pub(crate) fn shown(text: &str) -> String {
+    let mut out = String::new();
+    for (i, c) in text.chars().enumerate() {
+        if i == 80 {
+            out.push('…');
+            break;
+        }
+        if c.is_control() {
+            out.extend(c.escape_default());
+        } else {
+            out.push(c);
+        }
+    }
+    out
+}
+
+/// The word order a 32- or 64-bit value is in when its words are swapped (`swapped`) and its
+/// bytes within each word (`bytes`).
+pub(crate) fn order_of(swapped: bool, bytes: bool) -> Order {
+    match (swapped, bytes) {
+        (false, false) => Order::Abcd,
+        (true, false) => Order::Cdab,
+        (false, true) => Order::Badc,
+        (true, true) => Order::Dcba,
+    }
+}
+
+#[cfg(test)]
+mod tests;
