@@ -1,6 +1,12 @@
-//! `ferrobus profile list | show NAME | check FILE`: the device profiles, offline.
+//! `ferrobus profile list | show NAME | check FILE | import MAP | export PROFILE`: the device
+//! profiles, offline.
 
-use clap::{Args, Subcommand};
+use std::fmt::Write as _;
+use std::io::Write as _;
+use std::path::{Path, PathBuf};
+
+use clap::{Args, Subcommand, ValueEnum};
+use ferrobus_profile::exchange::{self, ImportError, ImportOptions};
 use ferrobus_profile::{BUILTIN, Point, Profile, Value, ValueType};
 use serde_json::json;
 
@@ -39,6 +45,69 @@ pub(crate) enum Action {
         #[arg(value_name = "FILE")]
         file: String,
     },
+    /// Turn a device map of another tool into a profile: a vendor's CSV register list, or the
+    /// YAML of a Home Assistant or evcc configuration. What could not be mapped is listed on
+    /// stderr; the profile written passes `profile check`. Formats: docs/device-maps.md
+    Import {
+        /// The map file
+        #[arg(value_name = "FILE")]
+        file: PathBuf,
+        /// What the file is
+        #[arg(long = "from", value_enum, value_name = "FORMAT")]
+        from: MapFormat,
+        /// Write the profile to this file instead of stdout (an existing file is kept unless
+        /// --force)
+        #[arg(long, short = 'o', value_name = "PROFILE.toml")]
+        output: Option<PathBuf>,
+        /// Replace the --output file if it exists
+        #[arg(long, requires = "output")]
+        force: bool,
+        /// The profile's device name [default: the file's name]
+        #[arg(long, value_name = "NAME")]
+        name: Option<String>,
+        /// Only the entries of this unit (Home Assistant's slave, evcc's id): needed when the
+        /// file describes several devices
+        #[arg(long = "only-unit", value_name = "UNIT")]
+        only_unit: Option<u8>,
+        /// The number the CSV gives the first register (1 for a manual's register numbers);
+        /// subtracted from every CSV address
+        #[arg(long = "first-address", value_name = "N", default_value_t = 0)]
+        first_address: u16,
+    },
+    /// Write a profile as a CSV register list (one row per point, the columns `import --from
+    /// csv` reads back)
+    Export {
+        /// A built-in name or a TOML file
+        #[arg(value_name = "PROFILE")]
+        name: String,
+        /// The format written
+        #[arg(long = "to", value_enum, value_name = "FORMAT", default_value_t = ExportFormat::Csv)]
+        to: ExportFormat,
+        /// Write to this file instead of stdout (an existing file is kept unless --force)
+        #[arg(long, short = 'o', value_name = "FILE")]
+        output: Option<PathBuf>,
+        /// Replace the --output file if it exists
+        #[arg(long, requires = "output")]
+        force: bool,
+    },
+}
+
+/// What `profile import` reads.
+#[derive(Clone, Copy, Debug, ValueEnum)]
+pub(crate) enum MapFormat {
+    /// A register list as CSV (ours, or a vendor's columns)
+    Csv,
+    /// A Home Assistant `modbus:` configuration
+    HaYaml,
+    /// An evcc configuration (its `source: modbus` blocks)
+    EvccYaml,
+}
+
+/// What `profile export` writes.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum)]
+pub(crate) enum ExportFormat {
+    /// A register list as CSV
+    Csv,
 }
 
 /// Runs `profile`.
@@ -48,7 +117,105 @@ pub(crate) fn run(args: &ProfileArgs) -> Result<(), CliError> {
         Action::List => list(format),
         Action::Show { name, group } => show(name, group.as_deref(), format),
         Action::Check { file } => check(file, format),
+        Action::Import { file, from, output, force, name, only_unit, first_address } => {
+            let options = ImportOptions { name: name.clone(), unit: *only_unit, base: *first_address };
+            import(file, *from, &options, output.as_deref(), *force, format)
+        }
+        Action::Export { name, to: ExportFormat::Csv, output, force } => {
+            let profile = crate::connect::load_profile(name)?;
+            let text = exchange::export_csv(&profile);
+            match output {
+                Some(path) => write_new(path, &text, *force),
+                None => output::print(&text),
+            }
+        }
     }
+}
+
+/// `profile import`: the profile to `output` (or stdout), the unmapped list and a summary on
+/// stderr (with `--json`, one document on stdout instead).
+fn import(
+    file: &Path,
+    from: MapFormat,
+    options: &ImportOptions,
+    output: Option<&Path>,
+    force: bool,
+    format: Format,
+) -> Result<(), CliError> {
+    let shown = file.display().to_string();
+    let text = ferrobus_profile::source::read(file).map_err(|e| match e {
+        ferrobus_profile::source::ReadError::Io(e) => CliError::Usage(format!("{shown}: {e}")),
+        ferrobus_profile::source::ReadError::NotText(e) => CliError::Usage(format!("{shown}:{e}")),
+    })?;
+    let from = match from {
+        MapFormat::Csv => exchange::Format::Csv,
+        MapFormat::HaYaml => exchange::Format::HaYaml,
+        MapFormat::EvccYaml => exchange::Format::EvccYaml,
+    };
+    let imported = match exchange::import(&text, &shown, from, options) {
+        Ok(imported) => imported,
+        Err(ImportError::Nothing { list, .. }) if !list.is_empty() && format != Format::Json => {
+            output::write_to(&mut std::io::stderr(), "stderr", &not_mapped(&list))?;
+            return Err(CliError::Usage(format!("{shown}: no entry could be mapped to a profile point")));
+        }
+        Err(e) => return Err(CliError::Usage(e.to_string())),
+    };
+    if let Some(path) = output {
+        write_new(path, &imported.toml, force)?;
+    }
+    let n = imported.unmapped.len();
+    if format == Format::Json {
+        let doc = json!({
+            "file": shown, "from": from.name(), "points": imported.points,
+            "profile": output.map_or_else(|| json!(imported.toml), |p| json!(p.display().to_string())),
+            "unmapped": imported.unmapped.iter().map(|u| json!({
+                "place": u.place, "field": u.field, "value": u.value, "why": u.why,
+            })).collect::<Vec<_>>(),
+        });
+        return output::print(&output::json_line(&doc));
+    }
+    if output.is_none() {
+        output::print(&imported.toml)?;
+    }
+    let mut report = not_mapped(&imported.unmapped);
+    let _ = writeln!(
+        report,
+        "{shown}: {} points imported{}; {n} thing{} not mapped{}",
+        imported.points,
+        output.map(|p| format!(" into {}", p.display())).unwrap_or_default(),
+        if n == 1 { "" } else { "s" },
+        if n == 0 { "" } else { " (listed above)" },
+    );
+    output::write_to(&mut std::io::stderr(), "stderr", &report)
+}
+
+/// The `not mapped: ...` lines of `list`.
+fn not_mapped(list: &[exchange::Unmapped]) -> String {
+    let mut lines = String::new();
+    for u in list {
+        let _ = writeln!(lines, "not mapped: {u}");
+    }
+    lines
+}
+
+/// Writes `text` to a new file at `path` (or over it with `force`); a failure names the file.
+fn write_new(path: &Path, text: &str, force: bool) -> Result<(), CliError> {
+    let what = path.display().to_string();
+    let mut open = std::fs::OpenOptions::new();
+    open.write(true);
+    if force {
+        open.create(true).truncate(true);
+    } else {
+        open.create_new(true);
+    }
+    let mut file = open.open(path).map_err(|source| {
+        if source.kind() == std::io::ErrorKind::AlreadyExists {
+            CliError::Usage(format!("{what} exists: give --force to replace it"))
+        } else {
+            CliError::Output { what: what.clone(), source }
+        }
+    })?;
+    file.write_all(text.as_bytes()).and_then(|()| file.sync_all()).map_err(|source| CliError::Output { what, source })
 }
 
 fn list(format: Format) -> Result<(), CliError> {

@@ -15,6 +15,7 @@ mod gateway;
 mod gateway_lines;
 mod guard;
 mod line_settings;
+mod maps;
 mod monitor;
 mod offline;
 mod output;

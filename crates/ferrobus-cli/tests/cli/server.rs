@@ -2,11 +2,12 @@
 //! handler, on its own thread and runtime, and a helper that runs the binary against it.
 
 use std::io::{Read, Write};
-use std::net::TcpListener as StdListener;
-use std::path::Path;
-use std::process::Command;
+use std::net::{TcpListener, TcpStream};
+use std::path::{Path, PathBuf};
+use std::process::{Child, Command, Stdio};
 use std::sync::mpsc;
 use std::thread;
+use std::time::{Duration, Instant};
 
 use assert_cmd::assert::{Assert, OutputAssertExt};
 use ferrobus::server::{ServerOptions, Shared, serve, serve_tcp};
@@ -259,7 +260,7 @@ pub(crate) fn misbehaving_server(reply: &'static [u8]) -> u16 {
 
 /// [`misbehaving_server`], answering under the request's transaction id plus `shift`.
 pub(crate) fn misbehaving_server_with(reply: &'static [u8], shift: u16) -> u16 {
-    let listener = StdListener::bind("127.0.0.1:0").unwrap();
+    let listener = TcpListener::bind("127.0.0.1:0").unwrap();
     let port = listener.local_addr().unwrap().port();
     thread::spawn(move || {
         for stream in listener.incoming() {
@@ -286,7 +287,7 @@ pub(crate) fn misbehaving_server_with(reply: &'static [u8], shift: u16) -> u16 {
 
 /// A port on which nothing listens.
 pub(crate) fn closed_port() -> u16 {
-    let listener = StdListener::bind("127.0.0.1:0").unwrap();
+    let listener = TcpListener::bind("127.0.0.1:0").unwrap();
     listener.local_addr().unwrap().port()
 }
 
@@ -341,5 +342,61 @@ impl Drop for Sim {
     fn drop(&mut self) {
         let _ = self.child.kill();
         let _ = self.child.wait();
+    }
+}
+
+/// A `ferrobus sim --tcp` serving `profile` (a built-in name or TOML text written to a file).
+pub(crate) struct TcpSim {
+    child: Child,
+    /// HOST:PORT it listens on.
+    pub(crate) addr: String,
+    file: Option<PathBuf>,
+}
+
+impl TcpSim {
+    /// The built-in profile `name`.
+    pub(crate) fn builtin(name: &str) -> TcpSim {
+        TcpSim::start(name, None)
+    }
+
+    /// The profile `text`, written to a temporary file named after `name` (removed on drop).
+    pub(crate) fn text(name: &str, text: &str) -> TcpSim {
+        let path = std::env::temp_dir().join(format!("ferrobus-sim-{}-{name}.toml", std::process::id()));
+        std::fs::write(&path, text).unwrap();
+        TcpSim::start(path.to_str().unwrap(), Some(path.clone()))
+    }
+
+    /// The profile `profile` (a built-in name or a path); `file` is removed on drop.
+    pub(crate) fn start(profile: &str, file: Option<PathBuf>) -> TcpSim {
+        let port = TcpListener::bind("127.0.0.1:0").and_then(|l| l.local_addr()).unwrap().port();
+        let addr = format!("127.0.0.1:{port}");
+        let child = Command::new(env!("CARGO_BIN_EXE_ferrobus"))
+            .env("XDG_CONFIG_HOME", no_settings())
+            .args(["--tcp", &addr, "sim", "--profile", profile, "--duration", "60s"])
+            .stdout(Stdio::null())
+            .stderr(Stdio::null())
+            .spawn()
+            .unwrap();
+        let started = Instant::now();
+        while TcpStream::connect(&addr).is_err() {
+            assert!(started.elapsed() < Duration::from_secs(10), "the sim listens on {addr}");
+            std::thread::sleep(Duration::from_millis(20));
+        }
+        TcpSim { child, addr, file }
+    }
+
+    /// `ferrobus --tcp ADDR --timeout 500ms ARGS...`.
+    pub(crate) fn run(&self, args: &[&str]) -> Assert {
+        ferrobus().args(["--tcp", &self.addr, "--timeout", "500ms"]).args(args).assert()
+    }
+}
+
+impl Drop for TcpSim {
+    fn drop(&mut self) {
+        let _ = self.child.kill();
+        let _ = self.child.wait();
+        if let Some(file) = &self.file {
+            let _ = std::fs::remove_file(file);
+        }
     }
 }

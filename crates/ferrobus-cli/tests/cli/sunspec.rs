@@ -3,15 +3,10 @@
 //! moved to 0 and 50000, and broken chains. Needs the model definitions built in (pysunspec2,
 //! installed by .ci/setup-peers.sh).
 
-use std::net::{TcpListener, TcpStream};
-use std::path::PathBuf;
-use std::process::{Child, Command, Stdio};
-use std::time::{Duration, Instant};
-
-use assert_cmd::assert::{Assert, OutputAssertExt};
+use assert_cmd::assert::OutputAssertExt;
 use serde_json::Value;
 
-use crate::server::{ferrobus, no_settings, stderr, stdout};
+use crate::server::{TcpSim, ferrobus, stderr, stdout};
 
 /// The built-in profile's text.
 fn inverter() -> String {
@@ -28,57 +23,6 @@ fn moved(text: &str, to: u32) -> String {
         })
         .collect::<Vec<_>>()
         .join("\n")
-}
-
-/// A `ferrobus sim --tcp` serving `profile` (a built-in name or TOML text written to a file).
-struct TcpSim {
-    child: Child,
-    addr: String,
-    file: Option<PathBuf>,
-}
-
-impl TcpSim {
-    fn builtin() -> TcpSim {
-        TcpSim::start("sunspec-inverter", None)
-    }
-
-    fn text(name: &str, text: &str) -> TcpSim {
-        let path = std::env::temp_dir().join(format!("ferrobus-sunspec-{}-{name}.toml", std::process::id()));
-        std::fs::write(&path, text).unwrap();
-        TcpSim::start(path.to_str().unwrap(), Some(path.clone()))
-    }
-
-    fn start(profile: &str, file: Option<PathBuf>) -> TcpSim {
-        let port = TcpListener::bind("127.0.0.1:0").and_then(|l| l.local_addr()).unwrap().port();
-        let addr = format!("127.0.0.1:{port}");
-        let child = Command::new(env!("CARGO_BIN_EXE_ferrobus"))
-            .env("XDG_CONFIG_HOME", no_settings())
-            .args(["--tcp", &addr, "sim", "--profile", profile, "--duration", "60s"])
-            .stdout(Stdio::null())
-            .stderr(Stdio::null())
-            .spawn()
-            .unwrap();
-        let started = Instant::now();
-        while TcpStream::connect(&addr).is_err() {
-            assert!(started.elapsed() < Duration::from_secs(10), "the sim listens on {addr}");
-            std::thread::sleep(Duration::from_millis(20));
-        }
-        TcpSim { child, addr, file }
-    }
-
-    fn run(&self, args: &[&str]) -> Assert {
-        ferrobus().args(["--tcp", &self.addr, "--timeout", "500ms"]).args(args).assert()
-    }
-}
-
-impl Drop for TcpSim {
-    fn drop(&mut self) {
-        let _ = self.child.kill();
-        let _ = self.child.wait();
-        if let Some(file) = &self.file {
-            let _ = std::fs::remove_file(file);
-        }
-    }
 }
 
 fn models(doc: &Value) -> Vec<(u64, String, u64, u64, bool)> {
@@ -100,7 +44,7 @@ fn models(doc: &Value) -> Vec<(u64, String, u64, u64, bool)> {
 
 #[test]
 fn scan_sunspec_lists_the_simulated_inverters_models_with_their_starts_and_lengths() {
-    let sim = TcpSim::builtin();
+    let sim = TcpSim::builtin("sunspec-inverter");
     let table = stdout(&sim.run(&["scan", "--sunspec"]).success());
     assert!(table.contains("\"SunS\" at 40000, 2 models"), "{table}");
     let rows: Vec<Vec<&str>> = table.lines().skip(2).map(|l| l.split_whitespace().collect()).collect();
@@ -156,7 +100,7 @@ fn a_chain_without_an_end_marker_or_without_suns_is_a_clear_error() {
 
 #[test]
 fn get_with_device_sunspec_reads_named_points_with_the_scale_factors_applied() {
-    let sim = TcpSim::builtin();
+    let sim = TcpSim::builtin("sunspec-inverter");
     let out = stdout(
         &sim.run(&[
             "get",
@@ -204,7 +148,7 @@ fn a_scale_factor_is_read_from_the_device_at_discovery() {
 
 #[test]
 fn poll_and_backup_with_device_sunspec_read_the_discovered_points() {
-    let sim = TcpSim::builtin();
+    let sim = TcpSim::builtin("sunspec-inverter");
     let out = stdout(
         &sim.run(&[
             "poll",
@@ -232,7 +176,7 @@ fn poll_and_backup_with_device_sunspec_read_the_discovered_points() {
 
 #[test]
 fn device_sunspec_is_refused_where_nothing_discovers_it_and_scan_sunspec_wants_tcp() {
-    let sim = TcpSim::builtin();
+    let sim = TcpSim::builtin("sunspec-inverter");
     let err = stderr(&sim.run(&["set", "--device", "sunspec", "common.DA", "2"]).failure());
     assert!(err.contains("--device sunspec works with get, poll and backup"), "{err}");
     let out = ferrobus().args(["--port", "/dev/null", "scan", "--sunspec"]).assert().failure();

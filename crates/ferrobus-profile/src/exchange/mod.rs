@@ -120,7 +120,7 @@ pub enum ImportError {
         message: String,
     },
     /// The file describes several devices and no `unit` picks one.
-    #[error("{origin} describes units {units}: pick one with --unit")]
+    #[error("{origin} describes units {units}: pick one with --only-unit")]
     SeveralUnits {
         /// The source, as named.
         origin: String,

@@ -5,12 +5,9 @@ use serde_yaml_ng::{Mapping, Value};
 
 use super::{Draft, ImportError};
 
-/// Parses `text`; a mistake names its line and column.
+/// Parses `text`; a mistake names its line and column (the YAML reader's message does).
 pub(super) fn parse(text: &str, draft: &Draft) -> Result<Value, ImportError> {
-    serde_yaml_ng::from_str(text).map_err(|e| {
-        let at = e.location().map(|l| format!("line {}, column {}: ", l.line(), l.column())).unwrap_or_default();
-        draft.malformed(format!("{at}not YAML: {e}"))
-    })
+    serde_yaml_ng::from_str(text).map_err(|e| draft.malformed(format!("not YAML: {e}")))
 }
 
 /// A scalar as written, for a message (a tree is shown by its kind).

@@ -1,0 +1,156 @@
+//! `profile import` and `profile export`: the example maps of examples/maps/ imported and
+//! checked, the files written and refused, and a map imported, served by `ferrobus sim` and
+//! read back with `get` through the profile written.
+
+use std::path::{Path, PathBuf};
+
+use serde_json::Value;
+
+use crate::server::{TcpSim, offline, stderr, stdout};
+
+/// examples/maps/NAME.
+fn example(name: &str) -> String {
+    format!("{}/../../examples/maps/{name}", env!("CARGO_MANIFEST_DIR"))
+}
+
+/// A fresh path in the temporary directory (the file is removed on drop).
+struct Temp(PathBuf);
+
+impl Temp {
+    fn new(name: &str) -> Temp {
+        let path = std::env::temp_dir().join(format!("ferrobus-maps-{}-{name}", std::process::id()));
+        let _ = std::fs::remove_file(&path);
+        Temp(path)
+    }
+
+    fn path(&self) -> &str {
+        self.0.to_str().unwrap()
+    }
+}
+
+impl Drop for Temp {
+    fn drop(&mut self) {
+        let _ = std::fs::remove_file(&self.0);
+    }
+}
+
+/// Imports `map` as `from` (with `more` options) into a new file; the file, and stderr.
+fn import(map: &str, from: &str, more: &[&str], name: &str) -> (Temp, String) {
+    let out = Temp::new(name);
+    let mut args = vec!["profile", "import", map, "--from", from, "-o", out.path()];
+    args.extend_from_slice(more);
+    let assert = offline(&args).success();
+    assert!(stdout(&assert).is_empty(), "the profile goes to the file: {}", stdout(&assert));
+    (out, stderr(&assert))
+}
+
+#[test]
+fn the_example_maps_import_into_profiles_that_check_with_what_was_not_mapped_listed() {
+    for (map, from, more, points) in [
+        ("meter.csv", "csv", &["--first-address", "1"][..], 13),
+        ("home-assistant.yaml", "ha-yaml", &[][..], 9),
+        ("evcc.yaml", "evcc-yaml", &[][..], 7),
+    ] {
+        let (profile, report) = import(&example(map), from, more, map);
+        assert!(report.contains(&format!("{points} points imported into {}", profile.path())), "{map}: {report}");
+        let check = stdout(&offline(&["profile", "check", profile.path()]).success());
+        assert!(check.contains(": ok: "), "{map}: {check}");
+        let text = std::fs::read_to_string(&profile.0).unwrap();
+        assert!(text.starts_with(&format!("# Imported by `ferrobus profile import --from {from}`")), "{text}");
+    }
+    let (_, report) = import(&example("home-assistant.yaml"), "ha-yaml", &[], "ha-report");
+    assert!(report.contains("not mapped: modbus[0]: host = 192.168.1.40: a connection setting"), "{report}");
+    assert!(report.contains("not mapped: modbus[0].sensors[0]: precision = 1"), "{report}");
+    let (_, report) = import(&example("evcc.yaml"), "evcc-yaml", &[], "evcc-report");
+    assert!(report.contains("not mapped: meters[1].power: source = http: a source other than Modbus"), "{report}");
+    assert!(report.contains("(and 7 more): uri = 192.168.1.50:502"), "{report}");
+}
+
+#[test]
+fn json_gives_the_profile_and_the_list_in_one_document() {
+    let assert = offline(&["profile", "import", &example("evcc.yaml"), "--from", "evcc-yaml", "--json"]).success();
+    let doc: Value = serde_json::from_str(&stdout(&assert)).unwrap();
+    assert_eq!((doc["from"].as_str(), doc["points"].as_u64()), (Some("evcc-yaml"), Some(7)));
+    assert!(doc["profile"].as_str().unwrap().contains("name = \"grid.power\""));
+    let first = &doc["unmapped"][0];
+    assert_eq!((first["place"].as_str(), first["field"].as_str()), (Some("meters[1].power"), Some("source")));
+}
+
+#[test]
+fn an_existing_output_is_kept_unless_forced_and_bad_input_is_a_usage_error() {
+    let (out, _) = import(&example("meter.csv"), "csv", &["--first-address", "1"], "kept");
+    let again = offline(&["profile", "import", &example("meter.csv"), "--from", "csv", "-o", out.path()]).code(2);
+    assert!(stderr(&again).contains("exists: give --force to replace it"), "{}", stderr(&again));
+    offline(&["profile", "import", &example("meter.csv"), "--from", "csv", "-o", out.path(), "--force"]).success();
+    let missing = offline(&["profile", "import", "/nonexistent/map.csv", "--from", "csv"]).code(2);
+    assert!(stderr(&missing).contains("/nonexistent/map.csv"), "{}", stderr(&missing));
+    let wrong = offline(&["profile", "import", &example("meter.csv"), "--from", "ha-yaml"]).code(2);
+    assert!(stderr(&wrong).contains("meter.csv: not YAML: "), "{}", stderr(&wrong));
+    let empty = Temp::new("empty.yaml");
+    std::fs::write(&empty.0, "homeassistant:\n  name: Home\n").unwrap();
+    let none = offline(&["profile", "import", empty.path(), "--from", "ha-yaml"]).code(2);
+    assert!(stderr(&none).contains("no Home Assistant modbus configuration"), "{}", stderr(&none));
+    let several = Temp::new("several.yaml");
+    std::fs::write(&several.0, "sensors:\n  - {name: a, slave: 1, address: 1}\n  - {name: b, slave: 2, address: 1}\n")
+        .unwrap();
+    let refused = offline(&["profile", "import", several.path(), "--from", "ha-yaml"]).code(2);
+    assert!(stderr(&refused).contains("describes units 1, 2: pick one with --only-unit"), "{}", stderr(&refused));
+    offline(&["profile", "import", several.path(), "--from", "ha-yaml", "--only-unit", "2"]).success();
+    let bad = offline(&["profile", "import", &example("meter.csv"), "--from", "xml"]).code(2);
+    assert!(stderr(&bad).contains("csv, ha-yaml, evcc-yaml"), "{}", stderr(&bad));
+}
+
+#[test]
+fn a_builtin_exported_to_csv_imports_back_and_checks() {
+    let csv = Temp::new("rx.csv");
+    offline(&["profile", "export", "omron-3g3rx", "--to", "csv", "-o", csv.path()]).success();
+    let text = std::fs::read_to_string(&csv.0).unwrap();
+    assert!(text.starts_with("name,table,address,type,length,order,scale,"), "{text}");
+    let (profile, report) = import(csv.path(), "csv", &[], "rx.toml");
+    assert!(report.contains("0 things not mapped"), "{report}");
+    let shown = |name: &str| stdout(&offline(&["profile", "show", name, "--json"]).success());
+    let (a, b): (Value, Value) =
+        (serde_json::from_str(&shown("omron-3g3rx")).unwrap(), serde_json::from_str(&shown(profile.path())).unwrap());
+    let codes = |doc: &Value| doc["points"].as_array().unwrap().iter().map(|p| p["code"].clone()).collect::<Vec<_>>();
+    assert_eq!(codes(&a), codes(&b));
+}
+
+#[test]
+fn a_map_imported_is_served_by_sim_and_read_back_with_get() {
+    let map = Temp::new("served.csv");
+    std::fs::write(
+        &map.0,
+        "name;table;address;type;order;scale;unit;access;default\n\
+         voltage;input;0;u16;;0.1;V;ro;2301\n\
+         power;input;1;f32;CDAB;;W;ro;-1250.5\n\
+         energy;input;3;u32;CDAB;0.01;kWh;ro;123456\n\
+         setpoint;holding;10;i16;;0.5;°C;rw;42\n\
+         relay;coils;5;;;;;rw;1\n",
+    )
+    .unwrap();
+    let (profile, _) = import(map.path(), "csv", &[], "served.toml");
+    let sim = TcpSim::start(profile.path(), None);
+    let get = |codes: &[&str]| {
+        let mut args = vec!["--device", profile.path(), "get"];
+        args.extend_from_slice(codes);
+        args.push("--json");
+        let doc: Value = serde_json::from_str(&stdout(&sim.run(&args).success())).unwrap();
+        doc["points"].as_array().unwrap().clone()
+    };
+    let values = get(&["voltage", "power", "energy", "setpoint", "relay"]);
+    let value = |code: &str| {
+        let found = values.iter().find(|v| v["code"] == code).unwrap_or_else(|| panic!("{code}: {values:?}"));
+        (found["engineering"].as_f64(), found["unit"].clone())
+    };
+    assert_eq!(value("voltage"), (Some(230.1), Value::from("V")));
+    assert_eq!(value("power"), (Some(-1250.5), Value::from("W")));
+    assert_eq!(value("energy"), (Some(1234.56), Value::from("kWh")));
+    assert_eq!(value("setpoint"), (Some(21.0), Value::from("°C")));
+    assert_eq!(value("relay").0, Some(1.0));
+    sim.run(&["--device", profile.path(), "set", "setpoint", "30.5"]).success();
+    let after = get(&["setpoint"]);
+    assert_eq!(after[0]["engineering"].as_f64(), Some(30.5), "{after:?}");
+    let refused = sim.run(&["--device", profile.path(), "set", "voltage", "1"]);
+    assert!(!refused.get_output().status.success(), "an input register is read-only");
+    assert!(Path::new(profile.path()).exists());
+}
