@@ -1,8 +1,8 @@
 //! Interop tests: ferrobus against real peers, and peers against ferrobus.
 //!
 //! The peers are the fixtures of tests/peers/ (libmodbus, pymodbus and tokio-modbus servers
-//! and clients) and mbpoll, built and installed by `.ci/setup-peers.sh`. Serial lines are
-//! socat pty pairs or the simulator's own pty. Outside CI a test whose peer is missing passes
+//! and clients, pysunspec2's client) and mbpoll, built and installed by `.ci/setup-peers.sh`.
+//! Serial lines are socat pty pairs or the simulator's own pty. Outside CI a test whose peer is missing passes
 //! with a `SKIPPED ...` line on stderr (shown even for passing tests) naming what installs it;
 //! under `CI=true` it fails ([`skips`] shows both).
 //!
@@ -20,6 +20,8 @@
 //! - [`reply_timing`]: when the simulator's reply starts, with a 20 ms response wait.
 //! - [`skips`]: what a test whose peer is missing does, in and outside CI.
 //! - [`stale_reply`]: a reply left in the port by an interrupted command, dropped by the next.
+//! - [`sunspec`]: pysunspec2, the SunSpec Alliance's client, against the simulated inverter,
+//!   beside `scan --sunspec` and `get --device sunspec`.
 //! - [`tcp_server`]: `ferrobus sim --tcp` under pipelining, corrupt headers, unit ids over TCP,
 //!   its connection cap and timeouts, and a lowered descriptor limit.
 //! - [`tls`]: `ferrobus sim` as a Modbus/TCP Security server with roles, met by ferrobus's
@@ -41,6 +43,7 @@ mod port_reopen;
 mod reply_timing;
 mod skips;
 mod stale_reply;
+mod sunspec;
 mod support;
 mod tcp_server;
 mod tls;

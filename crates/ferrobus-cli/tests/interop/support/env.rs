@@ -27,6 +27,8 @@ pub(crate) enum Need {
     Pymodbus,
     /// `target/peers/tokio-modbus-peer/release/tokio-modbus-peer`.
     TokioModbus,
+    /// python3 with pysunspec2 (the SunSpec Alliance's client), and `sunspec_client.py`.
+    Pysunspec2,
 }
 
 /// The repository root.
@@ -65,16 +67,19 @@ fn is_executable(path: &Path) -> bool {
     path.metadata().is_ok_and(|m| m.is_file() && m.permissions().mode() & 0o111 != 0)
 }
 
+/// Whether `python()` imports `module`.
+fn importable(module: &str) -> bool {
+    Command::new(python())
+        .args(["-c", &format!("import {module}")])
+        .stdout(Stdio::null())
+        .stderr(Stdio::null())
+        .status()
+        .is_ok_and(|s| s.success())
+}
+
 fn pymodbus_importable() -> bool {
     static OK: OnceLock<bool> = OnceLock::new();
-    *OK.get_or_init(|| {
-        Command::new(python())
-            .args(["-c", "import pymodbus, serial"])
-            .stdout(Stdio::null())
-            .stderr(Stdio::null())
-            .status()
-            .is_ok_and(|s| s.success())
-    })
+    *OK.get_or_init(|| importable("pymodbus, serial"))
 }
 
 impl Need {
@@ -88,6 +93,18 @@ impl Need {
                 [peer_path("libmodbus_server"), peer_path("libmodbus_client")].into_iter().filter_map(file).collect()
             }
             Need::TokioModbus => file(tokio_peer()).into_iter().collect(),
+            Need::Pysunspec2 => {
+                static OK: OnceLock<bool> = OnceLock::new();
+                let mut missing: Vec<String> = [pymodbus_script("sunspec_client.py")]
+                    .into_iter()
+                    .filter(|p| !p.is_file())
+                    .map(|p| p.display().to_string())
+                    .collect();
+                if !*OK.get_or_init(|| importable("sunspec2.modbus.client")) {
+                    missing.push(format!("pysunspec2 for {}", python()));
+                }
+                missing
+            }
             Need::Pymodbus => {
                 let mut missing: Vec<String> = ["pymodbus_server.py", "pymodbus_client.py"]
                     .iter()
@@ -111,6 +128,7 @@ impl Need {
             Need::Libmodbus => "apt install libmodbus-dev pkg-config gcc, then .ci/setup-peers.sh builds the fixtures",
             Need::Pymodbus => "pip install pymodbus==3.16.1 pyserial==3.5 (or .ci/setup-peers.sh)",
             Need::TokioModbus => ".ci/setup-peers.sh (cargo builds tests/peers/tokio-modbus-peer)",
+            Need::Pysunspec2 => "pip install pysunspec2==1.3.7 (or .ci/setup-peers.sh)",
         }
     }
 }
