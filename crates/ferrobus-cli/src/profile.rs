@@ -199,7 +199,7 @@ fn not_mapped(list: &[exchange::Unmapped]) -> String {
 }
 
 /// Writes `text` to a new file at `path` (or over it with `force`); a failure names the file.
-fn write_new(path: &Path, text: &str, force: bool) -> Result<(), CliError> {
+pub(crate) fn write_new(path: &Path, text: &str, force: bool) -> Result<(), CliError> {
     let what = path.display().to_string();
     let mut open = std::fs::OpenOptions::new();
     open.write(true);

@@ -73,10 +73,18 @@ pub(crate) struct ScanArgs {
     #[arg(long = "no-identify")]
     no_identify: bool,
 
-    /// Walk the SunSpec model chain of --unit on --tcp or --rtu-tcp instead of sweeping a serial
-    /// port: "SunS" at 40000, 0 or 50000, then each model's id, name, start and length
+    /// Walk the SunSpec model chain: of --unit on --tcp or --rtu-tcp, or, on a serial --port,
+    /// of every device the sweep finds, at its setting: "SunS" at 40000, 0 or 50000, then each
+    /// model's id, name, start and length
     #[arg(long)]
     sunspec: bool,
+
+    /// With --sunspec: write the profile of the models found (named points, scale factors as
+    /// read now) to this TOML file, for --device FILE, the bridge's `profile` and the monitor.
+    /// On a serial port each SunSpec device found gets its own file, FILE with `-unitN`
+    /// before the extension. An existing file is not replaced
+    #[arg(long = "save-profile", value_name = "FILE", requires = "sunspec")]
+    save_profile: Option<std::path::PathBuf>,
 
     /// Output format.
     #[command(flatten)]
@@ -147,16 +155,11 @@ fn parse_wait(text: &str) -> Result<Duration, String> {
 
 /// Runs `scan`.
 pub(crate) async fn run(connection: &ConnectArgs, args: &ScanArgs) -> Result<(), CliError> {
-    if args.sunspec {
-        if connection.port.is_some() {
-            return Err(CliError::Usage(
-                "scan --sunspec walks one unit over --tcp or --rtu-tcp; on a serial port, scan first, then \
-                 `ferrobus --port PATH --unit N get --device sunspec` reads a unit found"
-                    .into(),
-            ));
-        }
-        return crate::sunspec::scan(connection, args.output.format()).await;
+    if args.sunspec && connection.port.is_none() {
+        return crate::sunspec::scan(connection, args.output.format(), args.save_profile.as_deref()).await;
     }
+    // Read before the sweep: a bad --sunspec-models fails before the bus is touched.
+    let sunspec = if args.sunspec { Some(crate::sunspec::definitions(connection)?) } else { None };
     if connection.tcp.is_some() || connection.rtu_tcp.is_some() {
         return Err(CliError::Usage(
             "scan sweeps a serial --port; over --tcp or --rtu-tcp it walks a SunSpec device with --sunspec".into(),
@@ -215,11 +218,14 @@ pub(crate) async fn run(connection: &ConnectArgs, args: &ScanArgs) -> Result<(),
     let outcome = interrupt.unless(scanner.run(&mut report, |event| show(&bar, event))).await;
     bar.finish_and_clear();
     let elapsed = started.elapsed();
-    let text = match args.output.format() {
-        Format::Json => output::json_line(&as_json(&path, &lines, &report, elapsed)),
-        Format::Csv => device_rows(&report).csv(),
-        Format::Table => as_table(&path, &lines, &report, elapsed, scanner.config()),
+    let walks = match (&sunspec, &outcome) {
+        (Some(defs), Some(Ok(()))) => Some(walk_found(&scanner, &report, defs, connection).await),
+        _ => None,
     };
+    if let (Some(walks), Some(path), Some(defs)) = (&walks, &args.save_profile, &sunspec) {
+        save_walks(walks, path, defs, connection)?;
+    }
+    let text = render(args.output.format(), &path, &lines, &report, elapsed, scanner.config(), walks.as_deref());
     output::print(&text)?;
     match outcome {
         None => {
@@ -237,6 +243,143 @@ pub(crate) async fn run(connection: &ConnectArgs, args: &ScanArgs) -> Result<(),
             Ok(())
         }
     }
+}
+
+/// The report in `format`, with the SunSpec walks when there are any.
+fn render(
+    format: Format,
+    path: &str,
+    lines: &[LineConfig],
+    report: &Report,
+    elapsed: Duration,
+    config: &ScanConfig,
+    walks: Option<&[Walk]>,
+) -> String {
+    match format {
+        Format::Json => {
+            let mut doc = as_json(path, lines, report, elapsed);
+            if let (Some(walks), Some(object)) = (walks, doc.as_object_mut()) {
+                object.insert("sunspec".into(), walks_json(walks));
+            }
+            output::json_line(&doc)
+        }
+        Format::Csv => walks.map_or_else(|| device_rows(report).csv(), |w| walks_rows(w).csv()),
+        Format::Table => {
+            let mut text = as_table(path, lines, report, elapsed, config);
+            if let Some(walks) = walks {
+                text.push_str(&walks_table(walks));
+            }
+            text
+        }
+    }
+}
+
+/// A device found, and what walking its SunSpec models gave: the chain, or why there is none.
+type Walk = (u8, LineConfig, Result<ferrobus_sunspec::Discovery, String>);
+
+/// `--sunspec` on a serial port: each device the sweep found, walked at the setting it
+/// answered at, over the scanner's own port (it is not reopened), one after the other.
+async fn walk_found(
+    scanner: &Scanner<ferrobus::port::TtyPort>,
+    report: &Report,
+    defs: &ferrobus_sunspec::Definitions,
+    connection: &ConnectArgs,
+) -> Vec<Walk> {
+    let limit = connection.max_per_request(None, crate::address::Table::Holding, false).ok().flatten().unwrap_or(125);
+    let mut walks = Vec::new();
+    for device in &report.devices {
+        let found = match scanner.client_at(device.line, connection.timeout).await {
+            Ok(client) => {
+                ferrobus_sunspec::discover(&client, device.unit, defs, limit).await.map_err(|e| e.to_string())
+            }
+            Err(e) => Err(e.to_string()),
+        };
+        walks.push((device.unit, device.line, found));
+    }
+    walks
+}
+
+fn walks_json(walks: &[Walk]) -> Value {
+    Value::Array(
+        walks
+            .iter()
+            .map(|(unit, line, found)| match found {
+                Ok(found) => json!({
+                    "unit": unit, "setting": line.to_string(), "base": found.base,
+                    "models": crate::sunspec::models_json(found),
+                }),
+                Err(why) => json!({ "unit": unit, "setting": line.to_string(), "error": why }),
+            })
+            .collect(),
+    )
+}
+
+/// `--save-profile FILE` on a serial port: each SunSpec device's profile to `FILE-unitN.EXT`.
+fn save_walks(
+    walks: &[Walk],
+    path: &std::path::Path,
+    defs: &ferrobus_sunspec::Definitions,
+    connection: &ConnectArgs,
+) -> Result<(), CliError> {
+    let limit = connection.max_per_request(None, crate::address::Table::Holding, false).ok().flatten().unwrap_or(125);
+    for (unit, line, found) in walks {
+        if let Ok(found) = found {
+            let origin = format!("sunspec at {} unit {unit}, {line}", connection.port.as_deref().unwrap_or("?"));
+            crate::sunspec::save(found, defs, &origin, limit, &path.with_file_name(unit_file(path, *unit)))?;
+        }
+    }
+    Ok(())
+}
+
+/// `FILE-unitN.EXT`: the name of the profile saved for `unit` of a serial scan.
+fn unit_file(path: &std::path::Path, unit: u8) -> String {
+    let stem = path.file_stem().map(|s| s.to_string_lossy().into_owned()).unwrap_or_default();
+    match path.extension() {
+        Some(ext) => format!("{stem}-unit{unit}.{}", ext.to_string_lossy()),
+        None => format!("{stem}-unit{unit}"),
+    }
+}
+
+/// `--csv`: one row per model found, with the unit and setting.
+fn walks_rows(walks: &[Walk]) -> Rows {
+    let mut rows = Rows::new(&[
+        ("unit", Align::Right),
+        ("setting", Align::Left),
+        ("model", Align::Right),
+        ("name", Align::Left),
+        ("start", Align::Right),
+        ("length", Align::Right),
+        ("definition", Align::Left),
+    ]);
+    for (unit, line, found) in walks {
+        for m in found.iter().flat_map(|f| &f.models) {
+            let mut cells = vec![unit.to_string(), line.to_string()];
+            cells.extend(crate::sunspec::model_cells(m));
+            rows.push(cells);
+        }
+    }
+    rows
+}
+
+/// The table's SunSpec part: per device its chain, or why it has none.
+fn walks_table(walks: &[Walk]) -> String {
+    let mut text = String::from("\nSunSpec:\n");
+    if walks.is_empty() {
+        text.push_str("  no device found to walk\n");
+    }
+    for (unit, line, found) in walks {
+        match found {
+            Ok(found) => {
+                let _ =
+                    writeln!(text, "unit {unit} at {line}: \"SunS\" at {}, {} models", found.base, found.models.len());
+                text.push_str(&crate::sunspec::model_rows(found).table());
+            }
+            Err(why) => {
+                let _ = writeln!(text, "unit {unit} at {line}: {why}");
+            }
+        }
+    }
+    text
 }
 
 fn show(bar: &ProgressBar, event: &Event) {

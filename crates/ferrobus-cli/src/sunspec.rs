@@ -5,6 +5,7 @@
 //! then print the models or build the profile. `--sunspec-models PATH` (or
 //! `FERROBUS_SUNSPEC_MODELS` at run time) adds model definitions to the built-in ones.
 
+use std::path::Path;
 use std::sync::Arc;
 
 use ferrobus_sunspec::{Definitions, Discovery};
@@ -18,7 +19,7 @@ use crate::output::{self, Align, Format, Rows};
 pub(crate) const DEVICE: &str = "sunspec";
 
 /// The model definitions: built-in plus `--sunspec-models`.
-fn definitions(connection: &ConnectArgs) -> Result<Definitions, CliError> {
+pub(crate) fn definitions(connection: &ConnectArgs) -> Result<Definitions, CliError> {
     Definitions::with(connection.sunspec_models.as_deref()).map_err(CliError::Usage)
 }
 
@@ -52,51 +53,102 @@ pub(crate) async fn resolve(connection: &ConnectArgs) -> Result<ConnectArgs, Cli
     Ok(resolved)
 }
 
-/// `scan --sunspec`: the unit's models, as a table or `--json`.
-pub(crate) async fn scan(connection: &ConnectArgs, format: Format) -> Result<(), CliError> {
+/// `scan --sunspec` over TCP: the unit's models, as a table or `--json`; with `save`, their
+/// profile written there too.
+pub(crate) async fn scan(connection: &ConnectArgs, format: Format, save_to: Option<&Path>) -> Result<(), CliError> {
     let defs = definitions(connection)?;
     let (found, origin) = walk(connection, &defs).await?;
-    let fit = |m: &ferrobus_sunspec::Found| match &m.fits {
+    if let Some(path) = save_to {
+        let limit =
+            connection.max_per_request(None, crate::address::Table::Holding, false).ok().flatten().unwrap_or(125);
+        save(&found, &defs, &origin, limit, path)?;
+    }
+    let text = match format {
+        Format::Json => {
+            output::json_line(&json!({ "device": origin, "base": found.base, "models": models_json(&found) }))
+        }
+        Format::Csv => model_rows(&found).csv(),
+        Format::Table => {
+            format!(
+                "{origin}: \"SunS\" at {}, {} models\n{}",
+                found.base,
+                found.models.len(),
+                model_rows(&found).table()
+            )
+        }
+    };
+    output::print(&text)
+}
+
+/// Writes the profile of `found` to a new file at `path` (checked first: it parses as the
+/// profile `--device sunspec` would make) and says so on stderr.
+pub(crate) fn save(
+    found: &Discovery,
+    defs: &Definitions,
+    origin: &str,
+    limit: u16,
+    path: &Path,
+) -> Result<(), CliError> {
+    let text = ferrobus_sunspec::profile_text(found, defs, origin, limit);
+    let profile = ferrobus_profile::Profile::parse(&text, origin).map_err(|e| CliError::Usage(e.to_string()))?;
+    let header = format!(
+        "# Written by `ferrobus scan --sunspec --save-profile` from {origin}: the models found then, their\n\
+         # scale factors as read then. A device whose scale factors change needs a new scan.\n\n"
+    );
+    crate::profile::write_new(path, &format!("{header}{text}"), false)?;
+    let what = format!("{}: {} points of {} models\n", path.display(), profile.points().len(), found.models.len());
+    output::write_to(&mut std::io::stderr(), "stderr", &format!("scan: profile saved to {what}"))
+}
+
+/// What the definition says of a model found: `ok`, `no definition`, or what differs.
+fn fit(m: &ferrobus_sunspec::Found) -> String {
+    match &m.fits {
         None => "no definition".to_string(),
         Some(Ok(())) => "ok".to_string(),
         Some(Err(why)) => why.clone(),
-    };
-    let text = match format {
-        Format::Json => output::json_line(&json!({
-            "device": origin,
-            "base": found.base,
-            "models": found.models.iter().map(|m| json!({
+    }
+}
+
+/// The models of `found` as JSON objects: id, name, start, length, fits, problem.
+pub(crate) fn models_json(found: &Discovery) -> Vec<serde_json::Value> {
+    found
+        .models
+        .iter()
+        .map(|m| {
+            json!({
                 "id": m.id,
                 "name": m.name,
                 "start": m.start,
                 "length": m.length,
                 "fits": m.fits.as_ref().map(Result::is_ok),
                 "problem": m.fits.as_ref().and_then(|f| f.as_ref().err()),
-            })).collect::<Vec<_>>(),
-        })),
-        Format::Csv | Format::Table => {
-            let mut rows = Rows::new(&[
-                ("model", Align::Right),
-                ("name", Align::Left),
-                ("start", Align::Right),
-                ("length", Align::Right),
-                ("definition", Align::Left),
-            ]);
-            for m in &found.models {
-                rows.push(vec![
-                    m.id.to_string(),
-                    m.name.clone().unwrap_or_else(|| "?".into()),
-                    m.start.to_string(),
-                    m.length.to_string(),
-                    fit(m),
-                ]);
-            }
-            if format == Format::Csv {
-                rows.csv()
-            } else {
-                format!("{origin}: \"SunS\" at {}, {} models\n{}", found.base, found.models.len(), rows.table())
-            }
-        }
-    };
-    output::print(&text)
+            })
+        })
+        .collect()
+}
+
+/// The models of `found` as rows: model, name, start, length, definition.
+pub(crate) fn model_rows(found: &Discovery) -> Rows {
+    let mut rows = Rows::new(&[
+        ("model", Align::Right),
+        ("name", Align::Left),
+        ("start", Align::Right),
+        ("length", Align::Right),
+        ("definition", Align::Left),
+    ]);
+    for m in &found.models {
+        rows.push(model_cells(m));
+    }
+    rows
+}
+
+/// One model's cells of [`model_rows`].
+pub(crate) fn model_cells(m: &ferrobus_sunspec::Found) -> Vec<String> {
+    vec![
+        m.id.to_string(),
+        m.name.clone().unwrap_or_else(|| "?".into()),
+        m.start.to_string(),
+        m.length.to_string(),
+        fit(m),
+    ]
 }

@@ -287,6 +287,15 @@ impl<P: Reconfigure> Scanner<P> {
         u64::try_from(n).unwrap_or(u64::MAX)
     }
 
+    /// A client over the scanner's port at `line`, waiting `timeout` for a reply, with one
+    /// retry: for going on with a device the scan found (walking its SunSpec models, say)
+    /// without closing the port. The port comes back to the scanner when the client is
+    /// dropped; a second client waits for that.
+    pub async fn client_at(&self, line: LineConfig, timeout: Duration) -> Result<Client, Error> {
+        self.reconfigure(line).await?;
+        self.lend(line, timeout, 1).await
+    }
+
     /// Runs the scan, filling in `report` as it goes and telling `on_event` each step. An IO
     /// error on the port ends it (the report keeps what was found).
     pub async fn run(&mut self, report: &mut Report, mut on_event: impl FnMut(&Event)) -> Result<(), Error> {

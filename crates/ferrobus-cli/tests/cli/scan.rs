@@ -273,3 +273,40 @@ fn tempfile_dir(name: &str) -> std::path::PathBuf {
     std::fs::create_dir_all(&dir).unwrap();
     dir
 }
+
+#[test]
+fn with_sunspec_each_device_found_on_a_serial_line_is_walked_at_its_setting() {
+    let dir = tempfile_dir("sunspec");
+    let (_line, drops) = line("19200", 3, &dir.join("stats.json"));
+    // Unit 3: a SunSpec inverter at 9600; unit 7: a drive that is not SunSpec, at 19200.
+    let _inverter = sim(&drops[1], "9600", &["--profile", "sunspec-inverter", "--unit", "3"]);
+    let _drive = sim(&drops[2], "19200", &["--profile", "omron-3g3rx", "--unit", "7"]);
+    let args = ["--units", "1-8", "--bauds", "19200,9600", "--framings", "8E1", "--listen", "0", "--sunspec"];
+    let (code, doc) = scan(&drops[0], &args);
+    assert_eq!(code, Some(0), "{doc:#}");
+    assert_eq!(devices(&doc), [(7, "19200 8E1".to_string()), (3, "9600 8E1".to_string())], "{doc:#}");
+    let walks = doc["sunspec"].as_array().unwrap();
+    assert_eq!(walks.len(), 2, "{doc:#}");
+    let walk = |unit: u64| walks.iter().find(|w| w["unit"] == unit).unwrap();
+    assert_eq!((walk(3)["setting"].as_str(), walk(3)["base"].as_u64()), (Some("9600 8E1"), Some(40000)));
+    let models: Vec<(u64, u64)> = walk(3)["models"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|m| (m["id"].as_u64().unwrap(), m["length"].as_u64().unwrap()))
+        .collect();
+    assert_eq!(models, [(1, 66), (103, 50)]);
+    let not = walk(7)["error"].as_str().unwrap();
+    assert!(not.contains("not a SunSpec device"), "{not}");
+    // The table says the same, and the CSV is a row per model.
+    let table = ferrobus().args(["--port", &drops[0], "scan"]).args(args).output().unwrap();
+    let table = String::from_utf8_lossy(&table.stdout);
+    assert!(table.contains("unit 3 at 9600 8E1: \"SunS\" at 40000, 2 models"), "{table}");
+    assert!(table.contains("unit 7 at 19200 8E1: not a SunSpec device"), "{table}");
+    let csv = ferrobus().args(["--port", &drops[0], "scan", "--csv"]).args(args).output().unwrap();
+    let csv = String::from_utf8_lossy(&csv.stdout);
+    let rows: Vec<&str> = csv.lines().collect();
+    assert_eq!(rows.len(), 3, "{csv}");
+    assert!(rows[0].starts_with("unit,setting,model,name,start,length,definition"), "{csv}");
+    assert!(rows[2].starts_with("3,9600 8E1,103,inverter_three_phase,40070,50,ok"), "{csv}");
+}

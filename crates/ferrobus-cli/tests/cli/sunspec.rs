@@ -175,10 +175,51 @@ fn poll_and_backup_with_device_sunspec_read_the_discovered_points() {
 }
 
 #[test]
-fn device_sunspec_is_refused_where_nothing_discovers_it_and_scan_sunspec_wants_tcp() {
+fn device_sunspec_is_refused_where_nothing_discovers_it_and_bad_model_files_before_the_port_opens() {
     let sim = TcpSim::builtin("sunspec-inverter");
     let err = stderr(&sim.run(&["set", "--device", "sunspec", "common.DA", "2"]).failure());
     assert!(err.contains("--device sunspec works with get, poll and backup"), "{err}");
-    let out = ferrobus().args(["--port", "/dev/null", "scan", "--sunspec"]).assert().failure();
-    assert!(stderr(&out).contains("scan --sunspec walks one unit over --tcp or --rtu-tcp"), "{}", stderr(&out));
+    // On a serial port the model definitions are read before the port is opened.
+    let out = ferrobus()
+        .args(["--port", "/dev/null", "scan", "--sunspec", "--sunspec-models", "/nonexistent/models"])
+        .assert()
+        .failure();
+    assert!(stderr(&out).contains("/nonexistent/models"), "{}", stderr(&out));
+    assert!(!stderr(&out).contains("opening /dev/null"), "{}", stderr(&out));
+}
+
+#[test]
+fn save_profile_writes_the_models_as_a_profile_that_get_and_the_bridge_take() {
+    let sim = TcpSim::builtin("sunspec-inverter");
+    let dir = std::env::temp_dir().join(format!("ferrobus-sunspec-save-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    std::fs::create_dir_all(&dir).unwrap();
+    let file = dir.join("inverter.toml");
+    let path = file.to_str().unwrap();
+    let saved = sim.run(&["scan", "--sunspec", "--save-profile", path]).success();
+    assert!(stderr(&saved).contains(&format!("scan: profile saved to {path}: ")), "{}", stderr(&saved));
+    let text = std::fs::read_to_string(&file).unwrap();
+    assert!(text.starts_with("# Written by `ferrobus scan --sunspec --save-profile` from sunspec at"), "{text}");
+    let watts = stdout(&sim.run(&["--device", path, "get", "inverter_three_phase.W", "--json"]).success());
+    let doc: Value = serde_json::from_str(&watts).unwrap();
+    assert_eq!(doc["points"][0]["engineering"].as_f64(), Some(10000.0), "{doc}");
+    // A second save does not replace the file.
+    let again = sim.run(&["scan", "--sunspec", "--save-profile", path]).failure();
+    assert!(stderr(&again).contains("exists"), "{}", stderr(&again));
+    // The bridge's plant file takes it as a device's profile, its points by name.
+    let plant = dir.join("plant.toml");
+    std::fs::write(
+        &plant,
+        format!(
+            "[broker]\naddress = \"127.0.0.1:1883\"\n[sparkplug]\ngroup_id = \"g\"\nedge_node_id = \"e\"\n\
+             [[line]]\nname = \"pv\"\ntcp = \"{}\"\n[[line.device]]\nid = \"inverter\"\nunit = 1\n\
+             profile = \"inverter.toml\"\nevery = \"1s\"\npoints = [\"inverter_three_phase.W\", \"common.SN\"]\n\
+             groups = [\"inverter_three_phase\"]\n",
+            sim.addr
+        ),
+    )
+    .unwrap();
+    let check = ferrobus().args(["bridge", "--check", "--config", plant.to_str().unwrap()]).assert().success();
+    assert!(stdout(&check).contains("1 line, 1 device, 2 groups, 46 metrics"), "{}", stdout(&check));
+    let _ = std::fs::remove_dir_all(&dir);
 }
