@@ -35,11 +35,6 @@ pub struct ClientConfig {
     /// heard again). On serial framings only: see the master engine's owed replies
     /// ([`ferrobus_proto::master`]).
     pub late_window: Option<Duration>,
-    /// Requests on the wire at once (at least 1). Only Modbus/TCP can have more than one:
-    /// its transaction ids tell the replies apart, so a device that takes pipelined requests
-    /// on one connection is kept busy across the round trip. Serial framings and RTU over TCP
-    /// have no transaction id and always send one at a time.
-    pub in_flight: usize,
 }
 
 impl Default for ClientConfig {
@@ -54,7 +49,6 @@ impl Default for ClientConfig {
             queue: 64,
             connect_timeout: Duration::from_secs(5),
             late_window: None,
-            in_flight: 1,
         }
     }
 }
