@@ -1,7 +1,10 @@
-//! `ferrobus gateway`: Modbus/TCP clients to RTU serial lines.
+//! `ferrobus gateway`: Modbus/TCP clients to RTU serial lines, or to one device over TCP.
 //!
 //! The first line is `--port` with the usual line options; `--line PATH` adds more lines with
-//! the same settings (numbered 1, 2, ... in the order given; `--port` is line 0). `--route
+//! the same settings (numbered 1, 2, ... in the order given; `--port` is line 0). `--tcp
+//! HOST[:PORT]` or `--rtu-tcp HOST:PORT` in place of `--port` makes the one line a device over
+//! TCP, shared by every client of the gateway (a multiplexer for a device that takes one
+//! connection); several such lines, or a mix with serial ones, come from `--lines-file`. `--route
 //! UNITS=LINE[:UNIT]` says which units go where (with one line and no `--route`, units 1-247
 //! go to it under their own addresses); a unit in no route gets exception 0x0A. The library
 //! ([`ferrobus::gateway`]) documents every answer the gateway gives and why. The counters of
@@ -50,13 +53,15 @@ pub(crate) struct GatewayArgs {
     #[arg(long = "rtu-in")]
     rtu_in: bool,
 
-    /// Another serial line with the same settings as --port (line 1, 2, ... in order)
+    /// Another serial line with the same settings as --port (line 1, 2, ... in order; not
+    /// beside --tcp or --rtu-tcp: several TCP lines come from --lines-file)
     #[arg(long = "line", value_name = "PATH")]
     lines: Vec<String>,
 
-    /// Serial lines from a TOML file instead of --port, --line and --route: [[line]] tables,
-    /// each with its port, line options (baud, parity, timeout, response-wait, ...) and units
-    /// (units, renumber); what a line leaves out comes from the connection options
+    /// Lines from a TOML file instead of --port/--tcp/--rtu-tcp, --line and --route: [[line]]
+    /// tables, each with its port (or tcp = "HOST[:PORT]", rtu-tcp = "HOST:PORT"), line options
+    /// (baud, parity, timeout, response-wait, ...) and units (units, renumber); what a line
+    /// leaves out comes from the connection options
     #[arg(long = "lines-file", value_name = "FILE", conflicts_with_all = ["lines", "routes", "reverse"])]
     pub(crate) lines_file: Option<PathBuf>,
 

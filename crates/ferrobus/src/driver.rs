@@ -63,6 +63,14 @@ pub struct ClientStats {
     pub master: MasterStats,
     /// Bytes found waiting in the port before a request and dropped (a stale reply, noise).
     pub flushed_bytes: u64,
+    /// Times the port was opened (a TCP connection made), the first time included: every
+    /// one past the first is a reopen or reconnect.
+    pub connects: u64,
+    /// Attempts to open the port (to connect) that failed.
+    pub connect_failures: u64,
+    /// Times an open port was lost: closed by the other end (a TCP device that dropped the
+    /// connection or restarted), or a read or write that failed.
+    pub disconnects: u64,
 }
 
 pub(crate) struct Driver<F> {
@@ -80,22 +88,30 @@ pub(crate) struct Driver<F> {
     /// Shared with the clients, updated after each request.
     stats: Arc<Mutex<ClientStats>>,
     flushed_bytes: u64,
+    /// Opens, failed opens and ports lost ([`ClientStats`]).
+    connects: u64,
+    connect_failures: u64,
+    disconnects: u64,
 }
 
 impl<F: Framing + Send + 'static> Driver<F> {
     pub(crate) fn new(master: Master<F>, transport: Transport, config: ClientConfig, port: Option<BoxPort>) -> Self {
+        let opened = port.is_some();
         Driver {
             master,
             pump: Pump::new(transport.timer().sleeper()),
             transport,
             config,
-            opened: port.is_some(),
+            opened,
             io: IoBackoff::default(),
             port,
             health: HashMap::new(),
             tx: Box::new([0; MAX_TX_LEN]),
             stats: Arc::default(),
             flushed_bytes: 0,
+            connects: u64::from(opened),
+            connect_failures: 0,
+            disconnects: 0,
         }
     }
 
@@ -105,7 +121,13 @@ impl<F: Framing + Send + 'static> Driver<F> {
     }
 
     fn publish_stats(&self) {
-        let stats = ClientStats { master: self.master.stats(), flushed_bytes: self.flushed_bytes };
+        let stats = ClientStats {
+            master: self.master.stats(),
+            flushed_bytes: self.flushed_bytes,
+            connects: self.connects,
+            connect_failures: self.connect_failures,
+            disconnects: self.disconnects,
+        };
         *self.stats.lock().unwrap_or_else(PoisonError::into_inner) = stats;
     }
 
@@ -125,14 +147,16 @@ impl<F: Framing + Send + 'static> Driver<F> {
                     Step::Woke => continue,
                     Step::Closed => {
                         tracing::warn!(port = %self.transport.describe(), "the port closed; it will be reopened");
-                        self.port = None;
+                        self.lose_port();
                         self.io_failed();
+                        self.publish_stats();
                         continue;
                     }
                     Step::Failed(e) => {
                         tracing::warn!(port = %self.transport.describe(), "read failed, reopening on the next request: {e}");
-                        self.port = None;
+                        self.lose_port();
                         self.io_failed();
+                        self.publish_stats();
                         continue;
                     }
                 },
@@ -142,6 +166,13 @@ impl<F: Framing + Send + 'static> Driver<F> {
             let result = self.serve(&command).await;
             self.publish_stats();
             let _ = command.reply.send(result);
+        }
+    }
+
+    /// Drops the open port, counting it lost.
+    fn lose_port(&mut self) {
+        if self.port.take().is_some() {
+            self.disconnects = self.disconnects.saturating_add(1);
         }
     }
 
@@ -196,7 +227,19 @@ impl<F: Framing + Send + 'static> Driver<F> {
             if let Some(at) = self.io.take_reopen_at() {
                 tokio::time::sleep_until(self.pump.clock().to_tokio(at)).await;
             }
-            self.port = Some(self.transport.open(self.config.connect_timeout).await?);
+            match self.transport.open(self.config.connect_timeout).await {
+                Ok(port) => {
+                    self.port = Some(port);
+                    self.connects = self.connects.saturating_add(1);
+                    if self.opened {
+                        tracing::info!(port = %self.transport.describe(), "reopened");
+                    }
+                }
+                Err(e) => {
+                    self.connect_failures = self.connect_failures.saturating_add(1);
+                    return Err(e);
+                }
+            }
             self.opened = true;
             self.master.abort();
         }
@@ -212,7 +255,7 @@ impl<F: Framing + Send + 'static> Driver<F> {
         // Nothing is in flight between requests; make sure of it.
         self.master.abort();
         self.flush_input().map_err(|e| {
-            self.port = None;
+            self.lose_port();
             Error::io(format!("reading from {}", self.transport.describe()), e)
         })?;
         let now = self.pump.clock().now();
@@ -237,7 +280,7 @@ impl<F: Framing + Send + 'static> Driver<F> {
         if let Err(Error::Io { .. }) = result {
             // The port failed under the request: nothing more is heard of it.
             self.master.abort();
-            self.port = None;
+            self.lose_port();
         }
         result
     }

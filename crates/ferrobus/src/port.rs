@@ -118,6 +118,7 @@ pub struct Transport {
     frame_gap: Duration,
     incomplete_timeout: Duration,
     reopen: bool,
+    remote: bool,
     connector: Arc<dyn Connector>,
 }
 
@@ -145,6 +146,7 @@ impl Transport {
             frame_gap: timing.t3_5(),
             incomplete_timeout: PC_INCOMPLETE_TIMEOUT,
             reopen: true,
+            remote: false,
             connector: Arc::new(SerialTarget { config, first: Mutex::new(None) }),
         }
     }
@@ -159,6 +161,7 @@ impl Transport {
             frame_gap: STREAM_FRAME_GAP,
             incomplete_timeout: STREAM_FRAME_GAP,
             reopen: true,
+            remote: true,
             connector: Arc::new(TcpTarget(addr.into())),
         }
     }
@@ -186,6 +189,7 @@ impl Transport {
             frame_gap: timing.t3_5(),
             incomplete_timeout: timing.t3_5(),
             reopen: true,
+            remote: false,
             connector: Arc::new(connector),
         }
     }
@@ -237,6 +241,13 @@ impl Transport {
     /// Whether a lost port is opened again.
     pub fn reopens(&self) -> bool {
         self.reopen
+    }
+
+    /// Whether the stream is a network connection to a device (Modbus/TCP, RTU over TCP, TLS)
+    /// rather than a port of this machine: one whose other end may not be there yet, and
+    /// may come and go.
+    pub fn is_remote(&self) -> bool {
+        self.remote
     }
 
     /// The framing.

@@ -1,8 +1,14 @@
 //! `Gateway::start`'s typed errors: a routing mistake is told apart from a port that fails.
+//! A line to a Modbus/TCP device that is down is no error: the gateway starts, the line's
+//! requests get 0x0A until the device is up, and it reconnects after the device drops it.
 
-use ferrobus::gateway::{Gateway, GatewayConfig, GatewayError, GatewayLine, Route, Routes};
+use ferrobus::gateway::{
+    AllowAll, Gateway, GatewayConfig, GatewayError, GatewayLine, Inbound, Route, Routes, Timeouts,
+};
 use ferrobus::{ClientConfig, Error, SerialConfig, Transport};
 use ferrobus_proto::frame::LineConfig;
+use tokio::io::{AsyncReadExt, AsyncWriteExt, DuplexStream};
+use tokio::net::{TcpListener, TcpStream};
 
 fn line(path: &str) -> GatewayLine {
     let serial = SerialConfig::new(path, LineConfig::new(9600).unwrap());
@@ -37,4 +43,84 @@ async fn a_port_that_cannot_be_opened_is_an_io_error_naming_its_line_and_port() 
     let GatewayError::Io { line: 0, source } = &error else { panic!("{error:?}") };
     assert!(matches!(source, Error::Io { .. }), "{source:?}");
     assert!(error.to_string().contains("/nonexistent/ferrobus-gw"), "{error}");
+}
+
+/// An MBAP frame: transaction `t`, unit 1, `pdu`.
+fn mbap(t: u16, pdu: &[u8]) -> Vec<u8> {
+    let mut frame = t.to_be_bytes().to_vec();
+    frame.extend_from_slice(&[0, 0]);
+    frame.extend_from_slice(&u16::try_from(pdu.len() + 1).unwrap().to_be_bytes());
+    frame.push(1);
+    frame.extend_from_slice(pdu);
+    frame
+}
+
+/// Reads one MBAP frame from `stream`: (transaction, PDU).
+async fn frame(stream: &mut (impl AsyncReadExt + Unpin)) -> (u16, Vec<u8>) {
+    let mut head = [0u8; 7];
+    stream.read_exact(&mut head).await.unwrap();
+    let mut pdu = vec![0u8; usize::from(u16::from_be_bytes([head[4], head[5]])) - 1];
+    stream.read_exact(&mut pdu).await.unwrap();
+    (u16::from_be_bytes([head[0], head[1]]), pdu)
+}
+
+/// Sends a read of one register through `client` and returns the reply PDU.
+async fn read(client: &mut DuplexStream, t: u16) -> Vec<u8> {
+    client.write_all(&mbap(t, &[0x03, 0x00, 0x00, 0x00, 0x01])).await.unwrap();
+    let (tid, pdu) = frame(client).await;
+    assert_eq!(tid, t, "the client's transaction id comes back");
+    pdu
+}
+
+/// The device's side of one request: reads it and answers register 0 = `value`.
+async fn answer(device: &mut TcpStream, value: u16) {
+    let (tid, pdu) = frame(device).await;
+    assert_eq!(pdu, [0x03, 0x00, 0x00, 0x00, 0x01]);
+    let [hi, lo] = value.to_be_bytes();
+    device.write_all(&mbap(tid, &[0x03, 0x02, hi, lo])).await.unwrap();
+}
+
+#[tokio::test]
+async fn a_tcp_device_down_at_start_gets_0a_then_is_connected_once_up_and_reconnected_after_it_drops_the_line() {
+    // A port that was free a moment ago, and nobody listening on it.
+    let addr = TcpListener::bind("127.0.0.1:0").await.unwrap().local_addr().unwrap();
+    let line = GatewayLine::new(Transport::tcp(addr.to_string()), ClientConfig::default());
+    let gateway = Gateway::start(config(vec![line], Routes::all_on(0))).await.expect("started with the device down");
+    let (mut client, server) = tokio::io::duplex(4096);
+    let serving = gateway.clone();
+    tokio::spawn(async move {
+        let mut authorize = AllowAll;
+        serving.serve_connection(server, "test client", Inbound::Mbap, &mut authorize, Timeouts::default()).await
+    });
+    assert_eq!(read(&mut client, 1).await, [0x83, 0x0A], "the device is down: gateway path unavailable");
+    let down = &gateway.stats()[0];
+    assert_eq!((down.connects, down.connect_failures, down.total.line_errors), (0, 1, 1), "{down}");
+
+    // The device comes up: the next request connects (after the reconnect backoff).
+    let listener = TcpListener::bind(addr).await.unwrap();
+    let device = tokio::spawn(async move {
+        let (mut device, _) = listener.accept().await.unwrap();
+        answer(&mut device, 0x1234).await;
+        // It drops the connection, and takes the next one.
+        drop(device);
+        let (mut device, _) = listener.accept().await.unwrap();
+        answer(&mut device, 0x5678).await;
+        device
+    });
+    assert_eq!(read(&mut client, 2).await, [0x03, 0x02, 0x12, 0x34]);
+    // A request sent before the gateway has seen the drop may get 0x0A; one after is served.
+    let mut t = 3;
+    let answered = loop {
+        let reply = read(&mut client, t).await;
+        if reply != [0x83, 0x0A] {
+            break reply;
+        }
+        assert!(t < 50, "not reconnected after {t} requests");
+        t += 1;
+    };
+    assert_eq!(answered, [0x03, 0x02, 0x56, 0x78]);
+    let _device = device.await.unwrap();
+    let stats = &gateway.stats()[0];
+    assert_eq!((stats.connects, stats.disconnects), (2, 1), "{stats}");
+    assert!(stats.to_string().contains("connects 2 connect-failures"), "{stats}");
 }

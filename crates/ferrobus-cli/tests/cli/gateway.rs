@@ -19,7 +19,11 @@ fn usage_error(args: &[&str], expected: &str) {
 fn gateway_usage_errors_name_the_option_and_what_is_wrong() {
     let port = ["--port", "/dev/null-no-such-port", "gateway"];
     let with = |extra: &[&'static str]| [&port[..], extra].concat();
-    usage_error(&["--tcp", "127.0.0.1:1502", "gateway"], "the gateway's lines are serial ports");
+    usage_error(
+        &["--tcp", "127.0.0.1:1502", "gateway", "--line", "/dev/null-other"],
+        "--line adds serial lines beside --port",
+    );
+    usage_error(&["--tcp", "127.0.0.1:1502", "--tls", "gateway"], "not Modbus/TCP Security");
     usage_error(&with(&["--route", "5=1"]), "--route '5=1': line 1 does not exist: there are 1");
     usage_error(&with(&["--route", "0=0"]), "unit 0 is the broadcast");
     usage_error(&with(&["--route", "5"]), "--route '5': no '='");

@@ -1,4 +1,6 @@
-//! The gateway: Modbus/TCP clients (or RTU over TCP) in, RTU serial lines out.
+//! The gateway: Modbus/TCP clients (or RTU over TCP) in, RTU serial lines out — or Modbus/TCP
+//! (or RTU over TCP) devices out: a line may be a device on the network that takes one client
+//! connection, which the gateway then shares among many (a multiplexer).
 //!
 //! ```text
 //!   TCP connection ─┐  authorize ─ route by unit ─┐   line 0: queue ── worker ── Client ── RTU
@@ -26,7 +28,7 @@
 //! | silence after every retry, or the unit in backoff | 0x0B Gateway Target Device Failed to Respond |
 //! | replies with a bad CRC after every retry | 0x0B, counted as CRC errors apart from silence |
 //! | a reply that does not answer the request | 0x0B, counted as a bad reply |
-//! | the serial port failed | 0x0A (the path itself is down; it is reopened) |
+//! | the serial port failed, or a TCP line's device cannot be reached or dropped the connection | 0x0A (the path itself is down; it is reopened, reconnected) |
 //! | refused by the connection's [`Authorize`] | the exception it names ([`Rules`]: 0x01, or 0x0A for a unit) |
 //! | a broadcast (unit 0, a write) | nothing (the spec), or its echo with `broadcast_ack` |
 //!
@@ -68,6 +70,16 @@
 //! gets every request answered, in order, where a 0x06 would fail requests it could simply
 //! have waited for (the lines' queues, shared by every connection, still answer 0x06 when
 //! full).
+//!
+//! A line to a Modbus/TCP device ([`Transport::tcp`]) is served as a serial line is: one
+//! request at a time on its one connection, in turns per client connection, with the cache,
+//! the rules and the per-unit backoff; the reply is matched by the MBAP transaction id the
+//! line's master gave the request (a reply under another id is dropped). The gateway does not
+//! connect it at start: a device that is down keeps nobody else from being served. Its
+//! connection is made on the first request and made again after the device closes it or a
+//! read fails, after a backoff that grows with each failure (the driver's, as for a serial
+//! port's reopening); meanwhile its requests get 0x0A. The line's counters show its connects,
+//! failed connects and lost connections.
 //!
 //! The reverse direction, a slave on the serial line forwarding to Modbus/TCP servers, is
 //! [`serve_reverse`].
@@ -166,10 +178,11 @@ impl Routes {
     }
 }
 
-/// One serial line behind the gateway.
+/// One line behind the gateway: a serial port, or a device over TCP.
 #[derive(Clone, Debug)]
 pub struct GatewayLine {
-    /// The port and its framing (RTU, or ASCII) and timing.
+    /// The port and its framing (RTU, or ASCII) and timing, or the TCP device (Modbus/TCP,
+    /// RTU over TCP).
     pub transport: Transport,
     /// Reply timeout, retries, turnaround, backoff of its master.
     pub client: ClientConfig,
@@ -260,7 +273,7 @@ impl Default for FrontConfig {
 /// A gateway's settings.
 #[derive(Clone, Debug)]
 pub struct GatewayConfig {
-    /// The serial lines.
+    /// The lines: serial ports, TCP devices.
     pub lines: Vec<GatewayLine>,
     /// Which unit goes where.
     pub routes: Routes,
@@ -285,7 +298,7 @@ pub enum GatewayError {
         /// How many lines there are.
         lines: usize,
     },
-    /// A line's port could not be opened.
+    /// A serial line's port could not be opened.
     #[error("{source}")]
     Io {
         /// The line, numbered from 0.
@@ -312,6 +325,8 @@ pub struct Gateway {
 
 pub(crate) struct Inner {
     lines: Vec<Arc<LineQueue>>,
+    /// Each line's client, for what its driver counts between requests (connections).
+    clients: Vec<Client>,
     routes: Routes,
     broadcast_ack: bool,
     cache: Option<Arc<Cache>>,
@@ -320,24 +335,38 @@ pub(crate) struct Inner {
 }
 
 impl Gateway {
-    /// Checks the routes, opens every line (a port that cannot be opened fails here, named)
-    /// and starts its worker on the current tokio runtime.
+    /// Checks the routes, opens every serial line (a port that cannot be opened fails here,
+    /// named) and starts its worker on the current tokio runtime. A line to a device on the
+    /// network ([`Transport::is_remote`]) is not connected here: a device that is down must
+    /// not keep the gateway from serving the others. It connects on its first request and
+    /// again after a loss (after a backoff that grows with each failure), and its requests
+    /// get 0x0A meanwhile.
     pub async fn start(config: GatewayConfig) -> Result<Gateway, GatewayError> {
         check_routes(&config)?;
         let cache = config.cache_max_age.map(|age| Arc::new(Cache::new(age)));
         let mut lines = Vec::with_capacity(config.lines.len());
+        let mut clients = Vec::with_capacity(config.lines.len());
         for (index, line) in config.lines.into_iter().enumerate() {
             let name = line.transport.describe();
-            let client = Client::connect(line.transport.clone(), line.client)
-                .await
-                .map_err(|source| GatewayError::Io { line: index, source })?;
+            let client = if line.transport.is_remote() {
+                // A device on the network may be down, or not up yet: the line connects on
+                // its first request and again after each loss, and fails its requests
+                // meanwhile, as a serial line does while its port is being reopened.
+                Client::spawn(line.transport.clone(), line.client)
+            } else {
+                Client::connect(line.transport.clone(), line.client)
+                    .await
+                    .map_err(|source| GatewayError::Io { line: index, source })?
+            };
             let stats = Arc::new(Mutex::new(LineTraffic { name, ..LineTraffic::default() }));
             let queue = Arc::new(LineQueue::new(line.queue, stats));
-            tokio::spawn(back::run(Arc::clone(&queue), client, cache.clone(), line.late_guard));
+            tokio::spawn(back::run(Arc::clone(&queue), client.clone(), cache.clone(), line.late_guard));
             lines.push(queue);
+            clients.push(client);
         }
         let inner = Inner {
             lines,
+            clients,
             routes: config.routes,
             broadcast_ack: config.broadcast_ack,
             cache,
@@ -349,7 +378,14 @@ impl Gateway {
 
     /// What each line has counted so far.
     pub fn stats(&self) -> Vec<LineTraffic> {
-        self.inner.lines.iter().map(|q| q.stats().clone()).collect()
+        let lines = self.inner.lines.iter().zip(&self.inner.clients);
+        lines
+            .map(|(queue, client)| {
+                let mut stats = queue.stats().clone();
+                stats.dropped(&client.stats());
+                stats
+            })
+            .collect()
     }
 
     /// What the front end has refused so far, before any line, by reason.

@@ -172,6 +172,12 @@ pub struct LineTraffic {
     pub early_replies: u64,
     /// Bytes found waiting in the port before a request, dropped.
     pub flushed_bytes: u64,
+    /// Times the line's port was opened, or its TCP connection made (the first included).
+    pub connects: u64,
+    /// Opens or connection attempts that failed (a device down, a port missing).
+    pub connect_failures: u64,
+    /// Times an open port or connection was lost (closed by the device, a failed read).
+    pub disconnects: u64,
 }
 
 impl LineTraffic {
@@ -180,6 +186,9 @@ impl LineTraffic {
         self.late_replies = u64::from(seen.master.late_replies);
         self.early_replies = u64::from(seen.master.early_replies);
         self.flushed_bytes = seen.flushed_bytes;
+        self.connects = seen.connects;
+        self.connect_failures = seen.connect_failures;
+        self.disconnects = seen.disconnects;
     }
 }
 
@@ -187,14 +196,18 @@ impl fmt::Display for LineTraffic {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
         writeln!(
             f,
-            "line {}: queue {} (max {}); {}; late-replies {} early-replies {} flushed-bytes {}",
+            "line {}: queue {} (max {}); {}; late-replies {} early-replies {} flushed-bytes {}; connects {} \
+             connect-failures {} disconnects {}",
             self.name,
             self.queue_depth,
             self.queue_max,
             self.total,
             self.late_replies,
             self.early_replies,
-            self.flushed_bytes
+            self.flushed_bytes,
+            self.connects,
+            self.connect_failures,
+            self.disconnects
         )?;
         for (unit, counters) in &self.units {
             writeln!(f, "  unit {unit}: {counters}")?;
