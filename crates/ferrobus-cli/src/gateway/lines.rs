@@ -1,9 +1,11 @@
-//! `gateway --lines-file FILE`: the gateway's serial lines, each with its own settings and the
-//! units it serves, from a TOML file of `[[line]]` tables, read and checked by the library
-//! ([`ferrobus::gateway::config`], which documents the keys and every mistake it names).
+//! `gateway --lines-file FILE`: the gateway's lines (serial ports, devices over TCP), each with
+//! its own settings and the units it serves, from a TOML file of `[[line]]` tables, read and
+//! checked by the library ([`ferrobus::gateway::config`], which documents the keys and every
+//! mistake it names).
 //!
-//! The keys are the line options of the command line under their long names (`data-bits`),
-//! the gateway's `queue` and `late-guard`, and `response-wait`, which the line options lack.
+//! The keys are the line options of the command line under their long names (`port`, `tcp`,
+//! `rtu-tcp`, `data-bits`), the gateway's `queue` and `late-guard`, and `response-wait`, which
+//! the line options lack.
 //!
 //! Precedence: a key of a `[[line]]` beats the same option given on the command line (or from
 //! the settings file's `[defaults]` or `--conn`), which is what every line of the file starts

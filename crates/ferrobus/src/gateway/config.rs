@@ -1,5 +1,5 @@
-//! The gateway's lines file: its serial lines, each with its own settings and the units it
-//! serves, from a TOML file of `[[line]]` tables.
+//! The gateway's lines file: its lines — serial ports, and devices over TCP — each with its
+//! own settings and the units it serves, from a TOML file of `[[line]]` tables.
 //!
 //! ```toml
 //! [[line]]                      # line 0
@@ -17,15 +17,29 @@
 //! stop-bits = 1
 //! t35 = "2ms"
 //! renumber = { 30 = 3, "41-50" = "1-10" }   # client unit 30 is unit 3 on this line
+//!
+//! [[line]]                      # line 2: an inverter that takes one Modbus/TCP client
+//! tcp = "192.168.1.50"          # port 502 unless given
+//! timeout = "1s"
+//! renumber = { 100 = 1 }
+//!
+//! [[line]]                      # line 3: a serial server that carries RTU frames over TCP
+//! rtu-tcp = "192.168.1.60:4001"
+//! units = ["60-69"]
 //! ```
 //!
-//! The keys: `port`, `ascii`, `baud`, `parity`, `data-bits`, `stop-bits`, `rs485`,
+//! A line is exactly one of `port` (a serial port), `tcp` (a Modbus/TCP device, `HOST[:PORT]`,
+//! port 502 unless given) and `rtu-tcp` (RTU frames over TCP, `HOST:PORT`). The keys: `port`,
+//! `tcp`, `rtu-tcp`, `ascii`, `baud`, `parity`, `data-bits`, `stop-bits`, `rs485`,
 //! `low-latency`, `timeout`, `retries`, `t15`, `t35`, `turnaround`, `echo`, `reopen`, `queue`,
 //! `late-guard`, and `response-wait`: the time the devices of the line hold their reply, added
 //! to the line's reply timeout. A line's routes are `units` (numbers and `"A-B"` ranges) and
 //! `renumber` (client units to the units on the line; a range to a range of the same length,
 //! or to its first unit). Durations are strings such as `"300ms"`, or whole numbers of
-//! milliseconds.
+//! milliseconds. A serial port's own keys (`ascii`, `baud`, `parity`, `data-bits`,
+//! `stop-bits`, `rs485`, `low-latency`, `echo`) on a `tcp` or `rtu-tcp` line are a mistake, and
+//! so are `t15`, `t35` and `turnaround` on a `tcp` line (Modbus/TCP has no silent intervals and
+//! no broadcast); `reopen = false` there means a lost connection is not made again.
 //!
 //! Every line starts from the [`LineDefaults`] the caller gives (a command line's options,
 //! say); a key of a `[[line]]` beats them. One line without `units` or `renumber` serves units
@@ -33,9 +47,10 @@
 //!
 //! The whole file is checked before anything is opened. A [`LinesFileError`] names the file,
 //! the line and column, the `[[line]]` (numbered from 0, as the gateway numbers its lines) and
-//! the key: an unknown key, a value of the wrong type or out of range, a port given twice, a
-//! unit routed twice (with where it was routed first), a line with no units when there are
-//! several, or with empty `units` and `renumber`. Its places and excerpts are
+//! the key: an unknown key, a value of the wrong type or out of range, a line that is none or
+//! more than one of `port`, `tcp` and `rtu-tcp`, a serial key on a TCP line, a port or TCP
+//! device given twice, a unit routed twice (with where it was routed first), a line with no
+//! units when there are several, or with empty `units` and `renumber`. Its places and excerpts are
 //! [`ferrobus_profile::source`]'s: bounded, whatever the file holds.
 
 use std::collections::BTreeMap;
@@ -146,6 +161,8 @@ struct FileShape {
 #[serde(deny_unknown_fields, rename_all = "kebab-case")]
 struct LineShape {
     port: Option<Spanned<toml::Value>>,
+    tcp: Option<Spanned<toml::Value>>,
+    rtu_tcp: Option<Spanned<toml::Value>>,
     ascii: Option<Spanned<toml::Value>>,
     baud: Option<Spanned<toml::Value>>,
     parity: Option<Spanned<toml::Value>>,
@@ -209,13 +226,13 @@ pub fn parse(file: &str, text: &str, defaults: &LineDefaults) -> Result<LinesFil
             invalid(Some(index), Located::new(text, Some(span), &format!("[[line]] {index}, {message}")))
         };
         let line = table.get_ref();
-        let (config, port) = settings(table.span(), line, defaults).map_err(what)?;
-        if let Some((_, first)) = ports.iter().find(|(p, _)| *p == port.0) {
+        let (config, target) = settings(table.span(), line, defaults).map_err(what)?;
+        if let Some((_, first)) = ports.iter().find(|(p, _)| *p == target.name) {
             let (row, col) = line_col(text, *first);
-            let message = format!("port: {} is a line already ({file}:{row}:{col})", port.0);
-            return Err(what((port.1, message)));
+            let message = format!("{}: {} is a line already ({file}:{row}:{col})", target.key, target.name);
+            return Err(what((target.span, message)));
         }
-        ports.push((port.0, port.1.start));
+        ports.push((target.name, target.span.start));
         let mut route = |unit: u8, out: u8, span: &Range<usize>| -> Result<(), Problem> {
             let slot = first_seen
                 .get_mut(usize::from(unit))
@@ -287,20 +304,152 @@ pub fn parse(file: &str, text: &str, defaults: &LineDefaults) -> Result<LinesFil
     Ok(LinesFile { lines, routes })
 }
 
-/// One line's settings: `defaults`, with the table's keys on top. Its port and place too.
-fn settings(
-    table: Range<usize>,
-    line: &LineShape,
-    defaults: &LineDefaults,
-) -> Result<(GatewayLine, (String, Range<usize>)), Problem> {
-    let Some(port) = &line.port else {
-        return Err((table, "no port: give the serial port, e.g. port = \"/dev/ttyUSB0\"".into()));
+/// What a line is connected to: the key that said it, the port or address (normalised, for
+/// telling two lines on one device apart) and where.
+struct Target {
+    key: &'static str,
+    name: String,
+    span: Range<usize>,
+}
+
+/// Which kind of line a `[[line]]` is.
+#[derive(Clone, Copy, PartialEq, Eq)]
+enum Kind {
+    Serial,
+    Tcp,
+    RtuTcp,
+}
+
+/// The keys that only a serial port has, and those that Modbus/TCP also lacks (it has no
+/// silent intervals, and no broadcast to wait after).
+fn serial_only(line: &LineShape, kind: Kind) -> Vec<(&'static str, &Spanned<toml::Value>)> {
+    let mut keys = vec![
+        ("ascii", &line.ascii),
+        ("baud", &line.baud),
+        ("parity", &line.parity),
+        ("data-bits", &line.data_bits),
+        ("stop-bits", &line.stop_bits),
+        ("rs485", &line.rs485),
+        ("low-latency", &line.low_latency),
+        ("echo", &line.echo),
+    ];
+    if kind == Kind::Tcp {
+        keys.extend([("t15", &line.t15), ("t35", &line.t35), ("turnaround", &line.turnaround)]);
+    }
+    keys.into_iter().filter_map(|(key, value)| value.as_ref().map(|v| (key, v))).collect()
+}
+
+/// The line's target: exactly one of `port`, `tcp` and `rtu-tcp`.
+fn target(table: Range<usize>, line: &LineShape) -> Result<(Kind, Target), Problem> {
+    let given: Vec<(Kind, &'static str, &Spanned<toml::Value>)> =
+        [(Kind::Serial, "port", &line.port), (Kind::Tcp, "tcp", &line.tcp), (Kind::RtuTcp, "rtu-tcp", &line.rtu_tcp)]
+            .into_iter()
+            .filter_map(|(kind, key, value)| value.as_ref().map(|v| (kind, key, v)))
+            .collect();
+    let (kind, key, value) = match given.as_slice() {
+        [] => {
+            return Err((
+                table,
+                "no port: give the serial port (port = \"/dev/ttyUSB0\") or the device over TCP (tcp = \
+                 \"10.0.0.7:502\", rtu-tcp = \"10.0.0.8:4001\")"
+                    .into(),
+            ));
+        }
+        [one] => *one,
+        [(_, first, _), (_, second, value), ..] => {
+            return Err((
+                value.span(),
+                format!("{second}: a line is one of port, tcp and rtu-tcp, and this one has {first} already"),
+            ));
+        }
     };
-    let path = match port.get_ref() {
-        toml::Value::String(s) if !s.trim().is_empty() => s.clone(),
-        toml::Value::String(_) => return Err((port.span(), "port: the path is empty".into())),
-        other => return Err((port.span(), format!("port: a path in quotes, not a {}", other.type_str()))),
+    let text = match value.get_ref() {
+        toml::Value::String(s) if !s.trim().is_empty() => s.trim().to_string(),
+        toml::Value::String(_) if kind == Kind::Serial => return Err((value.span(), "port: the path is empty".into())),
+        toml::Value::String(_) => return Err((value.span(), format!("{key}: the address is empty"))),
+        other if kind == Kind::Serial => {
+            return Err((value.span(), format!("port: a path in quotes, not a {}", other.type_str())));
+        }
+        other => return Err((value.span(), format!("{key}: HOST:PORT in quotes, not a {}", other.type_str()))),
     };
+    let name = match kind {
+        Kind::Serial => text,
+        Kind::Tcp => with_default_port(&text, 502),
+        Kind::RtuTcp if has_port(&text) => text,
+        Kind::RtuTcp => {
+            return Err((
+                value.span(),
+                format!("rtu-tcp: '{text}' needs its port, HOST:PORT (serial servers listen on e.g. 4001 or 502)"),
+            ));
+        }
+    };
+    Ok((kind, Target { key, name, span: value.span() }))
+}
+
+/// Whether `addr` ends in `:PORT` (an IPv6 address only in brackets: `[::1]:502`).
+fn has_port(addr: &str) -> bool {
+    match addr.rsplit_once(':') {
+        Some((host, port)) => {
+            !port.is_empty()
+                && port.bytes().all(|b| b.is_ascii_digit())
+                && (!host.contains(':') || (host.starts_with('[') && host.ends_with(']')))
+        }
+        None => false,
+    }
+}
+
+/// `host` → `host:502`, `::1` → `[::1]:502`; an address with its port as it is.
+fn with_default_port(addr: &str, port: u16) -> String {
+    if has_port(addr) {
+        addr.to_string()
+    } else if addr.starts_with('[') || !addr.contains(':') {
+        format!("{addr}:{port}")
+    } else {
+        format!("[{addr}]:{port}")
+    }
+}
+
+/// Refuses a serial port's key on a line to a device over TCP.
+fn no_serial_keys(kind: Kind, target: &Target, line: &LineShape) -> Result<(), Problem> {
+    if kind == Kind::Serial {
+        return Ok(());
+    }
+    let Some((key, value)) = serial_only(line, kind).into_iter().next() else { return Ok(()) };
+    let what = if kind == Kind::Tcp { "a Modbus/TCP line" } else { "an RTU-over-TCP line" };
+    Err((
+        value.span(),
+        format!(
+            "{key}: a serial port's setting, and {what} ({} = \"{}\") has none: the device's own serial side, if \
+             any, is set on the device",
+            target.key, target.name
+        ),
+    ))
+}
+
+/// A line to the device at `addr` over TCP (Modbus/TCP, or RTU frames), with `d`'s settings.
+fn network_line(kind: Kind, addr: String, d: &LineDefaults) -> GatewayLine {
+    let mut transport = if kind == Kind::Tcp { Transport::tcp(addr) } else { Transport::rtu_over_tcp(addr) };
+    if kind == Kind::RtuTcp {
+        if let Some(t15) = d.t1_5 {
+            transport = transport.with_t1_5(t15);
+        }
+        if let Some(t35) = d.t3_5 {
+            transport = transport.with_t3_5(t35);
+        }
+    }
+    GatewayLine {
+        queue: d.queue,
+        late_guard: d.late_guard,
+        ..GatewayLine::new(transport.with_reopen(d.reopen), d.client)
+    }
+}
+
+/// One line's settings: `defaults`, with the table's keys on top. What it is connected to,
+/// and where that was said, too.
+fn settings(table: Range<usize>, line: &LineShape, defaults: &LineDefaults) -> Result<(GatewayLine, Target), Problem> {
+    let (kind, target) = target(table.clone(), line)?;
+    no_serial_keys(kind, &target, line)?;
+    let path = target.name.clone();
     let mut d = defaults.clone();
     if let Some(v) = &line.ascii {
         d.ascii = flag(v, "ascii")?;
@@ -369,6 +518,9 @@ fn settings(
     if let Some(v) = &line.late_guard {
         d.late_guard = duration(v, "late-guard")?;
     }
+    if kind != Kind::Serial {
+        return Ok((network_line(kind, path, &d), target));
+    }
     if d.framing.data_bits == DataBits::Seven && !d.ascii {
         let span = line.data_bits.as_ref().map_or(table, Spanned::span);
         return Err((span, "data-bits: 7 only with ascii = true (RTU needs 8 data bits)".into()));
@@ -386,7 +538,7 @@ fn settings(
         late_guard: d.late_guard,
         ..GatewayLine::new(transport.with_reopen(d.reopen), d.client)
     };
-    Ok((config, (path, port.span())))
+    Ok((config, target))
 }
 
 /// A whole number from `min` to `max`.

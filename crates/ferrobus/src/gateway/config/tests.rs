@@ -4,6 +4,7 @@ use ferrobus_proto::frame::{LineConfig, LineTiming, Parity, StopBits};
 
 use super::{LineDefaults, LinesFile, LinesFileError, parse};
 use crate::gateway::{GatewayLine, Route, Routes};
+use crate::port::Framing;
 use crate::{Backoff, ClientConfig};
 
 /// What a command line without options gives: 19200 8E1, a 1 s timeout, no retries, no
@@ -243,4 +244,98 @@ fn a_mistake_on_a_10_mb_line_is_told_in_a_few_hundred_bytes_with_its_place() {
     let e = error(&huge);
     assert!(e.len() < 2_000, "{} bytes", e.len());
     assert!(e.contains(":4:") && e.contains('…'), "{}", e.get(..300).unwrap_or(&e));
+}
+
+const MIXED: &str = r#"
+[[line]]
+port = "/dev/ttyA"
+units = ["1-9"]
+
+[[line]]
+tcp = "10.0.0.7"
+timeout = "700ms"
+retries = 1
+reopen = false
+renumber = { 100 = 1 }
+
+[[line]]
+rtu-tcp = "10.0.0.8:4001"
+t35 = "4ms"
+units = ["20-29"]
+
+[[line]]
+tcp = "[::1]:1502"
+units = [30]
+"#;
+
+#[test]
+fn tcp_and_rtu_tcp_lines_mix_with_serial_ones_each_with_its_routes_and_settings() {
+    let (lines, routes) = lines(MIXED).unwrap();
+    let names: Vec<String> = lines.iter().map(|l| l.transport.describe()).collect();
+    assert_eq!(names, ["/dev/ttyA at 19200 8E1", "10.0.0.7:502", "10.0.0.8:4001", "[::1]:1502"]);
+    let framings: Vec<_> = lines.iter().map(|l| l.transport.framing()).collect();
+    assert_eq!(framings, [Framing::Rtu, Framing::Mbap, Framing::Rtu, Framing::Mbap]);
+    let remote: Vec<bool> = lines.iter().map(|l| l.transport.is_remote()).collect();
+    assert_eq!(remote, [false, true, true, true]);
+    assert_eq!((lines[1].client.timeout, lines[1].client.retries), (Duration::from_millis(700), 1));
+    assert!(!lines[1].transport.reopens() && lines[2].transport.reopens());
+    assert_eq!(lines[2].transport.timing().t3_5(), Duration::from_millis(4));
+    let on = |line, unit| Some(Route { line, unit });
+    assert_eq!(
+        (routes.get(5), routes.get(100), routes.get(25), routes.get(30)),
+        (on(0, 5), on(1, 1), on(2, 25), on(3, 30))
+    );
+    assert_eq!(routes.get(10), None);
+}
+
+#[test]
+fn a_line_is_exactly_one_of_port_tcp_and_rtu_tcp() {
+    refused(
+        "[[line]]\nport = \"/dev/ttyA\"\ntcp = \"10.0.0.7\"\n",
+        3,
+        &["[[line]] 0", "tcp: a line is one of port, tcp and rtu-tcp, and this one has port already"],
+    );
+    refused(
+        "[[line]]\ntcp = \"10.0.0.7\"\nrtu-tcp = \"10.0.0.7:4001\"\n",
+        3,
+        &["rtu-tcp: a line is one of port, tcp and rtu-tcp, and this one has tcp already"],
+    );
+    let none = error("[[line]]\ntimeout = \"1s\"\n");
+    assert!(none.contains("[[line]] 0, no port: give the serial port") && none.contains("tcp = "), "{none}");
+    refused("[[line]]\ntcp = \"\"\n", 2, &["tcp: the address is empty"]);
+    refused("[[line]]\ntcp = 502\n", 2, &["tcp: HOST:PORT in quotes, not a integer"]);
+    refused("[[line]]\nrtu-tcp = \"10.0.0.8\"\n", 2, &["rtu-tcp: '10.0.0.8' needs its port, HOST:PORT"]);
+}
+
+#[test]
+fn a_serial_key_on_a_tcp_line_is_named_and_so_is_a_device_given_twice() {
+    for key in [
+        "baud = 9600",
+        "parity = \"even\"",
+        "ascii = true",
+        "rs485 = \"rts\"",
+        "low-latency = true",
+        "echo = true",
+        "t35 = \"2ms\"",
+        "turnaround = \"5ms\"",
+    ] {
+        let name = key.split_once(' ').unwrap().0;
+        refused(
+            &format!("[[line]]\ntcp = \"10.0.0.7\"\n{key}\n"),
+            3,
+            &[&format!(
+                "[[line]] 0, {name}: a serial port's setting, and a Modbus/TCP line (tcp = \"10.0.0.7:502\") has none"
+            )],
+        );
+    }
+    refused(
+        "[[line]]\nrtu-tcp = \"h:4001\"\nstop-bits = 2\n",
+        3,
+        &["stop-bits: a serial port's setting, and an RTU-over-TCP line (rtu-tcp = \"h:4001\") has none"],
+    );
+    // RTU over TCP keeps its frame gap: t35 is taken there.
+    assert!(lines("[[line]]\nrtu-tcp = \"h:4001\"\nt35 = \"3ms\"\n").is_ok());
+    // "h" is "h:502": the same device twice.
+    let twice = "[[line]]\ntcp = \"h:502\"\nunits = [1]\n[[line]]\ntcp = \"h\"\nunits = [2]\n";
+    refused(twice, 5, &["[[line]] 1", "tcp: h:502 is a line already (gw.toml:2:7)"]);
 }
