@@ -16,6 +16,9 @@
 //! - [`fault_rules`]: fault rules aimed at requests, each met by pymodbus and libmodbus clients.
 //! - [`gateway`]: the peer clients through `ferrobus gateway` to the sim, the client through it
 //!   to the peer RTU servers, and the TCP server's hostile-input tests against the gateway.
+//! - [`gateway_tcp`]: `ferrobus gateway --tcp` as a multiplexer in front of the libmodbus and
+//!   pymodbus TCP servers: many clients, read-only, the cache, a device down at start or
+//!   restarted mid-run, and a lines file with two TCP lines.
 //! - [`port_reopen`]: a serial port that disappears and comes back, through `ferrobus::Client`.
 //! - [`reply_timing`]: when the simulator's reply starts, with a 20 ms response wait.
 //! - [`skips`]: what a test whose peer is missing does, in and outside CI.
@@ -38,6 +41,7 @@ mod device_profile;
 mod drive_profiles;
 mod fault_rules;
 mod gateway;
+mod gateway_tcp;
 mod mbpoll_vs_sim;
 mod port_reopen;
 mod reply_timing;

@@ -110,6 +110,15 @@ pub(crate) fn peer_server(stack: Stack, over: Over, unit: u8) -> Served {
     Served { _proc: proc, _pair: pair, _dir: dir, link }
 }
 
+/// The peer fixture server of `stack` on 127.0.0.1:`port` (Modbus/TCP) for `unit`, with
+/// `extra` arguments (libmodbus's `--service-us`, say), once it is ready: for a test that
+/// stops a server and starts another on the same port.
+pub(crate) fn peer_tcp_server_on(stack: Stack, port: u16, unit: u8, extra: &[&str]) -> Proc {
+    let mut command = stack.command("server");
+    command.args(["--tcp", &port.to_string(), "--unit", &unit.to_string()]).args(extra);
+    ready(stack, &mut command)
+}
+
 /// The peer fixture server of `stack` on the tty `path` (RTU), once it is ready.
 pub(crate) fn peer_server_on(stack: Stack, path: &Path, unit: u8) -> Proc {
     let mut command = stack.command("server");
