@@ -8,15 +8,19 @@ transactions are counted opens once every client has connected and written its b
 `--warmup` more seconds) and lasts `--seconds`; a reply counts if it arrived inside it. A reply is a mismatch when its transaction id, unit or function is not the request's, or
 a read-back is not the values written; an exception reply is counted by code; a connection
 lost is counted as lost. Clients of `--dead-unit` read a unit nobody answers and are
-counted apart. Prints one JSON object.
+counted apart. Each `--cpu NAME=PID` adds the CPU time the process PID spent (all its
+threads, from /proc/PID/task/*/schedstat) while the window was open, and that per counted
+transaction, under "cpu" (with "clients": this program's own, when any `--cpu` is given).
+Prints one JSON object.
 
 Usage: gateway_load.py --addr HOST:PORT --clients N --seconds S [--units 1,2,...]
-                       [--dead-unit U --dead-clients K]
+                       [--dead-unit U --dead-clients K] [--cpu NAME=PID ...]
 """
 
 import argparse
 import asyncio
 import json
+import os
 import statistics
 import struct
 import time
@@ -59,6 +63,7 @@ class Client:
             reader, writer = await asyncio.wait_for(asyncio.open_connection(host, port), timeout)
         except (OSError, asyncio.TimeoutError):
             self.lost = True
+            await ready.leave()
             return
         tid = 0
         try:
@@ -123,6 +128,45 @@ class Barrier:
                 self.event.set()
 
 
+def cpu_ns(pid):
+    """The CPU time of every thread of process pid so far, in nanoseconds (None if it is gone)."""
+    total = 0
+    try:
+        tasks = os.listdir(f"/proc/{pid}/task")
+    except OSError:
+        return None
+    for task in tasks:
+        try:
+            with open(f"/proc/{pid}/task/{task}/schedstat") as f:
+                total += int(f.read().split()[0])
+        except (OSError, ValueError, IndexError):
+            pass  # a thread that ended between the listing and the read
+    return total
+
+
+async def sample_cpu(ready, pids):
+    """CPU seconds of each named process over the window: {name: (seconds, sampled interval)}."""
+    await ready.event.wait()
+    await asyncio.sleep(max(0.0, ready.begin[0] - time.monotonic()))
+    start = {name: cpu_ns(pid) for name, pid in pids.items()}
+    t0 = time.monotonic()
+    await asyncio.sleep(max(0.0, ready.until - t0))
+    t1 = time.monotonic()
+    out = {}
+    for name, pid in pids.items():
+        end = cpu_ns(pid)
+        if start[name] is not None and end is not None:
+            out[name] = ((end - start[name]) / 1e9, t1 - t0)
+    return out
+
+
+def named_pid(text):
+    name, sep, pid = text.partition("=")
+    if not sep or not name or not pid.isdigit():
+        raise argparse.ArgumentTypeError(f"want NAME=PID, not {text!r}")
+    return name, int(pid)
+
+
 async def main():
     p = argparse.ArgumentParser()
     p.add_argument("--addr", required=True)
@@ -133,6 +177,8 @@ async def main():
     p.add_argument("--dead-clients", type=int, default=0)
     p.add_argument("--timeout", type=float, default=120.0)
     p.add_argument("--warmup", type=float, default=0.0, help="seconds run before the window opens")
+    p.add_argument("--cpu", type=named_pid, action="append", default=[], metavar="NAME=PID",
+                   help="report the CPU time of process PID over the window (repeatable)")
     a = p.parse_args()
     host, port = a.addr.rsplit(":", 1)
     units = [int(u) for u in a.units.split(",")]
@@ -144,7 +190,23 @@ async def main():
         def __iter__(self):
             return iter((ready.begin, ready.until))
 
+    watched = dict(a.cpu, clients=os.getpid()) if a.cpu else {}
+    sampler = asyncio.create_task(sample_cpu(ready, watched)) if watched else None
     await asyncio.gather(*(c.run(host, int(port), ready, Window(), a.timeout) for c in clients))
+    cpu = {}
+    if sampler is not None:
+        if ready.event.is_set():
+            sampled = await sampler
+        else:
+            sampler.cancel()
+            sampled = {}
+        for name, (seconds, interval) in sampled.items():
+            # Scaled from the sampled interval to the window (they differ by the loop's lateness).
+            in_window = seconds * a.seconds / interval if interval > 0 else seconds
+            cpu[name] = {
+                "seconds": round(in_window, 4),
+                "share": round(seconds / interval, 4) if interval > 0 else None,
+            }
     elapsed = a.seconds
     live = [c for c in clients if not c.dead]
     counts = [c.done for c in live]
@@ -158,6 +220,9 @@ async def main():
         if c.dead:
             for code, n in c.exceptions.items():
                 dead_exceptions[str(code)] = dead_exceptions.get(str(code), 0) + n
+    done = sum(counts)
+    for entry in cpu.values():
+        entry["us_per_transaction"] = round(entry["seconds"] * 1e6 / done, 2) if done else None
     q = lambda f: round(lat[min(len(lat) - 1, int(f * len(lat)))] * 1000, 2) if lat else None
     print(json.dumps({
         "clients": a.clients,
@@ -174,6 +239,7 @@ async def main():
         "lost": sum(1 for c in clients if c.lost),
         "exceptions": exceptions,
         "dead_unit_exceptions": dead_exceptions,
+        **({"cpu": cpu} if a.cpu else {}),
     }))
 
 
