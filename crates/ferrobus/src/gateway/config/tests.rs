@@ -236,6 +236,9 @@ fn the_readme_example_reads_as_it_says() {
     let on = |line, unit| Some(Route { line, unit });
     assert_eq!((routes.get(2), routes.get(15), routes.get(21)), (on(0, 2), on(0, 15), None));
     assert_eq!((routes.get(30), routes.get(41), routes.get(50)), (on(1, 3), on(1, 1), on(1, 10)));
+    assert_eq!(lines[2].transport.describe(), "192.168.1.50:502");
+    assert_eq!((lines[2].transport.framing(), lines[2].client.timeout), (Framing::Mbap, Duration::from_secs(1)));
+    assert_eq!(routes.get(100), on(2, 1));
 }
 
 #[test]
