@@ -35,8 +35,8 @@ use crate::server_tls::ServerTlsArgs;
 /// Arguments of `ferrobus sim`.
 #[derive(Args, Clone, Debug)]
 pub(crate) struct SimArgs {
-    /// Device profile: omron-3g3rx, sdp-servo, generic, or a .toml file; each --unit takes the
-    /// --profile written before it (or the first one)
+    /// Device profile: omron-3g3rx, sdp-servo, generic, sunspec-inverter, or a .toml file; each
+    /// --unit takes the --profile written before it (or the first one)
     #[arg(long, required = true, value_name = "NAME|FILE")]
     profile: Vec<String>,
 

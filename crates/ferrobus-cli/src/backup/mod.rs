@@ -59,7 +59,7 @@ pub(crate) struct BackupArgs {
 pub(crate) fn profile(connection: &ConnectArgs, command: &str) -> Result<View, CliError> {
     let Some(name) = &connection.device else {
         return Err(CliError::Usage(format!(
-            "{command} needs the device's profile: --device NAME (omron-3g3rx, sdp-servo, generic) or --device FILE"
+            "{command} needs the device's profile: --device NAME (omron-3g3rx, sdp-servo, generic, sunspec-inverter), --device sunspec (discovered) or --device FILE"
         )));
     };
     if name == crate::sunspec::DEVICE {

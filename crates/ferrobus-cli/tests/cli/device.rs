@@ -214,7 +214,10 @@ fn a_point_the_device_refuses_is_reported_and_the_others_still_print() {
 #[test]
 fn get_and_set_need_a_device_and_known_names() {
     let err = stderr(&offline(&["--tcp", "127.0.0.1:1", "get", "d001"]).code(2));
-    assert!(err.contains("get needs --device PROFILE: a built-in one (omron-3g3rx, sdp-servo, generic)"), "{err}");
+    assert!(
+        err.contains("get needs --device PROFILE: a built-in one (omron-3g3rx, sdp-servo, generic, sunspec-inverter)"),
+        "{err}"
+    );
     let err = stderr(&offline(&["--tcp", "127.0.0.1:1", "--device", "omron-3g3rx", "get", "x999"]).code(2));
     assert!(err.contains("omron-3g3rx has no parameter \"x999\""), "{err}");
     let err = stderr(&offline(&["--tcp", "127.0.0.1:1", "--device", "omron-3g3rx", "set", "d00*", "1"]).code(2));
