@@ -16,6 +16,10 @@ use crate::address::{Address, AddressArgs, Table, split};
 use crate::exit::{CliError, Numbering};
 use crate::value::ValueArgs;
 
+/// The `--device` name whose profile is discovered from the device: its SunSpec models
+/// ([`crate::sunspec`]).
+pub(crate) const SUNSPEC: &str = "sunspec";
+
 /// Options that say how to reach the device.
 #[derive(Args, Clone, Debug)]
 #[command(next_help_heading = "Connection")]
@@ -129,7 +133,7 @@ impl ConnectArgs {
     /// The `--device` profile, if one was given; a profile that does not load is a usage error
     /// naming the file and the line.
     pub(crate) fn profile(&self) -> Result<Option<ferrobus_profile::Profile>, CliError> {
-        if self.device.as_deref() == Some(crate::sunspec::DEVICE) {
+        if self.device.as_deref() == Some(SUNSPEC) {
             return match &self.sunspec {
                 Some(profile) => Ok(Some(profile.as_ref().clone())),
                 None => Err(CliError::Usage(

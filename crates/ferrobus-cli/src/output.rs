@@ -266,6 +266,29 @@ pub(crate) fn json_line(doc: &Value) -> String {
     format!("{doc}\n")
 }
 
+/// Writes `text` to `path`, a new file, or over the one there with `force`; a failure names
+/// the file, and a file kept says `if_kept` (how to replace it).
+pub(crate) fn write_file(path: &std::path::Path, text: &str, force: bool, if_kept: &str) -> Result<(), CliError> {
+    let what = path.display().to_string();
+    let mut open = std::fs::OpenOptions::new();
+    open.write(true);
+    if force {
+        open.create(true).truncate(true);
+    } else {
+        open.create_new(true);
+    }
+    let mut file = open.open(path).map_err(|source| {
+        if source.kind() == std::io::ErrorKind::AlreadyExists {
+            CliError::Usage(format!("{what} exists and is kept: {if_kept}"))
+        } else {
+            CliError::Output { what: what.clone(), source }
+        }
+    })?;
+    std::io::Write::write_all(&mut file, text.as_bytes())
+        .and_then(|()| file.sync_all())
+        .map_err(|source| CliError::Output { what, source })
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

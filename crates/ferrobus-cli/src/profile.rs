@@ -2,7 +2,6 @@
 //! profiles, offline.
 
 use std::fmt::Write as _;
-use std::io::Write as _;
 use std::path::{Path, PathBuf};
 
 use clap::{Args, Subcommand, ValueEnum};
@@ -125,7 +124,7 @@ pub(crate) fn run(args: &ProfileArgs) -> Result<(), CliError> {
             let profile = crate::connect::load_profile(name)?;
             let text = exchange::export_csv(&profile);
             match output {
-                Some(path) => write_new(path, &text, *force),
+                Some(path) => output::write_file(path, &text, *force, "give --force to replace it"),
                 None => output::print(&text),
             }
         }
@@ -161,7 +160,7 @@ fn import(
         Err(e) => return Err(CliError::Usage(e.to_string())),
     };
     if let Some(path) = output {
-        write_new(path, &imported.toml, force)?;
+        output::write_file(path, &imported.toml, force, "give --force to replace it")?;
     }
     let n = imported.unmapped.len();
     if format == Format::Json {
@@ -196,26 +195,6 @@ fn not_mapped(list: &[exchange::Unmapped]) -> String {
         let _ = writeln!(lines, "not mapped: {u}");
     }
     lines
-}
-
-/// Writes `text` to a new file at `path` (or over it with `force`); a failure names the file.
-pub(crate) fn write_new(path: &Path, text: &str, force: bool) -> Result<(), CliError> {
-    let what = path.display().to_string();
-    let mut open = std::fs::OpenOptions::new();
-    open.write(true);
-    if force {
-        open.create(true).truncate(true);
-    } else {
-        open.create_new(true);
-    }
-    let mut file = open.open(path).map_err(|source| {
-        if source.kind() == std::io::ErrorKind::AlreadyExists {
-            CliError::Usage(format!("{what} exists: give --force to replace it"))
-        } else {
-            CliError::Output { what: what.clone(), source }
-        }
-    })?;
-    file.write_all(text.as_bytes()).and_then(|()| file.sync_all()).map_err(|source| CliError::Output { what, source })
 }
 
 fn list(format: Format) -> Result<(), CliError> {

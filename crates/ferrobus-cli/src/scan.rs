@@ -342,15 +342,8 @@ fn unit_file(path: &std::path::Path, unit: u8) -> String {
 
 /// `--csv`: one row per model found, with the unit and setting.
 fn walks_rows(walks: &[Walk]) -> Rows {
-    let mut rows = Rows::new(&[
-        ("unit", Align::Right),
-        ("setting", Align::Left),
-        ("model", Align::Right),
-        ("name", Align::Left),
-        ("start", Align::Right),
-        ("length", Align::Right),
-        ("definition", Align::Left),
-    ]);
+    let columns = [("unit", Align::Right), ("setting", Align::Left)];
+    let mut rows = Rows::new(&[&columns[..], &crate::sunspec::MODEL_COLUMNS[..]].concat());
     for (unit, line, found) in walks {
         for m in found.iter().flat_map(|f| &f.models) {
             let mut cells = vec![unit.to_string(), line.to_string()];

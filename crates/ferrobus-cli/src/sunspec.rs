@@ -16,7 +16,7 @@ use crate::exit::CliError;
 use crate::output::{self, Align, Format, Rows};
 
 /// The `--device` name that discovers the profile.
-pub(crate) const DEVICE: &str = "sunspec";
+pub(crate) use crate::connect::SUNSPEC as DEVICE;
 
 /// The model definitions: built-in plus `--sunspec-models`.
 pub(crate) fn definitions(connection: &ConnectArgs) -> Result<Definitions, CliError> {
@@ -95,7 +95,7 @@ pub(crate) fn save(
         "# Written by `ferrobus scan --sunspec --save-profile` from {origin}: the models found then, their\n\
          # scale factors as read then. A device whose scale factors change needs a new scan.\n\n"
     );
-    crate::profile::write_new(path, &format!("{header}{text}"), false)?;
+    output::write_file(path, &format!("{header}{text}"), false, "remove it, or save to another file")?;
     let what = format!("{}: {} points of {} models\n", path.display(), profile.points().len(), found.models.len());
     output::write_to(&mut std::io::stderr(), "stderr", &format!("scan: profile saved to {what}"))
 }
@@ -127,15 +127,18 @@ pub(crate) fn models_json(found: &Discovery) -> Vec<serde_json::Value> {
         .collect()
 }
 
+/// The columns of a model found, as [`model_cells`] fills them.
+pub(crate) const MODEL_COLUMNS: [(&str, Align); 5] = [
+    ("model", Align::Right),
+    ("name", Align::Left),
+    ("start", Align::Right),
+    ("length", Align::Right),
+    ("definition", Align::Left),
+];
+
 /// The models of `found` as rows: model, name, start, length, definition.
 pub(crate) fn model_rows(found: &Discovery) -> Rows {
-    let mut rows = Rows::new(&[
-        ("model", Align::Right),
-        ("name", Align::Left),
-        ("start", Align::Right),
-        ("length", Align::Right),
-        ("definition", Align::Left),
-    ]);
+    let mut rows = Rows::new(&MODEL_COLUMNS);
     for m in &found.models {
         rows.push(model_cells(m));
     }

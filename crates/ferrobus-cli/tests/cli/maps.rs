@@ -80,7 +80,7 @@ fn json_gives_the_profile_and_the_list_in_one_document() {
 fn an_existing_output_is_kept_unless_forced_and_bad_input_is_a_usage_error() {
     let (out, _) = import(&example("meter.csv"), "csv", &["--first-address", "1"], "kept");
     let again = offline(&["profile", "import", &example("meter.csv"), "--from", "csv", "-o", out.path()]).code(2);
-    assert!(stderr(&again).contains("exists: give --force to replace it"), "{}", stderr(&again));
+    assert!(stderr(&again).contains("exists and is kept: give --force to replace it"), "{}", stderr(&again));
     offline(&["profile", "import", &example("meter.csv"), "--from", "csv", "-o", out.path(), "--force"]).success();
     let missing = offline(&["profile", "import", "/nonexistent/map.csv", "--from", "csv"]).code(2);
     assert!(stderr(&missing).contains("/nonexistent/map.csv"), "{}", stderr(&missing));

@@ -70,7 +70,9 @@ pub(super) fn read(text: &str, draft: &mut Draft) -> Result<(), ImportError> {
     for (_, hub) in &hubs {
         if let Value::Mapping(map) = hub {
             for platform in PLATFORMS {
-                for entity in map.get(*platform).map(items).unwrap_or_default() {
+                for entity in
+                    map.get(*platform).map(items).unwrap_or_default().into_iter().filter_map(Value::as_mapping)
+                {
                     let unit = entity_unit(entity);
                     if !units.contains(&unit) {
                         units.push(unit);
@@ -101,7 +103,7 @@ pub(super) fn read(text: &str, draft: &mut Draft) -> Result<(), ImportError> {
                         draft.unmapped(&here, platform, &shown(entity), "an entity is a map: skipped");
                         continue;
                     };
-                    let of = entity_unit(&Value::Mapping(entity.clone()));
+                    let of = entity_unit(entity);
                     if of != unit {
                         let why = format!("an entity of unit {of}, not of unit {unit} (the one imported): skipped");
                         draft.unmapped(&here, "slave", &of.to_string(), &why);
@@ -144,7 +146,7 @@ fn hubs(root: &Value) -> Option<Vec<(String, &Value)>> {
 
 /// An entity's unit: `slave` or `device_address`, 0 when neither is given (Home Assistant's
 /// default).
-fn entity_unit(entity: &Value) -> u8 {
+fn entity_unit(entity: &Mapping) -> u8 {
     entity.get("slave").or_else(|| entity.get("device_address")).and_then(yaml::unit).unwrap_or(0)
 }
 
@@ -199,10 +201,11 @@ fn rest(m: &Mapping, known: &[&str], place: &str, draft: &mut Draft) {
     yaml::rest(m, &all, place, &why, draft);
 }
 
-/// The value keys of a sensor or climate: `data_type`, `count`, `swap`, `reverse_order`,
-/// `scale`, `offset`, `unit_of_measurement`. `false` when the type has no profile equivalent.
+/// The keys of a sensor or climate that say what its registers hold.
 const VALUE_KEYS: &[&str] = &["data_type", "count", "swap", "reverse_order", "scale", "offset", "unit_of_measurement"];
 
+/// Sets `entry`'s type, length, order, scale, offset and unit from [`VALUE_KEYS`] of `m`;
+/// `false` (the entity listed) when its type has no profile equivalent.
 fn value_of(m: &Mapping, entry: &mut Entry, place: &str, draft: &mut Draft) -> bool {
     let count = match m.get("count") {
         None => None,
@@ -300,14 +303,35 @@ fn value_of(m: &Mapping, entry: &mut Entry, place: &str, draft: &mut Draft) -> b
     true
 }
 
+/// The `input_type`s of a sensor and a climate's current temperature, the default first.
+const REGISTERS: &[(&str, Table)] = &[("holding", Table::Holding), ("input", Table::Input)];
+
+/// The `input_type`s of a binary sensor, the default first.
+const BINARY: &[(&str, Table)] = &[
+    ("coil", Table::Coils),
+    ("discrete_input", Table::DiscreteInputs),
+    ("holding", Table::Holding),
+    ("input", Table::Input),
+];
+
+/// The table `m`'s `input_type` names among `known` (the first when it names none); `None`,
+/// with the entity listed for `why`, when it names another.
+fn input_table(m: &Mapping, known: &[(&str, Table)], place: &str, why: &str, draft: &mut Draft) -> Option<Table> {
+    let Some(given) = m.get("input_type").and_then(text) else {
+        return known.first().map(|(_, table)| *table);
+    };
+    let table = known.iter().find(|(name, _)| *name == given).map(|(_, table)| *table);
+    if table.is_none() {
+        draft.unmapped(place, "input_type", &given, why);
+    }
+    table
+}
+
+/// A sensor: a read-only holding or input register.
 fn sensor(m: &Mapping, name: &str, address: u16, place: &str, draft: &mut Draft) {
-    let table = match m.get("input_type").and_then(text).as_deref() {
-        None | Some("holding") => Table::Holding,
-        Some("input") => Table::Input,
-        Some(other) => {
-            draft.unmapped(place, "input_type", other, "a sensor reads holding or input registers: skipped");
-            return;
-        }
+    let why = "a sensor reads holding or input registers: skipped";
+    let Some(table) = input_table(m, REGISTERS, place, why, draft) else {
+        return;
     };
     let mut entry = Entry::new(table, address, name, place.to_string());
     if !value_of(m, &mut entry, place, draft) {
@@ -333,29 +357,21 @@ fn sensor(m: &Mapping, name: &str, address: u16, place: &str, draft: &mut Draft)
     draft.add(entry);
 }
 
+/// A binary sensor: a read-only coil, discrete input or register.
 fn binary_sensor(m: &Mapping, name: &str, address: u16, place: &str, draft: &mut Draft) {
-    let table = match m.get("input_type").and_then(text).as_deref() {
-        None | Some("coil") => Table::Coils,
-        Some("discrete_input") => Table::DiscreteInputs,
-        Some("holding") => Table::Holding,
-        Some("input") => Table::Input,
-        Some(other) => {
-            draft.unmapped(
-                place,
-                "input_type",
-                other,
-                "not an input type (coil, discrete_input, holding, input): skipped",
-            );
-            return;
-        }
+    let why = "not an input type (coil, discrete_input, holding, input): skipped";
+    let Some(table) = input_table(m, BINARY, place, why, draft) else {
+        return;
     };
     let mut entry = Entry::new(table, address, name, place.to_string());
     if !table.is_bits() {
         entry.description = "on when not 0 (a Home Assistant binary sensor)".to_string();
     }
-    if let Some(value) = m.get("slave_count").or_else(|| m.get("virtual_count")) {
-        let why = "more binary sensors at the addresses that follow, named by Home Assistant: not imported";
-        draft.unmapped(place, "slave_count", &shown(value), why);
+    for key in ["slave_count", "virtual_count"] {
+        if let Some(value) = m.get(key) {
+            let why = "more binary sensors at the addresses that follow, named by Home Assistant: not imported";
+            draft.unmapped(place, key, &shown(value), why);
+        }
     }
     rest(m, &["input_type", "slave_count", "virtual_count"], place, draft);
     draft.add(entry);
@@ -388,6 +404,7 @@ fn raw(m: &Mapping, key: &str, default: u64, place: &str, draft: &mut Draft) -> 
     }
 }
 
+/// A switch, light or fan: a read/write register or coil, and its verify point.
 fn switch(m: &Mapping, name: &str, address: u16, place: &str, draft: &mut Draft) {
     let Some(table) = written_table(m.get("write_type")) else {
         let shown_type = m.get("write_type").map(shown).unwrap_or_default();
@@ -457,19 +474,11 @@ fn switch(m: &Mapping, name: &str, address: u16, place: &str, draft: &mut Draft)
     yaml::rest(&verify, &known, &here, &|_| "no profile equivalent".to_string(), draft);
 }
 
+/// A climate: its current temperature and its target.
 fn climate(m: &Mapping, name: &str, address: u16, place: &str, draft: &mut Draft) {
-    let table = match m.get("input_type").and_then(text).as_deref() {
-        None | Some("holding") => Table::Holding,
-        Some("input") => Table::Input,
-        Some(other) => {
-            draft.unmapped(
-                place,
-                "input_type",
-                other,
-                "the current temperature is a holding or input register: skipped",
-            );
-            return;
-        }
+    let why = "the current temperature is a holding or input register: skipped";
+    let Some(table) = input_table(m, REGISTERS, place, why, draft) else {
+        return;
     };
     let mut current = Entry::new(table, address, name, place.to_string());
     if !value_of(m, &mut current, place, draft) {
@@ -518,6 +527,7 @@ fn climate(m: &Mapping, name: &str, address: u16, place: &str, draft: &mut Draft
     rest(m, &known, place, draft);
 }
 
+/// A cover: its register or coil, and its status register.
 fn cover(m: &Mapping, name: &str, address: u16, place: &str, draft: &mut Draft) {
     let Some(table) = written_table(m.get("input_type")) else {
         let shown_type = m.get("input_type").map(shown).unwrap_or_default();
