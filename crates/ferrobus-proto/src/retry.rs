@@ -151,6 +151,13 @@ pub const IO_BACKOFF_INITIAL: Duration = Duration::from_millis(10);
 /// The longest wait before reopening, however many IO failures came in a row.
 pub const IO_BACKOFF_MAX: Duration = Duration::from_millis(500);
 
+/// The wait before the next open after `failures` IO failures in a row (1 or more):
+/// [`IO_BACKOFF_INITIAL`], doubling with each, up to [`IO_BACKOFF_MAX`].
+pub fn io_backoff_wait(failures: u32) -> Duration {
+    let doublings = failures.saturating_sub(1).min(16);
+    IO_BACKOFF_INITIAL.saturating_mul(1 << doublings).min(IO_BACKOFF_MAX)
+}
+
 /// IO failures in a row and when the port may be opened next: after each failed open, read
 /// or write the next open waits [`IO_BACKOFF_INITIAL`], doubling up to [`IO_BACKOFF_MAX`].
 #[derive(Clone, Copy, PartialEq, Eq, Debug, Default)]
@@ -163,9 +170,7 @@ impl IoBackoff {
     /// Counts an IO failure at `now`; returns when the port may be opened next.
     pub fn failed(&mut self, now: Instant) -> Instant {
         self.failures = self.failures.saturating_add(1);
-        let doublings = self.failures.saturating_sub(1).min(16);
-        let wait = IO_BACKOFF_INITIAL.saturating_mul(1 << doublings).min(IO_BACKOFF_MAX);
-        let at = now.saturating_add(wait);
+        let at = now.saturating_add(io_backoff_wait(self.failures));
         self.reopen_at = Some(at);
         at
     }

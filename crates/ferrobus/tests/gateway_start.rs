@@ -95,8 +95,16 @@ async fn a_tcp_device_down_at_start_gets_0a_then_is_connected_once_up_and_reconn
     assert_eq!(read(&mut client, 1).await, [0x83, 0x0A], "the device is down: gateway path unavailable");
     let down = &gateway.stats()[0];
     assert_eq!((down.connects, down.connect_failures, down.total.line_errors), (0, 1, 1), "{down}");
+    // While it is down, requests are answered at once, not each after its own attempt: a
+    // burst of 50 makes a few attempts (one per hold of 10 ms doubling), not 50.
+    for t in 100..150 {
+        assert_eq!(read(&mut client, t).await, [0x83, 0x0A]);
+    }
+    let burst = &gateway.stats()[0];
+    assert_eq!(burst.total.line_errors, 51, "{burst}");
+    assert!(burst.connect_failures < 10, "one attempt per hold, not per request: {burst}");
 
-    // The device comes up: the next request connects (after the reconnect backoff).
+    // The device comes up: a request after the hold connects.
     let listener = TcpListener::bind(addr).await.unwrap();
     let device = tokio::spawn(async move {
         let (mut device, _) = listener.accept().await.unwrap();
@@ -107,16 +115,29 @@ async fn a_tcp_device_down_at_start_gets_0a_then_is_connected_once_up_and_reconn
         answer(&mut device, 0x5678).await;
         device
     });
-    assert_eq!(read(&mut client, 2).await, [0x03, 0x02, 0x12, 0x34]);
-    // A request sent before the gateway has seen the drop may get 0x0A; one after is served.
-    let mut t = 3;
+    // Requests within the hold still get 0x0A; the first after it is served.
+    let mut t = 2;
     let answered = loop {
         let reply = read(&mut client, t).await;
         if reply != [0x83, 0x0A] {
             break reply;
         }
-        assert!(t < 50, "not reconnected after {t} requests");
+        assert!(t < 1000, "not connected after {t} requests");
         t += 1;
+        tokio::time::sleep(std::time::Duration::from_millis(5)).await;
+    };
+    assert_eq!(answered, [0x03, 0x02, 0x12, 0x34]);
+    // A request sent before the gateway has seen the drop may get 0x0A, and so do those within
+    // the hold after it; one after is served.
+    let mut t = 1000;
+    let answered = loop {
+        let reply = read(&mut client, t).await;
+        if reply != [0x83, 0x0A] {
+            break reply;
+        }
+        assert!(t < 2000, "not reconnected after {} requests", t - 1000);
+        t += 1;
+        tokio::time::sleep(std::time::Duration::from_millis(5)).await;
     };
     assert_eq!(answered, [0x03, 0x02, 0x56, 0x78]);
     let _device = device.await.unwrap();

@@ -24,6 +24,7 @@ use std::time::Duration;
 
 use ferrobus_proto::master::HeardInstead;
 use ferrobus_proto::pdu::Request;
+use ferrobus_proto::retry::io_backoff_wait;
 use ferrobus_proto::{ExceptionCode, FunctionCode};
 use tokio::sync::{Notify, oneshot};
 
@@ -160,8 +161,30 @@ impl LineQueue {
     }
 }
 
-/// The line's one master: takes jobs in turn and forwards each through `client`.
+/// A line found down (its port failed, its device unreachable or gone): until when the
+/// requests that come are answered 0x0A at once, and how many times in a row it was found so.
+#[derive(Clone, Copy, Debug)]
+struct Down {
+    retry_at: tokio::time::Instant,
+    times: u32,
+}
+
+impl Down {
+    /// The line found down at `now`, after `before`: held for the driver's own reconnect
+    /// backoff (10 ms, doubling with each time in a row, at most 500 ms), after which the
+    /// next request tries the line again.
+    fn after(before: Option<Down>, now: tokio::time::Instant) -> Down {
+        let times = before.map_or(1, |d| d.times.saturating_add(1));
+        Down { retry_at: now + io_backoff_wait(times), times }
+    }
+}
+
+/// The line's one master: takes jobs in turn and forwards each through `client`. While the
+/// line is down, the requests that come are answered 0x0A at once instead of each waiting out
+/// a reconnect (a device that is unreachable costs a whole connect timeout per attempt): one
+/// request tries the line again when the hold has passed.
 pub(crate) async fn run(queue: Arc<LineQueue>, client: Client, cache: Option<Arc<Cache>>, late_guard: Duration) {
+    let mut down: Option<Down> = None;
     while let Some(job) = queue.next().await {
         // A broadcast goes out even with nobody waiting for its end (no acknowledgement).
         if job.reply.is_closed() && job.unit_out != 0 {
@@ -170,7 +193,17 @@ pub(crate) async fn run(queue: Arc<LineQueue>, client: Client, cache: Option<Arc
             continue;
         }
         let started = tokio::time::Instant::now();
-        let (reply, ended) = forward(&client, job.unit_out, &job.pdu).await;
+        let (reply, ended) = match down {
+            Some(d) if started < d.retry_at => {
+                let function = job.pdu.first().copied().unwrap_or_default();
+                (Some(exception(function, ExceptionCode::GatewayPathUnavailable.value())), Ended::LineDown)
+            }
+            _ => {
+                let forwarded = forward(&client, job.unit_out, &job.pdu).await;
+                down = (forwarded.1 == Ended::LineDown).then(|| Down::after(down, tokio::time::Instant::now()));
+                forwarded
+            }
+        };
         let took = started.elapsed();
         {
             let mut stats = queue.stats();
@@ -278,6 +311,19 @@ mod tests {
         assert!(matches!(q.submit(2, j), Err(Full::Busy)));
         let stats = q.stats();
         assert_eq!((stats.total.busy, stats.units[&4].busy, stats.queue_depth, stats.queue_max), (1, 1, 2, 2));
+    }
+
+    #[test]
+    fn a_line_found_down_is_held_10_ms_doubling_to_500_ms_from_when_it_was_last_tried() {
+        let now = tokio::time::Instant::now();
+        let mut down = None;
+        let mut holds = Vec::new();
+        for _ in 0..8 {
+            let d = Down::after(down, now);
+            holds.push(d.retry_at.duration_since(now).as_millis());
+            down = Some(d);
+        }
+        assert_eq!(holds, [10, 20, 40, 80, 160, 320, 500, 500]);
     }
 
     #[test]

@@ -78,8 +78,11 @@
 //! connect it at start: a device that is down keeps nobody else from being served. Its
 //! connection is made on the first request and made again after the device closes it or a
 //! read fails, after a backoff that grows with each failure (the driver's, as for a serial
-//! port's reopening); meanwhile its requests get 0x0A. The line's counters show its connects,
-//! failed connects and lost connections.
+//! port's reopening); meanwhile its requests get 0x0A at once, without waiting for an attempt
+//! of their own (a device that does not answer a connect would cost each one the connect
+//! timeout), and the first request after the backoff tries again. A serial line whose port
+//! failed is held the same way. The line's counters show its connects, failed connects and
+//! lost connections.
 //!
 //! The reverse direction, a slave on the serial line forwarding to Modbus/TCP servers, is
 //! [`serve_reverse`].
