@@ -116,7 +116,7 @@ pub(crate) struct GatewayArgs {
 
     /// After a request that got no usable reply, keep the line quiet at least this long (a
     /// timed-out request's own late reply is awaited and dropped besides, for up to twice
-    /// --timeout)
+    /// --timeout). Not on a Modbus/TCP line: its transaction ids tell a late reply apart
     #[arg(long = "late-guard", value_name = "DURATION", default_value = "100ms", value_parser = parse_duration)]
     late_guard: Duration,
 

@@ -1,6 +1,7 @@
 //! `Gateway::start`'s typed errors: a routing mistake is told apart from a port that fails.
 //! A line to a Modbus/TCP device that is down is no error: the gateway starts, the line's
-//! requests get 0x0A until the device is up, and it reconnects after the device drops it.
+//! requests get 0x0A until the device is up, and it reconnects after the device drops it. A
+//! Modbus/TCP line is not held quiet after a timeout: its transaction ids drop a late reply.
 
 use ferrobus::gateway::{
     AllowAll, Gateway, GatewayConfig, GatewayError, GatewayLine, Inbound, Route, Routes, Timeouts,
@@ -144,4 +145,41 @@ async fn a_tcp_device_down_at_start_gets_0a_then_is_connected_once_up_and_reconn
     let stats = &gateway.stats()[0];
     assert_eq!((stats.connects, stats.disconnects), (2, 1), "{stats}");
     assert!(stats.to_string().contains("connects 2 connect-failures"), "{stats}");
+}
+
+#[tokio::test]
+async fn a_modbus_tcp_line_is_not_held_quiet_after_a_timeout_and_drops_the_late_reply_by_its_id() {
+    let listener = TcpListener::bind("127.0.0.1:0").await.unwrap();
+    let addr = listener.local_addr().unwrap();
+    let client = ClientConfig { timeout: std::time::Duration::from_millis(50), retries: 0, ..ClientConfig::default() };
+    let line = GatewayLine {
+        // A guard this long would stall the test: a TCP line must not keep it.
+        late_guard: std::time::Duration::from_secs(30),
+        ..GatewayLine::new(Transport::tcp(addr.to_string()), client)
+    };
+    let gateway = Gateway::start(config(vec![line], Routes::all_on(0))).await.unwrap();
+    let device = tokio::spawn(async move {
+        let (mut device, _) = listener.accept().await.unwrap();
+        // The first request is answered only after the gateway gave up on it, and after the
+        // second has come: the late reply, under the first one's transaction id, comes first.
+        let (late_tid, _) = frame(&mut device).await;
+        let (tid, _) = frame(&mut device).await;
+        device.write_all(&mbap(late_tid, &[0x03, 0x02, 0xDE, 0xAD])).await.unwrap();
+        device.write_all(&mbap(tid, &[0x03, 0x02, 0x00, 0x07])).await.unwrap();
+        device
+    });
+    let (mut client, server) = tokio::io::duplex(4096);
+    let serving = gateway.clone();
+    tokio::spawn(async move {
+        let mut authorize = AllowAll;
+        serving.serve_connection(server, "test client", Inbound::Mbap, &mut authorize, Timeouts::default()).await
+    });
+    assert_eq!(read(&mut client, 1).await, [0x83, 0x0B], "no reply within the timeout");
+    let second = tokio::time::timeout(std::time::Duration::from_secs(10), read(&mut client, 2)).await;
+    assert_eq!(
+        second.expect("served without the 30 s guard"),
+        [0x03, 0x02, 0x00, 0x07],
+        "its own reply, not the late one"
+    );
+    let _device = device.await.unwrap();
 }

@@ -221,7 +221,9 @@ pub(crate) async fn run(queue: Arc<LineQueue>, client: Client, cache: Option<Arc
             // The engine keeps the line closed for a reply owed to a timed-out request; what
             // else a device confused by this one may send meanwhile is awaited by nobody and
             // dropped.
-            tokio::time::sleep(late_guard).await;
+            if !late_guard.is_zero() {
+                tokio::time::sleep(late_guard).await;
+            }
         }
     }
 }

@@ -192,7 +192,9 @@ pub struct GatewayLine {
     /// Requests that may wait for the line; past it, 0x06 at once.
     pub queue: usize,
     /// After a request that got no usable reply, how long the line stays quiet before the
-    /// next request, so that a late reply is dropped and not taken for the next one's.
+    /// next request, so that a late reply is dropped and not taken for the next one's. Not
+    /// kept on a Modbus/TCP line ([`Framing::Mbap`](crate::Framing::Mbap)): its transaction
+    /// ids tell a late reply from the next one's, and the line is not held for it.
     pub late_guard: Duration,
 }
 
@@ -363,7 +365,11 @@ impl Gateway {
             };
             let stats = Arc::new(Mutex::new(LineTraffic { name, ..LineTraffic::default() }));
             let queue = Arc::new(LineQueue::new(line.queue, stats));
-            tokio::spawn(back::run(Arc::clone(&queue), client.clone(), cache.clone(), line.late_guard));
+            // A Modbus/TCP device's late reply carries its own transaction id: the master drops
+            // it, so the line need not stay quiet for it.
+            let late_guard =
+                if line.transport.framing() == crate::Framing::Mbap { Duration::ZERO } else { line.late_guard };
+            tokio::spawn(back::run(Arc::clone(&queue), client.clone(), cache.clone(), late_guard));
             lines.push(queue);
             clients.push(client);
         }
