@@ -169,7 +169,7 @@ fn row<'a>(cell: &dyn Fn(&str) -> Option<&'a str>, place: &str, draft: &mut Draf
     };
     let Some(address) = number(address_text).and_then(|a| a.checked_sub(u32::from(draft.options.base))) else {
         let why = if draft.options.base > 0 {
-            format!("not an address from {} up to 65535 + {0}: row skipped", draft.options.base)
+            format!("not an address of {} or more (the first address): row skipped", draft.options.base)
         } else {
             "not an address (0-65535, decimal or 0x hex): row skipped".to_string()
         };

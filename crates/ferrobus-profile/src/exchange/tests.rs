@@ -112,7 +112,7 @@ fn a_vendor_csv_with_other_column_names_semicolons_and_register_numbers_from_1()
     assert!(lists(&imported, "line 9", "address", "no address"));
     assert!(lists(&imported, "line 10", "address", "beyond the address space"));
     assert!(lists(&imported, "line 11", "type", "not a type"));
-    assert!(lists(&imported, "line 12", "address", "from 1"));
+    assert!(lists(&imported, "line 12", "address", "of 1 or more"));
     assert_eq!(point(&profile, "Weird").value_type, ValueType::U16);
     assert!(lists(&imported, "header", "Colour", "2 rows"), "{:?}", imported.unmapped);
 }
