@@ -404,9 +404,12 @@ fn default_of(text: &str, value_type: ValueType) -> Option<toml::Value> {
     }
 }
 
-/// `profile` as CSV: a header of [`COLUMNS`], then one row per point in profile order
-/// (a run of `count` items gives `count` rows). Addresses are the frame's; the cells of
-/// a point's defaults (a scale of 1, the table's word order) are left empty.
+/// `profile` as CSV: a header of the columns the import reads (name, table, address, type,
+/// length, order, scale, offset, unit, access, min, max, group, label, description, values,
+/// bits, default), then one row per point in profile order (a run of `count` items gives
+/// `count` rows). Addresses are the frame's. A scale of 1 and an offset of 0 are left empty,
+/// and so are the cells a point has no use for (a word order of one register, a length of a
+/// number, a type of a bit).
 pub fn export_csv(profile: &Profile) -> String {
     let mut writer = ::csv::WriterBuilder::new().terminator(::csv::Terminator::Any(b'\n')).from_writer(Vec::new());
     // Writing to a Vec cannot fail; a record is the same width as the header.
