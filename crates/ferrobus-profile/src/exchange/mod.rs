@@ -75,13 +75,14 @@ pub struct ImportOptions {
 /// Something of the source that the profile does not carry.
 #[derive(Clone, PartialEq, Eq, Debug)]
 pub struct Unmapped {
-    /// Where in the source: `row 7`, `modbus[0].sensors[3]`.
+    /// Where in the source: `line 7`, `modbus[0].sensors[3]` (bounded, control characters
+    /// escaped).
     pub place: String,
     /// The field, the column or the key.
     pub field: String,
     /// Its value as written (bounded, control characters escaped).
     pub value: String,
-    /// Why it could not be mapped.
+    /// Why it could not be mapped (bounded, control characters escaped).
     pub why: String,
 }
 
@@ -282,11 +283,13 @@ impl Draft {
 
     /// Lists `field = value` at `place` as not mapped, for `why`.
     pub(crate) fn unmapped(&mut self, place: &str, field: &str, value: &str, why: &str) {
+        // A place is a path of the file's own keys, and a reason may quote the file: both are
+        // bounded and escaped as a value is.
         self.unmapped.push(Unmapped {
-            place: place.to_string(),
+            place: bounded(place, 160),
             field: shown(field),
             value: shown(value),
-            why: why.to_string(),
+            why: bounded(why, 400),
         });
     }
 
@@ -442,17 +445,22 @@ pub(crate) fn code_and_label(name: &str) -> (String, Option<String>) {
 /// `text` bounded to 80 characters, control characters escaped: a value from a file is shown,
 /// never obeyed.
 pub(crate) fn shown(text: &str) -> String {
+    bounded(text, 80)
+}
+
+/// `text` with control characters escaped, cut (then `…`) so that what is shown is at most
+/// `limit` characters before the ellipsis.
+fn bounded(text: &str, limit: usize) -> String {
     let mut out = String::new();
-    for (i, c) in text.chars().enumerate() {
-        if i == 80 {
+    let mut shown = 0;
+    for c in text.chars() {
+        let escaped: Vec<char> = if c.is_control() { c.escape_default().collect() } else { vec![c] };
+        if shown + escaped.len() > limit {
             out.push('…');
             break;
         }
-        if c.is_control() {
-            out.extend(c.escape_default());
-        } else {
-            out.push(c);
-        }
+        shown += escaped.len();
+        out.extend(escaped);
     }
     out
 }

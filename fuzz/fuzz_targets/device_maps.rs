@@ -1,0 +1,135 @@
+//! `profile import` on what a user might give it: arbitrary text as each format, or one of
+//! the example maps (`examples/maps/*`) with a few edits (bytes cut, text or a token of the
+//! formats put in), so that most inputs get past the CSV and YAML readers into the mapping.
+//!
+//! - It never panics.
+//! - A map that imports is a profile that parses, with as many points as the import says,
+//!   and its list of what was not mapped shows no control character, and no field or value
+//!   longer than 80 characters (and the ellipsis): what comes from a file is shown, never
+//!   obeyed.
+//! - A map that is refused says where it is from: its Display starts with the origin.
+#![no_main]
+
+use arbitrary::Arbitrary;
+use ferrobus_profile::Profile;
+use ferrobus_profile::exchange::{Format, ImportOptions, import};
+use libfuzzer_sys::fuzz_target;
+
+/// The name messages must carry.
+const ORIGIN: &str = "fuzz-map";
+
+/// The example maps, the starting points of [`Input::Edited`], with their formats.
+const EXAMPLES: [(&str, Format); 3] = [
+    (include_str!("../../examples/maps/meter.csv"), Format::Csv),
+    (include_str!("../../examples/maps/home-assistant.yaml"), Format::HaYaml),
+    (include_str!("../../examples/maps/evcc.yaml"), Format::EvccYaml),
+];
+
+/// Pieces of the formats an edit may put in, beside arbitrary text.
+const TOKENS: [&str; 24] = [
+    "\n70000;Far;u16;;;;R;;04\n",
+    "\n1;Dup;u32;CDAB;1/0;A;RW;;03\n",
+    ";string;;;;;;\n",
+    "\"quoted;\"\"cell\"\"\"",
+    "\t",
+    "\n      - name: X\n        address: 65535\n        data_type: uint64\n",
+    "\n      - name: Y\n        address: 1\n        data_type: string\n        count: 0\n",
+    "        swap: word_byte\n",
+    "        slave: 300\n",
+    "        input_type: coil\n",
+    "        write_type: holdings\n",
+    "    covers:\n      - {name: c, address: 9, status_register: 10}\n",
+    "    climates:\n      - {name: z, address: 1, target_temp_register: [2, 3]}\n",
+    "\n      register: { address: 65534, type: input, decode: float64 }\n",
+    "        decode: int32snan\n",
+    "      source: calc\n      add:\n",
+    "      id: 0\n",
+    "      scale: .nan\n",
+    "      scale: 1e309\n",
+    "!include other.yaml",
+    "&a [*a]",
+    "{{ .id }}",
+    "é\u{0}\u{7}\r",
+    "- ",
+];
+
+/// The text of one run and its format.
+#[derive(Arbitrary, Debug)]
+enum Input {
+    /// Any text, as one of the formats.
+    Text { text: String, format: u8, unit: Option<u8>, base: u8 },
+    /// An example with edits applied in order.
+    Edited { example: u8, edits: Vec<Edit>, unit: Option<u8> },
+}
+
+/// Cut `cut` bytes at `at` (both moved to character boundaries) and put `put` there.
+#[derive(Arbitrary, Debug)]
+struct Edit {
+    at: u16,
+    cut: u8,
+    put: Put,
+}
+
+/// What an edit puts in.
+#[derive(Arbitrary, Debug)]
+enum Put {
+    /// Nothing (a cut only).
+    Nothing,
+    /// Any text.
+    Text(String),
+    /// One of [`TOKENS`].
+    Token(u8),
+}
+
+impl Input {
+    fn run(self) -> (String, Format, ImportOptions) {
+        match self {
+            Input::Text { text, format, unit, base } => {
+                let format = EXAMPLES[usize::from(format) % EXAMPLES.len()].1;
+                (text, format, ImportOptions { name: None, unit, base: u16::from(base % 3) })
+            }
+            Input::Edited { example, edits, unit } => {
+                let (text, format) = EXAMPLES[usize::from(example) % EXAMPLES.len()];
+                let mut text = text.to_owned();
+                for edit in edits {
+                    edit.apply(&mut text);
+                }
+                let base = u16::from(format == Format::Csv);
+                (text, format, ImportOptions { name: None, unit, base })
+            }
+        }
+    }
+}
+
+impl Edit {
+    fn apply(self, text: &mut String) {
+        let start = text.floor_char_boundary(usize::from(self.at) % (text.len() + 1));
+        let end = text.ceil_char_boundary(start + usize::from(self.cut));
+        let put = match self.put {
+            Put::Nothing => String::new(),
+            Put::Text(put) => put,
+            Put::Token(i) => TOKENS[usize::from(i) % TOKENS.len()].to_owned(),
+        };
+        text.replace_range(start..end, &put);
+    }
+}
+
+fuzz_target!(|input: Input| {
+    let (text, format, options) = input.run();
+    match import(&text, ORIGIN, format, &options) {
+        Ok(imported) => {
+            let profile = Profile::parse(&imported.toml, ORIGIN)
+                .unwrap_or_else(|e| panic!("the profile written does not parse: {e}\n{}", imported.toml));
+            assert_eq!(profile.points().len(), imported.points, "{}", imported.toml);
+            for u in &imported.unmapped {
+                for shown in [&u.place, &u.field, &u.value, &u.why] {
+                    assert!(!shown.chars().any(char::is_control), "a control character shown: {u:?}");
+                }
+                for shown in [&u.field, &u.value] {
+                    assert!(shown.chars().count() <= 81, "a value shown whole: {u:?}");
+                }
+            }
+        }
+        Err(e) => assert!(e.to_string().starts_with(ORIGIN), "an error that does not say where from: {e}"),
+    }
+});
