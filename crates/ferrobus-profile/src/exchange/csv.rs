@@ -357,8 +357,13 @@ fn real(text: &str) -> Option<f64> {
     value.is_finite().then_some(value)
 }
 
-/// A scale: `0.1`, `1/10`, `x10`, `×0.01`, `/100`.
+/// A scale: `0.1`, `1/10`, `x10`, `×0.01`, `/100`; finite.
 fn scale_of(text: &str) -> Option<f64> {
+    quotient(text).filter(|s| s.is_finite())
+}
+
+/// What [`scale_of`] reads, before the check that it is finite (`1/1e-320` is not).
+fn quotient(text: &str) -> Option<f64> {
     let text = text.trim();
     let text = text.strip_prefix(['x', 'X', '×', '*']).unwrap_or(text).trim();
     if let Some(divisor) = text.strip_prefix('/') {

@@ -510,7 +510,17 @@ fn climate(m: &Mapping, name: &str, address: u16, place: &str, draft: &mut Draft
         let offset = entry.offset.unwrap_or(0.0);
         for (key, field) in [("min_temp", &mut entry.min), ("max_temp", &mut entry.max)] {
             if let Some(value) = m.get(key).and_then(real) {
-                *field = Some((value - offset) / scale);
+                let raw = (value - offset) / scale;
+                if raw.is_finite() {
+                    *field = Some(raw);
+                } else {
+                    draft.unmapped(
+                        place,
+                        key,
+                        &value.to_string(),
+                        "no raw value of the register gives it at this scale",
+                    );
+                }
             }
         }
         if let (Some(min), Some(max)) = (entry.min, entry.max) {

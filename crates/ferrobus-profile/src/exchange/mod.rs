@@ -298,6 +298,8 @@ impl Draft {
     pub(crate) fn add(&mut self, mut entry: Entry) {
         if entry.table.is_bits() {
             self.bits_only(&mut entry);
+        } else {
+            self.fit(&mut entry);
         }
         if matches!(entry.table, Table::Input | Table::DiscreteInputs) && entry.access != Access::Ro {
             let why = format!("{} cannot be written (no function code writes them): read-only", entry.table.name());
@@ -353,6 +355,97 @@ impl Draft {
             }
         }
         self.entries.push(entry);
+    }
+
+    /// Lists and clears what a register's type cannot have, so that one bad cell costs its
+    /// field and not the file: a string's range and scale, a range that is no raw value of the
+    /// type or is upside down, an enumeration or bit field of another type or out of its
+    /// range, a default that is no value of the type.
+    fn fit(&mut self, entry: &mut Entry) {
+        let place = entry.place.clone();
+        let ty = entry.value_type;
+        let name = ty.name();
+        if ty == ValueType::String {
+            let why = "a string has no range, scale or offset";
+            for (field, value) in [
+                ("min", entry.min.take()),
+                ("max", entry.max.take()),
+                ("scale", entry.scale.take()),
+                ("offset", entry.offset.take()),
+            ] {
+                if let Some(value) = value {
+                    self.unmapped(&place, field, &value.to_string(), why);
+                }
+            }
+        }
+        if ty.is_integer() {
+            let (lo, hi) = ty.integer_range();
+            #[allow(clippy::cast_precision_loss)] // the bounds of 64-bit types, compared as the checker does
+            let (lo, hi) = (lo as f64, hi as f64);
+            for (field, value) in [("min", &mut entry.min), ("max", &mut entry.max)] {
+                if let Some(v) = value.take_if(|v| *v < lo || *v > hi || v.fract() != 0.0) {
+                    self.unmapped(&place, field, &v.to_string(), &format!("not a raw {name} value (the range is raw)"));
+                }
+            }
+        }
+        if let (Some(min), Some(max)) = (entry.min, entry.max) {
+            if min > max {
+                let why = format!("above max = {max}: the range is left out");
+                self.unmapped(&place, "min", &min.to_string(), &why);
+                entry.min = None;
+                entry.max = None;
+            }
+        }
+        let (lo, hi) = ty.integer_range();
+        let bit_count = i128::from(ty.registers()) * 16;
+        let values = std::mem::take(&mut entry.values);
+        entry.values = self.keep_pairs(&place, "values", values, ty, |k| (lo..=hi).contains(&k));
+        let bits = std::mem::take(&mut entry.bits);
+        entry.bits = self.keep_pairs(&place, "bits", bits, ty, |k| (0..bit_count).contains(&k));
+        let default_fits = match (&entry.default, ty) {
+            (None, _) => true,
+            (Some(toml::Value::String(text)), ValueType::String) => {
+                text.is_ascii() && text.len() <= usize::from(entry.width()) * 2
+            }
+            (Some(toml::Value::Integer(n)), t) if t.is_integer() => (lo..=hi).contains(&i128::from(*n)),
+            (Some(toml::Value::Integer(_) | toml::Value::Float(_)), t) => t.is_float(),
+            _ => false,
+        };
+        if !default_fits {
+            if let Some(default) = entry.default.take() {
+                self.unmapped(&place, "default", &default.to_string(), &format!("not a {name} value: left out"));
+            }
+        }
+    }
+
+    /// The pairs of an enumeration or bit field (`field`) of a `ty` whose keys `fits`; the others
+    /// listed.
+    fn keep_pairs(
+        &mut self,
+        place: &str,
+        field: &str,
+        pairs: Vec<(String, String)>,
+        ty: ValueType,
+        fits: impl Fn(i128) -> bool,
+    ) -> Vec<(String, String)> {
+        let mut kept = Vec::new();
+        for (key, meaning) in pairs {
+            if ty.is_integer() && crate::check::parse_key(&key).is_some_and(&fits) {
+                kept.push((key, meaning));
+                continue;
+            }
+            let why = if ty.is_integer() {
+                format!(
+                    "{key} is no raw {} value{}: the pair is left out",
+                    ty.name(),
+                    if field == "bits" { "'s bit" } else { "" }
+                )
+            } else {
+                format!("a {} has no {field}: left out", ty.name())
+            };
+            self.unmapped(place, field, &format!("{key}={meaning}"), &why);
+        }
+        kept
     }
 
     /// Lists and clears what a coil or discrete input cannot have: a type, a scale, a unit, ...

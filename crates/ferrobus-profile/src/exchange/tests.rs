@@ -139,6 +139,38 @@ fn csv_rows_at_the_same_address_are_one_point_or_listed_and_names_stay_unique() 
     assert!(lists(&imported, "line 8", "access", "cannot be written"));
 }
 
+#[test]
+fn a_cell_that_does_not_fit_its_type_costs_that_cell_and_not_the_file() {
+    let text = "name,address,type,length,min,max,scale,values,bits,default\n\
+        text,0,string,2,0,10,0.1,,,too long for two registers\n\
+        small,2,u16,,-5,1.5,,70000=x; 1=one,16=high; 3=low,70000\n\
+        upside,3,i16,,10,1,,,,\n\
+        real,4,f32,,,,,1=one,0=bit,x\n\
+        fine,6,u16,,0,100,,,,7\n";
+    let (profile, imported) = imported(text, Format::Csv, &ImportOptions::default());
+    let text_point = point(&profile, "text");
+    assert_eq!((text_point.min, text_point.max, text_point.scale), (None, None, 1.0));
+    assert!(lists(&imported, "line 2", "scale", "a string has no"));
+    assert!(lists(&imported, "line 2", "default", "not a string value"));
+    let small = point(&profile, "small");
+    assert_eq!((small.min, small.max), (None, None), "-5 and 1.5 are no raw u16 values");
+    assert_eq!(small.values, vec![(1, "one".to_string())]);
+    assert_eq!(small.bits, vec![(3, "low".to_string())]);
+    assert!(lists(&imported, "line 3", "values", "70000 is no raw u16 value"));
+    assert!(lists(&imported, "line 3", "bits", "16 is no raw u16 value's bit"));
+    assert!(lists(&imported, "line 3", "default", "not a value of a u16"));
+    assert_eq!((point(&profile, "upside").min, point(&profile, "upside").max), (None, None));
+    assert!(lists(&imported, "line 4", "min", "above max"));
+    let real = point(&profile, "real");
+    assert!(real.values.is_empty() && real.bits.is_empty());
+    assert!(lists(&imported, "line 5", "values", "a f32 has no values"));
+    let fine = point(&profile, "fine");
+    assert_eq!(
+        (fine.min, fine.max, fine.factory_default.clone()),
+        (Some(0.0), Some(100.0), Some(crate::Value::Int(7)))
+    );
+}
+
 const HA: &str = r"
 homeassistant:
   name: Home
