@@ -14,6 +14,7 @@
 use arbitrary::Arbitrary;
 use ferrobus_profile::Profile;
 use ferrobus_profile::exchange::{Format, ImportError, ImportOptions, import};
+use ferrobus_proto_fuzz::Edit;
 use libfuzzer_sys::fuzz_target;
 
 /// The name messages must carry.
@@ -63,25 +64,6 @@ enum Input {
     Edited { example: u8, edits: Vec<Edit>, unit: Option<u8> },
 }
 
-/// Cut `cut` bytes at `at` (both moved to character boundaries) and put `put` there.
-#[derive(Arbitrary, Debug)]
-struct Edit {
-    at: u16,
-    cut: u8,
-    put: Put,
-}
-
-/// What an edit puts in.
-#[derive(Arbitrary, Debug)]
-enum Put {
-    /// Nothing (a cut only).
-    Nothing,
-    /// Any text.
-    Text(String),
-    /// One of [`TOKENS`].
-    Token(u8),
-}
-
 impl Input {
     fn run(self) -> (String, Format, ImportOptions) {
         match self {
@@ -93,25 +75,12 @@ impl Input {
                 let (text, format) = EXAMPLES[usize::from(example) % EXAMPLES.len()];
                 let mut text = text.to_owned();
                 for edit in edits {
-                    edit.apply(&mut text);
+                    edit.apply(&mut text, &TOKENS);
                 }
                 let base = u16::from(format == Format::Csv);
                 (text, format, ImportOptions { name: None, unit, base })
             }
         }
-    }
-}
-
-impl Edit {
-    fn apply(self, text: &mut String) {
-        let start = text.floor_char_boundary(usize::from(self.at) % (text.len() + 1));
-        let end = text.ceil_char_boundary(start + usize::from(self.cut));
-        let put = match self.put {
-            Put::Nothing => String::new(),
-            Put::Text(put) => put,
-            Put::Token(i) => TOKENS[usize::from(i) % TOKENS.len()].to_owned(),
-        };
-        text.replace_range(start..end, &put);
     }
 }
 

@@ -19,6 +19,7 @@ use std::sync::LazyLock;
 use arbitrary::Arbitrary;
 use ferrobus_bridge::config::{ConfigErrors, Mode, Plant};
 use ferrobus_bridge::sparkplug::topic::check_id;
+use ferrobus_proto_fuzz::Edit;
 use libfuzzer_sys::fuzz_target;
 
 /// The name errors must carry.
@@ -87,25 +88,6 @@ enum Input {
     Edited { example: u8, edits: Vec<Edit> },
 }
 
-/// Cut `cut` bytes at `at` (both moved to character boundaries) and put `put` there.
-#[derive(Arbitrary, Debug)]
-struct Edit {
-    at: u16,
-    cut: u8,
-    put: Put,
-}
-
-/// What an edit puts in.
-#[derive(Arbitrary, Debug)]
-enum Put {
-    /// Nothing (a cut only).
-    Nothing,
-    /// Any text.
-    Text(String),
-    /// One of [`TOKENS`].
-    Token(u8),
-}
-
 impl Input {
     fn text(self) -> String {
         match self {
@@ -113,24 +95,11 @@ impl Input {
             Input::Edited { example, edits } => {
                 let mut text = EXAMPLES[usize::from(example) % EXAMPLES.len()].to_owned();
                 for edit in edits {
-                    edit.apply(&mut text);
+                    edit.apply(&mut text, &TOKENS);
                 }
                 text
             }
         }
-    }
-}
-
-impl Edit {
-    fn apply(self, text: &mut String) {
-        let start = text.floor_char_boundary(usize::from(self.at) % (text.len() + 1));
-        let end = text.ceil_char_boundary(start + usize::from(self.cut));
-        let put = match self.put {
-            Put::Nothing => String::new(),
-            Put::Text(put) => put,
-            Put::Token(i) => TOKENS[usize::from(i) % TOKENS.len()].to_owned(),
-        };
-        text.replace_range(start..end, &put);
     }
 }
 

@@ -9,6 +9,8 @@
 //!   and the statistics agree with the events handed out.
 //! - [`MemoryHandler`]: a slave [`Handler`] over small in-memory tables that implements every
 //!   data method, so the slave engine can serve every function code.
+//! - [`Edit`]: a cut and an insertion in a text a user might write (a shipped example), so that
+//!   the targets of configuration readers start from files that mostly parse.
 //!
 //! Built by cargo-fuzz, ferrobus-proto sees `cfg(fuzzing)`: its `crc_ok` then accepts every
 //! frame (and the ASCII receiver skips its LRC), so random bytes reach the parsers. CRC
@@ -378,5 +380,42 @@ impl Handler for MemoryHandler {
             *slot = b;
         }
         Ok(n)
+    }
+}
+
+/// Cut `cut` bytes at `at` (both moved to character boundaries) and put `put` there.
+#[derive(Arbitrary, Debug)]
+pub struct Edit {
+    /// Where, as an offset wrapped to the text's length.
+    pub at: u16,
+    /// How many bytes to cut there.
+    pub cut: u8,
+    /// What to put in their place.
+    pub put: Put,
+}
+
+/// What an [`Edit`] puts in.
+#[derive(Arbitrary, Debug)]
+pub enum Put {
+    /// Nothing (a cut only).
+    Nothing,
+    /// Any text.
+    Text(String),
+    /// One of the target's tokens of its format, by index (wrapped).
+    Token(u8),
+}
+
+impl Edit {
+    /// Applies the edit to `text`; a [`Put::Token`] picks from `tokens`.
+    pub fn apply(self, text: &mut String, tokens: &[&str]) {
+        let start = text.floor_char_boundary(usize::from(self.at) % (text.len() + 1));
+        let end = text.ceil_char_boundary(start + usize::from(self.cut));
+        let put = match self.put {
+            Put::Nothing => String::new(),
+            Put::Text(put) => put,
+            Put::Token(i) if !tokens.is_empty() => tokens[usize::from(i) % tokens.len()].to_owned(),
+            Put::Token(_) => String::new(),
+        };
+        text.replace_range(start..end, &put);
     }
 }
