@@ -355,6 +355,100 @@ enum Outcome {
     Failed(MasterError),
 }
 
+impl Outcome {
+    /// How the reply `pdu` — from the unit asked, under the request's transaction id, with
+    /// the function code asked or its exception form — ends the request `request` (its
+    /// PDU): for a raw request, the reply as it is or the exception it carries; otherwise
+    /// the reply parsed and checked against the request ([`check_reply`]).
+    fn of_reply(request: &[u8], raw: bool, pdu: &[u8]) -> Outcome {
+        if raw {
+            return match *pdu {
+                [fc, code, ..] if fc & FunctionCode::EXCEPTION_BIT != 0 => {
+                    Outcome::Exception(ExceptionCode::from_u8(code))
+                }
+                _ => Outcome::Raw,
+            };
+        }
+        match (Request::parse(request), Response::parse(pdu)) {
+            (_, Err(e)) | (Err(e), _) => Outcome::Failed(MasterError::BadResponse(e)),
+            (_, Ok(Response::Exception(e))) => Outcome::Exception(e.code()),
+            (Ok(request), Ok(response)) => match check_reply(&request, &response) {
+                Ok(bits) => Outcome::Response { bits },
+                Err(e) => Outcome::Failed(e),
+            },
+        }
+    }
+
+    /// Copies the reply `pdu` into `reply` if this outcome hands it out; returns its length
+    /// then.
+    fn keep_reply(self, reply: &mut [u8; MAX_PDU_LEN], pdu: &[u8]) -> Option<usize> {
+        if !matches!(self, Outcome::Response { .. } | Outcome::Raw) {
+            return None;
+        }
+        reply.get_mut(..pdu.len())?.copy_from_slice(pdu);
+        Some(pdu.len())
+    }
+
+    /// The completion it makes, `reply` being the reply PDU kept for it.
+    fn completion(self, reply: &[u8]) -> Completion<'_> {
+        match self {
+            Outcome::Exception(exception) => Completion::Exception(exception),
+            Outcome::Sent => Completion::Sent,
+            Outcome::Failed(e) => Completion::Failed(e),
+            Outcome::Raw => Completion::Raw(reply),
+            Outcome::Response { bits } => match Response::parse(reply) {
+                Ok(response) => Completion::Response(trim_bits(response, bits)),
+                Err(e) => Completion::Failed(MasterError::BadResponse(e)),
+            },
+        }
+    }
+}
+
+impl MasterStats {
+    /// Counts how a request ended.
+    fn count(&mut self, outcome: Outcome) {
+        let counter = match outcome {
+            Outcome::Response { .. } | Outcome::Raw => &mut self.responses,
+            Outcome::Exception(_) => &mut self.exceptions,
+            Outcome::Sent => return,
+            Outcome::Failed(MasterError::Timeout { .. }) => &mut self.timeouts,
+            Outcome::Failed(_) => &mut self.bad_replies,
+        };
+        *counter = counter.wrapping_add(1);
+    }
+}
+
+/// Keeps `heard` in `kept` unless what is kept tells more (see [`HeardInstead::weight`]).
+fn keep_heard(kept: &mut Option<HeardInstead>, heard: HeardInstead) {
+    if kept.is_none_or(|kept| heard.weight() >= kept.weight()) {
+        *kept = Some(heard);
+    }
+}
+
+/// When the wait for a reply due by `deadline` ends, as far as `framing` tells: at the
+/// deadline, or, while a frame is still arriving past it, when that frame is complete but no
+/// later than the time a whole frame takes after the deadline.
+fn reply_wait_end<F: Framing>(framing: &F, deadline: Instant) -> Instant {
+    match framing.poll_timeout() {
+        Some(rx) if rx > deadline => rx.min(grace_end(framing, deadline)),
+        _ => deadline,
+    }
+}
+
+/// Whether at `now` the wait for a reply due by `deadline` is over ([`reply_wait_end`]).
+fn reply_wait_is_over<F: Framing>(framing: &F, now: Instant, deadline: Instant) -> bool {
+    if now < deadline {
+        return false;
+    }
+    let in_progress = framing.poll_timeout().is_some_and(|rx| rx > now);
+    !in_progress || now >= grace_end(framing, deadline)
+}
+
+/// The latest a reply still arriving at `deadline` may finish: a whole frame's time after it.
+fn grace_end<F: Framing>(framing: &F, deadline: Instant) -> Instant {
+    deadline.saturating_add(framing.transmit_time(rtu::MAX_ADU_LEN))
+}
+
 /// A reply still owed to a request that timed out (see the module docs).
 #[derive(Clone, Copy, PartialEq, Eq, Debug)]
 struct Owed {
@@ -638,18 +732,10 @@ impl<F: Framing> Master<F> {
         let own = match self.core.state {
             State::Idle => None,
             State::Queued { not_before } => Some(self.transmit_at(not_before)),
-            State::AwaitingReply { deadline, .. } => match rx {
-                // A reply in progress gets the time a whole frame takes to finish.
-                Some(rx) if rx > deadline => Some(rx.min(self.grace_end(deadline))),
-                _ => Some(deadline),
-            },
+            State::AwaitingReply { deadline, .. } => Some(reply_wait_end(&self.framing, deadline)),
             State::Turnaround { until } => Some(until),
         };
         earliest(own, rx)
-    }
-
-    fn grace_end(&self, deadline: Instant) -> Instant {
-        deadline.saturating_add(self.framing.transmit_time(rtu::MAX_ADU_LEN))
     }
 
     /// `now` has come: ends silent intervals, turnarounds and timeouts that are due. Spurious
@@ -659,14 +745,11 @@ impl<F: Framing> Master<F> {
         expire(framing, now, |event| core.on_event(&event));
         match self.core.state {
             State::Turnaround { until } if now >= until => self.core.finish(Outcome::Sent),
-            State::AwaitingReply { sent, deadline, .. } if now >= deadline => {
-                let in_progress = self.framing.poll_timeout().is_some_and(|rx| rx > now);
-                if !in_progress || now >= self.grace_end(deadline) {
-                    let waited = now.saturating_duration_since(sent);
-                    let heard = self.core.heard;
-                    self.core.owe_reply(now);
-                    self.core.finish(Outcome::Failed(MasterError::Timeout { waited, heard }));
-                }
+            State::AwaitingReply { sent, deadline, .. } if reply_wait_is_over(&self.framing, now, deadline) => {
+                let waited = now.saturating_duration_since(sent);
+                let heard = self.core.heard;
+                self.core.owe_reply(now);
+                self.core.finish(Outcome::Failed(MasterError::Timeout { waited, heard }));
             }
             _ => {}
         }
@@ -676,19 +759,7 @@ impl<F: Framing> Master<F> {
     pub fn poll_event(&mut self) -> Option<Completion<'_>> {
         let core = &mut self.core;
         let outcome = core.outcome.take()?;
-        Some(match outcome {
-            Outcome::Exception(exception) => Completion::Exception(exception),
-            Outcome::Sent => Completion::Sent,
-            Outcome::Failed(e) => Completion::Failed(e),
-            Outcome::Raw => Completion::Raw(core.reply.get(..core.reply_len).unwrap_or_default()),
-            Outcome::Response { bits } => {
-                let pdu = core.reply.get(..core.reply_len).unwrap_or_default();
-                match Response::parse(pdu) {
-                    Ok(response) => Completion::Response(trim_bits(response, bits)),
-                    Err(e) => Completion::Failed(MasterError::BadResponse(e)),
-                }
-            }
-        })
+        Some(outcome.completion(core.reply.get(..core.reply_len).unwrap_or_default()))
     }
 }
 
@@ -709,9 +780,7 @@ impl Core {
 
     /// Keeps `heard` unless something that tells more was heard already.
     fn hear(&mut self, heard: HeardInstead) {
-        if self.heard.is_none_or(|kept| heard.weight() >= kept.weight()) {
-            self.heard = Some(heard);
-        }
+        keep_heard(&mut self.heard, heard);
     }
 
     fn on_event(&mut self, event: &RxEvent<'_>) {
@@ -775,27 +844,9 @@ impl Core {
             self.stats.ignored_frames = self.stats.ignored_frames.wrapping_add(1);
             return;
         }
-        let outcome = if self.raw {
-            match *frame.pdu {
-                [fc, code, ..] if fc & FunctionCode::EXCEPTION_BIT != 0 => {
-                    Outcome::Exception(ExceptionCode::from_u8(code))
-                }
-                _ => Outcome::Raw,
-            }
-        } else {
-            let request = Request::parse(self.request.get(..self.request_len).unwrap_or_default());
-            match (request, Response::parse(frame.pdu)) {
-                (_, Err(e)) | (Err(e), _) => Outcome::Failed(MasterError::BadResponse(e)),
-                (_, Ok(Response::Exception(e))) => Outcome::Exception(e.code()),
-                (Ok(request), Ok(response)) => match check_reply(&request, &response) {
-                    Ok(bits) => Outcome::Response { bits },
-                    Err(e) => Outcome::Failed(e),
-                },
-            }
-        };
-        if let (Outcome::Response { .. } | Outcome::Raw, Some(dst)) = (outcome, self.reply.get_mut(..frame.pdu.len())) {
-            dst.copy_from_slice(frame.pdu);
-            self.reply_len = frame.pdu.len();
+        let outcome = Outcome::of_reply(self.request.get(..self.request_len).unwrap_or_default(), self.raw, frame.pdu);
+        if let Some(len) = outcome.keep_reply(&mut self.reply, frame.pdu) {
+            self.reply_len = len;
         }
         self.finish(outcome);
     }
@@ -842,17 +893,7 @@ impl Core {
 
     /// Counts the outcome and ends the request.
     fn finish(&mut self, outcome: Outcome) {
-        let stats = &mut self.stats;
-        let counter = match outcome {
-            Outcome::Response { .. } | Outcome::Raw => Some(&mut stats.responses),
-            Outcome::Exception(_) => Some(&mut stats.exceptions),
-            Outcome::Sent => None,
-            Outcome::Failed(MasterError::Timeout { .. }) => Some(&mut stats.timeouts),
-            Outcome::Failed(_) => Some(&mut stats.bad_replies),
-        };
-        if let Some(counter) = counter {
-            *counter = counter.wrapping_add(1);
-        }
+        self.stats.count(outcome);
         self.outcome = Some(outcome);
         self.state = State::Idle;
     }
