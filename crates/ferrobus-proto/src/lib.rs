@@ -39,7 +39,9 @@
 //!   The caller feeds bytes with the time they arrived, sleeps until `poll_timeout()`, calls
 //!   `handle_timeout(now)`, and writes what `poll_transmit(now, …)` returns. The engines
 //!   decide everything else: when the line has been silent long enough to transmit, when a
-//!   reply is due, which frames to ignore.
+//!   reply is due, which frames to ignore. Over Modbus/TCP, [`master::pipeline`] keeps
+//!   several requests in flight on one connection, each matched to its reply by its
+//!   transaction id.
 //! - [`schedule`]: polling at a fixed rate — deadlines from the start, overruns, and the
 //!   wire time of an exchange to check a period against.
 //! - [`sniff`]: the passive decoder of a listener that never transmits: frames with good and

@@ -1,4 +1,5 @@
-//! The master (client) engine: one request in flight on a shared line.
+//! The master (client) engine: one request in flight on a shared line. (Over Modbus/TCP,
+//! [`pipeline`] keeps several in flight on one connection.)
 //!
 //! Spec: MODBUS over Serial Line V1.02 §2.4.1 (master state diagram) and §2.5.1.1 (t3.5).
 //!
@@ -58,6 +59,8 @@ use crate::error::{BufferTooSmall, DiscardReason, PduError};
 use crate::frame::{AduHeader, Direction, Framing, RxEvent, ascii, expire, feed, rtu};
 use crate::pdu::{BitValues, MAX_PDU_LEN, MeiRequest, MeiResponse, Request, Response};
 use crate::time::{Instant, earliest};
+
+pub mod pipeline;
 
 /// The largest frame the master transmits, in any framing (an ASCII frame of a 253-byte PDU).
 pub const MAX_TX_LEN: usize = ascii::MAX_FRAME_CHARS;
@@ -258,20 +261,29 @@ impl fmt::Display for HeardInstead {
     }
 }
 
-/// Why [`Master::submit`] refused a request.
+/// Why [`Master::submit`] or [`Pipeline::submit`](pipeline::Pipeline::submit) refused a request.
 #[derive(Clone, Copy, PartialEq, Eq, Debug)]
 #[non_exhaustive]
 pub enum SubmitError {
-    /// A request is in flight, or its completion has not been polled yet.
+    /// A request is in flight, or its completion has not been polled yet ([`Master`]).
     Busy,
     /// The request does not fit the framing's buffer (cannot happen with the built-in codecs).
     Encode(BufferTooSmall),
+    /// As many requests as the [`Pipeline`](pipeline::Pipeline) keeps in flight are
+    /// outstanding: submitted, and their completions not polled yet.
+    Full {
+        /// The pipeline's limit ([`Pipeline::limit`](pipeline::Pipeline::limit)).
+        limit: usize,
+    },
 }
 
 impl fmt::Display for SubmitError {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
         match self {
             SubmitError::Busy => f.write_str("a request is already in flight"),
+            SubmitError::Full { limit } => {
+                write!(f, "{limit} requests are outstanding, the most this connection keeps in flight")
+            }
             SubmitError::Encode(e) => write!(f, "cannot encode the request: {e}"),
         }
     }
