@@ -1,7 +1,9 @@
 //! The client: a cheap, cloneable handle to one bus.
 //!
 //! Every clone talks to the same driver task, which puts one request on the bus at a time, in
-//! the order they come: many tasks can poll many devices through one port. Each request has a
+//! the order they come: many tasks can poll many devices through one port. (On Modbus/TCP,
+//! [`ClientConfig::in_flight`] lets several be outstanding on the connection at once, matched
+//! by transaction id.) Each request has a
 //! timeout and a number of retries (from the client's defaults, or [`Client::with_timeout`]
 //! and [`Client::with_retries`]); unit 0 on a serial line is a broadcast and returns as soon
 //! as the turnaround delay has passed.
@@ -32,7 +34,7 @@ use ferrobus_proto::{FunctionCode, PduError};
 use tokio::sync::{mpsc, oneshot};
 
 pub use crate::driver::ClientStats;
-use crate::driver::{Command, Driver, Reply, parse_reply};
+use crate::driver::{Command, Driver, Pipelined, Reply, parse_reply};
 use crate::error::Error;
 use crate::port::{Framing, Transport};
 use crate::pump::{Codec, Role};
@@ -87,16 +89,24 @@ impl Client {
         let (tx, rx) = mpsc::channel(config.queue.max(1));
         let options = RequestOptions { timeout: config.timeout, retries: config.retries };
         let framing = transport.framing();
-        let master = MasterConfig {
-            response_timeout: config.timeout,
-            turnaround_delay: config.turnaround_delay,
-            echo_suppression: config.echo_suppression,
-            ..MasterConfig::default()
+        let stats = if framing == Framing::Mbap && config.in_flight > 1 {
+            let driver = Pipelined::new(transport, config, port);
+            let stats = driver.stats();
+            tokio::spawn(driver.run(rx));
+            stats
+        } else {
+            let master = MasterConfig {
+                response_timeout: config.timeout,
+                turnaround_delay: config.turnaround_delay,
+                echo_suppression: config.echo_suppression,
+                ..MasterConfig::default()
+            };
+            let codec = Codec::for_transport(&transport, Role::Client);
+            let driver = Driver::new(Master::new(codec, master), transport, config, port);
+            let stats = driver.stats();
+            tokio::spawn(driver.run(rx));
+            stats
         };
-        let codec = Codec::for_transport(&transport, Role::Client);
-        let driver = Driver::new(Master::new(codec, master), transport, config, port);
-        let stats = driver.stats();
-        tokio::spawn(driver.run(rx));
         Client { commands: tx, options, framing, stats }
     }
 

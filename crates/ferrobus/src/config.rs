@@ -35,6 +35,16 @@ pub struct ClientConfig {
     /// heard again). On serial framings only: see the master engine's owed replies
     /// ([`ferrobus_proto::master`]).
     pub late_window: Option<Duration>,
+    /// On Modbus/TCP: how many requests may be outstanding on the connection at once, each
+    /// matched to its reply by its transaction id (at most
+    /// [`MAX_IN_FLIGHT`](ferrobus_proto::master::pipeline::MAX_IN_FLIGHT)). 1, the default,
+    /// sends a request only once the last has ended. More hides the round trip for a device
+    /// that reads its connection in order and answers every request (libmodbus's server
+    /// does); a device that takes one request at a time and drops the rest wants 1 (pymodbus's
+    /// server answers only the first of the requests that reach it together).
+    /// Every other framing (RTU, ASCII, RTU over TCP) has no transaction id and keeps one
+    /// request in flight whatever this says.
+    pub in_flight: usize,
 }
 
 impl Default for ClientConfig {
@@ -49,6 +59,7 @@ impl Default for ClientConfig {
             queue: 64,
             connect_timeout: Duration::from_secs(5),
             late_window: None,
+            in_flight: 1,
         }
     }
 }

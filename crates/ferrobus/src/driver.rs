@@ -17,6 +17,8 @@
 //! that a reply owed to a timed-out request is recognised and the line's silence is timed
 //! from them, and counted ([`ClientStats::flushed_bytes`], and a debug line).
 
+mod pipelined;
+
 use std::collections::HashMap;
 use std::sync::{Arc, Mutex, PoisonError};
 
@@ -29,10 +31,15 @@ use ferrobus_proto::retry::{IO_BACKOFF_INITIAL, IO_BACKOFF_MAX};
 use ferrobus_proto::{FunctionCode, PduError};
 use tokio::sync::{mpsc, oneshot};
 
+use ferrobus_proto::Instant;
+
+use crate::clock::Clock;
 use crate::config::{ClientConfig, RequestOptions};
 use crate::error::Error;
 use crate::port::{BoxPort, Transport};
 use crate::pump::{Engine, Pump, Session, Step, write_frame};
+
+pub(crate) use pipelined::Pipelined;
 
 /// One request for the driver.
 pub(crate) struct Command {
@@ -73,8 +80,9 @@ pub struct ClientStats {
     pub disconnects: u64,
 }
 
-pub(crate) struct Driver<F> {
-    master: Master<F>,
+/// What every driver keeps of its line besides the engine: the port and when it may be
+/// reopened, the units' health and the counters its clients read.
+pub(crate) struct Link {
     transport: Transport,
     config: ClientConfig,
     port: Option<BoxPort>,
@@ -83,8 +91,6 @@ pub(crate) struct Driver<F> {
     /// IO failures (opening, reading, writing) and when the port may be reopened.
     io: IoBackoff,
     health: HashMap<u8, UnitHealth>,
-    tx: Box<[u8; MAX_TX_LEN]>,
-    pump: Pump,
     /// Shared with the clients, updated after each request.
     stats: Arc<Mutex<ClientStats>>,
     flushed_bytes: u64,
@@ -94,19 +100,16 @@ pub(crate) struct Driver<F> {
     disconnects: u64,
 }
 
-impl<F: Framing + Send + 'static> Driver<F> {
-    pub(crate) fn new(master: Master<F>, transport: Transport, config: ClientConfig, port: Option<BoxPort>) -> Self {
+impl Link {
+    pub(crate) fn new(transport: Transport, config: ClientConfig, port: Option<BoxPort>) -> Self {
         let opened = port.is_some();
-        Driver {
-            master,
-            pump: Pump::new(transport.timer().sleeper()),
+        Link {
             transport,
             config,
+            port,
             opened,
             io: IoBackoff::default(),
-            port,
             health: HashMap::new(),
-            tx: Box::new([0; MAX_TX_LEN]),
             stats: Arc::default(),
             flushed_bytes: 0,
             connects: u64::from(opened),
@@ -120,9 +123,9 @@ impl<F: Framing + Send + 'static> Driver<F> {
         Arc::clone(&self.stats)
     }
 
-    fn publish_stats(&self) {
+    fn publish(&self, master: MasterStats) {
         let stats = ClientStats {
-            master: self.master.stats(),
+            master,
             flushed_bytes: self.flushed_bytes,
             connects: self.connects,
             connect_failures: self.connect_failures,
@@ -131,11 +134,125 @@ impl<F: Framing + Send + 'static> Driver<F> {
         *self.stats.lock().unwrap_or_else(PoisonError::into_inner) = stats;
     }
 
+    /// Drops the open port, counting it lost.
+    fn lose_port(&mut self) {
+        if self.port.take().is_some() {
+            self.disconnects = self.disconnects.saturating_add(1);
+        }
+    }
+
+    /// Counts an IO failure at `now` and sets when the port may be opened next.
+    fn io_failed(&mut self, now: Instant) {
+        self.io.failed(now);
+    }
+
+    /// Opens the port if none is open, once the IO backoff allows; returns whether it opened
+    /// one (nothing said on the old one can be heard on it).
+    async fn ensure_open(&mut self, clock: &Clock) -> Result<bool, Error> {
+        if self.port.is_some() {
+            return Ok(false);
+        }
+        if self.opened && !self.transport.reopens() {
+            return Err(Error::io(
+                format!("reopening {}", self.transport.describe()),
+                std::io::Error::new(std::io::ErrorKind::NotConnected, "the port was lost, and reopening is off"),
+            ));
+        }
+        if let Some(at) = self.io.take_reopen_at() {
+            tokio::time::sleep_until(clock.to_tokio(at)).await;
+        }
+        match self.transport.open(self.config.connect_timeout).await {
+            Ok(port) => {
+                self.port = Some(port);
+                self.connects = self.connects.saturating_add(1);
+                if self.opened {
+                    tracing::info!(port = %self.transport.describe(), "reopened");
+                }
+                self.opened = true;
+                Ok(true)
+            }
+            Err(e) => {
+                self.connect_failures = self.connect_failures.saturating_add(1);
+                Err(e)
+            }
+        }
+    }
+
+    /// The error for a port that is not open where one must be.
+    fn not_connected(&self) -> Error {
+        Error::io(format!("reading from {}", self.transport.describe()), std::io::ErrorKind::NotConnected.into())
+    }
+
+    /// Fails fast for a unit in backoff; returns whether this request is its probe.
+    fn check_health(&mut self, unit: u8, now: Instant) -> Result<bool, Error> {
+        let Some(health) = self.health.get(&unit) else { return Ok(false) };
+        match health.check(now) {
+            Admit::Send => Ok(false),
+            Admit::Probe => Ok(true),
+            Admit::Skip { until } => Err(Error::Backoff { unit, retry_in: until.saturating_duration_since(now) }),
+        }
+    }
+
+    fn record_health(&mut self, command: &Command, result: &Result<Reply, Error>, now: Instant) {
+        let Some(backoff) = self.config.backoff else { return };
+        let unit = command.unit;
+        // A broadcast gets no reply, so it says nothing of any unit's health.
+        if ferrobus_proto::codes::unit::is_broadcast(unit, self.transport.framing() != crate::port::Framing::Mbap) {
+            return;
+        }
+        let outcome = outcome(command, result);
+        let health = self.health.entry(unit).or_default();
+        if health.record(now, outcome, &backoff) {
+            self.health.remove(&unit);
+        } else if outcome == Outcome::Timeout && matches!(health.check(now), Admit::Skip { .. }) {
+            tracing::info!(unit, period = ?health.period(), "unit not answering; backing off");
+        }
+    }
+
+    /// Counts how an attempt ended for the IO backoff: an IO failure sets it, any other
+    /// result but a port that turned out to be another device clears it.
+    fn attempt_ended(&mut self, result: &Result<Reply, Error>, now: Instant) {
+        match result {
+            Err(Error::Io { .. }) => self.io_failed(now),
+            Err(Error::NotSameDevice { .. }) => {}
+            _ => self.io.succeeded(),
+        }
+    }
+}
+
+/// The driver of a line with one request in flight: every serial line, and Modbus/TCP unless
+/// pipelining is asked for ([`pipelined`]).
+pub(crate) struct Driver<F> {
+    master: Master<F>,
+    link: Link,
+    tx: Box<[u8; MAX_TX_LEN]>,
+    pump: Pump,
+}
+
+impl<F: Framing + Send + 'static> Driver<F> {
+    pub(crate) fn new(master: Master<F>, transport: Transport, config: ClientConfig, port: Option<BoxPort>) -> Self {
+        Driver {
+            master,
+            pump: Pump::new(transport.timer().sleeper()),
+            link: Link::new(transport, config, port),
+            tx: Box::new([0; MAX_TX_LEN]),
+        }
+    }
+
+    /// The counters the driver keeps up to date for its clients.
+    pub(crate) fn stats(&self) -> Arc<Mutex<ClientStats>> {
+        self.link.stats()
+    }
+
+    fn publish_stats(&self) {
+        self.link.publish(self.master.stats());
+    }
+
     pub(crate) async fn run(mut self, mut commands: mpsc::Receiver<Command>) {
         loop {
             // Between requests, keep reading: the engine must know when the line was last
             // busy, and stale bytes must not be taken for the next reply.
-            let command = match self.port.as_mut() {
+            let command = match self.link.port.as_mut() {
                 // No deadline: between requests the engine has nothing due.
                 Some(port) => match self.pump.step(port, &mut self.master, None, commands.recv()).await {
                     Step::Other(command) => command,
@@ -146,17 +263,13 @@ impl<F: Framing + Send + 'static> Driver<F> {
                     }
                     Step::Woke => continue,
                     Step::Closed => {
-                        tracing::warn!(port = %self.transport.describe(), "the port closed; it will be reopened");
+                        tracing::warn!(port = %self.link.transport.describe(), "the port closed; it will be reopened");
                         self.lose_port();
-                        self.io_failed();
-                        self.publish_stats();
                         continue;
                     }
                     Step::Failed(e) => {
-                        tracing::warn!(port = %self.transport.describe(), "read failed, reopening on the next request: {e}");
+                        tracing::warn!(port = %self.link.transport.describe(), "read failed, reopening on the next request: {e}");
                         self.lose_port();
-                        self.io_failed();
-                        self.publish_stats();
                         continue;
                     }
                 },
@@ -169,21 +282,16 @@ impl<F: Framing + Send + 'static> Driver<F> {
         }
     }
 
-    /// Drops the open port, counting it lost.
+    /// The port was lost between requests: counted, and reopened after the IO backoff.
     fn lose_port(&mut self) {
-        if self.port.take().is_some() {
-            self.disconnects = self.disconnects.saturating_add(1);
-        }
-    }
-
-    /// Counts an IO failure and sets when the port may be opened next.
-    fn io_failed(&mut self) {
-        self.io.failed(self.pump.clock().now());
+        self.link.lose_port();
+        self.link.io_failed(self.pump.clock().now());
+        self.publish_stats();
     }
 
     async fn serve(&mut self, command: &Command) -> Result<Reply, Error> {
         let unit = command.unit;
-        let probe = self.check_health(unit)?;
+        let probe = self.link.check_health(unit, self.pump.clock().now())?;
         let retries = if probe { 0 } else { command.options.retries };
         let function = FunctionCode::from_u8(command.pdu.first().copied().unwrap_or_default());
         let mut attempts = 0;
@@ -197,16 +305,12 @@ impl<F: Framing + Send + 'static> Driver<F> {
                     heard = Some(now);
                 }
             }
-            match result {
-                Err(Error::Io { .. }) => self.io_failed(),
-                Err(Error::NotSameDevice { .. }) => {}
-                _ => self.io.succeeded(),
-            }
+            self.link.attempt_ended(&result, self.pump.clock().now());
             if should_retry(outcome(command, &result), attempts, retries) {
                 tracing::debug!(unit, %function, attempts, "retrying: {:?}", result);
                 continue;
             }
-            self.record_health(command, &result);
+            self.link.record_health(command, &result, self.pump.clock().now());
             return match result {
                 Err(Error::Timeout { unit, timeout, .. }) => Err(Error::Timeout { unit, timeout, attempts, heard }),
                 other => other,
@@ -217,46 +321,24 @@ impl<F: Framing + Send + 'static> Driver<F> {
     /// One request on the line: open the port if needed, submit, drive the engine until it
     /// completes.
     async fn transact(&mut self, command: &Command) -> Result<Reply, Error> {
-        if self.port.is_none() {
-            if self.opened && !self.transport.reopens() {
-                return Err(Error::io(
-                    format!("reopening {}", self.transport.describe()),
-                    std::io::Error::new(std::io::ErrorKind::NotConnected, "the port was lost, and reopening is off"),
-                ));
-            }
-            if let Some(at) = self.io.take_reopen_at() {
-                tokio::time::sleep_until(self.pump.clock().to_tokio(at)).await;
-            }
-            match self.transport.open(self.config.connect_timeout).await {
-                Ok(port) => {
-                    self.port = Some(port);
-                    self.connects = self.connects.saturating_add(1);
-                    if self.opened {
-                        tracing::info!(port = %self.transport.describe(), "reopened");
-                    }
-                }
-                Err(e) => {
-                    self.connect_failures = self.connect_failures.saturating_add(1);
-                    return Err(e);
-                }
-            }
-            self.opened = true;
+        if self.link.ensure_open(self.pump.clock()).await? {
             self.master.abort();
         }
+        let config = &self.link.config;
         self.master.set_config(MasterConfig {
             response_timeout: command.options.timeout,
-            turnaround_delay: self.config.turnaround_delay,
-            echo_suppression: self.config.echo_suppression,
-            late_window: self.config.late_window.unwrap_or(command.options.timeout.saturating_mul(2)),
+            turnaround_delay: config.turnaround_delay,
+            echo_suppression: config.echo_suppression,
+            late_window: config.late_window.unwrap_or(command.options.timeout.saturating_mul(2)),
             // On a wire no reply can begin before the request has left; a pty or TCP says
             // nothing of when a reply may come.
-            min_reply_delay: self.port.as_ref().is_some_and(|p| p.has_wire()).then_some(std::time::Duration::ZERO),
+            min_reply_delay: self.link.port.as_ref().is_some_and(|p| p.has_wire()).then_some(std::time::Duration::ZERO),
         });
         // Nothing is in flight between requests; make sure of it.
         self.master.abort();
         self.flush_input().map_err(|e| {
-            self.lose_port();
-            Error::io(format!("reading from {}", self.transport.describe()), e)
+            self.link.lose_port();
+            Error::io(format!("reading from {}", self.link.transport.describe()), e)
         })?;
         let now = self.pump.clock().now();
         let submitted = if command.raw {
@@ -269,59 +351,27 @@ impl<F: Framing + Send + 'static> Driver<F> {
             // Only a PDU longer than 253 bytes cannot be framed.
             return Err(Error::InvalidRequest(ferrobus_proto::PduError::TooLong { len: command.pdu.len() }));
         }
-        let Some(port) = self.port.as_mut() else {
-            return Err(Error::io(
-                format!("reading from {}", self.transport.describe()),
-                std::io::ErrorKind::NotConnected.into(),
-            ));
-        };
-        let mut transaction = Transaction { command, tx: &mut self.tx, transport: &self.transport };
+        let not_connected = self.link.not_connected();
+        let Some(port) = self.link.port.as_mut() else { return Err(not_connected) };
+        let mut transaction = Transaction { command, tx: &mut self.tx, transport: &self.link.transport };
         let result = self.pump.run(port, &mut self.master, &mut transaction).await;
         if let Err(Error::Io { .. }) = result {
             // The port failed under the request: nothing more is heard of it.
             self.master.abort();
-            self.lose_port();
+            self.link.lose_port();
         }
         result
     }
 
     /// Hands the engine what is waiting in the port, unread, and counts it as dropped.
     fn flush_input(&mut self) -> std::io::Result<()> {
-        let Some(port) = self.port.as_mut() else { return Ok(()) };
+        let Some(port) = self.link.port.as_mut() else { return Ok(()) };
         let n = self.pump.drain(port, &mut self.master)?;
         if n > 0 {
-            self.flushed_bytes = self.flushed_bytes.saturating_add(n as u64);
-            tracing::debug!(port = %self.transport.describe(), bytes = n, "dropped bytes waiting in the port before the request");
+            self.link.flushed_bytes = self.link.flushed_bytes.saturating_add(n as u64);
+            tracing::debug!(port = %self.link.transport.describe(), bytes = n, "dropped bytes waiting in the port before the request");
         }
         Ok(())
-    }
-
-    /// Fails fast for a unit in backoff; returns whether this request is its probe.
-    fn check_health(&mut self, unit: u8) -> Result<bool, Error> {
-        let Some(health) = self.health.get(&unit) else { return Ok(false) };
-        let now = self.pump.clock().now();
-        match health.check(now) {
-            Admit::Send => Ok(false),
-            Admit::Probe => Ok(true),
-            Admit::Skip { until } => Err(Error::Backoff { unit, retry_in: until.saturating_duration_since(now) }),
-        }
-    }
-
-    fn record_health(&mut self, command: &Command, result: &Result<Reply, Error>) {
-        let Some(backoff) = self.config.backoff else { return };
-        let unit = command.unit;
-        // A broadcast gets no reply, so it says nothing of any unit's health.
-        if ferrobus_proto::codes::unit::is_broadcast(unit, self.transport.framing() != crate::port::Framing::Mbap) {
-            return;
-        }
-        let outcome = outcome(command, result);
-        let now = self.pump.clock().now();
-        let health = self.health.entry(unit).or_default();
-        if health.record(now, outcome, &backoff) {
-            self.health.remove(&unit);
-        } else if outcome == Outcome::Timeout && matches!(health.check(now), Admit::Skip { .. }) {
-            tracing::info!(unit, period = ?health.period(), "unit not answering; backing off");
-        }
     }
 }
 

@@ -51,6 +51,7 @@ use ferrobus_proto::frame::ascii::AsciiCodec;
 use ferrobus_proto::frame::mbap::MbapCodec;
 use ferrobus_proto::frame::rtu::RtuCodec;
 use ferrobus_proto::frame::{AduHeader, Framing, LineTiming, RxEvent, RxStats};
+use ferrobus_proto::master::pipeline::{Pipeline, Ticket};
 use ferrobus_proto::master::{Completion, Master};
 use ferrobus_proto::slave::{Slave, SlaveEvent};
 use tokio::io::{AsyncReadExt, AsyncWriteExt};
@@ -103,6 +104,29 @@ impl<F: Framing> Engine for Master<F> {
     }
     fn poll_event(&mut self) -> Option<Completion<'_>> {
         Master::poll_event(self)
+    }
+}
+
+/// The pipelined master: several requests in flight on one Modbus/TCP connection, each
+/// completion with the ticket of its request.
+impl Engine for Pipeline {
+    type Event<'a> = (Ticket, Completion<'a>);
+
+    fn on_bytes(&mut self, now: Instant, bytes: &[u8]) -> usize {
+        Pipeline::on_bytes(self, now, bytes);
+        bytes.len()
+    }
+    fn poll_timeout(&self) -> Option<Instant> {
+        Pipeline::poll_timeout(self)
+    }
+    fn handle_timeout(&mut self, now: Instant) {
+        Pipeline::handle_timeout(self, now);
+    }
+    fn poll_transmit(&mut self, now: Instant, buf: &mut [u8]) -> Option<usize> {
+        Pipeline::poll_transmit(self, now, buf)
+    }
+    fn poll_event(&mut self) -> Option<(Ticket, Completion<'_>)> {
+        Pipeline::poll_event(self)
     }
 }
 

@@ -1,0 +1,259 @@
+//! The driver of a Modbus/TCP connection with several requests in flight
+//! ([`ClientConfig::in_flight`](crate::ClientConfig::in_flight) past 1).
+//!
+//! It is the one-at-a-time [`Driver`](super::Driver)'s twin: it takes commands from the
+//! client's channel and hands back completions, with the same retries, per-unit backoff,
+//! reconnection and counters (the [`Link`] both keep). It does not wait for a reply before it
+//! sends the next request: up to the limit are outstanding on the connection at once, each
+//! matched to its reply by its transaction id by the core's [`Pipeline`]. Requests that come
+//! together go out in one write, and replies that come together are taken from one read.
+//!
+//! - **Retries.** A retry is a new request under a new transaction id, sent as soon as its
+//!   attempt has ended; it goes before the requests that wait in the channel.
+//! - **A lost connection** (the device closed it, a read or a write failed) ends every request
+//!   in flight: those with retries left are sent again on the next connection, made after the
+//!   IO backoff; the others fail with the IO error. The backoff counts the loss once, not once
+//!   per request it ended.
+//! - **Backoff.** A unit in backoff is refused before anything is sent, as on any line; its
+//!   probe goes without retries.
+//!
+//! Whether a device takes pipelined requests is the device's affair: one that reads its
+//! connection in order and answers each request (libmodbus's server) serves them back to back,
+//! so pipelining hides the round trip; one that takes a single request at a time and drops
+//! the rest (pymodbus's server, 3.16, answers only the first of those one read brings) makes
+//! the others time out, and wants `in_flight` 1.
+
+use std::collections::VecDeque;
+use std::sync::{Arc, Mutex};
+
+use ferrobus_proto::master::pipeline::{MAX_IN_FLIGHT, Pipeline};
+use ferrobus_proto::master::{HeardInstead, MAX_TX_LEN};
+use ferrobus_proto::pdu::Request;
+use ferrobus_proto::retry::should_retry;
+use tokio::sync::mpsc;
+
+use super::{ClientStats, Command, Link, Reply, convert, outcome};
+use crate::config::ClientConfig;
+use crate::error::Error;
+use crate::port::{BoxPort, Transport};
+use crate::pump::{Pump, Step, write_frame};
+
+/// A request and its attempts so far.
+struct Pending {
+    command: Command,
+    /// Attempts sent, this one included.
+    attempts: u32,
+    /// Resends allowed (none for a unit's probe).
+    retries: u32,
+    /// What tells most about the unit over all attempts that timed out.
+    heard: Option<HeardInstead>,
+}
+
+pub(crate) struct Pipelined {
+    engine: Pipeline,
+    link: Link,
+    pump: Pump,
+    /// The requests in flight, by their ticket's slot.
+    flying: [Option<Pending>; MAX_IN_FLIGHT],
+    /// Requests to send before any new one: retries, and those a lost connection ended.
+    again: VecDeque<Pending>,
+    frame: Box<[u8; MAX_TX_LEN]>,
+    /// The frames of one write.
+    batch: Vec<u8>,
+}
+
+impl Pipelined {
+    pub(crate) fn new(transport: Transport, config: ClientConfig, port: Option<BoxPort>) -> Self {
+        Pipelined {
+            engine: Pipeline::new(Transport::mbap_codec(), config.in_flight),
+            pump: Pump::new(transport.timer().sleeper()),
+            link: Link::new(transport, config, port),
+            flying: std::array::from_fn(|_| None),
+            again: VecDeque::new(),
+            frame: Box::new([0; MAX_TX_LEN]),
+            batch: Vec::new(),
+        }
+    }
+
+    /// The counters the driver keeps up to date for its clients.
+    pub(crate) fn stats(&self) -> Arc<Mutex<ClientStats>> {
+        self.link.stats()
+    }
+
+    fn publish_stats(&self) {
+        self.link.publish(self.engine.stats());
+    }
+
+    pub(crate) async fn run(mut self, mut commands: mpsc::Receiver<Command>) {
+        let mut open = true;
+        loop {
+            self.deliver();
+            while self.engine.has_room() {
+                let Some(pending) = self.again.pop_front() else { break };
+                self.send(pending).await;
+                // A failed connect ends it here: deliver what that ended.
+                self.deliver();
+            }
+            self.transmit().await;
+            if self.link.port.is_none() {
+                if !self.again.is_empty() {
+                    continue;
+                }
+                // Nothing is in flight without a connection: wait for the next request.
+                match commands.recv().await {
+                    Some(command) => self.start(command).await,
+                    None => return,
+                }
+                continue;
+            }
+            if !open && self.engine.outstanding() == 0 {
+                return;
+            }
+            let room = open && self.engine.has_room() && self.again.is_empty();
+            let deadline = self.pump.deadline(&self.engine);
+            let Some(port) = self.link.port.as_mut() else { continue };
+            let next = async { if room { commands.recv().await } else { std::future::pending().await } };
+            match self.pump.step(port, &mut self.engine, deadline, next).await {
+                Step::Other(Some(command)) => {
+                    self.start(command).await;
+                    // Whatever else is waiting goes out in the same write.
+                    while self.engine.has_room() && self.link.port.is_some() {
+                        let Ok(command) = commands.try_recv() else { break };
+                        self.start(command).await;
+                    }
+                }
+                Step::Other(None) => open = false,
+                Step::Read => {}
+                Step::Woke => self.pump.handle_timeout(&mut self.engine),
+                Step::Closed => self.lost(&std::io::ErrorKind::UnexpectedEof.into()),
+                Step::Failed(e) => self.lost(&e),
+            }
+        }
+    }
+
+    /// A new request: refused at once for a unit in backoff, else sent.
+    async fn start(&mut self, command: Command) {
+        let now = self.pump.clock().now();
+        match self.link.check_health(command.unit, now) {
+            Err(e) => {
+                let _ = command.reply.send(Err(e));
+                self.publish_stats();
+            }
+            Ok(probe) => {
+                let retries = if probe { 0 } else { command.options.retries };
+                self.send(Pending { command, attempts: 0, retries, heard: None }).await;
+            }
+        }
+    }
+
+    /// Sends one attempt of `pending`, connecting first if needed; it waits in `again` while
+    /// the requests in flight are at the limit.
+    async fn send(&mut self, mut pending: Pending) {
+        if !self.engine.has_room() {
+            self.again.push_back(pending);
+            return;
+        }
+        pending.attempts = pending.attempts.saturating_add(1);
+        match self.link.ensure_open(self.pump.clock()).await {
+            // A new connection: nothing said on the old one will be heard on it.
+            Ok(true) => self.engine.abort(),
+            Ok(false) => {}
+            Err(e) => return self.ended(pending, Err(e)),
+        }
+        let now = self.pump.clock().now();
+        let command = &pending.command;
+        let timeout = command.options.timeout;
+        let submitted = if command.raw {
+            self.engine.submit_raw(now, command.unit, &command.pdu, timeout)
+        } else {
+            match Request::parse(&command.pdu) {
+                Ok(request) => self.engine.submit(now, command.unit, &request, timeout),
+                Err(e) => return self.settle(pending, Err(e.into())),
+            }
+        };
+        if let Ok(Some(slot)) = submitted.map(|ticket| self.flying.get_mut(ticket.slot())) {
+            *slot = Some(pending);
+        } else {
+            // Only a PDU longer than 253 bytes cannot be framed.
+            let len = pending.command.pdu.len();
+            self.settle(pending, Err(Error::InvalidRequest(ferrobus_proto::PduError::TooLong { len })));
+        }
+    }
+
+    /// Writes every request that is due, in one write.
+    async fn transmit(&mut self) {
+        let now = self.pump.clock().now();
+        self.batch.clear();
+        while let Some(n) = self.engine.poll_transmit(now, &mut self.frame[..]) {
+            self.batch.extend_from_slice(self.frame.get(..n).unwrap_or_default());
+        }
+        if self.batch.is_empty() {
+            return;
+        }
+        let Some(port) = self.link.port.as_mut() else { return self.lost(&std::io::ErrorKind::NotConnected.into()) };
+        let transport = &self.link.transport;
+        if let Err(e) = write_frame(port, &self.batch, transport.rs485(), transport.timing()).await {
+            self.lost(&e);
+        }
+    }
+
+    /// Hands each completion the engine has to its request.
+    fn deliver(&mut self) {
+        let mut any = false;
+        while let Some((ticket, completion)) = self.engine.poll_event() {
+            let Some(pending) = self.flying.get_mut(ticket.slot()).and_then(Option::take) else { continue };
+            let result = convert(&pending.command, completion);
+            self.ended(pending, result);
+            any = true;
+        }
+        if any {
+            self.publish_stats();
+        }
+    }
+
+    /// The connection is gone under the requests in flight: each is sent again on the next
+    /// one if it has retries left, or fails.
+    fn lost(&mut self, error: &std::io::Error) {
+        let describe = self.link.transport.describe();
+        tracing::warn!(port = %describe, "the connection was lost ({error}); it will be made again");
+        self.link.lose_port();
+        self.link.io_failed(self.pump.clock().now());
+        self.engine.abort();
+        for slot in 0..MAX_IN_FLIGHT {
+            let Some(pending) = self.flying.get_mut(slot).and_then(Option::take) else { continue };
+            let error = std::io::Error::new(error.kind(), error.to_string());
+            self.settle(pending, Err(Error::io(format!("reading from {describe}"), error)));
+        }
+        self.publish_stats();
+    }
+
+    /// One attempt ended with `result`: counted for the IO backoff, then settled.
+    fn ended(&mut self, pending: Pending, result: Result<Reply, Error>) {
+        self.link.attempt_ended(&result, self.pump.clock().now());
+        self.settle(pending, result);
+    }
+
+    /// Sends `pending` again if the retry policy says so; else records the unit's health and
+    /// answers its client.
+    fn settle(&mut self, mut pending: Pending, result: Result<Reply, Error>) {
+        if let Err(Error::Timeout { heard: Some(now), .. }) = result {
+            if pending.heard.is_none_or(|kept| now.weight() >= kept.weight()) {
+                pending.heard = Some(now);
+            }
+        }
+        let command = &pending.command;
+        if should_retry(outcome(command, &result), pending.attempts, pending.retries) {
+            tracing::debug!(unit = command.unit, attempts = pending.attempts, "retrying: {:?}", result);
+            self.again.push_back(pending);
+            return;
+        }
+        self.link.record_health(command, &result, self.pump.clock().now());
+        let result = match result {
+            Err(Error::Timeout { unit, timeout, .. }) => {
+                Err(Error::Timeout { unit, timeout, attempts: pending.attempts, heard: pending.heard })
+            }
+            other => other,
+        };
+        let _ = pending.command.reply.send(result);
+    }
+}
