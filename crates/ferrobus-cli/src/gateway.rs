@@ -80,6 +80,13 @@ pub(crate) struct GatewayArgs {
     #[arg(long, default_value_t = 16, value_parser = clap::value_parser!(u32).range(1..=16))]
     pipeline: u32,
 
+    /// On a Modbus/TCP line (--tcp, or tcp = in --lines-file): requests outstanding on the
+    /// device's connection at once (1 to 16), each matched to its reply by transaction id; 1
+    /// sends the next only once the last has ended. More hides the round trip for a device
+    /// that answers every request of its connection in order, as most Modbus/TCP servers do
+    #[arg(long = "in-flight", value_name = "N", default_value_t = 1, value_parser = clap::value_parser!(u32).range(1..=16))]
+    in_flight: u32,
+
     /// Answer a broadcast (unit 0) with its echo once it has gone out (the spec: no reply)
     #[arg(long = "broadcast-ack")]
     broadcast_ack: bool,
@@ -349,6 +356,11 @@ fn config(connection: &ConnectArgs, args: &GatewayArgs) -> Result<GatewayConfig,
             }
             let mut client = connection.client_config();
             client.backoff = backoff(args);
+            if matches!(tcp, Target::Tcp(_)) {
+                client.in_flight = in_flight(args);
+            } else {
+                no_in_flight(args, "RTU over TCP (--rtu-tcp)")?;
+            }
             let line = GatewayLine {
                 queue: usize::try_from(args.queue).unwrap_or(usize::MAX),
                 late_guard: args.late_guard,
@@ -363,6 +375,7 @@ fn config(connection: &ConnectArgs, args: &GatewayArgs) -> Result<GatewayConfig,
             });
         }
     };
+    no_in_flight(args, "a serial line")?;
     let mut client = connection.client_config();
     client.backoff = backoff(args);
     let queue = usize::try_from(args.queue).unwrap_or(usize::MAX);
@@ -397,23 +410,43 @@ fn lines_file(path: &std::path::Path, connection: &ConnectArgs, args: &GatewayAr
         backoff: backoff(args),
         queue: usize::try_from(args.queue).unwrap_or(usize::MAX),
         late_guard: args.late_guard,
+        in_flight: in_flight(args),
     };
     let (lines, routes) = lines::read(path, connection, base)?;
     for (index, line) in lines.iter().enumerate() {
         let units: Vec<String> =
             routes.iter().filter(|(_, r)| r.line == index).map(|(u, r)| format!("{u}->{}", r.unit)).collect();
         tracing::info!(
-            "line {index}: {}, timeout {:?}, retries {}, t3.5 {:?}, queue {}, late guard {:?}, units {}",
+            "line {index}: {}, timeout {:?}, retries {}, t3.5 {:?}, queue {}, late guard {:?}, in flight {}, units {}",
             line.transport.describe(),
             line.client.timeout,
             line.client.retries,
             line.transport.timing().t3_5(),
             line.queue,
             line.late_guard,
+            if line.transport.framing() == ferrobus::Framing::Mbap { line.client.in_flight } else { 1 },
             units.join(" ")
         );
     }
     Ok(GatewayConfig { lines, routes, broadcast_ack: args.broadcast_ack, cache_max_age: args.cache_max_age })
+}
+
+/// `--in-flight`.
+fn in_flight(args: &GatewayArgs) -> usize {
+    usize::try_from(args.in_flight).unwrap_or(1)
+}
+
+/// Refuses `--in-flight` past 1 on a line that is `what`: only Modbus/TCP tells replies apart
+/// by transaction id.
+fn no_in_flight(args: &GatewayArgs, what: &str) -> Result<(), CliError> {
+    if args.in_flight == 1 {
+        return Ok(());
+    }
+    Err(CliError::Usage(format!(
+        "--in-flight {}: only a Modbus/TCP line (--tcp) keeps several requests in flight, and this is {what}: RTU \
+         frames carry no transaction id to tell their replies apart",
+        args.in_flight
+    )))
 }
 
 /// Each line's per-unit backoff from `--backoff-after`, `--backoff-skip`, `--backoff-max`.

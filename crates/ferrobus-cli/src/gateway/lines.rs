@@ -4,8 +4,8 @@
 //! mistake it names).
 //!
 //! The keys are the line options of the command line under their long names (`port`, `tcp`,
-//! `rtu-tcp`, `data-bits`), the gateway's `queue` and `late-guard`, and `response-wait`, which
-//! the line options lack.
+//! `rtu-tcp`, `data-bits`), the gateway's `queue`, `late-guard` and `in-flight` (a `tcp` line's
+//! only), and `response-wait`, which the line options lack.
 //!
 //! Precedence: a key of a `[[line]]` beats the same option given on the command line (or from
 //! the settings file's `[defaults]` or `--conn`), which is what every line of the file starts
@@ -33,11 +33,14 @@ pub(super) struct Base {
     pub(super) queue: usize,
     /// `--late-guard`, unless the line says `late-guard`.
     pub(super) late_guard: Duration,
+    /// `--in-flight`, for each Modbus/TCP line that does not say `in-flight`.
+    pub(super) in_flight: usize,
 }
 
 /// What every line starts from: the connection options and `base`.
 fn defaults(connection: &ConnectArgs, base: Base) -> LineDefaults {
-    let client = ferrobus::ClientConfig { backoff: base.backoff, ..connection.client_config() };
+    let client =
+        ferrobus::ClientConfig { backoff: base.backoff, in_flight: base.in_flight, ..connection.client_config() };
     LineDefaults {
         framing: connection.line(),
         ascii: connection.ascii,

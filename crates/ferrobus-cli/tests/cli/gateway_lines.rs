@@ -1,7 +1,8 @@
 //! `ferrobus gateway --lines-file`: two `ferrobus line` buses at their own baud rates, a
 //! simulated device on each at its line's settings, one gateway serving both from a file, each
 //! unit reached at its own line's settings; the mix with `--port` or `--route` refused; a
-//! broken file refused with its file:line:column before any port is opened.
+//! broken file refused with its file:line:column before any port is opened; `--in-flight` (and
+//! `in-flight =`) refused on a line without transaction ids.
 
 use std::io::{BufRead, BufReader, Read, Write};
 use std::net::TcpStream;
@@ -222,4 +223,26 @@ fn lines_file_beside_port_or_route_is_refused_and_a_broken_file_is_named_before_
     let missing = dir.join("missing.toml");
     let err = stderr(&offline(&["gateway", "--lines-file", missing.to_str().unwrap()]).code(2));
     assert!(err.contains("cannot read the lines file"), "{err}");
+}
+
+#[test]
+fn in_flight_past_one_is_refused_on_a_serial_or_rtu_over_tcp_line_before_anything_opens() {
+    let err = stderr(&offline(&["--port", "/dev/null-no-such-port", "gateway", "--in-flight", "4"]).code(2));
+    assert!(
+        err.contains(
+            "--in-flight 4: only a Modbus/TCP line (--tcp) keeps several requests in flight, and this is a serial line"
+        ),
+        "{err}"
+    );
+    assert!(!err.contains("null-no-such-port"), "refused before the port is opened: {err}");
+    let err = stderr(&offline(&["--rtu-tcp", "127.0.0.1:1", "gateway", "--in-flight", "2"]).code(2));
+    assert!(err.contains("this is RTU over TCP (--rtu-tcp): RTU frames carry no transaction id"), "{err}");
+    let err = stderr(&offline(&["--tcp", "127.0.0.1:1", "gateway", "--in-flight", "17"]).code(2));
+    assert!(err.contains("17 is not in 1..=16"), "{err}");
+    let dir = dir("in-flight");
+    let file = dir.join("lines.toml");
+    std::fs::write(&file, "[[line]]\nport = \"/dev/null-no-such-port\"\nin-flight = 3\n").unwrap();
+    let path = file.to_str().unwrap();
+    let err = stderr(&offline(&["gateway", "--lines-file", path]).code(2));
+    assert!(err.contains(&format!("{path}:3:13: [[line]] 0, in-flight: only a Modbus/TCP line")), "{err}");
 }

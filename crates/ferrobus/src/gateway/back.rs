@@ -2,7 +2,8 @@
 //! behind the gateway, its bounded queue, served round-robin per client connection, and the
 //! worker that is the line's one master. (The virtual RS-485 line is [`crate::line`].)
 //!
-//! The worker takes one request at a time and hands it to the line's [`Client`], which keeps
+//! The worker takes one request at a time (on a pipelined Modbus/TCP line, up to
+//! [`Worker::in_flight`] at once) and hands it to the line's [`Client`], which keeps
 //! t3.5 before every frame, waits the reply timeout, retries, skips a unit in backoff and
 //! waits the turnaround after a broadcast. A reply is matched to its request by the client's
 //! master engine (unit, function code, and for a parsed request its length and echo), and the
@@ -26,6 +27,8 @@ use ferrobus_proto::master::HeardInstead;
 use ferrobus_proto::pdu::Request;
 use ferrobus_proto::retry::io_backoff_wait;
 use ferrobus_proto::{ExceptionCode, FunctionCode};
+use futures_util::StreamExt;
+use futures_util::stream::FuturesUnordered;
 use tokio::sync::{Notify, oneshot};
 
 use super::cache::Cache;
@@ -179,53 +182,121 @@ impl Down {
     }
 }
 
-/// The line's one master: takes jobs in turn and forwards each through `client`. While the
-/// line is down, the requests that come are answered 0x0A at once instead of each waiting out
-/// a reconnect (a device that is unreachable costs a whole connect timeout per attempt): one
-/// request tries the line again when the hold has passed.
-pub(crate) async fn run(queue: Arc<LineQueue>, client: Client, cache: Option<Arc<Cache>>, late_guard: Duration) {
+/// What the worker does with the requests it takes.
+#[derive(Clone, Copy, Debug)]
+pub(crate) struct Worker {
+    /// How many requests may be on the line at once: 1 but on a pipelined Modbus/TCP line
+    /// ([`crate::ClientConfig::in_flight`]).
+    pub(crate) in_flight: usize,
+    /// How long the line stays quiet after a request that got no usable reply (none on a
+    /// Modbus/TCP line).
+    pub(crate) late_guard: Duration,
+}
+
+/// A request the worker has handed to the line, with how it ended.
+struct Flown {
+    job: Job,
+    reply: Option<Vec<u8>>,
+    ended: Ended,
+    took: Duration,
+}
+
+/// The line's one master: takes jobs in turn and forwards each through `client`, keeping up
+/// to [`Worker::in_flight`] on the line at once (one on a serial line: the next request goes
+/// only once the last has ended). While the line is down, the requests that come are
+/// answered 0x0A at once instead of each waiting out a reconnect (a device that is
+/// unreachable costs a whole connect timeout per attempt): one request tries the line again
+/// when the hold has passed.
+pub(crate) async fn run(queue: Arc<LineQueue>, client: Client, cache: Option<Arc<Cache>>, worker: Worker) {
+    let in_flight = worker.in_flight.max(1);
     let mut down: Option<Down> = None;
-    while let Some(job) = queue.next().await {
-        // A broadcast goes out even with nobody waiting for its end (no acknowledgement).
-        if job.reply.is_closed() && job.unit_out != 0 {
-            let mut stats = queue.stats();
-            stats.total.abandoned = stats.total.abandoned.saturating_add(1);
-            continue;
+    let mut flying = FuturesUnordered::new();
+    // After a request without a usable reply: the line is quiet until then.
+    let mut quiet: Option<tokio::time::Instant> = None;
+    let mut closed = false;
+    loop {
+        let room = !closed && quiet.is_none() && flying.len() < in_flight;
+        tokio::select! {
+            job = queue.next(), if room => match job {
+                None => closed = true,
+                Some(job) => {
+                    if let Some(job) = take(&queue, job, down) {
+                        flying.push(fly(&client, job));
+                    }
+                }
+            },
+            Some(flown) = flying.next(), if !flying.is_empty() => {
+                let ended = flown.ended;
+                land(&queue, &client, cache.as_deref(), flown);
+                let now = tokio::time::Instant::now();
+                down = match down {
+                    // The other requests in flight when the line went down end the same way:
+                    // one loss, held once.
+                    Some(d) if ended == Ended::LineDown && now < d.retry_at => Some(d),
+                    _ => (ended == Ended::LineDown).then(|| Down::after(down, now)),
+                };
+                if matches!(ended, Ended::Timeout | Ended::BadCrc | Ended::BadReply) && !worker.late_guard.is_zero() {
+                    // The engine keeps the line closed for a reply owed to a timed-out
+                    // request; what else a device confused by this one may send meanwhile is
+                    // awaited by nobody and dropped.
+                    quiet = Some(now + worker.late_guard);
+                }
+            },
+            () = tokio::time::sleep_until(quiet.unwrap_or_else(tokio::time::Instant::now)), if quiet.is_some() => {
+                quiet = None;
+            },
         }
-        let started = tokio::time::Instant::now();
-        let (reply, ended) = match down {
-            Some(d) if started < d.retry_at => {
-                let function = job.pdu.first().copied().unwrap_or_default();
-                (Some(exception(function, ExceptionCode::GatewayPathUnavailable.value())), Ended::LineDown)
-            }
-            _ => {
-                let forwarded = forward(&client, job.unit_out, &job.pdu).await;
-                down = (forwarded.1 == Ended::LineDown).then(|| Down::after(down, tokio::time::Instant::now()));
-                forwarded
-            }
-        };
-        let took = started.elapsed();
-        {
-            let mut stats = queue.stats();
-            stats.total.count(ended, took);
-            stats.units.entry(job.unit_in).or_default().count(ended, took);
-            stats.dropped(&client.stats());
-        }
-        if let (Some(cache), Some(reply), Ended::Replied) = (&cache, &reply, ended) {
-            cache.update(job.unit_in, &job.pdu, reply);
-        }
-        tracing::debug!(unit = job.unit_in, line_unit = job.unit_out, ?ended, "after {took:?}");
-        // The client may have gone meanwhile: nothing to answer.
-        let _ = job.reply.send(reply);
-        if matches!(ended, Ended::Timeout | Ended::BadCrc | Ended::BadReply) {
-            // The engine keeps the line closed for a reply owed to a timed-out request; what
-            // else a device confused by this one may send meanwhile is awaited by nobody and
-            // dropped.
-            if !late_guard.is_zero() {
-                tokio::time::sleep(late_guard).await;
-            }
+        if closed && flying.is_empty() {
+            return;
         }
     }
+}
+
+/// A job taken from the queue: `None` if it needs the line no more — its client has gone,
+/// or it was answered 0x0A at once because the line is held down.
+fn take(queue: &LineQueue, job: Job, down: Option<Down>) -> Option<Job> {
+    // A broadcast goes out even with nobody waiting for its end (no acknowledgement).
+    if job.reply.is_closed() && job.unit_out != 0 {
+        let mut stats = queue.stats();
+        stats.total.abandoned = stats.total.abandoned.saturating_add(1);
+        return None;
+    }
+    if down.is_some_and(|d| tokio::time::Instant::now() < d.retry_at) {
+        let function = job.pdu.first().copied().unwrap_or_default();
+        let reply = Some(exception(function, ExceptionCode::GatewayPathUnavailable.value()));
+        let mut stats = queue.stats();
+        stats.total.count(Ended::LineDown, Duration::ZERO);
+        stats.units.entry(job.unit_in).or_default().count(Ended::LineDown, Duration::ZERO);
+        drop(stats);
+        tracing::debug!(unit = job.unit_in, line_unit = job.unit_out, "the line is down: 0x0A at once");
+        let _ = job.reply.send(reply);
+        return None;
+    }
+    Some(job)
+}
+
+/// Forwards `job` through `client`, timed.
+async fn fly(client: &Client, job: Job) -> Flown {
+    let started = tokio::time::Instant::now();
+    let (reply, ended) = forward(client, job.unit_out, &job.pdu).await;
+    Flown { job, reply, ended, took: started.elapsed() }
+}
+
+/// Counts how a request ended, keeps a reply in the cache and sends it to its client.
+fn land(queue: &LineQueue, client: &Client, cache: Option<&Cache>, flown: Flown) {
+    let Flown { job, reply, ended, took } = flown;
+    {
+        let mut stats = queue.stats();
+        stats.total.count(ended, took);
+        stats.units.entry(job.unit_in).or_default().count(ended, took);
+        stats.dropped(&client.stats());
+    }
+    if let (Some(cache), Some(reply), Ended::Replied) = (cache, &reply, ended) {
+        cache.update(job.unit_in, &job.pdu, reply);
+    }
+    tracing::debug!(unit = job.unit_in, line_unit = job.unit_out, ?ended, "after {took:?}");
+    // The client may have gone meanwhile: nothing to answer.
+    let _ = job.reply.send(reply);
 }
 
 /// Forwards one request; the reply PDU for the client (`None` for a broadcast) and how it

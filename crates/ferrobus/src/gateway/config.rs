@@ -21,6 +21,7 @@
 //! [[line]]                      # line 2: an inverter that takes one Modbus/TCP client
 //! tcp = "192.168.1.50"          # port 502 unless given
 //! timeout = "1s"
+//! in-flight = 4                 # up to 4 requests outstanding on its connection
 //! renumber = { 100 = 1 }
 //!
 //! [[line]]                      # line 3: a serial server that carries RTU frames over TCP
@@ -32,8 +33,10 @@
 //! port 502 unless given) and `rtu-tcp` (RTU frames over TCP, `HOST:PORT`). The keys: `port`,
 //! `tcp`, `rtu-tcp`, `ascii`, `baud`, `parity`, `data-bits`, `stop-bits`, `rs485`,
 //! `low-latency`, `timeout`, `retries`, `t15`, `t35`, `turnaround`, `echo`, `reopen`, `queue`,
-//! `late-guard`, and `response-wait`: the time the devices of the line hold their reply, added
-//! to the line's reply timeout. A line's routes are `units` (numbers and `"A-B"` ranges) and
+//! `late-guard`, `in-flight` (on a `tcp` line only: how many requests may be outstanding on
+//! the device's connection at once, 1 to 16, matched by transaction id; see
+//! [`ClientConfig::in_flight`]), and `response-wait`: the time the devices of the line hold
+//! their reply, added to the line's reply timeout. A line's routes are `units` (numbers and `"A-B"` ranges) and
 //! `renumber` (client units to the units on the line; a range to a range of the same length,
 //! or to its first unit). Durations are strings such as `"300ms"`, or whole numbers of
 //! milliseconds. A serial port's own keys (`ascii`, `baud`, `parity`, `data-bits`,
@@ -61,6 +64,7 @@ use std::time::Duration;
 
 use ferrobus_profile::source::{self, Located, Place, ReadError};
 use ferrobus_proto::frame::{DataBits, LineConfig, Parity, StopBits};
+use ferrobus_proto::master::pipeline::MAX_IN_FLIGHT;
 use serde::Deserialize;
 use toml::Spanned;
 
@@ -180,6 +184,7 @@ struct LineShape {
     reopen: Option<Spanned<toml::Value>>,
     queue: Option<Spanned<toml::Value>>,
     late_guard: Option<Spanned<toml::Value>>,
+    in_flight: Option<Spanned<toml::Value>>,
     units: Option<Vec<Spanned<Item>>>,
     renumber: Option<BTreeMap<Spanned<String>, Spanned<Item>>>,
 }
@@ -518,6 +523,7 @@ fn settings(table: Range<usize>, line: &LineShape, defaults: &LineDefaults) -> R
     if let Some(v) = &line.late_guard {
         d.late_guard = duration(v, "late-guard")?;
     }
+    d.client.in_flight = in_flight(line.in_flight.as_ref(), kind, d.client.in_flight)?;
     if kind != Kind::Serial {
         return Ok((network_line(kind, path, &d), target));
     }
@@ -539,6 +545,25 @@ fn settings(table: Range<usize>, line: &LineShape, defaults: &LineDefaults) -> R
         ..GatewayLine::new(transport.with_reopen(d.reopen), d.client)
     };
     Ok((config, target))
+}
+
+/// A line's requests in flight: its `in-flight` key on a Modbus/TCP line, else `default` there;
+/// one on every other line, where the key is a mistake.
+fn in_flight(value: Option<&Spanned<toml::Value>>, kind: Kind, default: usize) -> Result<usize, Problem> {
+    match (value, kind) {
+        (Some(v), Kind::Tcp) => {
+            let limit = i64::try_from(MAX_IN_FLIGHT).unwrap_or(i64::MAX);
+            let n = number(v, "in-flight", 1, limit, &format!("the requests outstanding at once, 1 to {limit}"))?;
+            Ok(usize::try_from(n).unwrap_or(1))
+        }
+        (Some(v), _) => {
+            let message = "in-flight: only a Modbus/TCP line (tcp = ...) keeps several requests in flight; RTU \
+                           frames carry no transaction id to tell their replies apart";
+            Err((v.span(), message.into()))
+        }
+        (None, Kind::Tcp) => Ok(default),
+        (None, _) => Ok(1),
+    }
 }
 
 /// A whole number from `min` to `max`.

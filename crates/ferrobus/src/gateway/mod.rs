@@ -8,13 +8,14 @@
 //!   TCP connection ─┘                             └─▶ line 1: ...
 //! ```
 //!
-//! Each line has one master, its worker: strictly one transaction at a time through the
-//! line's [`Client`], which keeps t3.5 before every frame, waits the reply timeout and
-//! retries, waits the turnaround after a broadcast, and skips a unit that stopped answering
-//! (per-unit backoff: a powered-off drive costs the bus one probe now and then, never a
-//! timeout per request, and the other units' requests go on meanwhile). Requests from every
-//! connection wait in one bounded queue per line and are taken one per connection in turn,
-//! so no client can starve another; a full queue answers 0x06 Server Device Busy at once.
+//! Each line has one master, its worker: strictly one transaction at a time (on a serial line;
+//! a pipelined Modbus/TCP line may keep several in flight, below) through the line's
+//! [`Client`], which keeps t3.5 before every frame, waits the reply timeout and retries, waits
+//! the turnaround after a broadcast, and skips a unit that stopped answering (per-unit backoff:
+//! a powered-off drive costs the bus one probe now and then, never a timeout per request, and
+//! the other units' requests go on meanwhile). Requests from every connection wait in one
+//! bounded queue per line and are taken one per connection in turn, so no client can starve
+//! another; a full queue answers 0x06 Server Device Busy at once.
 //!
 //! What a client is answered:
 //!
@@ -74,7 +75,11 @@
 //! A line to a Modbus/TCP device ([`Transport::tcp`]) is served as a serial line is: one
 //! request at a time on its one connection, in turns per client connection, with the cache,
 //! the rules and the per-unit backoff; the reply is matched by the MBAP transaction id the
-//! line's master gave the request (a reply under another id is dropped). The gateway does not
+//! line's master gave the request (a reply under another id is dropped). With
+//! [`ClientConfig::in_flight`](crate::ClientConfig::in_flight) past 1 its worker keeps that
+//! many requests outstanding on the connection, taken in the same turns, each matched by its
+//! own id: a device that answers its connection's requests in order then serves them back to
+//! back, without a round trip between two. The gateway does not
 //! connect it at start: a device that is down keeps nobody else from being served. Its
 //! connection is made on the first request and made again after the device closes it or a
 //! read fails, after a backoff that grows with each failure (the driver's, as for a serial
@@ -107,12 +112,13 @@ use std::sync::{Arc, Mutex};
 use std::time::Duration;
 
 use ferrobus_proto::frame::AduHeader;
+use ferrobus_proto::master::pipeline::MAX_IN_FLIGHT;
 use tokio::io::{AsyncRead, AsyncWrite};
 use tokio::net::TcpListener;
 use tokio::sync::oneshot;
 
 pub use authorize::{AllowAll, Authorize, Chain, Rules};
-use back::{Job, LineQueue};
+use back::{Job, LineQueue, Worker};
 use cache::Cache;
 pub use reverse::{OnFailure, Upstream, serve_reverse};
 use stats::{FrontStats, LineTraffic};
@@ -366,10 +372,14 @@ impl Gateway {
             let stats = Arc::new(Mutex::new(LineTraffic { name, ..LineTraffic::default() }));
             let queue = Arc::new(LineQueue::new(line.queue, stats));
             // A Modbus/TCP device's late reply carries its own transaction id: the master drops
-            // it, so the line need not stay quiet for it.
-            let late_guard =
-                if line.transport.framing() == crate::Framing::Mbap { Duration::ZERO } else { line.late_guard };
-            tokio::spawn(back::run(Arc::clone(&queue), client.clone(), cache.clone(), late_guard));
+            // it, so the line need not stay quiet for it, and may keep several requests in
+            // flight.
+            let worker = if line.transport.framing() == crate::Framing::Mbap {
+                Worker { in_flight: line.client.in_flight.clamp(1, MAX_IN_FLIGHT), late_guard: Duration::ZERO }
+            } else {
+                Worker { in_flight: 1, late_guard: line.late_guard }
+            };
+            tokio::spawn(back::run(Arc::clone(&queue), client.clone(), cache.clone(), worker));
             lines.push(queue);
             clients.push(client);
         }

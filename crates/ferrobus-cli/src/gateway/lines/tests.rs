@@ -14,7 +14,7 @@ fn connection(args: &[&str]) -> ConnectArgs {
     ConnectArgs::from_arg_matches(&command.try_get_matches_from(args).unwrap()).unwrap()
 }
 
-const BASE: Base = Base { backoff: None, queue: 64, late_guard: Duration::from_millis(100) };
+const BASE: Base = Base { backoff: None, queue: 64, late_guard: Duration::from_millis(100), in_flight: 1 };
 
 /// `text` in a file of its own, removed when dropped.
 struct File(PathBuf);
@@ -65,7 +65,7 @@ fn the_gateways_queue_late_guard_and_backoff_go_to_every_line_unless_it_says_oth
     let text = "[[line]]\nport = \"/dev/ttyA\"\nunits = [1]\n[[line]]\nport = \"/dev/ttyB\"\nunits = [2]\nqueue = 3\n";
     let file = File::new("base", text);
     let backoff = ferrobus::Backoff { after: 3, initial: Duration::from_secs(5), max: Duration::from_secs(60) };
-    let base = Base { backoff: Some(backoff), queue: 9, late_guard: Duration::from_millis(40) };
+    let base = Base { backoff: Some(backoff), queue: 9, late_guard: Duration::from_millis(40), in_flight: 1 };
     let (lines, _) = read(&file.0, &connection(&[]), base).unwrap();
     assert!(lines.iter().all(|l| l.client.backoff == Some(backoff)));
     assert_eq!((lines[0].queue, lines[1].queue), (9, 3));

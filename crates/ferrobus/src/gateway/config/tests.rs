@@ -238,6 +238,7 @@ fn the_readme_example_reads_as_it_says() {
     assert_eq!((routes.get(30), routes.get(41), routes.get(50)), (on(1, 3), on(1, 1), on(1, 10)));
     assert_eq!(lines[2].transport.describe(), "192.168.1.50:502");
     assert_eq!((lines[2].transport.framing(), lines[2].client.timeout), (Framing::Mbap, Duration::from_secs(1)));
+    assert_eq!((lines[0].client.in_flight, lines[2].client.in_flight), (1, 4));
     assert_eq!(routes.get(100), on(2, 1));
 }
 
@@ -341,4 +342,27 @@ fn a_serial_key_on_a_tcp_line_is_named_and_so_is_a_device_given_twice() {
     // "h" is "h:502": the same device twice.
     let twice = "[[line]]\ntcp = \"h:502\"\nunits = [1]\n[[line]]\ntcp = \"h\"\nunits = [2]\n";
     refused(twice, 5, &["[[line]] 1", "tcp: h:502 is a line already (gw.toml:2:7)"]);
+}
+
+#[test]
+fn in_flight_is_a_modbus_tcp_lines_own_and_the_callers_default_reaches_only_those() {
+    let text = "[[line]]\ntcp = \"10.0.0.7\"\nin-flight = 8\nunits = [1]\n\n[[line]]\ntcp = \"10.0.0.8\"\nunits = [2]\n\n\
+                [[line]]\nport = \"/dev/ttyA\"\nunits = [3]\n\n[[line]]\nrtu-tcp = \"h:4001\"\nunits = [4]\n";
+    let four = ClientConfig { in_flight: 4, ..defaults().client };
+    let LinesFile { lines, .. } = parse("gw.toml", text, &LineDefaults { client: four, ..defaults() }).unwrap();
+    let in_flight: Vec<usize> = lines.iter().map(|l| l.client.in_flight).collect();
+    assert_eq!(in_flight, [8, 4, 1, 1], "the line's own, the default, and one on the lines without transaction ids");
+    for line in ["port = \"/dev/ttyA\"", "rtu-tcp = \"h:4001\""] {
+        refused(
+            &format!("[[line]]\n{line}\nin-flight = 2\n"),
+            3,
+            &["[[line]] 0, in-flight: only a Modbus/TCP line (tcp = ...) keeps several requests in flight"],
+        );
+    }
+    refused(
+        "[[line]]\ntcp = \"h\"\nin-flight = 17\n",
+        3,
+        &["in-flight: 17 is out of range (the requests outstanding at once, 1 to 16)"],
+    );
+    refused("[[line]]\ntcp = \"h\"\nin-flight = 0\n", 3, &["in-flight: 0 is out of range"]);
 }
