@@ -10,7 +10,7 @@
 #   libmodbus  `libmodbus_client --tcp ... bench` straight to a fresh server (a C client: a
 #            second reference for the server's one-client rate);
 #   gateway  CLIENTS (100) closed-loop clients (the same gateway_load.py) -> `ferrobus --tcp
-#            127.0.0.1:PORT gateway` -> a fresh server. Each client writes its own block of 10
+#            127.0.0.1:PORT gateway --in-flight N` -> a fresh server, for each N in IN_FLIGHT. Each client writes its own block of 10
 #            holding registers (client i at 10*i: 100 x 10 fits the peers' 1000) and reads it
 #            back: a reply with the wrong tid, unit or values is a mismatch;
 #   gateway_c  CLIENTS `libmodbus_client bench` processes at once through the gateway (each
@@ -18,7 +18,7 @@
 #            checks each reply's tid): the gateway under C clients, which cost less than the
 #            Python ones; its rate is the sum of the clients' own rates, and its ratio is to
 #            the libmodbus bench straight to the server.
-# Then per S: the medians of the runs and ratio = gateway tps / direct tps (the median of the
+# Then per S and N: the medians of the runs and ratio = gateway tps / direct tps (the median of the
 # per-rep ratios, each rep's two runs taken back to back), client-side p50/p99, exceptions by
 # code, lost connections, and the CPU per transaction of the gateway and of the server (from
 # /proc/PID/task/*/schedstat while the window was open).
@@ -28,10 +28,11 @@
 #
 # Environment: FERROBUS=PATH (default target/release/ferrobus: cargo build --release -p
 # ferrobus-cli), PEERS=DIR (target/peers), PYTHON (python3), SERVICES ("0 1000 5000"),
-# REPS (3), SECONDS_PER_RUN (10), CLIENTS (100, at most 100), RECORDS=FILE (also append the
-# JSON records there), QUICK=1 (one rep of 3 s per run: a smoke run under a minute). The
-# gateway's line sends one request at a time (it does not pipeline on the device's
-# connection), as the one-client direct run does.
+# REPS (3), SECONDS_PER_RUN (10), CLIENTS (100, at most 100), IN_FLIGHT ("1 8": the gateway's
+# --in-flight, requests outstanding on the server's connection at once; 1 sends one at a time,
+# as the one-client direct run does; the libmodbus server reads its connection in order, so
+# more are answered in turn), RECORDS=FILE (also append the JSON records there), QUICK=1 (one
+# rep of 3 s per run: a smoke run under a minute).
 # Installs nothing; every process it starts is stopped on exit, Ctrl-C included.
 set -euo pipefail
 
@@ -43,6 +44,7 @@ SERVICES="${SERVICES:-0 1000 5000}"
 REPS="${REPS:-3}"
 RUN="${SECONDS_PER_RUN:-10}"
 CLIENTS="${CLIENTS:-100}"
+IN_FLIGHT="${IN_FLIGHT:-1 8}"
 WARMUP=1
 if [ "${QUICK:-0}" = 1 ]; then
     REPS=1
@@ -68,6 +70,9 @@ command -v "$PYTHON" >/dev/null || die "$PYTHON is missing"
 [[ "$REPS" =~ ^[1-9][0-9]*$ ]] || die "REPS must be a positive number, not '$REPS'"
 for s in $SERVICES; do
     [[ "$s" =~ ^[0-9]+$ ]] || die "SERVICES must be microsecond counts, not '$s'"
+done
+for n in $IN_FLIGHT; do
+    [[ "$n" =~ ^[0-9]+$ ]] && [ "$n" -ge 1 ] && [ "$n" -le 16 ] || die "IN_FLIGHT must be counts 1..16, not '$n'"
 done
 
 ulimit -n 4096
@@ -143,12 +148,13 @@ run_libmodbus() {
     record "{\"mode\":\"libmodbus\",\"service_us\":$1,\"rep\":$2,\"bench\":$out}"
 }
 
-# start_gateway SERVICE_US: a fresh server and the gateway in front of it; sets GW_PORT, GW_PID.
+# start_gateway SERVICE_US IN_FLIGHT: a fresh server and the gateway in front of it; sets
+# GW_PORT, GW_PID.
 start_gateway() {
     start_server "$1"
     GW_PORT="$(free_port)"
     "$FERROBUS" --tcp "127.0.0.1:$SRV_PORT" gateway --listen "127.0.0.1:$GW_PORT" --queue $((CLIENTS + 16)) \
-        --max-connections 2000 --max-per-source 2000 >"$WORK/gw" 2>"$WORK/gw.err" &
+        --in-flight "$2" --max-connections 2000 --max-per-source 2000 >"$WORK/gw" 2>"$WORK/gw.err" &
     GW_PID=$!
     PIDS+=("$GW_PID")
     wait_for "$WORK/gw.err" "gateway: listening on" "$GW_PID"
@@ -163,22 +169,24 @@ stop_gateway() {
     FIRST_WARNING="$(grep -m1 -E 'WARN|ERROR' "$WORK/gw.err" | tr -d '"\\' | cut -c1-200 || true)"
 }
 
-# run_gateway SERVICE_US REP: CLIENTS closed-loop clients through the gateway to the server.
+# run_gateway SERVICE_US REP IN_FLIGHT: CLIENTS closed-loop clients through the gateway to
+# the server.
 run_gateway() {
-    start_gateway "$1"
+    start_gateway "$1" "$3"
     local load
     load="$("$PYTHON" "$LOAD" --addr "127.0.0.1:$GW_PORT" --clients "$CLIENTS" --seconds "$RUN" --warmup "$WARMUP" \
         --cpu "gateway=$GW_PID" --cpu "server=$SRV_PID")"
     stop_gateway
-    record "{\"mode\":\"gateway\",\"service_us\":$1,\"rep\":$2,\"clients\":$CLIENTS,\"load\":$load,\"gateway_warnings\":${WARNINGS:-0},\"first_warning\":\"$FIRST_WARNING\"}"
+    record "{\"mode\":\"gateway\",\"service_us\":$1,\"rep\":$2,\"in_flight\":$3,\"clients\":$CLIENTS,\"load\":$load,\"gateway_warnings\":${WARNINGS:-0},\"first_warning\":\"$FIRST_WARNING\"}"
 }
 
-# run_gateway_c SERVICE_US REP: CLIENTS libmodbus_client bench processes through the gateway,
-# all at once, each about half a run's worth of reads at the direct rate (DIRECT_TPS).
+# run_gateway_c SERVICE_US REP IN_FLIGHT: CLIENTS libmodbus_client bench processes through
+# the gateway, all at once, each about half a run's worth of reads at the direct rate
+# (DIRECT_TPS).
 run_gateway_c() {
     local count=$(( DIRECT_TPS * RUN / 2 / CLIENTS ))
     (( count < 20 )) && count=20
-    start_gateway "$1"
+    start_gateway "$1" "$3"
     local i pids=() cpu0 cpu1
     cpu0="$(cpu_ns "$GW_PID")"
     for i in $(seq 1 "$CLIENTS"); do
@@ -191,19 +199,21 @@ run_gateway_c() {
     stop_gateway
     local benches
     benches="$(for i in $(seq 1 "$CLIENTS"); do cat "$WORK/c.$i"; done | paste -sd, -)"
-    record "{\"mode\":\"gateway_c\",\"service_us\":$1,\"rep\":$2,\"clients\":$CLIENTS,\"count\":$count,\"gateway_cpu_s\":$(( (cpu1 - cpu0) / 1000 ))e-6,\"benches\":[$benches],\"gateway_warnings\":${WARNINGS:-0},\"first_warning\":\"$FIRST_WARNING\"}"
+    record "{\"mode\":\"gateway_c\",\"service_us\":$1,\"rep\":$2,\"in_flight\":$3,\"clients\":$CLIENTS,\"count\":$count,\"gateway_cpu_s\":$(( (cpu1 - cpu0) / 1000 ))e-6,\"benches\":[$benches],\"gateway_warnings\":${WARNINGS:-0},\"first_warning\":\"$FIRST_WARNING\"}"
     rm -f "$WORK"/c.*
 }
 
-log "machine: $(nproc) CPUs, load $(cut -d' ' -f1-3 /proc/loadavg); $("$FERROBUS" --version); services (us): $SERVICES; $REPS x ${RUN} s; $CLIENTS clients"
+log "machine: $(nproc) CPUs, load $(cut -d' ' -f1-3 /proc/loadavg); $("$FERROBUS" --version); services (us): $SERVICES; in flight: $IN_FLIGHT; $REPS x ${RUN} s; $CLIENTS clients"
 : >"$WORK/records.jsonl"
 for service in $SERVICES; do
     for rep in $(seq 1 "$REPS"); do
         log "service ${service} us, rep $rep/$REPS"
         run_direct "$service" "$rep"
         run_libmodbus "$service" "$rep"
-        run_gateway "$service" "$rep"
-        run_gateway_c "$service" "$rep"
+        for n in $IN_FLIGHT; do
+            run_gateway "$service" "$rep" "$n"
+            run_gateway_c "$service" "$rep" "$n"
+        done
     done
 done
 
@@ -218,8 +228,9 @@ clients = next((r["clients"] for r in records if r["mode"] == "gateway"), "?")
 reps = max(r["rep"] for r in records)
 failed = False
 rows1, rows2 = [], []
-for service in sorted({r["service_us"] for r in records}):
-    of = lambda mode: [r for r in records if r["mode"] == mode and r["service_us"] == service]
+for service, n in sorted({(r["service_us"], r.get("in_flight", 1)) for r in records if r["mode"] == "gateway"}):
+    of = lambda mode: [r for r in records if r["mode"] == mode and r["service_us"] == service
+                       and r.get("in_flight", n) == n]
     direct, lib, gw, gwc = of("direct"), of("libmodbus"), of("gateway"), of("gateway_c")
     # Each rep's gateway run against the same rep's direct run, taken just before it.
     py_tps = {r["rep"]: r["load"]["tps"] for r in direct}
@@ -244,27 +255,27 @@ for service in sorted({r["service_us"] for r in records}):
                    if (ok := sum(b["transactions"] - b["errors"] for b in r["benches"])) > 0])
     warnings = sum(r["gateway_warnings"] for r in gw + gwc)
     failed |= mismatches > 0
-    rows1.append(f"| {service / 1000:g} ms | {fmt(med(list(py_tps.values())))} "
+    rows1.append(f"| {service / 1000:g} ms | {n} | {fmt(med(list(py_tps.values())))} "
                  f"| {fmt(med([r['load']['tps'] for r in gw]))} | {pct(ratio)} "
                  f"| {fmt(med(list(c_tps.values())))} | {fmt(med(list(gwc_tps.values())))} | {pct(ratio_c)} "
                  f"| {mismatches} | {json.dumps(exceptions, sort_keys=True) if exceptions else 0} | {lost} "
                  f"| {c_errors}{f' ({c_missing} no output)' if c_missing else ''} | {warnings} |")
-    rows2.append(f"| {service / 1000:g} ms | {fmt(lat(direct, 'p50_ms'), 2)} / {fmt(lat(direct, 'p99_ms'), 2)} "
+    rows2.append(f"| {service / 1000:g} ms | {n} | {fmt(lat(direct, 'p50_ms'), 2)} / {fmt(lat(direct, 'p99_ms'), 2)} "
                  f"| {fmt(lat(gw, 'p50_ms'), 2)} / {fmt(lat(gw, 'p99_ms'), 2)} "
                  f"| {fmt(cpu(gw, 'gateway'), 1)} | {fmt(gwc_cpu, 1)} "
                  f"| {fmt(cpu(direct, 'server'), 1)} / {fmt(cpu(gw, 'server'), 1)} "
                  f"| {fmt(share(direct, 'clients'), 2)} / {fmt(share(gw, 'clients'), 2)} |")
 print()
-print(f"| service | direct, 1 client (tx/s) | gateway, {clients} clients (tx/s) | ratio "
+print(f"| service | in flight | direct, 1 client (tx/s) | gateway, {clients} clients (tx/s) | ratio "
       f"| libmodbus bench, 1 client (tx/s) | gateway, {clients} libmodbus clients (tx/s) | ratio "
       "| mismatches | exceptions | lost | libmodbus errors | gateway warnings |")
-print("|---|---|---|---|---|---|---|---|---|---|---|---|")
+print("|---|---|---|---|---|---|---|---|---|---|---|---|---|")
 print("\n".join(rows1))
 print()
-print("| service | direct p50 / p99 (ms) | gateway p50 / p99 (ms) | gateway CPU (µs/tx) "
+print("| service | in flight | direct p50 / p99 (ms) | gateway p50 / p99 (ms) | gateway CPU (µs/tx) "
       "| gateway CPU, libmodbus clients (µs/tx) | server CPU direct / gateway (µs/tx) "
       "| load generator CPU direct / gateway (cores) |")
-print("|---|---|---|---|---|---|---|")
+print("|---|---|---|---|---|---|---|---|")
 print("\n".join(rows2))
 print()
 print(f"ratio: gateway tx/s over the one-client direct tx/s with the same client, the median of {reps} "
