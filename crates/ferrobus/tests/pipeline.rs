@@ -1,8 +1,9 @@
 //! Several requests in flight on one Modbus/TCP connection (`ClientConfig::in_flight`): the
 //! client's pipelined driver and the gateway's worker on a pipelined line, against a device
 //! written here that holds requests back and answers them out of order. Each caller gets the
-//! reply to its own request, a timeout ends only its own, a late reply goes to nobody, and a
-//! connection lost under the requests in flight sends those with retries again.
+//! reply to its own request, a timeout ends only its own, a late reply goes to nobody, a
+//! connection lost under the requests in flight sends those with retries again, and a line
+//! whose device is down is tried by one request at a time.
 
 use std::time::Duration;
 
@@ -219,7 +220,10 @@ async fn a_pipelined_gateway_line_keeps_several_clients_requests_on_the_device_a
     let addr = listener.local_addr().unwrap();
     let device = tokio::spawn(async move {
         let (mut device, _) = listener.accept().await.unwrap();
-        // Six clients' requests, six at a time, answered newest first, twice over.
+        // The line is tried by one request until the device has answered; then six clients'
+        // requests, six at a time, answered newest first, twice over.
+        let first = asked(&mut device).await;
+        answer(&mut device, first).await;
         hold_and_answer_backwards(&mut device, 6).await;
         hold_and_answer_backwards(&mut device, 6).await;
         device
@@ -228,6 +232,14 @@ async fn a_pipelined_gateway_line_keeps_several_clients_requests_on_the_device_a
     let config =
         GatewayConfig { lines: vec![line], routes: Routes::all_on(0), broadcast_ack: false, cache_max_age: None };
     let gateway = Gateway::start(config).await.unwrap();
+    let (mut first, server) = tokio::io::duplex(4096);
+    let serving = gateway.clone();
+    tokio::spawn(async move {
+        let mut authorize = AllowAll;
+        serving.serve_connection(server, "first client", Inbound::Mbap, &mut authorize, Timeouts::default()).await
+    });
+    let [hi, lo] = value(7).to_be_bytes();
+    assert_eq!(read_through(&mut first, 1, 7).await, [0x03, 0x02, hi, lo]);
     let clients: Vec<_> = (0..6u16)
         .map(|c| {
             let (mut client, server) = tokio::io::duplex(4096);
@@ -252,5 +264,37 @@ async fn a_pipelined_gateway_line_keeps_several_clients_requests_on_the_device_a
     }
     let _device = device.await.unwrap();
     let stats = &gateway.stats()[0];
-    assert_eq!((stats.total.replies, stats.connects), (12, 1), "{stats}");
+    assert_eq!((stats.total.replies, stats.connects), (13, 1), "{stats}");
+}
+
+#[tokio::test]
+async fn a_pipelined_line_whose_device_is_down_is_tried_by_one_request_at_a_time_the_others_get_0a_at_once() {
+    // A port that was free a moment ago, and nobody listening on it.
+    let addr = TcpListener::bind("127.0.0.1:0").await.unwrap().local_addr().unwrap();
+    let line = GatewayLine::new(Transport::tcp(addr.to_string()), pipelined(8, Duration::from_secs(10), 0));
+    let config = GatewayConfig { lines: vec![line], routes: Routes::all_on(0), broadcast_ack: false, cache_max_age: None };
+    let gateway = Gateway::start(config).await.unwrap();
+    // Eight clients at once, ten requests each: were eight in flight, each would make a
+    // connect attempt of its own.
+    let clients: Vec<_> = (0..8u16)
+        .map(|c| {
+            let (mut client, server) = tokio::io::duplex(4096);
+            let serving = gateway.clone();
+            tokio::spawn(async move {
+                let mut authorize = AllowAll;
+                serving.serve_connection(server, "test client", Inbound::Mbap, &mut authorize, Timeouts::default()).await
+            });
+            tokio::spawn(async move {
+                for t in 0..10u16 {
+                    assert_eq!(read_through(&mut client, c * 100 + t, t).await, [0x83, 0x0A], "the device is down");
+                }
+            })
+        })
+        .collect();
+    for client in clients {
+        client.await.unwrap();
+    }
+    let stats = &gateway.stats()[0];
+    assert_eq!((stats.total.line_errors, stats.connects), (80, 0), "{stats}");
+    assert!(stats.connect_failures < 8, "one attempt per hold, not one per request in flight: {stats}");
 }

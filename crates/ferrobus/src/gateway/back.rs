@@ -202,19 +202,23 @@ struct Flown {
 }
 
 /// The line's one master: takes jobs in turn and forwards each through `client`, keeping up
-/// to [`Worker::in_flight`] on the line at once (one on a serial line: the next request goes
-/// only once the last has ended). While the line is down, the requests that come are
-/// answered 0x0A at once instead of each waiting out a reconnect (a device that is
-/// unreachable costs a whole connect timeout per attempt): one request tries the line again
-/// when the hold has passed.
+/// to [`Worker::in_flight`] on the line at once once it has answered (one on a serial line:
+/// the next request goes only once the last has ended). While the line is down, the requests
+/// that come are answered 0x0A at once instead of each waiting out a reconnect (a device that
+/// is unreachable costs a whole connect timeout per attempt): one request tries the line again
+/// when the hold has passed, alone.
 pub(crate) async fn run(queue: Arc<LineQueue>, client: Client, cache: Option<Arc<Cache>>, worker: Worker) {
-    let in_flight = worker.in_flight.max(1);
     let mut down: Option<Down> = None;
+    // Whether the line answered since it started or was last found down: until then one
+    // request at a time finds out (a connect that fails is tried once, not once per request in
+    // flight).
+    let mut up = false;
     let mut flying = FuturesUnordered::new();
     // After a request without a usable reply: the line is quiet until then.
     let mut quiet: Option<tokio::time::Instant> = None;
     let mut closed = false;
     loop {
+        let in_flight = if up { worker.in_flight.max(1) } else { 1 };
         let room = !closed && quiet.is_none() && flying.len() < in_flight;
         tokio::select! {
             job = queue.next(), if room => match job {
@@ -235,6 +239,7 @@ pub(crate) async fn run(queue: Arc<LineQueue>, client: Client, cache: Option<Arc
                     Some(d) if ended == Ended::LineDown && now < d.retry_at => Some(d),
                     _ => (ended == Ended::LineDown).then(|| Down::after(down, now)),
                 };
+                up = ended != Ended::LineDown;
                 if matches!(ended, Ended::Timeout | Ended::BadCrc | Ended::BadReply) && !worker.late_guard.is_zero() {
                     // The engine keeps the line closed for a reply owed to a timed-out
                     // request; what else a device confused by this one may send meanwhile is
