@@ -272,7 +272,8 @@ async fn a_pipelined_line_whose_device_is_down_is_tried_by_one_request_at_a_time
     // A port that was free a moment ago, and nobody listening on it.
     let addr = TcpListener::bind("127.0.0.1:0").await.unwrap().local_addr().unwrap();
     let line = GatewayLine::new(Transport::tcp(addr.to_string()), pipelined(8, Duration::from_secs(10), 0));
-    let config = GatewayConfig { lines: vec![line], routes: Routes::all_on(0), broadcast_ack: false, cache_max_age: None };
+    let config =
+        GatewayConfig { lines: vec![line], routes: Routes::all_on(0), broadcast_ack: false, cache_max_age: None };
     let gateway = Gateway::start(config).await.unwrap();
     // Eight clients at once, ten requests each: were eight in flight, each would make a
     // connect attempt of its own.
@@ -282,7 +283,9 @@ async fn a_pipelined_line_whose_device_is_down_is_tried_by_one_request_at_a_time
             let serving = gateway.clone();
             tokio::spawn(async move {
                 let mut authorize = AllowAll;
-                serving.serve_connection(server, "test client", Inbound::Mbap, &mut authorize, Timeouts::default()).await
+                serving
+                    .serve_connection(server, "test client", Inbound::Mbap, &mut authorize, Timeouts::default())
+                    .await
             });
             tokio::spawn(async move {
                 for t in 0..10u16 {

@@ -86,13 +86,16 @@ impl Pipelined {
 
     pub(crate) async fn run(mut self, mut commands: mpsc::Receiver<Command>) {
         let mut open = true;
+        // Bytes were read since the counters were last published (a late reply, say).
+        let mut read = false;
         loop {
-            self.deliver();
+            if self.deliver() || read {
+                self.publish_stats();
+                read = false;
+            }
             while self.engine.has_room() {
                 let Some(pending) = self.again.pop_front() else { break };
                 self.send(pending).await;
-                // A failed connect ends it here: deliver what that ended.
-                self.deliver();
             }
             self.transmit().await;
             if self.link.port.is_none() {
@@ -123,7 +126,7 @@ impl Pipelined {
                     }
                 }
                 Step::Other(None) => open = false,
-                Step::Read => {}
+                Step::Read => read = true,
                 Step::Woke => self.pump.handle_timeout(&mut self.engine),
                 Step::Closed => self.lost(&std::io::ErrorKind::UnexpectedEof.into()),
                 Step::Failed(e) => self.lost(&e),
@@ -158,7 +161,11 @@ impl Pipelined {
             // A new connection: nothing said on the old one will be heard on it.
             Ok(true) => self.engine.abort(),
             Ok(false) => {}
-            Err(e) => return self.ended(pending, Err(e)),
+            Err(e) => {
+                self.ended(pending, Err(e));
+                // The failed connect is counted now, not at the next completion.
+                return self.publish_stats();
+            }
         }
         let now = self.pump.clock().now();
         let command = &pending.command;
@@ -197,8 +204,8 @@ impl Pipelined {
         }
     }
 
-    /// Hands each completion the engine has to its request.
-    fn deliver(&mut self) {
+    /// Hands each completion the engine has to its request; returns whether there was any.
+    fn deliver(&mut self) -> bool {
         let mut any = false;
         while let Some((ticket, completion)) = self.engine.poll_event() {
             let Some(pending) = self.flying.get_mut(ticket.slot()).and_then(Option::take) else { continue };
@@ -206,9 +213,7 @@ impl Pipelined {
             self.ended(pending, result);
             any = true;
         }
-        if any {
-            self.publish_stats();
-        }
+        any
     }
 
     /// The connection is gone under the requests in flight: each is sent again on the next
