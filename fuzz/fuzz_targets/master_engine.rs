@@ -25,9 +25,9 @@ use ferrobus_proto::crc::crc16;
 use ferrobus_proto::frame::rtu::{RtuCodec, RtuFrame};
 use ferrobus_proto::frame::{Direction, Expect, Framing, RxEvent, expire, feed};
 use ferrobus_proto::master::{Completion, MAX_TX_LEN, Master, MasterConfig};
-use ferrobus_proto::pdu::{MAX_PDU_LEN, ReadRegisters, Request, Response};
+use ferrobus_proto::pdu::{MAX_PDU_LEN, Request, Response};
 use ferrobus_proto::time::Instant;
-use ferrobus_proto_fuzz::{MAX_TIMEOUTS_PER_WAIT, Step, line_9600_8e1};
+use ferrobus_proto_fuzz::{MAX_TIMEOUTS_PER_WAIT, Step, line_9600_8e1, request_from};
 use libfuzzer_sys::fuzz_target;
 
 #[derive(Arbitrary, Debug)]
@@ -228,21 +228,7 @@ impl Harness<'_> {
 }
 
 fuzz_target!(|input: Input| {
-    let raw = input.raw && !input.request.is_empty() && input.request.len() <= MAX_PDU_LEN;
-    let request = if raw {
-        None
-    } else {
-        let fallback = Request::ReadHoldingRegisters(ReadRegisters::new(0, 10).expect("valid"));
-        Some(Request::parse(&input.request).unwrap_or(fallback))
-    };
-    let pdu = match request {
-        Some(r) => {
-            let mut out = [0u8; MAX_PDU_LEN];
-            let n = r.emit(&mut out).expect("fits");
-            out[..n].to_vec()
-        }
-        None => input.request.clone(),
-    };
+    let (request, pdu) = request_from(input.raw, &input.request);
     let timing = line_9600_8e1();
     let codec = RtuCodec::new(timing, Expect::Responses).with_strict_t1_5(input.strict_t1_5);
     let config = MasterConfig {

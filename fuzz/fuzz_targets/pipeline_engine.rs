@@ -32,9 +32,9 @@ use ferrobus_proto::frame::mbap::{MAX_ADU_LEN, MbapCodec, encode_pdu};
 use ferrobus_proto::frame::{AduHeader, Framing, RxEvent, feed};
 use ferrobus_proto::master::pipeline::{Pipeline, Ticket};
 use ferrobus_proto::master::{Completion, SubmitError};
-use ferrobus_proto::pdu::{MAX_PDU_LEN, ReadRegisters, Request, Response};
+use ferrobus_proto::pdu::{MAX_PDU_LEN, Request, Response};
 use ferrobus_proto::time::Instant;
-use ferrobus_proto_fuzz::MAX_TIMEOUTS_PER_WAIT;
+use ferrobus_proto_fuzz::{MAX_TIMEOUTS_PER_WAIT, request_from};
 use libfuzzer_sys::fuzz_target;
 
 #[derive(Arbitrary, Debug)]
@@ -147,7 +147,9 @@ impl Submitted<'_> {
                 .iter()
                 .find(|(id, unit, pdu)| *id == self.ticket.transaction() && *unit == self.unit && pdu[0] & 0x7F == fc)
                 .map(|(_, _, pdu)| pdu.as_slice())
-                .unwrap_or_else(|| panic!("{completion:?} without a frame under {:?} from unit {}", self.ticket, self.unit))
+                .unwrap_or_else(|| {
+                    panic!("{completion:?} without a frame under {:?} from unit {}", self.ticket, self.unit)
+                })
         };
         assert_eq!(matches!(completion, Completion::Sent), self.listen_only(), "{completion:?} for {:?}", self.request);
         match completion {
@@ -211,21 +213,7 @@ struct Harness<'r> {
 
 impl<'r> Harness<'r> {
     fn submit(&mut self, template: &'r Template) {
-        let raw = template.raw && !template.request.is_empty() && template.request.len() <= MAX_PDU_LEN;
-        let request = if raw {
-            None
-        } else {
-            let fallback = Request::ReadHoldingRegisters(ReadRegisters::new(0, 10).expect("valid"));
-            Some(Request::parse(&template.request).unwrap_or(fallback))
-        };
-        let pdu = match request {
-            Some(r) => {
-                let mut out = [0u8; MAX_PDU_LEN];
-                let n = r.emit(&mut out).expect("fits");
-                out[..n].to_vec()
-            }
-            None => template.request.clone(),
-        };
+        let (request, pdu) = request_from(template.raw, &template.request);
         let timeout = Duration::from_millis(1 + u64::from(template.timeout_ms));
         let had_room = self.pipeline.has_room();
         let result = match request {

@@ -11,6 +11,7 @@
 //!   data method, so the slave engine can serve every function code.
 //! - [`Edit`]: a cut and an insertion in a text a user might write (a shipped example), so that
 //!   the targets of configuration readers start from files that mostly parse.
+//! - [`request_from`]: the request a master target submits, from the input's bytes.
 //!
 //! Built by cargo-fuzz, ferrobus-proto sees `cfg(fuzzing)`: its `crc_ok` then accepts every
 //! frame (and the ASCII receiver skips its LRC), so random bytes reach the parsers. CRC
@@ -22,7 +23,7 @@ use core::time::Duration;
 use arbitrary::Arbitrary;
 use ferrobus_proto::ExceptionCode;
 use ferrobus_proto::frame::{Adu, Framing, LineConfig, LineTiming, RxEvent, expire, feed};
-use ferrobus_proto::pdu::{Bits, MaskWrite, ReadWriteRegisters, Registers};
+use ferrobus_proto::pdu::{Bits, MAX_PDU_LEN, MaskWrite, ReadRegisters, ReadWriteRegisters, Registers, Request};
 use ferrobus_proto::slave::Handler;
 use ferrobus_proto::time::Instant;
 
@@ -50,6 +51,20 @@ pub fn line_9600_8e1() -> LineTiming {
 /// How many timeouts one wait may handle before the engine counts as spinning: each timeout
 /// settles at least one buffered byte, and no buffer holds more than a few hundred.
 pub const MAX_TIMEOUTS_PER_WAIT: usize = 4096;
+
+/// The request a master target submits from `bytes`: sent as they are (`submit_raw`, the
+/// request `None`) when `raw` and they fit a PDU, else parsed, a read of 10 holding
+/// registers where they do not parse; with the PDU that goes out either way.
+pub fn request_from(raw: bool, bytes: &[u8]) -> (Option<Request<'_>>, Vec<u8>) {
+    if raw && !bytes.is_empty() && bytes.len() <= MAX_PDU_LEN {
+        return (None, bytes.to_vec());
+    }
+    let fallback = Request::ReadHoldingRegisters(ReadRegisters::new(0, 10).expect("valid"));
+    let request = Request::parse(bytes).unwrap_or(fallback);
+    let mut out = [0u8; MAX_PDU_LEN];
+    let n = request.emit(&mut out).expect("fits");
+    (Some(request), out[..n].to_vec())
+}
 
 /// What a receiver handed out, summed over a run.
 #[derive(Clone, Copy, Debug, Default)]
