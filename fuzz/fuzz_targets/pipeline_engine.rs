@@ -32,9 +32,9 @@ use ferrobus_proto::frame::mbap::{MAX_ADU_LEN, MbapCodec, encode_pdu};
 use ferrobus_proto::frame::{AduHeader, Framing, RxEvent, feed};
 use ferrobus_proto::master::pipeline::{Pipeline, Ticket};
 use ferrobus_proto::master::{Completion, SubmitError};
-use ferrobus_proto::pdu::{MAX_PDU_LEN, Request, Response};
+use ferrobus_proto::pdu::{MAX_PDU_LEN, Request};
 use ferrobus_proto::time::Instant;
-use ferrobus_proto_fuzz::{MAX_TIMEOUTS_PER_WAIT, request_from};
+use ferrobus_proto_fuzz::{MAX_TIMEOUTS_PER_WAIT, assert_response_is, request_from};
 use libfuzzer_sys::fuzz_target;
 
 #[derive(Arbitrary, Debug)]
@@ -155,31 +155,7 @@ impl Submitted<'_> {
         match completion {
             Completion::Response(response) => {
                 let request = self.request.as_ref().expect("a parsed response only for a parsed request");
-                assert_eq!(response.function(), request.function(), "response to another function");
-                let frame = reply();
-                assert_eq!(frame[0], fc);
-                let mut out = [0u8; MAX_PDU_LEN];
-                let n = response.emit(&mut out).expect("a response fits");
-                match request {
-                    Request::ReadCoils(q) | Request::ReadDiscreteInputs(q) => {
-                        // Trimmed to the quantity asked: the bits past it go out as zeros.
-                        assert_eq!(n, 2 + q.response_byte_count(), "bit reply not trimmed to the request");
-                        let mut want = frame[..n].to_vec();
-                        let used = q.quantity() % 8;
-                        if used != 0 {
-                            want[n - 1] &= (1u8 << used) - 1;
-                        }
-                        assert_eq!(&out[..n], want.as_slice(), "the bits are not the frame's");
-                    }
-                    _ => assert_eq!(&out[..n], frame, "the response is not the frame received"),
-                }
-                if let (
-                    Request::ReadHoldingRegisters(q) | Request::ReadInputRegisters(q),
-                    Response::ReadHoldingRegisters(r) | Response::ReadInputRegisters(r),
-                ) = (request, response)
-                {
-                    assert_eq!(r.values().len(), usize::from(q.quantity()), "register count not checked");
-                }
+                assert_response_is(request, response, reply());
             }
             Completion::Raw(pdu) => {
                 assert!(self.request.is_none(), "a raw reply to a parsed request");

@@ -11,7 +11,8 @@
 //!   data method, so the slave engine can serve every function code.
 //! - [`Edit`]: a cut and an insertion in a text a user might write (a shipped example), so that
 //!   the targets of configuration readers start from files that mostly parse.
-//! - [`request_from`]: the request a master target submits, from the input's bytes.
+//! - [`request_from`]: the request a master target submits, from the input's bytes, and
+//!   [`assert_response_is`]: that a master's parsed response is the frame it came in.
 //!
 //! Built by cargo-fuzz, ferrobus-proto sees `cfg(fuzzing)`: its `crc_ok` then accepts every
 //! frame (and the ASCII receiver skips its LRC), so random bytes reach the parsers. CRC
@@ -23,7 +24,9 @@ use core::time::Duration;
 use arbitrary::Arbitrary;
 use ferrobus_proto::ExceptionCode;
 use ferrobus_proto::frame::{Adu, Framing, LineConfig, LineTiming, RxEvent, expire, feed};
-use ferrobus_proto::pdu::{Bits, MAX_PDU_LEN, MaskWrite, ReadRegisters, ReadWriteRegisters, Registers, Request};
+use ferrobus_proto::pdu::{
+    Bits, MAX_PDU_LEN, MaskWrite, ReadRegisters, ReadWriteRegisters, Registers, Request, Response,
+};
 use ferrobus_proto::slave::Handler;
 use ferrobus_proto::time::Instant;
 
@@ -64,6 +67,36 @@ pub fn request_from(raw: bool, bytes: &[u8]) -> (Option<Request<'_>>, Vec<u8>) {
     let mut out = [0u8; MAX_PDU_LEN];
     let n = request.emit(&mut out).expect("fits");
     (Some(request), out[..n].to_vec())
+}
+
+/// Asserts that `response`, which a master handed for `request`, is `frame` (the PDU of the
+/// frame it came in): for 0x01/0x02 trimmed to the quantity asked, the bits past it zero; for
+/// 0x03/0x04 with the register count asked.
+pub fn assert_response_is(request: &Request<'_>, response: &Response<'_>, frame: &[u8]) {
+    assert_eq!(response.function(), request.function(), "response to another function");
+    assert_eq!(frame.first().copied(), Some(request.function().value()));
+    let mut out = [0u8; MAX_PDU_LEN];
+    let n = response.emit(&mut out).expect("a response fits");
+    match request {
+        Request::ReadCoils(q) | Request::ReadDiscreteInputs(q) => {
+            // Trimmed to the quantity asked: the bits past it go out as zeros.
+            assert_eq!(n, 2 + q.response_byte_count(), "bit reply not trimmed to the request");
+            let mut want = frame[..n].to_vec();
+            let used = q.quantity() % 8;
+            if used != 0 {
+                want[n - 1] &= (1u8 << used) - 1;
+            }
+            assert_eq!(&out[..n], want.as_slice(), "the bits are not the frame's");
+        }
+        _ => assert_eq!(&out[..n], frame, "the response is not the frame received"),
+    }
+    if let (
+        Request::ReadHoldingRegisters(q) | Request::ReadInputRegisters(q),
+        Response::ReadHoldingRegisters(r) | Response::ReadInputRegisters(r),
+    ) = (request, response)
+    {
+        assert_eq!(r.values().len(), usize::from(q.quantity()), "register count not checked");
+    }
 }
 
 /// What a receiver handed out, summed over a run.

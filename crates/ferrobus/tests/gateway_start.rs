@@ -8,8 +8,12 @@ use ferrobus::gateway::{
 };
 use ferrobus::{ClientConfig, Error, SerialConfig, Transport};
 use ferrobus_proto::frame::LineConfig;
-use tokio::io::{AsyncReadExt, AsyncWriteExt, DuplexStream};
+use tokio::io::{AsyncWriteExt, DuplexStream};
 use tokio::net::{TcpListener, TcpStream};
+
+mod support;
+
+use support::{mbap, read_mbap};
 
 fn line(path: &str) -> GatewayLine {
     let serial = SerialConfig::new(path, LineConfig::new(9600).unwrap());
@@ -46,36 +50,17 @@ async fn a_port_that_cannot_be_opened_is_an_io_error_naming_its_line_and_port() 
     assert!(error.to_string().contains("/nonexistent/ferrobus-gw"), "{error}");
 }
 
-/// An MBAP frame: transaction `t`, unit 1, `pdu`.
-fn mbap(t: u16, pdu: &[u8]) -> Vec<u8> {
-    let mut frame = t.to_be_bytes().to_vec();
-    frame.extend_from_slice(&[0, 0]);
-    frame.extend_from_slice(&u16::try_from(pdu.len() + 1).unwrap().to_be_bytes());
-    frame.push(1);
-    frame.extend_from_slice(pdu);
-    frame
-}
-
-/// Reads one MBAP frame from `stream`: (transaction, PDU).
-async fn frame(stream: &mut (impl AsyncReadExt + Unpin)) -> (u16, Vec<u8>) {
-    let mut head = [0u8; 7];
-    stream.read_exact(&mut head).await.unwrap();
-    let mut pdu = vec![0u8; usize::from(u16::from_be_bytes([head[4], head[5]])) - 1];
-    stream.read_exact(&mut pdu).await.unwrap();
-    (u16::from_be_bytes([head[0], head[1]]), pdu)
-}
-
 /// Sends a read of one register through `client` and returns the reply PDU.
 async fn read(client: &mut DuplexStream, t: u16) -> Vec<u8> {
     client.write_all(&mbap(t, &[0x03, 0x00, 0x00, 0x00, 0x01])).await.unwrap();
-    let (tid, pdu) = frame(client).await;
+    let (tid, pdu) = read_mbap(client).await;
     assert_eq!(tid, t, "the client's transaction id comes back");
     pdu
 }
 
 /// The device's side of one request: reads it and answers register 0 = `value`.
 async fn answer(device: &mut TcpStream, value: u16) {
-    let (tid, pdu) = frame(device).await;
+    let (tid, pdu) = read_mbap(device).await;
     assert_eq!(pdu, [0x03, 0x00, 0x00, 0x00, 0x01]);
     let [hi, lo] = value.to_be_bytes();
     device.write_all(&mbap(tid, &[0x03, 0x02, hi, lo])).await.unwrap();
@@ -162,8 +147,8 @@ async fn a_modbus_tcp_line_is_not_held_quiet_after_a_timeout_and_drops_the_late_
         let (mut device, _) = listener.accept().await.unwrap();
         // The first request is answered only after the gateway gave up on it, and after the
         // second has come: the late reply, under the first one's transaction id, comes first.
-        let (late_tid, _) = frame(&mut device).await;
-        let (tid, _) = frame(&mut device).await;
+        let (late_tid, _) = read_mbap(&mut device).await;
+        let (tid, _) = read_mbap(&mut device).await;
         device.write_all(&mbap(late_tid, &[0x03, 0x02, 0xDE, 0xAD])).await.unwrap();
         device.write_all(&mbap(tid, &[0x03, 0x02, 0x00, 0x07])).await.unwrap();
         device

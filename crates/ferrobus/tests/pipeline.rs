@@ -9,18 +9,12 @@ use std::time::Duration;
 
 use ferrobus::gateway::{AllowAll, Gateway, GatewayConfig, GatewayLine, Inbound, Routes, Timeouts};
 use ferrobus::{Client, ClientConfig, Error, Transport};
-use tokio::io::{AsyncReadExt, AsyncWriteExt};
+use tokio::io::{AsyncReadExt, AsyncWriteExt, DuplexStream};
 use tokio::net::{TcpListener, TcpStream};
 
-/// An MBAP frame: transaction `t`, unit 1, `pdu`.
-fn mbap(t: u16, pdu: &[u8]) -> Vec<u8> {
-    let mut frame = t.to_be_bytes().to_vec();
-    frame.extend_from_slice(&[0, 0]);
-    frame.extend_from_slice(&u16::try_from(pdu.len() + 1).unwrap().to_be_bytes());
-    frame.push(1);
-    frame.extend_from_slice(pdu);
-    frame
-}
+mod support;
+
+use support::{mbap, read_mbap};
 
 /// One request as the device reads it: its transaction id and the register it reads.
 #[derive(Clone, Copy, Debug)]
@@ -31,12 +25,9 @@ struct Asked {
 
 /// Reads one request, a read of one holding register (0x03), from `stream`.
 async fn asked(stream: &mut (impl AsyncReadExt + Unpin)) -> Asked {
-    let mut head = [0u8; 7];
-    stream.read_exact(&mut head).await.unwrap();
-    let mut pdu = vec![0u8; usize::from(u16::from_be_bytes([head[4], head[5]])) - 1];
-    stream.read_exact(&mut pdu).await.unwrap();
+    let (tid, pdu) = read_mbap(stream).await;
     assert_eq!((pdu.len(), pdu[0], &pdu[3..]), (5, 0x03, &[0x00, 0x01][..]), "{pdu:02X?}");
-    Asked { tid: u16::from_be_bytes([head[0], head[1]]), register: u16::from_be_bytes([pdu[1], pdu[2]]) }
+    Asked { tid, register: u16::from_be_bytes([pdu[1], pdu[2]]) }
 }
 
 /// What the device keeps in register `r`.
@@ -202,16 +193,32 @@ async fn a_connection_lost_under_requests_in_flight_sends_those_with_retries_aga
     }
 }
 
+/// A client connection to `gateway`, served as a TCP connection would be.
+fn connect(gateway: &Gateway) -> DuplexStream {
+    let (client, server) = tokio::io::duplex(4096);
+    let serving = gateway.clone();
+    tokio::spawn(async move {
+        let mut authorize = AllowAll;
+        serving.serve_connection(server, "test client", Inbound::Mbap, &mut authorize, Timeouts::default()).await
+    });
+    client
+}
+
 /// Sends a read of `register` through the gateway connection `client`; returns the reply PDU.
-async fn read_through(client: &mut tokio::io::DuplexStream, t: u16, register: u16) -> Vec<u8> {
+async fn read_through(client: &mut DuplexStream, t: u16, register: u16) -> Vec<u8> {
     let [hi, lo] = register.to_be_bytes();
     client.write_all(&mbap(t, &[0x03, hi, lo, 0x00, 0x01])).await.unwrap();
-    let mut head = [0u8; 7];
-    client.read_exact(&mut head).await.unwrap();
-    assert_eq!(u16::from_be_bytes([head[0], head[1]]), t, "the client's own transaction id comes back");
-    let mut pdu = vec![0u8; usize::from(u16::from_be_bytes([head[4], head[5]])) - 1];
-    client.read_exact(&mut pdu).await.unwrap();
+    let (tid, pdu) = read_mbap(client).await;
+    assert_eq!(tid, t, "the client's own transaction id comes back");
     pdu
+}
+
+/// A gateway with one line, to the Modbus/TCP device at `addr`, `in_flight` requests at once.
+async fn gateway(addr: std::net::SocketAddr, in_flight: usize) -> Gateway {
+    let line = GatewayLine::new(Transport::tcp(addr.to_string()), pipelined(in_flight, Duration::from_secs(10), 0));
+    let config =
+        GatewayConfig { lines: vec![line], routes: Routes::all_on(0), broadcast_ack: false, cache_max_age: None };
+    Gateway::start(config).await.unwrap()
 }
 
 #[tokio::test]
@@ -228,28 +235,12 @@ async fn a_pipelined_gateway_line_keeps_several_clients_requests_on_the_device_a
         hold_and_answer_backwards(&mut device, 6).await;
         device
     });
-    let line = GatewayLine::new(Transport::tcp(addr.to_string()), pipelined(6, Duration::from_secs(10), 0));
-    let config =
-        GatewayConfig { lines: vec![line], routes: Routes::all_on(0), broadcast_ack: false, cache_max_age: None };
-    let gateway = Gateway::start(config).await.unwrap();
-    let (mut first, server) = tokio::io::duplex(4096);
-    let serving = gateway.clone();
-    tokio::spawn(async move {
-        let mut authorize = AllowAll;
-        serving.serve_connection(server, "first client", Inbound::Mbap, &mut authorize, Timeouts::default()).await
-    });
+    let gateway = gateway(addr, 6).await;
     let [hi, lo] = value(7).to_be_bytes();
-    assert_eq!(read_through(&mut first, 1, 7).await, [0x03, 0x02, hi, lo]);
+    assert_eq!(read_through(&mut connect(&gateway), 1, 7).await, [0x03, 0x02, hi, lo]);
     let clients: Vec<_> = (0..6u16)
         .map(|c| {
-            let (mut client, server) = tokio::io::duplex(4096);
-            let serving = gateway.clone();
-            tokio::spawn(async move {
-                let mut authorize = AllowAll;
-                serving
-                    .serve_connection(server, "test client", Inbound::Mbap, &mut authorize, Timeouts::default())
-                    .await
-            });
+            let mut client = connect(&gateway);
             tokio::spawn(async move {
                 for round in 0..2u16 {
                     let register = c * 10 + round;
@@ -271,22 +262,12 @@ async fn a_pipelined_gateway_line_keeps_several_clients_requests_on_the_device_a
 async fn a_pipelined_line_whose_device_is_down_is_tried_by_one_request_at_a_time_the_others_get_0a_at_once() {
     // A port that was free a moment ago, and nobody listening on it.
     let addr = TcpListener::bind("127.0.0.1:0").await.unwrap().local_addr().unwrap();
-    let line = GatewayLine::new(Transport::tcp(addr.to_string()), pipelined(8, Duration::from_secs(10), 0));
-    let config =
-        GatewayConfig { lines: vec![line], routes: Routes::all_on(0), broadcast_ack: false, cache_max_age: None };
-    let gateway = Gateway::start(config).await.unwrap();
+    let gateway = gateway(addr, 8).await;
     // Eight clients at once, ten requests each: were eight in flight, each would make a
     // connect attempt of its own.
     let clients: Vec<_> = (0..8u16)
         .map(|c| {
-            let (mut client, server) = tokio::io::duplex(4096);
-            let serving = gateway.clone();
-            tokio::spawn(async move {
-                let mut authorize = AllowAll;
-                serving
-                    .serve_connection(server, "test client", Inbound::Mbap, &mut authorize, Timeouts::default())
-                    .await
-            });
+            let mut client = connect(&gateway);
             tokio::spawn(async move {
                 for t in 0..10u16 {
                     assert_eq!(read_through(&mut client, c * 100 + t, t).await, [0x83, 0x0A], "the device is down");

@@ -1,6 +1,7 @@
 //! What the library's tests share: a unit on an in-memory line, served by the server engine
 //! (the bytes are paced by the server's pump only as far as t3.5 goes; the pipe itself is
-//! instant). Each test crate takes what it needs of it.
+//! instant), and MBAP frames written and read by hand. Each test crate takes what it needs of
+//! it.
 #![allow(dead_code)]
 
 use std::time::Duration;
@@ -11,6 +12,7 @@ use ferrobus::server::{ServerOptions, Shared, serve};
 use ferrobus_proto::frame::rtu::RtuCodec;
 use ferrobus_proto::frame::{Expect, LineConfig, LineTiming};
 use ferrobus_proto::slave::{Handler, Slave, SlaveConfig, UnitSet};
+use tokio::io::AsyncReadExt;
 
 /// The line's timing: 19200 baud.
 pub(crate) fn timing() -> LineTiming {
@@ -34,4 +36,23 @@ pub(crate) fn in_memory<H: Handler + Send + 'static>(name: &str, device: Shared<
         })
     });
     Transport::custom(ferrobus::Framing::Rtu, timing(), connector)
+}
+
+/// An MBAP frame: transaction `t`, unit 1, `pdu`.
+pub(crate) fn mbap(t: u16, pdu: &[u8]) -> Vec<u8> {
+    let mut frame = t.to_be_bytes().to_vec();
+    frame.extend_from_slice(&[0, 0]);
+    frame.extend_from_slice(&u16::try_from(pdu.len() + 1).unwrap().to_be_bytes());
+    frame.push(1);
+    frame.extend_from_slice(pdu);
+    frame
+}
+
+/// Reads one MBAP frame from `stream`: (transaction, PDU).
+pub(crate) async fn read_mbap(stream: &mut (impl AsyncReadExt + Unpin)) -> (u16, Vec<u8>) {
+    let mut head = [0u8; 7];
+    stream.read_exact(&mut head).await.unwrap();
+    let mut pdu = vec![0u8; usize::from(u16::from_be_bytes([head[4], head[5]])) - 1];
+    stream.read_exact(&mut pdu).await.unwrap();
+    (u16::from_be_bytes([head[0], head[1]]), pdu)
 }
