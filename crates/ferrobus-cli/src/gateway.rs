@@ -83,7 +83,8 @@ pub(crate) struct GatewayArgs {
     /// On a Modbus/TCP line (--tcp, or tcp = in --lines-file): requests outstanding on the
     /// device's connection at once (1 to 16), each matched to its reply by transaction id; 1
     /// sends the next only once the last has ended. More hides the round trip for a device
-    /// that answers every request of its connection in order, as most Modbus/TCP servers do
+    /// that answers every request of its connection in order (libmodbus's server does; one
+    /// that answers only the first of several that reach it together, as pymodbus's, wants 1)
     #[arg(long = "in-flight", value_name = "N", default_value_t = 1, value_parser = clap::value_parser!(u32).range(1..=16))]
     in_flight: u32,
 
