@@ -8,7 +8,8 @@
 #      and running the demo (its virtual line in-process).
 #
 # The runs under wine are bounded: WINE_SECONDS (default 180) for the tests, a minute for the
-# CLI. Honours CARGO_TARGET_DIR.
+# CLI; they share one persistent wineserver, stopped at the end. Honours CARGO_TARGET_DIR,
+# WINE (the wine binary) and WINESERVER.
 set -euo pipefail
 
 root="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
@@ -17,13 +18,33 @@ target_dir="${CARGO_TARGET_DIR:-$root/target}"
 seconds="${WINE_SECONDS:-180}"
 export CARGO_TARGET_X86_64_PC_WINDOWS_GNU_RUNNER="$root/tests/wine/run.sh"
 export WINEPREFIX="${WINEPREFIX:-$target_dir/wine/prefix}"
+export WINEDEBUG="${WINEDEBUG:--all}"
+wineserver="${WINESERVER:-/usr/lib/wine/wineserver}"
+sim=""
+# Stops the simulator, if started, and the wineserver.
+cleanup() {
+    if [ -n "$sim" ]; then
+        kill "$sim" 2>/dev/null || true
+        wait "$sim" 2>/dev/null || true
+    fi
+    "$wineserver" -k 2>/dev/null || true
+}
+trap cleanup EXIT
 
 echo "--- building the Windows tests and binary"
 cargo build --locked --target x86_64-pc-windows-gnu -p ferrobus-cli --bin ferrobus
 cargo test --locked --target x86_64-pc-windows-gnu -p ferrobus-proto -p ferrobus-sim -p ferrobus --lib --tests --no-run
 
+echo "--- the wine prefix, and one wineserver for the whole step"
+# A wineserver that exits once its last program has (after a few seconds) drops a program
+# that starts just then ("wine client error:0: recvmsg: Connection reset by peer"), and the
+# tests start one program after another: this one is persistent (-p) until the end of the
+# step. The prefix is made here, not by the first test program.
+mkdir -p "$WINEPREFIX"
+"$wineserver" -p
+timeout --kill-after=10 120 "${WINE:-/usr/lib/wine/wine64}" wineboot --init
+
 echo "--- under wine: ferrobus-proto, ferrobus-sim, ferrobus (lib) tests (at most ${seconds}s)"
-# The first run makes the wine prefix (tens of seconds).
 timeout --kill-after=10 "$seconds" \
     cargo test --locked --target x86_64-pc-windows-gnu -p ferrobus-proto -p ferrobus-sim --lib --tests
 timeout --kill-after=10 "$seconds" \
@@ -35,7 +56,7 @@ port=$((20000 + RANDOM % 20000))
 log="$(mktemp)"
 "$target_dir/debug/ferrobus" sim --profile generic --unit 1 --tcp "127.0.0.1:$port" --duration 90s 2>"$log" &
 sim=$!
-trap 'kill "$sim" 2>/dev/null || true; wait "$sim" 2>/dev/null || true; rm -f "$log"' EXIT
+trap 'cleanup; rm -f "$log"' EXIT
 for _ in $(seq 50); do
     grep -q 'listening on' "$log" && break
     sleep 0.1
