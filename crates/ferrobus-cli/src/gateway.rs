@@ -6,7 +6,8 @@
 //! TCP, shared by every client of the gateway (a multiplexer for a device that takes one
 //! connection); several such lines, or a mix with serial ones, come from `--lines-file`. `--route
 //! UNITS=LINE[:UNIT]` says which units go where (with one line and no `--route`, units 1-247
-//! go to it under their own addresses); a unit in no route gets exception 0x0A. The library
+//! go to it under their own addresses, and every unit id 0-255 to a `--tcp` line); a unit in
+//! no route gets exception 0x0A. The library
 //! ([`ferrobus::gateway`]) documents every answer the gateway gives and why. The counters of
 //! every line and unit, and the requests the front end refused by reason, are printed on
 //! SIGUSR1 and at exit. `--reverse` turns it around: a
@@ -367,7 +368,13 @@ fn config(connection: &ConnectArgs, args: &GatewayArgs) -> Result<GatewayConfig,
                 late_guard: args.late_guard,
                 ..GatewayLine::new(connection.transport(&tcp), client)
             };
-            let routes = routes(&args.routes, 1)?;
+            // A Modbus/TCP device takes every unit id (0xFF the spec's for it, 0 no broadcast
+            // there); RTU over TCP reaches a serial line, units 1-247.
+            let routes = if args.routes.is_empty() && matches!(tcp, Target::Tcp(_)) {
+                Routes::every_id_on(0)
+            } else {
+                routes(&args.routes, 1)?
+            };
             return Ok(GatewayConfig {
                 lines: vec![line],
                 routes,
@@ -476,7 +483,8 @@ fn routes(given: &[String], lines: usize) -> Result<Routes, CliError> {
         let (units, target) = text.split_once('=').ok_or_else(|| bad("no '='"))?;
         let (first, last) = unit_range(units).map_err(|e| bad(&e))?;
         if first == 0 {
-            return Err(bad("unit 0 is the broadcast, sent to every line; route units 1-255"));
+            return Err(bad("unit 0 is the broadcast, sent to every serial line; route units 1-255 (a --tcp line \
+                            alone takes every unit id, 0 among them)"));
         }
         let (line, renumbered) = match target.split_once(':') {
             Some((line, unit)) => (line, Some(parse_u8(unit).map_err(|e| bad(&e))?)),

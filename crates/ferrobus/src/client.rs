@@ -132,6 +132,12 @@ impl Client {
         *self.stats.lock().unwrap_or_else(PoisonError::into_inner)
     }
 
+    /// Whether the bus has a broadcast (unit 0 on the serial framings, RTU over TCP
+    /// included); Modbus/TCP has none.
+    pub(crate) fn has_broadcast(&self) -> bool {
+        self.framing != Framing::Mbap
+    }
+
     /// Whether unit 0 is a broadcast here (serial framings).
     fn broadcasts(&self, unit: u8) -> bool {
         ferrobus_proto::codes::unit::is_broadcast(unit, self.framing != Framing::Mbap)

@@ -511,3 +511,37 @@ async fn a_frame_begun_and_never_finished_closes_the_connection_after_the_frame_
     assert_eq!(ferrobus::server::Closed::of(&err), Some(ferrobus::server::Closed::UnfinishedFrame(frame)), "{err}");
     assert!(after >= frame && after < frame + Duration::from_secs(1), "closed after {after:?}");
 }
+
+#[tokio::test]
+async fn a_broadcast_goes_to_the_serial_line_and_not_to_a_modbus_tcp_device_which_would_take_it_as_its_own() {
+    let bus = Shared::new(Bus::default());
+    let listener = tokio::net::TcpListener::bind("127.0.0.1:0").await.unwrap();
+    let device_addr = listener.local_addr().unwrap();
+    let device = tokio::spawn(async move {
+        let (mut device, _) = listener.accept().await.unwrap();
+        // The first frame the device hears is the read for unit 100, not the broadcast write.
+        let mut head = [0u8; 7];
+        device.read_exact(&mut head).await.unwrap();
+        let mut pdu = vec![0u8; usize::from(u16::from_be_bytes([head[4], head[5]])) - 1];
+        device.read_exact(&mut pdu).await.unwrap();
+        let (tid, unit) = (u16::from_be_bytes([head[0], head[1]]), head[6]);
+        device.write_all(&mbap(tid, unit, &[0x03, 0x02, 0x00, 0x2A])).await.unwrap();
+        (unit, pdu)
+    });
+    let serial = GatewayLine::new(line(&bus, Faults::default()), client_config());
+    let tcp = GatewayLine::new(Transport::tcp(device_addr.to_string()), client_config());
+    let mut routes = Routes::all_on(0);
+    routes.set(100, Route { line: 1, unit: 1 });
+    let config = GatewayConfig { lines: vec![serial, tcp], routes, broadcast_ack: false, cache_max_age: None };
+    let gw = Gateway::start(config).await.unwrap();
+    let mut c = connect(&gw, Box::new(AllowAll));
+    c.write_all(&mbap(1, 0, &[0x06, 0x00, 0x05, 0x00, 0x09])).await.unwrap();
+    assert_eq!(
+        ask(&mut c, 2, 1, &[0x03, 0x00, 0x05, 0x00, 0x01]).await,
+        [0x03, 0x02, 0x00, 0x09],
+        "on the serial line"
+    );
+    assert_eq!(bus.lock().broadcasts, 4);
+    assert_eq!(ask(&mut c, 3, 100, &[0x03, 0x00, 0x05, 0x00, 0x01]).await, [0x03, 0x02, 0x00, 0x2A]);
+    assert_eq!(device.await.unwrap(), (1, vec![0x03, 0x00, 0x05, 0x00, 0x01]), "the TCP device never got the write");
+}

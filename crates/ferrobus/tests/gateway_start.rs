@@ -1,7 +1,9 @@
 //! `Gateway::start`'s typed errors: a routing mistake is told apart from a port that fails.
 //! A line to a Modbus/TCP device that is down is no error: the gateway starts, the line's
 //! requests get 0x0A until the device is up, and it reconnects after the device drops it. A
-//! Modbus/TCP line is not held quiet after a timeout: its transaction ids drop a late reply.
+//! Modbus/TCP line is not held quiet after a timeout: its transaction ids drop a late reply. A
+//! Modbus/TCP line alone takes every unit id, 0 (no broadcast there) and 255 among them; with no
+//! serial line, a broadcast has nowhere to go.
 
 use ferrobus::gateway::{
     AllowAll, Gateway, GatewayConfig, GatewayError, GatewayLine, Inbound, Route, Routes, Timeouts,
@@ -167,4 +169,75 @@ async fn a_modbus_tcp_line_is_not_held_quiet_after_a_timeout_and_drops_the_late_
         "its own reply, not the late one"
     );
     let _device = device.await.unwrap();
+}
+
+/// An MBAP frame to `unit`.
+fn mbap_to(t: u16, unit: u8, pdu: &[u8]) -> Vec<u8> {
+    let mut frame = mbap(t, pdu);
+    frame[6] = unit;
+    frame
+}
+
+/// Reads one MBAP frame: (transaction, unit, PDU).
+async fn adu(stream: &mut (impl tokio::io::AsyncReadExt + Unpin)) -> (u16, u8, Vec<u8>) {
+    let mut head = [0u8; 7];
+    stream.read_exact(&mut head).await.unwrap();
+    let mut pdu = vec![0u8; usize::from(u16::from_be_bytes([head[4], head[5]])) - 1];
+    stream.read_exact(&mut pdu).await.unwrap();
+    (u16::from_be_bytes([head[0], head[1]]), head[6], pdu)
+}
+
+#[tokio::test]
+async fn a_modbus_tcp_line_alone_takes_every_unit_id_and_unit_0_there_is_the_devices_not_a_broadcast() {
+    let listener = TcpListener::bind("127.0.0.1:0").await.unwrap();
+    let addr = listener.local_addr().unwrap();
+    let device = tokio::spawn(async move {
+        let (mut device, _) = listener.accept().await.unwrap();
+        // Answers each request with its own unit id in the register, or echoes a write.
+        let mut heard = Vec::new();
+        for _ in 0..3 {
+            let (tid, unit, pdu) = adu(&mut device).await;
+            let reply = if pdu[0] == 0x06 { pdu.clone() } else { vec![0x03, 0x02, 0x00, unit] };
+            device.write_all(&mbap_to(tid, unit, &reply)).await.unwrap();
+            heard.push(unit);
+        }
+        heard
+    });
+    let line = GatewayLine::new(Transport::tcp(addr.to_string()), ClientConfig::default());
+    let gateway = Gateway::start(config(vec![line], Routes::every_id_on(0))).await.unwrap();
+    let (mut client, server) = tokio::io::duplex(4096);
+    tokio::spawn(async move {
+        let mut authorize = AllowAll;
+        gateway.serve_connection(server, "test client", Inbound::Mbap, &mut authorize, Timeouts::default()).await
+    });
+    for (t, unit, pdu, reply) in [
+        (1, 255, vec![0x03, 0x00, 0x00, 0x00, 0x01], vec![0x03, 0x02, 0x00, 255]),
+        (2, 0, vec![0x03, 0x00, 0x00, 0x00, 0x01], vec![0x03, 0x02, 0x00, 0]),
+        // A write to unit 0 is answered by the device, not sent as a broadcast.
+        (3, 0, vec![0x06, 0x00, 0x05, 0x00, 0x09], vec![0x06, 0x00, 0x05, 0x00, 0x09]),
+    ] {
+        client.write_all(&mbap_to(t, unit, &pdu)).await.unwrap();
+        assert_eq!(adu(&mut client).await, (t, unit, reply), "unit {unit}");
+    }
+    assert_eq!(device.await.unwrap(), [255, 0, 0]);
+}
+
+#[tokio::test]
+async fn with_no_serial_line_a_write_to_an_unrouted_unit_0_has_no_broadcast_to_go_to_and_gets_0a() {
+    // Nobody listens: nothing may be sent anywhere.
+    let addr = TcpListener::bind("127.0.0.1:0").await.unwrap().local_addr().unwrap();
+    let line = GatewayLine::new(Transport::tcp(addr.to_string()), ClientConfig::default());
+    let mut routes = Routes::new();
+    routes.set(100, Route { line: 0, unit: 1 });
+    let gateway = Gateway::start(config(vec![line], routes)).await.unwrap();
+    let (mut client, server) = tokio::io::duplex(4096);
+    let serving = gateway.clone();
+    tokio::spawn(async move {
+        let mut authorize = AllowAll;
+        serving.serve_connection(server, "test client", Inbound::Mbap, &mut authorize, Timeouts::default()).await
+    });
+    client.write_all(&mbap_to(1, 0, &[0x06, 0x00, 0x05, 0x00, 0x09])).await.unwrap();
+    assert_eq!(adu(&mut client).await, (1, 0, vec![0x86, 0x0A]));
+    let stats = &gateway.stats()[0];
+    assert_eq!((stats.total.requests, stats.connect_failures), (0, 0), "nothing reached the line: {stats}");
 }

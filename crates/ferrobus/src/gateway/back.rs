@@ -45,6 +45,8 @@ pub(crate) struct Job {
     pub(crate) pdu: Vec<u8>,
     /// Where the reply PDU goes (`None`: a broadcast, no reply).
     pub(crate) reply: oneshot::Sender<Option<Vec<u8>>>,
+    /// A serial line's broadcast (unit 0 there): it goes out even with nobody waiting.
+    pub(crate) broadcast: bool,
 }
 
 /// The queue's state: a FIFO per connection and the order in which connections take turns.
@@ -261,7 +263,7 @@ pub(crate) async fn run(queue: Arc<LineQueue>, client: Client, cache: Option<Arc
 /// or it was answered 0x0A at once because the line is held down.
 fn take(queue: &LineQueue, job: Job, down: Option<Down>) -> Option<Job> {
     // A broadcast goes out even with nobody waiting for its end (no acknowledgement).
-    if job.reply.is_closed() && job.unit_out != 0 {
+    if job.reply.is_closed() && !job.broadcast {
         let mut stats = queue.stats();
         stats.total.abandoned = stats.total.abandoned.saturating_add(1);
         return None;
@@ -353,7 +355,7 @@ mod tests {
 
     fn job(unit: u8) -> (Job, oneshot::Receiver<Option<Vec<u8>>>) {
         let (reply, rx) = oneshot::channel();
-        (Job { unit_in: unit, unit_out: unit, pdu: vec![3, 0, 0, 0, 1], reply }, rx)
+        (Job { unit_in: unit, unit_out: unit, pdu: vec![3, 0, 0, 0, 1], reply, broadcast: false }, rx)
     }
 
     fn queue(capacity: usize) -> LineQueue {

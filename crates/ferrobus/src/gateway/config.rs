@@ -46,7 +46,9 @@
 //!
 //! Every line starts from the [`LineDefaults`] the caller gives (a command line's options,
 //! say); a key of a `[[line]]` beats them. One line without `units` or `renumber` serves units
-//! 1–247 under their own addresses.
+//! 1–247 under their own addresses; a `tcp` line alone, every unit id 0-255
+//! ([`Routes::every_id_on`]: a Modbus/TCP device has no broadcast, and 0xFF is the spec's id for
+//! a device addressed by its IP address).
 //!
 //! The whole file is checked before anything is opened. A [`LinesFileError`] names the file,
 //! the line and column, the `[[line]]` (numbered from 0, as the gateway numbers its lines) and
@@ -302,7 +304,9 @@ pub fn parse(file: &str, text: &str, defaults: &LineDefaults) -> Result<LinesFil
                         .into(),
                 )));
             }
-            routes = Routes::all_on(0);
+            // A Modbus/TCP device takes every unit id; a serial line units 1-247.
+            let tcp = config.transport.framing() == crate::Framing::Mbap;
+            routes = if tcp { Routes::every_id_on(0) } else { Routes::all_on(0) };
         }
         lines.push(config);
     }
@@ -621,10 +625,13 @@ fn range(text: &str) -> Result<(i64, i64), String> {
     Ok((number(a)?, number(b)?))
 }
 
-/// A unit a client addresses, or one on the line: 1-255 (0 is the broadcast, sent to every line).
+/// A unit a client addresses, or one on the line: 1-255 (0 is the broadcast, sent to every
+/// serial line).
 fn unit_number(n: i64) -> Result<u8, String> {
     match u8::try_from(n) {
-        Ok(0) => Err("unit 0 is the broadcast, sent to every line; route units 1-255".into()),
+        Ok(0) => Err("unit 0 is the broadcast, sent to every serial line; route units 1-255 (a tcp line alone \
+                      takes every unit id, 0 among them)"
+            .into()),
         Ok(unit) => Ok(unit),
         Err(_) => Err(format!("{n} is no unit: units are 1-255")),
     }

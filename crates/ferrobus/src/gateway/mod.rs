@@ -24,14 +24,15 @@
 //! | the unit's reply, or its exception | forwarded as it came |
 //! | a PDU no device could take: code 0x00, 0x80–0xFF, reserved; fields missing or out of range | 0x01 or 0x03 at once, never forwarded (see below) |
 //! | a unit in no routing table | 0x0A Gateway Path Unavailable |
-//! | a read to unit 0 (a broadcast: no device answers it) | 0x0A |
+//! | a read to unit 0 unless routed (a broadcast: no device answers it) | 0x0A |
+//! | a write to unit 0 unless routed, with no serial line (nowhere to broadcast) | 0x0A |
 //! | the line's queue full | 0x06 Server Device Busy, at once |
 //! | silence after every retry, or the unit in backoff | 0x0B Gateway Target Device Failed to Respond |
 //! | replies with a bad CRC after every retry | 0x0B, counted as CRC errors apart from silence |
 //! | a reply that does not answer the request | 0x0B, counted as a bad reply |
 //! | the serial port failed, or a TCP line's device cannot be reached or dropped the connection | 0x0A (the path itself is down; it is reopened, reconnected) |
 //! | refused by the connection's [`Authorize`] | the exception it names ([`Rules`]: 0x01, or 0x0A for a unit) |
-//! | a broadcast (unit 0, a write) | nothing (the spec), or its echo with `broadcast_ack` |
+//! | a broadcast (unit 0 unless routed, a write: sent to the serial lines, never to a Modbus/TCP device) | nothing (the spec), or its echo with `broadcast_ack` |
 //!
 //! Why a bad CRC is 0x0B and not 0x04, as mbusd answers: 0x04 Server Device Failure says the
 //! *device* tried and failed to perform the request, so a client takes it as the device's
@@ -158,6 +159,17 @@ impl Routes {
     /// An empty table: every unit gets 0x0A.
     pub fn new() -> Self {
         Self::default()
+    }
+
+    /// Every unit id, 0 to 255, on `line`, each under its own address: for a Modbus/TCP
+    /// device, to which every unit id is its own to interpret (0xFF, the spec's for a device
+    /// addressed by its IP address, and 0 among them: Modbus/TCP has no broadcast).
+    pub fn every_id_on(line: usize) -> Self {
+        let mut routes = Self::new();
+        for unit in 0..=u8::MAX {
+            routes.set(unit, Route { line, unit });
+        }
+        routes
     }
 
     /// Units 1 to 247 on `line`, each under its own address.
@@ -486,13 +498,20 @@ impl Inner {
         queue.submit(connection, job).map_err(|_| ())
     }
 
-    /// Sends a broadcast on every line; with `broadcast_ack`, what completes when every line
-    /// has sent it (its reply `None`: the echo), or 0x06 if no line could take it.
+    /// Whether any line has a broadcast: a serial line, or RTU over TCP to one.
+    fn broadcasts(&self) -> bool {
+        self.clients.iter().any(Client::has_broadcast)
+    }
+
+    /// Sends a broadcast on every line that has one (not to a Modbus/TCP device, which would
+    /// take unit 0 as addressed to itself); with `broadcast_ack`, what completes when every
+    /// such line has sent it (its reply `None`: the echo), or 0x06 if no line could take it.
     fn broadcast(&self, connection: u64, header: AduHeader, pdu: &[u8]) -> Option<oneshot::Receiver<Option<Vec<u8>>>> {
         let mut done = Vec::new();
-        for (line, queue) in self.lines.iter().enumerate() {
+        let lines = self.lines.iter().zip(&self.clients).enumerate();
+        for (line, (queue, _)) in lines.filter(|(_, (_, client))| client.has_broadcast()) {
             let (reply, rx) = oneshot::channel();
-            let job = Job { unit_in: header.unit, unit_out: 0, pdu: pdu.to_vec(), reply };
+            let job = Job { unit_in: header.unit, unit_out: 0, pdu: pdu.to_vec(), reply, broadcast: true };
             if queue.submit(connection, job).is_ok() {
                 done.push(rx);
             } else {

@@ -366,3 +366,14 @@ fn in_flight_is_a_modbus_tcp_lines_own_and_the_callers_default_reaches_only_thos
     );
     refused("[[line]]\ntcp = \"h\"\nin-flight = 0\n", 3, &["in-flight: 0 is out of range"]);
 }
+
+#[test]
+fn a_tcp_line_alone_takes_every_unit_id_and_a_serial_or_rtu_over_tcp_line_alone_units_1_to_247() {
+    let (_, routes) = lines("[[line]]\ntcp = \"10.0.0.7\"\n").unwrap();
+    let on = |unit| Some(Route { line: 0, unit });
+    assert_eq!((routes.get(0), routes.get(1), routes.get(248), routes.get(255)), (on(0), on(1), on(248), on(255)));
+    for line in ["port = \"/dev/ttyA\"", "rtu-tcp = \"h:4001\""] {
+        let (_, routes) = lines(&format!("[[line]]\n{line}\n")).unwrap();
+        assert_eq!((routes.get(0), routes.get(1), routes.get(247), routes.get(248)), (None, on(1), on(247), None));
+    }
+}
