@@ -2,7 +2,7 @@
 //! scaling, word order, enumerations, limits and exception meanings from the Omron 3G3RX-V1
 //! (I578) and Hitachi SJ700-2 tables and the Shihlin SDP manual's example, and the profiles
 //! are consistent: no two entries share an address, every 32-bit pair is in the drive's
-//! order, every dependency names an entry.
+//! order, every dependency names an entry, every point has a code of its own.
 
 use std::collections::{BTreeMap, BTreeSet};
 
@@ -297,5 +297,16 @@ fn every_start_value_of_a_builtin_profile_is_within_its_range() {
             let Some(x) = p.default.as_f64() else { continue };
             assert!(p.min.is_none_or(|m| x >= m) && p.max.is_none_or(|m| x <= m), "{name}: {} starts at {x}", p.code);
         }
+    }
+}
+
+#[test]
+fn every_point_of_every_built_in_profile_has_a_code_of_its_own() {
+    for (name, _) in BUILTIN {
+        let profile = Profile::load(name).unwrap();
+        let mut seen = BTreeSet::new();
+        let twice: Vec<&str> =
+            profile.points().iter().map(|p| p.code.as_str()).filter(|code| !seen.insert(*code)).collect();
+        assert!(twice.is_empty(), "{name}: codes given to more than one point: {twice:?}");
     }
 }
