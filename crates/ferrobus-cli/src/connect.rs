@@ -431,6 +431,7 @@ impl ConnectArgs {
             Ok(result) => result.map_err(|error| CliError::Modbus { error })?,
             Err(_) => return Err(CliError::ConnectTimeout { target: target.to_string(), waited: wait }),
         };
+        crate::interrupt::keep_release(&client);
         Ok(Session { client, unit, target })
     }
 }

@@ -6,8 +6,52 @@
 //! what it wrote and verified and what not) and ends with
 //! [`crate::exit::CliError::Interrupted`] (exit 130), or, for `line`, whose normal end is an
 //! interruption, with its statistics.
+//!
+//! Whatever ended the command, a reply may still be on its way: the request of an
+//! interrupted command, or one that timed out. On RTU and ASCII the next program on the port
+//! would take it for its own reply, so before the process exits [`release_ports`] waits
+//! until every client's driver has let its port go ([`ferrobus::Release`]): the reply has
+//! come and been dropped, or its late window has passed. It says so when it waits; a second
+//! Ctrl-C exits at once.
+
+use std::sync::{Mutex, PoisonError};
+use std::time::Duration;
 
 use crate::exit::CliError;
+
+/// The releases of the clients this process opened, waited for before it exits.
+static RELEASES: Mutex<Vec<ferrobus::Release>> = Mutex::new(Vec::new());
+
+/// Keeps `client`'s release, so that the process waits for it before it exits
+/// ([`release_ports`]). Every client the commands open is kept here.
+pub(crate) fn keep_release(client: &ferrobus::Client) {
+    RELEASES.lock().unwrap_or_else(PoisonError::into_inner).push(client.release());
+}
+
+/// Waits until no reply is on its way to a client this process opened, saying how long it
+/// may take; a second SIGINT or SIGTERM ends the wait at once.
+pub(crate) async fn release_ports() {
+    let releases = std::mem::take(&mut *RELEASES.lock().unwrap_or_else(PoisonError::into_inner));
+    let Some(longest) = releases.iter().filter_map(ferrobus::Release::pending).max() else { return };
+    // A listener made before the note, so that a Ctrl-C after it is caught.
+    let interrupt = Interrupt::listen();
+    eprintln!(
+        "waiting up to {} ms for the reply in flight, so that it reaches no one else (Ctrl-C again to exit now)",
+        longest.max(Duration::from_millis(1)).as_millis()
+    );
+    // Each wait ends by its own deadline; awaited in turn they take as long as the longest.
+    let settled = async {
+        for release in releases {
+            release.settled().await;
+        }
+    };
+    match interrupt {
+        Ok(mut interrupt) => {
+            let _ = interrupt.unless(settled).await;
+        }
+        Err(_) => settled.await,
+    }
+}
 
 /// A listener for SIGINT and SIGTERM, installed when made.
 pub(crate) struct Interrupt {

@@ -489,7 +489,12 @@ fn main() -> ExitCode {
             return Exit::Io.into();
         }
     };
-    let outcome = runtime.block_on(dispatch(&cli));
+    let outcome = runtime.block_on(async {
+        let outcome = dispatch(&cli).await;
+        // A reply still on its way must reach no one else, whatever ended the command.
+        interrupt::release_ports().await;
+        outcome
+    });
     if let Err(error) = &outcome {
         let target = cli.connection.target().ok();
         let unit = cli.connection.unit.first().copied().unwrap_or(1);

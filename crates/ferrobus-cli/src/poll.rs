@@ -731,6 +731,7 @@ pub(crate) async fn run(connection: &ConnectArgs, args: &PollArgs) -> Result<(),
         Ok(result) => result.map_err(|error| CliError::Modbus { error })?,
         Err(_) => return Err(CliError::ConnectTimeout { target: target.to_string(), waited: wait }),
     };
+    crate::interrupt::keep_release(&client);
     if style == Style::Csv {
         output::print(CSV_HEADER)?;
     }

@@ -672,6 +672,12 @@ impl<F: Framing> Master<F> {
         self.core.owed.is_some_and(|owed| now < owed.until)
     }
 
+    /// Until when a reply owed to a request that timed out is awaited, if one is: the line
+    /// must not be handed to another master before then (see the module docs).
+    pub fn owed_until(&self) -> Option<Instant> {
+        self.core.owed.map(|owed| owed.until)
+    }
+
     /// The bytes to write now, if a request is due: copies them into `buf` (which should hold
     /// [`MAX_TX_LEN`] bytes) and returns their length.
     pub fn poll_transmit(&mut self, now: Instant, buf: &mut [u8]) -> Option<usize> {

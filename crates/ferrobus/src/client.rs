@@ -31,7 +31,7 @@ use ferrobus_proto::pdu::{
     ReadWriteRegisters, Registers, Request, Response, WriteCoil, WriteCoils, WriteRegister, WriteRegisters,
 };
 use ferrobus_proto::{FunctionCode, PduError};
-use tokio::sync::{mpsc, oneshot};
+use tokio::sync::{mpsc, oneshot, watch};
 
 pub use crate::driver::ClientStats;
 use crate::driver::{Command, Driver, Pipelined, Reply, parse_reply};
@@ -70,6 +70,42 @@ pub struct Client {
     options: RequestOptions,
     framing: Framing,
     stats: Arc<Mutex<ClientStats>>,
+    hold: watch::Receiver<Option<tokio::time::Instant>>,
+}
+
+/// When a client's driver lets its port go ([`Client::release`]): at once, unless a reply is
+/// still on its way on a line whose replies carry no transaction id (RTU, ASCII).
+///
+/// A command interrupted while its request is on the line does not take its reply; but the
+/// reply still comes, and over RTU or ASCII a program that opened the port next would take
+/// it for the reply to its own request of the same shape. The driver therefore keeps the
+/// port, reading, until that reply has come and been dropped or its late window has passed,
+/// also once every client has gone; an application that is about to exit waits for it here.
+#[derive(Clone, Debug)]
+pub struct Release {
+    hold: watch::Receiver<Option<tokio::time::Instant>>,
+}
+
+impl Release {
+    /// How much longer the port may be held for a reply in flight or owed, at most; `None`
+    /// if no reply is coming.
+    pub fn pending(&self) -> Option<Duration> {
+        let until = (*self.hold.borrow())?;
+        let left = until.saturating_duration_since(tokio::time::Instant::now());
+        (!left.is_zero()).then_some(left)
+    }
+
+    /// Waits until no reply is coming any more: it has come, its window has passed, or the
+    /// driver has ended.
+    pub async fn settled(mut self) {
+        loop {
+            let Some(until) = *self.hold.borrow_and_update() else { return };
+            tokio::select! {
+                () = tokio::time::sleep_until(until) => return,
+                changed = self.hold.changed() => if changed.is_err() { return },
+            }
+        }
+    }
 }
 
 impl Client {
@@ -89,11 +125,11 @@ impl Client {
         let (tx, rx) = mpsc::channel(config.queue.max(1));
         let options = RequestOptions { timeout: config.timeout, retries: config.retries };
         let framing = transport.framing();
-        let stats = if framing == Framing::Mbap && config.in_flight > 1 {
+        let watched = if framing == Framing::Mbap && config.in_flight > 1 {
             let driver = Pipelined::new(transport, config, port);
-            let stats = driver.stats();
+            let watched = (driver.stats(), driver.hold());
             tokio::spawn(driver.run(rx));
-            stats
+            watched
         } else {
             let master = MasterConfig {
                 response_timeout: config.timeout,
@@ -103,11 +139,18 @@ impl Client {
             };
             let codec = Codec::for_transport(&transport, Role::Client);
             let driver = Driver::new(Master::new(codec, master), transport, config, port);
-            let stats = driver.stats();
+            let watched = (driver.stats(), driver.hold());
             tokio::spawn(driver.run(rx));
-            stats
+            watched
         };
-        Client { commands: tx, options, framing, stats }
+        let (stats, hold) = watched;
+        Client { commands: tx, options, framing, stats, hold }
+    }
+
+    /// When the driver lets its port go: wait on it before the program exits, so that a reply
+    /// still on its way reaches nobody ([`Release`]). It does not keep the driver running.
+    pub fn release(&self) -> Release {
+        Release { hold: self.hold.clone() }
     }
 
     /// The same client with another timeout for its requests.

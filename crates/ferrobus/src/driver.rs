@@ -16,6 +16,14 @@
 //! to a request of an earlier program, say): those bytes are handed to the engine first, so
 //! that a reply owed to a timed-out request is recognised and the line's silence is timed
 //! from them, and counted ([`ClientStats::flushed_bytes`], and a debug line).
+//!
+//! A request whose caller has gone (its future dropped: an interrupted command) is not sent,
+//! and one already on the line is not retried; but a reply still on its way is owed. On RTU
+//! and ASCII, where nothing tells a late reply from the next request's, the driver keeps the
+//! port — read, not handed to anyone — until the reply in flight has come or its window has
+//! passed, even once every client has gone: a program that ends then leaves no stale reply
+//! for the next one. It publishes how long it may still hold the port for that
+//! ([`Release`](crate::Release)), so that an application can wait for it before it exits.
 
 mod pipelined;
 
@@ -29,7 +37,7 @@ use ferrobus_proto::retry::{Admit, IoBackoff, Outcome, UnitHealth, should_retry}
 #[cfg(doc)]
 use ferrobus_proto::retry::{IO_BACKOFF_INITIAL, IO_BACKOFF_MAX};
 use ferrobus_proto::{FunctionCode, PduError};
-use tokio::sync::{mpsc, oneshot};
+use tokio::sync::{mpsc, oneshot, watch};
 
 use ferrobus_proto::Instant;
 
@@ -98,6 +106,9 @@ pub(crate) struct Link {
     connects: u64,
     connect_failures: u64,
     disconnects: u64,
+    /// Until when the port may still be held for a reply in flight or owed: watched by
+    /// [`Release`](crate::Release); dropped with the driver.
+    hold: watch::Sender<Option<tokio::time::Instant>>,
 }
 
 impl Link {
@@ -115,12 +126,27 @@ impl Link {
             connects: u64::from(opened),
             connect_failures: 0,
             disconnects: 0,
+            hold: watch::Sender::new(None),
         }
     }
 
     /// The counters the driver keeps up to date for its clients.
     pub(crate) fn stats(&self) -> Arc<Mutex<ClientStats>> {
         Arc::clone(&self.stats)
+    }
+
+    /// How long the driver may still hold the port for a reply, as it publishes it.
+    pub(crate) fn hold(&self) -> watch::Receiver<Option<tokio::time::Instant>> {
+        self.hold.subscribe()
+    }
+
+    /// Publishes until when the port may be held for a reply (`None`: no reply is coming).
+    fn hold_until(&self, until: Option<tokio::time::Instant>) {
+        self.hold.send_if_modified(|held| {
+            let changed = *held != until;
+            *held = until;
+            changed
+        });
     }
 
     fn publish(&self, master: MasterStats) {
@@ -244,8 +270,23 @@ impl<F: Framing + Send + 'static> Driver<F> {
         self.link.stats()
     }
 
+    /// How long the driver may still hold the port for a reply ([`Release`](crate::Release)).
+    pub(crate) fn hold(&self) -> watch::Receiver<Option<tokio::time::Instant>> {
+        self.link.hold()
+    }
+
+    /// Publishes the counters, and until when the port is held for a reply owed to a request
+    /// that timed out.
     fn publish_stats(&self) {
         self.link.publish(self.master.stats());
+        let owed = self.master.owed_until().filter(|&until| until > self.pump.clock().now());
+        self.link.hold_until(owed.map(|until| self.pump.clock().to_tokio(until)));
+    }
+
+    /// Whether the framing's replies carry nothing that tells a late one from the next
+    /// request's (RTU, ASCII; over a serial port or TCP alike).
+    fn owes_late_replies(&self) -> bool {
+        self.link.transport.framing() != crate::port::Framing::Mbap
     }
 
     pub(crate) async fn run(mut self, mut commands: mpsc::Receiver<Command>) {
@@ -275,11 +316,30 @@ impl<F: Framing + Send + 'static> Driver<F> {
                 },
                 None => commands.recv().await,
             };
-            let Some(command) = command else { return };
+            let Some(command) = command else { break };
+            if command.reply.is_closed() {
+                // Its caller has gone (an interrupted command): nobody awaits the reply.
+                tracing::debug!(unit = command.unit, "a request nobody awaits any more is not sent");
+                continue;
+            }
             let result = self.serve(&command).await;
             self.publish_stats();
             let _ = command.reply.send(result);
         }
+        self.linger().await;
+    }
+
+    /// Every client has gone: keeps reading the port while a reply is owed to a request that
+    /// timed out, so that it reaches nobody (the next program on the port, say), then lets
+    /// the port go.
+    async fn linger(&mut self) {
+        let clock = self.pump.clock();
+        let Some(until) = self.master.owed_until().filter(|&until| until > clock.now()) else { return };
+        let mut linger = Linger { until: clock.to_tokio(until) };
+        let Some(port) = self.link.port.as_mut() else { return };
+        tracing::debug!(port = %self.link.transport.describe(), "keeping the port until the reply owed has come or its window has passed");
+        self.pump.run(port, &mut self.master, &mut linger).await;
+        self.publish_stats();
     }
 
     /// The port was lost between requests: counted, and reopened after the IO backoff.
@@ -298,6 +358,11 @@ impl<F: Framing + Send + 'static> Driver<F> {
         let mut heard: Option<HeardInstead> = None;
         loop {
             attempts += 1;
+            if self.owes_late_replies() {
+                let clock = self.pump.clock();
+                let until = clock.now().saturating_add(self.attempt_span(command));
+                self.link.hold_until(Some(clock.to_tokio(until)));
+            }
             let result = self.transact(command).await;
             if let Err(Error::Timeout { heard: Some(now), .. }) = result {
                 // What tells most about the unit, over all attempts.
@@ -306,7 +371,8 @@ impl<F: Framing + Send + 'static> Driver<F> {
                 }
             }
             self.link.attempt_ended(&result, self.pump.clock().now());
-            if should_retry(outcome(command, &result), attempts, retries) {
+            // A caller that has gone awaits no retry.
+            if should_retry(outcome(command, &result), attempts, retries) && !command.reply.is_closed() {
                 tracing::debug!(unit, %function, attempts, "retrying: {:?}", result);
                 continue;
             }
@@ -318,18 +384,40 @@ impl<F: Framing + Send + 'static> Driver<F> {
         }
     }
 
+    /// The longest one attempt of `command` may keep the line from now, at most: a reply
+    /// owed to an earlier request, the request, its timeout, a reply still arriving then,
+    /// and the late window after it.
+    fn attempt_span(&self, command: &Command) -> std::time::Duration {
+        let framing = self.master.framing();
+        let owed = self
+            .master
+            .owed_until()
+            .map_or(std::time::Duration::ZERO, |until| until.saturating_duration_since(self.pump.clock().now()));
+        owed.saturating_add(framing.transmit_time(MAX_TX_LEN))
+            .saturating_add(framing.inter_frame_gap())
+            .saturating_add(command.options.timeout)
+            .saturating_add(framing.transmit_time(MAX_TX_LEN))
+            .saturating_add(self.late_window(command))
+    }
+
+    /// How long past a request's timeout its reply is still awaited.
+    fn late_window(&self, command: &Command) -> std::time::Duration {
+        self.link.config.late_window.unwrap_or(command.options.timeout.saturating_mul(2))
+    }
+
     /// One request on the line: open the port if needed, submit, drive the engine until it
     /// completes.
     async fn transact(&mut self, command: &Command) -> Result<Reply, Error> {
         if self.link.ensure_open(self.pump.clock()).await? {
             self.master.abort();
         }
+        let late_window = self.late_window(command);
         let config = &self.link.config;
         self.master.set_config(MasterConfig {
             response_timeout: command.options.timeout,
             turnaround_delay: config.turnaround_delay,
             echo_suppression: config.echo_suppression,
-            late_window: config.late_window.unwrap_or(command.options.timeout.saturating_mul(2)),
+            late_window,
             // On a wire no reply can begin before the request has left; a pty or TCP says
             // nothing of when a reply may come.
             min_reply_delay: self.link.port.as_ref().is_some_and(|p| p.has_wire()).then_some(std::time::Duration::ZERO),
@@ -400,6 +488,33 @@ impl<F: Framing> Session<Master<F>> for Transaction<'_> {
         let error = error.unwrap_or_else(|| std::io::ErrorKind::UnexpectedEof.into());
         Err(Error::io(format!("reading from {}", self.transport.describe()), error))
     }
+}
+
+/// The driver's last turn, once every client has gone: reading, until `until`, while a reply
+/// is owed.
+struct Linger {
+    until: tokio::time::Instant,
+}
+
+impl<F: Framing> Session<Master<F>> for Linger {
+    type Output = ();
+
+    /// Ends once nothing is owed any more: the reply has come and been dropped.
+    async fn serve(&mut self, pump: &Pump, _port: &mut BoxPort, master: &mut Master<F>) -> Option<()> {
+        while Engine::poll_event(master).is_some() {}
+        (!master.owes_reply(pump.clock().now())).then_some(())
+    }
+
+    fn deadline(&mut self, _master: &Master<F>) -> Option<tokio::time::Instant> {
+        Some(self.until)
+    }
+
+    /// Ends when the late window has passed without the reply.
+    fn on_wake(&mut self) -> Option<()> {
+        (tokio::time::Instant::now() >= self.until).then_some(())
+    }
+
+    fn on_end(&mut self, _error: Option<std::io::Error>) {}
 }
 
 /// What the retry policy sees of a result: silence counts against the unit only after a

@@ -14,6 +14,7 @@ mod errors;
 mod gateway;
 mod gateway_lines;
 mod guard;
+mod interrupted;
 mod line_settings;
 mod maps;
 mod monitor;

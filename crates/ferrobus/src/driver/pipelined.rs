@@ -80,6 +80,12 @@ impl Pipelined {
         self.link.stats()
     }
 
+    /// How long the driver may hold the connection for a reply: never past its end, since the
+    /// transaction ids tell a late reply apart (watched by [`Release`](crate::Release)).
+    pub(crate) fn hold(&self) -> tokio::sync::watch::Receiver<Option<tokio::time::Instant>> {
+        self.link.hold()
+    }
+
     fn publish_stats(&self) {
         self.link.publish(self.engine.stats());
     }
