@@ -162,6 +162,9 @@ fn the_real_plant_example_says_what_a_plant_has() {
     let Connection::Serial { config: packaging, .. } = &plant.lines[1].connection else { panic!("serial") };
     assert_eq!(packaging.line.to_string(), "9600 8N1");
     assert_eq!((plant.lines[0].client.timeout, plant.lines[0].client.retries), (Duration::from_millis(200), 2));
+    // The press line's late window is its own; the others' is twice their timeout.
+    assert_eq!(plant.lines[0].client.late_window, Some(Duration::from_secs(1)));
+    assert_eq!(plant.lines[1].client.late_window, None);
     assert_eq!(plant.lines[2].connection, Connection::Tcp("192.168.10.20:502".into()));
     let scale = &plant.lines[1].devices[1];
     assert_eq!(scale.metric_names().collect::<Vec<_>>(), ["net-weight", "tare-mode", "filter"]);

@@ -93,6 +93,11 @@ pub(crate) struct ConnectArgs {
     #[arg(long, global = true, value_name = "DURATION", value_parser = parse_duration)]
     pub(crate) turnaround: Option<Duration>,
 
+    /// RTU/ASCII: after a timeout, how long its reply is still awaited (and dropped) before the
+    /// line is used again; default: twice the timeout. Size it to the device's slowest reply
+    #[arg(long = "late-window", global = true, value_name = "DURATION", value_parser = parse_duration)]
+    pub(crate) late_window: Option<Duration>,
+
     /// Do not reopen a serial port or connection that was lost (by default it is reopened,
     /// a serial port only while its path names the same device)
     #[arg(long = "no-reopen", global = true)]
@@ -393,7 +398,7 @@ impl ConnectArgs {
         transport.with_reopen(!self.no_reopen)
     }
 
-    /// The client settings: timeout, retries, turnaround, echo; no backoff (one-shot commands
+    /// The client settings: timeout, retries, turnaround, late window, echo; no backoff (one-shot commands
     /// should report every timeout, not skip the unit).
     pub(crate) fn client_config(&self) -> ClientConfig {
         let mut config =
@@ -403,6 +408,7 @@ impl ConnectArgs {
         if let Some(turnaround) = self.turnaround {
             config.turnaround_delay = turnaround;
         }
+        config.late_window = self.late_window;
         config
     }
 

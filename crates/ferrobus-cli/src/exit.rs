@@ -407,6 +407,13 @@ fn heard_hints(heard: &HeardInstead, target: Option<&Target>, unit: u8) -> Vec<S
                     .into(),
             );
         }
+        HeardInstead::Suspect { .. } => {
+            hints.push(
+                "the unit usually answers far sooner: a reply this late is most likely one to an earlier request \
+                 that timed out, dropped. If the device is now this slow, raise --timeout (and --late-window)"
+                    .into(),
+            );
+        }
         HeardInstead::WrongFunction { .. } => {
             hints.push(
                 "the unit is talking but did not answer this request: it may not support the function or the \

@@ -297,7 +297,7 @@ fn explain_parse_error(error: clap::Error) -> clap::Error {
 }
 
 /// The connection options, by clap id (the long option is the id with `-` for `_`).
-const CONNECTION_OPTIONS: [&str; 23] = [
+const CONNECTION_OPTIONS: [&str; 24] = [
     "port",
     "tcp",
     "rtu_tcp",
@@ -315,6 +315,7 @@ const CONNECTION_OPTIONS: [&str; 23] = [
     "t35",
     "echo",
     "turnaround",
+    "late_window",
     "tls",
     "cert",
     "key",

@@ -31,15 +31,24 @@
 //!   therefore remembers a request that timed out in silence (nothing from its unit was
 //!   heard) as *owed* a reply — its unit, function code and, where the request implies it,
 //!   the reply's length — and keeps the line closed after it: the next request (a retry, or
-//!   anyone's next one) goes out only once the owed reply has been heard and dropped (counted
-//!   in [`MasterStats::late_replies`]) and the line has been silent for the gap after it, or
-//!   once [`MasterConfig::late_window`] has passed since the timeout without it. Only one
-//!   reply is ever owed: a request waits for the last one to be settled before it leaves. A
-//!   unit whose owed reply never came is silent, not slow: its later timeouts owe nothing
-//!   (and cost no late window) until a frame from it is heard again. A
-//!   reply later than the timeout plus the late window, to a request of the same unit,
-//!   function and length, cannot be told from the next one's by any master: size the
-//!   timeout to the device.
+//!   anyone's next one to that unit) goes out only once the owed reply has been heard and
+//!   dropped (counted in [`MasterStats::late_replies`]) and the line has been silent for the
+//!   gap after it, or once [`MasterConfig::late_window`] has passed since the timeout without
+//!   it. A request to another unit need not wait: the owed reply cannot pass for its reply
+//!   (it names another unit), and if the two collide the result is a damaged frame, never a
+//!   wrong value. Up to [`MAX_OWED`] units may be owed a reply at once; with as many owed, a
+//!   request to yet another unit waits for the first to be settled. A unit whose owed reply
+//!   never came is silent, not slow: its later timeouts owe nothing (and cost no late window)
+//!   until a frame from it is heard again.
+//! - **Suspect replies.** A reply later than the timeout plus the late window, to a request
+//!   of the same unit, function and length, cannot be told from the next one's by its
+//!   content; but the line knows when replies come. The engine learns each unit's usual reply
+//!   delay (the 99th percentile of the delays from the end of the request to the start of the
+//!   reply, once it has answered 20 times) and, to a unit whose owed reply never came, drops a
+//!   reply that begins more than four times that delay plus 10 ms after the request: counted
+//!   in [`MasterStats::suspect_replies`] and named in the timeout
+//!   ([`HeardInstead::Suspect`]). A device that is really that slow now shows timeouts, never
+//!   another request's values: size the timeout and the late window to it.
 //! - **Too early.** On a wire no reply can begin before our request has finished leaving —
 //!   the slave must have heard all of it, and the spec has it keep t3.5 of silence on top —
 //!   so a reply that begins sooner than [`MasterConfig::min_reply_delay`] after the end of
@@ -61,6 +70,12 @@ use crate::pdu::{BitValues, MAX_PDU_LEN, MeiRequest, MeiResponse, Request, Respo
 use crate::time::{Instant, earliest};
 
 pub mod pipeline;
+mod reply_times;
+
+use reply_times::ReplyTimes;
+
+/// Units that may be owed a late reply at once (see the module docs).
+pub const MAX_OWED: usize = 4;
 
 /// The largest frame the master transmits, in any framing (an ASCII frame of a 253-byte PDU).
 pub const MAX_TX_LEN: usize = ascii::MAX_FRAME_CHARS;
@@ -200,6 +215,15 @@ pub enum HeardInstead {
         /// own transmission, and the minimum delay after it).
         earliest: Duration,
     },
+    /// What would have been the reply, from a unit whose last owed reply never came, began
+    /// far later than the unit usually answers: most likely that late reply, dropped (see
+    /// the module docs).
+    Suspect {
+        /// From the end of our transmission to the start of the reply.
+        after: Duration,
+        /// The unit's usual delay (its 99th percentile).
+        usual: Duration,
+    },
 }
 
 impl HeardInstead {
@@ -209,7 +233,8 @@ impl HeardInstead {
         match *self {
             HeardInstead::OtherTransaction { .. }
             | HeardInstead::WrongFunction { .. }
-            | HeardInstead::TooEarly { .. } => 3,
+            | HeardInstead::TooEarly { .. }
+            | HeardInstead::Suspect { .. } => 3,
             HeardInstead::BadChecksum { head: Some((from, _)), expected: (unit, _) } if from == unit => 2,
             HeardInstead::BadChecksum { .. } | HeardInstead::Garbage { .. } => 1,
             HeardInstead::OtherUnit { .. } => 0,
@@ -256,6 +281,13 @@ impl fmt::Display for HeardInstead {
                 "a reply {} µs after the request, earlier than any slave can answer (not before {} µs): a stale reply, ignored",
                 after.as_micros(),
                 earliest.as_micros()
+            ),
+            HeardInstead::Suspect { after, usual } => write!(
+                f,
+                "a reply {} ms after the request, where the unit answers within {} ms, after an earlier reply of \
+                 it never came: taken for that late reply, dropped",
+                after.as_millis(),
+                usual.as_millis().max(1)
             ),
         }
     }
@@ -333,6 +365,10 @@ pub struct MasterStats {
     /// Replies that began sooner after the request than any slave may answer, dropped
     /// ([`MasterConfig::min_reply_delay`]). Also counted in `ignored_frames`.
     pub early_replies: u32,
+    /// Replies far later than their unit usually answers, after its last owed reply never
+    /// came, dropped as that late reply ([`HeardInstead::Suspect`]). Also counted in
+    /// `ignored_frames`.
+    pub suspect_replies: u32,
 }
 
 #[derive(Clone, Copy, PartialEq, Eq, Debug)]
@@ -541,11 +577,13 @@ struct Core {
     last_activity: Option<Instant>,
     /// When the frame now being received began: the chunk its first byte came in.
     rx_start: Instant,
-    /// The reply owed to a request that timed out, while it is awaited.
-    owed: Option<Owed>,
+    /// The replies owed to requests that timed out, while they are awaited: one per unit.
+    owed: [Option<Owed>; MAX_OWED],
     /// A unit whose owed reply never came: silent, not slow, so its timeouts owe nothing
     /// until it is heard again.
     silent_unit: Option<u8>,
+    /// How soon each unit answers.
+    reply_times: ReplyTimes,
     stats: MasterStats,
 }
 
@@ -575,8 +613,9 @@ impl<F: Framing> Master<F> {
                 heard: None,
                 last_activity: None,
                 rx_start: Instant::ZERO,
-                owed: None,
+                owed: [None; MAX_OWED],
                 silent_unit: None,
+                reply_times: ReplyTimes::new(),
                 stats: MasterStats::default(),
             },
         }
@@ -658,24 +697,27 @@ impl<F: Framing> Master<F> {
         self.core.outcome = None;
     }
 
-    /// When a queued request may go out: after its submission, after the gap, and once no
-    /// reply is owed.
+    /// When a queued request may go out: after its submission, after the gap, once no reply
+    /// is owed by its unit, and, with [`MAX_OWED`] units owed one, once one of them is settled.
     fn transmit_at(&self, not_before: Instant) -> Instant {
         let gap = self.framing.inter_frame_gap();
         let quiet = self.core.last_activity.map_or(not_before, |t| t.saturating_add(gap));
-        let owed = self.core.owed.map_or(not_before, |owed| owed.until);
-        not_before.max(quiet).max(owed)
+        let owed = self.core.owed.iter().flatten();
+        let own = owed.clone().filter(|o| o.unit == self.core.unit).map(|o| o.until).max();
+        let full = self.core.owed.iter().all(Option::is_some);
+        let room = if full { owed.map(|o| o.until).min() } else { None };
+        not_before.max(quiet).max(own.unwrap_or(not_before)).max(room.unwrap_or(not_before))
     }
 
     /// Whether a reply is owed to a request that timed out and still awaited at `now`.
     pub fn owes_reply(&self, now: Instant) -> bool {
-        self.core.owed.is_some_and(|owed| now < owed.until)
+        self.core.owed.iter().flatten().any(|owed| now < owed.until)
     }
 
-    /// Until when a reply owed to a request that timed out is awaited, if one is: the line
-    /// must not be handed to another master before then (see the module docs).
+    /// Until when the last reply owed to a request that timed out is awaited, if one is: the
+    /// line must not be handed to another master before then (see the module docs).
     pub fn owed_until(&self) -> Option<Instant> {
-        self.core.owed.map(|owed| owed.until)
+        self.core.owed.iter().flatten().map(|owed| owed.until).max()
     }
 
     /// The bytes to write now, if a request is due: copies them into `buf` (which should hold
@@ -698,9 +740,11 @@ impl<F: Framing> Master<F> {
         // Anything heard before our request cannot be its reply, and an owed reply not heard
         // by now is no longer awaited.
         self.framing.reset();
-        if let Some(owed) = core.owed.take() {
-            // The late window passed in silence: the unit is dead, not slow.
-            core.silent_unit = Some(owed.unit);
+        for slot in &mut core.owed {
+            if let Some(owed) = slot.take_if(|owed| now >= owed.until) {
+                // The late window passed in silence: the unit is dead, not slow.
+                core.silent_unit = Some(owed.unit);
+            }
         }
         let sent = now.saturating_add(self.framing.transmit_time(n));
         core.last_activity = Some(sent);
@@ -808,7 +852,9 @@ impl Core {
             RxEvent::Frame(frame) => Some(frame.header.unit),
             RxEvent::Discarded { head, .. } => head.map(|(unit, _)| unit),
         };
-        if heard_from.is_some() && heard_from == self.silent_unit {
+        // A unit whose owed reply never came may be sending it now.
+        let in_doubt = heard_from.is_some() && heard_from == self.silent_unit;
+        if in_doubt {
             self.silent_unit = None;
         }
         let frame = match *event {
@@ -821,18 +867,17 @@ impl Core {
                         }
                         reason => HeardInstead::Garbage { bytes, reason },
                     });
-                } else if reason == DiscardReason::ChecksumMismatch && self.owed.is_some_and(|o| o.is_named_by(head)) {
-                    // The owed reply, damaged: it came, so nothing is owed any more.
-                    self.settle_owed();
+                } else if reason == DiscardReason::ChecksumMismatch {
+                    // The owed reply, damaged: it came, so it is owed no more.
+                    self.settle_owed(|o| o.is_named_by(head));
                 }
                 return;
             }
         };
+        let settles = |o: &Owed| o.is_answered_by(frame.header.unit, frame.pdu);
         if !awaiting {
             // Awaited by nobody; the reply owed to a request that timed out settles it.
-            if self.owed.is_some_and(|o| o.is_answered_by(frame.header.unit, frame.pdu)) {
-                self.settle_owed();
-            }
+            self.settle_owed(settles);
             self.stats.ignored_frames = self.stats.ignored_frames.wrapping_add(1);
             return;
         }
@@ -849,6 +894,16 @@ impl Core {
             self.stats.ignored_frames = self.stats.ignored_frames.wrapping_add(1);
             return;
         }
+        if from_unit && in_transaction && answers && in_doubt && self.is_suspect() {
+            self.stats.suspect_replies = self.stats.suspect_replies.wrapping_add(1);
+            self.stats.ignored_frames = self.stats.ignored_frames.wrapping_add(1);
+            return;
+        }
+        if !from_unit {
+            // Another unit's reply owed to an earlier request of ours, heard while we wait for
+            // this one's: it came, so it is owed no more.
+            self.settle_owed(settles);
+        }
         if !from_unit || !in_transaction || !answers {
             // Not the reply (perhaps a late one to an earlier request), but worth naming if
             // the wait ends without one.
@@ -861,6 +916,11 @@ impl Core {
             });
             self.stats.ignored_frames = self.stats.ignored_frames.wrapping_add(1);
             return;
+        }
+        // How soon the unit answers, learned from replies to a quiet line only: one that came
+        // behind another frame (a late reply, a suspect one) was held up by it.
+        if let Some(delay) = self.reply_delay().filter(|_| self.heard.is_none()) {
+            self.reply_times.record(self.unit, delay);
         }
         let outcome = Outcome::of_reply(self.request.get(..self.request_len).unwrap_or_default(), self.raw, frame.pdu);
         if let Some(len) = outcome.keep_reply(&mut self.reply, frame.pdu) {
@@ -884,6 +944,22 @@ impl Core {
         true
     }
 
+    /// From the end of our transmission to the start of the frame just received, while a
+    /// reply is awaited.
+    fn reply_delay(&self) -> Option<Duration> {
+        let State::AwaitingReply { sent, .. } = self.state else { return None };
+        Some(self.rx_start.saturating_duration_since(sent))
+    }
+
+    /// Whether the reply just received, from a unit whose owed reply never came, began far
+    /// later than the unit usually answers; if so it is noted as heard.
+    fn is_suspect(&mut self) -> bool {
+        let Some(after) = self.reply_delay() else { return false };
+        let Some(usual) = self.reply_times.suspect(self.unit, after) else { return false };
+        self.hear(HeardInstead::Suspect { after, usual });
+        true
+    }
+
     /// The request in flight timed out at `now`: unless its unit was heard answering (a
     /// damaged reply), its reply is owed until the late window has passed. Only where
     /// replies carry no transaction id (not Modbus/TCP, whose ids tell a late reply apart).
@@ -895,18 +971,33 @@ impl Core {
         }
         let request = self.request.get(..self.request_len).unwrap_or_default();
         let len = if self.raw { None } else { Request::parse(request).ok().as_ref().and_then(reply_len) };
-        self.owed = Some(Owed {
+        let owed = Owed {
             unit: self.unit,
             function: request.first().copied().unwrap_or_default(),
             len,
             until: now.saturating_add(self.config.late_window),
-        });
+        };
+        // The unit's own slot if it still has one, else a free one: a request goes out only
+        // with one free, so the earliest is replaced only should none be.
+        let slots = &mut self.owed;
+        let slot = match slots.iter().position(|o| o.is_some_and(|o| o.unit == owed.unit)) {
+            Some(i) => i,
+            None => slots.iter().position(Option::is_none).unwrap_or_else(|| {
+                slots.iter().enumerate().min_by_key(|(_, o)| o.map(|o| o.until)).map_or(0, |(i, _)| i)
+            }),
+        };
+        if let Some(slot) = slots.get_mut(slot) {
+            *slot = Some(owed);
+        }
     }
 
-    /// The owed reply has come and been dropped; the line opens after the gap that follows it.
-    fn settle_owed(&mut self) {
-        self.owed = None;
-        self.stats.late_replies = self.stats.late_replies.wrapping_add(1);
+    /// The owed reply that `matches` picks has come and been dropped; the line opens after the
+    /// gap that follows it.
+    fn settle_owed(&mut self, matches: impl Fn(&Owed) -> bool) {
+        if let Some(slot) = self.owed.iter_mut().find(|o| o.as_ref().is_some_and(&matches)) {
+            *slot = None;
+            self.stats.late_replies = self.stats.late_replies.wrapping_add(1);
+        }
     }
 
     /// Counts the outcome and ends the request.

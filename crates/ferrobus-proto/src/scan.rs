@@ -296,7 +296,8 @@ impl Answer {
             Some(
                 HeardInstead::OtherTransaction { .. }
                 | HeardInstead::WrongFunction { .. }
-                | HeardInstead::TooEarly { .. },
+                | HeardInstead::TooEarly { .. }
+                | HeardInstead::Suspect { .. },
             ) => Answer::Mismatch,
         }
     }

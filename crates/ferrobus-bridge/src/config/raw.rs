@@ -84,6 +84,7 @@ pub(super) struct Line {
     pub timeout: Option<Text>,
     pub retries: Option<Spanned<i64>>,
     pub connect_timeout: Option<Text>,
+    pub late_window: Option<Text>,
     pub echo_suppression: Option<bool>,
 }
 

@@ -468,7 +468,39 @@ fn a_reply_later_than_the_timeout_and_the_guard_is_dropped_as_late_and_never_giv
     let killed = Command::new("kill").args(["-USR1", &gw.gateway.id().to_string()]).status().unwrap();
     assert!(killed.success());
     let line = gw.gateway.wait_for(Stream::Err, |l| l.starts_with("line "), STEP);
-    assert!(line.contains("late-replies 3 early-replies 0"), "{line}");
+    assert!(line.contains("late-window 2s late-replies 3 early-replies 0"), "{line}");
+}
+
+#[test]
+fn a_reply_later_than_the_late_window_is_dropped_as_suspect_and_never_given_to_the_next_client() {
+    let Some(_turn) = require(&[Need::Socat]) else { return };
+    // Register 0x10 answers 3.1 s late: after the timeout (1 s) and the late window (2 s), so
+    // it arrives while the next client's read of register 0x20 waits. Its content cannot tell;
+    // its timing can: the unit answers the other reads within milliseconds.
+    let device =
+        |path: &Path| sim_on(path, Parity::None, &["--profile", "generic", "--fault", "1:fc=3,addr=0x10,delay=3100ms"]);
+    let gw = behind_waiting(device, "1s", &["--backoff-after", "0"], &[]);
+    let mut slow = connect_to(&gw.addr);
+    let mut other = connect_to(&gw.addr);
+    assert_eq!(ask(&mut slow, 1, 1, &[0x06, 0x00, 0x10, 0x11, 0x10]), [0x06, 0x00, 0x10, 0x11, 0x10]);
+    assert_eq!(ask(&mut other, 2, 1, &[0x06, 0x00, 0x20, 0x22, 0x22]), [0x06, 0x00, 0x20, 0x22, 0x22]);
+    // The unit's habit: 30 replies.
+    for t in 0..30u16 {
+        assert_eq!(ask(&mut other, 10 + t, 1, &[0x03, 0x00, 0x20, 0x00, 0x01]), [0x03, 0x02, 0x22, 0x22]);
+    }
+    for round in 0..3u16 {
+        slow.write_all(&mbap(100 + round, 1, &[0x03, 0x00, 0x10, 0x00, 0x01])).unwrap();
+        // Queued behind the slow read (the pause only orders the two; nothing is timed).
+        std::thread::sleep(Duration::from_millis(50));
+        let theirs = ask(&mut other, 200 + round, 1, &[0x03, 0x00, 0x20, 0x00, 0x01]);
+        assert_eq!(theirs, [0x03, 0x02, 0x22, 0x22], "round {round}: register 0x20 read after 0x10's late reply");
+        assert_eq!(read_frame(&mut slow), Some(mbap(100 + round, 1, &[0x83, 0x0B])), "round {round}: 0x10 timed out");
+    }
+    let killed = Command::new("kill").args(["-USR1", &gw.gateway.id().to_string()]).status().unwrap();
+    assert!(killed.success());
+    let line = gw.gateway.wait_for(Stream::Err, |l| l.starts_with("line "), STEP);
+    assert!(line.contains("late-window 2s"), "{line}");
+    assert!(!line.contains("suspect-replies 0 "), "no reply was dropped as suspect: {line}");
 }
 
 // Reverse: a serial master through the gateway to Modbus/TCP servers.

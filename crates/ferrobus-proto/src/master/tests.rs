@@ -792,3 +792,123 @@ fn a_unit_silent_through_its_late_window_owes_no_reply_on_its_next_timeouts_unti
     done(&mut m);
     assert!(m.owes_reply(ns(timeout_of(v))));
 }
+
+// ---- Owed replies per unit, and replies far outside a unit's habit -----------------------
+
+#[test]
+fn a_request_to_another_unit_goes_out_while_a_reply_is_owed_and_the_owed_reply_cannot_answer_it() {
+    let (mut m, t) = owing();
+    m.abort();
+    // Unit 2 need not wait for unit 1's late reply...
+    m.submit(ns(t), 2, &read_holding(0, 1)).unwrap();
+    assert_eq!(transmit(&mut m, ns(t + T3_5)), rtu(2, &[0x03, 0, 0, 0, 1]));
+    // ...which comes during unit 2's wait: dropped as late, never taken for unit 2's.
+    m.on_bytes(ns(t + 20_000_000), &rtu(1, &[0x03, 0x02, 0xDE, 0xAD]));
+    assert_eq!(done(&mut m), None);
+    assert_eq!((m.stats().late_replies, m.owes_reply(ns(t + 20_000_000))), (1, false));
+    m.on_bytes(ns(t + 30_000_000), &rtu(2, &[0x03, 0x02, 0x00, 0x02]));
+    assert_eq!(done(&mut m), Some(Done::Registers(std::vec![2])));
+}
+
+#[test]
+fn a_request_to_a_unit_owed_a_reply_still_waits_for_it_after_requests_to_others() {
+    let (mut m, t) = owing();
+    m.abort();
+    m.submit(ns(t), 2, &read_holding(0, 1)).unwrap();
+    transmit(&mut m, ns(t + T3_5));
+    m.on_bytes(ns(t + 10_000_000), &rtu(2, &[0x03, 0x02, 0x00, 0x02]));
+    assert_eq!(done(&mut m), Some(Done::Registers(std::vec![2])));
+    // Unit 1 is still owed its reply: its next request waits for the late window.
+    m.submit(ns(t + 20_000_000), 1, &read_holding(0, 1)).unwrap();
+    assert_eq!(m.poll_timeout(), Some(ns(t + 200_000_000)));
+    let mut buf = [0u8; MAX_TX_LEN];
+    assert_eq!(m.poll_transmit(ns(t + 200_000_000 - 1), &mut buf), None);
+    assert!(m.poll_transmit(ns(t + 200_000_000), &mut buf).is_some());
+}
+
+#[test]
+fn with_as_many_units_owed_a_reply_as_it_keeps_a_request_to_yet_another_waits_for_the_first() {
+    // A late window long enough for every unit's to be open at once.
+    let config = MasterConfig { late_window: Duration::from_secs(1), ..*late_master().config() };
+    let mut m = master(config);
+    let mut at = 0;
+    let mut first_until = None;
+    for unit in 1..=u8::try_from(MAX_OWED).unwrap() {
+        m.submit(ns(at), unit, &read_holding(0, 1)).unwrap();
+        transmit(&mut m, ns(at));
+        at = timeout_of(at);
+        m.handle_timeout(ns(at));
+        assert!(matches!(done(&mut m), Some(Done::Failed(MasterError::Timeout { .. }))));
+        first_until.get_or_insert(at + 1_000_000_000);
+        at += T3_5;
+    }
+    m.submit(ns(at), 9, &read_holding(0, 1)).unwrap();
+    assert_eq!(m.poll_timeout(), first_until.map(ns), "unit 1's window is the first to end");
+    // Unit 1's late reply settles its slot, and the line opens after the gap.
+    m.on_bytes(ns(at + 1_000_000), &rtu(1, &[0x03, 0x02, 0x00, 0x01]));
+    let mut buf = [0u8; MAX_TX_LEN];
+    assert!(m.poll_transmit(ns(at + 1_000_000 + T3_5), &mut buf).is_some());
+    assert_eq!(m.stats().late_replies, 1);
+}
+
+/// A master whose unit 1 has answered 20 reads 5 ms after each, then timed out on one whose
+/// late window passed in silence; returns it with the next read to unit 1 just sent, and when.
+fn in_doubt() -> (Master<RtuCodec>, u64) {
+    let mut m = late_master();
+    let mut at = 0;
+    for value in 0..20 {
+        m.submit(ns(at), 1, &read_holding(0, 1)).unwrap();
+        transmit(&mut m, ns(at));
+        let reply_at = at + 8 * CHAR + 5_000_000;
+        m.on_bytes(ns(reply_at), &rtu(1, &[0x03, 0x02, 0x00, value]));
+        assert_eq!(done(&mut m), Some(Done::Registers(std::vec![u16::from(value)])));
+        at = reply_at + T3_5;
+    }
+    m.submit(ns(at), 1, &read_holding(0, 1)).unwrap();
+    transmit(&mut m, ns(at));
+    m.handle_timeout(ns(timeout_of(at)));
+    assert!(matches!(done(&mut m), Some(Done::Failed(MasterError::Timeout { .. }))));
+    let next = timeout_of(at) + 200_000_000;
+    m.submit(ns(timeout_of(at)), 1, &read_holding(0, 1)).unwrap();
+    transmit(&mut m, ns(next));
+    (m, next)
+}
+
+#[test]
+fn a_reply_far_later_than_the_unit_answers_after_its_owed_reply_never_came_is_dropped_as_that_reply() {
+    let (mut m, sent) = in_doubt();
+    // The timed-out read's reply, 3.1 s after it: 100 ms into this read's wait.
+    m.on_bytes(ns(sent + 8 * CHAR + 100_000_000), &rtu(1, &[0x03, 0x02, 0xDE, 0xAD]));
+    assert_eq!(done(&mut m), None, "the late reply was taken for this read's");
+    assert_eq!(m.stats().suspect_replies, 1);
+    m.handle_timeout(ns(timeout_of(sent)));
+    let Some(Done::Failed(e @ MasterError::Timeout { heard, .. })) = done(&mut m) else { panic!("no timeout") };
+    let usual = Duration::from_millis(8);
+    assert_eq!(heard, Some(HeardInstead::Suspect { after: Duration::from_millis(100), usual }));
+    assert!(e.to_string().contains("a reply 100 ms after the request, where the unit answers within 8 ms"), "{e}");
+}
+
+#[test]
+fn a_reply_in_the_units_habit_after_its_owed_reply_never_came_is_taken() {
+    let (mut m, sent) = in_doubt();
+    m.on_bytes(ns(sent + 8 * CHAR + 6_000_000), &rtu(1, &[0x03, 0x02, 0x00, 0x2A]));
+    assert_eq!(done(&mut m), Some(Done::Registers(std::vec![42])));
+    assert_eq!(m.stats().suspect_replies, 0);
+}
+
+#[test]
+fn a_slow_reply_from_a_unit_in_no_doubt_is_taken() {
+    let (mut m, _) = in_doubt();
+    m.on_bytes(ns(timeout_of(0)), &[]);
+    m.abort();
+    // Heard again (this reply), the unit is in no doubt: its next slow reply is its own.
+    let at = 100_000_000_000;
+    m.submit(ns(at), 1, &read_holding(0, 1)).unwrap();
+    transmit(&mut m, ns(at));
+    m.on_bytes(ns(at + 8 * CHAR + 5_000_000), &rtu(1, &[0x03, 0x02, 0x00, 0x01]));
+    assert_eq!(done(&mut m), Some(Done::Registers(std::vec![1])));
+    m.submit(ns(at + 50_000_000), 1, &read_holding(0, 1)).unwrap();
+    transmit(&mut m, ns(at + 50_000_000));
+    m.on_bytes(ns(at + 50_000_000 + 8 * CHAR + 90_000_000), &rtu(1, &[0x03, 0x02, 0x00, 0x02]));
+    assert_eq!(done(&mut m), Some(Done::Registers(std::vec![2])));
+}

@@ -33,7 +33,8 @@
 //! port 502 unless given) and `rtu-tcp` (RTU frames over TCP, `HOST:PORT`). The keys: `port`,
 //! `tcp`, `rtu-tcp`, `ascii`, `baud`, `parity`, `data-bits`, `stop-bits`, `rs485`,
 //! `low-latency`, `timeout`, `retries`, `t15`, `t35`, `turnaround`, `echo`, `reopen`, `queue`,
-//! `late-guard`, `in-flight` (on a `tcp` line only: how many requests may be outstanding on
+//! `late-guard`, `late-window` (after a timeout, how long its reply is still awaited and the
+//! line kept closed; default twice the timeout: [`ClientConfig::late_window`]), `in-flight` (on a `tcp` line only: how many requests may be outstanding on
 //! the device's connection at once, 1 to 16, matched by transaction id; see
 //! [`ClientConfig::in_flight`]), and `response-wait`: the time the devices of the line hold
 //! their reply, added to the line's reply timeout. A line's routes are `units` (numbers and `"A-B"` ranges) and
@@ -186,6 +187,7 @@ struct LineShape {
     reopen: Option<Spanned<toml::Value>>,
     queue: Option<Spanned<toml::Value>>,
     late_guard: Option<Spanned<toml::Value>>,
+    late_window: Option<Spanned<toml::Value>>,
     in_flight: Option<Spanned<toml::Value>>,
     units: Option<Vec<Spanned<Item>>>,
     renumber: Option<BTreeMap<Spanned<String>, Spanned<Item>>>,
@@ -526,6 +528,9 @@ fn settings(table: Range<usize>, line: &LineShape, defaults: &LineDefaults) -> R
     }
     if let Some(v) = &line.late_guard {
         d.late_guard = duration(v, "late-guard")?;
+    }
+    if let Some(v) = &line.late_window {
+        d.client.late_window = Some(duration(v, "late-window")?);
     }
     d.client.in_flight = in_flight(line.in_flight.as_ref(), kind, d.client.in_flight)?;
     if kind != Kind::Serial {

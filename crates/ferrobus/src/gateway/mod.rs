@@ -48,8 +48,8 @@
 //! function code asked and, for a request it can parse, the length and echo it must have.
 //! After a request timed out, the engine owes it its reply and keeps the line closed until
 //! the reply has come and been dropped (counted as a late reply in the line's stats) or the
-//! late window — twice the reply timeout ([`ClientConfig::late_window`](crate::ClientConfig::late_window))
-//! — has passed; after any request without a usable reply the line also stays quiet for
+//! late window — the line's `late-window`, by default twice the reply timeout
+//! ([`ClientConfig::late_window`](crate::ClientConfig::late_window)), shown in its stats — has passed; after any request without a usable reply the line also stays quiet for
 //! [`GatewayLine::late_guard`]. So a late reply is awaited by nobody and dropped instead of
 //! being taken for the next request's, a retry's or another client's. (A reply later than the
 //! timeout plus the late window, to a request of the same unit, function and length, cannot
@@ -381,7 +381,9 @@ impl Gateway {
                     .await
                     .map_err(|source| GatewayError::Io { line: index, source })?
             };
-            let stats = Arc::new(Mutex::new(LineTraffic { name, ..LineTraffic::default() }));
+            let late_window = (line.transport.framing() != crate::Framing::Mbap)
+                .then(|| line.client.late_window.unwrap_or(line.client.timeout.saturating_mul(2)));
+            let stats = Arc::new(Mutex::new(LineTraffic { name, late_window, ..LineTraffic::default() }));
             let queue = Arc::new(LineQueue::new(line.queue, stats));
             // A Modbus/TCP device's late reply carries its own transaction id: the master drops
             // it, so the line need not stay quiet for it, and may keep several requests in

@@ -164,12 +164,19 @@ pub struct LineTraffic {
     pub queue_depth: usize,
     /// The deepest the queue has been.
     pub queue_max: usize,
+    /// After a timeout, how long its reply is still awaited, the line kept closed
+    /// ([`ClientConfig::late_window`](crate::ClientConfig::late_window)); `None` on Modbus/TCP,
+    /// whose transaction ids tell a late reply apart.
+    pub late_window: Option<std::time::Duration>,
     /// Replies that came after their request had timed out, dropped by the line's master
     /// (never handed to the next request).
     pub late_replies: u64,
     /// Replies that began sooner after their request than any device may answer (stale
     /// ones), dropped.
     pub early_replies: u64,
+    /// Replies far later than their unit usually answers, after an earlier reply of it never
+    /// came, dropped as that late reply (never handed to the request waiting).
+    pub suspect_replies: u64,
     /// Bytes found waiting in the port before a request, dropped.
     pub flushed_bytes: u64,
     /// Times the line's port was opened, or its TCP connection made (the first included).
@@ -185,6 +192,7 @@ impl LineTraffic {
     pub(crate) fn dropped(&mut self, seen: &crate::ClientStats) {
         self.late_replies = u64::from(seen.master.late_replies);
         self.early_replies = u64::from(seen.master.early_replies);
+        self.suspect_replies = u64::from(seen.master.suspect_replies);
         self.flushed_bytes = seen.flushed_bytes;
         self.connects = seen.connects;
         self.connect_failures = seen.connect_failures;
@@ -196,14 +204,16 @@ impl fmt::Display for LineTraffic {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
         writeln!(
             f,
-            "line {}: queue {} (max {}); {}; late-replies {} early-replies {} flushed-bytes {}; connects {} \
-             connect-failures {} disconnects {}",
+            "line {}: queue {} (max {}); {}; late-window {} late-replies {} early-replies {} suspect-replies {} \
+             flushed-bytes {}; connects {} connect-failures {} disconnects {}",
             self.name,
             self.queue_depth,
             self.queue_max,
             self.total,
+            self.late_window.map_or_else(|| "none".to_string(), |w| format!("{w:?}")),
             self.late_replies,
             self.early_replies,
+            self.suspect_replies,
             self.flushed_bytes,
             self.connects,
             self.connect_failures,

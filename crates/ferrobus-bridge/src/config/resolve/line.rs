@@ -8,7 +8,7 @@ use ferrobus_proto::frame::{DataBits, LineConfig, Parity, StopBits};
 use toml::Spanned;
 
 use super::super::raw::{self, Text};
-use super::super::text::host_port;
+use super::super::text::{duration, host_port};
 use super::super::{Connection, LineSpec};
 use super::{Cx, device};
 
@@ -199,7 +199,8 @@ fn line_config(cx: &mut Cx<'_>, line: &raw::Line) -> Option<LineConfig> {
     (cx.errors.len() == errors).then_some(config)
 }
 
-/// The client's timeout, retries and connect timeout (the library's defaults unless given).
+/// The client's timeout, retries, connect timeout and late window (the library's defaults
+/// unless given).
 fn resolve_client(cx: &mut Cx<'_>, line: &raw::Line) -> Option<ClientConfig> {
     let errors = cx.errors.len();
     let mut client = ClientConfig::default();
@@ -208,6 +209,13 @@ fn resolve_client(cx: &mut Cx<'_>, line: &raw::Line) -> Option<ClientConfig> {
     }
     if let Some(timeout) = line.connect_timeout.as_ref().and_then(|t| cx.period("connect_timeout", t)) {
         client.connect_timeout = timeout;
+    }
+    if let Some(window) = &line.late_window {
+        // Zero is a choice: a late reply is not waited for (it is still never taken for another).
+        match duration(window.get_ref()) {
+            Ok(window) => client.late_window = Some(window),
+            Err(problem) => cx.at(window.span(), format!("late_window: {problem}")),
+        }
     }
     if let Some(retries) = &line.retries {
         match u32::try_from(*retries.get_ref()) {

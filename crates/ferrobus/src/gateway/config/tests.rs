@@ -45,6 +45,7 @@ parity = "odd"
 t35 = "5ms"
 queue = 8
 late-guard = "20ms"
+late-window = "3500ms"
 renumber = { 30 = 3, "41-43" = "1-3", 50 = 9 }
 "#;
 
@@ -68,6 +69,8 @@ fn each_line_gets_its_own_port_framing_timing_timeout_and_queue() {
     assert_eq!((a.client.retries, b.client.retries), (2, 0));
     assert_eq!((a.queue, b.queue), (64, 8));
     assert_eq!((a.late_guard, b.late_guard), (Duration::from_millis(100), Duration::from_millis(20)));
+    // No late window: the client's own (twice the timeout); or the line's.
+    assert_eq!((a.client.late_window, b.client.late_window), (None, Some(Duration::from_millis(3500))));
 }
 
 #[test]
