@@ -1,7 +1,7 @@
 //! A command interrupted while its request is on an RTU line: the reply still comes, and the
 //! next program on the port must not take it for its own. The interrupted process keeps the
 //! port until the reply has come (or its window has passed), says so, and exits at once on a
-//! second Ctrl-C.
+//! second Ctrl-C. A command that ended on a timeout waits the same way, for the late window.
 
 use std::io::{BufRead, BufReader};
 use std::process::{Child, ChildStderr, Stdio};
@@ -84,12 +84,7 @@ fn a_second_ctrl_c_ends_the_wait_for_the_reply_in_flight_at_once() {
     read_until(&mut stderr, " tx ").unwrap_or_else(|seen| panic!("no request traced:\n{seen}"));
     interrupt(&child);
     let note = read_until(&mut stderr, "waiting up to").unwrap_or_else(|seen| panic!("no note:\n{seen}"));
-    let ms: u64 = note
-        .rsplit("waiting up to ")
-        .next()
-        .and_then(|rest| rest.split(' ').next())
-        .and_then(|n| n.parse().ok())
-        .unwrap_or_else(|| panic!("no wait in {note:?}"));
+    let ms = announced(&note);
     assert!(ms >= 14_000, "a request with a 5 s timeout and a 10 s late window may keep the line {ms} ms");
     let asked = Instant::now();
     interrupt(&child);
@@ -97,4 +92,29 @@ fn a_second_ctrl_c_ends_the_wait_for_the_reply_in_flight_at_once() {
     assert_eq!(status.code(), Some(130));
     // Not a timed assertion of how fast: only that it did not sit out the wait it announced.
     assert!(asked.elapsed() < Duration::from_millis(ms / 2), "the second Ctrl-C was not taken");
+}
+
+/// The wait `note` announces, in ms.
+fn announced(note: &str) -> u64 {
+    note.rsplit("waiting up to ")
+        .next()
+        .and_then(|rest| rest.split(' ').next())
+        .and_then(|n| n.parse().ok())
+        .unwrap_or_else(|| panic!("no wait in {note:?}"))
+}
+
+#[test]
+fn a_get_that_timed_out_keeps_the_port_for_its_late_reply_for_the_late_window() {
+    let sim = Sim::pty(&["--profile", "omron-3g3rx", "--fault", "1:silent"]);
+    let get = |extra: &[&str]| {
+        let assert = sim.run(1, &[extra, &["--device", "omron-3g3rx", "get", "F002"]].concat()).code(3);
+        crate::server::stderr(&assert)
+    };
+    // By default twice the timeout (300 ms): the reply is owed up to 600 ms after it.
+    let default = get(&[]);
+    let waited = announced(&default);
+    assert!((300..=600).contains(&waited), "{default}");
+    let set = get(&["--late-window", "150ms"]);
+    assert!(announced(&set) <= 150, "{set}");
+    assert!(set.contains("no reply from unit 1 within 300 ms"), "{set}");
 }
