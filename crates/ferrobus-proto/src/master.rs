@@ -36,7 +36,11 @@
 //!   gap after it, or once [`MasterConfig::late_window`] has passed since the timeout without
 //!   it. A request to another unit need not wait: the owed reply cannot pass for its reply
 //!   (it names another unit), and if the two collide the result is a damaged frame, never a
-//!   wrong value. Up to [`MAX_OWED`] units may be owed a reply at once; with as many owed, a
+//!   wrong value. But once such a request gets no usable reply but damage or other traffic —
+//!   the units collide, or answer through one responder that is still busy with the late one
+//!   (a multi-unit device, a simulator) — every request on the line waits for every owed
+//!   reply from then on. Up to
+//!   [`MAX_OWED`] units may be owed a reply at once; with as many owed, a
 //!   request to yet another unit waits for the first to be settled. A unit whose owed reply
 //!   never came is silent, not slow: its later timeouts owe nothing (and cost no late window)
 //!   until a frame from it is heard again.
@@ -584,6 +588,12 @@ struct Core {
     silent_unit: Option<u8>,
     /// How soon each unit answers.
     reply_times: ReplyTimes,
+    /// The request in flight went out while another unit was owed a reply.
+    beside_owed: bool,
+    /// A request that went out while another unit was owed a reply got no usable reply, but
+    /// damage or other traffic: from then on every request waits for every owed reply (see
+    /// the module docs).
+    owed_holds_line: bool,
     stats: MasterStats,
 }
 
@@ -616,6 +626,8 @@ impl<F: Framing> Master<F> {
                 owed: [None; MAX_OWED],
                 silent_unit: None,
                 reply_times: ReplyTimes::new(),
+                beside_owed: false,
+                owed_holds_line: false,
                 stats: MasterStats::default(),
             },
         }
@@ -703,7 +715,8 @@ impl<F: Framing> Master<F> {
         let gap = self.framing.inter_frame_gap();
         let quiet = self.core.last_activity.map_or(not_before, |t| t.saturating_add(gap));
         let owed = self.core.owed.iter().flatten();
-        let own = owed.clone().filter(|o| o.unit == self.core.unit).map(|o| o.until).max();
+        let unit = self.core.unit;
+        let own = owed.clone().filter(|o| o.unit == unit || self.core.owed_holds_line).map(|o| o.until).max();
         let full = self.core.owed.iter().all(Option::is_some);
         let room = if full { owed.map(|o| o.until).min() } else { None };
         not_before.max(quiet).max(own.unwrap_or(not_before)).max(room.unwrap_or(not_before))
@@ -746,6 +759,7 @@ impl<F: Framing> Master<F> {
                 core.silent_unit = Some(owed.unit);
             }
         }
+        core.beside_owed = core.owed.iter().flatten().any(|o| o.unit != core.unit);
         let sent = now.saturating_add(self.framing.transmit_time(n));
         core.last_activity = Some(sent);
         core.echo_pos = 0;
@@ -1002,6 +1016,12 @@ impl Core {
 
     /// Counts the outcome and ends the request.
     fn finish(&mut self, outcome: Outcome) {
+        if matches!(outcome, Outcome::Failed(_)) && self.beside_owed && self.heard.is_some() {
+            // Sent beside another unit's owed reply, and what came instead of a usable reply
+            // was damage or other traffic: that is no longer risked on this line.
+            self.owed_holds_line = true;
+        }
+        self.beside_owed = false;
         self.stats.count(outcome);
         self.outcome = Some(outcome);
         self.state = State::Idle;

@@ -912,3 +912,24 @@ fn a_slow_reply_from_a_unit_in_no_doubt_is_taken() {
     m.on_bytes(ns(at + 50_000_000 + 8 * CHAR + 90_000_000), &rtu(1, &[0x03, 0x02, 0x00, 0x02]));
     assert_eq!(done(&mut m), Some(Done::Registers(std::vec![2])));
 }
+
+#[test]
+fn once_a_request_beside_another_units_owed_reply_gets_none_every_request_waits_for_every_owed_reply() {
+    // Units behind one responder (a multi-unit device): busy with unit 1's late reply, it does
+    // not hear unit 2's request.
+    let (mut m, t) = owing();
+    m.abort();
+    m.submit(ns(t), 2, &read_holding(0, 1)).unwrap();
+    transmit(&mut m, ns(t + T3_5));
+    m.on_bytes(ns(t + 20_000_000), &rtu(1, &[0x03, 0x02, 0xDE, 0xAD]));
+    m.handle_timeout(ns(timeout_of(t + T3_5)));
+    assert!(matches!(done(&mut m), Some(Done::Failed(MasterError::Timeout { .. }))));
+    // Unit 2's timeout owes a reply now; unit 3's request waits for it, as every request does
+    // on this line from now on.
+    let u = timeout_of(t + T3_5);
+    m.submit(ns(u), 3, &read_holding(0, 1)).unwrap();
+    assert_eq!(m.poll_timeout(), Some(ns(u + 200_000_000)));
+    let mut buf = [0u8; MAX_TX_LEN];
+    assert_eq!(m.poll_transmit(ns(u + 200_000_000 - 1), &mut buf), None);
+    assert!(m.poll_transmit(ns(u + 200_000_000), &mut buf).is_some());
+}
