@@ -387,6 +387,8 @@ enum State {
         began: Instant,
         sent: Instant,
         deadline: Instant,
+        /// Sent while another unit was owed a reply.
+        beside_owed: bool,
     },
     /// Sent as broadcast; quiet until `until`.
     Turnaround {
@@ -501,6 +503,16 @@ fn grace_end<F: Framing>(framing: &F, deadline: Instant) -> Instant {
     deadline.saturating_add(framing.transmit_time(rtu::MAX_ADU_LEN))
 }
 
+/// Whose owed replies a request waits for (see the module docs).
+#[derive(Clone, Copy, PartialEq, Eq, Debug)]
+enum OwedRule {
+    /// Its own unit's only.
+    SameUnit,
+    /// Every unit's: a request sent beside another unit's owed reply got damage or other
+    /// traffic instead of a reply.
+    Every,
+}
+
 /// A reply still owed to a request that timed out (see the module docs).
 #[derive(Clone, Copy, PartialEq, Eq, Debug)]
 struct Owed {
@@ -588,12 +600,8 @@ struct Core {
     silent_unit: Option<u8>,
     /// How soon each unit answers.
     reply_times: ReplyTimes,
-    /// The request in flight went out while another unit was owed a reply.
-    beside_owed: bool,
-    /// A request that went out while another unit was owed a reply got no usable reply, but
-    /// damage or other traffic: from then on every request waits for every owed reply (see
-    /// the module docs).
-    owed_holds_line: bool,
+    /// Whose owed replies a request waits for.
+    owed_rule: OwedRule,
     stats: MasterStats,
 }
 
@@ -626,8 +634,7 @@ impl<F: Framing> Master<F> {
                 owed: [None; MAX_OWED],
                 silent_unit: None,
                 reply_times: ReplyTimes::new(),
-                beside_owed: false,
-                owed_holds_line: false,
+                owed_rule: OwedRule::SameUnit,
                 stats: MasterStats::default(),
             },
         }
@@ -716,7 +723,8 @@ impl<F: Framing> Master<F> {
         let quiet = self.core.last_activity.map_or(not_before, |t| t.saturating_add(gap));
         let owed = self.core.owed.iter().flatten();
         let unit = self.core.unit;
-        let own = owed.clone().filter(|o| o.unit == unit || self.core.owed_holds_line).map(|o| o.until).max();
+        let line = self.core.owed_rule == OwedRule::Every;
+        let own = owed.clone().filter(|o| line || o.unit == unit).map(|o| o.until).max();
         let full = self.core.owed.iter().all(Option::is_some);
         let room = if full { owed.map(|o| o.until).min() } else { None };
         not_before.max(quiet).max(own.unwrap_or(not_before)).max(room.unwrap_or(not_before))
@@ -759,7 +767,7 @@ impl<F: Framing> Master<F> {
                 core.silent_unit = Some(owed.unit);
             }
         }
-        core.beside_owed = core.owed.iter().flatten().any(|o| o.unit != core.unit);
+        let beside_owed = core.owed.iter().flatten().any(|o| o.unit != core.unit);
         let sent = now.saturating_add(self.framing.transmit_time(n));
         core.last_activity = Some(sent);
         core.echo_pos = 0;
@@ -775,7 +783,7 @@ impl<F: Framing> Master<F> {
         } else {
             core.stats.requests = core.stats.requests.wrapping_add(1);
             let deadline = sent.saturating_add(core.config.response_timeout);
-            core.state = State::AwaitingReply { began: now, sent, deadline };
+            core.state = State::AwaitingReply { began: now, sent, deadline, beside_owed };
         }
         Some(n)
     }
@@ -1016,12 +1024,12 @@ impl Core {
 
     /// Counts the outcome and ends the request.
     fn finish(&mut self, outcome: Outcome) {
-        if matches!(outcome, Outcome::Failed(_)) && self.beside_owed && self.heard.is_some() {
+        let beside_owed = matches!(self.state, State::AwaitingReply { beside_owed: true, .. });
+        if matches!(outcome, Outcome::Failed(_)) && beside_owed && self.heard.is_some() {
             // Sent beside another unit's owed reply, and what came instead of a usable reply
             // was damage or other traffic: that is no longer risked on this line.
-            self.owed_holds_line = true;
+            self.owed_rule = OwedRule::Every;
         }
-        self.beside_owed = false;
         self.stats.count(outcome);
         self.outcome = Some(outcome);
         self.state = State::Idle;
