@@ -300,7 +300,16 @@ fn check_register(
         (t, toml::Value::Integer(_) | toml::Value::Float(_)) => t.is_float(),
         _ => false,
     };
+    // A not-implemented u64 (0xFFFFFFFFFFFFFFFF) is past TOML's integers: it may be written as text.
+    let raw_text = |value: &toml::Value| match value {
+        toml::Value::String(s) if ty.is_integer() => {
+            let (lo, hi) = ty.integer_range();
+            parse_key(s).is_some_and(|n| (lo..=hi).contains(&n))
+        }
+        _ => false,
+    };
     for (field, value) in [("default", &r.default), ("not_implemented", &r.not_implemented)] {
+        let fits = |v: &toml::Value| fits(v) || (field == "not_implemented" && raw_text(v));
         if let Some(value) = value.as_ref().filter(|v| !fits(v)) {
             problem(field, format!("{field} = {value} is not a {} value", ty.name()));
         }

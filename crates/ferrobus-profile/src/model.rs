@@ -470,8 +470,9 @@ pub struct RegisterDef {
     /// for f32/f64, text for a string.
     pub default: Option<toml::Value>,
     /// The raw value by which the device says it does not implement the point (SunSpec's
-    /// 0xFFFF for a u16, 0x8000 for an i16, `nan` for a float, `""` for a string): read, it
-    /// shows as not implemented (`n/a`, empty in CSV, null in JSON), not as a reading.
+    /// 0xFFFF for a u16, 0x8000 for an i16, `nan` for a float, `""` for a string; an integer
+    /// may be written as text, `"0xFFFFFFFFFFFFFFFF"`, past TOML's 64-bit signed integers):
+    /// read, it shows as not implemented (`n/a`, empty in CSV, null in JSON), not as a reading.
     pub not_implemented: Option<toml::Value>,
     /// False when the device does not implement the point at all (a SunSpec point whose scale
     /// factor read 0x8000): every value read shows as not implemented. Default true.

@@ -252,10 +252,12 @@ pub(crate) fn resolve(profile: &Profile) -> Vec<Point> {
                         .default
                         .as_ref()
                         .map(|given| crate::codec::default_value(def.value_type, Some(given))),
-                    not_implemented: def
-                        .not_implemented
-                        .as_ref()
-                        .map(|given| crate::codec::default_value(def.value_type, Some(given))),
+                    not_implemented: def.not_implemented.as_ref().map(|given| match given {
+                        toml::Value::String(text) if def.value_type.is_integer() => {
+                            crate::Value::Int(parse_key(text).unwrap_or_default())
+                        }
+                        given => crate::codec::default_value(def.value_type, Some(given)),
+                    }),
                     implemented: def.implemented,
                 });
             }

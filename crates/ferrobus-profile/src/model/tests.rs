@@ -285,22 +285,26 @@ fn a_not_implemented_value_reads_as_none_of_a_number_a_meaning_or_a_reading() {
         "{DEVICE}[[registers]]\nnumber=1\nname='t'\ntype='i16'\nscale=0.1\nunit='C'\nnot_implemented=-32768\n\
          [[registers]]\nnumber=2\nname='st'\nvalues={{ '1' = 'off' }}\nnot_implemented=0xFFFF\n\
          [[registers]]\nnumber=3\nname='f'\ntype='f32'\nnot_implemented=nan\n\
-         [[registers]]\nnumber=5\nname='w'\nscale=10.0\nimplemented=false\n"
+         [[registers]]\nnumber=5\nname='w'\nscale=10.0\nimplemented=false\n\
+         [[registers]]\nnumber=6\nname='e'\ntype='u64'\nnot_implemented='0xFFFFFFFFFFFFFFFF'\n"
     );
     let profile = Profile::parse(&text, "mine.toml").unwrap();
-    let p = |code: &str| profile.point(code).unwrap().clone();
-    let t = p("t");
-    let raw = t.decode(&[0x8000]).unwrap();
-    assert_eq!((t.show(&raw), t.number(&raw), t.engineering(&raw)), ("n/a".into(), String::new(), None));
-    assert_eq!(t.show(&t.decode(&[0xFFE2]).unwrap()), "-3.0 C", "any other value is a reading");
-    let st = p("st");
+    let point = |code: &str| profile.point(code).unwrap().clone();
+    let temp = point("t");
+    let raw = temp.decode(&[0x8000]).unwrap();
+    assert_eq!((temp.show(&raw), temp.number(&raw), temp.engineering(&raw)), ("n/a".into(), String::new(), None));
+    assert_eq!(temp.show(&temp.decode(&[0xFFE2]).unwrap()), "-3.0 C", "any other value is a reading");
+    let st = point("st");
     assert_eq!((st.show(&Value::Int(0xFFFF)), st.meaning(&Value::Int(0xFFFF))), ("n/a".into(), None));
     assert_eq!(st.show(&Value::Int(1)), "off");
-    let f = p("f");
-    let nan = f.decode(&[0x7FC0, 0x0000]).unwrap();
-    assert!(!f.implemented(&nan) && f.implemented(&Value::Float(1.5)));
-    let w = p("w");
-    assert_eq!((w.show(&Value::Int(5)), w.engineering(&Value::Int(5))), ("n/a".into(), None));
+    let float = point("f");
+    let nan = float.decode(&[0x7FC0, 0x0000]).unwrap();
+    assert!(!float.implemented(&nan) && float.implemented(&Value::Float(1.5)));
+    let unscaled = point("w");
+    assert_eq!((unscaled.show(&Value::Int(5)), unscaled.engineering(&Value::Int(5))), ("n/a".into(), None));
+    let wide = point("e");
+    assert_eq!(wide.show(&wide.decode(&[0xFFFF; 4]).unwrap()), "n/a");
+    assert_eq!(wide.show(&wide.decode(&[0xFFFF, 0xFFFF, 0xFFFF, 0xFFFE]).unwrap()), "18446744073709551614");
     let wrong = format!("{DEVICE}[[registers]]\nnumber=1\nname='r'\nnot_implemented=70000\n");
     assert!(error(&wrong).contains("not_implemented = 70000 is not a u16 value"), "{}", error(&wrong));
 }
