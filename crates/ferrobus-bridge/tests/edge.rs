@@ -1186,3 +1186,47 @@ mod hostile {
         }
     }
 }
+
+// ---------------------------------------------------------------------------------------------
+// Values the device does not implement (a SunSpec device's 0xFFFF, 0x8000).
+// ---------------------------------------------------------------------------------------------
+
+#[test]
+fn a_value_the_device_does_not_implement_is_a_null_metric_in_dbirth_and_ddata() {
+    let text = "[device]\nname='inverter'\nvendor='v'\nproduct_code='p'\nrevision='1'\n\
+                [[registers]]\nnumber=0\nname='St'\nnot_implemented=0xFFFF\n\
+                [[registers]]\nnumber=1\nname='Tmp'\ntype='i16'\nscale=0.1\nunit='C'\nnot_implemented=-32768\n";
+    let profile = Arc::new(Profile::parse(text, "inverter.toml").unwrap());
+    let names = vec!["St".to_string(), "Tmp".to_string()];
+    let groups = Group::points(&profile, 2, &names, &[], Duration::from_secs(1)).unwrap();
+    let mut plant = sparkplug_plant();
+    plant.lines[1].devices[0] = DeviceSpec {
+        id: "inverter".into(),
+        unit: 2,
+        profile: Some(profile),
+        deadbands: vec![vec![0.0, 0.0]],
+        groups,
+        death_after: 2,
+    };
+    let (g, _) = locate(&plant, METER, "St");
+    let mut edge = Edge::new(&plant);
+    edge.connected(t(0));
+    let sentinels = || vec![Value::Int(0xFFFF), Value::Int(-32768)];
+    let out = publishes(edge.sample(METER, g, &answered(g, t(10), sentinels())));
+    let dbirth = decode(out.iter().find(|p| kind(p) == "DBIRTH").expect("a DBIRTH"));
+    for name in ["St", "Tmp"] {
+        let m = metric(&dbirth, name);
+        assert_eq!((m.is_null, &m.value), (Some(true), &None), "{name}: not implemented, so no value");
+    }
+    let names = aliases(&dbirth);
+    let values = |out: Vec<Publish>| -> Vec<(String, Option<bool>, Option<MetricValue>)> {
+        out.iter().flat_map(decode_metrics).map(|m| (names[&m.alias.unwrap()].clone(), m.is_null, m.value)).collect()
+    };
+    let read = values(publishes(edge.sample(METER, g, &answered(g, t(20), vec![Value::Int(3), Value::Int(451)]))));
+    assert_eq!(
+        read,
+        [("St".into(), None, Some(MetricValue::Int(3))), ("Tmp".into(), None, Some(MetricValue::Double(45.1)))]
+    );
+    let gone = values(publishes(edge.sample(METER, g, &answered(g, t(30), sentinels()))));
+    assert_eq!(gone, [("St".into(), Some(true), None), ("Tmp".into(), Some(true), None)], "null again, as DDATA");
+}

@@ -240,7 +240,8 @@ pub(crate) fn raw_text(p: &Point, raw: &Value) -> String {
 
 /// One point as a JSON object: `value` as shown (`50.00 Hz`, `run`), `engineering` the number
 /// at the point's resolution, `meaning` an enumeration's or a bit field's (else null), `unit`,
-/// `raw`.
+/// `raw`; `implemented` false, and `value`, `engineering` and `meaning` null, for a value by
+/// which the device says it does not implement the point.
 pub(crate) fn point_json(p: &Point, outcome: &Outcome) -> Json {
     let mut doc = json!({
         "code": p.code,
@@ -251,7 +252,9 @@ pub(crate) fn point_json(p: &Point, outcome: &Outcome) -> Json {
     });
     match outcome {
         Ok(raw) => {
-            doc["value"] = p.show(raw).into();
+            // A value the device does not implement is no value: null, with `implemented` false.
+            doc["value"] = if p.implemented(raw) { p.show(raw).into() } else { Json::Null };
+            doc["implemented"] = p.implemented(raw).into();
             doc["engineering"] = output::number_json(p, raw);
             doc["meaning"] = p.meaning(raw).map_or(Json::Null, Json::from);
             doc["unit"] = p.unit.clone().map_or(Json::Null, Json::from);
@@ -293,6 +296,8 @@ pub(crate) async fn run(connection: &ConnectArgs, args: &GetArgs) -> Result<(), 
             let mut rows = Rows::new(&headers);
             for (p, outcome) in points.iter().zip(&outcomes) {
                 let (value, raw) = match outcome {
+                    // Not implemented: `n/a` for people, an empty field in CSV.
+                    Ok(raw) if format == Format::Csv && !p.implemented(raw) => (String::new(), raw_text(p, raw)),
                     Ok(raw) => (p.show(raw), raw_text(p, raw)),
                     Err(error) => (format!("error: {error}"), String::new()),
                 };

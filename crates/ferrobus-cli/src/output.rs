@@ -69,9 +69,10 @@ impl Rows {
         Rows { headers: headers.iter().map(|(h, a)| ((*h).to_string(), *a)).collect(), rows: Vec::new() }
     }
 
-    /// Adds a row (one cell per column).
+    /// Adds a row (one cell per column), each cell [`printable`]: a table's cells come from
+    /// devices, profiles and files.
     pub(crate) fn push(&mut self, row: Vec<String>) {
-        self.rows.push(row);
+        self.rows.push(row.into_iter().map(|cell| printable(&cell).into_owned()).collect());
     }
 
     /// The table with aligned columns, two spaces apart, no trailing spaces.
@@ -129,9 +130,24 @@ impl Rows {
     }
 }
 
-/// A CSV field, quoted if it holds a comma, a quote or a line break (RFC 4180).
+/// A CSV field, [`printable`], quoted if it holds a comma, a quote or a line break (RFC 4180).
 pub(crate) fn csv_field(cell: &str) -> String {
-    if cell.contains([',', '"', '\n', '\r']) { format!("\"{}\"", cell.replace('"', "\"\"")) } else { cell.to_string() }
+    let cell = printable(cell);
+    if cell.contains([',', '"', '\n', '\r']) { format!("\"{}\"", cell.replace('"', "\"\"")) } else { cell.into_owned() }
+}
+
+/// `text` from outside (a device's string register, a profile's label or unit, a file) as it
+/// may reach a terminal: when it holds a control character, a line separator or a
+/// bidirectional control, spelled out as a log line spells it ([`ferrobus::log::escape`]:
+/// `\u{1b}`, `\n`, backslashes doubled); as it is otherwise.
+pub(crate) fn printable(text: &str) -> std::borrow::Cow<'_, str> {
+    let escaped = ferrobus::log::escape(text).to_string();
+    // The escape adds one character per backslash and more per character it spells out.
+    if escaped.len() == text.len() + text.matches('\\').count() {
+        std::borrow::Cow::Borrowed(text)
+    } else {
+        std::borrow::Cow::Owned(escaped)
+    }
 }
 
 /// The header of the reference column, if the address style has one.
@@ -299,6 +315,16 @@ mod tests {
         assert_eq!(csv_field("plain"), "plain");
         assert_eq!(csv_field("a,b"), "\"a,b\"");
         assert_eq!(csv_field("say \"hi\""), "\"say \"\"hi\"\"\"");
+    }
+
+    #[test]
+    fn control_characters_in_cells_are_spelled_out_in_tables_and_csv() {
+        let mut rows = Rows::new(&[("code", Align::Left), ("unit", Align::Left)]);
+        rows.push(vec!["red\u{1b}[31m".into(), "\0°C\u{202e}".into()]);
+        rows.push(vec!["C:\\dir".into(), "a\tb".into()]);
+        assert_eq!(rows.table(), "code           unit\nred\\u{1b}[31m  \\0°C\\u{202e}\nC:\\dir         a\\tb\n");
+        assert_eq!(csv_field("line\nbreak"), "line\\nbreak");
+        assert_eq!(printable("plain °C \\ path"), "plain °C \\ path", "nothing to spell out: as it is");
     }
 
     #[test]

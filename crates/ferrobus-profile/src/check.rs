@@ -2,14 +2,18 @@
 //! keys, ranges, enumerations and bit fields that fit, references that exist; every problem,
 //! not only the first, each with the place of the entry or field at fault.
 
-use serde::Deserialize;
+pub(crate) mod text;
+
+use std::collections::HashMap;
+use std::ops::Range;
 
 use crate::model::{Profile, RegisterDef, ValueType};
+use crate::read::Spans;
 use crate::source::Place;
 
 /// The byte offset of `field` in the entry whose header is at `span` of `text` (up to the
 /// next header), else the header's.
-fn field_offset(text: &str, span: &std::ops::Range<usize>, field: &str) -> usize {
+fn field_offset(text: &str, span: &Range<usize>, field: &str) -> usize {
     let mut offset = span.end;
     for (n, line) in text.get(span.end..).unwrap_or_default().split_inclusive('\n').enumerate() {
         let here = offset;
@@ -28,25 +32,6 @@ fn field_offset(text: &str, span: &std::ops::Range<usize>, field: &str) -> usize
     span.start
 }
 
-/// Where each entry of a profile starts, read by a second pass over the same text.
-#[derive(Default, Deserialize)]
-pub(crate) struct Spans {
-    #[serde(default)]
-    coils: Vec<toml::Spanned<toml::Table>>,
-    #[serde(default)]
-    discrete_inputs: Vec<toml::Spanned<toml::Table>>,
-    #[serde(default)]
-    registers: Vec<toml::Spanned<toml::Table>>,
-    #[serde(default)]
-    inputs: Vec<toml::Spanned<toml::Table>>,
-    #[serde(default)]
-    span: Vec<toml::Spanned<toml::Table>>,
-    #[serde(default)]
-    pub(crate) fault_rule: Vec<toml::Spanned<toml::Table>>,
-    pub(crate) faults: Option<toml::Spanned<String>>,
-    state: Option<toml::Spanned<toml::Table>>,
-}
-
 /// A problem, with the byte offset of the entry or field at fault when known.
 pub(crate) type Problem = (Option<usize>, String);
 
@@ -54,9 +39,8 @@ impl Profile {
     /// Every problem of the profile parsed from `text`, in the file's sections' order.
     pub(crate) fn validate(&self, text: &str, spans: &Spans) -> Vec<Problem> {
         let mut problems = Vec::new();
-        let starts = |entries: &[toml::Spanned<toml::Table>]| -> Vec<Option<usize>> {
-            entries.iter().map(|e| Some(e.span().start)).collect()
-        };
+        let starts =
+            |entries: &[Range<usize>]| -> Vec<Option<usize>> { entries.iter().map(|e| Some(e.start)).collect() };
         if self.comm.response_wait_ms > 60_000 {
             problems.push((None, format!("response_wait_ms = {} is more than a minute", self.comm.response_wait_ms)));
         }
@@ -64,7 +48,7 @@ impl Profile {
         for (kind, entries, spans) in
             [("registers", &self.registers, &spans.registers), ("inputs", &self.inputs, &spans.inputs)]
         {
-            let at = |i: usize, field: &str| spans.get(i).map(|e| field_offset(text, &e.span(), field));
+            let at = |i: usize, field: &str| spans.get(i).map(|e| field_offset(text, e, field));
             for (i, r) in entries.iter().enumerate() {
                 let entry = format!("[[{kind}]] {} ({})", r.number, r.name);
                 check_register(r, &entry, base, &|field| at(i, field), &mut problems);
@@ -111,6 +95,7 @@ impl Profile {
             }
         }
         self.check_references(text, spans, &mut problems);
+        self.one_code_each(text, spans, &mut problems);
         problems
     }
 
@@ -122,6 +107,7 @@ impl Profile {
             .chain(&self.discrete_inputs)
             .map(|b| b.name.as_str())
             .chain(self.registers.iter().chain(&self.inputs).map(|r| r.name.as_str()))
+            .chain(spans.unread_names.iter().map(String::as_str))
             .collect();
         for (kind, entries, spans) in
             [("registers", &self.registers, &spans.registers), ("inputs", &self.inputs, &spans.inputs)]
@@ -129,7 +115,7 @@ impl Profile {
             for (i, r) in entries.iter().enumerate() {
                 for missing in r.depends_on.iter().filter(|d| !names.contains(&d.as_str())) {
                     problems.push((
-                        spans.get(i).map(|e| field_offset(text, &e.span(), "depends_on")),
+                        spans.get(i).map(|e| field_offset(text, e, "depends_on")),
                         format!(
                             "[[{kind}]] {} ({}): depends_on names {missing:?}, which the profile does not have",
                             r.number, r.name
@@ -141,9 +127,77 @@ impl Profile {
         if let Some(running) = &self.state.running {
             if !names.contains(&running.point.as_str()) {
                 problems.push((
-                    spans.state.as_ref().map(|s| field_offset(text, &s.span(), "running")),
+                    spans.state.as_ref().map(|s| field_offset(text, s, "running")),
                     format!("[state] running: point {:?} is not in the profile", running.point),
                 ));
+            }
+        }
+    }
+}
+
+/// An entry for [`Profile::one_code_each`]: its list, number, name, count and start.
+type Entry<'a> = (&'a str, u32, &'a str, u32, Option<usize>);
+
+impl Profile {
+    /// No two entries share a name and no two points a code (a run's NAME1, NAME2, ...), in
+    /// any case: `get`, `set`, a backup and the bridge find a point by its code, whatever its
+    /// case. Each mistake names both entries, the later one first.
+    fn one_code_each(&self, text: &str, spans: &Spans, problems: &mut Vec<Problem>) {
+        let mut entries: Vec<Entry<'_>> = Vec::new();
+        for (kind, list, spans) in
+            [("coils", &self.coils, &spans.coils), ("discrete_inputs", &self.discrete_inputs, &spans.discrete_inputs)]
+        {
+            entries.extend(
+                list.iter()
+                    .enumerate()
+                    .map(|(i, b)| (kind, b.number, b.name.as_str(), b.count, spans.get(i).map(|s| s.start))),
+            );
+        }
+        for (kind, list, spans) in
+            [("registers", &self.registers, &spans.registers), ("inputs", &self.inputs, &spans.inputs)]
+        {
+            entries.extend(
+                list.iter()
+                    .enumerate()
+                    .map(|(i, r)| (kind, r.number, r.name.as_str(), r.count, spans.get(i).map(|s| s.start))),
+            );
+        }
+        let name_of = |e: &Entry<'_>| {
+            let line = e.4.map_or(String::new(), |at| format!(" on line {}", Place::of(text, at).line));
+            format!("[[{}]] {} ({}){line}", e.0, e.1, e.2)
+        };
+        let mut names: HashMap<String, usize> = HashMap::new();
+        let mut codes: HashMap<String, usize> = HashMap::new();
+        for (n, entry) in entries.iter().enumerate() {
+            let (kind, number, name, count, at) = *entry;
+            if let Some(first) = names.get(&name.to_lowercase()).and_then(|&f| entries.get(f)) {
+                problems
+                    .push((at, format!("[[{kind}]] {number} ({name}): the name is also that of {}", name_of(first))));
+                continue;
+            }
+            names.insert(name.to_lowercase(), n);
+            if count > 0x1_0000 {
+                continue; // refused for running past the address space
+            }
+            let mine: Vec<String> = (0..count).map(|i| crate::point::run_name(name, count, i).to_lowercase()).collect();
+            if let Some((code, first)) =
+                mine.iter().find_map(|code| codes.get(code).and_then(|&f| entries.get(f)).map(|first| (code, first)))
+            {
+                let code = (0..count)
+                    .map(|i| crate::point::run_name(name, count, i))
+                    .find(|c| c.to_lowercase() == *code)
+                    .unwrap_or_default();
+                problems.push((
+                    at,
+                    format!(
+                        "[[{kind}]] {number} ({name}): its point {code} has the code of a point of {}",
+                        name_of(first)
+                    ),
+                ));
+                continue;
+            }
+            for code in mine {
+                codes.entry(code).or_insert(n);
             }
         }
     }
@@ -237,18 +291,27 @@ fn check_register(
             problem("bits", format!("bits key {key:?} is not a bit from 0 to {}", bit_count - 1));
         }
     }
-    if let Some(default) = &r.default {
-        let fits = match (ty, default) {
-            (ValueType::String, toml::Value::String(s)) => s.len() <= usize::from(r.width()) * 2 && s.is_ascii(),
-            (t, toml::Value::Integer(n)) if t.is_integer() => {
-                let (lo, hi) = t.integer_range();
-                (lo..=hi).contains(&i128::from(*n))
-            }
-            (t, toml::Value::Integer(_) | toml::Value::Float(_)) => t.is_float(),
-            _ => false,
-        };
-        if !fits {
-            problem("default", format!("default = {default} is not a {} value", ty.name()));
+    let fits = |value: &toml::Value| match (ty, value) {
+        (ValueType::String, toml::Value::String(s)) => s.len() <= usize::from(r.width()) * 2 && s.is_ascii(),
+        (t, toml::Value::Integer(n)) if t.is_integer() => {
+            let (lo, hi) = t.integer_range();
+            (lo..=hi).contains(&i128::from(*n))
+        }
+        (t, toml::Value::Integer(_) | toml::Value::Float(_)) => t.is_float(),
+        _ => false,
+    };
+    // A not-implemented u64 (0xFFFFFFFFFFFFFFFF) is past TOML's integers: it may be written as text.
+    let raw_text = |value: &toml::Value| match value {
+        toml::Value::String(s) if ty.is_integer() => {
+            let (lo, hi) = ty.integer_range();
+            parse_key(s).is_some_and(|n| (lo..=hi).contains(&n))
+        }
+        _ => false,
+    };
+    for (field, value) in [("default", &r.default), ("not_implemented", &r.not_implemented)] {
+        let fits = |v: &toml::Value| fits(v) || (field == "not_implemented" && raw_text(v));
+        if let Some(value) = value.as_ref().filter(|v| !fits(v)) {
+            problem(field, format!("{field} = {value} is not a {} value", ty.name()));
         }
     }
 }

@@ -217,7 +217,26 @@ fn decimals(step: f64) -> usize {
         .unwrap_or(6)
 }
 
+/// How a value the device does not implement is shown to people (`get`, `poll`, `monitor`).
+pub const NOT_IMPLEMENTED: &str = "n/a";
+
+/// Whether raw values `a` and `b` are the same (a NaN is the same as a NaN).
+fn same(a: &Value, b: &Value) -> bool {
+    match (a, b) {
+        (Value::Float(x), Value::Float(y)) => (x.is_nan() && y.is_nan()) || x.to_bits() == y.to_bits(),
+        _ => a == b,
+    }
+}
+
 impl Point {
+    /// Whether raw value `raw` is a reading: false when the point is not implemented at all,
+    /// or `raw` is its not-implemented value (SunSpec's 0xFFFF, 0x8000, NaN, ...). A value
+    /// that is not a reading shows as [`NOT_IMPLEMENTED`] ([`Point::show`]), has no number
+    /// ([`Point::number`] is empty, [`Point::engineering`] `None`) and no meaning.
+    pub fn implemented(&self, raw: &Value) -> bool {
+        self.implemented && !self.not_implemented.as_ref().is_some_and(|ni| same(ni, raw))
+    }
+
     /// The raw value of the point's registers, `words` in address order (exactly its width).
     pub fn decode(&self, words: &[u16]) -> Result<Value, ValueError> {
         if words.len() != usize::from(self.width) || self.value_type == ValueType::Bit {
@@ -289,8 +308,11 @@ impl Point {
         Some(self.number(raw).parse().unwrap_or(exact))
     }
 
-    /// raw × scale + offset, as computed.
+    /// raw × scale + offset, as computed; `None` for a value that is not a reading.
     fn exact(&self, raw: &Value) -> Option<f64> {
+        if !self.implemented(raw) {
+            return None;
+        }
         raw.as_f64().map(|x| x * self.scale + self.offset)
     }
 
@@ -309,6 +331,9 @@ impl Point {
     /// poll, monitor); scripts' formats take its parts: [`Point::number`] (with its `unit`
     /// beside it) and [`Point::meaning`].
     pub fn show(&self, raw: &Value) -> String {
+        if !self.implemented(raw) {
+            return NOT_IMPLEMENTED.to_string();
+        }
         match raw {
             Value::Bool(b) => u8::from(*b).to_string(),
             Value::Text(s) => s.clone(),
@@ -320,6 +345,9 @@ impl Point {
     /// `5 (not in the profile's list)`); `None` for a point that is neither.
     pub fn meaning(&self, raw: &Value) -> Option<String> {
         let Value::Int(n) = raw else { return None };
+        if !self.implemented(raw) {
+            return None;
+        }
         if !self.values.is_empty() {
             return Some(match self.values.iter().find(|(k, _)| k == n) {
                 Some((_, meaning)) => meaning.clone(),
@@ -343,8 +371,12 @@ impl Point {
 
     /// The engineering number without unit, at the point's resolution: `50.00` for scale
     /// 0.01, `-3`, `1.5`, an f32 in its shortest form (`1.1`), a bit as `0`/`1`, a text as is.
-    /// CSV and JSON write this (or [`Point::engineering`], the same number) as the value.
+    /// CSV and JSON write this (or [`Point::engineering`], the same number) as the value;
+    /// empty for a value that is not a reading ([`Point::implemented`]).
     pub fn number(&self, raw: &Value) -> String {
+        if !self.implemented(raw) {
+            return String::new();
+        }
         let Some(x) = self.exact(raw) else {
             return match raw {
                 Value::Text(s) => s.clone(),

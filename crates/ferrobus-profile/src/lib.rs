@@ -22,9 +22,11 @@ pub mod guard;
 mod model;
 mod plan;
 mod point;
+mod read;
 pub mod source;
 
-pub use codec::{Value, ValueError, beyond_deadband};
+pub use check::text::{LABEL_MAX, NAME_MAX, TEXT_MAX, UNIT_MAX};
+pub use codec::{NOT_IMPLEMENTED, Value, ValueError, beyond_deadband};
 pub use guard::{Refusal, RunState, Write};
 pub use model::{
     Access, Addressing, BUILTIN, BitDef, Comm, DeviceSection, ExceptionMeaning, Exceptions, Fifo, Files, Limits,

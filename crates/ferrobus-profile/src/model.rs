@@ -19,7 +19,6 @@ use std::path::Path;
 
 use serde::Deserialize;
 
-use crate::check::Spans;
 use crate::point::{self, Point};
 use crate::source::{self, Located, NotText, Place, ReadError};
 
@@ -470,6 +469,15 @@ pub struct RegisterDef {
     /// The raw value at start (the simulator's) and out of the factory: an integer, a float
     /// for f32/f64, text for a string.
     pub default: Option<toml::Value>,
+    /// The raw value by which the device says it does not implement the point (SunSpec's
+    /// 0xFFFF for a u16, 0x8000 for an i16, `nan` for a float, `""` for a string; an integer
+    /// may be written as text, `"0xFFFFFFFFFFFFFFFF"`, past TOML's 64-bit signed integers):
+    /// read, it shows as not implemented (`n/a`, empty in CSV, null in JSON), not as a reading.
+    pub not_implemented: Option<toml::Value>,
+    /// False when the device does not implement the point at all (a SunSpec point whose scale
+    /// factor read 0x8000): every value read shows as not implemented. Default true.
+    #[serde(default = "yes")]
+    pub implemented: bool,
 }
 
 fn one() -> u32 {
@@ -687,29 +695,43 @@ impl Profile {
     /// file's order: the TOML reader stops at its first, the checks of a well-formed file
     /// find them all. Never an empty list.
     pub fn parse_all(text: &str, origin: &str) -> Result<Profile, Vec<ProfileError>> {
-        let mut profile: Profile = toml::from_str(text).map_err(|e| {
+        let read = crate::read::read(text).map_err(|e| {
             let mut mistake = Located::toml(text, &e);
             mistake.message = with_migration_hint(&mistake.message);
             vec![ProfileError::Parse { origin: origin.to_string(), mistake }]
         })?;
-        // The same text has parsed once; a second reader that fails only loses the places.
-        let spans: Spans = toml::from_str(text).unwrap_or_default();
-        profile.origin = origin.to_string();
-        profile.faults_place = spans.faults.as_ref().map(|f| Place::of(text, f.span().start));
-        profile.fault_rule_places = spans.fault_rule.iter().map(|e| Some(Place::of(text, e.span().start))).collect();
-        let mut problems = profile.validate(text, &spans);
-        if !problems.is_empty() {
-            problems.sort_by_key(|(at, _)| at.unwrap_or(0));
-            return Err(problems
-                .into_iter()
-                .map(|(at, problem)| ProfileError::Invalid {
-                    origin: origin.to_string(),
-                    mistake: Located::new(text, at.map(|a| a..a), &problem),
-                })
-                .collect());
+        let spans = read.spans;
+        // The reader's mistakes, then the checks' of the entries it read: all in the file's order.
+        let mut mistakes: Vec<(Option<usize>, String, bool)> =
+            read.mistakes.into_iter().map(|(at, message)| (at, message, true)).collect();
+        let mut profile = read.profile;
+        if let Some(profile) = profile.as_mut() {
+            profile.origin = origin.to_string();
+            profile.faults_place = spans.faults.as_ref().map(|f| Place::of(text, f.start));
+            profile.fault_rule_places = spans.fault_rule.iter().map(|e| Some(Place::of(text, e.start))).collect();
+            mistakes.extend(profile.validate(text, &spans).into_iter().map(|(at, message)| (at, message, false)));
         }
-        profile.points = point::resolve(&profile);
-        Ok(profile)
+        match profile {
+            Some(mut profile) if mistakes.is_empty() => {
+                profile.points = point::resolve(&profile);
+                Ok(profile)
+            }
+            _ => {
+                mistakes.sort_by_key(|(at, _, _)| at.unwrap_or(0));
+                Err(mistakes
+                    .into_iter()
+                    .map(|(at, message, parse)| {
+                        let mistake = Located::new(text, at.map(|a| a..a), &message);
+                        let origin = origin.to_string();
+                        if parse {
+                            ProfileError::Parse { origin, mistake }
+                        } else {
+                            ProfileError::Invalid { origin, mistake }
+                        }
+                    })
+                    .collect())
+            }
+        }
     }
 
     /// Every coil, discrete input and register entry as points, in profile order (coils,
@@ -727,7 +749,7 @@ impl Profile {
 }
 
 /// A TOML reader's message, with the new keys named when it refuses an old one.
-fn with_migration_hint(message: &str) -> String {
+pub(crate) fn with_migration_hint(message: &str) -> String {
     let old =
         ["`size`", "`signed`", "`word_order`"].iter().any(|key| message.starts_with(&format!("unknown field {key}")));
     if old {

@@ -6,6 +6,7 @@ use crate::model::{Access, Order, Profile, Table, ValueType};
 
 /// One value of the device: a coil, a discrete input, or a register value of any type.
 #[derive(Clone, Debug, PartialEq)]
+#[allow(clippy::struct_excessive_bools)] // each one a fact of the profile's own entry
 pub struct Point {
     /// Its table.
     pub table: Table,
@@ -58,6 +59,11 @@ pub struct Point {
     /// The profile's `default` when it gives one: the value the device leaves the factory
     /// with (`diff --defaults` compares with it); `None` where `default` is a mere zero.
     pub factory_default: Option<crate::Value>,
+    /// The raw value by which the device says it does not implement the point (SunSpec's
+    /// sentinels: 0xFFFF for a u16, ...), if it has one; see [`Point::implemented`].
+    pub not_implemented: Option<crate::Value>,
+    /// False when the device does not implement the point at all: no value read is a reading.
+    pub implemented: bool,
 }
 
 impl Point {
@@ -94,6 +100,8 @@ impl Point {
             confirmed: true,
             default: if bits { crate::Value::Bool(false) } else { crate::Value::Int(0) },
             factory_default: None,
+            not_implemented: None,
+            implemented: true,
         }
     }
 
@@ -198,6 +206,8 @@ pub(crate) fn resolve(profile: &Profile) -> Vec<Point> {
                     confirmed: def.confirmed,
                     default: crate::Value::Bool(def.default.unwrap_or(false)),
                     factory_default: def.default.map(crate::Value::Bool),
+                    not_implemented: None,
+                    implemented: true,
                 });
             }
         }
@@ -242,6 +252,13 @@ pub(crate) fn resolve(profile: &Profile) -> Vec<Point> {
                         .default
                         .as_ref()
                         .map(|given| crate::codec::default_value(def.value_type, Some(given))),
+                    not_implemented: def.not_implemented.as_ref().map(|given| match given {
+                        toml::Value::String(text) if def.value_type.is_integer() => {
+                            crate::Value::Int(parse_key(text).unwrap_or_default())
+                        }
+                        given => crate::codec::default_value(def.value_type, Some(given)),
+                    }),
+                    implemented: def.implemented,
                 });
             }
         }
@@ -249,7 +266,7 @@ pub(crate) fn resolve(profile: &Profile) -> Vec<Point> {
     points
 }
 
-fn run_name(name: &str, count: u32, i: u32) -> String {
+pub(crate) fn run_name(name: &str, count: u32, i: u32) -> String {
     if count == 1 { name.to_string() } else { format!("{name}{}", i.saturating_add(1)) }
 }
 

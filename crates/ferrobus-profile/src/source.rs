@@ -22,7 +22,7 @@ use std::ops::Range;
 pub const WINDOW: usize = 40;
 
 /// Characters of a message shown before it is cut.
-pub const MESSAGE_MAX: usize = 400;
+pub const MESSAGE_MAX: usize = 600;
 
 /// A line and a column, both from 1; the column counts characters, not bytes.
 #[derive(Clone, Copy, PartialEq, Eq, Debug)]

@@ -12,10 +12,22 @@
 //!
 //! Scale factors are read once, at discovery: a point whose `sf` names a `sunssf` point gets
 //! scale = 10^sf of the value read then (a device that changes a scale factor at run time needs
-//! a new discovery). A scale factor the device does not implement (0x8000) leaves the point
-//! unscaled. The profile machinery has no "not implemented" value: a point the device does not
-//! implement (0xFFFF for uint16, 0x8000 for int16, 0x80000000 for int32, ...) shows as that
-//! number; [`not_implemented`] tells them.
+//! a new discovery).
+//!
+//! Every point carries SunSpec's "not implemented" value of its type as the profile's
+//! `not_implemented` ([`not_implemented_value`]): int16 and sunssf 0x8000, uint16, count,
+//! enum16 and bitfield16 0xFFFF, acc16 0, int32 0x80000000, uint32, enum32 and bitfield32
+//! 0xFFFFFFFF, acc32 and ipaddr 0, int64 0x8000000000000000, uint64 and bitfield64
+//! 0xFFFFFFFFFFFFFFFF, acc64 0, eui48 0xFFFFFFFFFFFF, float32 and float64 NaN (0x7FC00000),
+//! a string whose first byte is NUL — the table of pysunspec2 (`sunspec2/mb.py`). `get`,
+//! `poll`, `monitor` and the bridge show such a value as not implemented (`n/a`, empty in
+//! CSV, null in JSON and Sparkplug), as pysunspec2 reads it as `None`. A point whose scale
+//! factor read 0x8000 at discovery is not implemented either (`implemented = false`): with no
+//! scale its number would be no reading (pysunspec2 would show it unscaled).
+//!
+//! Text from the device (the common model's `Mn`, `Md`, `Vr`) and from the model files
+//! (labels, units, descriptions) reaches the profile with control characters spelled out
+//! (`\u{1b}`) and cut to the profile's limits ([`ferrobus_profile::LABEL_MAX`], ...).
 //!
 //! A model without a definition, or whose length does not fit its definition, gets no points
 //! (the scan lists it with what differs).
@@ -30,27 +42,84 @@ use crate::def::PointType;
 use crate::discover::{Discovery, Found};
 use crate::layout::{SfAt, layout};
 
-/// Whether `raw` (the point's registers) is SunSpec's "not implemented" value of `kind`.
+/// Whether `raw` (the point's registers) is SunSpec's "not implemented" value of `kind` (see
+/// the module doc).
 pub fn not_implemented(kind: PointType, raw: &[u16]) -> bool {
     let all = |v: u16| raw.iter().all(|r| *r == v);
     match kind {
-        PointType::Uint16 | PointType::Enum16 | PointType::Bitfield16 | PointType::Count => all(0xFFFF),
+        PointType::Uint16
+        | PointType::Enum16
+        | PointType::Bitfield16
+        | PointType::Count
+        | PointType::Uint32
+        | PointType::Enum32
+        | PointType::Bitfield32
+        | PointType::Uint64
+        | PointType::Bitfield64 => all(0xFFFF),
         PointType::Int16 | PointType::Sunssf => raw == [0x8000],
-        PointType::Uint32 | PointType::Enum32 | PointType::Bitfield32 | PointType::Uint64 | PointType::Bitfield64 => {
-            all(0xFFFF)
-        }
         PointType::Int32 | PointType::Int64 => {
             raw.split_first().is_some_and(|(h, rest)| *h == 0x8000 && rest.iter().all(|r| *r == 0))
         }
-        PointType::Acc16
-        | PointType::Acc32
-        | PointType::Acc64
-        | PointType::Ipaddr
-        | PointType::Ipv6addr
-        | PointType::Eui48
-        | PointType::String => all(0),
-        PointType::Float32 | PointType::Float64 => raw.first() == Some(&0x7FC0),
+        PointType::Acc16 | PointType::Acc32 | PointType::Acc64 | PointType::Ipaddr | PointType::Ipv6addr => all(0),
+        PointType::String => raw.first().is_none_or(|r| r >> 8 == 0),
+        PointType::Eui48 => raw.get(1..).is_some_and(|rest| rest.iter().all(|r| *r == 0xFFFF)),
+        PointType::Float32 => match raw {
+            [hi, lo] => f32::from_bits((u32::from(*hi) << 16) | u32::from(*lo)).is_nan(),
+            _ => false,
+        },
+        PointType::Float64 => {
+            raw.len() == 4 && f64::from_bits(raw.iter().fold(0, |acc, r| (acc << 16) | u64::from(*r))).is_nan()
+        }
         PointType::Pad => false,
+    }
+}
+
+/// SunSpec's "not implemented" value of `kind` as the profile's `not_implemented` of the
+/// point's profile type (u64's past TOML's integers, as text); `None` for a pad.
+pub fn not_implemented_value(kind: PointType) -> Option<Value> {
+    Some(match kind {
+        PointType::Uint16 | PointType::Enum16 | PointType::Bitfield16 | PointType::Count => Value::Integer(0xFFFF),
+        PointType::Int16 | PointType::Sunssf => Value::Integer(i64::from(i16::MIN)),
+        PointType::Uint32 | PointType::Enum32 | PointType::Bitfield32 => Value::Integer(0xFFFF_FFFF),
+        PointType::Int32 => Value::Integer(i64::from(i32::MIN)),
+        PointType::Int64 => Value::Integer(i64::MIN),
+        PointType::Uint64 | PointType::Bitfield64 => Value::String("0xFFFFFFFFFFFFFFFF".into()),
+        PointType::Eui48 => Value::Integer(0xFFFF_FFFF_FFFF),
+        PointType::Acc16 | PointType::Acc32 | PointType::Acc64 | PointType::Ipaddr => Value::Integer(0),
+        PointType::Float32 | PointType::Float64 => Value::Float(f64::NAN),
+        PointType::String => Value::String(String::new()),
+        PointType::Pad | PointType::Ipv6addr => return None,
+    })
+}
+
+/// The power of ten of a point's scale factor (a fixed one, or the `sunssf` point's value
+/// read in `registers`, if from -10 to 10), and false when that point is not implemented.
+fn scale_of(sf: Option<SfAt>, registers: &[u16]) -> (Option<i8>, bool) {
+    match sf {
+        Some(SfAt::Fixed(n)) => (Some(n), true),
+        Some(SfAt::Offset(at)) => {
+            let read = usize::try_from(at).ok().and_then(|at| registers.get(at)).map(|r| r.cast_signed());
+            let power = read.filter(|sf| (-10..=10).contains(sf)).and_then(|sf| i8::try_from(sf).ok());
+            (power, read != Some(i16::MIN))
+        }
+        None => (None, true),
+    }
+}
+
+/// `text` from a device or a model file as a profile holds it: control characters spelled out
+/// (`\u{1b}`), cut to `max` characters.
+fn printable(text: &str, max: usize) -> String {
+    let mut out = String::new();
+    for c in text.chars() {
+        if c.is_control() && !matches!(c, '\t' | '\n') {
+            out.extend(c.escape_unicode());
+        } else {
+            out.push(c);
+        }
+    }
+    match out.char_indices().nth(max) {
+        Some((cut, _)) => out.get(..cut).unwrap_or_default().to_string(),
+        None => out,
     }
 }
 
@@ -81,14 +150,16 @@ pub fn profile_text(discovery: &Discovery, defs: &Definitions, origin: &str, lim
         let start = usize::try_from(p.offset).ok()?;
         let regs = m.registers.get(start..start + usize::from(p.def.size))?;
         let bytes: Vec<u8> = regs.iter().flat_map(|r| r.to_be_bytes()).take_while(|b| *b != 0).collect();
-        Some(String::from_utf8_lossy(&bytes).trim().to_string()).filter(|s| !s.is_empty())
+        let text = printable(String::from_utf8_lossy(&bytes).trim(), 32);
+        Some(text).filter(|s| !s.is_empty())
     };
     let common = discovery.models.iter().find(|m| m.id == 1);
     let field = |point: &str| common.and_then(|m| text_of(m, point));
     let mut device = Table::new();
     let vendor = field("Mn").unwrap_or_else(|| "unknown".into());
     let product = field("Md").unwrap_or_else(|| "unknown".into());
-    device.insert("name".into(), Value::String(format!("SunSpec device {vendor} {product} ({origin})")));
+    let name = printable(&format!("SunSpec device {vendor} {product} ({origin})"), ferrobus_profile::LABEL_MAX);
+    device.insert("name".into(), Value::String(name));
     device.insert("vendor".into(), Value::String(vendor));
     device.insert("product_code".into(), Value::String(product));
     device.insert("revision".into(), Value::String(field("Vr").unwrap_or_default()));
@@ -119,24 +190,22 @@ pub fn profile_text(discovery: &Discovery, defs: &Definitions, origin: &str, lim
                 e.insert("length".into(), Value::Integer(i64::from(p.def.size)));
             }
             if let Some(label) = &p.def.label {
-                e.insert("label".into(), Value::String(label.clone()));
+                e.insert("label".into(), Value::String(printable(label, ferrobus_profile::LABEL_MAX)));
             }
             if let Some(desc) = &p.def.desc {
-                e.insert("description".into(), Value::String(desc.clone()));
+                e.insert("description".into(), Value::String(printable(desc, ferrobus_profile::TEXT_MAX)));
             }
             if let Some(units) = p.def.units.as_ref().filter(|u| !u.is_empty()) {
-                e.insert("unit".into(), Value::String(units.clone()));
+                e.insert("unit".into(), Value::String(printable(units, ferrobus_profile::UNIT_MAX)));
             }
-            let sf = match p.sf {
-                Some(SfAt::Fixed(n)) => Some(n),
-                Some(SfAt::Offset(at)) => usize::try_from(at)
-                    .ok()
-                    .and_then(|at| m.registers.get(at))
-                    .map(|r| i16::from_ne_bytes(r.to_ne_bytes()))
-                    .filter(|sf| (-10..=10).contains(sf))
-                    .and_then(|sf| i8::try_from(sf).ok()),
-                None => None,
-            };
+            if let Some(sentinel) = not_implemented_value(p.def.kind) {
+                e.insert("not_implemented".into(), sentinel);
+            }
+            let (sf, implemented) = scale_of(p.sf, &m.registers);
+            if !implemented {
+                // The scale factor is not implemented: nor is the value it scales.
+                e.insert("implemented".into(), Value::Boolean(false));
+            }
             if let Some(sf) = sf.filter(|sf| *sf != 0) {
                 e.insert("scale".into(), Value::Float(10f64.powi(i32::from(sf))));
             }
@@ -147,7 +216,7 @@ pub fn profile_text(discovery: &Discovery, defs: &Definitions, origin: &str, lim
                     .symbols
                     .iter()
                     .filter(|(v, _)| (0..limit).contains(v))
-                    .map(|(v, n)| (v.to_string(), Value::String(n.clone())))
+                    .map(|(v, n)| (v.to_string(), Value::String(printable(n, ferrobus_profile::LABEL_MAX))))
                     .collect()
             };
             match p.def.kind {

@@ -181,3 +181,66 @@ fn not_implemented_values_are_told_by_type() {
     assert!(not_implemented(PointType::Acc32, &[0, 0]));
     assert!(not_implemented(PointType::String, &[0, 0]));
 }
+
+#[test]
+fn sunspec_not_implemented_values_and_a_not_implemented_scale_factor_show_as_not_implemented() {
+    let mut defs = Definitions::default();
+    defs.insert(toy());
+    // W = 0x8000 (int16), Nm empty, St = 0xFFFF (enum16), WH = 0 (acc32), ch1.Evt = 0xFFFF.
+    let regs = vec![64900, 14, 0x8000, 0xFFFF, 0, 0, 0, 0, 0xFFFF, 0, 0, 0, 2300, 0xFFFF, 7, 0];
+    let p =
+        profile(&Discovery { base: 40000, models: vec![found(&defs, 40002, regs.clone())] }, &defs, "d", 125).unwrap();
+    let shown = |code: &str, at: usize| {
+        let point = p.find(code)[0];
+        let words = &regs[at..at + usize::from(point.width)];
+        let raw = point.decode(words).unwrap();
+        (point.show(&raw), point.number(&raw), point.engineering(&raw))
+    };
+    for (code, at) in [("toy.W", 2), ("toy.Nm", 4), ("toy.St", 8), ("toy.WH", 10), ("toy.ch1.Evt", 13)] {
+        assert_eq!(shown(code, at), ("n/a".to_string(), String::new(), None), "{code}");
+    }
+    assert_eq!(shown("toy.ch1.V", 12).0, "230.0", "a value that is no sentinel is a reading");
+    // W_SF itself not implemented: W and ch1.V, which it scales, are not either.
+    let mut unscaled = regs.clone();
+    unscaled[2] = 1234;
+    unscaled[3] = 0x8000;
+    let p = profile(&Discovery { base: 40000, models: vec![found(&defs, 40002, unscaled)] }, &defs, "d", 125).unwrap();
+    for code in ["toy.W", "toy.ch1.V", "toy.ch2.V"] {
+        let point = p.find(code)[0];
+        assert!(!point.implemented, "{code}");
+        assert_eq!(point.show(&ferrobus_profile::Value::Int(1234)), "n/a", "{code}");
+    }
+    assert!(p.find("toy.St")[0].implemented);
+}
+
+#[test]
+fn not_implemented_registers_are_told_by_type_as_pysunspec2_tells_them() {
+    assert!(not_implemented(PointType::Eui48, &[0, 0xFFFF, 0xFFFF, 0xFFFF]));
+    assert!(!not_implemented(PointType::Eui48, &[0, 0, 0, 0]));
+    assert!(not_implemented(PointType::Float32, &[0x7FC0, 0]));
+    assert!(!not_implemented(PointType::Float32, &[0x3FC0, 0]));
+    assert!(not_implemented(PointType::Uint64, &[0xFFFF; 4]));
+    assert!(not_implemented(PointType::String, &[0x0041]), "a string whose first byte is NUL");
+    assert!(!not_implemented(PointType::String, &[0x4100]));
+    assert_eq!(not_implemented_value(PointType::Int16), Some(toml::Value::Integer(-32768)));
+    assert_eq!(not_implemented_value(PointType::Pad), None);
+}
+
+#[test]
+fn every_built_in_model_makes_a_profile_that_checks() {
+    let defs = Definitions::builtin();
+    let mut made = 0;
+    for id in 0..=u16::MAX {
+        let Some(def) = defs.get(id) else { continue };
+        let Ok(length) = u16::try_from(def.fixed_length()) else { continue };
+        let mut registers = vec![0u16; usize::from(length) + 2];
+        registers[0] = id;
+        registers[1] = length;
+        let discovery = Discovery { base: 40000, models: vec![found(&defs, 40002, registers)] };
+        if let Err(e) = profile(&discovery, &defs, "every model", 125) {
+            panic!("model {id}: {e}");
+        }
+        made += 1;
+    }
+    assert!(made == defs.len(), "{made} of {}", defs.len());
+}

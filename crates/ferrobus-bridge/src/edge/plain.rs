@@ -339,6 +339,9 @@ fn set_text(payload: &[u8]) -> Result<String, String> {
 /// such, a bit as a boolean, a text as a string; `null` when there is none.
 fn json_value(cell: &Cell, seen: &Seen) -> String {
     let Seen::Value(raw) = seen else { return "null".to_string() };
+    if !cell.point.implemented(raw) {
+        return "null".to_string(); // the device's "not implemented" value (SunSpec's 0xFFFF, ...)
+    }
     match raw {
         Value::Bool(b) => b.to_string(),
         Value::Text(s) => json_string(s),

@@ -85,8 +85,14 @@ pub fn properties_of(point: &Point) -> Option<PropertySet> {
 
 /// The value the point's metric publishes for raw value `raw`: the engineering value for a
 /// scaled point, else the raw value in the field its datatype takes. None when `raw` is not a
-/// value of the point's type (a text for a number, an integer out of its range).
+/// value of the point's type (a text for a number, an integer out of its range), or is the
+/// device's value for "not implemented" ([`Point::implemented`]): the metric is then sent with
+/// `is_null` and no value, as Sparkplug B says a null value is sent.
 pub fn metric_value(point: &Point, raw: &Value, encoding: UintEncoding) -> Option<MetricValue> {
+    if !point.implemented(raw) {
+        // The device's "not implemented" value (SunSpec's 0xFFFF, ...): no value, a null metric.
+        return None;
+    }
     let datatype = datatype_of(point);
     match (datatype, raw) {
         (DataType::Double, raw) => point.engineering(raw).map(MetricValue::Double),
@@ -312,6 +318,20 @@ mod tests {
         assert_eq!(datatype_of(&point(ValueType::F32, 0.5, 0.0)), DataType::Double);
         assert!(!is_scaled(&point(ValueType::Bit, 2.0, 0.0)), "a bit has no engineering value");
         assert!(!is_scaled(&point(ValueType::String, 2.0, 1.0)));
+    }
+
+    #[test]
+    fn a_value_the_device_does_not_implement_publishes_no_value() {
+        let spec = UintEncoding::Spec;
+        let sentinel = Point { not_implemented: Some(Value::Int(0xFFFF)), ..plain(ValueType::U16) };
+        assert_eq!(metric_value(&sentinel, &Value::Int(0xFFFF), spec), None);
+        assert_eq!(metric_value(&sentinel, &Value::Int(7), spec), Some(MetricValue::Int(7)));
+        let scaled = Point { not_implemented: Some(Value::Int(-32768)), ..point(ValueType::I16, 0.1, 0.0) };
+        assert_eq!(metric_value(&scaled, &Value::Int(-32768), spec), None);
+        let nan = Point { not_implemented: Some(Value::Float(f64::NAN)), ..plain(ValueType::F32) };
+        assert_eq!(metric_value(&nan, &Value::Float(f64::NAN), spec), None);
+        let never = Point { implemented: false, ..plain(ValueType::U16) };
+        assert_eq!(metric_value(&never, &Value::Int(7), spec), None);
     }
 
     #[test]

@@ -253,7 +253,7 @@ fn profile_check_names_the_file_and_line_of_a_mistake() {
     let unknown = dir.join("unknown.toml");
     std::fs::write(&unknown, "[device]\nname='x'\nvendor='v'\nproduct_code='p'\nrevision='1'\ncolour='red'\n").unwrap();
     let err = stderr(&offline(&["profile", "check", &unknown.display().to_string()]).code(2));
-    assert!(err.starts_with(&format!("{}:6:1: unknown field `colour`", unknown.display())), "{err}");
+    assert!(err.starts_with(&format!("{}:6:1: [device]: unknown field `colour`", unknown.display())), "{err}");
     let out = stdout(&offline(&["profile", "check", &profile("types.toml")]).success());
     assert!(out.ends_with("types.toml: ok: ferrobus type test device — 0 coils, 0 discrete inputs, 13 holding and 0 input register values\n"), "{out}");
     std::fs::remove_dir_all(&dir).unwrap();
@@ -360,4 +360,94 @@ fn read_and_write_take_a_parameter_name_where_an_address_goes_and_type_it_whole(
         err.trim(),
         "error: \"d00*\" names 9 parameters (d001, d002, d003, d004, d005, d006, d007, d008, d009): give one, or use get"
     );
+}
+
+const DEVICE: &str = "[device]\nname='x'\nvendor='v'\nproduct_code='p'\nrevision='1'\n";
+
+/// `profile check` of a file holding `text`: its exit, stderr and stdout.
+fn check(name: &str, text: &str) -> (Option<i32>, String) {
+    let dir = std::env::temp_dir().join(format!("ferrobus-cli-check-{name}-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let file = dir.join(format!("{name}.toml"));
+    std::fs::write(&file, text).unwrap();
+    let out = offline(&["profile", "check", &file.display().to_string()]);
+    let code = out.get_output().status.code();
+    let err = stderr(&out);
+    std::fs::remove_dir_all(&dir).unwrap();
+    (code, err)
+}
+
+#[test]
+fn profile_check_reports_seven_type_errors_in_seven_entries_in_one_run() {
+    let text = format!(
+        "{DEVICE}[[registers]]\nnumber = 'one'\nname = 'a'\n[[registers]]\nnumber = 2\nname = 'b'\ntype = 'u24'\n\
+         [[registers]]\nnumber = 3\nname = 'c'\nscale = 'ten'\n[[inputs]]\nnumber = 1\nname = 'd'\ncolour = 1\n\
+         [[coils]]\nnumber = 1\nname = 'e'\ndefault = 'on'\n[[coils]]\nnumber = -2\nname = 'f'\n\
+         [[discrete_inputs]]\nnumber = 1\nname = 'g'\naccess = 'all'\n"
+    );
+    let (code, err) = check("seven", &text);
+    assert_eq!(code, Some(2), "{err}");
+    let mistakes: Vec<&str> = err.lines().filter(|l| !l.starts_with("error:")).collect();
+    assert_eq!(mistakes.len(), 7, "{err}");
+    for (mistake, entry) in mistakes.iter().zip([
+        "[[registers]] entry 1 (a): invalid type",
+        "[[registers]] 2 (b): unknown variant `u24`",
+        "[[registers]] 3 (c): invalid type",
+        "[[inputs]] 1 (d): unknown field `colour`",
+        "[[coils]] 1 (e): invalid type",
+        "[[coils]] entry 2 (f): invalid value",
+        "[[discrete_inputs]] 1 (g): unknown variant `all`",
+    ]) {
+        assert!(mistake.contains(entry), "{mistake:?} names {entry:?}");
+    }
+    assert!(err.ends_with(": 7 mistakes\n"), "{err}");
+}
+
+#[test]
+fn profile_check_refuses_two_points_of_one_code_naming_both_entries() {
+    let (code, err) = check(
+        "twice",
+        &format!("{DEVICE}[[registers]]\nnumber=1\nname='F001'\n[[registers]]\nnumber=5\nname='F001'\n"),
+    );
+    assert_eq!(code, Some(2), "{err}");
+    assert!(
+        err.contains(":9:1: [[registers]] 5 (F001): the name is also that of [[registers]] 1 (F001) on line 6"),
+        "{err}"
+    );
+    let (code, err) = check(
+        "run",
+        &format!("{DEVICE}[[coils]]\nnumber=1\nname='DI'\ncount=4\n[[registers]]\nnumber=1\nname='di3'\n"),
+    );
+    assert_eq!(code, Some(2), "{err}");
+    assert!(
+        err.contains("[[registers]] 1 (di3): its point di3 has the code of a point of [[coils]] 1 (DI) on line 6"),
+        "{err}"
+    );
+}
+
+#[test]
+fn profile_check_refuses_control_characters_and_endless_names_and_says_what_it_saw() {
+    let (code, err) = check("escape", &format!("{DEVICE}[[registers]]\nnumber=1\nname='r'\nunit=\"\\u001b[2J\"\n"));
+    assert_eq!(code, Some(2), "{err}");
+    assert!(err.contains("[[registers]] 1 (r): unit holds the control character \\u{1b} at character 1"), "{err}");
+    assert!(!err.contains('\u{1b}'), "nothing reaches the terminal raw: {err:?}");
+    let (code, err) = check("nul", &format!("{DEVICE}[[coils]]\nnumber=1\nname=\"c\\u0000\"\n"));
+    assert_eq!(code, Some(2), "{err}");
+    assert!(err.contains("name holds the control character \\u{0}"), "{err}");
+    let (code, err) = check("long", &format!("{DEVICE}[[registers]]\nnumber=1\nname='{}'\n", "n".repeat(10 << 20)));
+    assert_eq!(code, Some(2), "{err}");
+    assert!(err.len() < 2_000, "{} bytes", err.len());
+    assert!(err.contains(&format!("name is {} characters long, more than the 128 a name may have", 10 << 20)), "{err}");
+}
+
+#[test]
+fn a_string_read_from_a_device_reaches_the_terminal_with_its_control_characters_spelled_out() {
+    let server = Server::start();
+    // The types profile's "tag" (number 24, 4 registers): ESC [ 2 J, then NUL padding.
+    server.device().holding[24..28].copy_from_slice(&[0x1B5B, 0x324A, 0, 0]);
+    let out = stdout(&server.run(&["--device", &profile("types.toml"), "get", "tag"]).success());
+    assert!(!out.contains('\u{1b}'), "{out:?}");
+    assert!(row(&out, "tag").ends_with("\\u{1b}[2J"), "{out}");
+    let csv = stdout(&server.run(&["--device", &profile("types.toml"), "get", "tag", "--csv"]).success());
+    assert!(csv.lines().nth(1).is_some_and(|l| l.ends_with(",\\u{1b}[2J")), "{csv}");
 }

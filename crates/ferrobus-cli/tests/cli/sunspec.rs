@@ -223,3 +223,67 @@ fn save_profile_writes_the_models_as_a_profile_that_get_and_the_bridge_take() {
     assert!(stdout(&check).contains("1 line, 1 device, 2 groups, 46 metrics"), "{}", stdout(&check));
     let _ = std::fs::remove_dir_all(&dir);
 }
+
+#[test]
+fn values_the_inverter_does_not_implement_show_as_not_implemented_not_as_readings() {
+    // The simulated inverter holds TmpSnk = 0x8000 (int16) and StVnd = 0xFFFF (enum16); here
+    // Evt1 = 0xFFFFFFFF (bitfield32) too; TmpCab = 451 (45.1 C) is a reading.
+    let text = inverter().replace(
+        "name = \"inverter.Evt1\"\ntype = \"u32\"\ngroup = \"inverter\"\ndefault = 0",
+        "name = \"inverter.Evt1\"\ntype = \"u32\"\ngroup = \"inverter\"\ndefault = 4294967295",
+    );
+    assert_ne!(text, inverter());
+    let sim = TcpSim::text("sentinels", &text);
+    let codes = [
+        "inverter_three_phase.TmpSnk",
+        "inverter_three_phase.StVnd",
+        "inverter_three_phase.Evt1",
+        "inverter_three_phase.TmpCab",
+    ];
+    let get = |format: &[&str]| {
+        let mut args = vec!["get", "--device", "sunspec"];
+        args.extend(codes);
+        args.extend(format);
+        stdout(&sim.run(&args).success())
+    };
+    let table = get(&[]);
+    let values: Vec<&str> = table.lines().skip(1).map(|l| l.rsplit("  ").next().unwrap_or_default()).collect();
+    assert_eq!(values, ["n/a", "n/a", "n/a", "45.1 C"], "{table}");
+    let csv = get(&["--csv"]);
+    let last: Vec<&str> = csv.lines().skip(1).map(|l| l.rsplit(',').next().unwrap_or_default()).collect();
+    assert_eq!(last, ["", "", "", "45.1 C"], "{csv}");
+    let doc: Value = serde_json::from_str(&get(&["--json"])).unwrap();
+    let points = doc["points"].as_array().unwrap();
+    for p in &points[..3] {
+        assert_eq!(
+            (&p["value"], &p["engineering"], &p["implemented"]),
+            (&Value::Null, &Value::Null, &Value::Bool(false)),
+            "{p}"
+        );
+    }
+    assert_eq!(points[0]["raw"], -32768, "the raw value is kept");
+    assert_eq!((points[3]["engineering"].as_f64(), &points[3]["implemented"]), (Some(45.1), &Value::Bool(true)));
+    let poll = stdout(
+        &sim.run(&["poll", "--device", "sunspec", codes[0], "--every", "50ms", "--duration", "120ms", "--csv"])
+            .success(),
+    );
+    assert!(poll.lines().nth(1).is_some_and(|l| l.contains(",inverter_three_phase.TmpSnk,-32768,,,C,ok,")), "{poll}");
+}
+
+#[test]
+fn a_value_whose_scale_factor_is_not_implemented_is_not_implemented_either() {
+    let text = inverter().replace(
+        "name = \"inverter.Tmp_SF\"\ntype = \"i16\"\ngroup = \"inverter\"\ndefault = -1",
+        "name = \"inverter.Tmp_SF\"\ntype = \"i16\"\ngroup = \"inverter\"\ndefault = -32768",
+    );
+    assert_ne!(text, inverter());
+    let sim = TcpSim::text("nosf", &text);
+    let out = stdout(&sim.run(&["get", "--device", "sunspec", "inverter_three_phase.TmpCab", "--json"]).success());
+    let doc: Value = serde_json::from_str(&out).unwrap();
+    let point = &doc["points"][0];
+    assert_eq!(
+        (&point["value"], &point["raw"], &point["implemented"]),
+        (&Value::Null, &Value::from(451), &Value::Bool(false)),
+        "{out}"
+    );
+}

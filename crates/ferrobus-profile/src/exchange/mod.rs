@@ -518,7 +518,8 @@ fn default_name(origin: &str) -> String {
 }
 
 /// A point's code from a source's name (runs of blanks and control characters become `_`),
-/// and the name itself as its label when the two differ.
+/// and the name itself as its label when the two differ (control characters but the tab
+/// spelled out, `\u{7}`).
 pub(crate) fn code_and_label(name: &str) -> (String, Option<String>) {
     let name = name.trim();
     let mut code = String::with_capacity(name.len());
@@ -531,7 +532,15 @@ pub(crate) fn code_and_label(name: &str) -> (String, Option<String>) {
             code.push(c);
         }
     }
-    let label = (code != name).then(|| name.to_string());
+    // A profile holds no control character but the tab: the label spells them out.
+    let printable: String = name
+        .chars()
+        .flat_map(|c| {
+            let spelled = c != '\t' && crate::check::text::forbidden(c);
+            if spelled { c.escape_unicode().collect::<Vec<_>>() } else { vec![c] }
+        })
+        .collect();
+    let label = (code != name).then_some(printable);
     (code, label)
 }
 
