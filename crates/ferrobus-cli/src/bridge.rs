@@ -224,6 +224,8 @@ struct Inverter {
     line: usize,
     unit: u8,
     id: String,
+    /// The profile, whose write guard every demo write goes through.
+    profile: Arc<Profile>,
     run: Point,
     frequency: Point,
     /// F002 and F003, the acceleration and deceleration times: set long enough to watch the
@@ -240,6 +242,7 @@ fn inverter(plant: &Plant) -> Option<Inverter> {
                 line,
                 unit: d.unit,
                 id: d.id.clone(),
+                profile: Arc::clone(d.profile.as_ref()?),
                 run: profile.point("run")?.clone(),
                 frequency: profile.point("F001")?.clone(),
                 ramps: ["F002", "F003"].iter().filter_map(|code| profile.point(code).cloned()).collect(),
@@ -265,18 +268,18 @@ async fn drive_inverter(
         }
     };
     for ramp in &inverter.ramps {
-        match set(&client, inverter.unit, ramp, DEMO_RAMP).await {
+        match set(&client, &inverter, ramp, DEMO_RAMP).await {
             Ok(()) => say(format!("{} {} = {DEMO_RAMP} ({})", inverter.id, ramp.code, ramp.label)),
             Err(e) => say(format!("{} {} = {DEMO_RAMP}: {e}", inverter.id, ramp.code)),
         }
     }
     for (step, text) in DEMO_FREQUENCIES.iter().cycle().enumerate() {
-        match set(&client, inverter.unit, &inverter.frequency, text).await {
+        match set(&client, &inverter, &inverter.frequency, text).await {
             Ok(()) => say(format!("{} F001 = {text}", inverter.id)),
             Err(e) => say(format!("{} F001 = {text}: {e}", inverter.id)),
         }
         if step == 0 {
-            match set(&client, inverter.unit, &inverter.run, "1").await {
+            match set(&client, &inverter, &inverter.run, "1").await {
                 Ok(()) => say(format!("{} run: the output frequency ramps to F001", inverter.id)),
                 Err(e) => say(format!("{} run: {e}", inverter.id)),
             }
@@ -285,9 +288,13 @@ async fn drive_inverter(
     }
 }
 
-/// Writes `text` to `point` of `unit`, checked by the profile first.
-async fn set(client: &Client, unit: u8, point: &Point, text: &str) -> Result<(), String> {
+/// Writes `text` to `point` of the inverter, through its profile's write guard first (the
+/// running point read for a run-locked point, as `set` does).
+async fn set(client: &Client, inverter: &Inverter, point: &Point, text: &str) -> Result<(), String> {
+    let unit = inverter.unit;
     let raw = point.prepare_write(text).map_err(|e| e.to_string())?;
+    let write = ferrobus_profile::Write { point, raw: &raw, typed: text };
+    ferrobus::guard::check_write(client, unit, &inverter.profile, &write).await.map_err(|e| e.to_string())?;
     if point.table == ferrobus_profile::Table::Coils {
         let on = raw.as_int().is_some_and(|n| n != 0) || matches!(raw, ferrobus_profile::Value::Bool(true));
         return client.write_single_coil(unit, point.address, on).await.map_err(|e| e.to_string());

@@ -66,6 +66,7 @@ mod progress;
 mod raw;
 mod read;
 mod readwrite;
+mod run_lock;
 mod scan;
 mod server_tls;
 mod set;

@@ -10,6 +10,7 @@ use crate::address::{ADDRESS_HELP, AddressArgs, Table};
 use crate::connect::ConnectArgs;
 use crate::exit::CliError;
 use crate::output;
+use crate::run_lock::{self, Span};
 use crate::value::{ValueType, WordOrder, encode};
 use crate::write::describe_address;
 
@@ -26,6 +27,10 @@ pub(crate) struct MaskArgs {
     /// Address style.
     #[command(flatten)]
     pub(crate) address_args: AddressArgs,
+    /// Write even where the --device profile says the register cannot change while the drive
+    /// runs and the drive runs (or cannot say whether it does)
+    #[arg(long)]
+    pub(crate) force: bool,
 }
 
 fn mask(text: &str) -> Result<u16, CliError> {
@@ -38,6 +43,7 @@ pub(crate) async fn run(connection: &ConnectArgs, args: &MaskArgs) -> Result<(),
     let and_mask = mask(&args.and_mask)?;
     let or_mask = mask(&args.or_mask)?;
     let session = connection.open().await?;
+    run_lock::check(connection, &session, Span::registers(address.wire, 1), args.force, "mask").await?;
     session.client.mask_write_register(session.unit, address.wire, and_mask, or_mask).await?;
     let who = if session.is_broadcast() { "broadcast".to_string() } else { format!("unit {}", session.unit) };
     output::print(&format!(

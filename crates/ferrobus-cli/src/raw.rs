@@ -9,6 +9,7 @@ use crate::connect::ConnectArgs;
 use crate::exit::CliError;
 use crate::hex;
 use crate::output;
+use crate::run_lock::{self, Span};
 
 /// `raw HEX...`.
 #[derive(Args, Debug)]
@@ -16,6 +17,11 @@ pub(crate) struct RawArgs {
     /// The PDU in hex, function code first: `03 00 00 00 02` or `030000 0002`
     #[arg(required = true, num_args = 1..)]
     pub(crate) bytes: Vec<String>,
+
+    /// Send a write even where the --device profile says what it writes cannot change while the
+    /// drive runs and the drive runs (or cannot say whether it does)
+    #[arg(long)]
+    pub(crate) force: bool,
 }
 
 /// Runs `raw`.
@@ -27,7 +33,12 @@ pub(crate) async fn run(connection: &ConnectArgs, args: &RawArgs) -> Result<(), 
     let function = FunctionCode::from_u8(pdu[0]);
     let session = connection.open().await?;
     match Request::parse(&pdu) {
-        Ok(request) => output::print(&format!("request  {}  ({})\n", hex::format(&pdu), request.function()))?,
+        Ok(request) => {
+            if let Some(span) = Span::of_request(&request) {
+                run_lock::check(connection, &session, span, args.force, "raw").await?;
+            }
+            output::print(&format!("request  {}  ({})\n", hex::format(&pdu), request.function()))?;
+        }
         Err(e) => {
             eprintln!("note: not a valid {function} request ({e}); sending it as is");
             output::print(&format!("request  {}\n", hex::format(&pdu)))?;

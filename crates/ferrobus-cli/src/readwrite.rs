@@ -7,6 +7,7 @@ use crate::address::{ADDRESS_HELP, AddressArgs, Table};
 use crate::connect::ConnectArgs;
 use crate::exit::CliError;
 use crate::output::{self, Format, OutputArgs, ReadData};
+use crate::run_lock::{self, Span};
 use crate::value::ValueArgs;
 
 /// `readwrite --read ADDRESS --count N --write ADDRESS VALUE...`.
@@ -36,6 +37,11 @@ pub(crate) struct ReadWriteArgs {
     /// Output format.
     #[command(flatten)]
     pub(crate) output: OutputArgs,
+
+    /// Write even where the --device profile says a register cannot change while the drive
+    /// runs and the drive runs (or cannot say whether it does)
+    #[arg(long)]
+    pub(crate) force: bool,
 }
 
 /// Runs `readwrite`.
@@ -51,6 +57,8 @@ pub(crate) async fn run(connection: &ConnectArgs, args: &ReadWriteArgs) -> Resul
     write.check_span(registers.len())?;
     let read_count = u16::try_from(count).unwrap_or(u16::MAX);
     let session = connection.open().await?;
+    let span = Span::registers(write.wire, registers.len());
+    run_lock::check(connection, &session, span, args.force, "readwrite").await?;
     let got = session
         .client
         .read_write_multiple_registers(session.unit, read.wire, read_count, write.wire, &registers)

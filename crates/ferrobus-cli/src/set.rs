@@ -167,11 +167,7 @@ async fn guard(
     interrupt.unless(check).await.ok_or(CliError::Interrupted)?.map_err(|e| refused(&e))
 }
 
-/// The guard's refusal as the command's error: nothing was sent (exit 2), or, when the drive
-/// could not be asked whether it runs, the device's part (exit 7, as for a refused request).
+/// The guard's refusal as the command's error (`set` has no `--force`).
 fn refused(refusal: &Refusal) -> CliError {
-    match refusal {
-        Refusal::Unreadable { .. } => CliError::Refused(format!("not sent: {refusal}")),
-        _ => CliError::Usage(format!("not sent: {refusal}")),
-    }
+    crate::run_lock::refused(refusal, None)
 }

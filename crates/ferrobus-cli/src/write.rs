@@ -12,6 +12,7 @@ use crate::address::{ADDRESS_HELP, Address, AddressArgs, Table, per_request, qua
 use crate::connect::{ConnectArgs, Session};
 use crate::exit::CliError;
 use crate::output;
+use crate::run_lock::{self, Span};
 use crate::value::{ValueArgs, ValueType, parse_coil};
 
 /// The spec's most coils per FC0F request (§6.11), from the core.
@@ -25,6 +26,11 @@ pub(crate) struct WriteArgs {
     /// What to write.
     #[command(subcommand)]
     pub(crate) what: WriteCommand,
+
+    /// Write even where the --device profile says the value cannot change while the drive runs
+    /// and the drive runs (or cannot say whether it does)
+    #[arg(long, global = true)]
+    pub(crate) force: bool,
 }
 
 /// The write commands.
@@ -146,6 +152,7 @@ pub(crate) async fn run(connection: &ConnectArgs, args: &WriteArgs) -> Result<()
             };
             let value = parse_coil(value)?;
             let session = &connection.open().await?;
+            run_lock::check(connection, session, Span::coils(address.wire, 1), args.force, "write").await?;
             session.client.write_single_coil(session.unit, address.wire, value).await?;
             let line = report(session, FunctionCode::WriteSingleCoil, "coil", address, address.wire, &on_off(&[value]));
             output::print(&line)?;
@@ -158,6 +165,7 @@ pub(crate) async fn run(connection: &ConnectArgs, args: &WriteArgs) -> Result<()
             let max_per_request = connection.max_per_request(*max_per_request, Table::Coils, true)?;
             let max = per_request(max_per_request, MAX_WRITE_COILS, 1, ValueType::U16)?;
             let session = &connection.open().await?;
+            run_lock::check(connection, session, Span::coils(address.wire, bits.len()), args.force, "write").await?;
             for (start, n) in split(address.wire, bits.len(), 1, max) {
                 let from = usize::from(start - address.wire);
                 let chunk = &bits[from..from + n];
@@ -183,6 +191,8 @@ pub(crate) async fn run(connection: &ConnectArgs, args: &WriteArgs) -> Result<()
             let registers = values.encode_all(std::slice::from_ref(value))?;
             address.check_span(registers.len())?;
             let session = &connection.open().await?;
+            let span = Span::registers(address.wire, registers.len());
+            run_lock::check(connection, session, span, args.force, "write").await?;
             if registers.len() == 1 && !multiple {
                 session.client.write_single_register(session.unit, address.wire, registers[0]).await?;
                 let data = shown(*values, &registers);
@@ -203,6 +213,8 @@ pub(crate) async fn run(connection: &ConnectArgs, args: &WriteArgs) -> Result<()
             let max_per_request = connection.max_per_request(*max_per_request, Table::Holding, true)?;
             let max = per_request(max_per_request, MAX_WRITE_REGISTERS, values.kind.width(), values.kind)?;
             let session = &connection.open().await?;
+            let span = Span::registers(address.wire, registers.len());
+            run_lock::check(connection, session, span, args.force, "write").await?;
             write_registers(session, address, &registers, *values, max).await
         }
     }

@@ -14,10 +14,11 @@
 //!   Write { point, raw, typed } ──check_value──▶ access, range
 //!                               ──run_state_point──▶ the caller reads it ──▶ RunState
 //!   guard_write(write, state) = check_value + the run lock  ──▶ Ok | Refusal
+//!   guard_span(run_locked_in(table, start, count), state)     the run lock of a write by address
 //! ```
 
 use crate::codec::{Value, ValueError};
-use crate::model::Profile;
+use crate::model::{Profile, Table};
 use crate::point::Point;
 
 /// One write a writer is about to send: the point, the raw value, and how it was given (the
@@ -126,7 +127,36 @@ impl Profile {
     pub fn guard_write(&self, write: &Write<'_>, state: &RunState) -> Result<(), Refusal> {
         self.check_value(write)?;
         let Some(running) = self.run_state_point(write.point) else { return Ok(()) };
-        let code = write.point.code.clone();
+        self.run_lock(write.point.code.clone(), running, state)
+    }
+
+    /// The run-locked points that a write by address of `count` items from `start` in `table`
+    /// touches (`write`, `mask`, `raw`: a writer that names no point), in address order; none
+    /// when the profile names no running point.
+    pub fn run_locked_in(&self, table: Table, start: u16, count: usize) -> Vec<&Point> {
+        let end = usize::from(start) + count;
+        self.points()
+            .iter()
+            .filter(|p| p.table == table && self.run_state_point(p).is_some())
+            .filter(|p| {
+                usize::from(p.address) < end
+                    && usize::from(start) < usize::from(p.address) + usize::from(p.width.max(1))
+            })
+            .collect()
+    }
+
+    /// The run lock for a write by address that touches `locked` (from
+    /// [`Profile::run_locked_in`]), with `state` the reading of the running point: the one
+    /// rule of [`Profile::guard_write`], the refusal naming every point touched. No value is
+    /// checked: a write by address is raw.
+    pub fn guard_span(&self, locked: &[&Point], state: &RunState) -> Result<(), Refusal> {
+        let Some(running) = locked.first().and_then(|p| self.run_state_point(p)) else { return Ok(()) };
+        let code = locked.iter().map(|p| p.code.as_str()).collect::<Vec<_>>().join(", ");
+        self.run_lock(code, running, state)
+    }
+
+    /// The run lock on `code` (one point, or the points a write by address touches).
+    fn run_lock(&self, code: String, running: &Point, state: &RunState) -> Result<(), Refusal> {
         match state {
             RunState::Read(value) if self.means_running(value) => {
                 Err(Refusal::Running { code, state: running.code.clone(), shown: running.show(value) })
@@ -243,5 +273,23 @@ mod tests {
         assert!(!p.means_running(&Value::Bool(false)));
         let refusal = guard(&p, "A003", 50, &RunState::Read(Value::Bool(true))).unwrap_err();
         assert!(matches!(refusal, Refusal::Running { .. }), "{refusal}");
+    }
+
+    #[test]
+    fn a_write_by_address_is_run_locked_by_every_run_locked_point_it_touches() {
+        let p = profile();
+        let codes = |start, count| -> Vec<String> {
+            p.run_locked_in(Table::Holding, start, count).iter().map(|q| q.code.clone()).collect()
+        };
+        assert_eq!(codes(0, 1), Vec::<String>::new());
+        assert_eq!(codes(0, 4), ["A003", "d001"]);
+        assert_eq!(codes(3, 1), ["d001"]);
+        assert!(p.run_locked_in(Table::Coils, 0, 4).is_empty());
+        let locked = p.run_locked_in(Table::Holding, 0, 4);
+        let refusal = p.guard_span(&locked, &RunState::Read(Value::Int(1))).unwrap_err();
+        assert_eq!(refusal.to_string(), "A003, d001 cannot change while the drive runs (running = run); stop it first");
+        assert_eq!(p.guard_span(&locked, &RunState::Read(Value::Int(0))), Ok(()));
+        assert!(matches!(p.guard_span(&locked, &RunState::Broadcast), Err(Refusal::Broadcast { .. })));
+        assert_eq!(p.guard_span(&[], &RunState::NotRead), Ok(()));
     }
 }

@@ -7,6 +7,11 @@
 //!     ├─ profile.check_value(write)             range, access: no request
 //!     ├─ run_state(client, unit, profile, point)  one read of [state] running, if run-locked
 //!     └─ profile.guard_write(write, state)        Ok | Refusal
+//!
+//!   check_span(client, unit, profile, table, start, count)   a write by address
+//!     ├─ profile.run_locked_in(table, start, count)   the run-locked points it touches
+//!     ├─ run_state(...)                               read only when it touches one
+//!     └─ profile.guard_span(locked, state)
 //! ```
 //!
 //! A broadcast reads nothing: its writer passes [`RunState::Broadcast`] to
@@ -34,6 +39,23 @@ pub async fn check_write(client: &Client, unit: u8, profile: &Profile, write: &W
     profile.check_value(write)?;
     let state = run_state(client, unit, profile, write.point).await;
     profile.guard_write(write, &state)
+}
+
+/// The run lock for a write by address to `unit` (`count` items from `start` in `table`): when
+/// the write touches a run-locked point of `profile`, the running point read and
+/// [`Profile::guard_span`] applied; nothing is read otherwise.
+pub async fn check_span(
+    client: &Client,
+    unit: u8,
+    profile: &Profile,
+    table: Table,
+    start: u16,
+    count: usize,
+) -> Result<(), Refusal> {
+    let locked = profile.run_locked_in(table, start, count);
+    let Some(first) = locked.first() else { return Ok(()) };
+    let state = run_state(client, unit, profile, first).await;
+    profile.guard_span(&locked, &state)
 }
 
 /// One point's value, read on its own.

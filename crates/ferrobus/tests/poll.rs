@@ -214,8 +214,8 @@ async fn pause_stops_polling_reset_zeroes_the_counters_and_a_write_goes_through(
     assert!(poller.try_next().is_none());
     handle.reset();
     assert_eq!(handle.counters()[0], ferrobus::poll::Counters::default());
-    assert_eq!(handle.write(0, 1, "1234").await.unwrap(), Value::Int(1234));
-    assert!(handle.write(0, 1, "70000").await.is_err(), "a u16 cell takes no 70000");
+    assert_eq!(handle.write(None, 0, 1, "1234").await.unwrap(), Value::Int(1234));
+    assert!(handle.write(None, 0, 1, "70000").await.is_err(), "a u16 cell takes no 70000");
     assert_eq!(handle.prepare_write(0, 1, "4321").unwrap(), Value::Int(4321), "prepared, not sent");
     assert!(handle.write_raw(0, 1, &Value::Int(70_000)).await.is_err(), "a raw value must fit the type");
     assert!(matches!(handle.write_raw(0, 9, &Value::Int(1)).await, Err(WriteError::NoSuchCell { group: 0, cell: 9 })));

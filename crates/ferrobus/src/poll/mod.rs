@@ -176,6 +176,9 @@ pub enum WriteError {
     /// The value does not parse, is out of the point's range, or the point is read-only.
     #[error("{0}")]
     Value(#[from] ferrobus_profile::ValueError),
+    /// The profile's write guard refused it: the drive runs, or whether it runs is unknown.
+    #[error("{0}")]
+    Refused(#[from] ferrobus_profile::Refusal),
     /// The bus refused or failed.
     #[error("{0}")]
     Bus(#[from] Error),
@@ -252,10 +255,24 @@ impl PollHandle {
         self.stats().unit_times()
     }
 
-    /// Writes `text` to a cell, as its point parses it (`45 Hz`, `run`, `0x10`) and within
-    /// the point's range and access; returns the raw value written.
-    pub async fn write(&self, group: usize, cell: usize, text: &str) -> Result<Value, WriteError> {
+    /// Writes `text` to a cell, as its point parses it (`45 Hz`, `run`, `0x10`) and through the
+    /// write guard of `profile`, the one the cells' points came from: the point's range and
+    /// access, and for a run-locked point the drive's running point read first
+    /// ([`crate::guard::check_write`]). `None` for cells of raw ranges, which have no profile:
+    /// range and access only. Returns the raw value written.
+    pub async fn write(
+        &self,
+        profile: Option<&Profile>,
+        group: usize,
+        cell: usize,
+        text: &str,
+    ) -> Result<Value, WriteError> {
         let raw = self.prepare_write(group, cell, text)?;
+        if let Some(profile) = profile {
+            let (g, c) = self.cell(group, cell)?;
+            let write = ferrobus_profile::Write { point: &c.point, raw: &raw, typed: text };
+            crate::guard::check_write(&self.client, g.unit, profile, &write).await?;
+        }
         self.write_raw(group, cell, &raw).await?;
         Ok(raw)
     }
@@ -268,8 +285,9 @@ impl PollHandle {
     }
 
     /// Writes the raw value `raw` to a cell as is: a coil, one register or several, encoded
-    /// in the point's type and word order. Range and access are the caller's to check
-    /// ([`Point::check_write`]); a value that does not fit the point's type is refused.
+    /// in the point's type and word order. The write guard is the caller's to apply
+    /// ([`crate::guard::check_write`], as [`PollHandle::write`] does); a value that does not
+    /// fit the point's type is refused.
     pub async fn write_raw(&self, group: usize, cell: usize, raw: &Value) -> Result<(), WriteError> {
         let (g, c) = self.cell(group, cell)?;
         let point = &c.point;
