@@ -26,8 +26,8 @@ use crate::output;
 const DEMO_BROKER: &str = "127.0.0.1:1883";
 
 /// The demo's acceleration and deceleration times (F002, F003), from 0 to the maximum
-/// frequency (400 Hz) and back: a few seconds between two set frequencies.
-const DEMO_RAMP: &str = "60s";
+/// frequency (A004, 60 Hz) and back: a few seconds between two set frequencies.
+const DEMO_RAMP: &str = "9s";
 
 /// The set frequencies the demo cycles through, and how long it stays at each.
 const DEMO_FREQUENCIES: [&str; 4] = ["60 Hz", "35 Hz", "50 Hz", "20 Hz"];

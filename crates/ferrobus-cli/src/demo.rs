@@ -132,10 +132,12 @@ pub(crate) async fn run(args: &DemoArgs) -> Result<(), CliError> {
         say!("   {e}\n   (ferrobus read --max-per-request 4 splits such reads, never inside a 32-bit value)\n");
     }
 
-    step("4. Ramp times (F002, F003: 32-bit, high word first, in 0.01 s, from 0 to the maximum 400.00 Hz):")?;
-    client.write_multiple_registers(UNIT, reg::F002, &words(2000)).await?;
-    client.write_multiple_registers(UNIT, reg::F003, &words(1500)).await?;
-    say!("   F002 = 20.00 s, F003 = 15.00 s: 20 Hz/s up, 26.7 Hz/s down\n");
+    step(
+        "4. Ramp times (F002, F003: 32-bit, high word first, in 0.01 s, from 0 to the maximum frequency A004, 60 Hz):",
+    )?;
+    client.write_multiple_registers(UNIT, reg::F002, &words(300)).await?;
+    client.write_multiple_registers(UNIT, reg::F003, &words(225)).await?;
+    say!("   F002 = 3.00 s, F003 = 2.25 s: 20 Hz/s up, 26.7 Hz/s down\n");
 
     step("5. A frequency of 500.00 Hz is beyond the drive's range:")?;
     if let Err(e) = client.write_multiple_registers(UNIT, reg::F001, &words(50_000)).await {

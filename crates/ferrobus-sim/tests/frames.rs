@@ -184,8 +184,8 @@ fn omron_3g3rx_broadcast_writes_run_but_reads_and_loopback_do_not() {
 #[test]
 fn the_inverter_ramps_its_output_after_run_as_the_registers_show() {
     let mut line = Line::new(&[(1, "omron-3g3rx")]);
-    // F002 = 4.00 s (0 → 400 Hz): 100 Hz/s. F001 = 50.00 Hz. Run.
-    line.reply(&rtu(1, &[0x10, 0x11, 0x02, 0x00, 0x02, 0x04, 0x00, 0x00, 0x01, 0x90]));
+    // F002 = 0.60 s (0 → A004, 60 Hz by default): 100 Hz/s. F001 = 50.00 Hz. Run.
+    line.reply(&rtu(1, &[0x10, 0x11, 0x02, 0x00, 0x02, 0x04, 0x00, 0x00, 0x00, 0x3C]));
     line.reply(&rtu(1, &[0x10, 0x00, 0x00, 0x00, 0x02, 0x04, 0x00, 0x00, 0x13, 0x88]));
     line.reply(&rtu(1, &[0x05, 0x00, 0x00, 0xFF, 0x00]));
     // 100 ms of line time has passed since the run command (this request included): 10 Hz.

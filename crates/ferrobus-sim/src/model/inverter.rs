@@ -85,14 +85,24 @@ impl Inverter {
         if !self.running_command(memory) || memory.get("A001") != SOURCE_MODBUS {
             return 0.0;
         }
-        let reference = (memory.get("F001") as f64).clamp(0.0, self.max_frequency);
+        let reference = (memory.get("F001") as f64).clamp(0.0, self.top(memory));
         if self.reverse_command(memory) { -reference } else { reference }
     }
 
-    /// Ramp slope in 0.01 Hz per second for a ramp time register (0.01 s units).
+    /// The maximum frequency set, in 0.01 Hz: A004 (in Hz) where the profile has it, within the
+    /// frame's rating; the rating otherwise.
+    fn top(&self, memory: &Memory) -> f64 {
+        match memory.get("A004") {
+            hz if hz > 0 => (hz as f64 * 100.0).min(self.max_frequency),
+            _ => self.max_frequency,
+        }
+    }
+
+    /// Ramp slope in 0.01 Hz per second for a ramp time register (0.01 s units): the time from
+    /// 0 to the maximum frequency set (A004), as on the drive.
     fn slope(&self, memory: &Memory, register: &str) -> f64 {
         let seconds = (memory.get(register) as f64 / 100.0).max(0.01);
-        self.max_frequency / seconds
+        self.top(memory) / seconds
     }
 
     fn do_trip(&mut self, memory: &mut Memory, code: u16) {
@@ -115,7 +125,7 @@ impl Inverter {
         let f = self.frequency.abs();
         let running = f > 0.0 || target != 0.0;
         let base = (memory.get("A003").max(1) * 100) as f64;
-        let load = 0.3 + 0.5 * (f / self.max_frequency);
+        let load = 0.3 + 0.5 * (f / self.top(memory)).min(1.0);
         let accel = if self.ramping > 0 { 0.4 } else { 0.0 };
         let current = if f > 0.0 { self.rated_current * (load + accel) } else { 0.0 };
         let bus = self.dc_bus_voltage * if self.ramping < 0 { 1.08 } else { 1.0 };
@@ -247,6 +257,7 @@ mod tests {
     #[test]
     fn the_output_ramps_to_the_reference_at_the_acceleration_rate() {
         let (mut inv, mut m) = drive();
+        m.set("A004", 400); // the maximum frequency: 400 Hz
         m.set("F001", 5000); // 50.00 Hz
         m.set("F002", 400); // 4.00 s from 0 to 400.00 Hz: 100 Hz per second
         m.set("run", 1);
@@ -263,6 +274,7 @@ mod tests {
     #[test]
     fn stop_ramps_down_with_the_deceleration_time_and_reverse_goes_through_zero() {
         let (mut inv, mut m) = drive();
+        m.set("A004", 400);
         m.set("F001", 4000);
         m.set("F002", 100); // 1 s to 400 Hz
         m.set("F003", 200); // 2 s to 400 Hz
@@ -322,5 +334,20 @@ mod tests {
         m.set("run", 1);
         step(&mut inv, &mut m, 1000);
         assert_eq!(m.get("d001"), 0);
+    }
+
+    #[test]
+    fn the_ramp_times_are_from_0_to_a004_and_the_output_stops_at_it() {
+        let (mut inv, mut m) = drive();
+        assert_eq!(m.get("A004"), 60, "60 Hz by default");
+        m.set("F001", 5000);
+        m.set("F002", 1000); // 10.00 s from 0 to 60 Hz: 6 Hz per second
+        m.set("run", 1);
+        step(&mut inv, &mut m, 5000);
+        assert_eq!(m.get("d001"), 3000, "30 Hz after 5 s, not the 200 Hz a ramp to 400 Hz would give");
+        m.set("A004", 50);
+        m.set("F001", 40000);
+        step(&mut inv, &mut m, 10_000);
+        assert_eq!(m.get("d001"), 5000, "F001 above A004: the output stops at 50 Hz");
     }
 }
