@@ -35,6 +35,7 @@ use std::fmt;
 
 pub use csv::export_csv;
 
+use crate::check::text::{LABEL_MAX, NAME_MAX, TEXT_MAX, UNIT_MAX, forbidden};
 use crate::model::{Access, Order, Table, ValueType};
 
 /// What a map file is.
@@ -296,6 +297,7 @@ impl Draft {
     /// Adds `entry`, unless it shares an address with one added before (then it is listed);
     /// a name taken already gets a suffix (listed too).
     pub(crate) fn add(&mut self, mut entry: Entry) {
+        self.bound(&mut entry);
         if entry.table.is_bits() {
             self.bits_only(&mut entry);
         } else {
@@ -355,6 +357,45 @@ impl Draft {
             }
         }
         self.entries.push(entry);
+    }
+
+    /// Fits an entry's text to what a profile may hold ([`crate::check::text`]), so that a
+    /// long or unprintable cell costs that field and not the file: a label is cut, a
+    /// description is cut and its control characters spelled out; a unit, a group, a meaning
+    /// or a string default too long or holding a control character is listed and left out.
+    /// (The code was fitted already: [`code_and_label`].)
+    fn bound(&mut self, entry: &mut Entry) {
+        let place = entry.place.clone();
+        if let Some(label) = entry.label.take_if(|label| label.chars().nth(LABEL_MAX).is_some()) {
+            let cut: String = label.chars().take(LABEL_MAX - 1).chain(['…']).collect();
+            let why = format!("longer than the {LABEL_MAX} characters of a label: cut");
+            self.unmapped(&place, "label", &label, &why);
+            entry.label = Some(cut);
+        }
+        if entry.description.chars().any(|c| forbidden(c) && !matches!(c, '\t' | '\n' | '\r')) {
+            entry.description = spelled(&entry.description, |c| matches!(c, '\t' | '\n' | '\r'));
+        }
+        if entry.description.chars().nth(TEXT_MAX).is_some() {
+            let why = format!("longer than the {TEXT_MAX} characters of a description: cut");
+            self.unmapped(&place, "description", &entry.description.clone(), &why);
+            entry.description = entry.description.chars().take(TEXT_MAX - 1).chain(['…']).collect();
+        }
+        for (field, value, max) in [("unit", &mut entry.unit, UNIT_MAX), ("group", &mut entry.group, NAME_MAX)] {
+            if let Some(text) = value.take_if(|text| !printable(text, max)) {
+                self.unmapped(&place, field, &text, &unprintable(field, max));
+            }
+        }
+        for (field, pairs) in [("values", &mut entry.values), ("bits", &mut entry.bits)] {
+            let (kept, left): (Vec<_>, Vec<_>) =
+                std::mem::take(pairs).into_iter().partition(|(_, meaning)| printable(meaning, LABEL_MAX));
+            *pairs = kept;
+            for (key, meaning) in left {
+                self.unmapped(&place, field, &format!("{key}={meaning}"), &unprintable("meaning", LABEL_MAX));
+            }
+        }
+        if let Some(default) = entry.default.take_if(|d| d.as_str().is_some_and(|text| !printable(text, TEXT_MAX))) {
+            self.unmapped(&place, "default", &default.to_string(), &unprintable("default", TEXT_MAX));
+        }
     }
 
     /// Lists and clears what a register's type cannot have, so that one bad cell costs its
@@ -495,6 +536,8 @@ impl Draft {
             });
         }
         let name = self.options.name.clone().unwrap_or_else(|| default_name(&self.origin));
+        // A device's name is a label: printable, and cut to its length.
+        let name: String = spelled(&name, |_| false).chars().take(LABEL_MAX).collect();
         let toml = write::profile(&name, &self.origin, self.format, &self.entries);
         if let Err(mistakes) = crate::Profile::parse_all(&toml, &self.origin) {
             let message = mistakes.first().map(ToString::to_string).unwrap_or_default();
@@ -517,14 +560,18 @@ fn default_name(origin: &str) -> String {
     if stem.is_empty() { "imported map".to_string() } else { stem.to_string() }
 }
 
-/// A point's code from a source's name (runs of blanks and control characters become `_`),
-/// and the name itself as its label when the two differ (control characters but the tab
-/// spelled out, `\u{7}`).
+/// The characters of a code an import writes: a profile's [`NAME_MAX`] less room for the
+/// suffix ([`Draft::add`]'s `_2`, `_3`, ...) that a name taken already gets.
+const CODE_MAX: usize = NAME_MAX - 16;
+
+/// A point's code from a source's name (runs of blanks and control characters become `_`, cut
+/// to [`CODE_MAX`] characters), and the name itself as its label when the two differ (control
+/// characters but the tab spelled out, `\u{7}`).
 pub(crate) fn code_and_label(name: &str) -> (String, Option<String>) {
     let name = name.trim();
-    let mut code = String::with_capacity(name.len());
-    for c in name.chars() {
-        if c.is_whitespace() || c.is_control() {
+    let mut code = String::with_capacity(name.len().min(CODE_MAX * 4));
+    for c in name.chars().take(CODE_MAX) {
+        if c.is_whitespace() || forbidden(c) {
             if !code.ends_with('_') {
                 code.push('_');
             }
@@ -533,15 +580,31 @@ pub(crate) fn code_and_label(name: &str) -> (String, Option<String>) {
         }
     }
     // A profile holds no control character but the tab: the label spells them out.
-    let printable: String = name
-        .chars()
-        .flat_map(|c| {
-            let spelled = c != '\t' && crate::check::text::forbidden(c);
-            if spelled { c.escape_unicode().collect::<Vec<_>>() } else { vec![c] }
-        })
-        .collect();
-    let label = (code != name).then_some(printable);
+    let label = (code != name).then(|| spelled(name, |c| c == '\t'));
     (code, label)
+}
+
+/// `text` with the characters a profile may not hold spelled out (`\u{7}`), but those `kept`.
+fn spelled(text: &str, kept: impl Fn(char) -> bool) -> String {
+    let mut out = String::with_capacity(text.len());
+    for c in text.chars() {
+        if forbidden(c) && !kept(c) {
+            out.extend(c.escape_unicode());
+        } else {
+            out.push(c);
+        }
+    }
+    out
+}
+
+/// Whether `text` is one line of at most `max` printable characters (a tab allowed).
+fn printable(text: &str, max: usize) -> bool {
+    !text.chars().any(|c| c != '\t' && forbidden(c)) && text.chars().nth(max).is_none()
+}
+
+/// Why a `field` that is not [`printable`] is left out.
+fn unprintable(field: &str, max: usize) -> String {
+    format!("a {field} is one line of at most {max} printable characters: left out")
 }
 
 /// `text` bounded to 80 characters, control characters escaped: a value from a file is shown,

@@ -424,6 +424,34 @@ fn names_and_values_from_a_file_are_escaped_in_the_profile_and_the_list() {
     assert!(lists(&imported, "line 4", "values", "not a list"), "{:?}", imported.unmapped);
 }
 
+#[test]
+fn text_too_long_or_unprintable_for_a_profile_costs_its_field_and_not_the_file() {
+    let long_name = "Current L1 ".repeat(30);
+    let text = format!(
+        "address,name,unit,group,description,values\n\
+         1,{long_name},Total signed: negative is exported,grid,,\n\
+         2,rtl\u{202E}name,V,\"esc\u{1b}[2J\",\"bell\u{7} {}\",\"0=off; 1=\u{202E}on\"\n",
+        "x".repeat(5000)
+    );
+    let (profile, imported) = imported(&text, Format::Csv, &ImportOptions::default());
+    let long = profile.points().iter().find(|p| p.address == 1).unwrap();
+    assert!(long.code.chars().count() <= 112 && long.code.starts_with("Current_L1_"), "{}", long.code);
+    assert_eq!(long.label.chars().count(), 256, "cut, with an ellipsis: {}", long.label);
+    assert!(lists(&imported, "line 2", "label", "longer than the 256 characters of a label: cut"));
+    assert_eq!(long.unit, None, "a unit of 33 characters is a shifted column, not a unit");
+    assert!(lists(&imported, "line 2", "unit", "at most 32 printable characters: left out"));
+    assert_eq!(long.group.as_deref(), Some("grid"));
+    let rtl = profile.points().iter().find(|p| p.address == 2).unwrap();
+    assert_eq!(rtl.code, "rtl_name", "a bidirectional control is no part of a code");
+    assert_eq!(rtl.label, "rtl\\u{202e}name");
+    assert_eq!(rtl.group, None);
+    assert!(lists(&imported, "line 3", "group", "left out"));
+    assert!(rtl.description.starts_with("bell\\u{7} xxx") && rtl.description.ends_with('…'));
+    assert!(lists(&imported, "line 3", "description", "longer than the 4096 characters"));
+    assert_eq!(rtl.values, vec![(0, "off".to_string())]);
+    assert!(lists(&imported, "line 3", "values", "a meaning is one line"));
+}
+
 proptest! {
     #![proptest_config(ProptestConfig::with_cases(256))]
 
