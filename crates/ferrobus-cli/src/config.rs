@@ -425,6 +425,7 @@ pub(crate) fn layer(matches: ArgMatches, args: Vec<OsString>) -> Result<(ArgMatc
             ))
         })?
     };
+    refuse_unused(&matches, &sources, &options)?;
     let settings = options
         .iter()
         .filter_map(|option| {
@@ -444,6 +445,38 @@ pub(crate) fn layer(matches: ArgMatches, args: Vec<OsString>) -> Result<(ArgMatc
         settings,
     };
     Ok((matches, layered))
+}
+
+/// An option that the chosen bus does not use (`--tcp HOST --baud 9600`) is a mistake, not a
+/// no-op: it is refused, with where it came from, if the command line gave it or a connection
+/// gave it beside that bus. `[defaults]` are for every bus, and a connection's line settings
+/// under a bus the command line gives instead are the connection's: those are left alone.
+fn refuse_unused(
+    matches: &ArgMatches,
+    sources: &BTreeMap<&str, Source>,
+    options: &[OptionDef],
+) -> Result<(), CliError> {
+    let Some(bus) = ["tcp", "rtu_tcp"].into_iter().find(|id| matches.try_get_raw(id).is_ok_and(|v| v.is_some())) else {
+        return Ok(());
+    };
+    let (unused, why) = crate::connect::unused_by(bus);
+    let bus_source = sources.get(bus);
+    let named: Vec<String> = options
+        .iter()
+        .filter(|option| unused.contains(&option.id.as_str()))
+        .filter_map(|option| match sources.get(option.id.as_str())? {
+            Source::Flag => Some(format!("--{}", option.long)),
+            source @ Source::Connection { .. } if Some(source) == bus_source => {
+                Some(format!("{} (from {source})", option.long))
+            }
+            Source::Connection { .. } | Source::Defaults { .. } | Source::BuiltIn => None,
+        })
+        .collect();
+    if named.is_empty() {
+        return Ok(());
+    }
+    let (verb, them) = if named.len() == 1 { ("does", "it") } else { ("do", "them") };
+    Err(CliError::Usage(format!("{why}: {} {verb} not apply to it; leave {them} out", named.join(", "))))
 }
 
 /// Runs `config show`.

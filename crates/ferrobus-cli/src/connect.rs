@@ -320,6 +320,27 @@ pub(crate) enum Rs485Arg {
 
 pub(crate) use crate::target::Target;
 
+/// The options of a serial line: a TCP connection has none (a serial gateway's line is set
+/// on the gateway).
+const SERIAL_LINE: [&str; 6] = ["baud", "parity", "data_bits", "stop_bits", "rs485", "low_latency"];
+
+/// The connection options (by clap id) that `bus` (`tcp` or `rtu_tcp`) does not use, and why:
+/// a serial line's settings with either, and RTU's gaps and echo with Modbus/TCP, whose frames
+/// are delimited by their length and never heard back.
+pub(crate) fn unused_by(bus: &str) -> (Vec<&'static str>, &'static str) {
+    match bus {
+        "tcp" => (
+            SERIAL_LINE.into_iter().chain(["t15", "t35", "echo"]).collect(),
+            "--tcp is Modbus/TCP, which has no serial line, gaps or echo",
+        ),
+        "rtu_tcp" => (
+            SERIAL_LINE.to_vec(),
+            "--rtu-tcp is a TCP connection, which has no serial line (a gateway's line is set on the gateway)",
+        ),
+        _ => (Vec::new(), ""),
+    }
+}
+
 impl ConnectArgs {
     /// The bus the options name, or a usage error if they name none or a bad one.
     pub(crate) fn target(&self) -> Result<Target, CliError> {

@@ -282,3 +282,29 @@ fn a_flag_set_false_in_a_connection_turns_off_the_defaults_true() {
     let doc = show(&dir.0, &["--conn", "quiet"]);
     assert_eq!(setting(&doc, "echo"), pair("false", &format!("connection quiet in {}", path.display())));
 }
+
+#[test]
+fn an_option_the_bus_does_not_use_is_refused_unless_it_is_a_default_or_the_connections() {
+    let dir = Scratch::new("config-unused");
+    let refused = |args: &[&str]| {
+        let out = ferrobus().env("XDG_CONFIG_HOME", &dir.0).args(args).args(["read", "holding", "0"]).assert().code(2);
+        stderr(&out)
+    };
+    let err = refused(&["--tcp", "127.0.0.1:1", "--baud", "9600"]);
+    assert!(err.contains("--tcp is Modbus/TCP") && err.contains("--baud does not apply to it; leave it out"), "{err}");
+    let err = refused(&["--tcp", "127.0.0.1:1", "--echo", "--t35", "10ms"]);
+    assert!(err.contains("--t35, --echo do not apply to it; leave them out"), "{err}");
+    // RTU over TCP has RTU's gaps, but the serial line is the gateway's.
+    let err = refused(&["--rtu-tcp", "127.0.0.1:1", "--t35", "10ms", "--parity", "none"]);
+    assert!(err.contains("--rtu-tcp is a TCP connection") && err.contains(": --parity does not apply"), "{err}");
+    // A connection that names a TCP bus and a baud rate is a mistake in the file.
+    let path = dir.file(
+        "ferrobus/config.toml",
+        "[defaults]\nbaud = 9600\n[connection.plc]\ntcp = \"127.0.0.1:1\"\nrs485 = \"rts\"\n",
+    );
+    let err = refused(&["--conn", "plc"]);
+    assert!(err.contains(&format!("rs485 (from connection plc in {}) does not apply", path.display())), "{err}");
+    // The defaults' baud rate is for the serial lines: with --tcp it is left alone.
+    let doc = show(&dir.0, &["--tcp", "127.0.0.1:1"]);
+    assert_eq!(setting(&doc, "baud").unwrap().0, "9600");
+}
