@@ -443,8 +443,9 @@ fn exception_hints(
             hints
         }
         (0x0A, Some(Target::Tcp(_) | Target::RtuTcp(_) | Target::Mbaps(_))) => vec![
-            "a gateway has no path to the unit: check --unit and the serial line behind the gateway; `ferrobus \
-             gateway` answers 0x0A too for a unit outside its --route or --allow-units: add the unit there"
+            "a gateway has no path to the unit: check --unit and the gateway's line to it (a serial line or a \
+             Modbus/TCP device); `ferrobus gateway` answers 0x0A too for a unit outside its --route or \
+             --allow-units: add the unit there"
                 .into(),
         ],
         _ => exception_hint(function, code, numbering).into_iter().collect(),
@@ -492,7 +493,14 @@ fn exception_hint(function: FunctionCode, code: ExceptionCode, numbering: &Numbe
         0x03 => return Some(illegal_value_hint(function)),
         0x04 => "the device failed while executing the request",
         0x05 | 0x06 => "the device is busy with a long operation; retry later",
-        0x0A | 0x0B => "a gateway could not reach the unit: check --unit and the serial line behind the gateway",
+        0x0A => {
+            "a gateway has no path to the unit: check --unit and the gateway's line to it (a serial line or a \
+                 Modbus/TCP device)"
+        }
+        0x0B => {
+            "the device behind a gateway did not answer it: check --unit, and that the device is on and reachable \
+                 from the gateway (on a serial line: wiring, baud rate and parity; over Modbus/TCP: its address)"
+        }
         0x21 => "Hitachi/Omron inverters: value out of the inverter's range",
         0x22 => "Hitachi/Omron inverters: not allowed in this state (e.g. while running, or a read-only register)",
         0x23 => "Hitachi/Omron inverters: the parameter is read-only",
@@ -697,6 +705,10 @@ mod tests {
         assert!(read.contains("add 1 to its --allow-functions") && !read.contains("--read-only"), "{read}");
         let path = exception_hints_on(FunctionCode::ReadCoils, 0x0A, &tcp);
         assert!(path.contains("--route or --allow-units"), "{path}");
+        // The device behind a gateway may be on a serial line or on Modbus/TCP.
+        assert!(path.contains("a serial line or a Modbus/TCP device"), "{path}");
+        let silent = exception_hints_on(FunctionCode::ReadCoils, 0x0B, &tcp);
+        assert!(silent.contains("did not answer") && silent.contains("over Modbus/TCP: its address"), "{silent}");
     }
 
     fn exception_03(function: FunctionCode) -> String {
