@@ -342,15 +342,15 @@ fn check(file: &str, format: Format) -> Result<(), CliError> {
 
 /// Shows every mistake of `file` and sums them up in the error.
 fn refuse(file: &str, mistakes: &[String], format: Format) -> CliError {
-    let shown = if format == Format::Json {
-        output::print(&output::json_line(&json!({ "file": file, "ok": false, "mistakes": mistakes })))
+    if format == Format::Json {
+        if let Err(e) = output::print(&output::json_line(&json!({ "file": file, "ok": false, "mistakes": mistakes }))) {
+            return e;
+        }
     } else {
-        let mut lines = mistakes.join("\n");
-        lines.push('\n');
-        output::write_to(&mut std::io::stderr(), "stderr", &lines)
-    };
-    if let Err(e) = shown {
-        return e;
+        // Through the crate's stderr: a full stderr leaves the exit code the mistakes' own.
+        for mistake in mistakes {
+            eprintln!("{mistake}");
+        }
     }
     let n = mistakes.len();
     CliError::Usage(format!("{file}: {n} mistake{}", if n == 1 { "" } else { "s" }))

@@ -40,6 +40,12 @@ fn a_full_stderr_keeps_a_failures_exit_code_and_turns_a_success_with_notes_or_a_
     // A usage error: its report cannot be written, its code stands.
     let unknown = with_full_stderr(&["--tcp", &sim.addr, "--device", "omron-3g3rx", "get", "no-such-parameter"]);
     assert_eq!(unknown.status.code(), Some(2));
+    // A profile with mistakes: they cannot be listed, the file is still refused as a usage error.
+    let bad = std::env::temp_dir().join(format!("ferrobus-cli-full-stderr-{}.toml", std::process::id()));
+    std::fs::write(&bad, "[device]\nname = 3\n").unwrap();
+    let checked = with_full_stderr(&["profile", "check", bad.to_str().unwrap()]);
+    std::fs::remove_file(&bad).unwrap();
+    assert_eq!(checked.status.code(), Some(2), "{}", text(&checked.stdout));
     // A success that writes nothing to stderr is a success.
     let quiet = with_full_stderr(&["--tcp", &sim.addr, "--device", "omron-3g3rx", "get", "F002"]);
     assert_eq!(quiet.status.code(), Some(0));
