@@ -12,10 +12,12 @@
 //! - The server ([`ServerTls`]) speaks TLS 1.2 or 1.3, never older; it
 //!   asks every client for a certificate and refuses the handshake, with a fatal alert, of a
 //!   client that shows none or one not issued by the configured CA (R-02, R-06, R-07, R-10,
-//!   The cipher suites are rustls's with the `ring` provider: with ECDSA keys
-//!   `TLS_ECDHE_ECDSA_WITH_AES_128_GCM_SHA256`, with RSA keys
-//!   `TLS_ECDHE_RSA_WITH_AES_128_GCM_SHA256`; none uses MD5 or SHA-1 for its MAC
-//!
+//!   The cipher suites are rustls's with the `ring` provider, chosen in the
+//!   client's order of preference: under TLS 1.2, ECDHE with AES-256-GCM-SHA384 (what rustls
+//!   and OpenSSL clients ask for first), AES-128-GCM-SHA256 or ChaCha20-Poly1305, among them
+//!   the required `TLS_ECDHE_ECDSA_WITH_AES_128_GCM_SHA256` and, with RSA
+//!   keys, `TLS_ECDHE_RSA_WITH_AES_128_GCM_SHA256`; all are AEAD, none uses MD5 or
+//!   SHA-1 for its MAC.
 //! - The role is read from the client certificate's extension 1.3.6.1.4.1.50316.802.1, a DER
 //!   `UTF8String` ([`role_of`], R-21, R-22, R-65); without the extension the client has the
 //!   NULL role. A role in another encoding, a malformed one or two role extensions
@@ -613,5 +615,34 @@ pub(crate) async fn handshake(
             }
             None
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use rustls::CipherSuite::*;
+
+    use super::*;
+
+    /// The TLS 1.2 suites the module documentation and the README name, in rustls's order.
+    #[test]
+    fn the_tls_1_2_suites_are_the_documented_ones_with_the_required_ones_among_them() {
+        let tls12: Vec<_> = provider()
+            .cipher_suites
+            .iter()
+            .filter(|suite| suite.version() == &rustls::version::TLS12)
+            .map(rustls::SupportedCipherSuite::suite)
+            .collect();
+        assert_eq!(
+            tls12,
+            [
+                TLS_ECDHE_ECDSA_WITH_AES_256_GCM_SHA384,
+                TLS_ECDHE_ECDSA_WITH_AES_128_GCM_SHA256,
+                TLS_ECDHE_ECDSA_WITH_CHACHA20_POLY1305_SHA256,
+                TLS_ECDHE_RSA_WITH_AES_256_GCM_SHA384,
+                TLS_ECDHE_RSA_WITH_AES_128_GCM_SHA256,
+                TLS_ECDHE_RSA_WITH_CHACHA20_POLY1305_SHA256,
+            ]
+        );
     }
 }
