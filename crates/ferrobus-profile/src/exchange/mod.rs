@@ -30,7 +30,7 @@ mod ha;
 mod write;
 mod yaml;
 
-use std::collections::HashMap;
+use std::collections::{HashMap, HashSet};
 use std::fmt;
 
 pub use csv::export_csv;
@@ -234,6 +234,8 @@ pub(crate) struct Draft {
     pub(crate) unmapped: Vec<Unmapped>,
     /// Per table, the addresses taken: (first, end, entry index).
     taken: HashMap<Table, Vec<(u32, u32, usize)>>,
+    /// The codes taken, in lower case.
+    codes: HashSet<String>,
     /// What [`Draft::unmapped_once`] listed: (field, value, why) -> index in `unmapped`.
     repeated: HashMap<(String, String, String), usize>,
     /// How many more places each of those was seen at: (index in `unmapped`, count).
@@ -249,6 +251,7 @@ impl Draft {
             entries: Vec::new(),
             unmapped: Vec::new(),
             taken: HashMap::new(),
+            codes: HashSet::new(),
             repeated: HashMap::new(),
             more: Vec::new(),
         }
@@ -344,18 +347,21 @@ impl Draft {
             return;
         }
         taken.push((first, end, self.entries.len()));
-        // Codes are unique in a table (a profile may give a register and an input one code).
-        let taken = |entries: &[Entry], name: &str| entries.iter().any(|e| e.table == entry.table && e.name == name);
-        if taken(&self.entries, &entry.name) {
+        // A code is the profile's one, in any case and every table: `get` finds a point by its
+        // code whatever its case, and the profile's check refuses two points with one.
+        if self.codes.contains(&entry.name.to_lowercase()) {
             let base = entry.name.clone();
-            // Fewer entries than suffixes: one of the first `len + 2` is free.
-            let free = (2..self.entries.len() + 3).map(|n| format!("{base}_{n}")).find(|n| !taken(&self.entries, n));
+            // Fewer codes than suffixes: one of the first `len + 2` is free.
+            let free = (2..self.codes.len() + 3)
+                .map(|n| format!("{base}_{n}"))
+                .find(|n| !self.codes.contains(&n.to_lowercase()));
             if let Some(free) = free {
                 let at = entry.place.clone();
                 self.unmapped(&at, "name", &base, &format!("taken by an earlier entry: written as {free}"));
                 entry.name = free;
             }
         }
+        self.codes.insert(entry.name.to_lowercase());
         self.entries.push(entry);
     }
 

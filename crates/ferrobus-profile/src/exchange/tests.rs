@@ -126,8 +126,14 @@ fn csv_rows_at_the_same_address_are_one_point_or_listed_and_names_stay_unique() 
         wide,holding,20,u32,ro\n\
         inside,holding,21,u16,ro\n\
         bit,coils,5,,ro\n\
-        sensor,input,7,,rw\n";
+        sensor,input,7,,rw\n\
+        Speed,input,8,,ro\n\
+        wide,input,9,,ro\n";
     let (profile, imported) = imported(text, Format::Csv, &ImportOptions::default());
+    // A code is the profile's one, in every table and whatever its case.
+    assert_eq!((point(&profile, "Speed_3").table, point(&profile, "Speed_3").address), (Table::Input, 8));
+    assert!(lists(&imported, "line 9", "name", "written as Speed_3"));
+    assert_eq!(point(&profile, "wide_2").table, Table::Input);
     assert_eq!(point(&profile, "speed").access, Access::Rw, "read in one row, written in another: one rw point");
     assert!(lists(&imported, "line 3", "name", "one point, rw"));
     assert_eq!(point(&profile, "speed_2").address, 11);
