@@ -69,7 +69,15 @@ impl Input {
         match self {
             Input::Text { text, format, unit, base } => {
                 let format = EXAMPLES[usize::from(format) % EXAMPLES.len()].1;
-                (text, format, ImportOptions { name: None, unit, base: u16::from(base % 3) })
+                (
+                    text,
+                    format,
+                    ImportOptions {
+                        unit,
+                        base: (base % 3 > 0).then(|| u16::from(base % 3 - 1)),
+                        ..ImportOptions::default()
+                    },
+                )
             }
             Input::Edited { example, edits, unit } => {
                 let (text, format) = EXAMPLES[usize::from(example) % EXAMPLES.len()];
@@ -77,8 +85,8 @@ impl Input {
                 for edit in edits {
                     edit.apply(&mut text, &TOKENS);
                 }
-                let base = u16::from(format == Format::Csv);
-                (text, format, ImportOptions { name: None, unit, base })
+                let base = (format == Format::Csv).then_some(1);
+                (text, format, ImportOptions { unit, base, ..ImportOptions::default() })
             }
         }
     }

@@ -68,10 +68,15 @@ pub(crate) enum Action {
         /// file describes several devices
         #[arg(long = "only-unit", value_name = "UNIT")]
         only_unit: Option<u8>,
+        /// Only the entries of the evcc device of this name (a meter's or charger's `name:`):
+        /// needed when the file describes several, one profile each; it names the profile
+        #[arg(long = "only-device", value_name = "NAME")]
+        only_device: Option<String>,
         /// The number the CSV gives the first register (1 for a manual's register numbers);
-        /// subtracted from every CSV address
-        #[arg(long = "first-address", value_name = "N", default_value_t = 0)]
-        first_address: u16,
+        /// subtracted from every CSV address. Unless given, a file whose every address is a
+        /// Modicon number (30001, 40001, ...) is read as one (with a note), any other from 0
+        #[arg(long = "first-address", value_name = "N")]
+        first_address: Option<u16>,
     },
     /// Write a profile as a CSV register list (one row per point, the columns `import --from
     /// csv` reads back)
@@ -116,8 +121,13 @@ pub(crate) fn run(args: &ProfileArgs) -> Result<(), CliError> {
         Action::List => list(format),
         Action::Show { name, group } => show(name, group.as_deref(), format),
         Action::Check { file } => check(file, format),
-        Action::Import { file, from, output, force, name, only_unit, first_address } => {
-            let options = ImportOptions { name: name.clone(), unit: *only_unit, base: *first_address };
+        Action::Import { file, from, output, force, name, only_unit, only_device, first_address } => {
+            let options = ImportOptions {
+                name: name.clone(),
+                unit: *only_unit,
+                device: only_device.clone(),
+                base: *first_address,
+            };
             import(file, *from, &options, output.as_deref(), *force, format)
         }
         Action::Export { name, to: ExportFormat::Csv, output, force } => {
@@ -165,7 +175,7 @@ fn import(
     let n = imported.unmapped.len();
     if format == Format::Json {
         let doc = json!({
-            "file": shown, "from": from.name(), "points": imported.points,
+            "file": shown, "from": from.name(), "points": imported.points, "notes": imported.notes,
             "profile": output.map_or_else(|| json!(imported.toml), |p| json!(p.display().to_string())),
             "unmapped": imported.unmapped.iter().map(|u| json!({
                 "place": u.place, "field": u.field, "value": u.value, "why": u.why,
@@ -177,10 +187,14 @@ fn import(
         output::print(&imported.toml)?;
     }
     let mut report = not_mapped(&imported.unmapped);
+    for note in &imported.notes {
+        let _ = writeln!(report, "note: {note}");
+    }
     let _ = writeln!(
         report,
-        "{shown}: {} points imported{}; {n} thing{} not mapped{}",
+        "{shown}: {} point{} imported{}; {n} thing{} not mapped{}",
         imported.points,
+        if imported.points == 1 { "" } else { "s" },
         output.map(|p| format!(" into {}", p.display())).unwrap_or_default(),
         if n == 1 { "" } else { "s" },
         if n == 0 { "" } else { " (listed above)" },
@@ -188,11 +202,37 @@ fn import(
     output::write_to(&mut std::io::stderr(), "stderr", &report)
 }
 
-/// The `not mapped: ...` lines of `list`.
+/// The most `not mapped: ...` lines a report shows; the rest are counted by field.
+const SHOWN_UNMAPPED: usize = 100;
+
+/// The `not mapped: ...` lines of `list`: the first [`SHOWN_UNMAPPED`], then how many more
+/// of each field (`--json` lists them all).
 fn not_mapped(list: &[exchange::Unmapped]) -> String {
     let mut lines = String::new();
-    for u in list {
+    for u in list.iter().take(SHOWN_UNMAPPED) {
         let _ = writeln!(lines, "not mapped: {u}");
+    }
+    let rest = list.get(SHOWN_UNMAPPED..).unwrap_or_default();
+    if !rest.is_empty() {
+        let mut fields: Vec<(&str, usize)> = Vec::new();
+        for u in rest {
+            match fields.iter_mut().find(|(field, _)| *field == u.field) {
+                Some((_, count)) => *count += 1,
+                None => fields.push((&u.field, 1)),
+            }
+            if fields.len() > SHOWN_UNMAPPED {
+                break;
+            }
+        }
+        fields.sort_by_key(|(_, count)| std::cmp::Reverse(*count));
+        let counted: usize = fields.iter().map(|(_, count)| count).sum();
+        let mut by_field: Vec<String> =
+            fields.iter().take(8).map(|(field, count)| format!("{count} {field}")).collect();
+        if counted < rest.len() || fields.len() > 8 {
+            by_field.push("...".to_string());
+        }
+        let _ =
+            writeln!(lines, "not mapped: ... and {} more ({}; --json lists them all)", rest.len(), by_field.join(", "));
     }
     lines
 }

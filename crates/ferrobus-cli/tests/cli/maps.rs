@@ -154,3 +154,131 @@ fn a_map_imported_is_served_by_sim_and_read_back_with_get() {
     assert!(!refused.get_output().status.success(), "an input register is read-only");
     assert!(Path::new(profile.path()).exists());
 }
+
+/// A reference device for the published-shape maps: the registers where the meters' manuals
+/// put them, by their frame addresses, with readings as defaults.
+const METERS: &str = r#"
+[device]
+name = "reference meters"
+vendor = "test"
+product_code = "reference"
+revision = "1"
+identification = false
+
+[addressing]
+base = 0
+
+[[inputs]]
+number = 0
+name = "l1_volts"
+type = "f32"
+default = 231.5
+
+[[inputs]]
+number = 342
+name = "total_kwh"
+type = "f32"
+default = 1234.5
+
+[[registers]]
+number = 12
+name = "demand_period"
+type = "f32"
+access = "rw"
+default = 15.0
+
+[[registers]]
+number = 0x5000
+name = "active_import"
+type = "u64"
+default = 123456
+
+[[registers]]
+number = 0x5B00
+name = "l1_n"
+type = "u32"
+default = 2302
+
+[[registers]]
+number = 0x5B14
+name = "active_power"
+type = "i32"
+default = -150025
+"#;
+
+/// The engineering values and units of `codes`, read with `get` through `profile` from `sim`.
+fn readings(sim: &TcpSim, profile: &str, codes: &[&str]) -> Vec<(Option<f64>, Value)> {
+    let mut args = vec!["--device", profile, "get"];
+    args.extend_from_slice(codes);
+    args.push("--json");
+    let doc: Value = serde_json::from_str(&stdout(&sim.run(&args).success())).unwrap();
+    let points = doc["points"].as_array().unwrap();
+    codes
+        .iter()
+        .map(|code| {
+            let found = points.iter().find(|v| v["code"] == *code).unwrap_or_else(|| panic!("{code}: {points:?}"));
+            (found["engineering"].as_f64(), found["unit"].clone())
+        })
+        .collect()
+}
+
+#[test]
+fn vendor_lists_in_the_shapes_people_publish_read_the_devices_values() {
+    let reference = Temp::new("reference.toml");
+    std::fs::write(&reference.0, METERS).unwrap();
+    let sim = TcpSim::start(reference.path(), None);
+    // Eastron's Modicon numbers: recognised, with a note; every read lands where the manual says.
+    let (sdm, report) = import(&example("published/sdm630.csv"), "csv", &[], "sdm630.toml");
+    assert!(report.contains("note: Every address is a Modicon register number"), "{report}");
+    assert!(report.contains("8 points imported") && report.contains("0 things not mapped"), "{report}");
+    let values = readings(&sim, sdm.path(), &["Phase_1_line_to_neutral_volts", "Total_kWh", "Demand_period"]);
+    assert_eq!(
+        values,
+        [(Some(231.5), Value::from("V")), (Some(1234.5), Value::from("kWh")), (Some(15.0), Value::from("minutes"))]
+    );
+    // ABB's hex start registers, sizes and resolutions.
+    let (abb, report) = import(&example("published/abb-b23.csv"), "csv", &[], "abb.toml");
+    assert!(report.contains("6 points imported") && report.contains("0 things not mapped"), "{report}");
+    let values = readings(&sim, abb.path(), &["Active_import", "Voltage_L1-N", "Active_power"]);
+    assert_eq!(
+        values,
+        [(Some(1234.56), Value::from("kWh")), (Some(230.2), Value::from("V")), (Some(-1500.25), Value::from("W"))]
+    );
+}
+
+#[test]
+fn an_evcc_file_of_two_devices_imports_one_profile_per_device() {
+    let map = example("published/evcc-meter-and-wallbox.yaml");
+    let refused = offline(&["profile", "import", &map, "--from", "evcc-yaml"]).code(2);
+    let err = stderr(&refused);
+    assert!(err.contains("describes 2 devices (grid at 192.168.1.50:502, wallbox at 192.168.1.60:502)"), "{err}");
+    assert!(stdout(&refused).is_empty());
+    let (grid, report) = import(&map, "evcc-yaml", &["--only-device", "grid"], "grid.toml");
+    assert!(report.contains("2 points imported"), "{report}");
+    assert!(report.contains("template = sma-inverter: an evcc template"), "{report}");
+    let text = std::fs::read_to_string(&grid.0).unwrap();
+    assert!(text.contains("name = \"grid\"") && text.contains("name = \"grid.energy\""), "{text}");
+    assert!(!text.contains("wallbox"), "{text}");
+    let (wallbox, report) = import(&map, "evcc-yaml", &["--only-device", "wallbox"], "wallbox.toml");
+    assert!(report.contains("3 points imported"), "{report}");
+    let check = stdout(&offline(&["profile", "check", wallbox.path()]).success());
+    assert!(check.contains(": ok: "), "{check}");
+}
+
+#[test]
+fn a_long_list_of_what_was_not_mapped_is_summed_up_past_a_hundred_lines() {
+    let map = Temp::new("many.csv");
+    let mut text = String::from("address,name,colour\n0,first,red\n");
+    for n in 0..5000 {
+        let _ = std::fmt::Write::write_fmt(&mut text, format_args!("x{n},bad,\n"));
+    }
+    std::fs::write(&map.0, &text).unwrap();
+    let (_, report) = import(map.path(), "csv", &[], "many.toml");
+    let lines: Vec<&str> = report.lines().filter(|l| l.starts_with("not mapped:")).collect();
+    assert_eq!(lines.len(), 101, "{report}");
+    assert!(lines[100].contains("... and 4901 more (4900 address, 1 colour; --json lists them all)"), "{}", lines[100]);
+    assert!(report.contains("1 point imported into") && report.contains("5001 things not mapped"), "{report}");
+    let all = offline(&["profile", "import", map.path(), "--from", "csv", "--json"]).success();
+    let doc: Value = serde_json::from_str(&stdout(&all)).unwrap();
+    assert_eq!(doc["unmapped"].as_array().unwrap().len(), 5001);
+}

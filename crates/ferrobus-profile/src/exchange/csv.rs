@@ -7,6 +7,12 @@
 //! register, without a type a u16 (a bit in the bit tables), without an access read/write in
 //! the writable tables (coils, holding registers) and read-only in the others.
 //! A column of no meaning in a profile is listed once, with how many rows had a value in it.
+//!
+//! Meters' manuals (Eastron, Carlo Gavazzi, ABB) and the lists made from them number registers
+//! Modicon-style: 30001 is input register 0, 40001 holding register 0. A file whose every
+//! address is such a number is read so (with a note) unless `--first-address` says how it
+//! numbers; an address column headed as hex (`Address (hex)`, `Start reg (Hex)`) is read as
+//! hex, `0x` or not. Without a name column, a row is named after its description.
 
 use std::collections::HashMap;
 
@@ -39,7 +45,24 @@ const COLUMNS: [&str; 18] = [
 /// Other names of each column, as vendors' lists and other tools write them (compared in
 /// lower case with blanks, `_`, `-`, `.` and `/` removed).
 const ALIASES: &[(&str, &[&str])] = &[
-    ("name", &["code", "tag", "tagname", "parameter", "param", "point", "signal", "variable", "registername"]),
+    (
+        "name",
+        &[
+            "code",
+            "tag",
+            "tagname",
+            "parameter",
+            "parametername",
+            "param",
+            "point",
+            "signal",
+            "variable",
+            "registername",
+            "measurement",
+            // ABB's meter lists: the quantity measured ("Active import"); the registers are "Size".
+            "quantity",
+        ],
+    ),
     (
         "table",
         &[
@@ -57,37 +80,125 @@ const ALIASES: &[(&str, &[&str])] = &[
     ),
     (
         "address",
-        &["addr", "register", "reg", "registeraddress", "modbusaddress", "startaddress", "start", "number", "no"],
+        &[
+            "addr",
+            "register",
+            "reg",
+            "registeraddress",
+            "modbusaddress",
+            "modbusaddr",
+            "modbusregister",
+            "modbusregisteraddress",
+            "registernumber",
+            "registerno",
+            "regno",
+            "regaddress",
+            "startaddress",
+            "startingaddress",
+            "startreg",
+            "startregister",
+            "start",
+            "number",
+            "no",
+        ],
     ),
-    ("type", &["datatype", "valuetype", "format", "dtype"]),
-    ("length", &["registers", "words", "quantity", "size", "len"]),
+    ("type", &["datatype", "valuetype", "format", "dataformat", "dtype", "encoding"]),
+    (
+        "length",
+        &[
+            "registers",
+            "words",
+            "size",
+            "len",
+            "lengthwords",
+            "numberofregisters",
+            "noofregisters",
+            "registercount",
+            "wordcount",
+        ],
+    ),
     ("order", &["wordorder", "byteorder", "endian", "endianness", "swap"]),
-    ("scale", &["factor", "multiplier", "gain", "scaling", "resolution"]),
-    ("unit", &["units", "uom", "engunit", "engineeringunit", "unitofmeasurement"]),
+    ("scale", &["factor", "multiplier", "gain", "scaling", "resolution", "res", "scalefactor"]),
+    ("unit", &["units", "uom", "engunit", "engineeringunit", "engineeringunits", "unitofmeasurement"]),
     ("access", &["rw", "mode", "permission", "permissions", "readwrite"]),
     ("min", &["minimum", "minvalue", "low", "rangemin"]),
     ("max", &["maximum", "maxvalue", "high", "rangemax"]),
     ("group", &["category", "section"]),
     ("label", &["title", "displayname", "caption"]),
-    ("description", &["desc", "comment", "comments", "notes", "note", "remark", "remarks", "meaning"]),
+    ("description", &["desc", "comment", "comments", "notes", "note", "remark", "remarks", "meaning", "details"]),
     ("values", &["enum", "enumeration", "options", "states"]),
     ("bits", &["bitfield", "flags"]),
     ("default", &["defaultvalue", "factorydefault", "initial", "init"]),
 ];
 
-/// A header cell as compared: lower case, without blanks and `_-./`.
+/// A header cell as compared: lower case, without blanks, `_-./` and brackets.
 fn folded(cell: &str) -> String {
-    cell.chars().filter(|c| !c.is_whitespace() && !"_-./".contains(*c)).flat_map(char::to_lowercase).collect()
+    cell.chars().filter(|c| !c.is_whitespace() && !"_-./()[]".contains(*c)).flat_map(char::to_lowercase).collect()
 }
 
-/// The column a header cell names, if any.
-fn column_of(cell: &str) -> Option<&'static str> {
+/// The column a header cell names, if any, and whether it says its numbers are hex (an
+/// address column headed `Address (hex)`, `Hex address`).
+fn column_of(cell: &str) -> Option<(&'static str, bool)> {
     let cell = folded(cell);
-    COLUMNS
-        .iter()
-        .copied()
-        .find(|c| *c == cell)
-        .or_else(|| ALIASES.iter().find(|(_, aliases)| aliases.contains(&cell.as_str())).map(|(column, _)| *column))
+    let named = |cell: &str| {
+        COLUMNS
+            .iter()
+            .copied()
+            .find(|c| *c == cell)
+            .or_else(|| ALIASES.iter().find(|(_, aliases)| aliases.contains(&cell)).map(|(column, _)| *column))
+    };
+    if let Some(column) = named(&cell) {
+        return Some((column, false));
+    }
+    let plain = cell.replacen("hex", "", 1);
+    named(&plain).filter(|column| plain != cell && *column == "address").map(|column| (column, true))
+}
+
+/// How a file numbers its registers.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+enum Numbering {
+    /// Addresses from this number (the first register's).
+    From(u16),
+    /// Addresses as hex numbers, from 0.
+    Hex,
+    /// Modicon register numbers: the first digit the table, the rest from 1.
+    Modicon,
+}
+
+/// A Modicon register number: five digits (six for the 65536 registers of a table), the first
+/// the table's (0 coils, 1 discrete inputs, 3 input registers, 4 holding registers), the rest
+/// the register's from 1 — the table and the frame's address.
+fn modicon(text: &str) -> Option<(Table, u16)> {
+    let text = text.trim();
+    if !matches!(text.len(), 5 | 6) || !text.bytes().all(|b| b.is_ascii_digit()) {
+        return None;
+    }
+    let table = match text.as_bytes().first()? {
+        b'0' => Table::Coils,
+        b'1' => Table::DiscreteInputs,
+        b'3' => Table::Input,
+        b'4' => Table::Holding,
+        _ => return None,
+    };
+    let register: u32 = text.get(1..)?.parse().ok()?;
+    let last = if text.len() == 5 { 9999 } else { 0x1_0000 };
+    let address = u16::try_from(register.checked_sub(1)?).ok()?;
+    (register <= last).then_some((table, address))
+}
+
+/// Whether `addresses` (a file's address cells) are Modicon register numbers: every one is,
+/// all of one length, and one at least is not a coil's (`00001`-style numbers alone may be
+/// plain numbers padded with zeros).
+fn all_modicon<'a>(mut addresses: impl Iterator<Item = &'a str>) -> bool {
+    let mut length = None;
+    let mut registers = false;
+    let all = addresses.all(|text| {
+        let text = text.trim();
+        let Some((table, _)) = modicon(text) else { return false };
+        registers |= table != Table::Coils;
+        *length.get_or_insert(text.len()) == text.len()
+    });
+    all && registers
 }
 
 /// Reads the CSV `text` into `draft`.
@@ -99,21 +210,18 @@ pub(super) fn read(text: &str, draft: &mut Draft) -> Result<(), ImportError> {
         })?;
     let delimiter =
         [b',', b';', b'\t'].into_iter().max_by_key(|d| header_line.bytes().filter(|b| b == d).count()).unwrap_or(b',');
-    let mut reader = ::csv::ReaderBuilder::new()
-        .delimiter(delimiter)
-        .comment(Some(b'#'))
-        .flexible(true)
-        .trim(::csv::Trim::All)
-        .from_reader(text.as_bytes());
+    let mut reader = reader_for(text, delimiter);
     let headers = reader.headers().map_err(|e| draft.malformed(format!("the header line: {e}")))?.clone();
     let mut columns: HashMap<&'static str, usize> = HashMap::new();
     let mut ignored: Vec<(usize, String)> = Vec::new();
+    let mut hex = false;
     for (i, cell) in headers.iter().enumerate() {
         match column_of(cell) {
-            Some(column) if !columns.contains_key(column) => {
+            Some((column, in_hex)) if !columns.contains_key(column) => {
                 columns.insert(column, i);
+                hex |= in_hex;
             }
-            Some(column) => {
+            Some((column, _)) => {
                 let why = format!("a second {column} column: the first one is read");
                 draft.unmapped("header", cell, "", &why);
             }
@@ -121,12 +229,33 @@ pub(super) fn read(text: &str, draft: &mut Draft) -> Result<(), ImportError> {
             None => ignored.push((i, cell.to_string())),
         }
     }
-    if !columns.contains_key("address") {
+    let Some(&address_column) = columns.get("address") else {
         return Err(draft.malformed(format!(
             "the header line {:?} has no address column (address, register, addr, ...)",
             super::shown(header_line)
         )));
-    }
+    };
+    let numbering = match draft.options.base {
+        Some(base) => Numbering::From(base),
+        None if hex => Numbering::Hex,
+        None => {
+            // A second reader over the same text: the numbering is the whole file's.
+            let mut again = reader_for(text, delimiter);
+            let records: Vec<_> = again.records().filter_map(Result::ok).collect();
+            let cells = records.iter().filter_map(|r| r.get(address_column)).filter(|a| !a.is_empty());
+            if all_modicon(cells) {
+                draft.notes.push(
+                    "Every address is a Modicon register number: 30001 is read as input register 0, 40001 as \
+                     holding register 0 (10001 a discrete input, 00001 a coil); --first-address N reads them as \
+                     numbers from N instead."
+                        .to_string(),
+                );
+                Numbering::Modicon
+            } else {
+                Numbering::From(0)
+            }
+        }
+    };
     let mut ignored_counts = vec![0usize; ignored.len()];
     for (n, record) in reader.records().enumerate() {
         let record = record.map_err(|e| draft.malformed(format!("row {}: {e}", n + 1)))?;
@@ -141,7 +270,7 @@ pub(super) fn read(text: &str, draft: &mut Draft) -> Result<(), ImportError> {
             }
         }
         let cell = |column: &str| columns.get(column).and_then(|i| record.get(*i)).filter(|v| !v.is_empty());
-        row(&cell, &place, draft);
+        row(&cell, &place, numbering, draft);
     }
     for ((_, name), count) in ignored.iter().zip(ignored_counts) {
         let why = format!("no such column in a profile ({count} rows have a value in it)");
@@ -150,8 +279,18 @@ pub(super) fn read(text: &str, draft: &mut Draft) -> Result<(), ImportError> {
     Ok(())
 }
 
-/// One row, its cells by column.
-fn row<'a>(cell: &dyn Fn(&str) -> Option<&'a str>, place: &str, draft: &mut Draft) {
+/// A CSV reader of `text`, its header first.
+fn reader_for(text: &str, delimiter: u8) -> ::csv::Reader<&[u8]> {
+    ::csv::ReaderBuilder::new()
+        .delimiter(delimiter)
+        .comment(Some(b'#'))
+        .flexible(true)
+        .trim(::csv::Trim::All)
+        .from_reader(text.as_bytes())
+}
+
+/// One row, its cells by column, its addresses numbered by `numbering`.
+fn row<'a>(cell: &dyn Fn(&str) -> Option<&'a str>, place: &str, numbering: Numbering, draft: &mut Draft) {
     let table = match cell("table") {
         None => Table::Holding,
         Some(text) => {
@@ -167,13 +306,7 @@ fn row<'a>(cell: &dyn Fn(&str) -> Option<&'a str>, place: &str, draft: &mut Draf
         draft.unmapped(place, "address", "", "no address: row skipped");
         return;
     };
-    let Some(address) = number(address_text).and_then(|a| a.checked_sub(u32::from(draft.options.base))) else {
-        let why = if draft.options.base > 0 {
-            format!("not an address of {} or more (the first address): row skipped", draft.options.base)
-        } else {
-            "not an address (0-65535, decimal or 0x hex): row skipped".to_string()
-        };
-        draft.unmapped(place, "address", address_text, &why);
+    let Some((table, address)) = address_of(address_text, table, cell("table"), place, numbering, draft) else {
         return;
     };
     let Ok(address) = u16::try_from(address) else {
@@ -181,7 +314,10 @@ fn row<'a>(cell: &dyn Fn(&str) -> Option<&'a str>, place: &str, draft: &mut Draf
         return;
     };
     let default_name = format!("{}_{address}", table.name());
-    let mut entry = Entry::new(table, address, cell("name").unwrap_or(&default_name), place.to_string());
+    // Without a name column, the description names the row (a manual's "Parameter" list).
+    let described = cell("name").is_none() && cell("description").is_some();
+    let name = cell("name").or(cell("description").filter(|_| described)).unwrap_or(&default_name);
+    let mut entry = Entry::new(table, address, name, place.to_string());
     entry.access = if matches!(table, Table::Coils | Table::Holding) { Access::Rw } else { Access::Ro };
     shape(cell, &mut entry, place, draft);
     if let Some(text) = cell("scale") {
@@ -212,7 +348,9 @@ fn row<'a>(cell: &dyn Fn(&str) -> Option<&'a str>, place: &str, draft: &mut Draf
     if let Some(label) = cell("label") {
         entry.label = Some(label.to_string());
     }
-    entry.description = cell("description").unwrap_or_default().to_string();
+    if !described {
+        entry.description = cell("description").unwrap_or_default().to_string();
+    }
     for (column, bits) in [("values", false), ("bits", true)] {
         if let Some(text) = cell(column) {
             match pairs(text, bits) {
@@ -235,6 +373,48 @@ fn row<'a>(cell: &dyn Fn(&str) -> Option<&'a str>, place: &str, draft: &mut Draf
     draft.add(entry);
 }
 
+/// The table and address of a row's `address_text` as the file numbers them, its `table` the
+/// row's (from `table_cell`, if it has one); an address that cannot be read is listed.
+fn address_of(
+    address_text: &str,
+    table: Table,
+    table_cell: Option<&str>,
+    place: &str,
+    numbering: Numbering,
+    draft: &mut Draft,
+) -> Option<(Table, u32)> {
+    Some(match numbering {
+        Numbering::Modicon => {
+            // Every address is one: the check read the whole file.
+            let (numbered, address) = modicon(address_text)?;
+            if let Some(given) = table_cell.filter(|_| numbered != table) {
+                let why = format!("the Modicon number {address_text} is a {}: read as one", numbered.name());
+                draft.unmapped(place, "table", given, &why);
+            }
+            (numbered, u32::from(address))
+        }
+        Numbering::Hex => {
+            let Some(address) = hex_number(address_text) else {
+                draft.unmapped(place, "address", address_text, "not a hex address (the column says hex): row skipped");
+                return None;
+            };
+            (table, address)
+        }
+        Numbering::From(base) => {
+            let Some(address) = number(address_text).and_then(|a| a.checked_sub(u32::from(base))) else {
+                let why = if base > 0 {
+                    format!("not an address of {base} or more (the first address): row skipped")
+                } else {
+                    "not an address (0-65535, decimal or 0x hex): row skipped".to_string()
+                };
+                draft.unmapped(place, "address", address_text, &why);
+                return None;
+            };
+            (table, address)
+        }
+    })
+}
+
 /// The cells that say what a register holds: `type`, `length`, `order`.
 fn shape<'a>(cell: &dyn Fn(&str) -> Option<&'a str>, entry: &mut Entry, place: &str, draft: &mut Draft) {
     let table = entry.table;
@@ -251,6 +431,18 @@ fn shape<'a>(cell: &dyn Fn(&str) -> Option<&'a str>, entry: &mut Entry, place: &
                 "not a type (u16, i16, u32, i32, u64, i64, f32, f64, string): read as u16",
             ),
         }
+    }
+    // A type without its width ("Unsigned", "Signed") takes it from the registers the row gives.
+    let widthless = cell("type").map(folded).filter(|t| ["unsigned", "signed", "uint", "int"].contains(&t.as_str()));
+    if let (Some(kind), Some(length)) = (widthless, cell("length").and_then(|l| l.parse::<u16>().ok())) {
+        let signed = kind != "unsigned" && kind != "uint";
+        entry.value_type = match (length, signed) {
+            (2, false) => ValueType::U32,
+            (2, true) => ValueType::I32,
+            (4, false) => ValueType::U64,
+            (4, true) => ValueType::I64,
+            _ => entry.value_type,
+        };
     }
     if let Some(text) = cell("length") {
         match text.parse::<u16>() {
@@ -302,12 +494,13 @@ fn table_of(text: &str) -> Option<Table> {
 fn type_of(text: &str) -> Option<ValueType> {
     Some(match folded(text).as_str() {
         "u16" | "uint16" | "uint" | "unsigned" | "unsigned16" | "word" | "ushort" => ValueType::U16,
-        "i16" | "int16" | "int" | "signed" | "signed16" | "sint16" | "short" => ValueType::I16,
+        "i16" | "int16" | "int" | "signed" | "signed16" | "sint16" | "s16" | "short" => ValueType::I16,
         "u32" | "uint32" | "unsigned32" | "dword" | "udint" | "ulong" => ValueType::U32,
-        "i32" | "int32" | "signed32" | "sint32" | "dint" | "long" => ValueType::I32,
+        "i32" | "int32" | "signed32" | "sint32" | "s32" | "dint" | "long" => ValueType::I32,
         "u64" | "uint64" | "unsigned64" | "ulint" | "lword" => ValueType::U64,
-        "i64" | "int64" | "signed64" | "sint64" | "lint" => ValueType::I64,
-        "f32" | "float" | "float32" | "real" | "single" | "ieee754" => ValueType::F32,
+        "i64" | "int64" | "signed64" | "sint64" | "s64" | "lint" => ValueType::I64,
+        "f32" | "float" | "float32" | "real" | "single" | "ieee754" | "ieee754float" | "32bitfloat" | "float32bit"
+        | "floatingpoint" => ValueType::F32,
         "f64" | "double" | "float64" | "lreal" => ValueType::F64,
         "string" | "str" | "ascii" | "char" | "text" => ValueType::String,
         "bit" | "bool" | "boolean" => ValueType::Bit,
@@ -350,6 +543,14 @@ fn number(text: &str) -> Option<u32> {
     text.parse().ok()
 }
 
+/// A non-negative hex integer, with or without `0x` or an `h` suffix.
+fn hex_number(text: &str) -> Option<u32> {
+    let text = text.trim();
+    let digits = text.strip_prefix("0x").or_else(|| text.strip_prefix("0X")).unwrap_or(text);
+    let digits = digits.strip_suffix(['h', 'H']).unwrap_or(digits);
+    u32::from_str_radix(digits, 16).ok()
+}
+
 /// A finite number; a decimal comma (`0,1`) is read as a point.
 fn real(text: &str) -> Option<f64> {
     let text = text.trim();
@@ -357,9 +558,14 @@ fn real(text: &str) -> Option<f64> {
     value.is_finite().then_some(value)
 }
 
-/// A scale: `0.1`, `1/10`, `x10`, `×0.01`, `/100`; finite.
+/// A scale: `0.1`, `1/10`, `x10`, `×0.01`, `/100`, or one followed by its unit as a
+/// resolution column gives it (`0,01 kWh`); finite.
 fn scale_of(text: &str) -> Option<f64> {
-    quotient(text).filter(|s| s.is_finite())
+    let scale = quotient(text).or_else(|| {
+        let (number, unit) = text.trim().split_once(char::is_whitespace)?;
+        unit.trim().chars().all(|c| c.is_alphabetic() || "%°/²³·".contains(c)).then(|| quotient(number))?
+    });
+    scale.filter(|s| s.is_finite())
 }
 
 /// What [`scale_of`] reads, before the check that it is finite (`1/1e-320` is not).

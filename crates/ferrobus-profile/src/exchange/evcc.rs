@@ -10,6 +10,12 @@
 //! energy, A for currents, ...). The connection (`uri`, `device`, `baudrate`, `comset`, `rtu`,
 //! `timeout`, ...), the blocks of other sources, SunSpec and meter-model `value`s, and the
 //! blocks of another unit than the one imported are listed as not mapped.
+//!
+//! A file of several devices (a grid meter and a wallbox, each `id: 1` behind its own `uri`)
+//! is one profile per device, a device being an endpoint (`uri` or serial `device`):
+//! [`ImportOptions::device`](super::ImportOptions::device) picks one by name or endpoint. A device whose registers are evcc's own — a `template:` (`sdm630`), or a
+//! `type: modbus` meter of a built-in `model:` — is named with where its registers are; so is
+//! an evcc template definition (`render:`), whose registers are Go template text.
 
 use serde_yaml_ng::{Mapping, Value};
 
@@ -29,7 +35,26 @@ pub(super) fn read(text: &str, draft: &mut Draft) -> Result<(), ImportError> {
     let root = yaml::parse(text, draft)?;
     let mut blocks = Vec::new();
     let mut others = Vec::new();
+    let mut elsewhere = Vec::new();
     walk(&root, "", None, "", &mut blocks, &mut others);
+    registers_elsewhere(&root, "", &mut elsewhere);
+    if blocks.is_empty() {
+        let mut message = "no `source: modbus` block: nothing of an evcc configuration to import".to_string();
+        for hint in elsewhere.iter().take(8) {
+            message.push_str("; ");
+            message.push_str(&hint.sentence());
+        }
+        if elsewhere.is_empty() {
+            message.push_str(
+                " (a `type: custom` device's attributes with `source: modbus` and a `register` are imported)",
+            );
+        }
+        return Err(draft.malformed(message));
+    }
+    for hint in &elsewhere {
+        draft.unmapped(&hint.place, hint.field, &hint.value, hint.why());
+    }
+    let blocks = one_device(blocks, draft)?;
     for (place, source) in others {
         let why = if source == "calc" {
             "arithmetic over other sources: its Modbus operands are imported each on its own, the sum or product is not"
@@ -41,9 +66,6 @@ pub(super) fn read(text: &str, draft: &mut Draft) -> Result<(), ImportError> {
     let mut units: Vec<u8> = blocks.iter().map(|b| b.unit).collect();
     units.sort_unstable();
     units.dedup();
-    if blocks.is_empty() {
-        return Err(draft.malformed("no `source: modbus` block: nothing of an evcc configuration to import"));
-    }
     let unit = match draft.options.unit {
         Some(unit) => unit,
         None if units.len() > 1 => return Err(draft.several_units(&units)),
@@ -60,6 +82,134 @@ pub(super) fn read(text: &str, draft: &mut Draft) -> Result<(), ImportError> {
     Ok(())
 }
 
+/// The blocks of the one device imported — those of one endpoint (`uri` or serial `device`):
+/// the one [`ImportOptions::device`] names (by a `name:` of its devices or its endpoint), or
+/// the only one; the others' blocks are listed, a block that names no endpoint is kept.
+/// Several endpoints and none picked is an error.
+///
+/// [`ImportOptions::device`]: super::ImportOptions::device
+fn one_device<'a>(blocks: Vec<Block<'a>>, draft: &mut Draft) -> Result<Vec<Block<'a>>, ImportError> {
+    // Each endpoint, with the names of the devices whose blocks read it.
+    let mut endpoints: Vec<(&str, Vec<&str>)> = Vec::new();
+    for block in blocks.iter().filter(|b| !b.endpoint.is_empty()) {
+        let at = endpoints.iter().position(|(e, _)| *e == block.endpoint).unwrap_or_else(|| {
+            endpoints.push((&block.endpoint, Vec::new()));
+            endpoints.len() - 1
+        });
+        if let (Some(name), Some((_, names))) = (block.device.as_deref(), endpoints.get_mut(at)) {
+            if !names.contains(&name) {
+                names.push(name);
+            }
+        }
+    }
+    let label = |(endpoint, names): &(&str, Vec<&str>)| {
+        if names.is_empty() { (*endpoint).to_string() } else { format!("{} at {endpoint}", names.join("+")) }
+    };
+    let Some(wanted) = draft.options.device.clone() else {
+        if endpoints.len() > 1 {
+            let labels: Vec<String> = endpoints.iter().map(label).collect();
+            return Err(draft.several_devices(&labels.iter().map(String::as_str).collect::<Vec<_>>()));
+        }
+        return Ok(blocks);
+    };
+    let Some((endpoint, devices)) =
+        endpoints.iter().find(|(endpoint, devices)| *endpoint == wanted || devices.contains(&wanted.as_str()))
+    else {
+        let all: Vec<String> = endpoints.iter().map(|e| super::shown(&label(e))).collect();
+        let message = format!("no device named {:?}: the file's devices are {}", super::shown(&wanted), all.join(", "));
+        return Err(draft.malformed(message));
+    };
+    let endpoint = (*endpoint).to_string();
+    if draft.options.name.is_none() {
+        draft.options.name = Some(if devices.is_empty() { wanted.clone() } else { devices.join("+") });
+    }
+    let mut kept = Vec::new();
+    for block in blocks {
+        if block.endpoint == endpoint || block.endpoint.is_empty() {
+            kept.push(block);
+        } else {
+            let device = block.device.clone().unwrap_or_default();
+            let why = format!("a block of another device ({}), not the one imported: skipped", block.endpoint);
+            draft.unmapped_once(&block.place, "device", &device, &why);
+        }
+    }
+    Ok(kept)
+}
+
+/// A device of the file whose registers are not in it.
+struct Elsewhere {
+    place: String,
+    /// The key that says so: `template`, `model` or `render`.
+    field: &'static str,
+    /// Its value (the template's or the model's name; `render`'s is not shown).
+    value: String,
+    /// The device's `name:`, if it has one.
+    device: Option<String>,
+}
+
+impl Elsewhere {
+    /// Why its registers are not imported, and where they are.
+    fn why(&self) -> &'static str {
+        match self.field {
+            "template" => {
+                "an evcc template: its registers are in evcc's template of that name, not in this file; import \
+                 the device's register list (CSV), or a configuration with `source: modbus` blocks"
+            }
+            "model" => {
+                "a `type: modbus` meter: its registers are those of evcc's built-in meter model, not in this file; \
+                 import the meter's register list (CSV), or use --device sunspec for a SunSpec meter"
+            }
+            _ => {
+                "an evcc template definition: its registers are Go template text (`{{ .id }}`, ...) that evcc \
+                 fills in; import a configuration that uses it, with its `source: modbus` blocks, or the device's \
+                 register list (CSV)"
+            }
+        }
+    }
+
+    /// The hint as a sentence of an error.
+    fn sentence(&self) -> String {
+        let device = self.device.as_deref().map(|d| format!(" ({})", super::shown(d))).unwrap_or_default();
+        let value = if self.value.is_empty() { String::new() } else { format!(" {}", super::shown(&self.value)) };
+        format!("{}{device} is {}{value}: {}", self.place, self.field, self.why())
+    }
+}
+
+/// Collects the devices of `value` at `place` whose registers are evcc's own: a `template:`,
+/// a `type: modbus` meter's `model:`, a template definition's `render:`.
+fn registers_elsewhere(value: &Value, place: &str, out: &mut Vec<Elsewhere>) {
+    match value {
+        Value::Mapping(map) => {
+            let device = map.get("name").and_then(text);
+            let kind = map.get("type").and_then(text).map(|t| t.to_ascii_lowercase());
+            let found = if map.contains_key("render") && map.contains_key("template") {
+                Some(("render", String::new()))
+            } else if let Some(template) = map.get("template").and_then(text) {
+                Some(("template", template))
+            } else if kind.as_deref() == Some("modbus") && !map.contains_key("source") {
+                Some(("model", map.get("model").and_then(text).unwrap_or_default()))
+            } else {
+                None
+            };
+            if let Some((field, value)) = found {
+                let place = if place.is_empty() { "the file".to_string() } else { place.to_string() };
+                out.push(Elsewhere { place, field, value, device });
+                return;
+            }
+            for (key, child) in entries(map) {
+                let here = if place.is_empty() { key.clone() } else { format!("{place}.{key}") };
+                registers_elsewhere(child, &here, out);
+            }
+        }
+        Value::Sequence(list) => {
+            for (i, child) in list.iter().enumerate() {
+                registers_elsewhere(child, &format!("{place}[{i}]"), out);
+            }
+        }
+        _ => {}
+    }
+}
+
 /// A `source: modbus` block found in the tree.
 struct Block<'a> {
     map: &'a Mapping,
@@ -70,6 +220,8 @@ struct Block<'a> {
     /// The attribute it feeds, as a path below the device (`power`, `currents[1]`).
     attribute: String,
     unit: u8,
+    /// Where the device is: its `uri` (Modbus/TCP) or serial `device`, as written.
+    endpoint: String,
 }
 
 /// Collects the Modbus blocks of `value` at `place` into `out`, and the places and names of
@@ -94,6 +246,7 @@ fn walk<'a>(
                     device: device.map(str::to_string),
                     attribute: below.to_string(),
                     unit: map.get("id").and_then(yaml::unit).unwrap_or(1),
+                    endpoint: map.get("uri").or_else(|| map.get("device")).and_then(text).unwrap_or_default(),
                 });
                 return;
             }

@@ -17,7 +17,9 @@
 //!
 //! Addresses: the YAML formats carry the address the frame carries (from 0), and so does our
 //! CSV unless [`ImportOptions::base`] says the file numbers from 1 (a manual's register
-//! numbers); the profile written has `base = 0`.
+//! numbers), or, without it, every address of the file is a Modicon register number (30001 is
+//! input register 0, 40001 holding register 0: meters' manuals number them so; a note says
+//! so); the profile written has `base = 0`.
 //!
 //! The YAML reader is serde_yaml_ng, the maintained fork of serde_yaml: Home Assistant and
 //! evcc read YAML 1.1, and so does it. CSV is the `csv` crate, the delimiter (`,`, `;` or a
@@ -68,9 +70,14 @@ pub struct ImportOptions {
     /// Only the entries of this unit (Home Assistant's `slave`/`device_address`, evcc's `id`):
     /// needed when a file describes several devices.
     pub unit: Option<u8>,
+    /// Only the entries of the evcc device of this `name:` (a meter, a charger): needed when
+    /// the file describes several, which are one profile each. It names the profile too,
+    /// unless [`ImportOptions::name`] does.
+    pub device: Option<String>,
     /// The number a CSV file gives the first address (1 for a manual's register numbers);
-    /// subtracted from every CSV address. 0 unless given.
-    pub base: u16,
+    /// subtracted from every CSV address. Unless given, a file whose every address is a
+    /// Modicon register number (30001, 40001, ...) is read as one, and any other from 0.
+    pub base: Option<u16>,
 }
 
 /// Something of the source that the profile does not carry.
@@ -106,6 +113,9 @@ pub struct Imported {
     pub points: usize,
     /// What of the source it does not carry, in the source's order.
     pub unmapped: Vec<Unmapped>,
+    /// How the source was read where it could have been read otherwise (a CSV's Modicon
+    /// register numbers), for the user to check; the profile's header says it too.
+    pub notes: Vec<String>,
 }
 
 /// Why a map could not be imported.
@@ -128,6 +138,18 @@ pub enum ImportError {
         origin: String,
         /// The units found, comma-separated.
         units: String,
+    },
+    /// The evcc file describes several devices and no `device` picks one.
+    #[error(
+        "{origin} describes {count} devices ({devices}): each is a profile of its own: import one with --only-device NAME"
+    )]
+    SeveralDevices {
+        /// The source, as named.
+        origin: String,
+        /// How many.
+        count: usize,
+        /// Their names, comma-separated.
+        devices: String,
     },
     /// Nothing of the file could be mapped to a point.
     #[error("{origin}: no entry could be mapped to a profile point{}", if *unmapped == 0 { String::new() } else { format!(" ({unmapped} things not mapped)") })]
@@ -232,6 +254,8 @@ pub(crate) struct Draft {
     pub(crate) options: ImportOptions,
     entries: Vec<Entry>,
     pub(crate) unmapped: Vec<Unmapped>,
+    /// How the source was read where it could have been read otherwise.
+    pub(crate) notes: Vec<String>,
     /// Per table, the addresses taken: (first, end, entry index).
     taken: HashMap<Table, Vec<(u32, u32, usize)>>,
     /// The codes taken, in lower case.
@@ -250,6 +274,7 @@ impl Draft {
             options: options.clone(),
             entries: Vec::new(),
             unmapped: Vec::new(),
+            notes: Vec::new(),
             taken: HashMap::new(),
             codes: HashSet::new(),
             repeated: HashMap::new(),
@@ -260,6 +285,12 @@ impl Draft {
     /// The error for a file that is not what its format says.
     pub(crate) fn malformed(&self, message: impl Into<String>) -> ImportError {
         ImportError::Malformed { origin: self.origin.clone(), message: message.into() }
+    }
+
+    /// The error for an evcc file of several devices when none was picked.
+    pub(crate) fn several_devices(&self, names: &[&str]) -> ImportError {
+        let devices = names.iter().map(|n| shown(n)).collect::<Vec<_>>().join(", ");
+        ImportError::SeveralDevices { origin: self.origin.clone(), count: names.len(), devices }
     }
 
     /// The error for a file of several units when none was picked.
@@ -544,12 +575,12 @@ impl Draft {
         let name = self.options.name.clone().unwrap_or_else(|| default_name(&self.origin));
         // A device's name is a label: printable, and cut to its length.
         let name: String = spelled(&name, |_| false).chars().take(LABEL_MAX).collect();
-        let toml = write::profile(&name, &self.origin, self.format, &self.entries);
+        let toml = write::profile(&name, &self.origin, self.format, &self.notes, &self.entries);
         if let Err(mistakes) = crate::Profile::parse_all(&toml, &self.origin) {
             let message = mistakes.first().map(ToString::to_string).unwrap_or_default();
             return Err(ImportError::Invalid { origin: self.origin, message });
         }
-        Ok(Imported { toml, points: self.entries.len(), unmapped: self.unmapped })
+        Ok(Imported { toml, points: self.entries.len(), unmapped: self.unmapped, notes: self.notes })
     }
 }
 

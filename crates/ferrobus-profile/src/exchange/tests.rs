@@ -91,7 +91,7 @@ fn a_vendor_csv_with_other_column_names_semicolons_and_register_numbers_from_1()
         99999;Far;u16;;;;;;\n\
         40;Weird;quaternion;;;;;;\n\
         0;Zero;u16;;;;;;\n";
-    let options = ImportOptions { base: 1, name: Some("meter".into()), ..ImportOptions::default() };
+    let options = ImportOptions { base: Some(1), name: Some("meter".into()), ..ImportOptions::default() };
     let (profile, imported) = imported(text, Format::Csv, &options);
     assert_eq!(profile.device.name, "meter");
     let voltage = point(&profile, "Voltage_L1");
@@ -428,6 +428,162 @@ fn names_and_values_from_a_file_are_escaped_in_the_profile_and_the_list() {
     assert_eq!(point(&profile, "a_\"quoted\"_name").description, "line\nbreak");
     assert!(imported.unmapped.iter().all(|u| !u.value.contains('\u{7}') && !u.field.contains('\u{7}')));
     assert!(lists(&imported, "line 4", "values", "not a list"), "{:?}", imported.unmapped);
+}
+
+/// A meter's register list as its manual gives it (Eastron's SDM630 columns and numbers).
+const MODICON_CSV: &str = "Modbus Register,Parameter Name,Units,Data Format\n\
+    30001,Phase 1 line to neutral volts,V,Float\n\
+    30007,Phase 1 current,A,Float\n\
+    30053,Total system power,W,Float\n\
+    30343,Total kWh,kWh,Float\n\
+    40013,Demand period,minutes,Float\n";
+
+#[test]
+fn modicon_register_numbers_are_read_as_their_table_and_address_with_a_note() {
+    let (profile, imported) = imported(MODICON_CSV, Format::Csv, &ImportOptions::default());
+    let volts = point(&profile, "Phase_1_line_to_neutral_volts");
+    assert_eq!((volts.table, volts.address, volts.value_type), (Table::Input, 0, ValueType::F32));
+    assert_eq!(volts.unit.as_deref(), Some("V"));
+    assert_eq!((point(&profile, "Total_kWh").table, point(&profile, "Total_kWh").address), (Table::Input, 342));
+    let period = point(&profile, "Demand_period");
+    assert_eq!((period.table, period.address, period.access), (Table::Holding, 12, Access::Rw));
+    assert!(imported.unmapped.is_empty(), "{:?}", imported.unmapped);
+    assert!(imported.notes.iter().any(|n| n.contains("Modicon register number")), "{:?}", imported.notes);
+    assert!(imported.toml.contains("# Every address is a Modicon register number"), "{}", imported.toml);
+    // --first-address says how the file numbers: then the numbers are addresses.
+    let plain = ImportOptions { base: Some(0), ..ImportOptions::default() };
+    let (profile, imported) = self::imported(MODICON_CSV, Format::Csv, &plain);
+    assert_eq!(point(&profile, "Demand_period").address, 40013);
+    assert!(imported.notes.is_empty());
+    // One address that is no Modicon number: the file numbers from 0.
+    let mixed = format!("{MODICON_CSV}7,Serial number,,Float\n");
+    let (profile, _) = self::imported(&mixed, Format::Csv, &ImportOptions::default());
+    assert_eq!((point(&profile, "Total_kWh").table, point(&profile, "Total_kWh").address), (Table::Holding, 30343));
+    // A table column that disagrees with the number is listed; the number's table is read.
+    let table = "Register;Table;Name\n30001;holding;volts\n40001;holding;setpoint\n";
+    let (profile, imported) = self::imported(table, Format::Csv, &ImportOptions::default());
+    assert_eq!((point(&profile, "volts").table, point(&profile, "volts").address), (Table::Input, 0));
+    assert!(lists(&imported, "line 2", "table", "the Modicon number 30001 is a input"), "{:?}", imported.unmapped);
+    // Padded coil numbers alone may be plain numbers: not Modicon.
+    let coils = "Address,Name\n00001,a\n00002,b\n";
+    assert_eq!(point(&self::imported(coils, Format::Csv, &ImportOptions::default()).0, "b").address, 2);
+}
+
+#[test]
+fn a_meter_list_with_a_hex_address_column_sizes_and_resolutions_is_read_as_the_vendor_means() {
+    // ABB's meter lists: the quantity measured, the start register in hex, its size in
+    // registers, the resolution with its unit, a type without its width.
+    let text = "Quantity;Details;Start reg (Hex);Size;Res.;Unit;Data type\n\
+        Active import;Total;5000;4;0,01 kWh;kWh;Unsigned\n\
+        Voltage L1-N;;5B00;2;0,1 V;V;Unsigned\n\
+        Active power;Total;5B14;2;0,01 W;W;Signed\n\
+        Frequency;;5B2C;1;0,01 Hz;Hz;Unsigned\n";
+    let (profile, imported) = imported(text, Format::Csv, &ImportOptions::default());
+    let energy = point(&profile, "Active_import");
+    assert_eq!((energy.table, energy.address, energy.value_type), (Table::Holding, 0x5000, ValueType::U64));
+    assert!((energy.scale - 0.01).abs() < 1e-12 && energy.unit.as_deref() == Some("kWh"));
+    assert_eq!(energy.description, "Total");
+    let volts = point(&profile, "Voltage_L1-N");
+    assert_eq!((volts.address, volts.value_type), (0x5B00, ValueType::U32));
+    assert!((volts.scale - 0.1).abs() < 1e-12);
+    assert_eq!(point(&profile, "Active_power").value_type, ValueType::I32);
+    assert_eq!(
+        (point(&profile, "Frequency").address, point(&profile, "Frequency").value_type),
+        (0x5B2C, ValueType::U16)
+    );
+    assert!(imported.unmapped.is_empty(), "{:?}", imported.unmapped);
+    assert!(imported.notes.is_empty());
+    // Without a name column, the description names the row.
+    let described = "Address;Description;Unit\n0;Heating flow temperature;°C\n";
+    let (profile, _) = self::imported(described, Format::Csv, &ImportOptions::default());
+    let flow = point(&profile, "Heating_flow_temperature");
+    assert_eq!((flow.label.as_str(), flow.description.as_str()), ("Heating flow temperature", ""));
+}
+
+const EVCC_TWO: &str = "
+meters:
+  - name: grid
+    type: custom
+    power:
+      source: modbus
+      uri: 192.168.1.50:502
+      id: 1
+      register: { address: 0, type: input, decode: int32 }
+chargers:
+  - name: wallbox
+    type: custom
+    maxcurrent:
+      source: modbus
+      uri: 192.168.1.60:502
+      id: 1
+      register: { address: 0, type: writesingle, decode: uint16 }
+  - name: garage
+    type: template
+    template: abl
+";
+
+#[test]
+fn an_evcc_file_of_two_devices_is_one_profile_each_and_a_template_is_named() {
+    let err = import(EVCC_TWO, "evcc.yaml", Format::EvccYaml, &ImportOptions::default()).unwrap_err();
+    assert!(matches!(&err, ImportError::SeveralDevices { count: 2, .. }), "{err}");
+    let shown = err.to_string();
+    assert!(shown.contains("grid at 192.168.1.50:502, wallbox at 192.168.1.60:502"), "{shown}");
+    assert!(shown.contains("--only-device NAME"), "{shown}");
+    for (device, code, table) in
+        [("wallbox", "wallbox.maxcurrent", Table::Holding), ("grid", "grid.power", Table::Input)]
+    {
+        let options = ImportOptions { device: Some(device.into()), ..ImportOptions::default() };
+        let (profile, imported) = imported(EVCC_TWO, Format::EvccYaml, &options);
+        assert_eq!(profile.device.name, device);
+        assert_eq!(profile.points().len(), 1, "{}", imported.toml);
+        assert_eq!((point(&profile, code).table, point(&profile, code).address), (table, 0));
+        assert!(lists(&imported, "", "device", "another device"), "{:?}", imported.unmapped);
+        assert!(lists(&imported, "chargers[1]", "template", "an evcc template"), "{:?}", imported.unmapped);
+    }
+    // By its endpoint too; an unknown name says which there are.
+    let options = ImportOptions { device: Some("192.168.1.60:502".into()), ..ImportOptions::default() };
+    assert_eq!(imported(EVCC_TWO, Format::EvccYaml, &options).0.device.name, "wallbox");
+    let options = ImportOptions { device: Some("pv".into()), ..ImportOptions::default() };
+    let err = import(EVCC_TWO, "evcc.yaml", Format::EvccYaml, &options).unwrap_err().to_string();
+    assert!(err.contains("no device named \"pv\": the file's devices are grid at"), "{err}");
+}
+
+#[test]
+fn an_evcc_file_whose_registers_are_evccs_own_says_where_they_are() {
+    let templates = "
+meters:
+  - name: grid
+    type: template
+    template: sdm630
+    usage: grid
+    modbus: rs485serial
+    id: 2
+  - name: pv
+    type: modbus
+    model: sdm
+    uri: 192.168.1.70:502
+    power: Power
+";
+    let err = import(templates, "evcc.yaml", Format::EvccYaml, &ImportOptions::default()).unwrap_err().to_string();
+    assert!(err.contains("no `source: modbus` block"), "{err}");
+    assert!(err.contains("meters[0] (grid) is template sdm630: an evcc template"), "{err}");
+    assert!(err.contains("meters[1] (pv) is model sdm: a `type: modbus` meter"), "{err}");
+    let definition = "
+template: sdm630
+products:
+  - brand: Eastron
+params:
+  - name: usage
+render: |
+  type: custom
+  power:
+    source: modbus
+    id: {{ .id }}
+";
+    let err = import(definition, "sdm630.yaml", Format::EvccYaml, &ImportOptions::default()).unwrap_err().to_string();
+    assert!(err.contains("the file is render: an evcc template definition"), "{err}");
+    let bare = import("meters: []\n", "evcc.yaml", Format::EvccYaml, &ImportOptions::default()).unwrap_err();
+    assert!(bare.to_string().contains("a `type: custom` device's attributes"), "{bare}");
 }
 
 #[test]

@@ -5,10 +5,14 @@ use std::fmt::Write as _;
 use super::{Entry, Format};
 use crate::model::{Table, ValueType};
 
-/// The profile named `name` with `entries`, from `origin` in `format`.
-pub(crate) fn profile(name: &str, origin: &str, format: Format, entries: &[Entry]) -> String {
+/// The profile named `name` with `entries`, from `origin` in `format`; `notes` say how the
+/// source was read.
+pub(crate) fn profile(name: &str, origin: &str, format: Format, notes: &[String], entries: &[Entry]) -> String {
     let mut out = String::new();
     let _ = writeln!(out, "# Imported by `ferrobus profile import --from {}` from {}.", format.name(), line(origin));
+    for note in notes {
+        comment(&mut out, note);
+    }
     out.push_str("# Addresses are the frame's (from 0). Check the units, scales and access against the\n");
     out.push_str("# device's manual: a map says what a tool read, not always what the device allows.\n\n");
     out.push_str("[device]\n");
@@ -102,6 +106,20 @@ fn number(value: f64) -> String {
 }
 
 /// `text` on one line, for a comment.
+/// `text` as `#` comment lines of at most 90 characters (a longer word has its own line).
+fn comment(out: &mut String, text: &str) {
+    let mut line = String::from("#");
+    for word in text.split_whitespace() {
+        if line.len() > 1 && line.len() + 1 + word.len() > 90 {
+            let _ = writeln!(out, "{line}");
+            line = String::from("#");
+        }
+        line.push(' ');
+        line.push_str(&super::shown(word));
+    }
+    let _ = writeln!(out, "{line}");
+}
+
 fn line(text: &str) -> String {
     super::shown(text).replace(['\n', '\r'], " ")
 }
