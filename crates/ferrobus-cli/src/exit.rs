@@ -574,6 +574,11 @@ fn io_hint(source: &io::Error, target: Option<&Target>) -> Vec<String> {
     // What the OS's code says of a port's trouble (its numbers differ: ferrobus asks).
     let fault = path.and_then(|_| PortFault::of(source));
     let hint = match (source.kind(), fault, path) {
+        _ if source.get_ref().and_then(|e| e.downcast_ref::<ferrobus::TlsAnswer>()).is_some() => {
+            "connect with --tls and --ca FILE (the CA of the server's certificate), and --cert FILE --key FILE: \
+             an mbaps server requires a client certificate; a --tcp host without a port is then port 802"
+                .to_string()
+        }
         // First: Windows says a COM port another program has is access denied.
         (_, Some(PortFault::Busy), Some(path)) => format!("another program has the port open (fuser {path})"),
         (io::ErrorKind::PermissionDenied, _, _) => {

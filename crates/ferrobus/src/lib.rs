@@ -92,5 +92,5 @@ pub use client::{Backoff, Client, ClientConfig, ClientStats, DeviceInfo, EventLo
 pub use error::Error;
 #[cfg(unix)]
 pub use port::Pty;
-pub use port::{Framing, Rs485, SerialConfig, Transport};
+pub use port::{Framing, Rs485, SerialConfig, TlsAnswer, Transport};
 pub use timer::Timer;

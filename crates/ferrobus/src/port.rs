@@ -32,6 +32,11 @@ pub use crate::sys::Pty;
 pub use crate::sys::{PortFault, TtyPort, open_serial};
 use crate::timer::Timer;
 
+mod tls_answer;
+
+use tls_answer::FirstBytes;
+pub use tls_answer::TlsAnswer;
+
 /// A byte stream a driver runs an engine over.
 pub trait Port: AsyncRead + AsyncWrite + Unpin + Send + 'static {
     /// Drives the RS-485 transmitter by RTS: `true` just before a transmission, `false` once
@@ -61,6 +66,7 @@ pub trait Port: AsyncRead + AsyncWrite + Unpin + Send + 'static {
 }
 
 impl Port for TcpStream {}
+impl Port for FirstBytes<TcpStream> {}
 impl Port for tokio::io::DuplexStream {}
 
 /// A serial port drives RTS itself.
@@ -153,8 +159,13 @@ impl Transport {
 
     /// Modbus/TCP to `addr` (`host:port`).
     pub fn tcp(addr: impl Into<String>) -> Self {
+        Transport::stream(Framing::Mbap, TcpTarget { addr: addr.into(), mbap: true })
+    }
+
+    /// `framing` over TCP connections to `target`.
+    fn stream(framing: Framing, target: TcpTarget) -> Self {
         Transport {
-            framing: Framing::Mbap,
+            framing,
             rs485: Rs485::Auto,
             timer: Timer::Tokio,
             timing: LineTiming::unpaced(),
@@ -162,7 +173,7 @@ impl Transport {
             incomplete_timeout: STREAM_FRAME_GAP,
             reopen: true,
             remote: true,
-            connector: Arc::new(TcpTarget(addr.into())),
+            connector: Arc::new(target),
         }
     }
 
@@ -174,7 +185,7 @@ impl Transport {
 
     /// RTU frames carried over TCP to `addr` (a serial gateway or a device that speaks it).
     pub fn rtu_over_tcp(addr: impl Into<String>) -> Self {
-        Transport { framing: Framing::Rtu, ..Transport::tcp(addr) }
+        Transport::stream(Framing::Rtu, TcpTarget { addr: addr.into(), mbap: false })
     }
 
     /// `framing` over streams opened by `connector`, with `timing` (exact: nothing is
@@ -391,20 +402,24 @@ impl Connector for SerialTarget {
     }
 }
 
-struct TcpTarget(String);
+struct TcpTarget {
+    addr: String,
+    /// Modbus/TCP: a TLS record as the server's first bytes is told ([`TlsAnswer`]).
+    mbap: bool,
+}
 
 impl Connector for TcpTarget {
     fn connect(&self) -> Connecting {
-        let addr = self.0.clone();
+        let (addr, mbap) = (self.addr.clone(), self.mbap);
         Box::pin(async move {
             let stream = TcpStream::connect(&addr).await?;
             stream.set_nodelay(true)?;
-            Ok(Box::new(stream) as BoxPort)
+            Ok(if mbap { Box::new(FirstBytes::new(stream)) as BoxPort } else { Box::new(stream) as BoxPort })
         })
     }
 
     fn describe(&self) -> String {
-        self.0.clone()
+        self.addr.clone()
     }
 }
 

@@ -340,3 +340,22 @@ fn a_write_the_gateway_refuses_for_a_role_gets_a_hint_naming_the_role_setting_an
     let read = ferrobus(&gateway, &pki.ca(), Some(&viewer), &["read", "holding", "9", "--json"]);
     assert!(text(&read.stdout).contains('5'), "stdout: {}", text(&read.stdout));
 }
+
+#[test]
+fn a_plain_modbus_tcp_client_on_a_tls_port_is_told_to_use_tls() {
+    let Some(_turn) = require(&[]) else { return };
+    let pki = Pki::new("test CA");
+    let server = mbaps(&pki, &pki.ca());
+    let mut command = Command::new(env!("CARGO_BIN_EXE_ferrobus"));
+    command.args(["--tcp", &server.addr, "--timeout", "2s", "read", "holding", "0"]);
+    let read = output_within(&mut command, "", LIMIT);
+    assert!(!read.status.success());
+    let err = text(&read.stderr);
+    assert!(err.contains("the server answered with a TLS record (an alert)"), "stderr: {err}");
+    assert!(err.contains("hint: connect with --tls and --ca FILE"), "stderr: {err}");
+    // RTU over TCP has no such check (`15 03 04 ...` is an RTU reply): it hears garbage.
+    let mut command = Command::new(env!("CARGO_BIN_EXE_ferrobus"));
+    command.args(["--rtu-tcp", &server.addr, "--timeout", "1s", "read", "holding", "0"]);
+    let rtu = output_within(&mut command, "", LIMIT);
+    assert!(!rtu.status.success() && !text(&rtu.stderr).contains("TLS record"), "{}", text(&rtu.stderr));
+}
