@@ -20,11 +20,15 @@ use libfuzzer_sys::fuzz_target;
 /// The name messages must carry.
 const ORIGIN: &str = "fuzz-map";
 
-/// The example maps, the starting points of [`Input::Edited`], with their formats.
-const EXAMPLES: [(&str, Format); 3] = [
-    (include_str!("../../examples/maps/meter.csv"), Format::Csv),
-    (include_str!("../../examples/maps/home-assistant.yaml"), Format::HaYaml),
-    (include_str!("../../examples/maps/evcc.yaml"), Format::EvccYaml),
+/// The example maps, the starting points of [`Input::Edited`], with their formats and the
+/// `--first-address` each is imported with (none: a Modicon list is recognised).
+const EXAMPLES: [(&str, Format, Option<u16>); 6] = [
+    (include_str!("../../examples/maps/meter.csv"), Format::Csv, Some(1)),
+    (include_str!("../../examples/maps/home-assistant.yaml"), Format::HaYaml, None),
+    (include_str!("../../examples/maps/evcc.yaml"), Format::EvccYaml, None),
+    (include_str!("../../examples/maps/published/sdm630.csv"), Format::Csv, None),
+    (include_str!("../../examples/maps/published/abb-b23.csv"), Format::Csv, None),
+    (include_str!("../../examples/maps/published/evcc-meter-and-wallbox.yaml"), Format::EvccYaml, None),
 ];
 
 /// Pieces of the formats an edit may put in, beside arbitrary text.
@@ -55,13 +59,17 @@ const TOKENS: [&str; 24] = [
     "- ",
 ];
 
+/// Devices `--only-device` may name: those of the evcc examples, an endpoint, and none.
+const DEVICES: [&str; 4] = ["grid", "wallbox", "192.168.1.60:502", "pv"];
+
 /// The text of one run and its format.
 #[derive(Arbitrary, Debug)]
 enum Input {
     /// Any text, as one of the formats.
     Text { text: String, format: u8, unit: Option<u8>, base: u8 },
-    /// An example with edits applied in order.
-    Edited { example: u8, edits: Vec<Edit>, unit: Option<u8> },
+    /// An example with edits applied in order, and an evcc device picked by one of
+    /// [`DEVICES`].
+    Edited { example: u8, edits: Vec<Edit>, unit: Option<u8>, device: Option<u8> },
 }
 
 impl Input {
@@ -79,14 +87,14 @@ impl Input {
                     },
                 )
             }
-            Input::Edited { example, edits, unit } => {
-                let (text, format) = EXAMPLES[usize::from(example) % EXAMPLES.len()];
+            Input::Edited { example, edits, unit, device } => {
+                let (text, format, base) = EXAMPLES[usize::from(example) % EXAMPLES.len()];
                 let mut text = text.to_owned();
                 for edit in edits {
                     edit.apply(&mut text, &TOKENS);
                 }
-                let base = (format == Format::Csv).then_some(1);
-                (text, format, ImportOptions { unit, base, ..ImportOptions::default() })
+                let device = device.map(|d| DEVICES[usize::from(d) % DEVICES.len()].to_owned());
+                (text, format, ImportOptions { unit, base, device, ..ImportOptions::default() })
             }
         }
     }
