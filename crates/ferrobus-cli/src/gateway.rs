@@ -197,6 +197,9 @@ pub(crate) async fn run(connection: &ConnectArgs, args: &GatewayArgs) -> Result<
     let bound = listener.local_addr().map_err(|e| ferrobus::Error::io("listening", e))?;
     let lines: Vec<String> = config.lines.iter().map(|l| l.transport.describe()).collect();
     let gateway = Gateway::start(config).await?;
+    // A request a line has in flight when the gateway stops is owed its reply: the process
+    // keeps the port until it has come or its window has passed.
+    gateway.releases().into_iter().for_each(crate::interrupt::keep);
     let inbound = if args.rtu_in { Inbound::RtuOverTcp } else { Inbound::Mbap };
     eprintln!(
         "gateway: listening on {bound} ({}), lines: {}",

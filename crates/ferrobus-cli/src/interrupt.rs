@@ -25,7 +25,13 @@ static RELEASES: Mutex<Vec<ferrobus::Release>> = Mutex::new(Vec::new());
 /// Keeps `client`'s release, so that the process waits for it before it exits
 /// ([`release_ports`]). Every client the commands open is kept here.
 pub(crate) fn keep_release(client: &ferrobus::Client) {
-    RELEASES.lock().unwrap_or_else(PoisonError::into_inner).push(client.release());
+    keep(client.release());
+}
+
+/// Keeps `release` (a client's the command did not open itself: a gateway line's), as
+/// [`keep_release`] does.
+pub(crate) fn keep(release: ferrobus::Release) {
+    RELEASES.lock().unwrap_or_else(PoisonError::into_inner).push(release);
 }
 
 /// Waits until no reply is on its way to a client this process opened, saying how long it

@@ -77,3 +77,48 @@ fn against_a_silent_line_a_read_gets_0b_and_the_exit_prints_the_line_and_unit_co
     assert!(rest.contains("tcp: 1 connections served"), "{rest}");
     drop(pty);
 }
+
+#[test]
+fn a_gateway_stopped_with_a_request_on_its_line_keeps_the_port_for_the_reply_in_flight() {
+    use tokio::io::AsyncReadExt;
+    let runtime = tokio::runtime::Builder::new_current_thread().enable_all().build().unwrap();
+    let _inside = runtime.enter();
+    let mut pty = Pty::open().unwrap();
+    let path = pty.path.display().to_string();
+    let mut child = ferrobus()
+        .args(["--port", &path, "--timeout", "5s", "gateway", "--listen", "127.0.0.1:0"])
+        .stderr(Stdio::piped())
+        .stdout(Stdio::null())
+        .spawn()
+        .unwrap();
+    let mut err = std::io::BufReader::new(child.stderr.take().unwrap());
+    let mut line = String::new();
+    while !line.contains("gateway: listening on") {
+        line.clear();
+        assert!(std::io::BufRead::read_line(&mut err, &mut line).unwrap() > 0, "the gateway ended before listening");
+    }
+    let addr = line.split_whitespace().nth(3).unwrap().to_string();
+    let mut stream = TcpStream::connect(&addr).unwrap();
+    stream.write_all(&[0x00, 0x07, 0x00, 0x00, 0x00, 0x06, 0x05, 0x03, 0x00, 0x00, 0x00, 0x01]).unwrap();
+    // The request is on the line (the device's end of the pty has it), its reply owed.
+    let mut request = [0u8; 8];
+    runtime.block_on(pty.read_exact(&mut request)).unwrap();
+    assert_eq!(request[..2], [0x05, 0x03]);
+    let kill = |child: &std::process::Child| {
+        let status = std::process::Command::new("kill").args(["-INT", &child.id().to_string()]).status();
+        assert!(status.is_ok_and(|s| s.success()));
+    };
+    kill(&child);
+    let mut rest = String::new();
+    while !rest.contains("waiting up to") {
+        line.clear();
+        let read = std::io::BufRead::read_line(&mut err, &mut line).unwrap();
+        assert!(read > 0, "no note of the reply in flight:\n{rest}");
+        rest.push_str(&line);
+    }
+    assert!(rest.contains("ms for the reply in flight"), "{rest}");
+    // A second Ctrl-C: out at once.
+    kill(&child);
+    child.wait().unwrap();
+    drop(pty);
+}

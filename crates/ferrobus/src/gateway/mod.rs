@@ -409,6 +409,13 @@ impl Gateway {
         Ok(Gateway { inner: Arc::new(inner) })
     }
 
+    /// When each line's driver lets its port go, once the gateway is dropped: a program waits
+    /// on them before it exits, so that a reply still on its way to a line reaches nobody else
+    /// ([`Client::release`]).
+    pub fn releases(&self) -> Vec<crate::Release> {
+        self.inner.clients.iter().map(Client::release).collect()
+    }
+
     /// What each line has counted so far.
     pub fn stats(&self) -> Vec<LineTraffic> {
         let lines = self.inner.lines.iter().zip(&self.inner.clients);
