@@ -95,8 +95,16 @@ pub(crate) async fn run(plant_file: Option<&Path>, args: &BridgeArgs) -> Result<
     let (status_tx, statuses) = mpsc::channel(1024);
     let born = Arc::new(Notify::new());
     let printer = tokio::spawn(print_statuses(statuses, args.quiet, Arc::clone(&born)));
-    let (running_tx, running) = oneshot::channel();
-    let demo = inverter.map(|target| tokio::spawn(drive_inverter(target, running, born, args.quiet)));
+    let (running_tx, running) = oneshot::channel::<Vec<RunningLine>>();
+    let (demo_tx, demo_lines) = oneshot::channel();
+    // A request a line has in flight when the bridge stops is owed its reply: the process
+    // keeps each real line's port until it has come (a simulated line is in-process).
+    tokio::spawn(async move {
+        let Ok(lines) = running.await else { return };
+        lines.iter().filter(|l| l.sim.is_none()).for_each(|l| crate::interrupt::keep_release(&l.client));
+        let _ = demo_tx.send(lines);
+    });
+    let demo = inverter.map(|target| tokio::spawn(drive_inverter(target, demo_lines, born, args.quiet)));
     let duration = args.duration;
     let stop = async move {
         tokio::select! {

@@ -12,7 +12,7 @@
 //! would take it for its own reply, so before the process exits [`release_ports`] waits
 //! until every client's driver has let its port go ([`ferrobus::Release`]): the reply has
 //! come and been dropped, or its late window has passed. It says so when it waits; a second
-//! Ctrl-C exits at once.
+//! Ctrl-C exits at once. The lines of `gateway` and `bridge` are kept so too.
 
 use std::sync::{Mutex, PoisonError};
 use std::time::Duration;

@@ -118,3 +118,46 @@ fn a_get_that_timed_out_keeps_the_port_for_its_late_reply_for_the_late_window() 
     assert!(announced(&set) <= 150, "{set}");
     assert!(set.contains("no reply from unit 1 within 300 ms"), "{set}");
 }
+
+#[test]
+fn a_bridge_stopped_with_a_poll_on_a_serial_line_keeps_the_port_for_the_reply_in_flight() {
+    use tokio::io::AsyncReadExt;
+    let runtime = tokio::runtime::Builder::new_current_thread().enable_all().build().unwrap();
+    let _inside = runtime.enter();
+    // The device's end of the line is the test's: it hears the poll and never answers.
+    let mut pty = ferrobus::Pty::open().unwrap();
+    let dir = std::env::temp_dir().join(format!("ferrobus-bridge-owed-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let plant = dir.join("plant.toml");
+    std::fs::write(
+        &plant,
+        format!(
+            "[broker]\naddress = \"127.0.0.1:1\"\nclient_id = \"owed\"\nreconnect = \"10s\"\n\n\
+             [plain]\nprefix = \"owed\"\n\n\
+             [[line]]\nname = \"line\"\nport = \"{}\"\nbaud = 19200\nparity = \"none\"\ntimeout = \"5s\"\nretries = 0\n\n\
+             [[line.device]]\nid = \"counter\"\nunit = 1\nprofile = \"generic\"\n\
+             [[line.device.raw]]\ntable = \"holding\"\naddress = 0\ncount = 1\ntype = \"u16\"\nname = \"counter\"\n\
+             every = \"100ms\"\n",
+            pty.path.display()
+        ),
+    )
+    .unwrap();
+    let mut child = ferrobus()
+        .args(["bridge", "--config", plant.to_str().unwrap()])
+        .stdout(Stdio::null())
+        .stderr(Stdio::piped())
+        .spawn()
+        .expect("ferrobus bridge starts");
+    let mut stderr = BufReader::new(child.stderr.take().expect("piped stderr"));
+    // The poll is on the line, its reply owed for the 5 s timeout and the late window.
+    let mut request = [0u8; 8];
+    runtime.block_on(pty.read_exact(&mut request)).unwrap();
+    assert_eq!(request[..2], [0x01, 0x03]);
+    interrupt(&child);
+    let note = read_until(&mut stderr, "waiting up to").unwrap_or_else(|seen| panic!("no note:\n{seen}"));
+    assert!(note.contains("for the reply in flight"), "{note}");
+    interrupt(&child);
+    child.wait().unwrap();
+    drop(pty);
+    let _ = std::fs::remove_dir_all(&dir);
+}
