@@ -258,15 +258,7 @@ pub(crate) fn point_json(p: &Point, outcome: &Outcome) -> Json {
             doc["engineering"] = output::number_json(p, raw);
             doc["meaning"] = p.meaning(raw).map_or(Json::Null, Json::from);
             doc["unit"] = p.unit.clone().map_or(Json::Null, Json::from);
-            doc["raw"] = match raw {
-                Value::Bool(b) => Json::from(*b),
-                Value::Int(n) => i64::try_from(*n)
-                    .map(Json::from)
-                    .or_else(|_| u64::try_from(*n).map(Json::from))
-                    .unwrap_or(Json::Null),
-                Value::Float(x) => Json::from(*x),
-                Value::Text(s) => Json::from(s.clone()),
-            };
+            doc["raw"] = output::raw_json(raw);
         }
         Err(error) => doc["error"] = error.clone().into(),
     }

@@ -267,6 +267,19 @@ pub(crate) fn write_to(out: &mut impl std::io::Write, what: &str, text: &str) ->
         .map_err(|source| CliError::Output { what: what.to_string(), source })
 }
 
+/// A raw value of a profile as JSON: a bit as a boolean, an integer as a number (`null` past
+/// 64 bits), a float as a number (`null` when it is not one), a text as a string.
+pub(crate) fn raw_json(raw: &ferrobus_profile::Value) -> Value {
+    match raw {
+        ferrobus_profile::Value::Bool(b) => Value::from(*b),
+        ferrobus_profile::Value::Int(n) => {
+            i64::try_from(*n).map(Value::from).or_else(|_| u64::try_from(*n).map(Value::from)).unwrap_or(Value::Null)
+        }
+        ferrobus_profile::Value::Float(x) => Value::from(*x),
+        ferrobus_profile::Value::Text(s) => Value::from(s.clone()),
+    }
+}
+
 /// A point's value as a JSON number, as [`ferrobus_profile::Point::number`] writes it: at the
 /// point's resolution (34.98, not 34.980000000000004), an unscaled integer as an integer, a
 /// bit as 0 or 1; `null` for a text (or a float that is not a number).

@@ -267,6 +267,15 @@ fn list(format: Format) -> Result<(), CliError> {
     output::print(&text)
 }
 
+/// A not-implemented sentinel as JSON: as [`output::raw_json`], but a float's NaN (SunSpec's
+/// sentinel of a float) is `"nan"`, not a `null` that would read as "none".
+fn sentinel_json(raw: &Value) -> serde_json::Value {
+    match raw {
+        Value::Float(x) if x.is_nan() => serde_json::Value::from("nan"),
+        other => output::raw_json(other),
+    }
+}
+
 /// A point's range in engineering units: `0.00 Hz .. 400.00 Hz`, or its enumeration.
 fn range(p: &Point) -> String {
     if !p.values.is_empty() {
@@ -310,6 +319,9 @@ fn show(name: &str, group: Option<&str>, format: Format) -> Result<(), CliError>
                 "values": p.values.iter().map(|(k, v)| (k.to_string(), json!(v))).collect::<serde_json::Map<_, _>>(),
                 "bits": p.bits.iter().map(|(k, v)| (k.to_string(), json!(v))).collect::<serde_json::Map<_, _>>(),
                 "confirmed": p.confirmed, "source": p.source,
+                "default": p.factory_default.as_ref().map_or(serde_json::Value::Null, output::raw_json),
+                "not_implemented": p.not_implemented.as_ref().map_or(serde_json::Value::Null, sentinel_json),
+                "implemented": p.implemented,
             })).collect::<Vec<_>>(),
         }))
     } else {

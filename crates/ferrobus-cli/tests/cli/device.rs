@@ -329,6 +329,28 @@ fn profile_list_and_show_print_the_profiles_and_their_parameter_tables() {
     let doc: serde_json::Value = serde_json::from_str(&json).unwrap();
     let speed = doc["points"].as_array().unwrap().iter().find(|p| p["code"] == "speed-command").unwrap().clone();
     assert_eq!((speed["type"].as_str(), speed["order"].as_str()), (Some("i32"), Some("CDAB")));
+    // What a profile says of a point's factory value and of how the device marks it absent.
+    let dir = std::env::temp_dir().join(format!("ferrobus-cli-show-ni-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let file = dir.join("meter.toml");
+    std::fs::write(
+        &file,
+        "[device]\nname = \"meter\"\nvendor = \"v\"\nproduct_code = \"p\"\nrevision = \"1\"\nidentification = false\n\n\
+         [[inputs]]\nnumber = 0\nname = \"temp\"\ntype = \"i16\"\nnot_implemented = -32768\ndefault = 215\n\n\
+         [[inputs]]\nnumber = 1\nname = \"hz\"\ntype = \"f32\"\nnot_implemented = nan\n\n\
+         [[inputs]]\nnumber = 3\nname = \"absent\"\nimplemented = false\n",
+    )
+    .unwrap();
+    let json = stdout(&offline(&["profile", "show", file.to_str().unwrap(), "--json"]).success());
+    std::fs::remove_dir_all(&dir).unwrap();
+    let doc: serde_json::Value = serde_json::from_str(&json).unwrap();
+    let point = |code: &str| doc["points"].as_array().unwrap().iter().find(|p| p["code"] == code).unwrap().clone();
+    let temp = point("temp");
+    assert_eq!((temp["not_implemented"].as_i64(), temp["default"].as_i64()), (Some(-32768), Some(215)), "{temp}");
+    assert_eq!(point("hz")["not_implemented"].as_str(), Some("nan"));
+    let absent = point("absent");
+    assert_eq!((absent["implemented"].as_bool(), absent["not_implemented"].is_null()), (Some(false), true));
+    assert!(absent["default"].is_null() && temp["implemented"] == true, "{absent}");
 }
 
 #[test]
