@@ -336,6 +336,11 @@ impl Point {
         }
         match raw {
             Value::Bool(b) => u8::from(*b).to_string(),
+            // A device's text is shown, never obeyed: its control characters (an ESC that
+            // would drive the terminal) are spelled out.
+            Value::Text(s) if s.chars().any(char::is_control) => {
+                s.chars().flat_map(|c| if c.is_control() { c.escape_default().collect() } else { vec![c] }).collect()
+            }
             Value::Text(s) => s.clone(),
             number => self.meaning(number).unwrap_or_else(|| self.show_plain(number)),
         }
@@ -622,6 +627,10 @@ mod tests {
     fn strings_are_two_characters_a_register_high_byte_first_nul_padded() {
         let p = point("type='string'\nlength=3");
         assert_eq!(p.encode(&Value::Text("ABC".into())).unwrap(), [0x4142, 0x4300, 0x0000]);
+        // What a device sends is shown, its control characters spelled out.
+        let hostile = p.decode(&[0x1B5B, 0x324A, 0x0700]).unwrap();
+        assert_eq!(hostile, Value::Text("\u{1b}[2J\u{7}".into()));
+        assert_eq!(p.show(&hostile), "\\u{1b}[2J\\u{7}");
         assert_eq!(p.decode(&[0x4142, 0x4300, 0x0000]).unwrap(), Value::Text("ABC".into()));
         assert!(matches!(p.parse("ABCDEFG"), Err(ValueError::TooLong { max: 6, .. })));
     }
