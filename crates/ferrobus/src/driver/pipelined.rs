@@ -72,8 +72,10 @@ pub(crate) struct Pipelined {
 
 impl Pipelined {
     pub(crate) fn new(transport: Transport, config: ClientConfig, port: Option<BoxPort>) -> Self {
+        let mut engine = Pipeline::new(Transport::mbap_codec(), config.in_flight);
+        engine.set_late_window(config.late_window);
         Pipelined {
-            engine: Pipeline::new(Transport::mbap_codec(), config.in_flight),
+            engine,
             pump: Pump::new(transport.timer().sleeper()),
             link: Link::new(transport, config, port),
             last_reply: None,
