@@ -2,14 +2,16 @@
 //! and a client bound to 127.0.0.N is another host as far as the per-source limit goes): a
 //! new client is served, the connection least worth keeping closed to make room (one never
 //! answered, then the one idle longest, from the source holding the most first), and a
-//! client that polls keeps its session.
+//! client that polls keeps its session. The gateway's front end, which shares the accept loop,
+//! too.
 
 use std::net::SocketAddr;
 use std::sync::Arc;
 use std::time::Duration;
 
+use ferrobus::gateway::{AllowAll, Authorize, FrontConfig, Gateway, GatewayConfig, GatewayLine, Routes};
 use ferrobus::server::{ServerOptions, Shared, TcpCounts, TcpLimits, TcpServeConfig, TcpStats, serve_tcp_with};
-use ferrobus::{Timer, Transport};
+use ferrobus::{ClientConfig, Timer, Transport};
 use ferrobus_proto::ExceptionCode;
 use ferrobus_proto::frame::LineTiming;
 use ferrobus_proto::slave::{Handler, SlaveConfig};
@@ -154,4 +156,38 @@ async fn a_source_holding_many_loses_one_before_a_source_holding_one() {
         assert!(polled(stream, 2).await);
     }
     assert_eq!(until(&stats, |c| c.evicted_idle == 1).await.refused, 0);
+}
+
+#[tokio::test]
+async fn the_gateway_serves_a_new_client_while_many_addresses_fill_its_cap_and_keeps_its_poller() {
+    let (device, _) = server().await;
+    let line =
+        GatewayLine::new(Transport::tcp(device.to_string()), ClientConfig { retries: 0, ..ClientConfig::default() });
+    let config =
+        GatewayConfig { lines: vec![line], routes: Routes::all_on(0), broadcast_ack: false, cache_max_age: None };
+    let gateway = Gateway::start(config).await.unwrap();
+    let listener = tokio::net::TcpListener::bind("127.0.0.1:0").await.unwrap();
+    let addr = listener.local_addr().unwrap();
+    let limits =
+        TcpLimits { max_connections: 6, max_per_source: PER_SOURCE, idle_timeout: None, ..TcpLimits::default() };
+    let stats = Arc::clone(&limits.stats);
+    let front = FrontConfig { limits, ..FrontConfig::default() };
+    let allow = |_| Box::new(AllowAll) as Box<dyn Authorize>;
+    tokio::spawn(async move { gateway.serve_tcp(listener, front, allow).await });
+    let mut operator = connect_from(200, addr).await;
+    assert!(polled(&mut operator, 1).await);
+    // 4 addresses, 2 each, that never send a request: 8 against the 5 slots left.
+    let mut flood = Vec::new();
+    for host in 10..14 {
+        for _ in 0..PER_SOURCE {
+            flood.push(connect_from(host, addr).await);
+        }
+    }
+    let counts = until(&stats, |c| c.accepted == 9).await;
+    assert_eq!((counts.evicted_unanswered, counts.refused, counts.refused_source), (3, 0, 0), "{counts:?}");
+    let mut newcomer = connect_from(100, addr).await;
+    assert!(polled(&mut newcomer, 1).await);
+    assert!(polled(&mut operator, 2).await);
+    let counts = until(&stats, |c| c.open == 6).await;
+    assert_eq!((counts.evicted_unanswered, counts.evicted_idle), (4, 0), "{counts:?}");
 }
