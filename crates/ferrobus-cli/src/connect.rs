@@ -94,7 +94,9 @@ pub(crate) struct ConnectArgs {
     pub(crate) turnaround: Option<Duration>,
 
     /// RTU/ASCII: after a timeout, how long its reply is still awaited (and dropped) before the
-    /// line is used again; default: twice the timeout. Size it to the device's slowest reply
+    /// line is used again; default: twice the timeout. Size it to the device's slowest reply.
+    /// A pipelined Modbus/TCP line (gateway --in-flight past 1): how long a timed-out request's id is kept
+    /// out of use
     #[arg(long = "late-window", global = true, value_name = "DURATION", value_parser = parse_duration)]
     pub(crate) late_window: Option<Duration>,
 

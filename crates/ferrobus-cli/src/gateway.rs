@@ -129,7 +129,9 @@ pub(crate) struct GatewayArgs {
     #[arg(long = "late-guard", value_name = "DURATION", default_value = "100ms", value_parser = parse_duration)]
     late_guard: Duration,
 
-    /// Connections served at once; past it a new one is closed at once
+    /// Connections served at once; past it a new one is served and the one least worth keeping
+    /// is closed to make room (one in its TLS handshake, then one never answered, then the one
+    /// idle longest; from the address holding the most first)
     #[arg(long = "max-connections", default_value_t = 1000, value_parser = clap::value_parser!(u32).range(1..))]
     max_connections: u32,
 
@@ -320,13 +322,17 @@ fn reverse_route(text: &str) -> Result<(u8, String, u8), CliError> {
 fn print(gateway: &Gateway, tcp: &TcpCounts, secure: bool) {
     eprint!("{}", ferrobus::gateway::report(&gateway.stats(), &gateway.front_stats()));
     eprintln!(
-        "tcp: {} connections served ({} open), {} refused over --max-connections, {} over --max-per-source, {} accept pauses out of file \
-         descriptors; closed: {} idle, {} unfinished frame, {} bad MBAP header",
+        "tcp: {} connections served ({} open), {} refused over --max-per-source, {} accept pauses out of file descriptors; \
+         closed: {} to make room over --max-connections ({} in their handshake, {} never answered, {} idle longest), {} idle, \
+         {} unfinished frame, {} bad MBAP header",
         tcp.accepted,
         tcp.open,
-        tcp.refused,
         tcp.refused_source,
         tcp.descriptor_waits,
+        tcp.evicted_handshakes.saturating_add(tcp.evicted_unanswered).saturating_add(tcp.evicted_idle),
+        tcp.evicted_handshakes,
+        tcp.evicted_unanswered,
+        tcp.evicted_idle,
         tcp.closed_idle,
         tcp.closed_unfinished,
         tcp.closed_bad_header

@@ -68,7 +68,9 @@ pub(crate) struct SimArgs {
     #[arg(long, value_name = "DURATION", value_parser = parse_duration)]
     duration: Option<Duration>,
 
-    /// TCP: connections served at once; past it a new connection is accepted and closed at once
+    /// TCP: connections served at once; past it a new one is served and the one least worth
+    /// keeping is closed to make room (one in its TLS handshake, then one never answered, then
+    /// the one idle longest; from the address holding the most first)
     #[arg(long = "max-connections", value_name = "N", default_value_t = 1000,
           value_parser = clap::value_parser!(u32).range(1..))]
     max_connections: u32,
@@ -308,14 +310,17 @@ fn print_tcp(c: &TcpCounts, tls: bool) {
         );
     }
     eprintln!(
-        "sim: tcp: {} connections served ({} open), {} refused over --max-connections, {} over --max-per-source, {} accept pauses out of file descriptors, {} other accept errors, {} socket-option errors; closed: {} idle, {} unfinished frame, {} bad MBAP header",
+        "sim: tcp: {} connections served ({} open), {} refused over --max-per-source, {} accept pauses out of file descriptors, {} other accept errors, {} socket-option errors; closed: {} to make room over --max-connections ({} in their handshake, {} never answered, {} idle longest), {} idle, {} unfinished frame, {} bad MBAP header",
         c.accepted,
         c.open,
-        c.refused,
         c.refused_source,
         c.descriptor_waits,
         c.accept_errors,
         c.socket_errors,
+        c.evicted_handshakes.saturating_add(c.evicted_unanswered).saturating_add(c.evicted_idle),
+        c.evicted_handshakes,
+        c.evicted_unanswered,
+        c.evicted_idle,
         c.closed_idle,
         c.closed_unfinished,
         c.closed_bad_header

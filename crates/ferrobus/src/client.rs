@@ -33,7 +33,7 @@ use ferrobus_proto::pdu::{
 use ferrobus_proto::{FunctionCode, PduError};
 use tokio::sync::{mpsc, oneshot, watch};
 
-pub use crate::driver::ClientStats;
+pub use crate::driver::{ClientStats, STALLED_AFTER_TIMEOUTS};
 use crate::driver::{Command, Driver, Pipelined, Reply, parse_reply};
 use crate::error::Error;
 use crate::port::{Framing, Transport};

@@ -32,8 +32,11 @@ pub struct ClientConfig {
     /// after its request is still recognised as late (a device that misses a 1 s timeout
     /// by a second is dropped, not handed to the next request) — at the price of a unit that
     /// falls silent costing one late window once (its later timeouts owe nothing until it is
-    /// heard again). On serial framings only: see the master engine's owed replies
-    /// ([`ferrobus_proto::master`]).
+    /// heard again). On serial framings: see the master engine's owed replies
+    /// ([`ferrobus_proto::master`]). On a pipelined Modbus/TCP connection
+    /// ([`in_flight`](Self::in_flight) past 1) nothing waits: a timed-out request's
+    /// transaction id is kept out of use that long, its late reply dropped if it comes
+    /// ([`Pipeline::set_late_window`](ferrobus_proto::master::pipeline::Pipeline::set_late_window)).
     pub late_window: Option<Duration>,
     /// On Modbus/TCP: how many requests may be outstanding on the connection at once, each
     /// matched to its reply by its transaction id (at most

@@ -17,6 +17,14 @@
 //! that a reply owed to a timed-out request is recognised and the line's silence is timed
 //! from them, and counted ([`ClientStats::flushed_bytes`], and a debug line).
 //!
+//! A network connection (Modbus/TCP, RTU over TCP, TLS) that stalls is made again: after a
+//! timeout that left part of a reply in the buffer (a device that sent half a reply and went
+//! silent on that connection, or a stream whose framing is lost), or after
+//! [`STALLED_AFTER_TIMEOUTS`] timeouts in a row without any reply on it, the connection is
+//! closed and a new one made before the next request (the retry, if there is one), logged and
+//! counted ([`ClientStats::stalled`]). A serial port has no connection to make again: it is
+//! never reopened for this.
+//!
 //! A request whose caller has gone (its future dropped: an interrupted command) is not sent,
 //! and one already on the line is not retried; but a reply still on its way is owed. On RTU
 //! and ASCII, where nothing tells a late reply from the next request's, the driver keeps the
@@ -69,6 +77,10 @@ pub(crate) enum Reply {
     Sent,
 }
 
+/// Timeouts in a row, without any reply on the connection between them, after which a
+/// network connection is taken for stalled, closed and made again before the next request.
+pub const STALLED_AFTER_TIMEOUTS: u32 = 3;
+
 /// What a client's driver has seen on its bus ([`Client::stats`](crate::Client::stats)).
 #[derive(Clone, Copy, PartialEq, Eq, Debug, Default)]
 #[non_exhaustive]
@@ -86,6 +98,9 @@ pub struct ClientStats {
     /// Times an open port was lost: closed by the other end (a TCP device that dropped the
     /// connection or restarted), or a read or write that failed.
     pub disconnects: u64,
+    /// Network connections closed and made again because they stalled: a timeout left part
+    /// of a reply behind, or [`STALLED_AFTER_TIMEOUTS`] timed out in a row.
+    pub stalled: u64,
 }
 
 /// What every driver keeps of its line besides the engine: the port and when it may be
@@ -106,6 +121,9 @@ pub(crate) struct Link {
     connects: u64,
     connect_failures: u64,
     disconnects: u64,
+    stalled: u64,
+    /// Timeouts in a row on the open connection, without a reply between them.
+    timeouts_in_a_row: u32,
     /// Until when the port may still be held for a reply in flight or owed: watched by
     /// [`Release`](crate::Release); dropped with the driver.
     hold: watch::Sender<Option<tokio::time::Instant>>,
@@ -126,6 +144,8 @@ impl Link {
             connects: u64::from(opened),
             connect_failures: 0,
             disconnects: 0,
+            stalled: 0,
+            timeouts_in_a_row: 0,
             hold: watch::Sender::new(None),
         }
     }
@@ -156,15 +176,50 @@ impl Link {
             connects: self.connects,
             connect_failures: self.connect_failures,
             disconnects: self.disconnects,
+            stalled: self.stalled,
         };
         *self.stats.lock().unwrap_or_else(PoisonError::into_inner) = stats;
     }
 
     /// Drops the open port, counting it lost.
     fn lose_port(&mut self) {
+        self.timeouts_in_a_row = 0;
         if self.port.take().is_some() {
             self.disconnects = self.disconnects.saturating_add(1);
         }
+    }
+
+    /// Notes how an attempt on the open connection ended (`mid_frame`: the engine holds part
+    /// of a frame after it); closes a network connection that stalled, to be made again before
+    /// the next request, and returns whether it did. Only a timeout counts: any reply, even
+    /// an exception or a bad one, shows the connection alive.
+    fn check_stall(&mut self, result: &Result<Reply, Error>, mid_frame: bool) -> bool {
+        match result {
+            Err(Error::Timeout { .. }) => self.timeouts_in_a_row = self.timeouts_in_a_row.saturating_add(1),
+            Ok(_) | Err(Error::Exception { .. } | Error::BadReply { .. }) => self.timeouts_in_a_row = 0,
+            _ => {}
+        }
+        let timed_out = matches!(result, Err(Error::Timeout { .. }));
+        let stalled = timed_out && (mid_frame || self.timeouts_in_a_row >= STALLED_AFTER_TIMEOUTS);
+        // A serial port has no connection to make again; a transport that does not reopen
+        // would lose its only one.
+        if !stalled || !self.transport.is_remote() || !self.transport.reopens() || self.port.is_none() {
+            return false;
+        }
+        let why = if mid_frame {
+            "a timeout left part of a reply behind".to_string()
+        } else {
+            format!("{} requests in a row timed out", self.timeouts_in_a_row)
+        };
+        let describe = self.transport.describe();
+        tracing::warn!(
+            port = %crate::log::escape(&describe),
+            "the connection stalled ({why}); closing it, a new one is made for the next request"
+        );
+        self.port = None;
+        self.timeouts_in_a_row = 0;
+        self.stalled = self.stalled.saturating_add(1);
+        true
     }
 
     /// Counts an IO failure at `now` and sets when the port may be opened next.
@@ -364,6 +419,10 @@ impl<F: Framing + Send + 'static> Driver<F> {
                 self.link.hold_until(Some(clock.to_tokio(until)));
             }
             let result = self.transact(command).await;
+            if self.link.check_stall(&result, self.master.framing().is_mid_frame()) {
+                // Nothing said on the old connection will be heard on the new one.
+                self.master.abort();
+            }
             if let Err(Error::Timeout { heard: Some(now), .. }) = result {
                 // What tells most about the unit, over all attempts.
                 if heard.is_none_or(|kept| now.weight() >= kept.weight()) {

@@ -88,7 +88,9 @@ pub mod tls;
 mod uart;
 pub mod wire;
 
-pub use client::{Backoff, Client, ClientConfig, ClientStats, DeviceInfo, EventLog, Release, RequestOptions};
+pub use client::{
+    Backoff, Client, ClientConfig, ClientStats, DeviceInfo, EventLog, Release, RequestOptions, STALLED_AFTER_TIMEOUTS,
+};
 pub use error::Error;
 #[cfg(unix)]
 pub use port::Pty;

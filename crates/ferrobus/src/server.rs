@@ -14,11 +14,12 @@
 //! Over TCP ([`serve_tcp_with`]) a connection's trouble never ends the server: running out of
 //! file descriptors pauses accepting for [`ACCEPT_BACKOFF`] while the open connections are
 //! served; other accept and socket-option errors are logged and counted ([`TcpStats`]).
-//! Past [`TcpLimits::max_connections`], or past its source's share
-//! ([`TcpLimits::max_per_source`] connections; a TLS server also bounds its source's
-//! handshakes in progress), a new connection is accepted and closed at once, so that one
-//! host cannot take every slot; idle connections are not evicted to make room ([`TcpLimits`] says
-//! why). A connection is closed when it is idle for [`ServerOptions::idle_timeout`], when a
+//! Past its source's share ([`TcpLimits::max_per_source`] connections; a TLS server also
+//! bounds its source's handshakes in progress), a new connection is accepted and closed at
+//! once, so that one host cannot take every slot; past [`TcpLimits::max_connections`] the
+//! connection least worth keeping (one in its handshake, one never answered, the one idle
+//! longest) is closed to make room, so that many hosts cannot lock a new client out
+//! ([`TcpLimits`] says which). A connection is closed when it is idle for [`ServerOptions::idle_timeout`], when a
 //! frame begun is not finished within [`ServerOptions::frame_timeout`], or when its MBAP framing
 //! is lost (a bad header: nothing after it is executed); each is logged and counted. Requests
 //! written back to back are answered in order; while the engine's reply queue is full the

@@ -366,3 +366,52 @@ async fn a_certified_client_gets_in_while_another_host_holds_hundreds_of_half_op
     }
     assert_eq!(counts(&stats).tls_refused, 0);
 }
+
+#[tokio::test]
+async fn a_certified_client_gets_in_while_many_hosts_fill_the_cap_with_half_open_handshakes() {
+    // 5 addresses with 16 half-open handshakes each (their share): 80 against a cap of 64.
+    // Each past the cap closes the oldest handshake of a source holding the most; the
+    // certified client's own connection, in its handshake, is the newest of a source
+    // holding one, so it is never the one closed.
+    const HOSTS: usize = 5;
+    let ca = Ca::new("test CA");
+    let limits = TcpLimits { max_connections: 64, ..TcpLimits::default() };
+    let tune = |tls: ServerTls| tls.with_handshake_timeout(Duration::from_secs(600));
+    let (addr, stats) = server_within(&ca, limits, tune).await;
+    let held = ferrobus::tls::HANDSHAKES_PER_SOURCE;
+    let mut attacker = Vec::new();
+    for host in 0..HOSTS {
+        for _ in 0..held {
+            attacker.push(half_open(&format!("127.0.0.{}", 10 + host), &addr).await);
+        }
+    }
+    let attack = (HOSTS * held) as u64;
+    for _ in 0..10_000 {
+        if counts(&stats).accepted >= attack {
+            break;
+        }
+        tokio::time::sleep(Duration::from_millis(2)).await;
+    }
+    let c = counts(&stats);
+    assert_eq!(
+        (c.accepted, c.evicted_handshakes, c.refused, c.refused_handshakes),
+        (attack, attack - 64, 0, 0),
+        "{c:?}"
+    );
+    // Three clients kept open: each makes room for itself.
+    let mut clients = Vec::new();
+    for _ in 0..3 {
+        let client = client(&addr, &ca, Some(ca.issue(false, utf8_role("operator")))).await.unwrap();
+        assert_eq!(client.read_holding_registers(1, 0, 2).await.unwrap(), vec![7, 7]);
+        clients.push(client);
+    }
+    for client in &clients {
+        assert_eq!(client.read_holding_registers(1, 0, 2).await.unwrap(), vec![7, 7]);
+    }
+    let c = counts(&stats);
+    assert_eq!(
+        (c.tls_refused, c.evicted_handshakes, c.evicted_unanswered, c.evicted_idle),
+        (0, attack - 61, 0, 0),
+        "{c:?}"
+    );
+}

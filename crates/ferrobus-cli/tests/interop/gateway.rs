@@ -210,7 +210,7 @@ fn through_the_gateway_a_corrupt_mbap_header_closes_the_connection_and_nothing_b
 }
 
 #[test]
-fn past_max_connections_the_gateway_closes_a_new_connection_at_once_and_serves_the_others() {
+fn past_max_connections_the_gateway_serves_a_new_connection_and_closes_the_one_idle_longest() {
     let Some(_turn) = require(&[Need::Socat]) else { return };
     let gw = behind(generic_sim, &["--max-connections", "2"]);
     let mut first = connect_to(&gw.addr);
@@ -218,8 +218,9 @@ fn past_max_connections_the_gateway_closes_a_new_connection_at_once_and_serves_t
     ask(&mut first, 1, 1, &READ_0);
     ask(&mut second, 1, 1, &READ_0);
     let mut third = connect_to(&gw.addr);
-    assert!(closed_silently(&mut third), "the third connection is closed");
-    assert_eq!(ask(&mut first, 2, 1, &READ_0), [0x03, 0x02, 0x00, 0x00]);
+    assert_eq!(ask(&mut third, 1, 1, &READ_0), [0x03, 0x02, 0x00, 0x00], "the newcomer is served");
+    assert!(closed_silently(&mut first), "the connection idle longest is closed to make room");
+    assert_eq!(ask(&mut second, 2, 1, &READ_0), [0x03, 0x02, 0x00, 0x00]);
 }
 
 #[test]

@@ -49,11 +49,17 @@
 //!   that does not answer the request a [`MasterError::Mismatch`] or
 //!   [`MasterError::BadResponse`], an exception a [`Completion::Exception`]). A bad reply
 //!   fails only its own request.
-//! - **Late replies.** The ids of the last [`MAX_IN_FLIGHT`] requests that timed out are
-//!   remembered with their unit. A frame under such an id from that unit is the late reply:
-//!   dropped, counted in [`MasterStats::late_replies`], and the id forgotten (so it may be
-//!   used again). Nothing is owed and nothing waits for it: unlike a serial line, the id
-//!   keeps it from ever being taken for another request's reply.
+//! - **Late replies.** The id of a request that timed out is remembered with its unit for its
+//!   late window: [`Pipeline::set_late_window`], by default twice the request's timeout,
+//!   from the timeout on. Until then no new request takes the id, and a frame under it from
+//!   that unit is the late reply: dropped, counted in [`MasterStats::late_replies`], and the
+//!   id forgotten (so it may be used again). Nothing is owed and nothing waits for it: unlike
+//!   a serial line, the id keeps it from ever being taken for another request's reply, however
+//!   many requests time out meanwhile (ids wrap after 65,536 requests, which a fast line goes
+//!   through within a long window). Up to [`LATE_IDS`] ids are remembered at once (with the
+//!   default window and one timeout for every request, at most 3 × [`MAX_IN_FLIGHT`] windows
+//!   are open at once); past that the id whose window ends soonest is forgotten first. No
+//!   memory is allocated: the ids are a fixed array.
 //! - **Other frames.** A frame under any other id (a request not yet sent, one answered
 //!   already, one forgotten, or none) is dropped, and every request awaiting a reply from the
 //!   frame's unit names it if it times out ([`HeardInstead::OtherTransaction`]). Bytes that
@@ -106,10 +112,30 @@ use crate::time::{Instant, earliest};
 /// The most requests a Pipeline keeps in flight.
 pub const MAX_IN_FLIGHT: usize = 16;
 
+/// The most ids of timed-out requests remembered at once while their late reply may still
+/// come (see the module docs).
+pub const LATE_IDS: usize = 256;
+
 /// Ids a new request may not take: those of the other requests outstanding and the
 /// remembered timed-out ones (fewer than this). One more candidate than this is always
 /// enough.
-const TAKEN_IDS: usize = MAX_IN_FLIGHT + MAX_IN_FLIGHT;
+const TAKEN_IDS: usize = MAX_IN_FLIGHT + LATE_IDS;
+
+/// The id of a request that timed out, from its unit, whose late reply may come until
+/// `until`.
+#[derive(Clone, Copy, PartialEq, Eq, Debug)]
+struct Late {
+    transaction: u16,
+    unit: u8,
+    until: Instant,
+}
+
+impl Late {
+    /// Whether its late reply may still come at `now`.
+    fn open(&self, now: Instant) -> bool {
+        now < self.until
+    }
+}
 
 /// A submitted request, to match its completion.
 #[derive(Clone, Copy, PartialEq, Eq, Hash, Debug)]
@@ -219,11 +245,11 @@ struct Core {
     transaction: u16,
     /// The next place in the order of submissions and ends.
     seq: u64,
-    /// The transaction ids and units of the last requests that timed out, while their late
-    /// replies have not come.
-    late: [Option<(u16, u8)>; MAX_IN_FLIGHT],
-    /// Where the next timed-out id is written in `late`, over the oldest.
-    late_at: usize,
+    /// The transaction ids and units of requests that timed out, while their late replies
+    /// have not come and may still (an entry past its window is free).
+    late: [Option<Late>; LATE_IDS],
+    /// How long after its timeout a request's late reply may come; `None`: twice its timeout.
+    late_window: Option<Duration>,
     stats: MasterStats,
 }
 
@@ -238,8 +264,8 @@ impl Pipeline {
                 slots: [Slot::FREE; MAX_IN_FLIGHT],
                 transaction: 0,
                 seq: 0,
-                late: [None; MAX_IN_FLIGHT],
-                late_at: 0,
+                late: [None; LATE_IDS],
+                late_window: None,
                 stats: MasterStats::default(),
             },
         }
@@ -268,6 +294,13 @@ impl Pipeline {
     /// The framing (for its statistics).
     pub fn framing(&self) -> &MbapCodec {
         &self.framing
+    }
+
+    /// How long after a request's timeout its late reply may still come, and its id is kept
+    /// out of use: `window`, or (`None`, the default) twice the request's own timeout. Applies
+    /// to the timeouts from now on.
+    pub fn set_late_window(&mut self, window: Option<Duration>) {
+        self.core.late_window = window;
     }
 
     /// Queues `request` for `unit`, to be transmitted at once and its reply awaited for
@@ -348,7 +381,7 @@ impl Pipeline {
             return;
         }
         let Pipeline { framing, core } = self;
-        feed(framing, now, bytes, |event| core.on_event(&event));
+        feed(framing, now, bytes, |event| core.on_event(now, &event));
     }
 
     /// The next instant [`Pipeline::handle_timeout`] must be called (or, for a queued
@@ -368,7 +401,7 @@ impl Pipeline {
     /// Spurious calls do nothing.
     pub fn handle_timeout(&mut self, now: Instant) {
         let Pipeline { framing, core } = self;
-        expire(framing, now, |event| core.on_event(&event));
+        expire(framing, now, |event| core.on_event(now, &event));
         // Each round ends a request.
         for _ in 0..MAX_IN_FLIGHT {
             let due = (core.slots.iter().enumerate())
@@ -383,7 +416,8 @@ impl Pipeline {
             let Some(slot) = core.slots.get(index) else { return };
             let waited = now.saturating_duration_since(sent);
             let (heard, transaction, unit) = (slot.heard, slot.transaction, slot.unit);
-            core.remember_late(transaction, unit);
+            let window = core.late_window.unwrap_or(slot.timeout.saturating_mul(2));
+            core.remember_late(Late { transaction, unit, until: now.saturating_add(window) }, now);
             core.end(index, Outcome::Failed(MasterError::Timeout { waited, heard }));
         }
     }
@@ -409,7 +443,7 @@ impl Pipeline {
         for slot in &mut self.core.slots {
             slot.phase = Phase::Free;
         }
-        self.core.late = [None; MAX_IN_FLIGHT];
+        self.core.late = [None; LATE_IDS];
         self.framing.reset();
     }
 
@@ -432,7 +466,7 @@ struct NewRequest<'a> {
 impl Core {
     /// Takes the lowest free slot and the next free transaction id for `request`.
     fn queue(&mut self, framing: &MbapCodec, now: Instant, request: &NewRequest<'_>) -> Result<Ticket, SubmitError> {
-        let transaction = self.next_transaction();
+        let transaction = self.next_transaction(now);
         let full = SubmitError::Full { limit: self.limit };
         let (slot_index, slot) = (0u8..).zip(self.slots.iter_mut()).find(|(_, slot)| slot.is_free()).ok_or(full)?;
         let header = AduHeader { unit: request.unit, transaction };
@@ -451,15 +485,15 @@ impl Core {
         Ok(Ticket { slot: slot_index, transaction })
     }
 
-    /// The id after the last one given that no request outstanding holds and that is not
-    /// remembered as timed out.
-    fn next_transaction(&self) -> u16 {
+    /// The id after the last one given that no request outstanding holds and whose late
+    /// reply may not come any more at `now`.
+    fn next_transaction(&self, now: Instant) -> u16 {
         let mut id = self.transaction;
         // At most `TAKEN_IDS` ids are taken, so one of this many candidates is free.
         for _ in 0..=TAKEN_IDS {
             id = id.wrapping_add(1);
             let held = self.slots.iter().any(|slot| !slot.is_free() && slot.transaction == id);
-            let late = self.late.iter().any(|late| late.is_some_and(|(transaction, _)| transaction == id));
+            let late = self.late.iter().flatten().any(|late| late.transaction == id && late.open(now));
             if !held && !late {
                 break;
             }
@@ -467,14 +501,17 @@ impl Core {
         id
     }
 
-    /// Remembers the id of a request that timed out, over the oldest one remembered.
-    fn remember_late(&mut self, transaction: u16, unit: u8) {
-        if let Some(entry) = self.late.get_mut(self.late_at) {
-            *entry = Some((transaction, unit));
-        }
-        self.late_at = self.late_at.saturating_add(1);
-        if self.late_at >= MAX_IN_FLIGHT {
-            self.late_at = 0;
+    /// Remembers the id of a request that timed out at `now`: in a free entry (one whose
+    /// window has passed), or, with every window open, over the one that ends soonest.
+    fn remember_late(&mut self, late: Late, now: Instant) {
+        let free = self.late.iter().position(|entry| entry.is_none_or(|entry| !entry.open(now)));
+        let soonest = || {
+            (self.late.iter().enumerate())
+                .min_by_key(|(_, entry)| entry.map(|entry| entry.until))
+                .map(|(index, _)| index)
+        };
+        if let Some(entry) = free.or_else(soonest).and_then(|index| self.late.get_mut(index)) {
+            *entry = Some(late);
         }
     }
 
@@ -491,7 +528,7 @@ impl Core {
         self.stats.ignored_frames = self.stats.ignored_frames.wrapping_add(1);
     }
 
-    fn on_event(&mut self, event: &RxEvent<'_>) {
+    fn on_event(&mut self, now: Instant, event: &RxEvent<'_>) {
         let frame = match *event {
             RxEvent::Frame(frame) => frame,
             RxEvent::Discarded { bytes, reason, .. } => {
@@ -512,8 +549,11 @@ impl Core {
             return;
         }
         self.ignore();
-        if let Some(late) = self.late.iter_mut().find(|late| **late == Some((transaction, unit))) {
-            *late = None;
+        let late = |entry: &&mut Option<Late>| {
+            entry.is_some_and(|late| late.transaction == transaction && late.unit == unit && late.open(now))
+        };
+        if let Some(entry) = self.late.iter_mut().find(late) {
+            *entry = None;
             self.stats.late_replies = self.stats.late_replies.wrapping_add(1);
             return;
         }

@@ -14,6 +14,10 @@
 //!   in flight: those with retries left are sent again on the next connection, made after the
 //!   IO backoff; the others fail with the IO error. The backoff counts the loss once, not once
 //!   per request it ended.
+//! - **A stalled connection** (a timeout that left part of a reply behind while nothing else
+//!   was outstanding, or [`STALLED_AFTER_TIMEOUTS`](super::STALLED_AFTER_TIMEOUTS) in a row
+//!   with no reply between) is closed and made again, as the one-at-a-time driver does; the
+//!   requests still in flight on it go again on the new one if they have retries left.
 //! - **Backoff.** A unit in backoff is refused before anything is sent, as on any line; its
 //!   probe goes without retries.
 //!
@@ -47,12 +51,16 @@ struct Pending {
     retries: u32,
     /// What tells most about the unit over all attempts that timed out.
     heard: Option<HeardInstead>,
+    /// When its attempt was sent.
+    sent: ferrobus_proto::Instant,
 }
 
 pub(crate) struct Pipelined {
     engine: Pipeline,
     link: Link,
     pump: Pump,
+    /// When the last reply (any but a timeout) came on the connection.
+    last_reply: Option<ferrobus_proto::Instant>,
     /// The requests in flight, by their ticket's slot.
     flying: [Option<Pending>; MAX_IN_FLIGHT],
     /// Requests to send before any new one: retries, and those a lost connection ended.
@@ -64,10 +72,13 @@ pub(crate) struct Pipelined {
 
 impl Pipelined {
     pub(crate) fn new(transport: Transport, config: ClientConfig, port: Option<BoxPort>) -> Self {
+        let mut engine = Pipeline::new(Transport::mbap_codec(), config.in_flight);
+        engine.set_late_window(config.late_window);
         Pipelined {
-            engine: Pipeline::new(Transport::mbap_codec(), config.in_flight),
+            engine,
             pump: Pump::new(transport.timer().sleeper()),
             link: Link::new(transport, config, port),
+            last_reply: None,
             flying: std::array::from_fn(|_| None),
             again: VecDeque::new(),
             frame: Box::new([0; MAX_TX_LEN]),
@@ -150,7 +161,8 @@ impl Pipelined {
             }
             Ok(probe) => {
                 let retries = if probe { 0 } else { command.options.retries };
-                self.send(Pending { command, attempts: 0, retries, heard: None }).await;
+                let sent = self.pump.clock().now();
+                self.send(Pending { command, attempts: 0, retries, heard: None, sent }).await;
             }
         }
     }
@@ -174,6 +186,7 @@ impl Pipelined {
             }
         }
         let now = self.pump.clock().now();
+        pending.sent = now;
         let command = &pending.command;
         let timeout = command.options.timeout;
         let submitted = if command.raw {
@@ -229,6 +242,13 @@ impl Pipelined {
         tracing::warn!(port = %describe, "the connection was lost ({error}); it will be made again");
         self.link.lose_port();
         self.link.io_failed(self.pump.clock().now());
+        self.abandon(error);
+    }
+
+    /// Ends every request in flight on a connection that is gone (each sent again on the
+    /// next one if it has retries left, or failed with `error`).
+    fn abandon(&mut self, error: &std::io::Error) {
+        let describe = self.link.transport.describe();
         self.engine.abort();
         for slot in 0..MAX_IN_FLIGHT {
             let Some(pending) = self.flying.get_mut(slot).and_then(Option::take) else { continue };
@@ -238,10 +258,32 @@ impl Pipelined {
         self.publish_stats();
     }
 
-    /// One attempt ended with `result`: counted for the IO backoff, then settled.
+    /// One attempt ended with `result`: counted for the IO backoff, then settled; a
+    /// connection it shows stalled is closed (the others in flight on it go again, or fail).
+    /// Only a timeout of a request sent after the last reply says the connection may have
+    /// stalled: one a device dropped while it answered others (pymodbus's server takes one
+    /// of the requests a read brings) does not.
     fn ended(&mut self, pending: Pending, result: Result<Reply, Error>) {
-        self.link.attempt_ended(&result, self.pump.clock().now());
+        let now = self.pump.clock().now();
+        self.link.attempt_ended(&result, now);
+        let stalled = match &result {
+            Err(Error::Timeout { .. }) if self.last_reply.is_some_and(|last| pending.sent <= last) => false,
+            Err(Error::Timeout { .. }) => {
+                let framing = self.engine.framing();
+                let mid_frame = self.engine.outstanding() == 0 && ferrobus_proto::frame::Framing::is_mid_frame(framing);
+                self.link.check_stall(&result, mid_frame)
+            }
+            Ok(_) | Err(Error::Exception { .. } | Error::BadReply { .. }) => {
+                self.last_reply = Some(now);
+                self.link.check_stall(&result, false)
+            }
+            _ => false,
+        };
         self.settle(pending, result);
+        if stalled {
+            self.abandon(&std::io::Error::new(std::io::ErrorKind::TimedOut, "the connection stalled"));
+            self.publish_stats();
+        }
     }
 
     /// Sends `pending` again if the retry policy says so; else records the unit's health and

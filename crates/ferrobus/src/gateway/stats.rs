@@ -185,6 +185,10 @@ pub struct LineTraffic {
     pub connect_failures: u64,
     /// Times an open port or connection was lost (closed by the device, a failed read).
     pub disconnects: u64,
+    /// Times a device's TCP connection stalled (a timeout left half a reply behind, or
+    /// [`STALLED_AFTER_TIMEOUTS`](crate::STALLED_AFTER_TIMEOUTS) in a row) and was closed and
+    /// made again.
+    pub stalled: u64,
 }
 
 impl LineTraffic {
@@ -197,6 +201,7 @@ impl LineTraffic {
         self.connects = seen.connects;
         self.connect_failures = seen.connect_failures;
         self.disconnects = seen.disconnects;
+        self.stalled = seen.stalled;
     }
 }
 
@@ -205,7 +210,7 @@ impl fmt::Display for LineTraffic {
         writeln!(
             f,
             "line {}: queue {} (max {}); {}; late-window {} late-replies {} early-replies {} suspect-replies {} \
-             flushed-bytes {}; connects {} connect-failures {} disconnects {}",
+             flushed-bytes {}; connects {} connect-failures {} disconnects {} stalled {}",
             self.name,
             self.queue_depth,
             self.queue_max,
@@ -217,7 +222,8 @@ impl fmt::Display for LineTraffic {
             self.flushed_bytes,
             self.connects,
             self.connect_failures,
-            self.disconnects
+            self.disconnects,
+            self.stalled
         )?;
         for (unit, counters) in &self.units {
             writeln!(f, "  unit {unit}: {counters}")?;

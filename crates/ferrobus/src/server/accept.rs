@@ -2,14 +2,14 @@
 //! variant, the gateway's front, plain and TLS), its limits and its counters.
 //!
 //! ```text
-//!   accept ─▶ source's share? ─▶ a slot? ─▶ served on its own task
+//!   accept ─▶ source's share? ─▶ a slot? ─────────────▶ served on its own task
 //!               │ (per source: connections,   │ (max_connections)
-//!               │  handshakes in progress)    │
+//!               │  handshakes in progress)    └─ none free: the connection least worth
+//!               │                                keeping is closed to make room (room.rs)
 //!               └── no: accepted and closed at once, counted, logged (a line a second at most)
 //! ```
 //!
-//! What the limits are for, and why idle connections are not evicted to make room: see
-//! [`TcpLimits`].
+//! What the limits are for, and whom the server closes to make room: see [`TcpLimits`].
 
 use std::collections::HashMap;
 use std::future::Future;
@@ -20,8 +20,9 @@ use std::sync::{Arc, Mutex, PoisonError};
 use std::time::Duration;
 
 use tokio::net::{TcpListener, TcpStream};
-use tokio::sync::OwnedSemaphorePermit;
 
+use self::room::{Activity, Evicted, Slot, Slots, Standing};
+pub(crate) use self::room::{Tracked, Tracker};
 use super::Closed;
 use super::trim::Bursts;
 use crate::log::escape;
@@ -44,18 +45,20 @@ const REFUSALS_LOGGED_EVERY: Duration = Duration::from_secs(1);
 /// timed out). A host that opens handshakes and never finishes them so holds a few slots,
 /// each for the handshake timeout at most, and every other host keeps getting in.
 ///
-/// Idle connections are not evicted when the cap is reached: an idle Modbus connection is
-/// usually a client between two slow polls, or one whose request waits on a slow serial line
-/// (idle on the socket, not to its user), and evicting it would let anyone who can connect
-/// drop a working operator's session, which is worse than refusing the newcomer. The idle
-/// timeout ([`TcpLimits::idle_timeout`]) already returns a silent connection's slot, the
-/// per-source limits stop one host from holding the cap, and the handshake timeout bounds
-/// what a half-open connection costs.
+/// The per-source limits alone do not keep the cap: many sources (11 addresses with 100
+/// idle connections each, 70 with 16 unfinished handshakes) fill it. So when
+/// [`max_connections`](Self::max_connections) are open, a new connection is served and the
+/// connection least worth keeping is closed to make room: first one still in its TLS
+/// handshake (the oldest first), then one never answered (the oldest first), then the one
+/// idle longest; within each, one from the source holding the most connections first. A
+/// client that polls keeps its session while anyone fills the cap with connections that do
+/// nothing; each such close is logged and counted ([`TcpCounts::evicted_handshakes`],
+/// [`TcpCounts::evicted_unanswered`], [`TcpCounts::evicted_idle`]).
 #[derive(Clone, Debug)]
 pub struct TcpLimits {
     /// Connections served at once, those still in their handshake included; past it a new
-    /// connection is accepted and closed at once (the client sees the connection closed,
-    /// not a hang), logged and counted.
+    /// connection is served and the one least worth keeping is closed to make room (see
+    /// above), logged and counted. 0 refuses every connection.
     pub max_connections: usize,
     /// Connections served at once from one source (an IPv4 address, an IPv6 /64); past it
     /// a new one from there is accepted and closed at once, logged and counted.
@@ -100,6 +103,9 @@ pub struct TcpStats {
     closed_unfinished: AtomicU64,
     closed_bad_header: AtomicU64,
     tls_refused: AtomicU64,
+    evicted_handshakes: AtomicU64,
+    evicted_unanswered: AtomicU64,
+    evicted_idle: AtomicU64,
     denied: Arc<AtomicU64>,
 }
 
@@ -113,7 +119,8 @@ pub struct TcpCounts {
     pub open: u64,
     /// Sources (IPv4 addresses, IPv6 /64s) with a connection open now.
     pub sources: u64,
-    /// Connections closed at once because [`TcpLimits::max_connections`] were open.
+    /// Connections closed at once because [`TcpLimits::max_connections`] were open (only
+    /// when it is 0: otherwise a connection is closed to make room).
     pub refused: u64,
     /// Connections closed at once because [`TcpLimits::max_per_source`] were open from
     /// their source.
@@ -140,6 +147,12 @@ pub struct TcpCounts {
     pub tls_refused: u64,
     /// Requests denied by the roles' rights (answered with exception 01).
     pub denied: u64,
+    /// Connections still in their TLS handshake closed to make room for a new one.
+    pub evicted_handshakes: u64,
+    /// Connections never answered closed to make room for a new one.
+    pub evicted_unanswered: u64,
+    /// Connections answered before, the one idle longest, closed to make room for a new one.
+    pub evicted_idle: u64,
 }
 
 impl TcpStats {
@@ -161,6 +174,9 @@ impl TcpStats {
             closed_bad_header: get(&self.closed_bad_header),
             tls_refused: get(&self.tls_refused),
             denied: get(&self.denied),
+            evicted_handshakes: get(&self.evicted_handshakes),
+            evicted_unanswered: get(&self.evicted_unanswered),
+            evicted_idle: get(&self.evicted_idle),
         }
     }
 }
@@ -180,6 +196,16 @@ impl TcpStats {
 
 fn bump(counter: &AtomicU64) {
     counter.fetch_add(1, Ordering::Relaxed);
+}
+
+impl Evicted {
+    fn count(&self, stats: &TcpStats) {
+        bump(match self.standing {
+            Standing::Handshaking => &stats.evicted_handshakes,
+            Standing::Unanswered => &stats.evicted_unanswered,
+            Standing::Idle => &stats.evicted_idle,
+        });
+    }
 }
 
 /// Where connections come from, as the per-source limits count them: an IPv4 address (an
@@ -270,6 +296,7 @@ impl Sources {
         source: Source,
         limits: &TcpLimits,
         handshakes: usize,
+        activity: &Arc<Activity>,
     ) -> Result<(Share, Handshake), Refusal> {
         let mut loads = self.loads.lock().unwrap_or_else(PoisonError::into_inner);
         let load = loads.entry(source).or_default();
@@ -287,7 +314,7 @@ impl Sources {
         load.handshaking = load.handshaking.saturating_add(1);
         self.note_len(&loads);
         let share = Share { sources: Arc::clone(self), source };
-        Ok((share, Handshake { sources: Arc::clone(self), source }))
+        Ok((share, Handshake { sources: Arc::clone(self), source, activity: Arc::clone(activity) }))
     }
 
     /// Takes one off `source`'s load (`open` or `handshaking`, as `take` picks).
@@ -332,10 +359,20 @@ impl Drop for Share {
 pub(crate) struct Handshake {
     sources: Arc<Sources>,
     source: Source,
+    activity: Arc<Activity>,
+}
+
+impl Handshake {
+    /// What notes the use of the connection's stream once its handshake is over (whom to
+    /// close to make room is chosen by it).
+    pub(crate) fn tracker(&self) -> Tracker {
+        Tracker(Arc::clone(&self.activity))
+    }
 }
 
 impl Drop for Handshake {
     fn drop(&mut self) {
+        self.activity.handshake_over();
         self.sources.release(self.source, |load| &mut load.handshaking);
     }
 }
@@ -343,17 +380,17 @@ impl Drop for Handshake {
 /// An accepted connection's place: its slot, its source's share, and the count of open
 /// connections, all given back when it is dropped (however its task ends).
 struct Place {
-    _slot: OwnedSemaphorePermit,
+    slot: Slot,
     _share: Share,
     stats: Arc<TcpStats>,
     bursts: Arc<Bursts>,
 }
 
 impl Place {
-    fn new(slot: OwnedSemaphorePermit, share: Share, stats: &Arc<TcpStats>, bursts: &Arc<Bursts>) -> Place {
+    fn new(slot: Slot, share: Share, stats: &Arc<TcpStats>, bursts: &Arc<Bursts>) -> Place {
         let open = stats.open.fetch_add(1, Ordering::Relaxed).saturating_add(1);
         bursts.opened(usize::try_from(open).unwrap_or(usize::MAX));
-        Place { _slot: slot, _share: share, stats: Arc::clone(stats), bursts: Arc::clone(bursts) }
+        Place { slot, _share: share, stats: Arc::clone(stats), bursts: Arc::clone(bursts) }
     }
 }
 
@@ -386,13 +423,14 @@ impl Throttle {
 }
 
 /// The accept loop for front ends without a handshake: as [`accept_handshaking`], the
-/// handshake over as soon as the connection is accepted.
+/// handshake over as soon as the connection is accepted, its stream [`Tracked`].
 pub(crate) async fn accept_connections<S, Fut>(listener: TcpListener, limits: &TcpLimits, serve: S) -> io::Result<()>
 where
-    S: Fn(TcpStream, SocketAddr) -> Fut,
+    S: Fn(Tracked<TcpStream>, SocketAddr) -> Fut,
     Fut: Future<Output = io::Result<()>> + Send + 'static,
 {
     accept_handshaking(listener, limits, usize::MAX, |stream, peer, handshake| {
+        let stream = handshake.tracker().track(stream);
         drop(handshake);
         serve(stream, peer)
     })
@@ -400,13 +438,15 @@ where
 }
 
 /// The hardened accept loop: accepts on `listener` within `limits` (past
-/// [`TcpLimits::max_connections`], past [`TcpLimits::max_per_source`] from its source or
-/// past `handshakes` from its source in their handshake, a connection is accepted and closed
-/// at once; out of sockets (descriptors, handles, socket buffers), accepting pauses for
+/// [`TcpLimits::max_per_source`] from its source or past `handshakes` from its source in
+/// their handshake, a connection is accepted and closed at once; past
+/// [`TcpLimits::max_connections`] the connection least worth keeping is closed to make room
+/// (its task aborted; see [`TcpLimits`]); out of sockets (descriptors, handles, socket buffers), accepting pauses for
 /// [`ACCEPT_BACKOFF`]; TCP_NODELAY set) and runs `serve` for each connection on its own
 /// task, counting how it ended in [`TcpLimits::stats`] (a [`Closed`] error is the server's
 /// own close). `serve` is given the connection's [`Handshake`], to drop when its handshake
-/// is over. No error of a connection or of accepting one ends it: it runs until dropped.
+/// is over, and whose [`Handshake::tracker`] should wrap the stream served after it (or the
+/// connection is never seen answered). No error of a connection or of accepting one ends it: it runs until dropped.
 pub(crate) async fn accept_handshaking<S, Fut>(
     listener: TcpListener,
     limits: &TcpLimits,
@@ -417,18 +457,19 @@ where
     S: Fn(TcpStream, SocketAddr, Handshake) -> Fut,
     Fut: Future<Output = io::Result<()>> + Send + 'static,
 {
-    let slots = Arc::new(tokio::sync::Semaphore::new(limits.max_connections));
+    let slots = Slots::new(limits.max_connections);
     let stats = Arc::clone(&limits.stats);
     let sources = Sources::new(Arc::clone(&stats));
     let bursts = Arc::new(Bursts::default());
-    let mut refusals = Throttle::default();
+    let (mut refusals, mut evictions) = (Throttle::default(), Throttle::default());
     loop {
         let Some((stream, peer)) = accept(&listener, &stats).await else { continue };
-        let admitted = sources.admit(Source::of(peer), limits, handshakes).and_then(|(share, handshake)| {
-            let slot = Arc::clone(&slots).try_acquire_owned().map_err(|_| Refusal::Full(limits.max_connections))?;
-            Ok((Place::new(slot, share, &stats, &bursts), handshake))
+        let (source, activity) = (Source::of(peer), Activity::new());
+        let admitted = sources.admit(source, limits, handshakes, &activity).and_then(|(share, handshake)| {
+            let (slot, evicted) = slots.take(peer, source, &activity).ok_or(Refusal::Full(limits.max_connections))?;
+            Ok((Place::new(slot, share, &stats, &bursts), handshake, evicted))
         });
-        let (place, handshake) = match admitted {
+        let (place, handshake, evicted) = match admitted {
             Ok(admitted) => admitted,
             Err(refusal) => {
                 refusal.count(&stats);
@@ -444,6 +485,26 @@ where
                 continue;
             }
         };
+        if let Some(evicted) = evicted {
+            evicted.count(&stats);
+            if let Some(unlogged) = evictions.pass() {
+                let more = if unlogged > 0 {
+                    format!(" ({unlogged} more closed to make room since the last such line)")
+                } else {
+                    String::new()
+                };
+                let Evicted { peer: closed, source, held, standing } = evicted;
+                let (closed, source) = (closed.to_string(), source.to_string());
+                tracing::warn!(
+                    %peer,
+                    "{} connections open, the most allowed: closed the connection from {} ({standing}; {} held {held}) \
+                     to make room{more}",
+                    limits.max_connections,
+                    escape(&closed),
+                    escape(&source)
+                );
+            }
+        }
         if let Err(e) = stream.set_nodelay(true) {
             bump(&stats.socket_errors);
             tracing::warn!(%peer, "setting TCP_NODELAY: {e}; serving the connection anyway");
@@ -453,11 +514,13 @@ where
         // Pinned on the heap before it is spawned: awaited inside the task's future, a future
         // captured by value would be stored in it twice (as the capture and as the awaited).
         let served = Box::pin(serve(stream, peer, handshake));
-        tokio::spawn(async move {
+        let id = place.slot.id;
+        let task = tokio::spawn(async move {
             let ended = served.await;
             report(peer, ended, &place.stats);
             drop(place);
         });
+        slots.spawned(id, task.abort_handle());
     }
 }
 
@@ -506,5 +569,6 @@ fn report(peer: SocketAddr, ended: io::Result<()>, stats: &TcpStats) {
     tracing::info!(%peer, "{e}");
 }
 
+mod room;
 #[cfg(test)]
 mod tests;

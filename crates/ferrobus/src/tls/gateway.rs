@@ -45,11 +45,14 @@ impl Gateway {
                 let authorize = Arc::clone(&authorize);
                 let (tls, stats) = (tls.clone(), Arc::clone(&stats));
                 async move {
+                    let tracker = in_progress.tracker();
                     let Some((stream, check)) = handshake(&tls, stream, peer, &stats, in_progress).await else {
                         return Ok(());
                     };
                     let mut chain = Chain(vec![authorize(peer), Box::new(check)]);
-                    gateway.serve_connection(stream, &peer.to_string(), inbound, &mut chain, timeouts).await
+                    gateway
+                        .serve_connection(tracker.track(stream), &peer.to_string(), inbound, &mut chain, timeouts)
+                        .await
                 }
             },
         )

@@ -46,6 +46,7 @@ where
             let options = Arc::clone(&options);
             let (tls, stats) = (tls.clone(), Arc::clone(&stats));
             async move {
+                let tracker = in_progress.tracker();
                 let Some((stream, check)) = handshake(&tls, stream, peer, &stats, in_progress).await else {
                     return Ok(());
                 };
@@ -53,7 +54,7 @@ where
                 options.authorize = Some(Box::new(check));
                 options.idle_timeout = options.idle_timeout.or(idle);
                 options.frame_timeout = options.frame_timeout.or(unfinished);
-                serve_transport(&transport, Box::new(stream), config, &mut handler, &mut options).await
+                serve_transport(&transport, Box::new(tracker.track(stream)), config, &mut handler, &mut options).await
             }
         },
     )

@@ -516,19 +516,95 @@ fn transaction_ids_skip_those_in_flight_and_those_that_recently_timed_out() {
     assert_eq!(p.submit(ms(20), 1, &read_holding(0, 1), TIMEOUT).unwrap().transaction(), 0xFFFE);
 }
 
+/// `n` requests to unit 1 one after the other, each timing out (1 s) in turn from `from`;
+/// returns their ids and the instant the last one timed out.
+fn time_out_in_turn(p: &mut Pipeline, n: usize, from: u64) -> (Vec<u16>, u64) {
+    let mut ids = Vec::new();
+    let mut at = from;
+    for _ in 0..n {
+        let ticket = p.submit(ms(at), 1, &read_holding(0, 1), TIMEOUT).unwrap();
+        transmit_all(p, ms(at));
+        at += 1_000;
+        p.handle_timeout(ms(at));
+        assert!(matches!(events(p)[..], [(t, Done::Failed(MasterError::Timeout { .. }))] if t == ticket));
+        ids.push(ticket.transaction());
+    }
+    (ids, at)
+}
+
 #[test]
-fn only_the_last_sixteen_timed_out_ids_are_remembered() {
+fn a_timed_out_id_stays_out_of_use_for_its_late_window_whatever_the_timeouts_after_it() {
+    let mut p = pipeline(4);
+    p.set_late_window(Some(Duration::from_secs(60)));
+    // Id 1 times out at 1 s, then 24 more in a row (ids 2..=25) until 25 s: inside its window.
+    let (ids, at) = time_out_in_turn(&mut p, 25, 0);
+    assert_eq!((ids[0], ids[24], at), (1, 25, 25_000));
+    // The ids wrap round (a fast line, 65,536 requests within the window): the next request
+    // does not take id 1, nor any of the 25, whose late replies may all still come.
+    p.set_last_transaction(0);
+    let next = p.submit(ms(at), 1, &read_holding(0, 1), TIMEOUT).unwrap();
+    assert_eq!(next.transaction(), 26);
+    transmit_all(&mut p, ms(at));
+    // Id 1's late reply comes, 30 s after its timeout: dropped, not handed to anyone.
+    p.on_bytes(ms(31_000), &mbap(1, 1, &registers(&[0xDEAD])));
+    assert!(events(&mut p).is_empty(), "the late reply was taken");
+    assert_eq!(p.stats().late_replies, 1);
+    p.on_bytes(ms(31_001), &mbap(26, 1, &registers(&[7])));
+    assert_eq!(events(&mut p), [(next, Done::Registers(std::vec![7]))]);
+}
+
+#[test]
+fn a_timed_out_id_is_given_again_once_its_window_has_passed_and_not_a_moment_before() {
     let mut p = pipeline(MAX_IN_FLIGHT);
+    p.set_late_window(Some(Duration::from_secs(10)));
+    // 20 timeouts: ids 1..=16 at 1 s (their windows end at 11 s), 17..=20 at 2 s (at 12 s).
     in_flight(&mut p, 16, 1);
     p.handle_timeout(ms(1_000));
-    events(&mut p);
-    in_flight(&mut p, 1, 1); // id 17
+    assert_eq!(events(&mut p).len(), 16);
+    for _ in 0..4 {
+        p.submit(ms(1_000), 1, &read_holding(0, 1), TIMEOUT).unwrap();
+    }
+    transmit_all(&mut p, ms(1_000));
     p.handle_timeout(ms(2_000));
-    events(&mut p);
-    // Id 1 is forgotten (17 timeouts), id 2 is not.
-    p.on_bytes(ms(2_001), &mbap(1, 1, &registers(&[1])));
-    p.on_bytes(ms(2_002), &mbap(2, 1, &registers(&[1])));
-    assert_eq!((p.stats().late_replies, p.stats().ignored_frames), (1, 2));
+    assert_eq!(events(&mut p).len(), 4);
+    p.set_last_transaction(0);
+    let before = p.submit(ms(10_999), 1, &read_holding(0, 1), TIMEOUT).unwrap();
+    assert_eq!(before.transaction(), 21, "every one of the 20 is still out of use");
+    p.set_last_transaction(0);
+    let after = p.submit(ms(11_000), 1, &read_holding(0, 1), TIMEOUT).unwrap();
+    assert_eq!(after.transaction(), 1, "id 1's window has passed");
+    // Past its window, a frame under id 2 is no late reply: an unknown id, ignored.
+    transmit_all(&mut p, ms(11_000));
+    p.on_bytes(ms(11_001), &mbap(2, 1, &registers(&[1])));
+    assert_eq!((p.stats().late_replies, p.stats().ignored_frames), (0, 1));
+    assert!(events(&mut p).is_empty());
+}
+
+#[test]
+fn by_default_the_late_window_is_twice_the_requests_timeout() {
+    let mut p = pipeline(1);
+    let (ids, at) = time_out_in_turn(&mut p, 1, 0);
+    assert_eq!((ids[0], at), (1, 1_000));
+    p.set_last_transaction(0);
+    let inside = p.submit(ms(2_999), 1, &read_holding(0, 1), TIMEOUT).unwrap();
+    assert_eq!(inside.transaction(), 2, "id 1's window ends at 3 s");
+    p.abort();
+    let mut p = pipeline(1);
+    time_out_in_turn(&mut p, 1, 0);
+    p.set_last_transaction(0);
+    assert_eq!(p.submit(ms(3_000), 1, &read_holding(0, 1), TIMEOUT).unwrap().transaction(), 1);
+}
+
+#[test]
+fn with_more_timeouts_in_one_window_than_it_remembers_the_id_whose_window_ends_soonest_is_forgotten() {
+    let mut p = pipeline(1);
+    p.set_late_window(Some(Duration::from_secs(100_000)));
+    let (ids, _) = time_out_in_turn(&mut p, LATE_IDS + 1, 0);
+    // Id 1 (the soonest to end) gave its place to the last; id 2 is still remembered.
+    p.on_bytes(ms(300_000), &mbap(ids[1], 1, &registers(&[1])));
+    p.on_bytes(ms(300_001), &mbap(ids[0], 1, &registers(&[1])));
+    p.on_bytes(ms(300_002), &mbap(ids[LATE_IDS], 1, &registers(&[1])));
+    assert_eq!((p.stats().late_replies, p.stats().ignored_frames), (2, 3));
 }
 
 // ---- Abort ------------------------------------------------------------------------------
