@@ -69,7 +69,7 @@ impl Input {
         match self {
             Input::Text { text, format, unit, base } => {
                 let format = EXAMPLES[usize::from(format) % EXAMPLES.len()].1;
-                (text, format, ImportOptions { name: None, unit, base: u16::from(base % 3) })
+                (text, format, ImportOptions { name: None, unit, base: u16::from(base % 3), dir: None })
             }
             Input::Edited { example, edits, unit } => {
                 let (text, format) = EXAMPLES[usize::from(example) % EXAMPLES.len()];
@@ -78,7 +78,7 @@ impl Input {
                     edit.apply(&mut text, &TOKENS);
                 }
                 let base = u16::from(format == Format::Csv);
-                (text, format, ImportOptions { name: None, unit, base })
+                (text, format, ImportOptions { name: None, unit, base, dir: None })
             }
         }
     }

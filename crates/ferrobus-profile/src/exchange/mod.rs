@@ -32,6 +32,7 @@ mod yaml;
 
 use std::collections::{HashMap, HashSet};
 use std::fmt;
+use std::path::PathBuf;
 
 pub use csv::export_csv;
 
@@ -71,7 +72,15 @@ pub struct ImportOptions {
     /// The number a CSV file gives the first address (1 for a manual's register numbers);
     /// subtracted from every CSV address. 0 unless given.
     pub base: u16,
+    /// The directory of the map file: a YAML map's `!include` files are read from it (and
+    /// from the including file's directory, inside it), its `!secret` values from the
+    /// `secrets.yaml` files there. `None` (the default): no file is read, and every
+    /// `!include` and `!secret` is listed as not mapped.
+    pub dir: Option<PathBuf>,
 }
+
+/// The largest map file an import reads, and each file a YAML map includes: 16 MiB.
+pub const MAP_MAX: u64 = 16 << 20;
 
 /// Something of the source that the profile does not carry.
 #[derive(Clone, PartialEq, Eq, Debug)]
@@ -153,6 +162,9 @@ pub enum ImportError {
 /// Reads the map `text` (called `origin` in messages and in the profile's header) as `format`.
 pub fn import(text: &str, origin: &str, format: Format, options: &ImportOptions) -> Result<Imported, ImportError> {
     let mut draft = Draft::new(origin, format, options);
+    if text.len() as u64 > MAP_MAX {
+        return Err(draft.malformed(format!("larger than the {} MiB a map file may be: refused", MAP_MAX >> 20)));
+    }
     match format {
         Format::Csv => csv::read(text, &mut draft)?,
         Format::HaYaml => ha::read(text, &mut draft)?,
@@ -240,6 +252,9 @@ pub(crate) struct Draft {
     repeated: HashMap<(String, String, String), usize>,
     /// How many more places each of those was seen at: (index in `unmapped`, count).
     more: Vec<(usize, usize)>,
+    /// The (place, field) of each value a YAML `!secret` gave, and that `!secret NAME`: a
+    /// listing shows the tag, never the secret.
+    pub(crate) secret_at: HashMap<(String, String), String>,
 }
 
 impl Draft {
@@ -254,6 +269,7 @@ impl Draft {
             codes: HashSet::new(),
             repeated: HashMap::new(),
             more: Vec::new(),
+            secret_at: HashMap::new(),
         }
     }
 
@@ -288,7 +304,8 @@ impl Draft {
     /// Lists `field = value` at `place` as not mapped, for `why`.
     pub(crate) fn unmapped(&mut self, place: &str, field: &str, value: &str, why: &str) {
         // A place is a path of the file's own keys, and a reason may quote the file: both are
-        // bounded and escaped as a value is.
+        // bounded and escaped as a value is. A secret's value is shown as its tag.
+        let value = self.secret_at.get(&(place.to_string(), field.to_string())).map_or(value, String::as_str);
         self.unmapped.push(Unmapped {
             place: bounded(place, 160),
             field: shown(field),
