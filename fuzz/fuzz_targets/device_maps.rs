@@ -21,14 +21,16 @@ use libfuzzer_sys::fuzz_target;
 const ORIGIN: &str = "fuzz-map";
 
 /// The example maps, the starting points of [`Input::Edited`], with their formats.
-const EXAMPLES: [(&str, Format); 3] = [
+const EXAMPLES: [(&str, Format); 5] = [
     (include_str!("../../examples/maps/meter.csv"), Format::Csv),
     (include_str!("../../examples/maps/home-assistant.yaml"), Format::HaYaml),
     (include_str!("../../examples/maps/evcc.yaml"), Format::EvccYaml),
+    (include_str!("../../examples/maps/published/sma-sunny-tripower.yaml"), Format::HaYaml),
+    (include_str!("../../examples/maps/published/ha-config/configuration.yaml"), Format::HaYaml),
 ];
 
 /// Pieces of the formats an edit may put in, beside arbitrary text.
-const TOKENS: [&str; 24] = [
+const TOKENS: [&str; 30] = [
     "\n70000;Far;u16;;;;R;;04\n",
     "\n1;Dup;u32;CDAB;1/0;A;RW;;03\n",
     ";string;;;;;;\n",
@@ -49,6 +51,12 @@ const TOKENS: [&str; 24] = [
     "      scale: .nan\n",
     "      scale: 1e309\n",
     "!include other.yaml",
+    "!secret modbus_slave",
+    "!include_dir_merge_list sensors",
+    "\n        <<: &m {scale: 2, data_type: int32}\n",
+    "\n        <<: [*m, *m]\n        <<: *m\n",
+    "\n        address: 7\n        address: 8\n",
+    "[[[[[[[[[[[[[[[[[[[[[[[[[[[[[[[[",
     "&a [*a]",
     "{{ .id }}",
     "é\u{0}\u{7}\r",

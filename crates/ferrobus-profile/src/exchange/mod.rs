@@ -255,6 +255,9 @@ pub(crate) struct Draft {
     /// The (place, field) of each value a YAML `!secret` gave, and that `!secret NAME`: a
     /// listing shows the tag, never the secret.
     pub(crate) secret_at: HashMap<(String, String), String>,
+    /// The text of each text value a `!secret` gave, and that `!secret NAME`: where an alias
+    /// or a merge took it elsewhere, the listing still shows the tag.
+    pub(crate) secret_texts: HashMap<String, String>,
 }
 
 impl Draft {
@@ -270,6 +273,7 @@ impl Draft {
             repeated: HashMap::new(),
             more: Vec::new(),
             secret_at: HashMap::new(),
+            secret_texts: HashMap::new(),
         }
     }
 
@@ -305,7 +309,11 @@ impl Draft {
     pub(crate) fn unmapped(&mut self, place: &str, field: &str, value: &str, why: &str) {
         // A place is a path of the file's own keys, and a reason may quote the file: both are
         // bounded and escaped as a value is. A secret's value is shown as its tag.
-        let value = self.secret_at.get(&(place.to_string(), field.to_string())).map_or(value, String::as_str);
+        let value = self
+            .secret_at
+            .get(&(place.to_string(), field.to_string()))
+            .or_else(|| self.secret_texts.get(value.trim()))
+            .map_or(value, String::as_str);
         self.unmapped.push(Unmapped {
             place: bounded(place, 160),
             field: shown(field),
@@ -666,3 +674,5 @@ pub(crate) fn order_of(swapped: bool, bytes: bool) -> Order {
 
 #[cfg(test)]
 mod tests;
+#[cfg(test)]
+mod yaml_tests;

@@ -33,7 +33,7 @@ use std::path::{Path, PathBuf};
 use serde_yaml_ng::value::{Tag, TaggedValue};
 use serde_yaml_ng::{Mapping, Value};
 use yaml_rust2::parser::{Event, Parser, Tag as YamlTag};
-use yaml_rust2::scanner::TScalarStyle;
+use yaml_rust2::scanner::{ScanError, TScalarStyle};
 
 use super::{Draft, ImportError, MAP_MAX};
 
@@ -183,15 +183,7 @@ impl Loader<'_> {
         let mut root: Option<(Value, usize)> = None;
         let mut documents = 0;
         loop {
-            let (event, mark) = parser.next_token().map_err(|e| {
-                let m = e.marker();
-                self.draft.malformed(named(format!(
-                    "not YAML: {} at line {} column {}",
-                    super::bounded(e.info(), 200),
-                    m.line(),
-                    m.col() + 1
-                )))
-            })?;
+            let (event, mark) = parser.next_token().map_err(|e| self.scan_error(&e, doc))?;
             let line = mark.line();
             let seq = matches!(event, Event::SequenceStart(..));
             // A node read whole: its value, nodes and anchor.
@@ -277,6 +269,23 @@ impl Loader<'_> {
         Ok(root.unwrap_or((Value::Null, 1)))
     }
 
+    /// The error for a text the YAML scanner refuses, with its line and column.
+    fn scan_error(&self, e: &ScanError, doc: &Doc) -> ImportError {
+        let m = e.marker();
+        // The scanner's own bound on flow nesting (deeper than ours, met first when it scans
+        // ahead of the events).
+        let message = if e.info() == "recursion limit exceeded" {
+            format!("nested deeper than {DEPTH_MAX} at line {}: refused", m.line())
+        } else {
+            format!("not YAML: {} at line {} column {}", super::bounded(e.info(), 200), m.line(), m.col() + 1)
+        };
+        self.draft.malformed(if doc.name.is_empty() {
+            message
+        } else {
+            format!("{}: {message}", super::shown(&doc.name))
+        })
+    }
+
     /// Puts the node `value` of `nodes` nodes (`merge`: a `<<` key), read at `line`, in `frame`: an item, a key, a
     /// key's value, or what a `<<` merges.
     fn put(&mut self, frame: &mut Frame, (value, nodes, merge): (Value, usize, bool), line: usize, doc: &Doc) {
@@ -355,6 +364,9 @@ impl Loader<'_> {
         match outcome {
             Ok(Ok(found)) => {
                 if name == "secret" {
+                    if let Value::String(text) = &found.0 {
+                        self.draft.secret_texts.insert(text.clone(), format!("!secret {arg}"));
+                    }
                     let field = if field.is_empty() { "!secret" } else { field };
                     // A bare hub's readers call the root `hub`.
                     for place in if place.is_empty() { vec!["top", "hub"] } else { vec![place] } {
@@ -523,7 +535,10 @@ impl Loader<'_> {
     /// parents up to the map's directory.
     fn secret(&mut self, name: &str, doc: &Doc) -> Resolved {
         let (Some(dir), Some(top)) = (doc.dir.clone(), self.top.clone()) else {
-            return Err("the map was given without its directory: no secrets.yaml to look it up in".to_string());
+            return Err(
+                "the map was given without its directory: no secrets.yaml to look it up in, the value is unknown"
+                    .to_string(),
+            );
         };
         let mut looked = Vec::new();
         let mut here = Some(dir.as_path());
