@@ -19,8 +19,10 @@
 //! CSV unless [`ImportOptions::base`] says the file numbers from 1 (a manual's register
 //! numbers); the profile written has `base = 0`.
 //!
-//! The YAML reader is serde_yaml_ng, the maintained fork of serde_yaml: Home Assistant and
-//! evcc read YAML 1.1, and so does it. CSV is the `csv` crate, the delimiter (`,`, `;` or a
+//! YAML is read event by event (yaml-rust2's parser) into serde_yaml_ng's `Value`, its
+//! scalars resolved as serde_yaml_ng resolves them, as Home Assistant's loader reads a file:
+//! merge keys, `!include` and `!secret` (from [`ImportOptions::dir`]), each unresolved tag
+//! listed; nesting, aliases, includes and sizes bounded ([`MAP_MAX`]). CSV is the `csv` crate, the delimiter (`,`, `;` or a
 //! tab) taken from the header line. The formats and their mapping tables are documented in
 //! `docs/device-maps.md`.
 
