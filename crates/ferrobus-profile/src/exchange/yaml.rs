@@ -18,6 +18,7 @@
 //!   directory, as Home Assistant looks it up. A tag that cannot be resolved (no directory
 //!   given, no such file, no such secret, `!env_var`) is listed as not mapped with what it
 //!   names, and stays in the tree as a tagged value that no reader takes for a number.
+//!   These tags are Home Assistant's: in an evcc file they stay as written.
 //!
 //! Bounds, each refused with a message that names the file and the line: containers nested
 //! deeper than [`DEPTH_MAX`] (counted as they open, so a file of `[[[[…` is refused at its
@@ -66,12 +67,15 @@ const HA_TAGS: &[&str] = &[
 ];
 
 /// Parses `text`, the map itself, resolving includes and secrets from
-/// [`super::ImportOptions::dir`] (none without it); a mistake names its file, line and column.
+/// [`super::ImportOptions::dir`] (none without it) in a Home Assistant map; a mistake names
+/// its file, line and column.
 pub(super) fn parse(text: &str, draft: &mut Draft) -> Result<Value, ImportError> {
     let top = draft.options.dir.as_ref().map(|dir| std::fs::canonicalize(dir).unwrap_or_else(|_| dir.clone()));
+    // Home Assistant's tags are Home Assistant's: an evcc file's are left as written.
+    let resolve = draft.format == super::Format::HaYaml;
     let mut loader =
         Loader { draft, top: top.clone(), stack: Vec::new(), expanded: 0, files: 0, bytes: 0, secrets: HashMap::new() };
-    let doc = Doc { name: String::new(), dir: top, resolve: true };
+    let doc = Doc { name: String::new(), dir: top, resolve };
     loader.document(text, &doc, 0, "").map(|(tree, _)| tree)
 }
 
