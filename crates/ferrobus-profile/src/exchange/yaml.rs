@@ -41,7 +41,7 @@ use super::{Draft, ImportError, MAP_MAX};
 /// How deep containers may nest, over a file and the files it includes.
 pub(super) const DEPTH_MAX: usize = 64;
 
-/// How many nodes aliases may add to the tree, over an import.
+/// How many nodes aliases may add to the tree (and anchors copy), over an import.
 pub(super) const EXPANSION_MAX: usize = 200_000;
 
 /// How deep includes may nest (`!include` in an included file, ...).
@@ -229,13 +229,9 @@ impl Loader<'_> {
                             .draft
                             .malformed(named(format!("an alias at line {line} to a node that holds it: refused"))));
                     };
-                    self.expanded = self.expanded.saturating_add(*nodes);
-                    if self.expanded > EXPANSION_MAX {
-                        return Err(self.draft.malformed(named(format!(
-                            "aliases expand to more than {EXPANSION_MAX} nodes (at line {line}): refused"
-                        ))));
-                    }
-                    (value.clone(), *nodes, 0, false)
+                    let (value, nodes) = (value.clone(), *nodes);
+                    self.copied(nodes, line, doc)?;
+                    (value, nodes, 0, false)
                 }
                 Event::Scalar(text, style, anchor, tag) => {
                     let (place, field) = stack.last().map_or_else(|| (path.to_string(), String::new()), Frame::next);
@@ -262,6 +258,11 @@ impl Loader<'_> {
             };
             let (value, nodes, anchor, merge) = done;
             if anchor != 0 {
+                // An anchor's copy counts: anchors nested in anchors would copy the file
+                // once per level.
+                if nodes > 1 {
+                    self.copied(nodes, line, doc)?;
+                }
                 anchors.insert(anchor, (value.clone(), nodes));
             }
             let Some(frame) = stack.last_mut() else {
@@ -271,6 +272,20 @@ impl Loader<'_> {
             self.put(frame, (value, nodes, merge), line, doc);
         }
         Ok(root.unwrap_or((Value::Null, 1)))
+    }
+
+    /// Counts `nodes` copied by an alias or an anchor at `line`, refused past [`EXPANSION_MAX`].
+    fn copied(&mut self, nodes: usize, line: usize, doc: &Doc) -> Result<(), ImportError> {
+        self.expanded = self.expanded.saturating_add(nodes);
+        if self.expanded <= EXPANSION_MAX {
+            return Ok(());
+        }
+        let message = format!("aliases expand to more than {EXPANSION_MAX} nodes (at line {line}): refused");
+        Err(self.draft.malformed(if doc.name.is_empty() {
+            message
+        } else {
+            format!("{}: {message}", super::shown(&doc.name))
+        }))
     }
 
     /// The error for a text the YAML scanner refuses, with its line and column.

@@ -291,6 +291,10 @@ fn a_billion_laughs_is_refused_quickly() {
     let (message, took) = quick(Duration::from_secs(2), || refused(&text, &ImportOptions::default()));
     assert!(message.contains("aliases expand to more than 200000 nodes"), "{message}");
     println!("a billion laughs: refused in {took:?}");
+    // Anchors nested in anchors, each a copy of the rest, count as well.
+    let nested = format!("{}{}{}", "&a [".repeat(60), vec!["x"; 5000].join(", "), "]".repeat(60));
+    let (message, _) = quick(Duration::from_secs(2), || refused(&nested, &ImportOptions::default()));
+    assert!(message.contains("aliases expand to more than 200000 nodes"), "{message}");
     // An alias inside what it names is refused, not followed.
     assert!(refused("sensors: &a [*a]\n", &ImportOptions::default()).contains("to a node that holds it"));
 }
