@@ -117,8 +117,9 @@ struct Frame {
     /// Its anchor (0: none).
     anchor: usize,
     tag: Option<YamlTag>,
-    /// Its place in the tree (`modbus[0].sensors`), for what is listed.
-    path: String,
+    /// What its place in the tree adds to its parent's (`.sensors`, `[0]`): the place
+    /// (`modbus[0].sensors`) is made from these only for what is listed.
+    segment: String,
     /// Nodes in it, itself included.
     nodes: usize,
 }
@@ -150,23 +151,29 @@ impl Frame {
         (tagged(value, self.tag.as_ref()), self.nodes, self.anchor)
     }
 
-    /// The place and the field of the node that comes next in it.
-    fn next(&self) -> (String, String) {
+    /// The place and the field of the node that comes next in it, the frame's place being
+    /// `here`.
+    fn next(&self, here: &str) -> (String, String) {
         match &self.kind {
-            Kind::Seq(items) => (format!("{}[{}]", self.path, items.len()), String::new()),
-            Kind::Map { key: Some((key_value, _, _)), .. } => (self.path.clone(), key(key_value)),
-            Kind::Map { .. } => (self.path.clone(), "key".to_string()),
+            Kind::Seq(items) => (format!("{here}[{}]", items.len()), String::new()),
+            Kind::Map { key: Some((key_value, _, _)), .. } => (here.to_string(), key(key_value)),
+            Kind::Map { .. } => (here.to_string(), "key".to_string()),
         }
     }
 
-    /// The tree place of a container that comes next in it.
-    fn child(&self) -> String {
-        match self.next() {
-            (place, field) if field.is_empty() => place,
-            (place, field) if place.is_empty() => super::shown(&field),
-            (place, field) => format!("{place}.{}", super::shown(&field)),
+    /// What the place of a node that comes next in it adds to `here`, the frame's place.
+    fn child(&self, here: &str) -> String {
+        match (&self.kind, self.next(here).1) {
+            (Kind::Seq(items), _) => format!("[{}]", items.len()),
+            (_, field) if here.is_empty() => super::shown(&field),
+            (_, field) => format!(".{}", super::shown(&field)),
         }
     }
+}
+
+/// The place in the tree of the last of `frames`, below `base`.
+fn place_of(base: &str, frames: &[Frame]) -> String {
+    frames.iter().fold(base.to_string(), |place, frame| place + &frame.segment)
 }
 
 /// A place for a message: the tree's root is `top`.
@@ -209,13 +216,17 @@ impl Loader<'_> {
                             .draft
                             .malformed(named(format!("nested deeper than {DEPTH_MAX} at line {line}: refused"))));
                     }
-                    let path = stack.last().map_or_else(|| path.to_string(), Frame::child);
+                    // The root's place is `path`; a child's adds to its parent's.
+                    let segment = match stack.last() {
+                        None => String::new(),
+                        Some(parent) => parent.child(if stack.len() == 1 && path.is_empty() { "" } else { "." }),
+                    };
                     let kind = if seq {
                         Kind::Seq(Vec::new())
                     } else {
                         Kind::Map { own: Mapping::new(), key: None, merged: Vec::new() }
                     };
-                    stack.push(Frame { kind, anchor, tag, path, nodes: 1 });
+                    stack.push(Frame { kind, anchor, tag, segment, nodes: 1 });
                     continue;
                 }
                 Event::SequenceEnd | Event::MappingEnd => {
@@ -234,14 +245,18 @@ impl Loader<'_> {
                     (value, nodes, 0, false)
                 }
                 Event::Scalar(text, style, anchor, tag) => {
-                    let (place, field) = stack.last().map_or_else(|| (path.to_string(), String::new()), Frame::next);
                     let is_key = matches!(stack.last(), Some(Frame { kind: Kind::Map { key: None, .. }, .. }));
-                    if is_key {
+                    let ha_tag = tag.as_ref().is_some_and(|t| t.handle == "!" && HA_TAGS.contains(&t.suffix.as_str()));
+                    if is_key || !ha_tag {
                         // A key is never a file's or a secret's; a plain `<<` merges.
-                        let merge = style == TScalarStyle::Plain && tag.is_none() && text == "<<";
+                        let merge = is_key && style == TScalarStyle::Plain && tag.is_none() && text == "<<";
                         (scalar(text, style, tag.as_ref()), 1, anchor, merge)
                     } else {
-                        let child = stack.last().map_or_else(|| path.to_string(), Frame::child);
+                        // Its place, made only for a tag of Home Assistant's.
+                        let here = place_of(path, &stack);
+                        let (place, field) =
+                            stack.last().map_or_else(|| (here.clone(), String::new()), |f| f.next(&here));
+                        let child = stack.last().map_or_else(|| here.clone(), |f| here.clone() + &f.child(&here));
                         let (value, nodes) = self.tagged_scalar(
                             text,
                             style,
@@ -265,11 +280,12 @@ impl Loader<'_> {
                 }
                 anchors.insert(anchor, (value.clone(), nodes));
             }
-            let Some(frame) = stack.last_mut() else {
+            let Some(mut frame) = stack.pop() else {
                 root = Some((value, nodes));
                 continue;
             };
-            self.put(frame, (value, nodes, merge), line, doc);
+            self.put(&mut frame, (&stack, path), (value, nodes, merge), line, doc);
+            stack.push(frame);
         }
         Ok(root.unwrap_or((Value::Null, 1)))
     }
@@ -307,10 +323,19 @@ impl Loader<'_> {
 
     /// Puts the node `value` of `nodes` nodes (`merge`: a `<<` key), read at `line`, in `frame`: an item, a key, a
     /// key's value, or what a `<<` merges.
-    fn put(&mut self, frame: &mut Frame, (value, nodes, merge): (Value, usize, bool), line: usize, doc: &Doc) {
-        frame.nodes = frame.nodes.saturating_add(nodes);
-        let path = frame.path.clone();
-        match &mut frame.kind {
+    fn put(
+        &mut self,
+        frame: &mut Frame,
+        (parents, base): (&[Frame], &str),
+        (value, nodes, merge): (Value, usize, bool),
+        line: usize,
+        doc: &Doc,
+    ) {
+        let Frame { kind, segment, nodes: count, .. } = frame;
+        *count = count.saturating_add(nodes);
+        // The frame's place, made only for what is listed.
+        let path = || place_of(base, parents) + segment;
+        match kind {
             Kind::Seq(items) => items.push(value),
             Kind::Map { key: pending @ None, .. } => *pending = Some((value, merge, line)),
             Kind::Map { own, key: pending, merged } => {
@@ -327,7 +352,7 @@ impl Loader<'_> {
                         other if unresolved(&other) => {}
                         other => {
                             let why = format!("line {key_line}: `<<` merges a map or a list of maps: left out");
-                            self.draft.unmapped(at(&path), "<<", &shown(&other), &why);
+                            self.draft.unmapped(at(&path()), "<<", &shown(&other), &why);
                         }
                     }
                 } else if let Some(old) = own.insert(k.clone(), value) {
@@ -337,7 +362,7 @@ impl Loader<'_> {
                     if !doc.name.is_empty() {
                         why = format!("{}: {why}", super::shown(&doc.name));
                     }
-                    self.draft.unmapped(at(&path), &key(&k), &shown(&old), &why);
+                    self.draft.unmapped(at(&path()), &key(&k), &shown(&old), &why);
                 }
             }
         }

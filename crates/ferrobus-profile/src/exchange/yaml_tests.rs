@@ -326,3 +326,17 @@ fn a_map_or_an_included_file_past_16_mib_is_refused_naming_it() {
     let message = refused("sensors: !include bad.yaml\n", &dir.options());
     assert!(message.starts_with("map.yaml: bad.yaml: not YAML: ") && message.contains("line 2"), "{message}");
 }
+
+#[test]
+fn long_keys_deep_down_and_many_small_nodes_are_read_in_bounded_time() {
+    // 60 maps nested under 80-character keys, then 300 000 empty lists: a place is made only
+    // for what is listed, not copied into every node.
+    let mut text = String::new();
+    for depth in 0..60 {
+        let _ = writeln!(text, "{}{}:", " ".repeat(depth), "k".repeat(80));
+    }
+    let _ = writeln!(text, "{}list: [{}]", " ".repeat(60), vec!["[]"; 300_000].join(","));
+    let (message, took) = quick(Duration::from_secs(10), || refused(&text, &ImportOptions::default()));
+    assert!(message.contains("no Home Assistant modbus configuration"), "{message}");
+    println!("{} KB of long keys and small lists: read in {took:?}", text.len() / 1024);
+}
