@@ -96,6 +96,11 @@ fn an_existing_output_is_kept_unless_forced_and_bad_input_is_a_usage_error() {
     let refused = offline(&["profile", "import", several.path(), "--from", "ha-yaml"]).code(2);
     assert!(stderr(&refused).contains("describes units 1, 2: pick one with --only-unit"), "{}", stderr(&refused));
     offline(&["profile", "import", several.path(), "--from", "ha-yaml", "--only-unit", "2"]).success();
+    let big = Temp::new("big.yaml");
+    std::fs::File::create(&big.0).unwrap().set_len((16 << 20) + 1).unwrap();
+    let refused = offline(&["profile", "import", big.path(), "--from", "ha-yaml"]).code(2);
+    let said = stderr(&refused);
+    assert!(said.contains(&format!("{}: larger than the 16 MiB a map file may be", big.path())), "{said}");
     let bad = offline(&["profile", "import", &example("meter.csv"), "--from", "xml"]).code(2);
     assert!(stderr(&bad).contains("csv, ha-yaml, evcc-yaml"), "{}", stderr(&bad));
 }
