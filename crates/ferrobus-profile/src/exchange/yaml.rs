@@ -248,8 +248,10 @@ impl Loader<'_> {
                     let is_key = matches!(stack.last(), Some(Frame { kind: Kind::Map { key: None, .. }, .. }));
                     let ha_tag = tag.as_ref().is_some_and(|t| t.handle == "!" && HA_TAGS.contains(&t.suffix.as_str()));
                     if is_key || !ha_tag {
-                        // A key is never a file's or a secret's; a plain `<<` merges.
-                        let merge = is_key && style == TScalarStyle::Plain && tag.is_none() && text == "<<";
+                        // A key is never a file's or a secret's; a plain `<<` (or `!!merge <<`) merges.
+                        let merge_tag =
+                            tag.as_ref().is_none_or(|t| t.handle == "tag:yaml.org,2002:" && t.suffix == "merge");
+                        let merge = is_key && style == TScalarStyle::Plain && merge_tag && text == "<<";
                         (scalar(text, style, tag.as_ref()), 1, anchor, merge)
                     } else {
                         // Its place, made only for a tag of Home Assistant's.

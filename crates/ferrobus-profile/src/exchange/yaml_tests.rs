@@ -136,7 +136,8 @@ fn merge_keys_give_way_to_the_maps_own_keys_the_first_of_a_list_and_the_later_of
                 - name: a\n  address: 1\n  <<: [{scale: 0.5, unit_of_measurement: A}, {scale: 2, unit_of_measurement: B, data_type: uint16}]\n\
                 - name: b\n  address: 2\n  <<: {scale: 0.5, data_type: int32}\n  <<: {scale: 2}\n\
                 - name: c\n  <<: {scale: 0.5, address: 9}\n  scale: 4\n  address: 4\n\
-                - name: d\n  address: 6\n  <<: 7\n";
+                - name: d\n  address: 6\n  <<: 7\n\
+                - name: e\n  address: 7\n  !!merge <<: {scale: 3}\n  '<<': {scale: 5}\n";
     let (profile, imported) = imported(text, &ImportOptions::default());
     let scale = |code: &str| {
         let p = point(&profile, code);
@@ -145,6 +146,9 @@ fn merge_keys_give_way_to_the_maps_own_keys_the_first_of_a_list_and_the_later_of
     assert_eq!(scale("a"), (1, ValueType::U16, 0.5, Some("A".into())));
     assert_eq!(scale("b"), (2, ValueType::I32, 2.0, None));
     assert_eq!(scale("c"), (4, ValueType::I16, 4.0, None));
+    // `!!merge <<` merges; a quoted `'<<'` is a key like any other (listed).
+    assert_eq!(scale("e"), (7, ValueType::I16, 3.0, None));
+    assert!(listed(&imported, "sensors[4]", "<<").is_some_and(|(_, why)| why.contains("no profile equivalent")));
     let (value, why) = listed(&imported, "sensors[3]", "<<").unwrap();
     assert_eq!(value, "7");
     assert!(why.contains("merges a map or a list of maps"), "{why}");
