@@ -21,9 +21,10 @@
 //!   These tags are Home Assistant's: in an evcc file they stay as written.
 //!
 //! Bounds, each refused with a message that names the file and the line: containers nested
-//! deeper than [`DEPTH_MAX`] (counted as they open, so a file of `[[[[…` is refused at its
-//! 65th byte), aliases and merges that add more than [`EXPANSION_MAX`] nodes to the tree (a
-//! "billion laughs" file), includes nested deeper than [`INCLUDE_DEPTH_MAX`] or in a cycle,
+//! deeper than [`DEPTH_MAX`] (counted as they open, so a file of `[[[[…` is refused within
+//! its first few hundred bytes, whatever its size: the scanner's own bound of 256 flow levels,
+//! met first when it scans ahead, reads as ours), aliases and anchors that copy more than
+//! [`EXPANSION_MAX`] nodes (a "billion laughs" file), includes nested deeper than [`INCLUDE_DEPTH_MAX`] or in a cycle,
 //! a file larger than [`super::MAP_MAX`], more than [`FILES_MAX`] files or [`BYTES_MAX`]
 //! bytes read in all.
 
