@@ -114,7 +114,7 @@ pub(super) fn read(text: &str, draft: &mut Draft) -> Result<(), ImportError> {
                             let (field, value) = written_unit(entity);
                             // An unresolved `!secret` was listed, naming it, when it was read.
                             if !yaml::unresolved(value) {
-                                let why = format!("not a unit (0-255): the entity is imported with unit {unit}'s");
+                                let why = format!("not a unit (0-255): imported with the entities of unit {unit}");
                                 draft.unmapped(&here, field, &shown(value), &why);
                             }
                         }
