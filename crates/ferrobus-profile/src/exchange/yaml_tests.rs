@@ -214,10 +214,12 @@ fn imported_of(text: &str) -> (Profile, Imported) {
 #[test]
 fn a_secret_is_looked_up_from_the_including_files_directory_up_to_the_maps() {
     let dir = Dir::new("secrets");
-    dir.write("secrets.yaml", "unit: 4\naddress: 40\n").write("sub/secrets.yaml", "address: 41\n").write(
-        "sub/sensors.yaml",
-        "- {name: near, address: !secret address, slave: !secret unit}\n- {name: gone, address: !secret nowhere}\n",
-    );
+    dir.write("secrets.yaml", "unit: 4\naddress: 40\npassword: hunter2\npassword: hunter3\n<<: hunter4\n")
+        .write("sub/secrets.yaml", "address: 41\n")
+        .write(
+            "sub/sensors.yaml",
+            "- {name: near, address: !secret address, slave: !secret unit}\n- {name: gone, address: !secret nowhere}\n",
+        );
     let text = "modbus:\n  - name: hub\n    sensors: !include sub/sensors.yaml\n    switches:\n      - {name: far, address: !secret address, slave: !secret unit}\n";
     let (profile, imported) = imported(text, &ImportOptions { unit: Some(4), ..dir.options() });
     // The nearer secrets.yaml wins; a secret it lacks comes from the one above.
@@ -227,6 +229,8 @@ fn a_secret_is_looked_up_from_the_including_files_directory_up_to_the_maps() {
     assert_eq!(value, "!secret nowhere");
     assert!(why.contains("no secret of this name in sub/secrets.yaml, secrets.yaml"), "{why}");
     assert_eq!(imported.points, 2, "{:?}", imported.unmapped);
+    // A secrets.yaml's own mistakes are not listed: its values are secrets.
+    assert!(!imported.unmapped.iter().any(|u| u.value.contains("hunter")), "{:?}", imported.unmapped);
 }
 
 #[test]

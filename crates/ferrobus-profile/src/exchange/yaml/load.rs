@@ -257,13 +257,14 @@ impl Loader<'_> {
                                 _ => None,
                             }));
                         }
-                        other if unresolved(&other) => {}
+                        // A secrets.yaml is not listed: its values are secrets.
+                        other if unresolved(&other) || !doc.resolve => {}
                         other => {
                             let why = format!("line {key_line}: `<<` merges a map or a list of maps: left out");
                             self.draft.unmapped(at(&path()), "<<", &shown(&other), &why);
                         }
                     }
-                } else if let Some(old) = own.insert(k.clone(), value) {
+                } else if let Some(old) = own.insert(k.clone(), value).filter(|_| doc.resolve) {
                     let mut why = format!(
                         "the key is written again at line {key_line}: the last is kept, as Home Assistant keeps it"
                     );
