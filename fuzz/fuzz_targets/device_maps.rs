@@ -22,17 +22,19 @@ const ORIGIN: &str = "fuzz-map";
 
 /// The example maps, the starting points of [`Input::Edited`], with their formats and the
 /// `--first-address` each is imported with (none: a Modicon list is recognised).
-const EXAMPLES: [(&str, Format, Option<u16>); 6] = [
+const EXAMPLES: [(&str, Format, Option<u16>); 8] = [
     (include_str!("../../examples/maps/meter.csv"), Format::Csv, Some(1)),
     (include_str!("../../examples/maps/home-assistant.yaml"), Format::HaYaml, None),
     (include_str!("../../examples/maps/evcc.yaml"), Format::EvccYaml, None),
     (include_str!("../../examples/maps/published/sdm630.csv"), Format::Csv, None),
     (include_str!("../../examples/maps/published/abb-b23.csv"), Format::Csv, None),
     (include_str!("../../examples/maps/published/evcc-meter-and-wallbox.yaml"), Format::EvccYaml, None),
+    (include_str!("../../examples/maps/published/sma-sunny-tripower.yaml"), Format::HaYaml, None),
+    (include_str!("../../examples/maps/published/ha-config/configuration.yaml"), Format::HaYaml, None),
 ];
 
 /// Pieces of the formats an edit may put in, beside arbitrary text.
-const TOKENS: [&str; 24] = [
+const TOKENS: [&str; 30] = [
     "\n70000;Far;u16;;;;R;;04\n",
     "\n1;Dup;u32;CDAB;1/0;A;RW;;03\n",
     ";string;;;;;;\n",
@@ -53,6 +55,12 @@ const TOKENS: [&str; 24] = [
     "      scale: .nan\n",
     "      scale: 1e309\n",
     "!include other.yaml",
+    "!secret modbus_slave",
+    "!include_dir_merge_list sensors",
+    "\n        <<: &m {scale: 2, data_type: int32}\n",
+    "\n        <<: [*m, *m]\n        <<: *m\n",
+    "\n        address: 7\n        address: 8\n",
+    "[[[[[[[[[[[[[[[[[[[[[[[[[[[[[[[[",
     "&a [*a]",
     "{{ .id }}",
     "é\u{0}\u{7}\r",

@@ -122,11 +122,14 @@ pub(crate) fn run(args: &ProfileArgs) -> Result<(), CliError> {
         Action::Show { name, group } => show(name, group.as_deref(), format),
         Action::Check { file } => check(file, format),
         Action::Import { file, from, output, force, name, only_unit, only_device, first_address } => {
+            // A YAML map's `!include` and `!secret` are read from the map's directory.
+            let dir = file.parent().map(|d| if d.as_os_str().is_empty() { Path::new(".") } else { d }.to_path_buf());
             let options = ImportOptions {
                 name: name.clone(),
                 unit: *only_unit,
                 device: only_device.clone(),
                 base: *first_address,
+                dir,
             };
             import(file, *from, &options, output.as_deref(), *force, format)
         }
@@ -152,6 +155,10 @@ fn import(
     format: Format,
 ) -> Result<(), CliError> {
     let shown = file.display().to_string();
+    if std::fs::metadata(file).is_ok_and(|m| m.len() > exchange::MAP_MAX) {
+        let why = format!("{shown}: larger than the {} MiB a map file may be: refused", exchange::MAP_MAX >> 20);
+        return Err(CliError::Usage(why));
+    }
     let text = ferrobus_profile::source::read(file).map_err(|e| match e {
         ferrobus_profile::source::ReadError::Io(e) => CliError::Usage(format!("{shown}: {e}")),
         ferrobus_profile::source::ReadError::NotText(e) => CliError::Usage(format!("{shown}:{e}")),

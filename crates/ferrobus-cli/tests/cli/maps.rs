@@ -96,6 +96,11 @@ fn an_existing_output_is_kept_unless_forced_and_bad_input_is_a_usage_error() {
     let refused = offline(&["profile", "import", several.path(), "--from", "ha-yaml"]).code(2);
     assert!(stderr(&refused).contains("describes units 1, 2: pick one with --only-unit"), "{}", stderr(&refused));
     offline(&["profile", "import", several.path(), "--from", "ha-yaml", "--only-unit", "2"]).success();
+    let big = Temp::new("big.yaml");
+    std::fs::File::create(&big.0).unwrap().set_len((16 << 20) + 1).unwrap();
+    let refused = offline(&["profile", "import", big.path(), "--from", "ha-yaml"]).code(2);
+    let said = stderr(&refused);
+    assert!(said.contains(&format!("{}: larger than the 16 MiB a map file may be", big.path())), "{said}");
     let bad = offline(&["profile", "import", &example("meter.csv"), "--from", "xml"]).code(2);
     assert!(stderr(&bad).contains("csv, ha-yaml, evcc-yaml"), "{}", stderr(&bad));
 }
@@ -281,4 +286,51 @@ fn a_long_list_of_what_was_not_mapped_is_summed_up_past_a_hundred_lines() {
     let all = offline(&["profile", "import", map.path(), "--from", "csv", "--json"]).success();
     let doc: Value = serde_json::from_str(&stdout(&all)).unwrap();
     assert_eq!(doc["unmapped"].as_array().unwrap().len(), 5001);
+}
+
+/// examples/maps/published/NAME: maps in the shapes people publish them in.
+fn published(name: &str) -> String {
+    example(&format!("published/{name}"))
+}
+
+#[test]
+fn published_home_assistant_files_import_through_anchors_include_and_secret_and_serve_scaled_values() {
+    // Anchors merged with `<<`, two `<<` keys in a map: every sensor with its type and scale.
+    let (sma, report) = import(&published("sma-sunny-tripower.yaml"), "ha-yaml", &[], "sma.toml");
+    assert!(report.contains("9 points imported into"), "{report}");
+    let sim = TcpSim::start(sma.path(), None);
+    let shown = stdout(&sim.run(&["--device", sma.path(), "get", "SMA_Grid_Frequency"]).success());
+    assert!(shown.contains("SMA Grid Frequency  0.00 Hz"), "u32 at a scale of 0.01: {shown}");
+    drop(sim);
+    // `sensors: !include` and `slave: !secret`, read from the map's directory.
+    let (config, report) = import(&published("ha-config/configuration.yaml"), "ha-yaml", &[], "config.toml");
+    assert!(report.contains("6 points imported into"), "{report}");
+    assert!(report.contains("not mapped: modbus[0]: host = !secret modbus_host: a connection setting"), "{report}");
+    assert!(!report.contains("192.168.1.40"), "a secret is never shown: {report}");
+    let (_, seven) = import(&published("ha-config/configuration.yaml"), "ha-yaml", &["--only-unit", "7"], "seven.toml");
+    assert!(seven.contains("6 points imported into"), "every entity is of the secret's unit 7: {seven}");
+    let zero = offline(&[
+        "profile",
+        "import",
+        &published("ha-config/configuration.yaml"),
+        "--from",
+        "ha-yaml",
+        "--only-unit",
+        "0",
+    ])
+    .code(2);
+    assert!(stderr(&zero).contains("an entity of unit 7, not of unit 0"), "{}", stderr(&zero));
+    let sim = TcpSim::start(config.path(), None);
+    sim.run(&["--device", config.path(), "set", "Living_room_target", "21.5"]).success();
+    let shown = stdout(&sim.run(&["--device", config.path(), "get", "Living_room_target"]).success());
+    assert!(shown.contains("21.5 °C"), "{shown}");
+    let json = stdout(
+        &sim.run(&["--device", config.path(), "get", "Outdoor_temperature", "Living_room_target", "--json"]).success(),
+    );
+    let doc: Value = serde_json::from_str(&json).unwrap();
+    let points = doc["points"].as_array().unwrap();
+    let target = points.iter().find(|p| p["code"] == "Living_room_target").unwrap();
+    assert_eq!((target["raw"].as_i64(), target["unit"].as_str()), (Some(215), Some("°C")), "{target}");
+    let outdoor = points.iter().find(|p| p["code"] == "Outdoor_temperature").unwrap();
+    assert_eq!(outdoor["unit"].as_str(), Some("°C"), "from the included file: {outdoor}");
 }

@@ -73,7 +73,7 @@ pub(super) fn read(text: &str, draft: &mut Draft) -> Result<(), ImportError> {
                 for entity in
                     map.get(*platform).map(items).unwrap_or_default().into_iter().filter_map(Value::as_mapping)
                 {
-                    let unit = entity_unit(entity);
+                    let Some(unit) = entity_unit(entity) else { continue };
                     if !units.contains(&unit) {
                         units.push(unit);
                     }
@@ -103,11 +103,21 @@ pub(super) fn read(text: &str, draft: &mut Draft) -> Result<(), ImportError> {
                         draft.unmapped(&here, platform, &shown(entity), "an entity is a map: skipped");
                         continue;
                     };
-                    let of = entity_unit(entity);
-                    if of != unit {
-                        let why = format!("an entity of unit {of}, not of unit {unit} (the one imported): skipped");
-                        draft.unmapped(&here, "slave", &of.to_string(), &why);
-                        continue;
+                    match entity_unit(entity) {
+                        Some(of) if of != unit => {
+                            let why = format!("an entity of unit {of}, not of unit {unit} (the one imported): skipped");
+                            draft.unmapped(&here, "slave", &of.to_string(), &why);
+                            continue;
+                        }
+                        Some(_) => {}
+                        None => {
+                            let (field, value) = written_unit(entity);
+                            // An unresolved `!secret` was listed, naming it, when it was read.
+                            if !yaml::unresolved(value) {
+                                let why = format!("not a unit (0-255): imported with the entities of unit {unit}");
+                                draft.unmapped(&here, field, &shown(value), &why);
+                            }
+                        }
                     }
                     entity_of(platform, entity, &here, draft);
                 }
@@ -145,9 +155,21 @@ fn hubs(root: &Value) -> Option<Vec<(String, &Value)>> {
 }
 
 /// An entity's unit: `slave` or `device_address`, 0 when neither is given (Home Assistant's
-/// default).
-fn entity_unit(entity: &Mapping) -> u8 {
-    entity.get("slave").or_else(|| entity.get("device_address")).and_then(yaml::unit).unwrap_or(0)
+/// default); `None` when it is written but is no unit (an unresolved `!secret`, text): never
+/// a silent 0.
+fn entity_unit(entity: &Mapping) -> Option<u8> {
+    match entity.get("slave").or_else(|| entity.get("device_address")) {
+        None => Some(0),
+        Some(value) => yaml::unit(value),
+    }
+}
+
+/// The key and value an entity's unit is written with (`slave` first).
+fn written_unit(entity: &Mapping) -> (&'static str, &Value) {
+    match entity.get("slave") {
+        Some(value) => ("slave", value),
+        None => ("device_address", entity.get("device_address").unwrap_or(&Value::Null)),
+    }
 }
 
 /// One entity of `platform` at `place`.

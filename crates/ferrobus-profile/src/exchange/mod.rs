@@ -21,9 +21,11 @@
 //! input register 0, 40001 holding register 0: meters' manuals number them so; a note says
 //! so); the profile written has `base = 0`.
 //!
-//! The YAML reader is serde_yaml_ng, the maintained fork of serde_yaml: Home Assistant and
-//! evcc read YAML 1.1, and so does it. CSV is the `csv` crate, the delimiter (`,`, `;` or a
-//! tab) taken from the header line. The formats and their mapping tables are documented in
+//! YAML is read event by event (yaml-rust2's parser) into serde_yaml_ng's `Value`, its
+//! scalars resolved as serde_yaml_ng resolves them, as Home Assistant's loader reads a file:
+//! merge keys, `!include` and `!secret` (from [`ImportOptions::dir`]), each unresolved tag
+//! listed; nesting, aliases, includes and sizes bounded ([`MAP_MAX`]). CSV is the `csv`
+//! crate, the delimiter (`,`, `;` or a tab) taken from the header line. The formats and their mapping tables are documented in
 //! `docs/device-maps.md`.
 
 mod csv;
@@ -34,6 +36,7 @@ mod yaml;
 
 use std::collections::{HashMap, HashSet};
 use std::fmt;
+use std::path::PathBuf;
 
 pub use csv::export_csv;
 
@@ -78,7 +81,15 @@ pub struct ImportOptions {
     /// subtracted from every CSV address. Unless given, a file whose every address is a
     /// Modicon register number (30001, 40001, ...) is read as one, and any other from 0.
     pub base: Option<u16>,
+    /// The directory of the map file: a YAML map's `!include` files are read from it (and
+    /// from the including file's directory, inside it), its `!secret` values from the
+    /// `secrets.yaml` files there. `None` (the default): no file is read, and every
+    /// `!include` and `!secret` is listed as not mapped.
+    pub dir: Option<PathBuf>,
 }
+
+/// The largest map file an import reads, and each file a YAML map includes: 16 MiB.
+pub const MAP_MAX: u64 = 16 << 20;
 
 /// Something of the source that the profile does not carry.
 #[derive(Clone, PartialEq, Eq, Debug)]
@@ -175,6 +186,9 @@ pub enum ImportError {
 /// Reads the map `text` (called `origin` in messages and in the profile's header) as `format`.
 pub fn import(text: &str, origin: &str, format: Format, options: &ImportOptions) -> Result<Imported, ImportError> {
     let mut draft = Draft::new(origin, format, options);
+    if text.len() as u64 > MAP_MAX {
+        return Err(draft.malformed(format!("larger than the {} MiB a map file may be: refused", MAP_MAX >> 20)));
+    }
     match format {
         Format::Csv => csv::read(text, &mut draft)?,
         Format::HaYaml => ha::read(text, &mut draft)?,
@@ -264,6 +278,12 @@ pub(crate) struct Draft {
     repeated: HashMap<(String, String, String), usize>,
     /// How many more places each of those was seen at: (index in `unmapped`, count).
     more: Vec<(usize, usize)>,
+    /// The (place, field) of each value a YAML `!secret` gave, and that `!secret NAME`: a
+    /// listing shows the tag, never the secret.
+    pub(crate) secret_at: HashMap<(String, String), String>,
+    /// The text of each text value a `!secret` gave, and that `!secret NAME`: where an alias
+    /// or a merge took it elsewhere, the listing still shows the tag.
+    pub(crate) secret_texts: HashMap<String, String>,
 }
 
 impl Draft {
@@ -279,6 +299,8 @@ impl Draft {
             codes: HashSet::new(),
             repeated: HashMap::new(),
             more: Vec::new(),
+            secret_at: HashMap::new(),
+            secret_texts: HashMap::new(),
         }
     }
 
@@ -319,7 +341,12 @@ impl Draft {
     /// Lists `field = value` at `place` as not mapped, for `why`.
     pub(crate) fn unmapped(&mut self, place: &str, field: &str, value: &str, why: &str) {
         // A place is a path of the file's own keys, and a reason may quote the file: both are
-        // bounded and escaped as a value is.
+        // bounded and escaped as a value is. A secret's value is shown as its tag.
+        let value = self
+            .secret_at
+            .get(&(place.to_string(), field.to_string()))
+            .or_else(|| self.secret_texts.get(value.trim()))
+            .map_or(value, String::as_str);
         self.unmapped.push(Unmapped {
             place: bounded(place, 160),
             field: shown(field),
@@ -680,3 +707,5 @@ pub(crate) fn order_of(swapped: bool, bytes: bool) -> Order {
 
 #[cfg(test)]
 mod tests;
+#[cfg(test)]
+mod yaml_tests;
