@@ -2,7 +2,7 @@
 //! writing them ([`device`]), the backup file (TOML, one parameter a
 //! line in the profile's order, under a comment with its label; [`file`](mod@file)), a point's registers
 //! to the file's raw value and back ([`param`]), the profile a backup is made with and the
-//! hash that pins a profile file ([`view`], [`sha256`]), the comparison of two backups
+//! SHA-256 that pins a profile file ([`view`]), the comparison of two backups
 //! ([`diff`]) and of a device or a backup with the profile's factory defaults ([`defaults`]),
 //! and the rules that write a backup file atomically and never let a worse backup
 //! replace a better one ([`save`](mod@save)), and a restore's plan and its writes
@@ -55,7 +55,6 @@ pub mod file;
 pub mod param;
 pub mod restore;
 pub mod save;
-pub mod sha256;
 pub mod view;
 
 pub use device::{Readings, Target, Unwatched, Watch};

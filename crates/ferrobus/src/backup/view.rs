@@ -1,10 +1,11 @@
 //! The profile a backup is made, compared or restored with: a `--device` profile with the name
 //! it was given and, for a file, the hash that pins the exact file.
 
+use std::fmt::Write as _;
+
 use ferrobus_profile::{BUILTIN, Point, Profile, ProfileError};
 use ferrobus_proto::ExceptionCode;
-
-use super::sha256;
+use sha2::{Digest, Sha256};
 
 /// Why a profile could not be loaded for a backup.
 #[derive(Debug, thiserror::Error)]
@@ -53,7 +54,7 @@ impl View {
             None
         } else {
             let bytes = std::fs::read(name).map_err(|source| ViewError::Read { name: name.to_string(), source })?;
-            Some(format!("sha256:{}", sha256::hex(&bytes)))
+            Some(format!("sha256:{}", sha256_hex(&bytes)))
         };
         Ok(View { name: name.to_string(), hash, profile })
     }
@@ -107,5 +108,24 @@ impl View {
     pub fn running(&self) -> Option<(&Point, &[i64])> {
         let rule = self.profile.state.running.as_ref()?;
         Some((self.find(&rule.point)?, rule.values.as_slice()))
+    }
+}
+
+/// The SHA-256 of `bytes`, in lower-case hex.
+fn sha256_hex(bytes: &[u8]) -> String {
+    Sha256::digest(bytes).iter().fold(String::with_capacity(64), |mut out, byte| {
+        let _ = write!(out, "{byte:02x}");
+        out
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::sha256_hex;
+
+    #[test]
+    fn a_file_is_named_by_its_sha_256_as_fips_180_gives_it() {
+        assert_eq!(sha256_hex(b""), "e3b0c44298fc1c149afbf4c8996fb92427ae41e4649b934ca495991b7852b855");
+        assert_eq!(sha256_hex(b"abc"), "ba7816bf8f01cfea414140de5dae2223b00361a396177a9cb410ff61f20015ad");
     }
 }
