@@ -3,7 +3,8 @@
 //! pysunspec2 package (`sunspec2/models/json/`, found by asking `python3`, or `$PYTHON`).
 //! Each file is checked with the crate's own reader (`src/def.rs`); a file that does not read
 //! fails the build, naming it. With none found the build succeeds with a warning, and the
-//! crate says so at run time.
+//! crate says so at run time; it is built again when Python's package directories change
+//! (`pip install pysunspec2`).
 
 #![allow(missing_docs, unreachable_pub, dead_code, clippy::pedantic)]
 
@@ -26,7 +27,14 @@ fn main() {
         }
         None => match pysunspec2_models() {
             Some(dir) => (model_files(&dir), format!("pysunspec2 at {}", dir.display())),
-            None => (Vec::new(), "nowhere".to_string()),
+            None => {
+                // Built again once pysunspec2 is installed: `pip install` changes the
+                // directories Python imports packages from.
+                for dir in python_package_dirs() {
+                    println!("cargo:rerun-if-changed={}", dir.display());
+                }
+                (Vec::new(), "nowhere".to_string())
+            }
         },
     };
     let mut code = String::from("/// The embedded model files: (id, file name, text).\n");
@@ -53,8 +61,8 @@ fn main() {
     code.push_str("];\n");
     if files.is_empty() {
         println!(
-            "cargo:warning=no SunSpec model definitions found ({from}): pip install pysunspec2, or set \
-             FERROBUS_SUNSPEC_MODELS=DIR, and rebuild; the crate builds without them"
+            "cargo:warning=no SunSpec model definitions found ({from}): pip install pysunspec2 (the next build \
+             takes them), or set FERROBUS_SUNSPEC_MODELS=DIR; the crate builds without them"
         );
     }
     let out = PathBuf::from(std::env::var_os("OUT_DIR").expect("cargo sets OUT_DIR")).join("models.rs");
@@ -82,16 +90,26 @@ fn model_files(path: &Path) -> Vec<PathBuf> {
     files
 }
 
-/// `sunspec2/models/json` of the pysunspec2 package `python3` imports, if any.
-fn pysunspec2_models() -> Option<PathBuf> {
+/// What `python3` (or `$PYTHON`) prints running `code`, if it runs and succeeds.
+fn python(code: &str) -> Option<String> {
     let python = std::env::var("PYTHON").unwrap_or_else(|_| "python3".to_string());
-    let output = Command::new(python)
-        .args(["-c", "import sunspec2, os; print(os.path.dirname(sunspec2.__file__))"])
-        .output()
-        .ok()?;
+    let output = Command::new(python).args(["-c", code]).output().ok()?;
     if !output.status.success() {
         return None;
     }
-    let dir = PathBuf::from(String::from_utf8(output.stdout).ok()?.trim()).join("models").join("json");
+    String::from_utf8(output.stdout).ok()
+}
+
+/// `sunspec2/models/json` of the pysunspec2 package `python3` imports, if any.
+fn pysunspec2_models() -> Option<PathBuf> {
+    let package = python("import sunspec2, os; print(os.path.dirname(sunspec2.__file__))")?;
+    let dir = PathBuf::from(package.trim()).join("models").join("json");
     dir.is_dir().then_some(dir)
+}
+
+/// The directories `python3` imports installed packages from (site-packages, the user's
+/// too) that exist: where `pip install pysunspec2` puts it.
+fn python_package_dirs() -> Vec<PathBuf> {
+    let code = "import site; print('\\n'.join(site.getsitepackages() + [site.getusersitepackages()]))";
+    python(code).map_or_else(Vec::new, |text| text.lines().map(PathBuf::from).filter(|d| d.is_dir()).collect())
 }
