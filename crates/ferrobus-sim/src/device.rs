@@ -12,7 +12,7 @@ use ferrobus_proto::pdu::{Bits, MeiRequest, Registers, Request};
 use ferrobus_proto::slave::Admission;
 use ferrobus_proto::{ExceptionCode, FunctionCode};
 
-use crate::memory::{Memory, Refusal, Table};
+use crate::memory::{Denial, Memory, Table};
 use crate::model::{self, Model};
 use crate::profile::Profile;
 
@@ -80,13 +80,14 @@ impl Device {
         Duration::from_millis(u64::from(self.profile.comm.response_wait_ms))
     }
 
-    fn refusal(&self, refusal: Refusal) -> ExceptionCode {
+    /// The exception code the profile answers a denial with.
+    fn exception(&self, denial: Denial) -> ExceptionCode {
         let e = &self.profile.exceptions;
-        ExceptionCode::from_u8(match refusal {
-            Refusal::Unmapped => 0x02,
-            Refusal::ReadOnly => e.read_only,
-            Refusal::OutOfRange => e.out_of_range,
-            Refusal::NotAllowed => e.not_allowed,
+        ExceptionCode::from_u8(match denial {
+            Denial::Unmapped => 0x02,
+            Denial::ReadOnly => e.read_only,
+            Denial::OutOfRange => e.out_of_range,
+            Denial::NotAllowed => e.not_allowed,
         })
     }
 
@@ -151,24 +152,24 @@ impl Device {
 
     /// 0x01 / 0x02.
     pub fn read_bits(&self, table: Table, start: u16, out: &mut [bool]) -> Result<(), ExceptionCode> {
-        self.memory.read_bits(table, start, out).map_err(|r| self.refusal(r))
+        self.memory.read_bits(table, start, out).map_err(|d| self.exception(d))
     }
 
     /// 0x03 / 0x04.
     pub fn read_registers(&self, table: Table, start: u16, out: &mut [u16]) -> Result<(), ExceptionCode> {
-        self.memory.read_registers(table, start, out).map_err(|r| self.refusal(r))
+        self.memory.read_registers(table, start, out).map_err(|d| self.exception(d))
     }
 
     /// 0x05 / 0x0F.
     pub fn write_coils(&mut self, start: u16, values: Bits<'_>) -> Result<(), ExceptionCode> {
-        self.memory.check_write_bits(start, values.len()).map_err(|r| self.refusal(r))?;
+        self.memory.check_write_bits(start, values.len()).map_err(|d| self.exception(d))?;
         if let Some(model) = &self.model {
             for i in 0..values.len() {
                 let address = u16::try_from(usize::from(start) + i).unwrap_or(u16::MAX);
                 if let Some(item) = self.memory.item_at(Table::Coils, address) {
                     model
                         .check_write(item, i64::from(values.get(i).unwrap_or_default()))
-                        .map_err(|r| self.refusal(r))?;
+                        .map_err(|d| self.exception(d))?;
                 }
             }
         }
@@ -180,11 +181,11 @@ impl Device {
     /// 0x06 / 0x10 and the write of 0x16, 0x17.
     pub fn write_registers(&mut self, start: u16, values: Registers<'_>) -> Result<(), ExceptionCode> {
         let words: Vec<u16> = values.iter().collect();
-        let touched = self.memory.check_write_registers(start, &words).map_err(|r| self.refusal(r))?;
+        let touched = self.memory.check_write_registers(start, &words).map_err(|d| self.exception(d))?;
         if let Some(model) = &self.model {
             for (index, value) in &touched {
                 if let Some(item) = self.memory.item_by_index(*index) {
-                    model.check_write(item, *value).map_err(|r| self.refusal(r))?;
+                    model.check_write(item, *value).map_err(|d| self.exception(d))?;
                 }
             }
         }

@@ -16,9 +16,9 @@ use crate::profile::{Access, Point, Profile, Value};
 
 pub use crate::profile::Table;
 
-/// Why an access is refused; the device turns it into its exception code.
+/// Why an access is denied; the device turns it into its exception code.
 #[derive(Clone, Copy, PartialEq, Eq, Debug)]
-pub enum Refusal {
+pub enum Denial {
     /// No item at the address (exception 02).
     Unmapped,
     /// The item is read-only.
@@ -241,7 +241,7 @@ impl Memory {
     }
 
     /// Reads bits; every address must belong to an item.
-    pub fn read_bits(&self, table: Table, start: u16, out: &mut [bool]) -> Result<(), Refusal> {
+    pub fn read_bits(&self, table: Table, start: u16, out: &mut [bool]) -> Result<(), Denial> {
         let space = self.bits(table);
         for (i, slot) in out.iter_mut().enumerate() {
             let a = usize::from(start) + i;
@@ -250,7 +250,7 @@ impl Memory {
                     *slot = false;
                     continue;
                 }
-                return Err(Refusal::Unmapped);
+                return Err(Denial::Unmapped);
             }
             let wo = self.item_at(table, a as u16).is_some_and(|it| it.access == Access::Wo);
             *slot = !wo && space.values.get(a).copied().unwrap_or_default();
@@ -259,7 +259,7 @@ impl Memory {
     }
 
     /// Reads registers; every address must belong to an item.
-    pub fn read_registers(&self, table: Table, start: u16, out: &mut [u16]) -> Result<(), Refusal> {
+    pub fn read_registers(&self, table: Table, start: u16, out: &mut [u16]) -> Result<(), Denial> {
         let space = self.words(table);
         for (i, slot) in out.iter_mut().enumerate() {
             let a = usize::from(start) + i;
@@ -268,7 +268,7 @@ impl Memory {
                     *slot = 0;
                     continue;
                 }
-                return Err(Refusal::Unmapped);
+                return Err(Denial::Unmapped);
             };
             *slot = if item.access == Access::Wo { 0 } else { space.values.get(a).copied().unwrap_or_default() };
         }
@@ -276,12 +276,12 @@ impl Memory {
     }
 
     /// Checks a write of coils from `start` without changing anything.
-    pub fn check_write_bits(&self, start: u16, count: usize) -> Result<(), Refusal> {
+    pub fn check_write_bits(&self, start: u16, count: usize) -> Result<(), Denial> {
         for i in 0..count {
             let a = (usize::from(start) + i) as u16;
             match self.item_at(Table::Coils, a) {
-                None => return Err(Refusal::Unmapped),
-                Some(item) if item.access == Access::Ro => return Err(Refusal::ReadOnly),
+                None => return Err(Denial::Unmapped),
+                Some(item) if item.access == Access::Ro => return Err(Denial::ReadOnly),
                 Some(_) => {}
             }
         }
@@ -297,15 +297,15 @@ impl Memory {
 
     /// The items a register write touches, with the raw value each would have afterwards,
     /// checked for access and range. Nothing changes.
-    pub fn check_write_registers(&self, start: u16, values: &[u16]) -> Result<Vec<(usize, i64)>, Refusal> {
+    pub fn check_write_registers(&self, start: u16, values: &[u16]) -> Result<Vec<(usize, i64)>, Denial> {
         let mut touched: Vec<(usize, i64)> = Vec::new();
         let mut a = usize::from(start);
         let end = a + values.len();
         while a < end {
             let owner = self.holding.owner.get(a).copied().unwrap_or(NONE);
-            let Some(item) = self.items.get(owner as usize) else { return Err(Refusal::Unmapped) };
+            let Some(item) = self.items.get(owner as usize) else { return Err(Denial::Unmapped) };
             if item.access == Access::Ro {
-                return Err(Refusal::ReadOnly);
+                return Err(Denial::ReadOnly);
             }
             // The item's registers after the write: new values where written, old elsewhere
             // (a write of one half of a pair keeps the other half). A plain table is one item
@@ -321,7 +321,7 @@ impl Memory {
                 })
                 .collect();
             if !item.in_range(&words) {
-                return Err(Refusal::OutOfRange);
+                return Err(Denial::OutOfRange);
             }
             let value = item.decode(&words);
             touched.push((owner as usize, value));
@@ -446,10 +446,10 @@ mod tests {
         let m = rx();
         // F001 = 40000 (0x9C40) is the maximum; 40001 is out of range.
         assert!(m.check_write_registers(0, &[0x0000, 0x9C40]).is_ok());
-        assert_eq!(m.check_write_registers(0, &[0x0000, 0x9C41]), Err(Refusal::OutOfRange));
-        assert_eq!(m.check_write_registers(0, &[0x0001, 0x0000]), Err(Refusal::OutOfRange), "the high word alone");
-        assert_eq!(m.check_write_registers(2, &[1]), Err(Refusal::ReadOnly), "status A");
-        assert_eq!(m.check_write_registers(4, &[1]), Err(Refusal::Unmapped));
+        assert_eq!(m.check_write_registers(0, &[0x0000, 0x9C41]), Err(Denial::OutOfRange));
+        assert_eq!(m.check_write_registers(0, &[0x0001, 0x0000]), Err(Denial::OutOfRange), "the high word alone");
+        assert_eq!(m.check_write_registers(2, &[1]), Err(Denial::ReadOnly), "status A");
+        assert_eq!(m.check_write_registers(4, &[1]), Err(Denial::Unmapped));
     }
 
     #[test]
@@ -484,9 +484,9 @@ mod tests {
         assert_eq!(m.read_registers(Table::Holding, 0x1000, &mut out), Ok(()));
         assert_eq!(out, [7, 0, 0, 0, 0], "0x1002, 0x1003 and 0x1005 are holes in the span");
         let mut past = [0u16; 6];
-        assert_eq!(m.read_registers(Table::Holding, 0x1000, &mut past), Err(Refusal::Unmapped), "0x1006 is outside");
-        assert_eq!(m.read_registers(Table::Input, 0x1001, &mut [0u16; 1]), Err(Refusal::Unmapped), "another table");
-        assert_eq!(m.check_write_registers(0x1001, &[1]), Err(Refusal::Unmapped), "a span is for reads only");
+        assert_eq!(m.read_registers(Table::Holding, 0x1000, &mut past), Err(Denial::Unmapped), "0x1006 is outside");
+        assert_eq!(m.read_registers(Table::Input, 0x1001, &mut [0u16; 1]), Err(Denial::Unmapped), "another table");
+        assert_eq!(m.check_write_registers(0x1001, &[1]), Err(Denial::Unmapped), "a span is for reads only");
     }
 
     #[test]
@@ -501,7 +501,7 @@ mod tests {
         assert_eq!(out, [0x0000, 0xC03F, 0xFFFE, 0xFFFF, 0xFFFF, 0xFFFF, 0x4F4B, 0x0000]);
         assert_eq!(m.get("q"), -2);
         // 2.5 (0x4020_0000, DCBA: 0000h then 2040h) is above max = 2; 1.75 is not.
-        assert_eq!(m.check_write_registers(0, &[0x0000, 0x2040]), Err(Refusal::OutOfRange));
+        assert_eq!(m.check_write_registers(0, &[0x0000, 0x2040]), Err(Denial::OutOfRange));
         assert!(m.check_write_registers(0, &[0x0000, 0xE03F]).is_ok());
     }
 

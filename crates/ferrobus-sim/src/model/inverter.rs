@@ -10,7 +10,7 @@
 use std::time::Duration;
 
 use super::Model;
-use crate::memory::{Item, Memory, Refusal};
+use crate::memory::{Denial, Item, Memory};
 use crate::profile::Polarity;
 
 /// Trip factor of an external trip (E12).
@@ -203,10 +203,10 @@ impl Model for Inverter {
         self.write_outputs(memory, target);
     }
 
-    fn check_write(&self, item: &Item, _value: i64) -> Result<(), Refusal> {
+    fn check_write(&self, item: &Item, _value: i64) -> Result<(), Denial> {
         let running = self.frequency != 0.0;
         if running && !item.while_running {
-            return Err(Refusal::NotAllowed);
+            return Err(Denial::NotAllowed);
         }
         Ok(())
     }
@@ -321,7 +321,7 @@ mod tests {
         m.set("F001", 1000);
         m.set("run", 1);
         step(&mut inv, &mut m, 100);
-        assert_eq!(inv.check_write(&a003, 50), Err(Refusal::NotAllowed));
+        assert_eq!(inv.check_write(&a003, 50), Err(Denial::NotAllowed));
         let f001 = m.item("F001").unwrap().clone();
         assert_eq!(inv.check_write(&f001, 2000), Ok(()));
     }

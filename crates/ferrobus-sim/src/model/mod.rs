@@ -19,7 +19,7 @@ use std::time::Duration;
 pub use inverter::{EXTERNAL_TRIP, Inverter, InverterRatings};
 pub use servo::Servo;
 
-use crate::memory::{Item, Memory, Refusal};
+use crate::memory::{Denial, Item, Memory};
 use crate::profile::ModelSection;
 
 /// A device's physics.
@@ -28,7 +28,7 @@ pub trait Model: Send {
     fn advance(&mut self, memory: &mut Memory, dt: Duration);
 
     /// Whether a write of `value` to `item` is allowed in the present state.
-    fn check_write(&self, item: &Item, value: i64) -> Result<(), Refusal> {
+    fn check_write(&self, item: &Item, value: i64) -> Result<(), Denial> {
         let _ = (item, value);
         Ok(())
     }
