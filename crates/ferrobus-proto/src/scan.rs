@@ -15,7 +15,7 @@
 //! - **What a probe heard.** [`Answer::from_heard`] sorts what came instead of a reply: bytes
 //!   that did not frame are a [`Lead`] (something answers, at other settings or over noise),
 //!   another unit's frame is other traffic, nothing is silence.
-//! - **Listening.** [`Listener`] takes (now, bytes) from a line it does not transmit on and says
+//! - **Listening.** [`Survey`] takes (now, bytes) from a line it does not transmit on and says
 //!   whether another master is active there ([`LineActivity::Traffic`], with the units), whether
 //!   something talks at other settings ([`LineActivity::Noise`]), or whether the line is quiet.
 
@@ -313,7 +313,7 @@ impl Answer {
     }
 }
 
-/// The activity a [`Listener`] found on a line at one setting: another master's traffic,
+/// The activity a [`Survey`] found on a line at one setting: another master's traffic,
 /// noise, or quiet. (What a master heard instead of the reply it waited for is
 /// [`HeardInstead`].)
 #[derive(Clone, Copy, PartialEq, Eq, Debug)]
@@ -343,7 +343,7 @@ pub enum LineActivity {
 /// Listens to a line without transmitting: frames requests and responses alike by the
 /// function code's length and t3.5, and counts what it finds.
 #[derive(Clone, Debug)]
-pub struct Listener {
+pub struct Survey {
     codec: rtu::RtuCodec,
     units: UnitSet,
     requests: u32,
@@ -353,10 +353,10 @@ pub struct Listener {
     discarded: u32,
 }
 
-impl Listener {
+impl Survey {
     /// A listener for a line with `timing`.
     pub fn new(timing: LineTiming) -> Self {
-        Listener {
+        Survey {
             codec: rtu::RtuCodec::new(timing, Expect::Both),
             units: UnitSet::EMPTY,
             requests: 0,
@@ -377,26 +377,26 @@ impl Listener {
 
     /// Bytes arrived at `now`.
     pub fn on_bytes(&mut self, now: Instant, bytes: &[u8]) {
-        let Listener { codec, .. } = self;
+        let Survey { codec, .. } = self;
         let mut events = Tally::default();
         feed(codec, now, bytes, |event| events.count(&event));
         self.add(&events);
     }
 
-    /// When [`Listener::handle_timeout`] is next due (the silence that ends a frame).
+    /// When [`Survey::handle_timeout`] is next due (the silence that ends a frame).
     pub fn poll_timeout(&self) -> Option<Instant> {
         self.codec.poll_timeout()
     }
 
     /// `now` has come: a frame whose silence has passed is decided.
     pub fn handle_timeout(&mut self, now: Instant) {
-        let Listener { codec, .. } = self;
+        let Survey { codec, .. } = self;
         let mut events = Tally::default();
         expire(codec, now, |event| events.count(&event));
         self.add(&events);
     }
 
-    /// What was heard so far. Call [`Listener::handle_timeout`] at the end of listening first,
+    /// What was heard so far. Call [`Survey::handle_timeout`] at the end of listening first,
     /// so that a frame still open is decided.
     pub fn heard(&self) -> LineActivity {
         if !self.units.is_empty() {

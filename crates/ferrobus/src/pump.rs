@@ -23,7 +23,7 @@
 //!                                            the line's reply back with Slave::respond (Session::wait)
 //!                                         gateway::serve_reverse: each request forwarded to its
 //!                                            TCP server, the answer back with Slave::respond
-//!   ferrobus_proto::scan::Listener ◀── Engine (never transmits): scan's listen phase
+//!   ferrobus_proto::scan::Survey   ◀── Engine (never transmits): scan's listen phase
 //! ```
 //!
 //! Every role is an [`Engine`] — the client's [`Master`], the server's [`Slave`] in its

@@ -33,7 +33,7 @@ use std::time::Duration;
 
 use ferrobus_proto::codes::{ExceptionCode, ReadDeviceIdCode, unit as unit_codes};
 use ferrobus_proto::frame::{LineConfig, LineTiming, rtu};
-use ferrobus_proto::scan::{Answer, Lead, LineActivity, Listener, Probe, ProbeTiming};
+use ferrobus_proto::scan::{Answer, Lead, LineActivity, Probe, ProbeTiming, Survey};
 use tokio::io::{AsyncRead, AsyncWrite, ReadBuf};
 use tokio::sync::Notify;
 
@@ -480,7 +480,7 @@ impl<P: Reconfigure> Scanner<P> {
     /// the one loop ([`Pump::run`]), as every other role is.
     async fn listen(&self, line: LineConfig) -> Result<LineActivity, Error> {
         let timing = self.timing(line);
-        let mut listener = Listener::new(timing).with_frame_gap(timing.t3_5().max(PC_INCOMPLETE_TIMEOUT));
+        let mut listener = Survey::new(timing).with_frame_gap(timing.t3_5().max(PC_INCOMPLETE_TIMEOUT));
         // Lent, so that the port comes home when listening ends, whatever ended it.
         let mut port: BoxPort = Box::new(Lent { port: Some(self.take().await?), home: Arc::clone(&self.home) });
         let mut pump = Pump::new(self.config.timer.sleeper());
@@ -656,19 +656,19 @@ impl<P: Reconfigure> Port for Lent<P> {
 }
 
 /// The core's listener is an engine that never transmits and reports nothing on the way: what
-/// it heard is read once listening ends ([`Listener::heard`]).
-impl Engine for Listener {
+/// it heard is read once listening ends ([`Survey::heard`]).
+impl Engine for Survey {
     type Event<'a> = ();
 
     fn on_bytes(&mut self, now: ferrobus_proto::Instant, bytes: &[u8]) -> usize {
-        Listener::on_bytes(self, now, bytes);
+        Survey::on_bytes(self, now, bytes);
         bytes.len()
     }
     fn poll_timeout(&self) -> Option<ferrobus_proto::Instant> {
-        Listener::poll_timeout(self)
+        Survey::poll_timeout(self)
     }
     fn handle_timeout(&mut self, now: ferrobus_proto::Instant) {
-        Listener::handle_timeout(self, now);
+        Survey::handle_timeout(self, now);
     }
     fn poll_transmit(&mut self, _: ferrobus_proto::Instant, _: &mut [u8]) -> Option<usize> {
         None
@@ -683,13 +683,13 @@ struct Listening {
     end: tokio::time::Instant,
 }
 
-impl Session<Listener> for Listening {
+impl Session<Survey> for Listening {
     type Output = io::Result<()>;
 
-    async fn serve(&mut self, _: &Pump, _: &mut BoxPort, _: &mut Listener) -> Option<io::Result<()>> {
+    async fn serve(&mut self, _: &Pump, _: &mut BoxPort, _: &mut Survey) -> Option<io::Result<()>> {
         None
     }
-    fn deadline(&mut self, _: &Listener) -> Option<tokio::time::Instant> {
+    fn deadline(&mut self, _: &Survey) -> Option<tokio::time::Instant> {
         Some(self.end)
     }
     fn on_wake(&mut self) -> Option<io::Result<()>> {

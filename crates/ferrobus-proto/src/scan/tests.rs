@@ -107,7 +107,7 @@ fn any_valid_frame_of_the_unit_proves_presence_and_broken_bytes_are_leads() {
 
 /// A frame of `pdu` from `unit`, fed to `listener` one byte per character time from `at`;
 /// returns the instant after its last byte.
-fn send(listener: &mut Listener, timing: &LineTiming, at: Instant, unit: u8, pdu: &[u8], corrupt: bool) -> Instant {
+fn send(listener: &mut Survey, timing: &LineTiming, at: Instant, unit: u8, pdu: &[u8], corrupt: bool) -> Instant {
     let mut frame = [0u8; 256];
     let n = encode_pdu(unit, pdu, &mut frame).unwrap();
     if corrupt {
@@ -121,7 +121,7 @@ fn send(listener: &mut Listener, timing: &LineTiming, at: Instant, unit: u8, pdu
     now
 }
 
-fn settle(listener: &mut Listener, after: Instant) {
+fn settle(listener: &mut Survey, after: Instant) {
     while let Some(due) = listener.poll_timeout() {
         assert!(due >= after, "a timeout in the past: {due:?} < {after:?}");
         listener.handle_timeout(due);
@@ -131,7 +131,7 @@ fn settle(listener: &mut Listener, after: Instant) {
 #[test]
 fn a_listener_that_hears_crc_valid_requests_and_replies_reports_another_master_and_its_units() {
     let timing = LineTiming::new(&line(19_200, CharFormat::E1));
-    let mut listener = Listener::new(timing);
+    let mut listener = Survey::new(timing);
     let gap = timing.t3_5();
     let mut now = send(&mut listener, &timing, Instant::ZERO, 7, &[0x03, 0x00, 0x00, 0x00, 0x01], false);
     now = send(&mut listener, &timing, now.checked_add(gap).unwrap(), 7, &[0x03, 0x02, 0x00, 0x2A], false);
@@ -147,7 +147,7 @@ fn a_listener_that_hears_crc_valid_requests_and_replies_reports_another_master_a
 #[test]
 fn a_listener_that_hears_only_bad_crcs_reports_noise_and_silence_is_quiet() {
     let timing = LineTiming::new(&line(9_600, CharFormat::E1));
-    let mut listener = Listener::new(timing);
+    let mut listener = Survey::new(timing);
     assert_eq!(listener.heard(), LineActivity::Quiet);
     let now = send(&mut listener, &timing, Instant::from_millis(5), 3, &[0x03, 0x00, 0x00, 0x00, 0x01], true);
     settle(&mut listener, now);
@@ -162,7 +162,7 @@ fn a_listener_that_hears_only_bad_crcs_reports_noise_and_silence_is_quiet() {
 #[test]
 fn a_listener_decides_a_frame_of_unknown_length_only_after_the_silence() {
     let timing = LineTiming::new(&line(19_200, CharFormat::E1));
-    let mut listener = Listener::new(timing);
+    let mut listener = Survey::new(timing);
     // 0x41 is a user-defined function code: its length is known only from the silence.
     let end = send(&mut listener, &timing, Instant::ZERO, 2, &[0x41, 0x01], false);
     assert_eq!(listener.heard(), LineActivity::Quiet);
