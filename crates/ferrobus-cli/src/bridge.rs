@@ -296,23 +296,16 @@ async fn drive_inverter(
     }
 }
 
-/// Writes `text` to `point` of the inverter, through its profile's write guard first (the
-/// running point read for a run-locked point, as `set` does).
+/// Writes `text` to `point` of the inverter as every writer writes a point
+/// ([`ferrobus::write::write_point`]: its profile's guard, the running point read for a
+/// run-locked point, the request the drive takes), not read back.
 async fn set(client: &Client, inverter: &Inverter, point: &Point, text: &str) -> Result<(), String> {
-    let unit = inverter.unit;
     let raw = point.prepare_write(text).map_err(|e| e.to_string())?;
     let write = ferrobus_profile::Write { point, raw: &raw, typed: text };
-    ferrobus::guard::check_write(client, unit, &inverter.profile, &write).await.map_err(|e| e.to_string())?;
-    if point.table == ferrobus_profile::Table::Coils {
-        let on = raw.as_int().is_some_and(|n| n != 0) || matches!(raw, ferrobus_profile::Value::Bool(true));
-        return client.write_single_coil(unit, point.address, on).await.map_err(|e| e.to_string());
-    }
-    let words = point.encode(&raw).map_err(|e| e.to_string())?;
-    match words.as_slice() {
-        [one] => client.write_single_register(unit, point.address, *one).await,
-        many => client.write_multiple_registers(unit, point.address, many).await,
-    }
-    .map_err(|e| e.to_string())
+    ferrobus::write::write_point(client, inverter.unit, Some(&inverter.profile), &write, false)
+        .await
+        .map(|_| ())
+        .map_err(|e| e.to_string())
 }
 
 #[cfg(test)]

@@ -2,19 +2,23 @@
 //! anything is sent, written, read back and shown.
 //!
 //! The value is parsed by the profile (`45Hz`, `12.5s`, `60.00`, `0x10` raw, `modbus` by its
-//! meaning) and converted by the point's scale; then the profile's write guard (the one every
-//! writer applies, `ferrobus::guard::check_write`) checks its range and access and, for a
-//! parameter that cannot change while the drive runs, reads the profile's `[state] running`
-//! point first. Only then is the value written: FC05 for a coil, FC06 for one register
-//! (FC10 when the device lacks FC06), FC10 for a value of several registers, never split.
+//! meaning) and converted by the point's scale; then it is written as every writer writes a
+//! point (`ferrobus::write::write_point`): the profile's guard checks its range and access
+//! and, for a parameter that cannot change while the drive runs, reads the profile's `[state]
+//! running` point first; only then is the value sent, FC05 for a coil, FC06 for one register
+//! (FC10 when the device lacks FC06), FC10 for a value of several registers, never split; and
+//! it is read back. What needs no bus (the value, the request's width) is checked before the
+//! bus is opened.
 
 use clap::Args;
-use ferrobus_profile::{Point, Profile, Refusal, RunState, Table, Value, Write};
+use ferrobus::guard::ReadFailure;
+use ferrobus::write::{WriteError, Written};
+use ferrobus_profile::{Point, Profile, Refusal, Write};
 use serde_json::json;
 
 use crate::connect::ConnectArgs;
 use crate::exit::CliError;
-use crate::get::{exception_words, point_json, raw_text, read_points};
+use crate::get::{exception_words, point_json, raw_text};
 use crate::interrupt::Interrupt;
 use crate::output::{self, Align, Format, OutputArgs, Rows};
 
@@ -58,36 +62,21 @@ pub(crate) async fn run(connection: &ConnectArgs, args: &SetArgs) -> Result<(), 
     let raw = point.parse(&args.value).map_err(|e| CliError::Usage(format!("not sent: {e}")))?;
     let write = Write { point, raw: &raw, typed: &args.value };
     profile.check_value(&write).map_err(|e| refused(&e))?;
-    let words = match &raw {
-        Value::Bool(_) => Vec::new(),
-        other => point.encode(other).map_err(|e| CliError::Usage(format!("not sent: {e}")))?,
-    };
-    let limit = usize::from(profile.write_limit(point.table));
-    if words.len() > limit {
-        return Err(CliError::Usage(format!(
-            "not sent: {} takes {} registers, more than the {limit} {} writes in one request",
-            point.code,
-            words.len(),
-            profile.device.name
-        )));
-    }
+    point.wire_write(&raw, &profile.write_rules()).map_err(|e| refused(&e))?;
     let mut interrupt = Interrupt::listen()?;
     let session = interrupt.unless(connection.open()).await.ok_or(CliError::Interrupted)??;
     let (client, unit) = (&session.client, session.unit);
-    let broadcast = session.is_broadcast();
-    guard(&session, &profile, &write, &mut interrupt).await?;
-    let sixteen = profile.comm.functions.as_ref().is_none_or(|f| f.contains(&0x06));
-    tracing::info!(unit, address = point.address, ?words, "writing {}", point.code);
-    let write = async {
-        match (&raw, words.as_slice()) {
-            (Value::Bool(on), _) => client.write_single_coil(unit, point.address, *on).await,
-            (_, [one]) if sixteen => client.write_single_register(unit, point.address, *one).await,
-            (_, words) => client.write_multiple_registers(unit, point.address, words).await,
+    tracing::info!(unit, address = point.address, "writing {}", point.code);
+    let written = ferrobus::write::write_point(client, unit, Some(&profile), &write, true);
+    let outcome = match interrupt.unless(written).await.ok_or(CliError::Interrupted)? {
+        Ok(Written { read_back: Some(back), .. }) => back.map_err(|e| read_failure(&profile, &e)),
+        Ok(Written { read_back: None, .. }) => {
+            let text = format!("{} = {}: written, not read back\n", point.code, point.show(&raw));
+            return output::print(&text);
         }
-    };
-    match interrupt.unless(write).await.ok_or(CliError::Interrupted)? {
-        Ok(()) => {}
-        Err(error) if error.exception().is_some() => {
+        Err(WriteError::Refused(refusal)) => return Err(refused(&refusal)),
+        Err(WriteError::Value(e)) => return Err(CliError::Usage(format!("not sent: {e}"))),
+        Err(WriteError::Bus(error)) if error.exception().is_some() => {
             return Err(CliError::Refused(format!(
                 "the device refused {} = {}: {}",
                 point.code,
@@ -95,14 +84,9 @@ pub(crate) async fn run(connection: &ConnectArgs, args: &SetArgs) -> Result<(), 
                 exception_words(&profile, &error)
             )));
         }
-        Err(error) => return Err(error.into()),
-    }
-    if broadcast || !point.readable() || point.table != Table::Holding && point.table != Table::Coils {
-        let text = format!("{} = {}: written, not read back\n", point.code, point.show(&raw));
-        return output::print(&text);
-    }
-    let (outcomes, _) = read_points(client, unit, &profile, &[point], &mut interrupt).await?;
-    let outcome = outcomes.into_iter().next().unwrap_or_else(|| Err("not read".into()));
+        Err(WriteError::Bus(error)) => return Err(error.into()),
+        Err(other) => return Err(CliError::Usage(format!("not sent: {other}"))),
+    };
     if let Ok(back) = &outcome {
         if *back != raw {
             eprintln!(
@@ -150,21 +134,12 @@ pub(crate) async fn run(connection: &ConnectArgs, args: &SetArgs) -> Result<(), 
     }
 }
 
-/// The profile's write guard for `write`, with the drive's run state read first when the
-/// point is run-locked (a broadcast cannot read it, so the guard refuses such a point).
-async fn guard(
-    session: &crate::connect::Session,
-    profile: &Profile,
-    write: &Write<'_>,
-    interrupt: &mut Interrupt,
-) -> Result<(), CliError> {
-    if session.is_broadcast() {
-        let state =
-            if profile.run_state_point(write.point).is_some() { RunState::Broadcast } else { RunState::NotRead };
-        return profile.guard_write(write, &state).map_err(|e| refused(&e));
+/// A read-back's failure in the user's words: an exception with the profile's meaning.
+fn read_failure(profile: &Profile, failure: &ReadFailure) -> String {
+    match failure {
+        ReadFailure::Bus(error) if error.exception().is_some() => exception_words(profile, error),
+        other => other.to_string(),
     }
-    let check = ferrobus::guard::check_write(&session.client, session.unit, profile, write);
-    interrupt.unless(check).await.ok_or(CliError::Interrupted)?.map_err(|e| refused(&e))
 }
 
 /// The guard's refusal as the command's error (`set` has no `--force`).

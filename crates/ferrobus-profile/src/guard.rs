@@ -87,13 +87,37 @@ pub enum Refusal {
         /// The running point.
         state: String,
     },
+    /// The value takes more registers than the device writes in one request; a value is never
+    /// split across requests.
+    #[error("{code} takes {items} registers, more than the {limit} the device writes in one request")]
+    TooWide {
+        /// The point refused.
+        code: String,
+        /// The registers its value takes.
+        items: usize,
+        /// The device's limit ([`Profile::write_limit`]).
+        limit: u16,
+    },
+    /// The device answers neither function that writes the point's table (its `functions`).
+    #[error("{code}: the device answers neither {single:#04x} nor {multiple:#04x}, the functions that write it")]
+    NoFunction {
+        /// The point refused.
+        code: String,
+        /// The single write's function code (0x05, 0x06).
+        single: u8,
+        /// The multiple write's (0x0F, 0x10).
+        multiple: u8,
+    },
 }
 
 impl Refusal {
     /// Whether the refusal is the run lock's (the drive runs, or whether it runs is unknown),
-    /// not the value's.
+    /// not the value's or the request's.
     pub fn is_run_lock(&self) -> bool {
-        !matches!(self, Refusal::Value(_))
+        matches!(
+            self,
+            Refusal::Running { .. } | Refusal::Unreadable { .. } | Refusal::Broadcast { .. } | Refusal::NotRead { .. }
+        )
     }
 }
 

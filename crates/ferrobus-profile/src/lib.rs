@@ -24,6 +24,7 @@ mod plan;
 mod point;
 mod read;
 pub mod source;
+mod write;
 
 pub use check::text::{LABEL_MAX, NAME_MAX, TEXT_MAX, UNIT_MAX};
 pub use codec::{NOT_IMPLEMENTED, Value, ValueError, beyond_deadband};
@@ -35,3 +36,4 @@ pub use model::{
 };
 pub use plan::{Extent, PlanError, Request, plan};
 pub use point::Point;
+pub use write::{Takes, WireWrite, WriteRules};

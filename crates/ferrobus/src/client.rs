@@ -181,8 +181,9 @@ impl Client {
         self.framing != Framing::Mbap
     }
 
-    /// Whether unit 0 is a broadcast here (serial framings).
-    fn broadcasts(&self, unit: u8) -> bool {
+    /// Whether a request to `unit` is a broadcast here: unit 0 on a serial framing (RTU,
+    /// ASCII, RTU over TCP), which no device answers.
+    pub fn is_broadcast(&self, unit: u8) -> bool {
         ferrobus_proto::codes::unit::is_broadcast(unit, self.framing != Framing::Mbap)
     }
 
@@ -226,7 +227,7 @@ impl Client {
         read: impl FnOnce(Response<'_>) -> Option<T>,
     ) -> Result<T, Error> {
         let function = request.function();
-        if self.broadcasts(unit) {
+        if self.is_broadcast(unit) {
             return Err(Error::BroadcastRead { function });
         }
         let pdu = self.request(unit, request).await?.ok_or(Error::NoReply { unit, function })?;

@@ -12,14 +12,18 @@
 //!     ├─ profile.run_locked_in(table, start, count)   the run-locked points it touches
 //!     ├─ run_state(...)                               read only when it touches one
 //!     └─ profile.guard_span(locked, state)
+//!
+//!   read_point(client, unit, point)    one point on its own: the run state, a write's read-back
 //! ```
 //!
 //! A broadcast reads nothing: its writer passes [`RunState::Broadcast`] to
-//! [`Profile::guard_write`] itself.
+//! [`Profile::guard_write`] itself. Writing a named point, guard included, is
+//! [`crate::write::write_point`]'s.
 
-use ferrobus_profile::{Point, Profile, Refusal, RunState, Table, Value, ValueType, Write};
+use ferrobus_profile::{Point, Profile, Refusal, RunState, Table, Value, ValueError, ValueType, Write};
 
 use crate::client::Client;
+use crate::error::Error;
 
 /// Reads what the guard needs to know of the drive before `point` is written: the profile's
 /// running point, if `point` is run-locked and the profile names one ([`RunState::NotRead`]
@@ -29,7 +33,7 @@ pub async fn run_state(client: &Client, unit: u8, profile: &Profile, point: &Poi
     let Some(state) = profile.run_state_point(point) else { return RunState::NotRead };
     match read_point(client, unit, state).await {
         Ok(value) => RunState::Read(value),
-        Err(why) => RunState::Unreadable(why),
+        Err(why) => RunState::Unreadable(why.to_string()),
     }
 }
 
@@ -58,21 +62,30 @@ pub async fn check_span(
     profile.guard_span(&locked, &state)
 }
 
+/// Why reading a point failed.
+#[derive(Clone, Debug, thiserror::Error)]
+#[non_exhaustive]
+pub enum ReadFailure {
+    /// The request failed or the device refused it.
+    #[error("{0}")]
+    Bus(#[from] Error),
+    /// The reply's registers are no value of the point's type.
+    #[error("{0}")]
+    Decode(#[from] ValueError),
+}
+
 /// One point's value, read on its own.
-async fn read_point(client: &Client, unit: u8, point: &Point) -> Result<Value, String> {
+pub async fn read_point(client: &Client, unit: u8, point: &Point) -> Result<Value, ReadFailure> {
     let (start, count) = (point.address, point.width);
     let bit = |bits: Vec<bool>| Value::Bool(bits.first().copied().unwrap_or(false));
     let words = match point.table {
-        Table::Coils => return client.read_coils(unit, start, count).await.map(bit).map_err(|e| e.to_string()),
-        Table::DiscreteInputs => {
-            return client.read_discrete_inputs(unit, start, count).await.map(bit).map_err(|e| e.to_string());
-        }
-        Table::Holding => client.read_holding_registers(unit, start, count).await,
-        Table::Input => client.read_input_registers(unit, start, count).await,
-    }
-    .map_err(|e| e.to_string())?;
+        Table::Coils => return Ok(client.read_coils(unit, start, count).await.map(bit)?),
+        Table::DiscreteInputs => return Ok(client.read_discrete_inputs(unit, start, count).await.map(bit)?),
+        Table::Holding => client.read_holding_registers(unit, start, count).await?,
+        Table::Input => client.read_input_registers(unit, start, count).await?,
+    };
     if point.value_type == ValueType::Bit {
         return Ok(Value::Bool(words.first().is_some_and(|w| *w != 0)));
     }
-    point.decode(&words).map_err(|e| e.to_string())
+    Ok(point.decode(&words)?)
 }

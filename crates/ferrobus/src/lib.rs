@@ -87,6 +87,7 @@ pub mod timer;
 pub mod tls;
 mod uart;
 pub mod wire;
+pub mod write;
 
 pub use client::{
     Backoff, Client, ClientConfig, ClientStats, DeviceInfo, EventLog, Release, RequestOptions, STALLED_AFTER_TIMEOUTS,

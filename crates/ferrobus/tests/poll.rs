@@ -217,15 +217,18 @@ async fn pause_stops_polling_reset_zeroes_the_counters_and_a_write_goes_through(
     assert_eq!(handle.write(None, 0, 1, "1234").await.unwrap(), Value::Int(1234));
     assert!(handle.write(None, 0, 1, "70000").await.is_err(), "a u16 cell takes no 70000");
     assert_eq!(handle.prepare_write(0, 1, "4321").unwrap(), Value::Int(4321), "prepared, not sent");
-    assert!(handle.write_raw(0, 1, &Value::Int(70_000)).await.is_err(), "a raw value must fit the type");
-    assert!(matches!(handle.write_raw(0, 9, &Value::Int(1)).await, Err(WriteError::NoSuchCell { group: 0, cell: 9 })));
+    assert!(handle.write_raw(None, 0, 1, &Value::Int(70_000)).await.is_err(), "a raw value must fit the type");
+    assert!(matches!(
+        handle.write_raw(None, 0, 9, &Value::Int(1)).await,
+        Err(WriteError::NoSuchCell { group: 0, cell: 9 })
+    ));
     handle.resume();
     let s = samples(&mut poller, 1).await.remove(0);
     assert_eq!(s.result.unwrap()[1].shown, "1234");
     assert_eq!(handle.counters()[0].polls, 1);
     handle.pause();
     while poller.try_next().is_some() {}
-    handle.write_raw(0, 0, &Value::Int(4321)).await.unwrap();
+    handle.write_raw(None, 0, 0, &Value::Int(4321)).await.unwrap();
     handle.resume();
     let s = samples(&mut poller, 1).await.remove(0);
     assert_eq!(s.result.unwrap()[0].shown, "4321", "a raw write goes through as is");

@@ -99,15 +99,16 @@ impl DeviceWrites {
 }
 
 /// The write guard over a command's writes to `unit`, before any is written: the drive's run
-/// state read once (only when a write is run-locked), then each write through
-/// [`Profile::guard_write`]. The first refusal.
+/// state read once (only when a write is run-locked), then each write planned by
+/// [`Profile::plan_write`]: the guard, and a request the device takes (its functions, its write
+/// limit). The first refusal.
 pub(super) async fn guard(client: &Client, unit: u8, profile: &Profile, writes: &[BusWrite]) -> Result<(), Refusal> {
     let mut state = RunState::NotRead;
     if let Some(locked) = writes.iter().find(|w| profile.run_state_point(&w.target).is_some()) {
         state = ferrobus::guard::run_state(client, unit, profile, &locked.target).await;
     }
     for w in writes {
-        profile.guard_write(&Write { point: &w.target, raw: &w.raw, typed: &w.typed }, &state)?;
+        profile.plan_write(&Write { point: &w.target, raw: &w.raw, typed: &w.typed }, &state)?;
     }
     Ok(())
 }

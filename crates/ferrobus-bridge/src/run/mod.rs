@@ -405,7 +405,9 @@ impl Bridge {
     /// One command's writes to `device`: every one resolved and checked, and the device's
     /// queue bound kept, before any is written (else the command is refused whole, with why);
     /// then, in a task of its own, the write guard ([`command::guard`], which reads the run
-    /// state for a run-locked point) over all of them, and written in order unless it refuses;
+    /// state for a run-locked point) over all of them, and written in order unless it refuses,
+    /// each in the one request [`PollHandle::write_raw`](ferrobus::poll::PollHandle::write_raw)
+    /// chooses with the profile's functions and limit;
     /// the task's [`Applied`] comes back on `written`.
     fn command(&mut self, device: DeviceRef, writes: Vec<Asked>, topic: &str) -> Result<(), String> {
         let name = self.device_name(device);
@@ -428,17 +430,18 @@ impl Bridge {
         let (client, topic) = (line.running.client.clone(), topic.to_string());
         tokio::spawn(async move {
             let _turn = turn.lock().await;
-            if let Some((profile, unit)) = guarded
-                && let Err(refusal) = command::guard(&client, unit, &profile, &resolved).await
+            if let Some((profile, unit)) = &guarded
+                && let Err(refusal) = command::guard(&client, *unit, profile, &resolved).await
             {
                 let why = format!("{name}: {refusal}: nothing written");
                 let refused = Applied { device, tried: Vec::new(), not_written: resolved, refused: Some((topic, why)) };
                 let _ = tx.send(refused).await;
                 return;
             }
+            let profile = guarded.map(|(profile, _)| profile);
             let applied = command::apply(device, resolved, |w| {
-                let (poll, index, cell, raw) = (poll.clone(), w.index, w.cell, w.raw.clone());
-                async move { poll.write_raw(index, cell, &raw).await.map_err(|e| e.to_string()) }
+                let (poll, index, cell, raw, profile) = (poll.clone(), w.index, w.cell, w.raw.clone(), profile.clone());
+                async move { poll.write_raw(profile.as_deref(), index, cell, &raw).await.map_err(|e| e.to_string()) }
             })
             .await;
             let _ = tx.send(applied).await;

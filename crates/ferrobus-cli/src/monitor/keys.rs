@@ -3,7 +3,7 @@
 
 use ratatui::crossterm::event::{KeyCode, KeyEvent, KeyEventKind, KeyModifiers};
 
-use ferrobus_profile::{Table, Value, ValueType};
+use ferrobus_profile::{Table, Value, WireWrite};
 
 use super::model::{App, Mode};
 
@@ -31,12 +31,8 @@ pub(crate) struct Asked {
     pub(crate) raw: Value,
     /// What was typed.
     pub(crate) text: String,
-    /// The wire address.
-    pub(crate) address: u16,
-    /// Registers to write, or the coil.
-    pub(crate) registers: Vec<u16>,
-    /// The coil's value.
-    pub(crate) bit: Option<bool>,
+    /// The request that writes it.
+    pub(crate) request: WireWrite,
 }
 
 /// Applies `key`.
@@ -64,12 +60,10 @@ pub(crate) fn handle(app: &mut App, key: KeyEvent) -> Action {
             });
             Action::None
         }
-        Mode::Confirm { text, raw, registers, bit } => {
+        Mode::Confirm { text, raw, request } => {
             if let KeyCode::Char('y' | 'Y') = key.code {
-                let Some((_, cell)) = app.selected() else { return Action::None };
-                let address = cell.point.address;
-                app.message = Some(format!("writing {text} to {address:#06x}"));
-                return Action::Write(Asked { pane: app.pane, cell: app.cell, raw, text, address, registers, bit });
+                app.message = Some(format!("writing {text} to {:#06x}", request.address()));
+                return Action::Write(Asked { pane: app.pane, cell: app.cell, raw, text, request });
             }
             app.message = Some("write cancelled".into());
             Action::None
@@ -102,16 +96,12 @@ fn check(app: &mut App, text: &str) -> Mode {
         app.message = Some(format!("{} are read-only", pane.table_name()));
         return Mode::Normal;
     }
-    let written = cell.point.prepare_write(text).and_then(|raw| match &raw {
-        Value::Bool(b) => Ok((Vec::new(), Some(*b), raw)),
-        other if cell.point.value_type == ValueType::Bit => {
-            let on = other.as_int().is_some_and(|n| n != 0);
-            Ok((Vec::new(), Some(on), raw))
-        }
-        other => cell.point.encode(other).map(|r| (r, None, raw)),
+    let written = cell.point.prepare_write(text).map_err(Into::into).and_then(|raw| {
+        let request = cell.point.wire_write(&raw, &app.rules)?;
+        Ok::<_, ferrobus_profile::Refusal>((raw, request))
     });
     match written {
-        Ok((registers, bit, raw)) => Mode::Confirm { text: text.trim().to_string(), raw, registers, bit },
+        Ok((raw, request)) => Mode::Confirm { text: text.trim().to_string(), raw, request },
         Err(e) => {
             app.message = Some(format!("not written: {e}"));
             Mode::Normal

@@ -183,6 +183,7 @@ pub(crate) async fn run(connection: &ConnectArgs, args: &MonitorArgs) -> Result<
         .then(|| *connection.transport(&session_client.target).timing());
     let poller = Poller::start(session_client.client.clone(), groups, PollConfig { line });
     let mut app = App::new(target, panes);
+    app.rules = profile.as_ref().map_or(ferrobus_profile::WriteRules::SPEC, ferrobus_profile::Profile::write_rules);
     let saving = SaveTo { path: args.session.clone(), device: connection.device.clone() };
     let mut screen = Screen::enter().map_err(|e| io_error("setting up the terminal", e))?;
     let bus = Bus { client: &session_client.client, profile: profile.as_ref() };
@@ -443,11 +444,13 @@ fn describe(outcome: &Outcome) -> String {
 
 /// Writes what the user confirmed, once the profile's write guard lets it (the one `set`,
 /// `restore` and the bridge apply: range, access, and for a run-locked parameter the drive's
-/// run state read first). A cell of a raw range over a profile's parameter is guarded as that
-/// parameter.
+/// run state read first), in the request the confirmation showed ([`ferrobus_profile::Point::wire_write`]
+/// with the device's functions and limit), sent as every writer sends it
+/// ([`ferrobus::write::send`]). A cell of a raw range over a profile's parameter is guarded
+/// as that parameter.
 async fn write(app: &mut App, bus: &Bus<'_>, start: Instant, asked: &keys::Asked) {
-    let keys::Asked { pane, cell, raw, text, address, registers, bit } = asked;
-    let (pane, address, registers, bit, client) = (*pane, *address, registers.as_slice(), *bit, bus.client);
+    let keys::Asked { pane, cell, raw, text, request } = asked;
+    let (pane, client) = (*pane, bus.client);
     let Some(unit) = app.panes.get(pane).map(|p| p.unit) else { return };
     if let (Some(profile), Some(cell)) = (bus.profile, app.panes.get(pane).and_then(|p| p.cells.get(*cell))) {
         let point = profile
@@ -461,30 +464,26 @@ async fn write(app: &mut App, bus: &Bus<'_>, start: Instant, asked: &keys::Asked
             return;
         }
     }
-    let [ah, al] = address.to_be_bytes();
-    let request: Vec<u8> = match (bit, registers) {
-        (Some(b), _) => vec![0x05, ah, al, if b { 0xFF } else { 0x00 }, 0x00],
-        (None, [one]) => {
-            let [h, l] = one.to_be_bytes();
-            vec![0x06, ah, al, h, l]
-        }
-        (None, many) => {
-            let n = u16::try_from(many.len()).unwrap_or(u16::MAX);
-            let [nh, nl] = n.to_be_bytes();
-            let mut pdu = vec![0x10, ah, al, nh, nl, u8::try_from(many.len() * 2).unwrap_or(u8::MAX)];
-            pdu.extend(many.iter().flat_map(|r| r.to_be_bytes()));
-            pdu
-        }
-    };
+    let (address, function) = (request.address(), request.function().value());
+    let sent = request.request().ok().and_then(|pdu| {
+        let mut bytes = vec![0; pdu.encoded_len()];
+        let n = pdu.emit(&mut bytes).ok()?;
+        bytes.truncate(n);
+        Some(bytes)
+    });
     let decode = format!("write {address:#06x}");
-    app.traffic.push(TrafficLine { at: start.elapsed(), direction: "Tx", unit, bytes: request.clone(), decode });
-    let result = client.raw(unit, &request).await;
+    app.traffic.push(TrafficLine {
+        at: start.elapsed(),
+        direction: "Tx",
+        unit,
+        bytes: sent.unwrap_or_default(),
+        decode,
+    });
+    let result = ferrobus::write::send(client, unit, request).await;
     let (bytes, decode) = match &result {
         Ok(Some(reply)) => (reply.clone(), "written".to_string()),
         Ok(None) => (Vec::new(), "sent".to_string()),
-        Err(e @ ferrobus::Error::Exception { code, .. }) => {
-            (vec![request.first().copied().unwrap_or(0) | 0x80, code.value()], e.to_string())
-        }
+        Err(e @ ferrobus::Error::Exception { code, .. }) => (vec![function | 0x80, code.value()], e.to_string()),
         Err(e) => (Vec::new(), e.to_string()),
     };
     app.message = Some(match &result {

@@ -4,7 +4,7 @@
 use std::collections::VecDeque;
 use std::time::Duration;
 
-use ferrobus_profile::{Access, Order, Point, Table, Value, ValueType};
+use ferrobus_profile::{Access, Order, Point, Table, Value, ValueType, WireWrite, WriteRules};
 
 /// How many traffic lines are kept.
 pub(crate) const TRAFFIC_KEPT: usize = 500;
@@ -469,16 +469,14 @@ pub(crate) enum Mode {
     Edit(String),
     /// Typing an alias for the selected cell.
     Alias(String),
-    /// Asking to confirm writing these registers (or the bit) for the text typed.
+    /// Asking to confirm the request that writes the text typed.
     Confirm {
         /// What the user typed.
         text: String,
         /// Its raw value, for the write guard.
         raw: Value,
-        /// The registers to write.
-        registers: Vec<u16>,
-        /// The coil to write.
-        bit: Option<bool>,
+        /// The request that writes it ([`Point::wire_write`] with [`App::rules`]).
+        request: WireWrite,
     },
 }
 
@@ -507,10 +505,13 @@ pub(crate) struct App {
     pub(crate) quit: bool,
     /// The columns of the focused pane's grid as last drawn (Up and Down move by a row).
     pub(crate) columns: std::cell::Cell<usize>,
+    /// What the device takes in its writes: its profile's, or the spec's.
+    pub(crate) rules: WriteRules,
 }
 
 impl App {
-    /// A monitor over `panes`.
+    /// A monitor over `panes`, writing with the spec's functions and limits until told the
+    /// device's ([`App::rules`]).
     pub(crate) fn new(target: String, panes: Vec<Definition>) -> App {
         let trends = panes
             .iter()
@@ -535,6 +536,7 @@ impl App {
             target,
             quit: false,
             columns: std::cell::Cell::new(1),
+            rules: WriteRules::SPEC,
         }
     }
 

@@ -3,7 +3,7 @@
 
 use std::time::Duration;
 
-use ferrobus_profile::{Order, Profile, Table, Value};
+use ferrobus_profile::{Order, Profile, Table, Value, WireWrite};
 use ratatui::Terminal;
 use ratatui::backend::TestBackend;
 use ratatui::crossterm::event::{KeyCode, KeyEvent, KeyModifiers};
@@ -101,7 +101,11 @@ fn the_confirmation_of_a_write_at_80x24() {
     key(&mut app, KeyCode::Enter);
     assert_eq!(
         app.mode,
-        Mode::Confirm { text: "4660".into(), raw: Value::Int(0x1234), registers: vec![0x1234], bit: None }
+        Mode::Confirm {
+            text: "4660".into(),
+            raw: Value::Int(0x1234),
+            request: WireWrite::Register { address: 0, value: 0x1234 }
+        }
     );
     insta::assert_snapshot!(render(&app, 80, 24));
     assert_eq!(
@@ -111,9 +115,7 @@ fn the_confirmation_of_a_write_at_80x24() {
             cell: 0,
             raw: Value::Int(0x1234),
             text: "4660".into(),
-            address: 0,
-            registers: vec![0x1234],
-            bit: None
+            request: WireWrite::Register { address: 0, value: 0x1234 }
         })
     );
 }

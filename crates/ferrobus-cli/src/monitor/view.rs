@@ -3,6 +3,7 @@
 
 use std::fmt::Write as _;
 
+use ferrobus_profile::WireWrite;
 use ratatui::Frame;
 use ratatui::layout::{Constraint, Layout, Rect};
 use ratatui::style::{Color, Modifier, Style};
@@ -261,13 +262,13 @@ fn draw_prompt(frame: &mut Frame<'_>, area: Rect, app: &App) {
         },
         Mode::Edit(text) => Line::from(format!("write {selected} = {text}_   (Enter: check, Esc: cancel)")),
         Mode::Alias(text) => Line::from(format!("alias of {selected}: {text}_   (Enter: set, Esc: cancel)")),
-        Mode::Confirm { text, registers, bit, .. } => {
-            let what = match bit {
-                Some(b) => format!("coil {}", u8::from(*b)),
-                None => format!(
-                    "registers [{}]",
-                    registers.iter().map(|r| format!("{r:#06x}")).collect::<Vec<_>>().join(" ")
-                ),
+        Mode::Confirm { text, request, .. } => {
+            let what = match request {
+                WireWrite::Coil { on, .. } | WireWrite::OneOfCoils { on, .. } => format!("coil {}", u8::from(*on)),
+                WireWrite::Register { value, .. } => format!("registers [{value:#06x}]"),
+                WireWrite::Registers { values, .. } => {
+                    format!("registers [{}]", values.iter().map(|r| format!("{r:#06x}")).collect::<Vec<_>>().join(" "))
+                }
             };
             Line::styled(format!("write {text} ({what}) to {selected}? y/n"), Style::new().fg(Color::Yellow))
         }

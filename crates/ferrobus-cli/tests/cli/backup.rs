@@ -58,7 +58,7 @@ impl TcpSim {
 
     /// The function codes of the requests the simulator has decoded so far. The log of a
     /// request is written before its reply, so once a command has its replies it is here.
-    fn functions(&self) -> Vec<u8> {
+    pub(crate) fn functions(&self) -> Vec<u8> {
         // The log thread may lag the reply by a moment.
         let deadline = Instant::now() + Duration::from_secs(5);
         let mut last = usize::MAX;

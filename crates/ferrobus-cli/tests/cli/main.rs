@@ -35,3 +35,4 @@ mod tls;
 mod values;
 mod word_order;
 mod write;
+mod write_point;

@@ -6,12 +6,13 @@
 use std::collections::BTreeMap;
 use std::future::Future;
 
-use ferrobus_profile::{Extent, Point, Table};
+use ferrobus_profile::{Extent, Point, Profile, Table, Value};
 use ferrobus_proto::codes::{ReadDeviceIdCode, device_object};
 
 use super::view::{Identification, View};
 use crate::client::Client;
 use crate::error::Error;
+use crate::write::WriteError;
 
 /// What reads and writes watch besides the bus: a stop, and the progress.
 pub trait Watch {
@@ -227,14 +228,13 @@ async fn read_table(target: Target<'_>, table: Table, start: u16, count: u16) ->
     }
 }
 
-/// Writes `words` to `point`: FC05 for a coil, FC06 for one register, FC10 for more.
-pub async fn write(target: Target<'_>, point: &Point, words: &[u16]) -> Result<(), Error> {
-    let (client, unit) = (target.client, target.unit);
-    match (point.table, words) {
-        (Table::Coils, [bit]) => client.write_single_coil(unit, point.address, *bit != 0).await,
-        (_, [one]) => client.write_single_register(unit, point.address, *one).await,
-        _ => client.write_multiple_registers(unit, point.address, words).await,
-    }
+/// Writes raw value `raw` to `point` in the one request [`Point::wire_write`] chooses with
+/// `profile`'s functions and write limit ([`crate::write::send`]); the guard is the restore's,
+/// applied to every parameter first.
+pub async fn write(target: Target<'_>, profile: &Profile, point: &Point, raw: &Value) -> Result<(), WriteError> {
+    let request = point.wire_write(raw, &profile.write_rules())?;
+    crate::write::send(target.client, target.unit, &request).await?;
+    Ok(())
 }
 
 /// An error in the user's words, with the profile's meaning of an exception code.

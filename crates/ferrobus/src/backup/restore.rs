@@ -13,6 +13,7 @@ use super::file::{Backup, State};
 use super::param::{self, shown_toml};
 use super::view::View;
 use crate::error::Error;
+use crate::write::WriteError;
 
 /// A value of the file to restore: its parameter, the raw value and its registers.
 pub type Candidate<'v> = (&'v Point, Value, Vec<u16>);
@@ -110,11 +111,11 @@ pub fn checked<'v>(backup: &Backup, view: &'v View, file: &str, force: bool) -> 
             }
             continue;
         };
-        let limit = view.profile.write_limit(param.table);
+        let rules = view.profile.write_rules();
         match param::from_toml(param, raw).and_then(|v| param::encode(param, &v).map(|w| (v, w))) {
             Err(why) => problems.push(format!("{at}: {why}")),
-            Ok(_) if param.width > limit => {
-                problems.push(format!("{at}: {} registers do not fit one write request of {limit}", param.width));
+            Ok((value, _)) if let Err(why) = param.wire_write(&value, &rules) => {
+                problems.push(format!("{file}:{}: {why}", entry.line));
             }
             Ok((value, words)) => {
                 match view.profile.check_value(&Write { point: param, raw: &value, typed: &param.show(&value) }) {
@@ -249,20 +250,25 @@ pub async fn apply(target: Target<'_>, view: &View, items: &mut [Item<'_>], watc
         }
         tracing::info!(code = %item.param.code, words = ?item.words, "writing");
         watch.started(&item.param.code);
-        match unless(watch, device::write(target, item.param, &item.words)).await {
+        match unless(watch, device::write(target, &view.profile, item.param, &item.raw)).await {
             Some(Ok(())) => watch.progress(1),
             None => {
                 item.outcome = Outcome::InFlight;
                 interrupted = true;
                 stopped = Some("Ctrl-C or SIGTERM".to_string());
             }
-            Some(Err(error)) => {
+            Some(Err(WriteError::Bus(error))) => {
                 watch.progress(1);
                 let why = device::describe(&error, view);
                 if !matches!(error, Error::Exception { .. }) {
                     stopped = Some(why.clone());
                 }
                 item.outcome = Outcome::NotWritten(why);
+                failed.insert(item.param.code.clone());
+            }
+            Some(Err(refused)) => {
+                watch.progress(1);
+                item.outcome = Outcome::NotWritten(refused.to_string());
                 failed.insert(item.param.code.clone());
             }
         }

@@ -161,28 +161,7 @@ pub struct Poller {
     handle: PollHandle,
 }
 
-/// Why a write-through failed.
-#[derive(Clone, Debug, thiserror::Error)]
-#[non_exhaustive]
-pub enum WriteError {
-    /// No such group or cell.
-    #[error("no cell {cell} in group {group}")]
-    NoSuchCell {
-        /// The group index.
-        group: usize,
-        /// The cell index.
-        cell: usize,
-    },
-    /// The value does not parse, is out of the point's range, or the point is read-only.
-    #[error("{0}")]
-    Value(#[from] ferrobus_profile::ValueError),
-    /// The profile's write guard refused it: the drive runs, or whether it runs is unknown.
-    #[error("{0}")]
-    Refused(#[from] ferrobus_profile::Refusal),
-    /// The bus refused or failed.
-    #[error("{0}")]
-    Bus(#[from] Error),
-}
+pub use crate::write::WriteError;
 
 impl Poller {
     /// Starts polling `groups` through `client` on the current tokio runtime.
@@ -255,11 +234,11 @@ impl PollHandle {
         self.stats().unit_times()
     }
 
-    /// Writes `text` to a cell, as its point parses it (`45 Hz`, `run`, `0x10`) and through the
-    /// write guard of `profile`, the one the cells' points came from: the point's range and
-    /// access, and for a run-locked point the drive's running point read first
-    /// ([`crate::guard::check_write`]). `None` for cells of raw ranges, which have no profile:
-    /// range and access only. Returns the raw value written.
+    /// Writes `text` to a cell, as its point parses it (`45 Hz`, `run`, `0x10`), with
+    /// [`crate::write::write_point`] and `profile`, the one the cells' points came from: the
+    /// point's range and access, the device's functions and write limit, and for a run-locked
+    /// point the drive's running point read first. `None` for cells of raw ranges, which have
+    /// no profile: range and access only, the spec's functions. Returns the raw value written.
     pub async fn write(
         &self,
         profile: Option<&Profile>,
@@ -268,12 +247,9 @@ impl PollHandle {
         text: &str,
     ) -> Result<Value, WriteError> {
         let raw = self.prepare_write(group, cell, text)?;
-        if let Some(profile) = profile {
-            let (g, c) = self.cell(group, cell)?;
-            let write = ferrobus_profile::Write { point: &c.point, raw: &raw, typed: text };
-            crate::guard::check_write(&self.client, g.unit, profile, &write).await?;
-        }
-        self.write_raw(group, cell, &raw).await?;
+        let (g, c) = self.cell(group, cell)?;
+        let write = ferrobus_profile::Write { point: &c.point, raw: &raw, typed: text };
+        crate::write::write_point(&self.client, g.unit, profile, &write, false).await?;
         Ok(raw)
     }
 
@@ -284,26 +260,24 @@ impl PollHandle {
         Ok(c.point.prepare_write(text)?)
     }
 
-    /// Writes the raw value `raw` to a cell as is: a coil, one register or several, encoded
-    /// in the point's type and word order. The write guard is the caller's to apply
-    /// ([`crate::guard::check_write`], as [`PollHandle::write`] does); a value that does not
-    /// fit the point's type is refused.
-    pub async fn write_raw(&self, group: usize, cell: usize, raw: &Value) -> Result<(), WriteError> {
+    /// Writes the raw value `raw` to a cell in the one request [`Point::wire_write`] chooses
+    /// with `profile`'s functions and write limit (the spec's without one). The write guard is
+    /// the caller's to apply first ([`Profile::plan_write`] with the run state it read, as a
+    /// bridge command does for all its writes at once); a value that does not fit the point's
+    /// type or one request is refused.
+    ///
+    /// [`Point::wire_write`]: ferrobus_profile::Point::wire_write
+    pub async fn write_raw(
+        &self,
+        profile: Option<&Profile>,
+        group: usize,
+        cell: usize,
+        raw: &Value,
+    ) -> Result<(), WriteError> {
         let (g, c) = self.cell(group, cell)?;
-        let point = &c.point;
-        if point.table == Table::Coils {
-            let on = match raw {
-                Value::Bool(b) => *b,
-                other => other.as_int().is_some_and(|n| n != 0),
-            };
-            self.client.write_single_coil(g.unit, point.address, on).await?;
-        } else {
-            let words = point.encode(raw)?;
-            match words.as_slice() {
-                [one] => self.client.write_single_register(g.unit, point.address, *one).await?,
-                many => self.client.write_multiple_registers(g.unit, point.address, many).await?,
-            }
-        }
+        let rules = profile.map_or(ferrobus_profile::WriteRules::SPEC, Profile::write_rules);
+        let request = c.point.wire_write(raw, &rules)?;
+        crate::write::send(&self.client, g.unit, &request).await?;
         Ok(())
     }
 
