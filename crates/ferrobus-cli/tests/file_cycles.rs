@@ -4,8 +4,12 @@
 //!
 //! Reads the workspace's sources; builds nothing.
 
+mod sources;
+
 use std::collections::{BTreeMap, BTreeSet};
-use std::path::{Path, PathBuf};
+use std::path::Path;
+
+use sources::{code, rust_files};
 
 /// Cycles known and owned elsewhere, each as its sorted modules. When one is broken, this test
 /// fails until it is taken off the list, so that it cannot come back unseen.
@@ -21,23 +25,6 @@ const KNOWN: &[(&str, &[&str])] = &[("ferrobus-profile", &["check", "codec", "mo
 
 const CRATES: [&str; 6] =
     ["ferrobus-proto", "ferrobus", "ferrobus-profile", "ferrobus-sim", "ferrobus-bridge", "ferrobus-cli"];
-
-fn rust_files(dir: &Path, out: &mut Vec<PathBuf>) {
-    let entries = std::fs::read_dir(dir).unwrap_or_else(|e| panic!("reading {}: {e}", dir.display()));
-    for entry in entries {
-        let path = entry.unwrap().path();
-        if path.is_dir() {
-            rust_files(&path, out);
-        } else if path.extension().is_some_and(|e| e == "rs") {
-            out.push(path);
-        }
-    }
-}
-
-/// The source without `//` comments (doc comments name modules in links, which is no use).
-fn code(text: &str) -> String {
-    text.lines().map(|line| line.split("//").next().unwrap_or_default()).collect::<Vec<_>>().join("\n")
-}
 
 fn ident(s: &str) -> &str {
     let end = s.find(|c: char| !(c.is_alphanumeric() || c == '_')).unwrap_or(s.len());

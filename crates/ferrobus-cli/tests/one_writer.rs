@@ -7,7 +7,11 @@
 //! it builds nothing. The client's own write methods, the core's and the simulator's servers,
 //! and the writes by address (`write`, the library demo's fixed registers) are what it allows.
 
+mod sources;
+
 use std::path::{Path, PathBuf};
+
+use sources::{code, rust_files};
 
 /// What builds a write request: the client's write methods, the request's variants, a PDU
 /// spelt out by hand.
@@ -50,23 +54,10 @@ fn workspace() -> PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR")).join("../..")
 }
 
-fn rust_files(dir: &Path, out: &mut Vec<PathBuf>) {
-    let entries = std::fs::read_dir(dir).unwrap_or_else(|e| panic!("reading {}: {e}", dir.display()));
-    for entry in entries {
-        let path = entry.unwrap().path();
-        if path.is_dir() {
-            rust_files(&path, out);
-        } else if path.extension().is_some_and(|e| e == "rs") {
-            out.push(path);
-        }
-    }
-}
-
 /// The source before its tests, without `//` comments.
-fn code(path: &Path) -> String {
+fn before_tests(path: &Path) -> String {
     let text = std::fs::read_to_string(path).unwrap_or_else(|e| panic!("reading {}: {e}", path.display()));
-    let before_tests = text.split("mod tests {").next().unwrap_or_default();
-    before_tests.lines().map(|line| line.split("//").next().unwrap_or_default()).collect::<Vec<_>>().join("\n")
+    code(text.split("mod tests {").next().unwrap_or_default())
 }
 
 fn relative(path: &Path) -> String {
@@ -87,7 +78,7 @@ fn no_source_file_but_the_allowed_builds_a_write_request() {
         if name.ends_with("tests.rs") || name.contains("/tests/") || ALLOWED.iter().any(|(a, _)| *a == name) {
             continue;
         }
-        for (n, line) in code(file).lines().enumerate() {
+        for (n, line) in before_tests(file).lines().enumerate() {
             // A match arm names a variant to read it, not to build one.
             if line.contains("=>") {
                 continue;
@@ -107,7 +98,7 @@ fn no_source_file_but_the_allowed_builds_a_write_request() {
 #[test]
 fn every_writer_of_a_point_calls_the_shared_act() {
     for (file, call) in WRITERS {
-        let text = code(&workspace().join(file));
+        let text = before_tests(&workspace().join(file));
         assert!(text.contains(call), "{file} does not call {call}");
     }
     for (file, _) in ALLOWED {
