@@ -88,8 +88,9 @@ pub enum Outcome {
 
 /// Each value of the file with its parameter and registers, checked before anything is sent:
 /// a parameter the profile lacks (skipped with `--force`), a value not of its type, out of
-/// range, or wider than a write request; `force` skips a parameter the profile lacks, with a
-/// note.
+/// range, or in no request the device takes ([`Point::wire_write`]: wider than its write
+/// limit, or a table it has no function for); `force` skips a parameter the profile lacks,
+/// with a note.
 pub fn checked<'v>(backup: &Backup, view: &'v View, file: &str, force: bool) -> Result<Checked<'v>, RestoreError> {
     let mut candidates: Vec<Candidate<'v>> = Vec::new();
     let mut problems = Vec::new();
@@ -114,11 +115,12 @@ pub fn checked<'v>(backup: &Backup, view: &'v View, file: &str, force: bool) -> 
         let rules = view.profile.write_rules();
         match param::from_toml(param, raw).and_then(|v| param::encode(param, &v).map(|w| (v, w))) {
             Err(why) => problems.push(format!("{at}: {why}")),
-            Ok((value, _)) if let Err(why) = param.wire_write(&value, &rules) => {
-                problems.push(format!("{file}:{}: {why}", entry.line));
-            }
             Ok((value, words)) => {
-                match view.profile.check_value(&Write { point: param, raw: &value, typed: &param.show(&value) }) {
+                let write = Write { point: param, raw: &value, typed: &param.show(&value) };
+                // A read-only parameter is kept to compare: it refuses the restore only if it differs.
+                let checked =
+                    view.profile.check_value(&write).and_then(|()| param.wire_write(&value, &rules).map(drop));
+                match checked {
                     Err(why) if param.writable() => problems.push(format!("{file}:{}: {why}", entry.line)),
                     _ => candidates.push((param, value, words)),
                 }
