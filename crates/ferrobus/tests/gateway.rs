@@ -5,7 +5,7 @@
 use std::collections::BTreeMap;
 use std::time::Duration;
 
-use ferrobus::gateway::stats::Refusal;
+use ferrobus::gateway::stats::Malformed;
 use ferrobus::gateway::{
     AllowAll, Authorize, Gateway, GatewayConfig, GatewayLine, Inbound, Route, Routes, Rules, Timeouts,
 };
@@ -385,12 +385,12 @@ async fn invalid_function_codes_and_malformed_pdus_get_01_or_03_at_once_and_neve
     assert_eq!(gw.stats()[0].total.requests, 0);
     let front = gw.front_stats();
     assert_eq!(
-        (front.refused(Refusal::NotARequest), front.refused(Refusal::Reserved), front.total()),
+        (front.refused(Malformed::NotARequest), front.refused(Malformed::Reserved), front.total()),
         (3, 3, 9),
         "{front}"
     );
-    assert_eq!((front.refused(Refusal::Truncated), front.refused(Refusal::Quantity)), (1, 1), "{front}");
-    assert_eq!(front.refused(Refusal::ByteCount), 1, "{front}");
+    assert_eq!((front.refused(Malformed::Truncated), front.refused(Malformed::Quantity)), (1, 1), "{front}");
+    assert_eq!(front.refused(Malformed::ByteCount), 1, "{front}");
     // The unit is as alive as before, for this client and another.
     let mut other = connect(&gw, Box::new(AllowAll));
     assert_eq!(ask(&mut other, 1, 1, &READ_0_2).await, [0x03, 0x04, 0, 0, 0, 0]);

@@ -24,9 +24,9 @@ use std::fmt;
 use ferrobus_proto::pdu::Request;
 use ferrobus_proto::{ExceptionCode, FunctionCode, PduError};
 
-/// Why the front end refused a request: one counter each in the gateway's stats.
+/// How a request the front end refused was malformed: one counter each in the gateway's stats.
 #[derive(Clone, Copy, PartialEq, Eq, PartialOrd, Ord, Hash, Debug)]
-pub enum Refusal {
+pub enum Malformed {
     /// No function code, 0x00, or one with the exception bit set: not a request at all.
     NotARequest,
     /// A code the spec reserves or leaves unassigned (neither public nor user-defined).
@@ -47,51 +47,51 @@ pub enum Refusal {
     TooLong,
 }
 
-impl Refusal {
+impl Malformed {
     /// Every reason, in the order the stats show them.
-    pub const ALL: [Refusal; 9] = [
-        Refusal::NotARequest,
-        Refusal::Reserved,
-        Refusal::Truncated,
-        Refusal::TrailingBytes,
-        Refusal::Quantity,
-        Refusal::ByteCount,
-        Refusal::Address,
-        Refusal::Value,
-        Refusal::TooLong,
+    pub const ALL: [Malformed; 9] = [
+        Malformed::NotARequest,
+        Malformed::Reserved,
+        Malformed::Truncated,
+        Malformed::TrailingBytes,
+        Malformed::Quantity,
+        Malformed::ByteCount,
+        Malformed::Address,
+        Malformed::Value,
+        Malformed::TooLong,
     ];
 
     /// The reason a parse error gives.
-    fn of(error: PduError) -> Refusal {
+    fn of(error: PduError) -> Malformed {
         match error {
-            PduError::Empty | PduError::InvalidFunctionCode(_) => Refusal::NotARequest,
-            PduError::Truncated { .. } => Refusal::Truncated,
-            PduError::TrailingBytes { .. } => Refusal::TrailingBytes,
-            PduError::QuantityOutOfRange { .. } => Refusal::Quantity,
-            PduError::ByteCountMismatch { .. } => Refusal::ByteCount,
-            PduError::AddressOverflow { .. } => Refusal::Address,
-            PduError::TooLong { .. } => Refusal::TooLong,
-            _ => Refusal::Value,
+            PduError::Empty | PduError::InvalidFunctionCode(_) => Malformed::NotARequest,
+            PduError::Truncated { .. } => Malformed::Truncated,
+            PduError::TrailingBytes { .. } => Malformed::TrailingBytes,
+            PduError::QuantityOutOfRange { .. } => Malformed::Quantity,
+            PduError::ByteCountMismatch { .. } => Malformed::ByteCount,
+            PduError::AddressOverflow { .. } => Malformed::Address,
+            PduError::TooLong { .. } => Malformed::TooLong,
+            _ => Malformed::Value,
         }
     }
 
     /// The name the stats show.
     pub fn name(self) -> &'static str {
         match self {
-            Refusal::NotARequest => "not-a-request",
-            Refusal::Reserved => "reserved-function",
-            Refusal::Truncated => "truncated",
-            Refusal::TrailingBytes => "trailing-bytes",
-            Refusal::Quantity => "quantity",
-            Refusal::ByteCount => "byte-count",
-            Refusal::Address => "address",
-            Refusal::Value => "value",
-            Refusal::TooLong => "too-long",
+            Malformed::NotARequest => "not-a-request",
+            Malformed::Reserved => "reserved-function",
+            Malformed::Truncated => "truncated",
+            Malformed::TrailingBytes => "trailing-bytes",
+            Malformed::Quantity => "quantity",
+            Malformed::ByteCount => "byte-count",
+            Malformed::Address => "address",
+            Malformed::Value => "value",
+            Malformed::TooLong => "too-long",
         }
     }
 }
 
-impl fmt::Display for Refusal {
+impl fmt::Display for Malformed {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
         f.write_str(self.name())
     }
@@ -100,7 +100,7 @@ impl fmt::Display for Refusal {
 /// A request the front end does not forward: why, and the exception that answers it.
 #[derive(Clone, Copy, PartialEq, Eq, Debug)]
 pub(crate) struct Refused {
-    pub(crate) reason: Refusal,
+    pub(crate) reason: Malformed,
     pub(crate) code: ExceptionCode,
 }
 
@@ -112,12 +112,12 @@ pub(crate) fn check(pdu: &[u8]) -> Result<(), Refused> {
             if forwarded(request.function()) {
                 Ok(())
             } else {
-                Err(Refused { reason: Refusal::Reserved, code: ExceptionCode::IllegalFunction })
+                Err(Refused { reason: Malformed::Reserved, code: ExceptionCode::IllegalFunction })
             }
         }
         // No function code at all is no request either: 01, like 0x00.
-        Err(PduError::Empty) => Err(Refused { reason: Refusal::NotARequest, code: ExceptionCode::IllegalFunction }),
-        Err(error) => Err(Refused { reason: Refusal::of(error), code: error.exception_code() }),
+        Err(PduError::Empty) => Err(Refused { reason: Malformed::NotARequest, code: ExceptionCode::IllegalFunction }),
+        Err(error) => Err(Refused { reason: Malformed::of(error), code: error.exception_code() }),
     }
 }
 
@@ -130,7 +130,7 @@ fn forwarded(function: FunctionCode) -> bool {
 mod tests {
     use super::*;
 
-    fn refused(pdu: &[u8]) -> Option<(Refusal, u8)> {
+    fn refused(pdu: &[u8]) -> Option<(Malformed, u8)> {
         check(pdu).err().map(|r| (r.reason, r.code.value()))
     }
 
@@ -141,29 +141,29 @@ mod tests {
             // A body the public parsers reject or take; a user code takes anything.
             let outcome = refused(&[v, 0x00, 0x00, 0x00, 0x01]);
             if !code.is_valid_request_code() {
-                assert_eq!(outcome, Some((Refusal::NotARequest, 0x01)), "{v:#04x}");
+                assert_eq!(outcome, Some((Malformed::NotARequest, 0x01)), "{v:#04x}");
             } else if !forwarded(code) {
-                assert_eq!(outcome, Some((Refusal::Reserved, 0x01)), "{v:#04x}");
+                assert_eq!(outcome, Some((Malformed::Reserved, 0x01)), "{v:#04x}");
             } else if code.is_user_defined() {
                 assert_eq!(outcome, None, "{v:#04x}");
             } else {
-                assert_ne!(outcome.map(|(r, _)| r), Some(Refusal::Reserved), "{v:#04x}");
+                assert_ne!(outcome.map(|(r, _)| r), Some(Malformed::Reserved), "{v:#04x}");
             }
         }
     }
 
     #[test]
     fn malformed_public_requests_get_03_and_a_range_past_ffff_02() {
-        assert_eq!(refused(&[0x03, 0x00, 0x00]), Some((Refusal::Truncated, 0x03)));
-        assert_eq!(refused(&[0x03]), Some((Refusal::Truncated, 0x03)));
-        assert_eq!(refused(&[0x03, 0x00, 0x00, 0x00, 0x01, 0x00]), Some((Refusal::TrailingBytes, 0x03)));
-        assert_eq!(refused(&[0x03, 0x00, 0x00, 0x00, 0x00]), Some((Refusal::Quantity, 0x03)));
-        assert_eq!(refused(&[0x03, 0x00, 0x00, 0x00, 0x7E]), Some((Refusal::Quantity, 0x03)));
-        assert_eq!(refused(&[0x10, 0x00, 0x00, 0x00, 0x01, 0x04, 0x00, 0x01]), Some((Refusal::ByteCount, 0x03)));
-        assert_eq!(refused(&[0x05, 0x00, 0x00, 0x12, 0x34]), Some((Refusal::Value, 0x03)));
-        assert_eq!(refused(&[0x03, 0xFF, 0xFF, 0x00, 0x02]), Some((Refusal::Address, 0x02)));
-        assert_eq!(refused(&[]), Some((Refusal::NotARequest, 0x01)));
-        assert_eq!(refused(&[0x83, 0x02]), Some((Refusal::NotARequest, 0x01)));
+        assert_eq!(refused(&[0x03, 0x00, 0x00]), Some((Malformed::Truncated, 0x03)));
+        assert_eq!(refused(&[0x03]), Some((Malformed::Truncated, 0x03)));
+        assert_eq!(refused(&[0x03, 0x00, 0x00, 0x00, 0x01, 0x00]), Some((Malformed::TrailingBytes, 0x03)));
+        assert_eq!(refused(&[0x03, 0x00, 0x00, 0x00, 0x00]), Some((Malformed::Quantity, 0x03)));
+        assert_eq!(refused(&[0x03, 0x00, 0x00, 0x00, 0x7E]), Some((Malformed::Quantity, 0x03)));
+        assert_eq!(refused(&[0x10, 0x00, 0x00, 0x00, 0x01, 0x04, 0x00, 0x01]), Some((Malformed::ByteCount, 0x03)));
+        assert_eq!(refused(&[0x05, 0x00, 0x00, 0x12, 0x34]), Some((Malformed::Value, 0x03)));
+        assert_eq!(refused(&[0x03, 0xFF, 0xFF, 0x00, 0x02]), Some((Malformed::Address, 0x02)));
+        assert_eq!(refused(&[]), Some((Malformed::NotARequest, 0x01)));
+        assert_eq!(refused(&[0x83, 0x02]), Some((Malformed::NotARequest, 0x01)));
         assert_eq!(refused(&[0x03, 0x00, 0x00, 0x00, 0x7D]), None);
         assert_eq!(refused(&[0x41]), None, "a user-defined code, even empty, is the device's to judge");
         assert_eq!(refused(&[0x6E, 1, 2, 3]), None);
@@ -171,7 +171,7 @@ mod tests {
 
     #[test]
     fn every_reason_has_its_own_name() {
-        let names: std::collections::BTreeSet<_> = Refusal::ALL.iter().map(|r| r.name()).collect();
-        assert_eq!(names.len(), Refusal::ALL.len());
+        let names: std::collections::BTreeSet<_> = Malformed::ALL.iter().map(|r| r.name()).collect();
+        assert_eq!(names.len(), Malformed::ALL.len());
     }
 }

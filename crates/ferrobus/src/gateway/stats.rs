@@ -7,7 +7,7 @@ use std::time::Duration;
 
 use hdrhistogram::Histogram;
 
-pub use super::screen::Refusal;
+pub use super::screen::Malformed;
 
 /// How one forwarded request ended, for the counters.
 #[derive(Clone, Copy, PartialEq, Eq, Debug)]
@@ -232,23 +232,23 @@ impl fmt::Display for LineTraffic {
     }
 }
 
-/// What the front end refused before any line saw it ([`Refusal`]: why), over every
+/// What the front end refused before any line saw it ([`Malformed`]: why), over every
 /// connection.
 #[derive(Clone, Debug, Default, PartialEq, Eq)]
 pub struct FrontStats {
     /// Requests refused, by reason.
-    pub refused: BTreeMap<Refusal, u64>,
+    pub refused: BTreeMap<Malformed, u64>,
 }
 
 impl FrontStats {
     /// Counts one refusal.
-    pub(crate) fn count(&mut self, reason: Refusal) {
+    pub(crate) fn count(&mut self, reason: Malformed) {
         let n = self.refused.entry(reason).or_insert(0);
         *n = n.saturating_add(1);
     }
 
     /// Requests refused for `reason`.
-    pub fn refused(&self, reason: Refusal) -> u64 {
+    pub fn refused(&self, reason: Malformed) -> u64 {
         self.refused.get(&reason).copied().unwrap_or(0)
     }
 
@@ -278,10 +278,10 @@ mod tests {
     fn front_stats_count_by_reason_and_show_each_with_the_total() {
         let mut front = FrontStats::default();
         assert_eq!(front.to_string(), "front: refused 0 invalid requests\n");
-        front.count(Refusal::Truncated);
-        front.count(Refusal::NotARequest);
-        front.count(Refusal::Truncated);
-        assert_eq!((front.refused(Refusal::Truncated), front.refused(Refusal::Reserved), front.total()), (2, 0, 3));
+        front.count(Malformed::Truncated);
+        front.count(Malformed::NotARequest);
+        front.count(Malformed::Truncated);
+        assert_eq!((front.refused(Malformed::Truncated), front.refused(Malformed::Reserved), front.total()), (2, 0, 3));
         assert_eq!(front.to_string(), "front: refused 3 invalid requests (not-a-request 1, truncated 2)\n");
     }
 }
