@@ -219,6 +219,7 @@ pub(crate) async fn run(connection: &ConnectArgs, args: &GatewayArgs) -> Result<
         idle_timeout: Some(args.idle_timeout).filter(|d| !d.is_zero()),
         frame_timeout: Some(args.frame_timeout).filter(|d| !d.is_zero()),
         max_per_source: usize::try_from(args.max_per_source).unwrap_or(usize::MAX),
+        release_memory_after_bursts: true,
         stats: Arc::default(),
     };
     let tcp = Arc::clone(&limits.stats);

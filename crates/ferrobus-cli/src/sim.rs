@@ -207,6 +207,7 @@ pub(crate) async fn run(connection: &ConnectArgs, args: &SimArgs) -> Result<(), 
         max_per_source: usize::try_from(args.max_per_source).unwrap_or(usize::MAX),
         idle_timeout: Some(args.idle_timeout).filter(|d| !d.is_zero()),
         frame_timeout: Some(args.frame_timeout).filter(|d| !d.is_zero()),
+        release_memory_after_bursts: true,
         stats: Arc::default(),
     };
     let tcp_stats = Arc::clone(&limits.stats);

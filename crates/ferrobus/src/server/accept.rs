@@ -69,19 +69,24 @@ pub struct TcpLimits {
     /// Close a connection whose frame begun is unfinished this long, unless its
     /// [`ServerOptions::frame_timeout`](super::ServerOptions::frame_timeout) is set.
     pub frame_timeout: Option<Duration>,
+    /// After a burst of connections (see `server/trim.rs`), ask the allocator to give their
+    /// freed memory back to the system (glibc's `malloc_trim`; elsewhere nothing). The
+    /// application's decision, off by default: the `ferrobus` binary's servers turn it on.
+    pub release_memory_after_bursts: bool,
     /// Counts what happened, shared with whoever reports it.
     pub stats: Arc<TcpStats>,
 }
 
 impl Default for TcpLimits {
     /// 1,000 connections (fits the common descriptor limit of 1,024), 100 from one source,
-    /// 60 s idle, 5 s for a frame.
+    /// 60 s idle, 5 s for a frame, freed memory left to the allocator.
     fn default() -> Self {
         TcpLimits {
             max_connections: 1000,
             max_per_source: 100,
             idle_timeout: Some(Duration::from_secs(60)),
             frame_timeout: Some(Duration::from_secs(5)),
+            release_memory_after_bursts: false,
             stats: Arc::default(),
         }
     }
@@ -383,22 +388,27 @@ struct Place {
     slot: Slot,
     _share: Share,
     stats: Arc<TcpStats>,
-    bursts: Arc<Bursts>,
+    bursts: Option<Arc<Bursts>>,
 }
 
 impl Place {
-    fn new(slot: Slot, share: Share, stats: &Arc<TcpStats>, bursts: &Arc<Bursts>) -> Place {
+    fn new(slot: Slot, share: Share, stats: &Arc<TcpStats>, bursts: Option<&Arc<Bursts>>) -> Place {
         let open = stats.open.fetch_add(1, Ordering::Relaxed).saturating_add(1);
-        bursts.opened(usize::try_from(open).unwrap_or(usize::MAX));
-        Place { slot, _share: share, stats: Arc::clone(stats), bursts: Arc::clone(bursts) }
+        if let Some(bursts) = bursts {
+            bursts.opened(usize::try_from(open).unwrap_or(usize::MAX));
+        }
+        Place { slot, _share: share, stats: Arc::clone(stats), bursts: bursts.map(Arc::clone) }
     }
 }
 
 impl Drop for Place {
-    /// Gives the place back, and after a burst of connections their freed memory.
+    /// Gives the place back, and after a burst of connections their freed memory if
+    /// [`TcpLimits::release_memory_after_bursts`].
     fn drop(&mut self) {
         let open = self.stats.open.fetch_sub(1, Ordering::Relaxed).saturating_sub(1);
-        self.bursts.closed(usize::try_from(open).unwrap_or(usize::MAX));
+        if let Some(bursts) = &self.bursts {
+            bursts.closed(usize::try_from(open).unwrap_or(usize::MAX));
+        }
     }
 }
 
@@ -460,14 +470,14 @@ where
     let slots = Slots::new(limits.max_connections);
     let stats = Arc::clone(&limits.stats);
     let sources = Sources::new(Arc::clone(&stats));
-    let bursts = Arc::new(Bursts::default());
+    let bursts = limits.release_memory_after_bursts.then(|| Arc::new(Bursts::default()));
     let (mut refusals, mut evictions) = (Throttle::default(), Throttle::default());
     loop {
         let Some((stream, peer)) = accept(&listener, &stats).await else { continue };
         let (source, activity) = (Source::of(peer), Activity::new());
         let admitted = sources.admit(source, limits, handshakes, &activity).and_then(|(share, handshake)| {
             let (slot, evicted) = slots.take(peer, source, &activity).ok_or(Refusal::Full(limits.max_connections))?;
-            Ok((Place::new(slot, share, &stats, &bursts), handshake, evicted))
+            Ok((Place::new(slot, share, &stats, bursts.as_ref()), handshake, evicted))
         });
         let (place, handshake, evicted) = match admitted {
             Ok(admitted) => admitted,

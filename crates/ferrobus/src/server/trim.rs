@@ -5,8 +5,10 @@
 //! long-lived allocation made during the burst pins it): the memory of 1,000 closed
 //! connections stayed in the process, reused by the next ones but never returned. When a
 //! burst is over — the open connections fallen to a quarter of their peak, a peak of at least
-//! [`BURST`] — the server asks the allocator to return the free pages (glibc's `malloc_trim`, behind the
-//! platform seam: [`crate::sys`]). Elsewhere (musl, macOS, Windows) the allocators return
+//! [`BURST`] — the server asks the allocator to return the free pages (glibc's `malloc_trim`,
+//! behind the platform seam: [`crate::sys`]) if the application asked for it
+//! ([`super::TcpLimits::release_memory_after_bursts`]; off by default, the `ferrobus` binary's
+//! servers turn it on). Elsewhere (musl, macOS, Windows) the allocators return
 //! memory by themselves, or have no such call, and this is a no-op.
 
 use std::sync::atomic::{AtomicUsize, Ordering};

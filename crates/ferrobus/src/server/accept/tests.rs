@@ -177,3 +177,8 @@ async fn out_of_sockets_pauses_accepting_for_the_backoff_and_another_error_only_
     let counts = stats.counts();
     assert_eq!((counts.descriptor_waits, counts.accept_errors), (1, 1));
 }
+
+#[test]
+fn a_library_server_leaves_freed_memory_to_the_allocator_unless_the_application_asks() {
+    assert!(!TcpLimits::default().release_memory_after_bursts, "the library's default: no malloc_trim");
+}
