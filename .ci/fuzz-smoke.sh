@@ -1,5 +1,5 @@
 #!/usr/bin/env bash
-# Bounded smoke run of every cargo-fuzz target in fuzz/ (DESIGN.md rule 11).
+# Bounded smoke run of every cargo-fuzz target in fuzz/.
 #
 #   FUZZ_SECONDS=20 .ci/fuzz-smoke.sh          # every target for 20 s (the default)
 #   FUZZ_SECONDS=60 .ci/fuzz-smoke.sh rtu_receiver slave_engine

@@ -1,4 +1,4 @@
-//! Shared pieces of the ferrobus-proto fuzz targets (DESIGN.md rule 11).
+//! Shared pieces of the ferrobus-proto fuzz targets.
 //!
 //! - [`Step`]: one chunk of bytes and the silence before it, the input of every receiver and
 //!   engine target. Gaps are `u16` microseconds (up to 65 ms), so that one input mixes gaps

@@ -1,4 +1,4 @@
-//! The PDU test suite (DESIGN.md style rules 3, 10 and 11).
+//! The PDU test suite.
 //!
 //! - `golden`: an annotated request and response for every function code, from the manuals
 //!   and the spec where they print one. Each is parsed, emitted into a buffer pre-filled with
