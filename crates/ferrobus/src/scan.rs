@@ -43,13 +43,20 @@ use crate::{Client, ClientConfig, Error, Framing, Rs485, Timer, Transport};
 
 /// A port whose line settings can be changed while it is open.
 pub trait Reconfigure: Port {
-    /// Sets `line` on the open port.
+    /// Sets `line` on the open port, and drops what it received at the settings before: those
+    /// bytes are no traffic of the new ones (a frame that came whole at 19200 is no frame heard
+    /// at 9600).
     fn reconfigure(&mut self, line: LineConfig) -> io::Result<()>;
 }
 
 impl Reconfigure for TtyPort {
     fn reconfigure(&mut self, line: LineConfig) -> io::Result<()> {
-        TtyPort::reconfigure(self, line)
+        TtyPort::reconfigure(self, line)?;
+        let dropped = self.discard_input()?;
+        if dropped > 0 {
+            tracing::debug!(dropped, "bytes received before {line} dropped");
+        }
+        Ok(())
     }
 }
 
