@@ -14,9 +14,9 @@
 //! ```
 //!
 //! A writer that writes many points under one reading of the run state (`restore`, a bridge
-//! command) plans each with [`Profile::plan_write`] and sends each with [`send`]; a writer
-//! that shows its traffic (`monitor`) sends what [`prepare`] planned. No writer builds a write
-//! request of its own.
+//! command) plans each with [`Profile::plan_write`] and sends each with [`send`]; the monitor,
+//! which shows its traffic and guards a raw cell as the parameter under it, plans with
+//! `Point::wire_write` and sends with [`send`]. No writer builds a write request of its own.
 
 use ferrobus_profile::{Profile, Refusal, RunState, Table, Value, ValueError, WireWrite, WriteRules};
 
