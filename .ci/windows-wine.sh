@@ -33,7 +33,7 @@ trap cleanup EXIT
 
 echo "--- building the Windows tests and binary"
 cargo build --locked --target x86_64-pc-windows-gnu -p ferrobus-cli --bin ferrobus
-cargo test --locked --target x86_64-pc-windows-gnu -p ferrobus-proto -p ferrobus-sim -p ferrobus --lib --tests --no-run
+cargo test --locked --target x86_64-pc-windows-gnu -p ferrobus-proto -p ferrobus-sim -p ferrobus -p ferrobus-tools --lib --tests --no-run
 
 echo "--- the wine prefix, and one wineserver for the whole step"
 # A wineserver that exits once its last program has (after a few seconds) drops a program
@@ -44,11 +44,11 @@ mkdir -p "$WINEPREFIX"
 "$wineserver" -p
 timeout --kill-after=10 120 "${WINE:-/usr/lib/wine/wine64}" wineboot --init
 
-echo "--- under wine: ferrobus-proto, ferrobus-sim, ferrobus (lib) tests (at most ${seconds}s)"
+echo "--- under wine: ferrobus-proto, ferrobus-sim, ferrobus and ferrobus-tools (lib) tests (at most ${seconds}s)"
 timeout --kill-after=10 "$seconds" \
     cargo test --locked --target x86_64-pc-windows-gnu -p ferrobus-proto -p ferrobus-sim --lib --tests
 timeout --kill-after=10 "$seconds" \
-    cargo test --locked --target x86_64-pc-windows-gnu -p ferrobus --lib
+    cargo test --locked --target x86_64-pc-windows-gnu -p ferrobus -p ferrobus-tools --lib
 
 echo "--- under wine: ferrobus.exe against a Linux ferrobus sim --tcp"
 cargo build --locked -p ferrobus-cli --bin ferrobus

@@ -21,7 +21,7 @@ use std::sync::LazyLock;
 use std::time::{Duration, SystemTime};
 
 use arbitrary::Arbitrary;
-use ferrobus::poll::{Failure, FailureKind, Reading, Sample, Traffic};
+use ferrobus_tools::poll::{Failure, FailureKind, Reading, Sample, Traffic};
 use ferrobus_bridge::config::{Mode, PlainConfig, Plant};
 use ferrobus_bridge::edge::{Action, DeviceRef, Edge, Output, Publish};
 use ferrobus_bridge::sparkplug::convert::UintEncoding;

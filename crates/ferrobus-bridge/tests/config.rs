@@ -4,10 +4,10 @@
 use std::path::Path;
 use std::time::Duration;
 
-use ferrobus::poll::Group;
 use ferrobus_bridge::config::{Connection, Mode, Plant};
 use ferrobus_bridge::sparkplug::convert::UintEncoding;
 use ferrobus_profile::Profile;
+use ferrobus_tools::poll::Group;
 
 /// The folder of the shipped examples.
 fn examples() -> std::path::PathBuf {

@@ -6,7 +6,6 @@ use std::collections::HashMap;
 use std::sync::Arc;
 use std::time::{Duration, SystemTime};
 
-use ferrobus::poll::{Failure, FailureKind, Group, Layout, Reading, Sample, Table, Traffic};
 use ferrobus_bridge::config::{Broker, Connection, DeviceSpec, LineSpec, Mode, PlainConfig, Plant, SparkplugConfig};
 use ferrobus_bridge::edge::{Action, DeviceRef, Edge, EdgeError, MAX_METRICS_PER_COMMAND, Output, Publish};
 use ferrobus_bridge::sparkplug::convert::UintEncoding;
@@ -14,6 +13,7 @@ use ferrobus_bridge::sparkplug::payload::{DataType, Metric, MetricValue, Payload
 use ferrobus_bridge::sparkplug::topic::HostState;
 use ferrobus_bridge::store::StoreConfig;
 use ferrobus_profile::{Profile, Value};
+use ferrobus_tools::poll::{Failure, FailureKind, Group, Layout, Reading, Sample, Table, Traffic};
 
 const DRIVE: DeviceRef = DeviceRef { line: 0, device: 0 };
 const METER: DeviceRef = DeviceRef { line: 1, device: 0 };
@@ -42,7 +42,7 @@ fn meter() -> DeviceSpec {
     let layout = Layout { aliases: vec![(0, "temperature".into())], ..Layout::default() };
     let group = Group::raw(
         "meter",
-        ferrobus::poll::RawRange { unit: 2, table: Table::Holding, count: 2, ..Default::default() },
+        ferrobus_tools::poll::RawRange { unit: 2, table: Table::Holding, count: 2, ..Default::default() },
         &layout,
     )
     .unwrap();
@@ -891,7 +891,7 @@ fn plain_publishes_each_point_as_json_on_its_topic_by_exception() {
     assert_eq!((f001.qos, f001.retain), (1, true));
     assert_eq!(
         json(f001),
-        serde_json::json!({"value": 60.0, "unit": "Hz", "timestamp": ferrobus::poll::iso8601_ms(t(1)), "quality": "good"})
+        serde_json::json!({"value": 60.0, "unit": "Hz", "timestamp": ferrobus_tools::poll::iso8601_ms(t(1)), "quality": "good"})
     );
     assert_eq!(json(by_topic["factory/line1/drive1/running"])["value"], true);
     assert_eq!(out.len(), 4, "status, F001, d001, running");
@@ -948,7 +948,7 @@ fn plain_failures_are_bad_or_stale_once_with_the_error_and_the_device_goes_offli
     assert_eq!(out.len(), 2, "stale, once");
     let stale = json(&out[0]);
     assert_eq!((stale["quality"].as_str(), stale["value"].as_i64()), (Some("stale"), Some(20)));
-    assert_eq!(stale["timestamp"], ferrobus::poll::iso8601_ms(t(5)));
+    assert_eq!(stale["timestamp"], ferrobus_tools::poll::iso8601_ms(t(5)));
     assert!(stale["error"].as_str().unwrap().contains("no reply"));
     let out = publishes(edge.sample(METER, 0, &failed(0, t(6), FailureKind::Timeout)));
     assert_eq!(out.len(), 1, "the second silent poll (death_after 2): offline");
@@ -1041,7 +1041,7 @@ fn plain_offline_messages_are_stored_and_replayed_historical_unretained() {
     assert!(!p.retain, "history does not replace the retained last value");
     let body = json(&p);
     assert_eq!(body["historical"], true);
-    assert_eq!(body["timestamp"], ferrobus::poll::iso8601_ms(t(1)));
+    assert_eq!(body["timestamp"], ferrobus_tools::poll::iso8601_ms(t(1)));
     for (bad, seen) in [(&b"[1]"[..], "not a JSON object"), (b"{", "not a JSON object")] {
         let record = records_of_plain("factory/line1/meter/temperature", bad);
         let error = edge.replay(&record, t(12)).unwrap_err().to_string();

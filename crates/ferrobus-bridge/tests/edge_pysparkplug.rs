@@ -10,9 +10,9 @@ use std::path::PathBuf;
 use std::process::Command;
 use std::time::{Duration, SystemTime};
 
-use ferrobus::poll::{Failure, FailureKind, Reading, Sample, Traffic};
 use ferrobus_bridge::config::Plant;
 use ferrobus_bridge::edge::{DeviceRef, Edge, Output, Publish};
+use ferrobus_tools::poll::{Failure, FailureKind, Reading, Sample, Traffic};
 use serde_json::Value as Json;
 
 mod support;

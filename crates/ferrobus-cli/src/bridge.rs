@@ -297,12 +297,12 @@ async fn drive_inverter(
 }
 
 /// Writes `text` to `point` of the inverter as every writer writes a point
-/// ([`ferrobus::write::write_point`]: its profile's guard, the running point read for a
+/// ([`ferrobus_tools::write::write_point`]: its profile's guard, the running point read for a
 /// run-locked point, the request the drive takes), not read back.
 async fn set(client: &Client, inverter: &Inverter, point: &Point, text: &str) -> Result<(), String> {
     let raw = point.prepare_write(text).map_err(|e| e.to_string())?;
     let write = ferrobus_profile::Write { point, raw: &raw, typed: text };
-    ferrobus::write::write_point(client, inverter.unit, Some(&inverter.profile), &write, false)
+    ferrobus_tools::write::write_point(client, inverter.unit, Some(&inverter.profile), &write, false)
         .await
         .map(|_| ())
         .map_err(|e| e.to_string())

@@ -20,10 +20,10 @@ use std::io;
 use std::time::Duration;
 
 use ferrobus::Error;
-use ferrobus::gateway::GatewayError;
 use ferrobus::port::PortFault;
 use ferrobus_proto::master::HeardInstead;
 use ferrobus_proto::{ExceptionCode, FunctionCode, PduError};
+use ferrobus_tools::gateway::GatewayError;
 
 use crate::target::Target;
 

@@ -8,7 +8,7 @@
 //! UNITS=LINE[:UNIT]` says which units go where (with one line and no `--route`, units 1-247
 //! go to it under their own addresses, and every unit id 0-255 to a `--tcp` line); a unit in
 //! no route gets exception 0x0A. The library
-//! ([`ferrobus::gateway`]) documents every answer the gateway gives and why. The counters of
+//! ([`ferrobus_tools::gateway`]) documents every answer the gateway gives and why. The counters of
 //! every line and unit, and the requests the front end refused by reason, are printed on
 //! SIGUSR1 and at exit. `--reverse` turns it around: a
 //! slave on `--port` for the units of `--route UNIT=HOST:PORT[/UNIT]`, each forwarded to its
@@ -24,12 +24,12 @@ use std::sync::Arc;
 use std::time::Duration;
 
 use clap::Args;
-use ferrobus::gateway::{
+use ferrobus::server::{TcpCounts, TcpLimits};
+use ferrobus::{Client, Transport};
+use ferrobus_tools::gateway::{
     AllowAll, Authorize, FrontConfig, Gateway, GatewayConfig, GatewayLine, Inbound, OnFailure, Route, Routes, Rules,
     Upstream, serve_reverse,
 };
-use ferrobus::server::{TcpCounts, TcpLimits};
-use ferrobus::{Client, Transport};
 
 use crate::connect::{ConnectArgs, Target, parse_duration};
 use crate::exit::CliError;
@@ -321,7 +321,7 @@ fn reverse_route(text: &str) -> Result<(u8, String, u8), CliError> {
 
 /// Prints every line's and unit's counters and the TCP side's on stderr.
 fn print(gateway: &Gateway, tcp: &TcpCounts, secure: bool) {
-    eprint!("{}", ferrobus::gateway::report(&gateway.stats(), &gateway.front_stats()));
+    eprint!("{}", ferrobus_tools::gateway::report(&gateway.stats(), &gateway.front_stats()));
     eprintln!(
         "tcp: {} connections served ({} open), {} refused over --max-per-source, {} accept pauses out of file descriptors; \
          closed: {} to make room over --max-connections ({} in their handshake, {} never answered, {} idle longest), {} idle, \

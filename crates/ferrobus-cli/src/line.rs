@@ -185,7 +185,7 @@ fn record_tap(
 ) -> Result<(), CliError> {
     let what = path.display().to_string();
     let mut file = std::fs::File::create(path).map_err(|source| CliError::Output { what: what.clone(), source })?;
-    let clock = ferrobus::sniff::WallClock::now();
+    let clock = ferrobus_tools::sniff::WallClock::now();
     tokio::spawn(async move {
         while let Some(run) = heard.recv().await {
             let doc = serde_json::json!({

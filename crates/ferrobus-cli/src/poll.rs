@@ -8,7 +8,7 @@
 //! (codes, labels, globs) and `--group`s are named points, read in the profile planner's
 //! fewest requests. `--session FILE` adds the groups of a session file (what `monitor`
 //! saves). The scheduling, the failure kinds and the counters are the library's
-//! ([`ferrobus::poll`]); this file turns its samples into records.
+//! ([`ferrobus_tools::poll`]); this file turns its samples into records.
 
 use std::collections::HashMap;
 use std::fmt::Write as _;
@@ -18,8 +18,8 @@ use std::time::Duration;
 
 use clap::Args;
 use ferrobus::Client;
-use ferrobus::poll::session::{Session, period};
-use ferrobus::poll::{Event, FailureKind, Format, Group, Layout, Order, PollConfig, Poller, Sample, iso8601_ms};
+use ferrobus_tools::poll::session::{Session, period};
+use ferrobus_tools::poll::{Event, FailureKind, Format, Group, Layout, Order, PollConfig, Poller, Sample, iso8601_ms};
 use serde_json::json;
 
 use crate::address::{AddressArgs, RangeWord};
@@ -298,7 +298,7 @@ fn raw_groups(
     let mut groups = Vec::new();
     for (at, n) in connection.read_pieces(start.wire, usize::from(count), width, table, None)? {
         let name = format!("u{} {} {at:#06x}", spec.unit, table.name());
-        let range = ferrobus::poll::RawRange { unit: spec.unit, table: table.into(), start: at, count: n, every };
+        let range = ferrobus_tools::poll::RawRange { unit: spec.unit, table: table.into(), start: at, count: n, every };
         let group = Group::raw(&name, range, layout).map_err(|e| CliError::Usage(e.to_string()))?;
         groups.push(group);
     }
@@ -476,12 +476,12 @@ fn millis(d: Duration) -> f64 {
     (d.as_secs_f64() * 1e6).round() / 1e3
 }
 
-fn raw_json(v: &ferrobus::poll::Value) -> serde_json::Value {
+fn raw_json(v: &ferrobus_tools::poll::Value) -> serde_json::Value {
     match v {
-        ferrobus::poll::Value::Int(n) => i64::try_from(*n).map_or_else(|_| json!(n.to_string()), |n| json!(n)),
-        ferrobus::poll::Value::Float(x) => json!(x),
-        ferrobus::poll::Value::Bool(b) => json!(b),
-        ferrobus::poll::Value::Text(s) => json!(s),
+        ferrobus_tools::poll::Value::Int(n) => i64::try_from(*n).map_or_else(|_| json!(n.to_string()), |n| json!(n)),
+        ferrobus_tools::poll::Value::Float(x) => json!(x),
+        ferrobus_tools::poll::Value::Bool(b) => json!(b),
+        ferrobus_tools::poll::Value::Text(s) => json!(s),
     }
 }
 
@@ -626,7 +626,7 @@ impl Screen {
     }
 
     /// The table, preceded after the first time by the escape that moves back to its top.
-    fn draw(&mut self, groups: &[Group], counters: &[ferrobus::poll::Counters]) -> String {
+    fn draw(&mut self, groups: &[Group], counters: &[ferrobus_tools::poll::Counters]) -> String {
         let mut rows = output::Rows::new(&[
             ("group", output::Align::Left),
             ("point", output::Align::Left),
@@ -671,8 +671,12 @@ impl Screen {
 
 /// The summary on stderr: polls, successes, each failure kind, overruns; response times per
 /// unit.
-fn summary(groups: &[Group], counters: &[ferrobus::poll::Counters], times: &[ferrobus::poll::UnitTimes]) -> String {
-    let mut total = ferrobus::poll::Counters::default();
+fn summary(
+    groups: &[Group],
+    counters: &[ferrobus_tools::poll::Counters],
+    times: &[ferrobus_tools::poll::UnitTimes],
+) -> String {
+    let mut total = ferrobus_tools::poll::Counters::default();
     for c in counters {
         total.polls += c.polls;
         total.ok += c.ok;
@@ -681,7 +685,7 @@ fn summary(groups: &[Group], counters: &[ferrobus::poll::Counters], times: &[fer
             *total.failures.entry(*k).or_insert(0) += n;
         }
     }
-    let kinds = |c: &ferrobus::poll::Counters| -> String {
+    let kinds = |c: &ferrobus_tools::poll::Counters| -> String {
         FailureKind::ALL.iter().filter(|k| c.of(**k) > 0).fold(String::new(), |mut s, k| {
             let _ = write!(s, ", {} {}", c.of(*k), k.name());
             s
@@ -799,7 +803,10 @@ mod tests {
     use super::*;
     use crate::address::Table;
 
-    fn sample(group: usize, result: Result<Vec<ferrobus::poll::Reading>, ferrobus::poll::Failure>) -> Sample {
+    fn sample(
+        group: usize,
+        result: Result<Vec<ferrobus_tools::poll::Reading>, ferrobus_tools::poll::Failure>,
+    ) -> Sample {
         Sample {
             group,
             seq: 0,
@@ -809,14 +816,14 @@ mod tests {
             response_time: Duration::ZERO,
             overrun: false,
             result,
-            traffic: ferrobus::poll::Traffic::default(),
+            traffic: ferrobus_tools::poll::Traffic::default(),
         }
     }
 
-    fn reading(cell: usize, x: f64) -> ferrobus::poll::Reading {
-        ferrobus::poll::Reading {
+    fn reading(cell: usize, x: f64) -> ferrobus_tools::poll::Reading {
+        ferrobus_tools::poll::Reading {
             cell,
-            raw: Ok(ferrobus::poll::Value::Float(x)),
+            raw: Ok(ferrobus_tools::poll::Value::Float(x)),
             scaled: Some(x),
             shown: x.to_string(),
         }
@@ -831,8 +838,11 @@ mod tests {
         // Drift adds up against the value last written, not the last seen.
         assert_eq!(c.filter(&sample(0, Ok(vec![reading(0, 10.6), reading(1, 5.6)])), 0.5), (vec![true, false], true));
         assert_eq!(c.filter(&sample(0, Ok(vec![reading(0, 10.6), reading(1, 5.6)])), 0.5), (vec![false, false], false));
-        let timeout =
-            || ferrobus::poll::Failure { kind: FailureKind::Timeout, exception: None, diagnosis: "no reply".into() };
+        let timeout = || ferrobus_tools::poll::Failure {
+            kind: FailureKind::Timeout,
+            exception: None,
+            diagnosis: "no reply".into(),
+        };
         assert_eq!(c.filter(&sample(0, Err(timeout())), 0.5), (vec![], true));
         assert_eq!(c.filter(&sample(0, Err(timeout())), 0.5), (vec![], false));
         // Back to ok: every cell is written again.
@@ -860,7 +870,7 @@ mod tests {
 
     #[test]
     fn the_terminal_table_is_redrawn_over_itself() {
-        let range = ferrobus::poll::RawRange { count: 2, ..ferrobus::poll::RawRange::default() };
+        let range = ferrobus_tools::poll::RawRange { count: 2, ..ferrobus_tools::poll::RawRange::default() };
         let g = Group::raw("u1 holding 0x0000", range, &Layout::default()).unwrap();
         let mut screen = Screen::default();
         let first = screen.draw(std::slice::from_ref(&g), &[]);
@@ -906,9 +916,9 @@ mod tests {
         ] {
             let order = crate::value::parse_word_order(name).unwrap();
             let layout = Layout { format: Format::U32, order, ..Layout::default() };
-            let range = ferrobus::poll::RawRange { count: 2, ..ferrobus::poll::RawRange::default() };
+            let range = ferrobus_tools::poll::RawRange { count: 2, ..ferrobus_tools::poll::RawRange::default() };
             let group = Group::raw("g", range, &layout).unwrap();
-            assert_eq!(group.decode(&registers), [Ok(ferrobus::poll::Value::Int(0x1122_3344))], "{name}");
+            assert_eq!(group.decode(&registers), [Ok(ferrobus_tools::poll::Value::Int(0x1122_3344))], "{name}");
         }
         assert_eq!(crate::value::parse_word_order("low-first"), Ok(Order::Cdab), "the aliases of --word-order");
     }

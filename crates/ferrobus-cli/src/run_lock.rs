@@ -1,7 +1,7 @@
 //! The run lock for writes by address: `write`, `readwrite`, `mask` and `raw` name no point, but
 //! with `--device` the profile knows which of the registers and coils they touch cannot change
 //! while the drive runs. Before such a write the running point is read, as `set` reads it
-//! ([`ferrobus::guard::check_span`], the one rule); while the drive runs, or when whether it runs
+//! ([`ferrobus_tools::guard::check_span`], the one rule); while the drive runs, or when whether it runs
 //! cannot be told, the write is refused, and `--force` sends it anyway with a warning.
 //!
 //! A write that touches no run-locked point, or made without `--device`, reads nothing.
@@ -63,7 +63,8 @@ pub(crate) async fn check(
         let locked = profile.run_locked_in(span.table, span.start, span.count);
         profile.guard_span(&locked, &RunState::Broadcast)
     } else {
-        ferrobus::guard::check_span(&session.client, session.unit, &profile, span.table, span.start, span.count).await
+        ferrobus_tools::guard::check_span(&session.client, session.unit, &profile, span.table, span.start, span.count)
+            .await
     };
     match refusal {
         Ok(()) => Ok(()),

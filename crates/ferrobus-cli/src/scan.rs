@@ -1,6 +1,6 @@
 //! `ferrobus scan`: every unit address × every line setting on a serial port, most likely first.
 //!
-//! A thin command over [`ferrobus::scan`]: it parses the lists, opens the port once, shows a
+//! A thin command over [`ferrobus_tools::scan`]: it parses the lists, opens the port once, shows a
 //! progress bar on a terminal, and prints what was found — also after Ctrl-C — as a table or
 //! `--json`. Each device comes with its settings, what it answered the probe, its response time,
 //! its identification (FC2B/0E basic objects, FC11 as a fallback) and the built-in profile whose
@@ -12,11 +12,11 @@ use std::time::Duration;
 use clap::Args;
 use ferrobus::SerialConfig;
 use ferrobus::port::open_serial;
-use ferrobus::scan::{Device, Event, Identification, LeadFound, Report, ScanConfig, Scanner};
 use ferrobus_proto::codes::unit;
 use ferrobus_proto::frame::LineConfig;
 use ferrobus_proto::scan::{Answer, CharFormat, Lead, LineActivity, Probe, ProbeFunction, ProbeTiming, rank};
 use ferrobus_sim::profile::{BUILTIN, Profile};
+use ferrobus_tools::scan::{Device, Event, Identification, LeadFound, Report, ScanConfig, Scanner};
 use indicatif::ProgressBar;
 use serde_json::{Value, json};
 

@@ -29,7 +29,7 @@ pub(crate) struct ServerTlsArgs {
     #[arg(long = "tls-ca", value_name = "FILE", requires = "tls_cert")]
     pub(crate) tls_ca: Option<PathBuf>,
 
-    /// The rights of each role named in client certificates (TOML; see README); without it
+    /// The rights of each role named in client certificates (TOML; see docs/tls.md); without it
     /// every trusted client may do everything
     #[arg(long, value_name = "FILE", requires = "tls_cert")]
     pub(crate) roles: Option<PathBuf>,

@@ -3,7 +3,7 @@
 //!
 //! The value is parsed by the profile (`45Hz`, `12.5s`, `60.00`, `0x10` raw, `modbus` by its
 //! meaning) and converted by the point's scale; then it is written as every writer writes a
-//! point (`ferrobus::write::write_point`): the profile's guard checks its range and access
+//! point (`ferrobus_tools::write::write_point`): the profile's guard checks its range and access
 //! and, for a parameter that cannot change while the drive runs, reads the profile's `[state]
 //! running` point first; only then is the value sent, FC05 for a coil, FC06 for one register
 //! (FC10 when the device lacks FC06), FC10 for a value of several registers, never split; and
@@ -11,9 +11,9 @@
 //! bus is opened.
 
 use clap::Args;
-use ferrobus::guard::ReadFailure;
-use ferrobus::write::{WriteError, Written};
 use ferrobus_profile::{Point, Profile, Refusal, Write};
+use ferrobus_tools::guard::ReadFailure;
+use ferrobus_tools::write::{WriteError, Written};
 use serde_json::json;
 
 use crate::connect::ConnectArgs;
@@ -67,7 +67,7 @@ pub(crate) async fn run(connection: &ConnectArgs, args: &SetArgs) -> Result<(), 
     let session = interrupt.unless(connection.open()).await.ok_or(CliError::Interrupted)??;
     let (client, unit) = (&session.client, session.unit);
     tracing::info!(unit, address = point.address, "writing {}", point.code);
-    let written = ferrobus::write::write_point(client, unit, Some(&profile), &write, true);
+    let written = ferrobus_tools::write::write_point(client, unit, Some(&profile), &write, true);
     let outcome = match interrupt.unless(written).await.ok_or(CliError::Interrupted)? {
         Ok(Written { read_back: Some(back), .. }) => back.map_err(|e| read_failure(&profile, &e)),
         Ok(Written { read_back: None, .. }) => {

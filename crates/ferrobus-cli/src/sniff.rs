@@ -2,7 +2,7 @@
 //! tap, and optionally write pcapng that tshark and Wireshark decode.
 //!
 //! The listening, the decoding, the unit filter, the statistics and the capture are the
-//! library's ([`ferrobus::sniff`]: nothing is ever written to the port, and each chunk is
+//! library's ([`ferrobus_tools::sniff`]: nothing is ever written to the port, and each chunk is
 //! stamped the moment its read returns). This command parses its arguments and prints: the
 //! timestamps' accuracy is measured in `bench/SNIFF.md` (a median of 81 µs from the line's
 //! write to the stamp on a pty, release build, 2 shared vCPUs, load 1.7).
@@ -17,9 +17,9 @@ use std::time::Duration;
 
 use clap::Args;
 use ferrobus::SerialConfig;
-use ferrobus::pcapng::PcapngWriter;
-use ferrobus::sniff::{Filter, Listener, SniffCapture, Stats};
 use ferrobus_proto::frame::LineTiming;
+use ferrobus_tools::pcapng::PcapngWriter;
+use ferrobus_tools::sniff::{Filter, Listener, SniffCapture, Stats};
 
 use crate::connect::{ConnectArgs, Rs485Arg, Target, parse_duration};
 use crate::exit::CliError;

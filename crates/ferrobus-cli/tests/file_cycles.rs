@@ -23,8 +23,16 @@ use sources::{code, rust_files};
 /// modules; until then it is listed rather than left out of the scan.
 const KNOWN: &[(&str, &[&str])] = &[("ferrobus-profile", &["check", "codec", "model", "point", "read"])];
 
-const CRATES: [&str; 6] =
-    ["ferrobus-proto", "ferrobus", "ferrobus-profile", "ferrobus-sim", "ferrobus-bridge", "ferrobus-cli"];
+const CRATES: [&str; 8] = [
+    "ferrobus-proto",
+    "ferrobus-profile",
+    "ferrobus",
+    "ferrobus-tools",
+    "ferrobus-sim",
+    "ferrobus-sunspec",
+    "ferrobus-bridge",
+    "ferrobus-cli",
+];
 
 fn ident(s: &str) -> &str {
     let end = s.find(|c: char| !(c.is_alphanumeric() || c == '_')).unwrap_or(s.len());

@@ -1,5 +1,5 @@
 //! A named point is written in one place: the request that carries a value is chosen by
-//! `Point::wire_write` (ferrobus-profile's `write.rs`) and sent by `ferrobus::write`, and every
+//! `Point::wire_write` (ferrobus-profile's `write.rs`) and sent by `ferrobus_tools::write`, and every
 //! writer of a point (`set`, `restore`, `monitor`, the bridge's commands and its demo, a poll
 //! handle) goes through them. No other source file builds a write request of its own.
 //!
@@ -44,9 +44,9 @@ const WRITERS: &[(&str, &str)] = &[
     ("crates/ferrobus-cli/src/bridge.rs", "write::write_point"),
     ("crates/ferrobus-cli/src/monitor/keys.rs", ".wire_write("),
     ("crates/ferrobus-cli/src/monitor/mod.rs", "write::send"),
-    ("crates/ferrobus/src/backup/device.rs", ".wire_write("),
-    ("crates/ferrobus/src/poll/mod.rs", "write::write_point"),
-    ("crates/ferrobus/src/poll/mod.rs", ".wire_write("),
+    ("crates/ferrobus-tools/src/backup/device.rs", ".wire_write("),
+    ("crates/ferrobus-tools/src/poll/mod.rs", "write::write_point"),
+    ("crates/ferrobus-tools/src/poll/mod.rs", ".wire_write("),
     ("crates/ferrobus-bridge/src/run/command.rs", ".plan_write("),
 ];
 
@@ -68,7 +68,9 @@ fn relative(path: &Path) -> String {
 #[test]
 fn no_source_file_but_the_allowed_builds_a_write_request() {
     let mut files = Vec::new();
-    for krate in ["ferrobus", "ferrobus-profile", "ferrobus-bridge", "ferrobus-cli", "ferrobus-sunspec"] {
+    for krate in
+        ["ferrobus", "ferrobus-tools", "ferrobus-profile", "ferrobus-bridge", "ferrobus-cli", "ferrobus-sunspec"]
+    {
         rust_files(&workspace().join("crates").join(krate).join("src"), &mut files);
     }
     assert!(files.len() > 50, "the scan found the sources ({} files)", files.len());
@@ -90,7 +92,7 @@ fn no_source_file_but_the_allowed_builds_a_write_request() {
     }
     assert!(
         found.is_empty(),
-        "write requests built outside ferrobus::write and Point::wire_write:\n{}",
+        "write requests built outside ferrobus_tools::write and Point::wire_write:\n{}",
         found.join("\n")
     );
 }

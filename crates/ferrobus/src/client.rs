@@ -177,7 +177,7 @@ impl Client {
 
     /// Whether the bus has a broadcast (unit 0 on the serial framings, RTU over TCP
     /// included); Modbus/TCP has none.
-    pub(crate) fn has_broadcast(&self) -> bool {
+    pub fn has_broadcast(&self) -> bool {
         self.framing != Framing::Mbap
     }
 

@@ -25,15 +25,8 @@
 //!   port that is reopened after it fails.
 //! - [`server`]: runs a slave engine over a port, or over each connection of a TCP listener,
 //!   with precise reply timing and a hook for fault injection.
-//! - [`gateway`]: Modbus/TCP clients to RTU lines: routing by unit, one bounded queue per
-//!   line served round-robin, the gateway exceptions, per-unit backoff, a read cache.
 //! - [`port`]: serial ports (RS-485 by the adapter, the kernel or RTS; the USB latency timer),
 //!   TCP, RTU over TCP, and ptys made in-process.
-//! - [`poll`]: the poller — read groups (raw ranges, a profile's points) each at its own
-//!   rate without drift, samples with each failure's kind, counters, pause and write-through,
-//!   and the session file that `poll` and `monitor` share.
-//! - [`scan`]: the bus scanner — unit addresses × line settings over one port reconfigured
-//!   in place, listening first, a second pass for leads, identification.
 //! - `tls` (the `tls` feature): Modbus/TCP Security — TLS with mutual authentication, the
 //!   role from the client's certificate and a roles file checked on every request, for the
 //!   server; `Transport::tls` for the client.
@@ -44,11 +37,6 @@
 //!   in this process or, on Unix, other programs behind ptys.
 //! - [`log`](mod@log): [`log::escape`], how every value from outside (a certificate's role, a
 //!   metric name, a peer's text) is written into a log line: on one line, controls spelled out.
-//! - [`sniff`]: the passive sniffer of an RTU line — listening without transmitting, the
-//!   core's decoder on the shared clock, owned events, a unit filter, per-unit statistics and
-//!   pcapng captures.
-//! - [`pcapng`]: capture files of an RTU line that tshark and Wireshark decode as Modbus RTU
-//!   (exported PDUs with the `mbrtu` dissector and ports telling queries from responses).
 //! - [`text`]: the one grammar of what people type — durations, sizes (SI and IEC units),
 //!   decimal/hex numbers and lists of ranges — for the command line, the simulator and the
 //!   bridge alike.
@@ -58,28 +46,25 @@
 //! (`src/sys/unix/`, `src/sys/windows/`); everything else is shared. Windows has no ptys:
 //! `Pty` and the virtual line's pty endpoints exist on Unix only.
 //!
+//! The tools built on this library (the gateway, the poller, the scanner, the sniffer,
+//! backup and restore, writing a named point) are the `ferrobus-tools` crate: an application
+//! that embeds a client or a server compiles none of them.
+//!
 //! Errors are one flat [`Error`], where a device's exception is kept apart from timeouts and
 //! IO failures.
 
-pub mod backup;
 pub mod client;
 pub mod clock;
 mod config;
 mod driver;
 pub mod error;
-pub mod gateway;
-pub mod guard;
 mod identity;
 pub mod line;
 pub mod log;
-pub mod pcapng;
-pub mod poll;
 pub mod port;
 pub mod pump;
-pub mod scan;
 mod serial;
 pub mod server;
-pub mod sniff;
 mod sys;
 pub mod text;
 pub mod timer;
@@ -87,7 +72,6 @@ pub mod timer;
 pub mod tls;
 mod uart;
 pub mod wire;
-pub mod write;
 
 pub use client::{
     Backoff, Client, ClientConfig, ClientStats, DeviceInfo, EventLog, Release, RequestOptions, STALLED_AFTER_TIMEOUTS,

@@ -44,6 +44,26 @@ pub fn escape_bytes(bytes: &[u8]) -> Escaped<'_> {
 #[derive(Clone, Copy, PartialEq, Eq, Debug)]
 pub struct Escaped<'a>(&'a [u8]);
 
+/// Bytes as upper-case hex pairs, as the frame trace (`-vvv`) writes every frame.
+///
+/// ```
+/// use ferrobus::log::Hex;
+/// assert_eq!(Hex(&[0x01, 0x83, 0x0b]).to_string(), "01 83 0B");
+/// ```
+pub struct Hex<'a>(pub &'a [u8]);
+
+impl fmt::Display for Hex<'_> {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        for (i, b) in self.0.iter().enumerate() {
+            if i > 0 {
+                f.write_str(" ")?;
+            }
+            write!(f, "{b:02X}")?;
+        }
+        Ok(())
+    }
+}
+
 impl fmt::Display for Escaped<'_> {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
         for chunk in self.0.utf8_chunks() {

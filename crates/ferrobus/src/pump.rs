@@ -18,11 +18,12 @@
 //!                                            ├─ server::serve, serve_tcp   (a Handler, a Shared one)
 //!                                            ├─ the simulator              (Shared<Sim> + FaultFilter)
 //!                                            └─ tls::serve_tls_with        (RoleCheck as the filter)
-//!                                         gateway front (serve_tcp, serve_tls, serve_connection):
-//!                                            screen, Authorize, each request to its line's queue,
-//!                                            the line's reply back with Slave::respond (Session::wait)
-//!                                         gateway::serve_reverse: each request forwarded to its
-//!                                            TCP server, the answer back with Slave::respond
+//!                                         ferrobus-tools, through the same Session:
+//!                                            the gateway's front (serve_tcp, serve_tls,
+//!                                            serve_connection): screen, Authorize, each request
+//!                                            to its line's queue, the reply back (Session::wait)
+//!                                            the reverse gateway: each request forwarded to its
+//!                                            TCP server, the answer back (Session::wait)
 //!   ferrobus_proto::scan::Survey   ◀── Engine (never transmits): scan's listen phase
 //! ```
 //!
@@ -40,7 +41,9 @@
 //! unchanged.
 //!
 //! Outside this crate, a program drives an engine of its own with [`Pump::new`] and
-//! [`Pump::run`], writing its frames with [`write_frame`].
+//! [`Pump::run`], writing its frames with [`write_frame`], and takes its codec with
+//! [`Codec::for_transport`]: the tools crate's gateway front and reverse gateway and its
+//! scanner do exactly that.
 
 use std::future::Future;
 use std::io;
@@ -53,10 +56,12 @@ use ferrobus_proto::frame::rtu::RtuCodec;
 use ferrobus_proto::frame::{AduHeader, Framing, LineTiming, RxEvent, RxStats};
 use ferrobus_proto::master::pipeline::{Pipeline, Ticket};
 use ferrobus_proto::master::{Completion, Master};
+use ferrobus_proto::scan::Survey;
 use ferrobus_proto::slave::{Slave, SlaveEvent};
 use tokio::io::{AsyncReadExt, AsyncWriteExt};
 
 use crate::clock::Clock;
+use crate::log::Hex;
 use crate::port::{BoxPort, Rs485, Transport};
 use crate::timer::Sleeper;
 
@@ -155,6 +160,29 @@ impl<F: Framing> Engine for Slave<F> {
     }
     fn is_blocked(&self) -> bool {
         Slave::is_blocked(self)
+    }
+}
+
+/// The core's bus survey (scan's listen phase) is an engine that never transmits and reports nothing on the way: what
+/// it heard is read once listening ends ([`Survey::heard`]).
+impl Engine for Survey {
+    type Event<'a> = ();
+
+    fn on_bytes(&mut self, now: Instant, bytes: &[u8]) -> usize {
+        Survey::on_bytes(self, now, bytes);
+        bytes.len()
+    }
+    fn poll_timeout(&self) -> Option<Instant> {
+        Survey::poll_timeout(self)
+    }
+    fn handle_timeout(&mut self, now: Instant) {
+        Survey::handle_timeout(self, now);
+    }
+    fn poll_transmit(&mut self, _: Instant, _: &mut [u8]) -> Option<usize> {
+        None
+    }
+    fn poll_event(&mut self) -> Option<()> {
+        None
     }
 }
 
@@ -360,7 +388,7 @@ pub async fn write_frame(port: &mut BoxPort, frame: &[u8], rs485: Rs485, timing:
 
 /// Which side of the bus an engine is on: it decides how strict the MBAP receiver is.
 #[derive(Clone, Copy, PartialEq, Eq, Debug)]
-pub(crate) enum Role {
+pub enum Role {
     /// A master: its MBAP receiver resyncs on a bad header.
     Client,
     /// A slave: its MBAP receiver is strict, a stream whose framing is lost is closed.
@@ -370,7 +398,7 @@ pub(crate) enum Role {
 /// The codec a [`Transport`] takes, chosen once ([`Codec::for_transport`]) for every role.
 #[derive(Debug)]
 #[expect(clippy::large_enum_variant, reason = "one codec per engine, held inline: no indirection on each byte")]
-pub(crate) enum Codec {
+pub enum Codec {
     /// RTU, on a serial line or over TCP.
     Rtu(RtuCodec),
     /// ASCII.
@@ -381,7 +409,7 @@ pub(crate) enum Codec {
 
 impl Codec {
     /// The codec of `transport`'s framing and timing for `role`.
-    pub(crate) fn for_transport(transport: &Transport, role: Role) -> Codec {
+    pub fn for_transport(transport: &Transport, role: Role) -> Codec {
         match transport.framing() {
             crate::port::Framing::Rtu => Codec::Rtu(transport.rtu_codec()),
             crate::port::Framing::Ascii => Codec::Ascii(transport.ascii_codec()),
@@ -445,21 +473,6 @@ impl Framing for Codec {
     }
     fn set_delimiter(&mut self, delimiter: u8) {
         self.framing_mut().set_delimiter(delimiter);
-    }
-}
-
-/// Bytes as upper-case hex pairs, for the frame trace (`-vvv`).
-pub(crate) struct Hex<'a>(pub(crate) &'a [u8]);
-
-impl std::fmt::Display for Hex<'_> {
-    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        for (i, b) in self.0.iter().enumerate() {
-            if i > 0 {
-                f.write_str(" ")?;
-            }
-            write!(f, "{b:02X}")?;
-        }
-        Ok(())
     }
 }
 

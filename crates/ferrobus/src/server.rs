@@ -48,10 +48,9 @@ use crate::port::{BoxPort, Rs485, Transport};
 use crate::pump::{Codec, Pump, Role, Session, write_frame};
 use crate::timer::Timer;
 
-pub(crate) use accept::accept_connections;
 pub use accept::{ACCEPT_BACKOFF, TcpCounts, TcpLimits, TcpStats};
 #[cfg(feature = "tls")]
-pub(crate) use accept::{Handshake, accept_handshaking};
+pub use accept::{Handshake, Tracked, Tracker, accept_connections, accept_handshaking};
 pub use authorize::Authorize;
 
 /// What happens to a reply on its way out.
@@ -231,7 +230,9 @@ impl std::fmt::Display for Closed {
 impl std::error::Error for Closed {}
 
 impl Closed {
-    pub(crate) fn error(self) -> io::Error {
+    /// The error a session ends with when it closes its connection for this reason (what
+    /// [`Closed::of`] finds again).
+    pub fn error(self) -> io::Error {
         let kind = if self == Closed::BadHeader { io::ErrorKind::InvalidData } else { io::ErrorKind::TimedOut };
         io::Error::new(kind, self)
     }

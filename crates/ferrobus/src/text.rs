@@ -266,7 +266,7 @@ pub fn list(text: &str, max: u64) -> Result<Vec<RangeInclusive<u64>>, TextError>
 /// number, `5`, or a text for the grammar, `"1-10"` or `"0x20"`.
 #[derive(serde::Deserialize)]
 #[serde(untagged)]
-pub(crate) enum Item {
+pub enum Item {
     /// A TOML integer.
     Number(i64),
     /// A TOML string.

@@ -85,8 +85,8 @@ impl LineOptions {
 
 /// What the virtual wire carried and did to it: characters, frames a sniffer decoded,
 /// collisions and faults, and each endpoint's share. Per-endpoint figures are indexed by
-/// endpoint id. (A gateway's counts of the requests it put on a real line are
-/// [`LineTraffic`](crate::gateway::stats::LineTraffic).)
+/// endpoint id. (A gateway's counts of the requests it put on a real line are the tools
+/// crate's `gateway::stats::LineTraffic`.)
 #[derive(Clone, PartialEq, Eq, Debug, Default)]
 pub struct WireStats {
     /// Characters put on the wire (noise included).

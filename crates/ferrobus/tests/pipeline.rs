@@ -1,59 +1,18 @@
 //! Several requests in flight on one Modbus/TCP connection (`ClientConfig::in_flight`): the
-//! client's pipelined driver and the gateway's worker on a pipelined line, against a device
-//! written here that holds requests back and answers them out of order. Each caller gets the
-//! reply to its own request, a timeout ends only its own, a late reply goes to nobody, a
-//! connection lost under the requests in flight sends those with retries again, and a line
-//! whose device is down is tried by one request at a time.
+//! client's pipelined driver against a device that holds requests back and answers them out
+//! of order ([`support::pipelined`]). Each caller gets the reply to its own request, a timeout
+//! ends only its own, a late reply goes to nobody, and a connection lost under the requests in
+//! flight sends those with retries again. (The gateway's pipelined line is the tools crate's
+//! `tcp_line` test.)
 
 use std::time::Duration;
 
-use ferrobus::gateway::{AllowAll, Gateway, GatewayConfig, GatewayLine, Inbound, Routes, Timeouts};
 use ferrobus::{Client, ClientConfig, Error, Transport};
-use tokio::io::{AsyncReadExt, AsyncWriteExt, DuplexStream};
-use tokio::net::{TcpListener, TcpStream};
+use tokio::net::TcpListener;
 
 mod support;
 
-use support::{mbap, read_mbap};
-
-/// One request as the device reads it: its transaction id and the register it reads.
-#[derive(Clone, Copy, Debug)]
-struct Asked {
-    tid: u16,
-    register: u16,
-}
-
-/// Reads one request, a read of one holding register (0x03), from `stream`.
-async fn asked(stream: &mut (impl AsyncReadExt + Unpin)) -> Asked {
-    let (tid, pdu) = read_mbap(stream).await;
-    assert_eq!((pdu.len(), pdu[0], &pdu[3..]), (5, 0x03, &[0x00, 0x01][..]), "{pdu:02X?}");
-    Asked { tid, register: u16::from_be_bytes([pdu[1], pdu[2]]) }
-}
-
-/// What the device keeps in register `r`.
-fn value(register: u16) -> u16 {
-    register.wrapping_mul(7).wrapping_add(1)
-}
-
-/// The device's answer to `asked`: the register's value, under the request's id.
-async fn answer(device: &mut TcpStream, asked: Asked) {
-    let [hi, lo] = value(asked.register).to_be_bytes();
-    device.write_all(&mbap(asked.tid, &[0x03, 0x02, hi, lo])).await.unwrap();
-}
-
-/// Reads `n` requests before answering any, then answers them newest first; returns them.
-async fn hold_and_answer_backwards(device: &mut TcpStream, n: usize) -> Vec<Asked> {
-    let mut held = Vec::new();
-    for _ in 0..n {
-        held.push(asked(device).await);
-    }
-    let ids: std::collections::HashSet<u16> = held.iter().map(|a| a.tid).collect();
-    assert_eq!(ids.len(), n, "requests outstanding together have distinct transaction ids: {held:?}");
-    for a in held.iter().rev() {
-        answer(device, *a).await;
-    }
-    held
-}
+use support::pipelined::{Asked, answer, asked, hold_and_answer_backwards, value};
 
 fn pipelined(in_flight: usize, timeout: Duration, retries: u32) -> ClientConfig {
     ClientConfig { in_flight, timeout, retries, backoff: None, ..ClientConfig::default() }
@@ -191,94 +150,4 @@ async fn a_connection_lost_under_requests_in_flight_sends_those_with_retries_aga
         let result = read.await.unwrap();
         assert!(matches!(result, Err(Error::Io { .. })), "{result:?}");
     }
-}
-
-/// A client connection to `gateway`, served as a TCP connection would be.
-fn connect(gateway: &Gateway) -> DuplexStream {
-    let (client, server) = tokio::io::duplex(4096);
-    let serving = gateway.clone();
-    tokio::spawn(async move {
-        let mut authorize = AllowAll;
-        serving.serve_connection(server, "test client", Inbound::Mbap, &mut authorize, Timeouts::default()).await
-    });
-    client
-}
-
-/// Sends a read of `register` through the gateway connection `client`; returns the reply PDU.
-async fn read_through(client: &mut DuplexStream, t: u16, register: u16) -> Vec<u8> {
-    let [hi, lo] = register.to_be_bytes();
-    client.write_all(&mbap(t, &[0x03, hi, lo, 0x00, 0x01])).await.unwrap();
-    let (tid, pdu) = read_mbap(client).await;
-    assert_eq!(tid, t, "the client's own transaction id comes back");
-    pdu
-}
-
-/// A gateway with one line, to the Modbus/TCP device at `addr`, `in_flight` requests at once.
-async fn gateway(addr: std::net::SocketAddr, in_flight: usize) -> Gateway {
-    let line = GatewayLine::new(Transport::tcp(addr.to_string()), pipelined(in_flight, Duration::from_secs(10), 0));
-    let config =
-        GatewayConfig { lines: vec![line], routes: Routes::all_on(0), broadcast_ack: false, cache_max_age: None };
-    Gateway::start(config).await.unwrap()
-}
-
-#[tokio::test]
-async fn a_pipelined_gateway_line_keeps_several_clients_requests_on_the_device_at_once_each_answered_its_own() {
-    let listener = TcpListener::bind("127.0.0.1:0").await.unwrap();
-    let addr = listener.local_addr().unwrap();
-    let device = tokio::spawn(async move {
-        let (mut device, _) = listener.accept().await.unwrap();
-        // The line is tried by one request until the device has answered; then six clients'
-        // requests, six at a time, answered newest first, twice over.
-        let first = asked(&mut device).await;
-        answer(&mut device, first).await;
-        hold_and_answer_backwards(&mut device, 6).await;
-        hold_and_answer_backwards(&mut device, 6).await;
-        device
-    });
-    let gateway = gateway(addr, 6).await;
-    let [hi, lo] = value(7).to_be_bytes();
-    assert_eq!(read_through(&mut connect(&gateway), 1, 7).await, [0x03, 0x02, hi, lo]);
-    let clients: Vec<_> = (0..6u16)
-        .map(|c| {
-            let mut client = connect(&gateway);
-            tokio::spawn(async move {
-                for round in 0..2u16 {
-                    let register = c * 10 + round;
-                    let [hi, lo] = value(register).to_be_bytes();
-                    assert_eq!(read_through(&mut client, 500 + c, register).await, [0x03, 0x02, hi, lo]);
-                }
-            })
-        })
-        .collect();
-    for client in clients {
-        client.await.unwrap();
-    }
-    let _device = device.await.unwrap();
-    let stats = &gateway.stats()[0];
-    assert_eq!((stats.total.replies, stats.connects), (13, 1), "{stats}");
-}
-
-#[tokio::test]
-async fn a_pipelined_line_whose_device_is_down_is_tried_by_one_request_at_a_time_the_others_get_0a_at_once() {
-    // A port that was free a moment ago, and nobody listening on it.
-    let addr = TcpListener::bind("127.0.0.1:0").await.unwrap().local_addr().unwrap();
-    let gateway = gateway(addr, 8).await;
-    // Eight clients at once, ten requests each: were eight in flight, each would make a
-    // connect attempt of its own.
-    let clients: Vec<_> = (0..8u16)
-        .map(|c| {
-            let mut client = connect(&gateway);
-            tokio::spawn(async move {
-                for t in 0..10u16 {
-                    assert_eq!(read_through(&mut client, c * 100 + t, t).await, [0x83, 0x0A], "the device is down");
-                }
-            })
-        })
-        .collect();
-    for client in clients {
-        client.await.unwrap();
-    }
-    let stats = &gateway.stats()[0];
-    assert_eq!((stats.total.line_errors, stats.connects), (80, 0), "{stats}");
-    assert!(stats.connect_failures < 8, "one attempt per hold, not one per request in flight: {stats}");
 }

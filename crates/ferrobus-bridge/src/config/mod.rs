@@ -24,9 +24,9 @@ use std::path::{Path, PathBuf};
 use std::sync::Arc;
 use std::time::Duration;
 
-use ferrobus::poll::Group;
 use ferrobus_profile::Profile;
 use ferrobus_profile::source::{self, Place, ReadError};
+use ferrobus_tools::poll::Group;
 
 use crate::sparkplug::convert::UintEncoding;
 use crate::store::StoreConfig;

@@ -7,8 +7,8 @@
 //! number after a NaN are sent, a NaN after a NaN is not. A bit or a text is sent on any change. A cell whose read failed (an exception reply, a value that does not decode)
 //! is sent once as null, and again when it reads a value.
 
-use ferrobus::poll::Cell;
 use ferrobus_profile::{Value, beyond_deadband};
+use ferrobus_tools::poll::Cell;
 
 /// What is known of a cell.
 #[derive(Clone, Debug, PartialEq)]
@@ -47,7 +47,7 @@ fn value_moved(cell: &Cell, old: &Value, new: &Value, deadband: f64) -> bool {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use ferrobus::poll::{Format, Order, Table};
+    use ferrobus_tools::poll::{Format, Order, Table};
 
     fn scaled_cell(scale: f64) -> Cell {
         let mut cell = Cell::raw(Table::Holding, 0, Format::U16, Order::default(), Some("f"));

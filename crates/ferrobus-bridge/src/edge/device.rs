@@ -10,7 +10,7 @@
 
 use std::time::SystemTime;
 
-use ferrobus::poll::{FailureKind, Group, Sample};
+use ferrobus_tools::poll::{FailureKind, Group, Sample};
 
 use super::DeviceRef;
 use super::deadband::{Seen, beyond};
@@ -106,7 +106,7 @@ impl Health {
 
 /// Whether a poll that ended with `result` heard the device: values, or a failure that is a
 /// reply (an exception, a reply that does not fit the read: something is alive on that unit).
-pub(crate) fn answered<T>(result: &Result<T, ferrobus::poll::Failure>) -> bool {
+pub(crate) fn answered<T>(result: &Result<T, ferrobus_tools::poll::Failure>) -> bool {
     match result {
         Ok(_) => true,
         Err(failure) => matches!(failure.kind, FailureKind::Exception | FailureKind::BadReply),
@@ -250,7 +250,7 @@ impl Device {
     }
 
     /// The cell at `(group, cell)`.
-    pub(crate) fn cell(&self, group: usize, cell: usize) -> Option<&ferrobus::poll::Cell> {
+    pub(crate) fn cell(&self, group: usize, cell: usize) -> Option<&ferrobus_tools::poll::Cell> {
         self.groups.get(group).and_then(|g| g.cells.get(cell))
     }
 
@@ -276,15 +276,15 @@ pub(crate) fn devices_of(plant: &crate::config::Plant) -> Vec<Device> {
 mod tests {
     use std::time::Duration;
 
-    use ferrobus::poll::{Failure, Layout, Reading, Table, Traffic};
     use ferrobus_profile::Value;
+    use ferrobus_tools::poll::{Failure, Layout, Reading, Table, Traffic};
 
     use super::*;
 
     fn device(death_after: u32) -> Device {
         let group = Group::raw(
             "g",
-            ferrobus::poll::RawRange { table: Table::Holding, ..Default::default() },
+            ferrobus_tools::poll::RawRange { table: Table::Holding, ..Default::default() },
             &Layout::default(),
         )
         .unwrap();

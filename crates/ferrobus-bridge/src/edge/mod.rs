@@ -75,8 +75,8 @@ mod sparkplug;
 
 use std::time::SystemTime;
 
-use ferrobus::poll::Sample;
 use ferrobus_profile::Value;
+use ferrobus_tools::poll::Sample;
 
 use crate::config::{Mode, Plant};
 pub(crate) use device::{Device, Liveness};

@@ -18,8 +18,8 @@
 use std::collections::{HashMap, VecDeque};
 use std::time::SystemTime;
 
-use ferrobus::poll::{Cell, Sample, iso8601_ms};
 use ferrobus_profile::Value;
+use ferrobus_tools::poll::{Cell, Sample, iso8601_ms};
 
 use super::deadband::Seen;
 use super::device::{Device, Liveness, devices_of};

@@ -17,8 +17,8 @@ use std::future::Future;
 use std::sync::Arc;
 
 use ferrobus::Client;
-use ferrobus::poll::Value;
 use ferrobus_profile::{Point, Profile, Refusal, RunState, Write};
+use ferrobus_tools::poll::Value;
 
 use crate::edge::DeviceRef;
 
@@ -105,7 +105,7 @@ impl DeviceWrites {
 pub(super) async fn guard(client: &Client, unit: u8, profile: &Profile, writes: &[BusWrite]) -> Result<(), Refusal> {
     let mut state = RunState::NotRead;
     if let Some(locked) = writes.iter().find(|w| profile.run_state_point(&w.target).is_some()) {
-        state = ferrobus::guard::run_state(client, unit, profile, &locked.target).await;
+        state = ferrobus_tools::guard::run_state(client, unit, profile, &locked.target).await;
     }
     for w in writes {
         profile.plan_write(&Write { point: &w.target, raw: &w.raw, typed: &w.typed }, &state)?;

@@ -10,13 +10,13 @@
 use std::time::Duration;
 
 use ferrobus::line::{Line, LineOptions};
-use ferrobus::poll::{Event, Group, PollConfig, PollHandle, Poller};
 use ferrobus::server::{ServerOptions, Shared, serve};
 use ferrobus::{Client, Timer, Transport};
 use ferrobus_proto::frame::rtu::RtuCodec;
 use ferrobus_proto::frame::{Expect, LineConfig, LineTiming};
 use ferrobus_proto::slave::{Slave, SlaveConfig};
 use ferrobus_sim::{Device, Faults, Profile, Sim, tokio_clock};
+use ferrobus_tools::poll::{Event, Group, PollConfig, PollHandle, Poller};
 use tokio::sync::mpsc;
 
 use crate::config::{Connection, LineSpec};

@@ -46,7 +46,7 @@ use std::future::Future;
 use std::sync::Arc;
 use std::time::{Duration, SystemTime};
 
-use ferrobus::poll::{Event, Sample};
+use ferrobus_tools::poll::{Event, Sample};
 use tokio::sync::{mpsc, oneshot};
 use tokio::time::Instant;
 
@@ -140,7 +140,7 @@ struct LineState {
 }
 
 /// A write a command asks for: the device's group and cell, the raw value, the value as typed.
-type Asked = (usize, usize, ferrobus::poll::Value, String);
+type Asked = (usize, usize, ferrobus_tools::poll::Value, String);
 
 struct Bridge {
     plant: Plant,
@@ -406,7 +406,7 @@ impl Bridge {
     /// queue bound kept, before any is written (else the command is refused whole, with why);
     /// then, in a task of its own, the write guard ([`command::guard`], which reads the run
     /// state for a run-locked point) over all of them, and written in order unless it refuses,
-    /// each in the one request [`PollHandle::write_raw`](ferrobus::poll::PollHandle::write_raw)
+    /// each in the one request [`PollHandle::write_raw`](ferrobus_tools::poll::PollHandle::write_raw)
     /// chooses with the profile's functions and limit;
     /// the task's [`Applied`] comes back on `written`.
     fn command(&mut self, device: DeviceRef, writes: Vec<Asked>, topic: &str) -> Result<(), String> {

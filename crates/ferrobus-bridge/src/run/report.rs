@@ -5,7 +5,7 @@
 use std::collections::BTreeMap;
 use std::fmt;
 
-use ferrobus::poll::{Counters, FailureKind};
+use ferrobus_tools::poll::{Counters, FailureKind};
 
 use crate::config::Plant;
 use crate::store::Store;

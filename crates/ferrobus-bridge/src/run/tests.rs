@@ -9,7 +9,7 @@ use std::time::Duration;
 use rumqttc::{AsyncClient, Event, MqttOptions, Packet, QoS};
 use tokio::sync::{mpsc, oneshot};
 
-use ferrobus::poll::FailureKind;
+use ferrobus_tools::poll::FailureKind;
 
 use super::*;
 use crate::edge::{Health, answered};
@@ -149,7 +149,10 @@ async fn until_ndeath(rx: &mut mpsc::UnboundedReceiver<(String, Vec<u8>)>) -> Ve
 }
 
 /// Waits (20 s at most) until `done` holds for the poller's counters of every group.
-async fn polled_until(poll: &ferrobus::poll::PollHandle, done: impl Fn(&[ferrobus::poll::Counters]) -> bool) {
+async fn polled_until(
+    poll: &ferrobus_tools::poll::PollHandle,
+    done: impl Fn(&[ferrobus_tools::poll::Counters]) -> bool,
+) {
     let wait = async {
         while !done(&poll.counters()) {
             tokio::time::sleep(Duration::from_millis(20)).await;
@@ -196,7 +199,7 @@ async fn one_run(port: u16, store: &Path) -> (u64, u64, Report) {
 fn said(health: &mut Health, kind: Option<FailureKind>) -> Option<String> {
     let result = match kind {
         None => Ok(Vec::new()),
-        Some(kind) => Err(ferrobus::poll::Failure { kind, exception: None, diagnosis: format!("{kind:?}") }),
+        Some(kind) => Err(ferrobus_tools::poll::Failure { kind, exception: None, diagnosis: format!("{kind:?}") }),
     };
     let sample = Sample {
         group: 0,
@@ -207,7 +210,7 @@ fn said(health: &mut Health, kind: Option<FailureKind>) -> Option<String> {
         response_time: Duration::ZERO,
         overrun: false,
         result,
-        traffic: ferrobus::poll::Traffic::default(),
+        traffic: ferrobus_tools::poll::Traffic::default(),
     };
     let liveness = health.observe(answered(&sample.result), 3);
     health_status(liveness, &sample, || "d".to_string()).map(|s| s.to_string())
@@ -407,7 +410,7 @@ async fn while_the_broker_is_away_samples_are_stored_and_replayed_as_historical_
     // F001 moves while the broker is away: each poll of it is a record. A poll that ends after
     // the write has returned was sent after it (the client asks one at a time): it read the value.
     for centi_hz in [1000, 2000, 3000] {
-        let words = f001.encode(&ferrobus::poll::Value::Int(centi_hz)).expect("F001 words");
+        let words = f001.encode(&ferrobus_tools::poll::Value::Int(centi_hz)).expect("F001 words");
         client.write_multiple_registers(1, f001.address, &words).await.expect("written");
         let before = poll.counters()[f001_group].ok;
         polled_until(&poll, |c| c[f001_group].ok > before).await;

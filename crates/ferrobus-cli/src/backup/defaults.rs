@@ -6,8 +6,8 @@
 
 use serde_json::{Value as Json, json};
 
-use ferrobus::backup::defaults::{Found, compare, of_backup, split};
 use ferrobus_profile::{Point, Value};
+use ferrobus_tools::backup::defaults::{Found, compare, of_backup, split};
 
 use super::diff::toml_json;
 use super::param;

@@ -1,10 +1,10 @@
-//! The library's reads and writes of parameters ([`ferrobus::backup::device`]), watched by
+//! The library's reads and writes of parameters ([`ferrobus_tools::backup::device`]), watched by
 //! Ctrl-C and shown with a progress bar on a terminal.
 
-use ferrobus::backup::Watch;
-pub(crate) use ferrobus::backup::device::Readings;
-use ferrobus::backup::{Target, View};
 use ferrobus_profile::Point;
+use ferrobus_tools::backup::Watch;
+pub(crate) use ferrobus_tools::backup::device::Readings;
+use ferrobus_tools::backup::{Target, View};
 use indicatif::ProgressBar;
 
 use crate::connect::Session;
@@ -48,11 +48,11 @@ pub(crate) fn target(session: &Session) -> Target<'_> {
     Target { client: &session.client, unit: session.unit }
 }
 
-/// Reads `params` ([`ferrobus::backup::device::read`]) with a progress bar on a terminal,
+/// Reads `params` ([`ferrobus_tools::backup::device::read`]) with a progress bar on a terminal,
 /// stopped by Ctrl-C.
 pub(crate) async fn read(session: &Session, view: &View, params: &[&Point], interrupt: &mut Interrupt) -> Readings {
     let mut watched = Watched::new(interrupt, params.len(), "parameters read");
-    let readings = ferrobus::backup::device::read(target(session), view, params, &mut watched).await;
+    let readings = ferrobus_tools::backup::device::read(target(session), view, params, &mut watched).await;
     watched.finish();
     readings
 }

@@ -17,7 +17,7 @@ use crate::connect::ConnectArgs;
 use crate::exit::CliError;
 use crate::interrupt::Interrupt;
 use crate::output::{self, Align, Format, OutputArgs, Rows};
-use ferrobus::backup::{Difference, Side, compare};
+use ferrobus_tools::backup::{Difference, Side, compare};
 
 /// `diff FILE [OTHER]`, `diff --defaults [FILE]`.
 #[derive(Args, Debug)]

@@ -2,7 +2,7 @@
 //! device or another file, and written back.
 //!
 //! The backup file's format, the values in it, the profile it pins and the comparison are the
-//! library's (`ferrobus::backup`, whose doc describes the format); here are the commands.
+//! library's (`ferrobus_tools::backup`, whose doc describes the format); here are the commands.
 //!
 //! A backup saves what the profile marks `backup` (by default its read-write registers); the
 //! reads follow the profile's read plan ([`ferrobus_profile::plan`]), so the 3G3RX's 4 registers per request are
@@ -20,7 +20,7 @@ pub(crate) mod diff;
 pub(crate) mod restore;
 
 // The file format, the values, the profile and the comparison are the library's.
-pub(crate) use ferrobus::backup::{entries, file, param, save, view};
+pub(crate) use ferrobus_tools::backup::{entries, file, param, save, view};
 
 use std::path::{Path, PathBuf};
 
@@ -180,8 +180,8 @@ pub(crate) fn backup_of(
     Backup { header, identification: objects, entries }
 }
 
-/// How the device identifies itself ([`ferrobus::backup::device::identify`]); no reply ends
+/// How the device identifies itself ([`ferrobus_tools::backup::device::identify`]); no reply ends
 /// the backup.
 async fn identify(session: &Session, view: &View) -> Result<(String, Vec<(String, String)>), CliError> {
-    Ok(ferrobus::backup::device::identify(device::target(session), view).await?)
+    Ok(ferrobus_tools::backup::device::identify(device::target(session), view).await?)
 }

@@ -21,8 +21,8 @@ use serde_json::json;
 
 use super::device::{self, Watched};
 use super::diff::load;
-use ferrobus::backup::restore::{self as plan, Item, Outcome};
 use ferrobus_profile::Point;
+use ferrobus_tools::backup::restore::{self as plan, Item, Outcome};
 
 use super::param;
 use crate::connect::ConnectArgs;

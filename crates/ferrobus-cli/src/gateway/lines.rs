@@ -1,6 +1,6 @@
 //! `gateway --lines-file FILE`: the gateway's lines (serial ports, devices over TCP), each with
 //! its own settings and the units it serves, from a TOML file of `[[line]]` tables, read and
-//! checked by the library ([`ferrobus::gateway::config`], which documents the keys and every
+//! checked by the library ([`ferrobus_tools::gateway::config`], which documents the keys and every
 //! mistake it names).
 //!
 //! The keys are the line options of the command line under their long names (`port`, `tcp`,
@@ -18,8 +18,8 @@ use std::path::Path;
 use std::time::Duration;
 
 use ferrobus::Backoff;
-use ferrobus::gateway::config::{self, LineDefaults, LinesFile};
-use ferrobus::gateway::{GatewayLine, Routes};
+use ferrobus_tools::gateway::config::{self, LineDefaults, LinesFile};
+use ferrobus_tools::gateway::{GatewayLine, Routes};
 
 use crate::connect::{ConnectArgs, Rs485Arg};
 use crate::exit::CliError;

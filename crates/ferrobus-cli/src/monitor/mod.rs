@@ -24,8 +24,8 @@ use std::time::Instant;
 
 use clap::Args;
 use ferrobus::Client;
-use ferrobus::poll::{Event as PollEvent, Failure, FailureKind, Group, Layout, PollConfig, Poller, Sample};
 use ferrobus_profile::Profile;
+use ferrobus_tools::poll::{Event as PollEvent, Failure, FailureKind, Group, Layout, PollConfig, Poller, Sample};
 use ratatui::Terminal;
 use ratatui::backend::CrosstermBackend;
 use ratatui::crossterm::event::{self, Event};
@@ -148,7 +148,7 @@ pub(crate) async fn run(connection: &ConnectArgs, args: &MonitorArgs) -> Result<
     if let Some(path) = &args.session {
         let path = std::path::Path::new(path);
         if args.watch.is_empty() && path.exists() {
-            let session = ferrobus::poll::session::Session::load(path)
+            let session = ferrobus_tools::poll::session::Session::load(path)
                 .map_err(|e| CliError::Usage(format!("the session file: {e}")))?;
             panes = spec::panes_of(&session, &path.display().to_string())?;
         }
@@ -170,7 +170,7 @@ pub(crate) async fn run(connection: &ConnectArgs, args: &MonitorArgs) -> Result<
     for (index, p) in panes.iter().enumerate() {
         for &(start, count) in &p.reads {
             let name = format!("unit {} {} {start:#06x} ×{count}", p.unit, p.table_name());
-            let range = ferrobus::poll::RawRange { unit: p.unit, table: p.table, start, count, every: p.every };
+            let range = ferrobus_tools::poll::RawRange { unit: p.unit, table: p.table, start, count, every: p.every };
             let group = Group::raw(&name, range, &Layout::default()).map_err(|e| CliError::Usage(e.to_string()))?;
             groups.push(group);
             reads.push(Read { pane: index, start, count });
@@ -446,7 +446,7 @@ fn describe(outcome: &Outcome) -> String {
 /// `restore` and the bridge apply: range, access, and for a run-locked parameter the drive's
 /// run state read first), in the request the confirmation showed ([`ferrobus_profile::Point::wire_write`]
 /// with the device's functions and limit), sent as every writer sends it
-/// ([`ferrobus::write::send`]). A cell of a raw range over a profile's parameter is guarded
+/// ([`ferrobus_tools::write::send`]). A cell of a raw range over a profile's parameter is guarded
 /// as that parameter.
 async fn write(app: &mut App, bus: &Bus<'_>, start: Instant, asked: &keys::Asked) {
     let keys::Asked { pane, cell, raw, text, request } = asked;
@@ -459,7 +459,7 @@ async fn write(app: &mut App, bus: &Bus<'_>, start: Instant, asked: &keys::Asked
             .find(|p| p.table == cell.point.table && p.address == cell.point.address)
             .unwrap_or(&cell.point);
         let write = ferrobus_profile::Write { point, raw, typed: text };
-        if let Err(refusal) = ferrobus::guard::check_write(client, unit, profile, &write).await {
+        if let Err(refusal) = ferrobus_tools::guard::check_write(client, unit, profile, &write).await {
             app.message = Some(format!("not written: {refusal}"));
             return;
         }
@@ -479,7 +479,7 @@ async fn write(app: &mut App, bus: &Bus<'_>, start: Instant, asked: &keys::Asked
         bytes: sent.unwrap_or_default(),
         decode,
     });
-    let result = ferrobus::write::send(client, unit, request).await;
+    let result = ferrobus_tools::write::send(client, unit, request).await;
     let (bytes, decode) = match &result {
         Ok(Some(reply)) => (reply.clone(), "written".to_string()),
         Ok(None) => (Vec::new(), "sent".to_string()),

@@ -4,10 +4,10 @@
 
 use std::time::Duration;
 
-use ferrobus::poll::Group;
-use ferrobus::poll::session::{CellDef, PointsDef, ReadDef, Session, order_of, period, table_from_name};
 use ferrobus_profile::Order;
 use ferrobus_profile::{Point, Profile, Table};
+use ferrobus_tools::poll::Group;
+use ferrobus_tools::poll::session::{CellDef, PointsDef, ReadDef, Session, order_of, period, table_from_name};
 
 use super::model::{Cell, Definition, Format};
 use crate::address::RangeWord;
@@ -131,7 +131,7 @@ fn points_to_panes(
 }
 
 /// The session file of the panes: the one `ferrobus poll --session` takes
-/// ([`ferrobus::poll::Session`]). Raw panes are `[[read]]`s with their cells' formats, orders,
+/// ([`ferrobus_tools::poll::Session`]). Raw panes are `[[read]]`s with their cells' formats, orders,
 /// aliases and trends (the read's order is its first multi-register cell's; a cell in another
 /// order names its own); panes of profile points are `[[points]]` of `device` with the codes
 /// of the trended points.

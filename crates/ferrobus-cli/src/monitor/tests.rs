@@ -277,7 +277,7 @@ fn a_session_file_round_trips_formats_aliases_and_points_in_polls_format() {
     session.save(&path).unwrap();
     let text = std::fs::read_to_string(&path).unwrap();
     assert!(text.contains("[[read]]") && text.contains("[[points]]") && text.contains("order = \"CDAB\""), "{text}");
-    let loaded = ferrobus::poll::session::Session::load(&path).unwrap();
+    let loaded = ferrobus_tools::poll::session::Session::load(&path).unwrap();
     assert_eq!(loaded, session);
     // The poll library reads the same file into its own groups.
     assert_eq!(loaded.groups("s.toml", |name| Profile::load(name).map_err(|e| e.to_string())).unwrap().len(), 2);
@@ -293,7 +293,7 @@ fn a_session_file_round_trips_formats_aliases_and_points_in_polls_format() {
         (Duration::from_secs(2), code.as_str(), Format::Named)
     );
     std::fs::write(&path, "[[read]]\nunit = 1\ntable = \"holding\"\naddress = 0\nformat = \"f16\"\n").unwrap();
-    let loaded = ferrobus::poll::session::Session::load(&path).unwrap();
+    let loaded = ferrobus_tools::poll::session::Session::load(&path).unwrap();
     let err = format!("{:?}", spec::panes_of(&loaded, "s.toml").err().unwrap());
     assert!(err.contains("read 1") && err.contains("'f16' is not a format"), "{err}");
     std::fs::remove_dir_all(&dir).unwrap();
@@ -351,7 +351,7 @@ fn bench_redraw_of_a_200_cell_grid() {
 
 #[test]
 fn a_pollers_samples_fill_the_pane_its_counters_by_kind_and_the_traffic() {
-    use ferrobus::poll::{Failure, FailureKind, Sample, Traffic};
+    use ferrobus_tools::poll::{Failure, FailureKind, Sample, Traffic};
     let mut app = App::new("t".into(), vec![Definition::raw(4, Table::Holding, 0x10, 2, Duration::from_secs(1))]);
     let sample = |result, rx: Option<Vec<u8>>| Sample {
         group: 0,
@@ -480,7 +480,7 @@ fn a_session_file_keeps_the_trends_and_each_cells_own_order_and_poll_reads_it() 
     let text = session.to_toml();
     assert!(text.contains("order = \"CDAB\"") && text.contains("order = \"DCBA\""), "{text}");
     assert!(text.contains("trend = true") && text.contains("trends = [\"d001\"]"), "{text}");
-    let loaded = ferrobus::poll::session::Session::parse(&text, "s.toml").unwrap();
+    let loaded = ferrobus_tools::poll::session::Session::parse(&text, "s.toml").unwrap();
     assert_eq!(loaded, session);
     let fresh = spec::panes_of(&loaded, "s.toml").unwrap();
     assert_eq!(fresh[0].cells[0].format, Format::F32(Order::Cdab));
@@ -499,7 +499,7 @@ fn a_session_file_keeps_the_trends_and_each_cells_own_order_and_poll_reads_it() 
     assert_eq!(groups.len(), 3);
     // A trend of a point not watched is refused, naming it.
     let bad = text.replace("trends = [\"d001\"]", "trends = [\"F002\"]");
-    let bad = ferrobus::poll::session::Session::parse(&bad, "s.toml").unwrap();
+    let bad = ferrobus_tools::poll::session::Session::parse(&bad, "s.toml").unwrap();
     let err = format!("{:?}", spec::panes_of(&bad, "s.toml").err().unwrap());
     assert!(err.contains("points 1") && err.contains("\\\"F002\\\" is not one of the points watched"), "{err}");
 }

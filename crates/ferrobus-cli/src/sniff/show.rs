@@ -1,14 +1,14 @@
 //! How `ferrobus sniff` prints what it heard: the table's lines, the JSON lines, and the
-//! per-unit statistics (counted, filtered and captured by [`ferrobus::sniff`]).
+//! per-unit statistics (counted, filtered and captured by [`ferrobus_tools::sniff`]).
 
 use std::fmt::Write as _;
 use std::io::Write;
 use std::time::Duration;
 
-use ferrobus::sniff::{BusEvent, Filter, SniffCapture, Stats, UnitStats};
 use ferrobus_proto::FunctionCode;
 use ferrobus_proto::pdu::{Request, Response};
 use ferrobus_proto::sniff::{FragmentKind, Role, WireTime};
+use ferrobus_tools::sniff::{BusEvent, Filter, SniffCapture, Stats, UnitStats};
 use serde_json::{Value, json};
 
 use crate::exit::CliError;

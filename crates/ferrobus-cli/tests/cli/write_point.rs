@@ -1,5 +1,5 @@
 //! Every writer of a named point sends it in the request the device takes, because they all
-//! write it one way (`ferrobus::write`): against a simulated device whose profile answers
+//! write it one way (`ferrobus_tools::write`): against a simulated device whose profile answers
 //! neither FC05 nor FC06 (the simulator refuses them with exception 01, as its profile says),
 //! `set` writes a coil with FC0F and a word with FC10, and `restore --apply` writes the backup
 //! back with FC10 (it sent FC06 before, which such a device refuses). The library's writers

@@ -22,7 +22,7 @@ use std::time::Duration;
 use tokio::net::{TcpListener, TcpStream};
 
 use self::room::{Activity, Evicted, Slot, Slots, Standing};
-pub(crate) use self::room::{Tracked, Tracker};
+pub use self::room::{Tracked, Tracker};
 use super::Closed;
 use super::trim::Bursts;
 use crate::log::escape;
@@ -361,7 +361,7 @@ impl Drop for Share {
 /// A connection's handshake in progress: counted against its source's handshakes until
 /// dropped (when the handshake is over, whatever its outcome).
 #[derive(Debug)]
-pub(crate) struct Handshake {
+pub struct Handshake {
     sources: Arc<Sources>,
     source: Source,
     activity: Arc<Activity>,
@@ -370,7 +370,7 @@ pub(crate) struct Handshake {
 impl Handshake {
     /// What notes the use of the connection's stream once its handshake is over (whom to
     /// close to make room is chosen by it).
-    pub(crate) fn tracker(&self) -> Tracker {
+    pub fn tracker(&self) -> Tracker {
         Tracker(Arc::clone(&self.activity))
     }
 }
@@ -434,7 +434,7 @@ impl Throttle {
 
 /// The accept loop for front ends without a handshake: as [`accept_handshaking`], the
 /// handshake over as soon as the connection is accepted, its stream [`Tracked`].
-pub(crate) async fn accept_connections<S, Fut>(listener: TcpListener, limits: &TcpLimits, serve: S) -> io::Result<()>
+pub async fn accept_connections<S, Fut>(listener: TcpListener, limits: &TcpLimits, serve: S) -> io::Result<()>
 where
     S: Fn(Tracked<TcpStream>, SocketAddr) -> Fut,
     Fut: Future<Output = io::Result<()>> + Send + 'static,
@@ -457,7 +457,7 @@ where
 /// own close). `serve` is given the connection's [`Handshake`], to drop when its handshake
 /// is over, and whose [`Handshake::tracker`] should wrap the stream served after it (or the
 /// connection is never seen answered). No error of a connection or of accepting one ends it: it runs until dropped.
-pub(crate) async fn accept_handshaking<S, Fut>(
+pub async fn accept_handshaking<S, Fut>(
     listener: TcpListener,
     limits: &TcpLimits,
     handshakes: usize,

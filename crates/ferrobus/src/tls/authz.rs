@@ -1,6 +1,6 @@
 //! The authorization step: a filter that checks each request against the client's role
 //! before the handler or the gateway's line sees it (MB-TCP-Security v36 §6, R-31). The TLS
-//! server and the TLS gateway front run it the same way, as their [`Authorize`](crate::gateway::Authorize).
+//! server and the TLS gateway front run it the same way, as their [`Authorize`].
 
 use std::net::SocketAddr;
 use std::sync::Arc;
@@ -10,6 +10,7 @@ use ferrobus_proto::ExceptionCode;
 use ferrobus_proto::pdu::Request;
 
 use super::{Policy, Role};
+use crate::server::Authorize;
 
 /// One client's authorization: its role, the policy, and where denials are logged and
 /// counted.
@@ -65,7 +66,7 @@ impl RoleCheck {
 /// PDU parsed, then checked; a denied request gets exception 01, one that does not parse the
 /// exception a server would answer it with (it could not be checked, so it is not served or
 /// forwarded). A broadcast refused gets nothing (the server's session drops it).
-impl crate::gateway::Authorize for RoleCheck {
+impl Authorize for RoleCheck {
     fn authorize(&mut self, unit: u8, pdu: &[u8]) -> Result<(), ExceptionCode> {
         let request = Request::parse(pdu).map_err(ferrobus_proto::PduError::exception_code)?;
         if self.allows(unit, &request) { Ok(()) } else { Err(ExceptionCode::IllegalFunction) }

@@ -45,7 +45,6 @@
 //!   extension exists to make safe.
 
 mod authz;
-mod gateway;
 mod policy;
 mod role;
 mod serve;
@@ -588,8 +587,9 @@ impl Connector for TlsTarget {
 /// The TLS handshake of a server's connection from `peer`: the stream and the check of its
 /// role's rights (counting denials in `stats`), or `None` when it was refused — counted, and
 /// logged with the reason (a role refused says which and why). `in_progress` counts against
-/// the source's handshakes until the handshake is over.
-pub(crate) async fn handshake(
+/// the source's handshakes until the handshake is over. [`serve_tls_with`] runs it for each
+/// connection; a front end of its own (the gateway's) does too.
+pub async fn handshake(
     tls: &ServerTls,
     stream: TcpStream,
     peer: SocketAddr,
@@ -624,7 +624,7 @@ mod tests {
 
     use super::*;
 
-    /// The TLS 1.2 suites the module documentation and the README name, in rustls's order.
+    /// The TLS 1.2 suites the module documentation and docs/tls.md name, in rustls's order.
     #[test]
     fn the_tls_1_2_suites_are_the_documented_ones_with_the_required_ones_among_them() {
         let tls12: Vec<_> = provider()

@@ -1,8 +1,13 @@
-//! What the library's tests share: a unit on an in-memory line, served by the server engine
-//! (the bytes are paced by the server's pump only as far as t3.5 goes; the pipe itself is
-//! instant), and MBAP frames written and read by hand. Each test crate takes what it needs of
-//! it.
+//! What the library's tests share, and the tools crate's with them: a unit on an in-memory
+//! line, served by the server engine (the bytes are paced by the server's pump only as far as
+//! t3.5 goes; the pipe itself is instant), MBAP frames written and read by hand, and the
+//! Modbus/TCP devices written here ([`pipelined`], [`stalling`], [`sources`]). Each test crate
+//! takes what it needs of it.
 #![allow(dead_code)]
+
+pub(crate) mod pipelined;
+pub(crate) mod sources;
+pub(crate) mod stalling;
 
 use std::time::Duration;
 

@@ -5,8 +5,8 @@ use std::collections::HashMap;
 use std::ops::Range;
 use std::time::Duration;
 
-use ferrobus::poll::{Cell, Format, Group, GroupError, Layout};
 use ferrobus_profile::{Order, Point, Profile, Table};
+use ferrobus_tools::poll::{Cell, Format, Group, GroupError, Layout};
 use toml::Spanned;
 
 use super::super::DeviceSpec;
@@ -211,7 +211,7 @@ fn raw_group(cx: &mut Cx<'_>, id: &str, unit: u8, every: Duration, range: &Spann
     let layout = Layout { format, order, aliases, ..Layout::default() };
     let name =
         r.name.as_ref().map_or_else(|| format!("u{unit} {}@{address:#06x}", table.name()), |n| n.get_ref().clone());
-    let span = ferrobus::poll::RawRange { unit, table, start: address, count, every };
+    let span = ferrobus_tools::poll::RawRange { unit, table, start: address, count, every };
     let group =
         Group::raw(&name, span, &layout).map_err(|e| cx.at(range.span(), format!("device {id:?}: {e}"))).ok()?;
     (cx.errors.len() == errors).then_some(group)

@@ -9,7 +9,7 @@ mod command;
 
 use std::time::SystemTime;
 
-use ferrobus::poll::Sample;
+use ferrobus_tools::poll::Sample;
 
 use super::deadband::Seen;
 use super::device::{Device, Liveness, devices_of};
@@ -433,7 +433,7 @@ fn value_of(point: &ferrobus_profile::Point, seen: &Seen, encoding: UintEncoding
 
 /// A birth metric's properties: engineering unit, description (the point's label), and
 /// whether it is read only.
-fn birth_properties(cell: &ferrobus::poll::Cell) -> PropertySet {
+fn birth_properties(cell: &ferrobus_tools::poll::Cell) -> PropertySet {
     let mut set = properties_of(&cell.point).unwrap_or_default();
     let point = &cell.point;
     let description = if point.label.is_empty() { &point.description } else { &point.label };

@@ -2,7 +2,7 @@ use std::path::PathBuf;
 use std::time::Duration;
 
 use clap::{Args, FromArgMatches};
-use ferrobus::gateway::Route;
+use ferrobus_tools::gateway::Route;
 
 use super::{Base, read};
 use crate::connect::ConnectArgs;

@@ -76,11 +76,11 @@ impl Activity {
 
 /// Wraps a connection's stream (after its handshake) to note when it is used.
 #[derive(Clone, Debug)]
-pub(crate) struct Tracker(pub(super) Arc<Activity>);
+pub struct Tracker(pub(super) Arc<Activity>);
 
 impl Tracker {
     /// `stream`, its reads and writes noted.
-    pub(crate) fn track<S>(self, stream: S) -> Tracked<S> {
+    pub fn track<S>(self, stream: S) -> Tracked<S> {
         Tracked { inner: stream, activity: self.0 }
     }
 }
@@ -89,7 +89,7 @@ impl Tracker {
 /// when every slot is taken: a write is a reply, so a connection written to has been
 /// answered.
 #[derive(Debug)]
-pub(crate) struct Tracked<S> {
+pub struct Tracked<S> {
     inner: S,
     activity: Arc<Activity>,
 }
