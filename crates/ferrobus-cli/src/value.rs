@@ -14,6 +14,7 @@
 use std::fmt;
 
 use clap::{Args, ValueEnum};
+use ferrobus_profile::text::{self, Radix};
 use ferrobus_profile::{Point, Table, Value};
 
 use crate::exit::CliError;
@@ -191,26 +192,10 @@ pub(crate) fn decode(kind: ValueType, order: WordOrder, regs: &[u16]) -> Option<
     })
 }
 
-/// An integer as typed: decimal with an optional sign, `0x` hex or `0b` binary; `_` ignored.
-/// Returns the value and whether it was written in hex or binary (raw bits).
+/// An integer as typed, in the one grammar of integers ([`text::integer`]); with whether it
+/// was written in hex or binary (raw bits).
 fn parse_int(text: &str) -> Option<(i128, bool)> {
-    let cleaned: String = text.trim().chars().filter(|&c| c != '_').collect();
-    let (negative, body) = match cleaned.strip_prefix('-') {
-        Some(rest) => (true, rest),
-        None => (false, cleaned.strip_prefix('+').unwrap_or(&cleaned)),
-    };
-    let (radix, digits) = if let Some(h) = body.strip_prefix("0x").or_else(|| body.strip_prefix("0X")) {
-        (16, h)
-    } else if let Some(b) = body.strip_prefix("0b").or_else(|| body.strip_prefix("0B")) {
-        (2, b)
-    } else {
-        (10, body)
-    };
-    if digits.is_empty() || digits.len() > 40 || digits.starts_with(['+', '-']) {
-        return None;
-    }
-    let value = i128::from_str_radix(digits, radix).ok()?;
-    Some((if negative { -value } else { value }, radix != 10))
+    text::integer(text).map(|(value, radix)| (value, radix != Radix::Decimal))
 }
 
 fn bad(text: &str, kind: ValueType, why: &str) -> CliError {

@@ -203,18 +203,9 @@ impl Profile {
     }
 }
 
-/// A raw integer written in a profile key: decimal, `0x` hex or `0b` binary, maybe negative.
+/// A raw integer written in a profile key: the one grammar of integers, [`crate::text::integer`].
 pub(crate) fn parse_key(key: &str) -> Option<i128> {
-    let key = key.trim();
-    let (negative, digits) = key.strip_prefix('-').map_or((false, key), |rest| (true, rest));
-    let value = if let Some(hex) = digits.strip_prefix("0x").or_else(|| digits.strip_prefix("0X")) {
-        i128::from_str_radix(hex, 16).ok()?
-    } else if let Some(bin) = digits.strip_prefix("0b").or_else(|| digits.strip_prefix("0B")) {
-        i128::from_str_radix(bin, 2).ok()?
-    } else {
-        digits.parse::<i128>().ok()?
-    };
-    Some(if negative { -value } else { value })
+    crate::text::integer(key).map(|(value, _)| value)
 }
 
 #[allow(clippy::too_many_lines)]

@@ -11,6 +11,7 @@ use std::fmt;
 
 use crate::model::{Order, ValueType};
 use crate::point::Point;
+use crate::text::{self, Radix};
 
 /// A point's raw value, as the device holds it.
 #[derive(Clone, Debug, PartialEq)]
@@ -436,7 +437,7 @@ impl Point {
         if let Some((raw, _)) = self.values.iter().find(|(_, m)| fold(m) == fold(typed)) {
             return Ok(Value::Int(*raw));
         }
-        if let Some(raw) = crate::check::parse_key(typed).filter(|_| typed.contains(['x', 'X', 'b', 'B'])) {
+        if let Some((raw, Radix::Hex | Radix::Binary)) = text::integer(typed) {
             return self.fit(Value::Int(raw), typed);
         }
         let number = self.strip_unit(typed)?;

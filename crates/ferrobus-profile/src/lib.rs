@@ -24,6 +24,7 @@ mod plan;
 mod point;
 mod read;
 pub mod source;
+pub mod text;
 mod write;
 
 pub use check::text::{LABEL_MAX, NAME_MAX, TEXT_MAX, UNIT_MAX};

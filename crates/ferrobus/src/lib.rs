@@ -38,8 +38,8 @@
 //! - [`log`](mod@log): [`log::escape`], how every value from outside (a certificate's role, a
 //!   metric name, a peer's text) is written into a log line: on one line, controls spelled out.
 //! - [`text`]: the one grammar of what people type — durations, sizes (SI and IEC units),
-//!   decimal/hex numbers and lists of ranges — for the command line, the simulator and the
-//!   bridge alike.
+//!   decimal/hex numbers, integers and lists of ranges — for the command line, the simulator,
+//!   the bridge and profiles alike (ferrobus-profile's, re-exported).
 //!
 //! Linux, macOS and Windows: what differs between them — ttys and ptys on Unix, COM ports on
 //! Windows, Linux's timerfd and kernel RS-485 — is behind one seam, a folder per platform
@@ -66,7 +66,6 @@ pub mod pump;
 mod serial;
 pub mod server;
 mod sys;
-pub mod text;
 pub mod timer;
 #[cfg(feature = "tls")]
 pub mod tls;
@@ -77,6 +76,9 @@ pub use client::{
     Backoff, Client, ClientConfig, ClientStats, DeviceInfo, EventLog, Release, RequestOptions, STALLED_AFTER_TIMEOUTS,
 };
 pub use error::Error;
+/// The one grammar of what people type, from the profile crate, where a profile's keys and an
+/// imported map's cells are read with it too.
+pub use ferrobus_profile::text;
 #[cfg(unix)]
 pub use port::Pty;
 pub use port::{Framing, Rs485, SerialConfig, TlsAnswer, Transport};

@@ -49,7 +49,6 @@ use crate::pump::{Codec, Pump, Role, Session, write_frame};
 use crate::timer::Timer;
 
 pub use accept::{ACCEPT_BACKOFF, TcpCounts, TcpLimits, TcpStats};
-#[cfg(feature = "tls")]
 pub use accept::{Handshake, Tracked, Tracker, accept_connections, accept_handshaking};
 pub use authorize::Authorize;
 

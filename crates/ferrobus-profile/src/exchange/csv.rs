@@ -531,16 +531,15 @@ fn access_of(text: &str) -> Option<Access> {
     })
 }
 
-/// A non-negative integer, decimal, `0x` hex or `h`-suffixed hex.
+/// A non-negative integer: the one grammar of numbers ([`crate::text::number`]: decimal or
+/// `0x` hex), or the `h`-suffixed hex of vendor sheets.
 fn number(text: &str) -> Option<u32> {
     let text = text.trim();
-    if let Some(hex) = text.strip_prefix("0x").or_else(|| text.strip_prefix("0X")) {
+    if let Some(hex) = text.strip_suffix(['h', 'H']) {
         return u32::from_str_radix(hex, 16).ok();
     }
-    if let Some(hex) = text.strip_suffix('h').or_else(|| text.strip_suffix('H')) {
-        return u32::from_str_radix(hex, 16).ok();
-    }
-    text.parse().ok()
+    let value = crate::text::number(text, u64::from(u32::MAX)).ok()?;
+    u32::try_from(value).ok()
 }
 
 /// A non-negative hex integer, with or without `0x` or an `h` suffix.

@@ -151,13 +151,7 @@ pub(super) fn text(value: &Value) -> Option<String> {
 pub(super) fn unsigned(value: &Value) -> Option<u64> {
     match value {
         Value::Number(n) => n.as_u64(),
-        Value::String(s) => {
-            let s = s.trim();
-            match s.strip_prefix("0x").or_else(|| s.strip_prefix("0X")) {
-                Some(hex) => u64::from_str_radix(hex, 16).ok(),
-                None => s.parse().ok(),
-            }
-        }
+        Value::String(s) => crate::text::number(s, u64::MAX).ok(),
         _ => None,
     }
 }

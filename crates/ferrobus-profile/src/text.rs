@@ -13,12 +13,19 @@
 //! - A **number** is decimal or `0x` hex (`247`, `0xF7`); `_` may group digits.
 //! - A **list** is numbers and inclusive ranges separated by commas: `1-10,0x20,247`.
 //!
-//! Errors carry what was typed, escaped ([`crate::log::escape`]), and say what is accepted.
+//! - An **integer** is a raw value, maybe negative: decimal, `0x` hex or `0b` binary
+//!   (`-5`, `0x8000`, `0b1010`); `_` may group digits.
+//!
+//! The grammar lives here, below the transport, so that a profile's keys and an imported
+//! map's cells are read with it too; `ferrobus::text` is this module.
+//!
+//! Errors carry what was typed, escaped as every message of this crate escapes what it quotes
+//! ([`source::bounded`](crate::source::bounded)), and say what is accepted.
 
 use std::ops::RangeInclusive;
 use std::time::Duration;
 
-use crate::log::escape;
+use crate::source::bounded as escape;
 
 /// What a duration's units accept, for messages and help texts.
 pub const DURATION_UNITS: &str = "ns, us, ms, s, min (or m) or h; a plain number is milliseconds";
@@ -128,7 +135,7 @@ fn number_and_unit(text: &str) -> (&str, &str) {
 ///
 /// ```
 /// use std::time::Duration;
-/// use ferrobus::text::duration;
+/// use ferrobus_profile::text::duration;
 /// assert_eq!(duration("1.5s"), Ok(Duration::from_millis(1500)));
 /// assert_eq!(duration("250"), Ok(Duration::from_millis(250)));
 /// assert_eq!(duration("2 min"), Ok(Duration::from_secs(120)));
@@ -175,7 +182,7 @@ pub fn duration(text: &str) -> Result<Duration, TextError> {
 /// A size in bytes as the [module](self) describes it.
 ///
 /// ```
-/// use ferrobus::text::size;
+/// use ferrobus_profile::text::size;
 /// assert_eq!(size("10MB"), Ok(10_000_000));
 /// assert_eq!(size("10MiB"), Ok(10 << 20));
 /// assert_eq!(size("500k"), Ok(500_000));
@@ -206,7 +213,7 @@ pub fn size(text: &str) -> Result<u64, TextError> {
 /// A number, decimal or `0x` hex, at most `max`.
 ///
 /// ```
-/// use ferrobus::text::number;
+/// use ferrobus_profile::text::number;
 /// assert_eq!(number("0xF7", 255), Ok(247));
 /// assert_eq!(number("1_000", u64::MAX), Ok(1000));
 /// assert!(number("256", 255).is_err());
@@ -236,7 +243,7 @@ pub fn number(text: &str, max: u64) -> Result<u64, TextError> {
 /// come back in the order written, ranges as `first..=last`, a lone number as `n..=n`.
 ///
 /// ```
-/// use ferrobus::text::list;
+/// use ferrobus_profile::text::list;
 /// assert_eq!(list("1-3,0x20,247", 247), Ok(vec![1..=3, 32..=32, 247..=247]));
 /// assert!(list("5-2", 247).is_err());
 /// ```
@@ -260,6 +267,52 @@ pub fn list(text: &str, max: u64) -> Result<Vec<RangeInclusive<u64>>, TextError>
         out.push(first..=last);
     }
     Ok(out)
+}
+
+/// How an [`integer`] was written: in hex or binary it names raw bits, in decimal a value.
+#[derive(Clone, Copy, PartialEq, Eq, Debug)]
+pub enum Radix {
+    /// Decimal.
+    Decimal,
+    /// `0x` hex.
+    Hex,
+    /// `0b` binary.
+    Binary,
+}
+
+/// An integer, maybe negative: decimal, `0x` hex or `0b` binary, `_` grouping digits, a
+/// leading `+` allowed; at most 40 digits. `None` for anything else.
+///
+/// ```
+/// use ferrobus_profile::text::{Radix, integer};
+/// assert_eq!(integer("-5"), Some((-5, Radix::Decimal)));
+/// assert_eq!(integer("0x8000"), Some((0x8000, Radix::Hex)));
+/// assert_eq!(integer("0b1010_1010"), Some((0xAA, Radix::Binary)));
+/// assert_eq!(integer("0x"), None);
+/// ```
+pub fn integer(text: &str) -> Option<(i128, Radix)> {
+    let cleaned: String = text.trim().chars().filter(|&c| c != '_').collect();
+    let (negative, body) = match cleaned.strip_prefix('-') {
+        Some(rest) => (true, rest),
+        None => (false, cleaned.strip_prefix('+').unwrap_or(&cleaned)),
+    };
+    let (radix, digits) = if let Some(h) = body.strip_prefix("0x").or_else(|| body.strip_prefix("0X")) {
+        (Radix::Hex, h)
+    } else if let Some(b) = body.strip_prefix("0b").or_else(|| body.strip_prefix("0B")) {
+        (Radix::Binary, b)
+    } else {
+        (Radix::Decimal, body)
+    };
+    if digits.is_empty() || digits.len() > 40 || digits.starts_with(['+', '-']) {
+        return None;
+    }
+    let base = match radix {
+        Radix::Decimal => 10,
+        Radix::Hex => 16,
+        Radix::Binary => 2,
+    };
+    let value = i128::from_str_radix(digits, base).ok()?;
+    Some((if negative { -value } else { value }, radix))
 }
 
 /// One item of a list in a TOML file (the gateway's lines file, the TLS roles policy): a
