@@ -137,7 +137,7 @@ out += [
     "task wakes at the frame's end, then writes), the pty, the sniffer's reading thread waking",
     "on the read and taking the time. On a USB adapter the latency timer (16 ms on an FTDI by",
     "default, 1 ms with --low-latency) and the USB poll interval come on top: see the sniff",
-    "section of the README.",
+    "section of docs/scan-sniff.md.",
 ]
 text = "\n".join(out) + "\n"
 open(results, "w").write(text)

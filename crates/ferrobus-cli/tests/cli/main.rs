@@ -24,6 +24,7 @@ mod package;
 mod poll;
 mod ports;
 mod read;
+mod readme;
 mod reopen;
 mod scan;
 mod server;

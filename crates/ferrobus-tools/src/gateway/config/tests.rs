@@ -227,8 +227,8 @@ fn a_file_that_cannot_be_read_or_is_not_text_is_refused_with_its_name() {
 
 #[test]
 fn the_readme_example_reads_as_it_says() {
-    let readme = include_str!("../../../../../README.md");
-    let start = readme.find("# ferrobus gateway --lines-file lines.toml").expect("the README's example");
+    let readme = include_str!("../../../../../docs/gateway.md");
+    let start = readme.find("# ferrobus gateway --lines-file lines.toml").expect("the example in docs/gateway.md");
     let example = readme.get(start..).and_then(|rest| rest.split("```").next()).unwrap();
     let (lines, routes) = lines(example).unwrap();
     assert_eq!(lines[0].transport.describe(), "/dev/ttyUSB0 at 9600 8E1");
