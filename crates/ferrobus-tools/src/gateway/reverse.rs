@@ -27,10 +27,10 @@ use ferrobus_proto::master::MAX_TX_LEN;
 use ferrobus_proto::pdu::Request;
 use ferrobus_proto::slave::{RequestId, Slave, SlaveConfig};
 
-use ferrobus::Client;
 use ferrobus::log::Hex;
 use ferrobus::port::{BoxPort, Rs485, Transport};
 use ferrobus::pump::{Codec, Pump, Role, Session, write_frame};
+use ferrobus::{Client, Error};
 
 use super::back::{exception, failure};
 use super::stats::Ended;
@@ -179,13 +179,45 @@ async fn forward(upstreams: &BTreeMap<u8, Upstream>, unit: u8, pdu: Vec<u8>, on_
     match result {
         Ok(reply) => reply,
         Err(e) => {
-            // The forward gateway's own answer for the failure; what the device said, or a
-            // request it could not be sent as, is always answered.
-            let (code, ended) = failure(&e);
-            if ended != Ended::Replied {
+            if !matches!(e, Error::Exception { .. }) {
                 tracing::info!(unit, "no answer from the TCP side: {e}");
             }
-            (ended == Ended::Replied || on_failure == OnFailure::Exception).then(|| exception(function, code.value()))
+            answer_failure(function, &e, on_failure)
         }
+    }
+}
+
+/// What the line gets for a failure on the TCP side: the forward gateway's own answer for it
+/// ([`failure`]), so both directions answer one failure alike. What the device said, or a
+/// request the client would not send, is always answered; silence, a bad reply or a server
+/// that cannot be reached only with [`OnFailure::Exception`].
+fn answer_failure(function: u8, error: &Error, on_failure: OnFailure) -> Option<Vec<u8>> {
+    let (code, ended) = failure(error);
+    (ended == Ended::Replied || on_failure == OnFailure::Exception).then(|| exception(function, code.value()))
+}
+
+#[cfg(test)]
+mod tests {
+    use std::time::Duration;
+
+    use ferrobus_proto::ExceptionCode;
+
+    use super::*;
+
+    #[test]
+    fn a_failure_on_the_tcp_side_is_answered_as_the_forward_gateway_answers_it_when_asked() {
+        let timeout = Error::Timeout { unit: 1, timeout: Duration::from_millis(5), attempts: 1, heard: None };
+        let gone = Error::io("connecting", std::io::Error::from(std::io::ErrorKind::ConnectionRefused));
+        let refused = Error::Exception {
+            unit: 1,
+            function: FunctionCode::from_u8(0x03),
+            code: ExceptionCode::IllegalDataAddress,
+        };
+        for (error, code) in [(&timeout, 0x0B), (&gone, 0x0A), (&refused, 0x02)] {
+            assert_eq!(answer_failure(0x03, error, OnFailure::Exception), Some(vec![0x83, code]), "{error}");
+        }
+        assert_eq!(answer_failure(0x03, &timeout, OnFailure::Silent), None);
+        assert_eq!(answer_failure(0x03, &gone, OnFailure::Silent), None);
+        assert_eq!(answer_failure(0x03, &refused, OnFailure::Silent), Some(vec![0x83, 0x02]), "the device's own word");
     }
 }
