@@ -115,6 +115,13 @@ fuzz_target!(|input: Input| {
             let profile = Profile::parse(&imported.toml, ORIGIN)
                 .unwrap_or_else(|e| panic!("the profile written does not parse: {e}\n{}", imported.toml));
             assert_eq!(profile.points().len(), imported.points, "{}", imported.toml);
+            // The file reads back to the profile the import built.
+            assert_eq!(
+                format!("{:?}", profile.points()),
+                format!("{:?}", imported.profile.points()),
+                "{}",
+                imported.toml
+            );
             for u in &imported.unmapped {
                 for shown in [&u.place, &u.field, &u.value, &u.why] {
                     assert!(!shown.chars().any(char::is_control), "a control character shown: {u:?}");

@@ -21,13 +21,13 @@ use std::sync::LazyLock;
 use std::time::{Duration, SystemTime};
 
 use arbitrary::Arbitrary;
-use ferrobus_tools::poll::{Failure, FailureKind, Reading, Sample, Traffic};
 use ferrobus_bridge::config::{Mode, PlainConfig, Plant};
 use ferrobus_bridge::edge::{Action, DeviceRef, Edge, Output, Publish};
 use ferrobus_bridge::sparkplug::convert::UintEncoding;
 use ferrobus_bridge::sparkplug::payload::{Metric, MetricValue, Payload};
 use ferrobus_bridge::sparkplug::topic::{self, HostState, MessageType, NAMESPACE, Topic};
 use ferrobus_profile::{Value, ValueType};
+use ferrobus_tools::poll::{Failure, FailureKind, Reading, Sample, Traffic};
 use libfuzzer_sys::fuzz_target;
 
 /// The primary host of the second plant.

@@ -80,8 +80,8 @@ pub(crate) async fn scan(connection: &ConnectArgs, format: Format, save_to: Opti
     output::print(&text)
 }
 
-/// Writes the profile of `found` to a new file at `path` (checked first: it parses as the
-/// profile `--device sunspec` would make) and says so on stderr.
+/// Writes the profile of `found` to a new file at `path` (checked first: the profile
+/// `--device sunspec` would make, written as every profile is) and says so on stderr.
 pub(crate) fn save(
     found: &Discovery,
     defs: &Definitions,
@@ -89,8 +89,8 @@ pub(crate) fn save(
     limit: u16,
     path: &Path,
 ) -> Result<(), CliError> {
-    let text = ferrobus_sunspec::profile_text(found, defs, origin, limit);
-    let profile = ferrobus_profile::Profile::parse(&text, origin).map_err(|e| CliError::Usage(e.to_string()))?;
+    let profile = ferrobus_sunspec::profile(found, defs, origin, limit).map_err(|e| CliError::Usage(e.to_string()))?;
+    let text = profile.to_toml();
     let header = format!(
         "# Written by `ferrobus scan --sunspec --save-profile` from {origin}: the models found then, their\n\
          # scale factors as read then. A device whose scale factors change needs a new scan.\n\n"

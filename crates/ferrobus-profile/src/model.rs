@@ -17,68 +17,72 @@ use std::collections::BTreeMap;
 use std::fmt;
 use std::path::Path;
 
-use serde::Deserialize;
+use serde::{Deserialize, Serialize};
 
 use crate::point::{self, Point};
 use crate::source::{self, Located, NotText, Place, ReadError};
 
 /// A device model.
-#[derive(Clone, Debug, Deserialize)]
+#[derive(Clone, Debug, Deserialize, Serialize)]
 #[serde(deny_unknown_fields)]
 pub struct Profile {
     /// What the device is.
     pub device: DeviceSection,
     /// How the manual numbers addresses, and the default word order.
-    #[serde(default)]
+    #[serde(skip_serializing_if = "is_default", default)]
     pub addressing: Addressing,
     /// Function codes, timing, broadcast.
-    #[serde(default)]
+    #[serde(skip_serializing_if = "is_default", default)]
     pub comm: Comm,
     /// Items per request.
-    #[serde(default)]
+    #[serde(skip_serializing_if = "is_default", default)]
     pub limits: Limits,
     /// Vendor exception codes.
-    #[serde(default)]
+    #[serde(skip_serializing_if = "is_default", default)]
     pub exceptions: Exceptions,
     /// Plain read/write tables covering the address space from 0 (the generic device).
-    #[serde(default)]
+    #[serde(skip_serializing_if = "is_default", default)]
     pub tables: Tables,
     /// The physics model, if any.
+    #[serde(skip_serializing_if = "Option::is_none")]
     pub model: Option<ModelSection>,
     /// Coils (0x01, 0x05, 0x0F).
-    #[serde(default)]
+    #[serde(skip_serializing_if = "Vec::is_empty", default)]
     pub coils: Vec<BitDef>,
     /// Discrete inputs (0x02).
-    #[serde(default)]
+    #[serde(skip_serializing_if = "Vec::is_empty", default)]
     pub discrete_inputs: Vec<BitDef>,
     /// Holding registers (0x03, 0x06, 0x10, 0x16, 0x17).
-    #[serde(default)]
+    #[serde(skip_serializing_if = "Vec::is_empty", default)]
     pub registers: Vec<RegisterDef>,
     /// Input registers (0x04).
-    #[serde(default)]
+    #[serde(skip_serializing_if = "Vec::is_empty", default)]
     pub inputs: Vec<RegisterDef>,
     /// Ranges in which the device answers reads of every address, mapped or not.
-    #[serde(default)]
+    #[serde(skip_serializing_if = "Vec::is_empty", default)]
     pub span: Vec<SpanDef>,
     /// How a client tells the device's state (whether it runs).
-    #[serde(default)]
+    #[serde(skip_serializing_if = "is_default", default)]
     pub state: State,
     /// The device's own words for its exception codes.
-    #[serde(default)]
+    #[serde(skip_serializing_if = "Vec::is_empty", default)]
     pub exception_meaning: Vec<ExceptionMeaning>,
     /// File records (0x14, 0x15).
+    #[serde(skip_serializing_if = "Option::is_none")]
     pub files: Option<Files>,
     /// The FIFO queue (0x18).
+    #[serde(skip_serializing_if = "Option::is_none")]
     pub fifo: Option<Fifo>,
     /// Faults every simulated unit of this profile starts with, written as `ferrobus sim
     /// --fault` takes them: `"drop=10%,delay=50ms"` (the simulator reads them).
+    #[serde(skip_serializing_if = "Option::is_none")]
     pub faults: Option<String>,
     /// Fault rules aimed at requests, tried in order after those of `faults`: `[[fault_rule]]`
     /// tables with the keys of a `--fault` rule, e.g. `fc = 0x03`, `addr = "0x1000-0x100F"`,
     /// `share = "50%"`, and one action: `exception = 0x06`, `no-reply = true`,
     /// `delay = "200ms"`, `short = true` or `short = 3`, `malformed = true`, `unit = 7`,
     /// `tid = "+1"`, `trickle = "5ms"` (the simulator reads them).
-    #[serde(default)]
+    #[serde(skip_serializing_if = "Vec::is_empty", default)]
     pub fault_rule: Vec<toml::Table>,
     /// Where the profile came from (a built-in name or a path), for messages.
     #[serde(skip)]
@@ -95,7 +99,7 @@ pub struct Profile {
 }
 
 /// `[device]`
-#[derive(Clone, Debug, Deserialize)]
+#[derive(Clone, Debug, Deserialize, Serialize)]
 #[serde(deny_unknown_fields)]
 pub struct DeviceSection {
     /// A human name.
@@ -107,67 +111,97 @@ pub struct DeviceSection {
     /// Identification object 0x02 MajorMinorRevision.
     pub revision: String,
     /// Object 0x03 VendorUrl.
+    #[serde(skip_serializing_if = "Option::is_none")]
     pub vendor_url: Option<String>,
     /// Object 0x04 ProductName.
+    #[serde(skip_serializing_if = "Option::is_none")]
     pub product_name: Option<String>,
     /// Object 0x05 ModelName.
+    #[serde(skip_serializing_if = "Option::is_none")]
     pub model_name: Option<String>,
     /// Object 0x06 UserApplicationName.
+    #[serde(skip_serializing_if = "Option::is_none")]
     pub user_application_name: Option<String>,
     /// Whether the device answers 0x2B/0x0E and 0x11 (else exception 01).
-    #[serde(default = "yes")]
+    #[serde(skip_serializing_if = "is_true", default = "yes")]
     pub identification: bool,
     /// The server id bytes of 0x11, before the run indicator (ASCII).
+    #[serde(skip_serializing_if = "Option::is_none")]
     pub server_id: Option<String>,
 }
 
+impl DeviceSection {
+    /// A device named `name`, with the three identification objects every device has; the
+    /// others absent, identification answered.
+    pub fn new(name: &str, vendor: &str, product_code: &str, revision: &str) -> DeviceSection {
+        DeviceSection {
+            name: name.to_string(),
+            vendor: vendor.to_string(),
+            product_code: product_code.to_string(),
+            revision: revision.to_string(),
+            vendor_url: None,
+            product_name: None,
+            model_name: None,
+            user_application_name: None,
+            identification: true,
+            server_id: None,
+        }
+    }
+}
+
 /// `[addressing]`
-#[derive(Clone, Copy, Debug, Default, Deserialize)]
+#[derive(Clone, Copy, Debug, Default, Deserialize, Serialize, PartialEq)]
 #[serde(deny_unknown_fields)]
 pub struct Addressing {
     /// The number of the first item in the manual: 1 when the frame carries number − 1.
-    #[serde(default)]
+    #[serde(skip_serializing_if = "is_default", default)]
     pub base: u16,
     /// The order of multi-register values whose entry names none (default ABCD).
-    #[serde(default, deserialize_with = "order")]
+    #[serde(skip_serializing_if = "is_default", default, deserialize_with = "order", serialize_with = "order_name")]
     pub order: Order,
 }
 
 /// `[comm]`
-#[derive(Clone, Debug, Default, Deserialize)]
+#[derive(Clone, Debug, Default, Deserialize, Serialize, PartialEq)]
 #[serde(deny_unknown_fields)]
 pub struct Comm {
     /// The function codes answered; the others get exception 01. Absent: all public codes.
+    #[serde(skip_serializing_if = "Option::is_none")]
     pub functions: Option<Vec<u8>>,
     /// The 0x08 sub-functions answered; absent: all.
+    #[serde(skip_serializing_if = "Option::is_none")]
     pub diagnostics: Option<Vec<u16>>,
     /// Wait before replying, on top of t3.5 (3G3RX C078).
-    #[serde(default)]
+    #[serde(skip_serializing_if = "is_default", default)]
     pub response_wait_ms: u32,
     /// Whether reads sent by broadcast are executed (they are never answered).
-    #[serde(default)]
+    #[serde(skip_serializing_if = "is_false", default)]
     pub broadcast_reads: bool,
     /// Whether 0x08 by broadcast is executed.
-    #[serde(default)]
+    #[serde(skip_serializing_if = "is_false", default)]
     pub broadcast_diagnostics: bool,
 }
 
 /// `[limits]`: the most items per request; absent: the spec's limits.
-#[derive(Clone, Copy, Debug, Default, Deserialize)]
+#[derive(Clone, Copy, Debug, Default, Deserialize, Serialize, PartialEq)]
 #[serde(deny_unknown_fields)]
 pub struct Limits {
     /// 0x01 and 0x02 (spec: 2000).
+    #[serde(skip_serializing_if = "Option::is_none")]
     pub read_coils: Option<u16>,
     /// 0x0F (spec: 1968).
+    #[serde(skip_serializing_if = "Option::is_none")]
     pub write_coils: Option<u16>,
     /// 0x03, 0x04 and the read of 0x17 (spec: 125).
+    #[serde(skip_serializing_if = "Option::is_none")]
     pub read_registers: Option<u16>,
     /// 0x10 and the write of 0x17 (spec: 123 and 121).
+    #[serde(skip_serializing_if = "Option::is_none")]
     pub write_registers: Option<u16>,
 }
 
 /// `[exceptions]`: which code the device answers for each kind of refusal.
-#[derive(Clone, Copy, Debug, Deserialize)]
+#[derive(Clone, Copy, Debug, Deserialize, Serialize, PartialEq)]
 #[serde(deny_unknown_fields)]
 pub struct Exceptions {
     /// A value outside a register's range (spec: 0x03; 3G3RX: 0x21).
@@ -201,21 +235,25 @@ fn illegal_address() -> u8 {
 }
 
 /// `[tables]`: plain tables of this many items from address 0 (the generic device).
-#[derive(Clone, Copy, Debug, Default, Deserialize)]
+#[derive(Clone, Copy, Debug, Default, Deserialize, Serialize, PartialEq)]
 #[serde(deny_unknown_fields)]
 pub struct Tables {
     /// Coils.
+    #[serde(skip_serializing_if = "Option::is_none")]
     pub coils: Option<u32>,
     /// Discrete inputs.
+    #[serde(skip_serializing_if = "Option::is_none")]
     pub discrete_inputs: Option<u32>,
     /// Holding registers.
+    #[serde(skip_serializing_if = "Option::is_none")]
     pub holding_registers: Option<u32>,
     /// Input registers.
+    #[serde(skip_serializing_if = "Option::is_none")]
     pub input_registers: Option<u32>,
 }
 
 /// `[model]`
-#[derive(Clone, Debug, Deserialize)]
+#[derive(Clone, Debug, Deserialize, Serialize)]
 #[serde(deny_unknown_fields, tag = "kind", rename_all = "kebab-case")]
 pub enum ModelSection {
     /// A frequency inverter.
@@ -242,7 +280,7 @@ pub enum ModelSection {
 }
 
 /// How a direction coil reads.
-#[derive(Clone, Copy, PartialEq, Eq, Debug, Default, Deserialize)]
+#[derive(Clone, Copy, PartialEq, Eq, Debug, Default, Deserialize, Serialize)]
 #[serde(rename_all = "kebab-case")]
 pub enum Polarity {
     /// 1 = reverse (Omron MX2/RX2 tables).
@@ -253,7 +291,7 @@ pub enum Polarity {
 }
 
 /// Read/write access.
-#[derive(Clone, Copy, PartialEq, Eq, Debug, Default, Deserialize)]
+#[derive(Clone, Copy, PartialEq, Eq, Debug, Default, Deserialize, Serialize)]
 #[serde(rename_all = "kebab-case")]
 pub enum Access {
     /// Read only.
@@ -277,7 +315,7 @@ impl Access {
 }
 
 /// The type of a register entry's value.
-#[derive(Clone, Copy, PartialEq, Eq, Hash, Debug, Default, Deserialize)]
+#[derive(Clone, Copy, PartialEq, Eq, Hash, Debug, Default, Deserialize, Serialize)]
 #[serde(rename_all = "lowercase")]
 pub enum ValueType {
     /// One register, unsigned.
@@ -371,113 +409,223 @@ fn order<'de, D: serde::Deserializer<'de>>(deserializer: D) -> Result<Order, D::
         .ok_or_else(|| serde::de::Error::custom(format!("{text:?} is not a word order: use {}", Order::NAMES)))
 }
 
+/// A word order as a profile writes it (`ABCD`).
+#[expect(clippy::trivially_copy_pass_by_ref, reason = "serde's serialize_with takes the field by reference")]
+fn order_name<S: serde::Serializer>(order: &Order, serializer: S) -> Result<S::Ok, S::Error> {
+    serializer.serialize_str(order.name())
+}
+
+/// [`order_name`] for an optional field (skipped when `None`).
+#[expect(
+    clippy::ref_option,
+    clippy::trivially_copy_pass_by_ref,
+    reason = "serde's serialize_with takes the field by reference"
+)]
+fn some_order_name<S: serde::Serializer>(order: &Option<Order>, serializer: S) -> Result<S::Ok, S::Error> {
+    match order {
+        Some(order) => order_name(order, serializer),
+        None => serializer.serialize_none(),
+    }
+}
+
+#[expect(clippy::trivially_copy_pass_by_ref, reason = "serde's skip_serializing_if takes the field by reference")]
+fn is_true(b: &bool) -> bool {
+    *b
+}
+#[expect(clippy::trivially_copy_pass_by_ref, reason = "serde's skip_serializing_if takes the field by reference")]
+fn is_false(b: &bool) -> bool {
+    !*b
+}
+#[expect(clippy::trivially_copy_pass_by_ref, reason = "serde's skip_serializing_if takes the field by reference")]
+fn is_one(n: &u32) -> bool {
+    *n == 1
+}
+fn is_default<T: Default + PartialEq>(value: &T) -> bool {
+    *value == T::default()
+}
+
 /// [`order`] for an optional field.
 fn some_order<'de, D: serde::Deserializer<'de>>(deserializer: D) -> Result<Option<Order>, D::Error> {
     order(deserializer).map(Some)
 }
 
 /// A coil or discrete input, or a run of them.
-#[derive(Clone, Debug, Deserialize)]
+#[derive(Clone, Debug, Deserialize, Serialize)]
 #[serde(deny_unknown_fields)]
 pub struct BitDef {
     /// The manual's number of the first.
     pub number: u32,
     /// How many (default 1); the items of a run are named NAME1, NAME2, ...
-    #[serde(default = "one")]
+    #[serde(skip_serializing_if = "is_one", default = "one")]
     pub count: u32,
     /// A short name (the code).
     pub name: String,
     /// A short descriptive name shown beside the code.
+    #[serde(skip_serializing_if = "Option::is_none")]
     pub label: Option<String>,
     /// What it is.
-    #[serde(default)]
+    #[serde(skip_serializing_if = "String::is_empty", default)]
     pub description: String,
     /// Access.
-    #[serde(default)]
+    #[serde(skip_serializing_if = "is_default", default)]
     pub access: Access,
     /// The value at start (the simulator's) and out of the factory; off when not given.
+    #[serde(skip_serializing_if = "Option::is_none")]
     pub default: Option<bool>,
     /// A group name for `--group`.
+    #[serde(skip_serializing_if = "Option::is_none")]
     pub group: Option<String>,
     /// Whether a backup saves it (default: when read/write).
+    #[serde(skip_serializing_if = "Option::is_none")]
     pub backup: Option<bool>,
     /// The manual section it comes from.
+    #[serde(skip_serializing_if = "Option::is_none")]
     pub source: Option<String>,
     /// False when the fact could not be confirmed.
-    #[serde(default = "yes")]
+    #[serde(skip_serializing_if = "is_true", default = "yes")]
     pub confirmed: bool,
 }
 
 /// A register or multi-register value, or a run of them.
-#[derive(Clone, Debug, Deserialize)]
+#[derive(Clone, Debug, Deserialize, Serialize)]
 #[serde(deny_unknown_fields)]
 pub struct RegisterDef {
     /// The manual's number of the first register.
     pub number: u32,
     /// How many items (default 1); the items of a run are named NAME1, NAME2, ...
-    #[serde(default = "one")]
+    #[serde(skip_serializing_if = "is_one", default = "one")]
     pub count: u32,
     /// The value's type (default u16).
-    #[serde(default, rename = "type")]
+    #[serde(skip_serializing_if = "is_default", default, rename = "type")]
     pub value_type: ValueType,
     /// The order of a multi-register value (default: `[addressing] order`).
-    #[serde(default, deserialize_with = "some_order")]
+    #[serde(
+        skip_serializing_if = "Option::is_none",
+        default,
+        deserialize_with = "some_order",
+        serialize_with = "some_order_name"
+    )]
     pub order: Option<Order>,
     /// Registers of a string.
+    #[serde(skip_serializing_if = "Option::is_none")]
     pub length: Option<u16>,
     /// A short name (a parameter code such as `F001`).
     pub name: String,
     /// A short descriptive name shown beside the code.
+    #[serde(skip_serializing_if = "Option::is_none")]
     pub label: Option<String>,
     /// What it is.
-    #[serde(default)]
+    #[serde(skip_serializing_if = "String::is_empty", default)]
     pub description: String,
     /// Engineering unit.
+    #[serde(skip_serializing_if = "Option::is_none")]
     pub unit: Option<String>,
     /// Engineering value = raw × scale + offset (default 1).
+    #[serde(skip_serializing_if = "Option::is_none")]
     pub scale: Option<f64>,
     /// Engineering value = raw × scale + offset (default 0).
+    #[serde(skip_serializing_if = "Option::is_none")]
     pub offset: Option<f64>,
     /// Lowest raw value accepted by a write.
+    #[serde(skip_serializing_if = "Option::is_none")]
     pub min: Option<f64>,
     /// Highest raw value accepted by a write.
+    #[serde(skip_serializing_if = "Option::is_none")]
     pub max: Option<f64>,
     /// Access.
-    #[serde(default)]
+    #[serde(skip_serializing_if = "is_default", default)]
     pub access: Access,
     /// Whether it may be written while the drive runs (default yes).
-    #[serde(default = "yes")]
+    #[serde(skip_serializing_if = "is_true", default = "yes")]
     pub while_running: bool,
     /// A group name for `--group`.
+    #[serde(skip_serializing_if = "Option::is_none")]
     pub group: Option<String>,
     /// An enumeration: raw value (as a string key) → meaning.
-    #[serde(default)]
+    #[serde(skip_serializing_if = "BTreeMap::is_empty", default)]
     pub values: BTreeMap<String, String>,
     /// A bit field: bit index (as a string key) → meaning.
-    #[serde(default)]
+    #[serde(skip_serializing_if = "BTreeMap::is_empty", default)]
     pub bits: BTreeMap<String, String>,
     /// Codes a restore writes before this one.
-    #[serde(default)]
+    #[serde(skip_serializing_if = "Vec::is_empty", default)]
     pub depends_on: Vec<String>,
     /// Whether a backup saves it (default: when read/write).
+    #[serde(skip_serializing_if = "Option::is_none")]
     pub backup: Option<bool>,
     /// The manual section it comes from.
+    #[serde(skip_serializing_if = "Option::is_none")]
     pub source: Option<String>,
     /// False when the fact could not be confirmed.
-    #[serde(default = "yes")]
+    #[serde(skip_serializing_if = "is_true", default = "yes")]
     pub confirmed: bool,
     /// The raw value at start (the simulator's) and out of the factory: an integer, a float
     /// for f32/f64, text for a string.
+    #[serde(skip_serializing_if = "Option::is_none")]
     pub default: Option<toml::Value>,
     /// The raw value by which the device says it does not implement the point (SunSpec's
     /// 0xFFFF for a u16, 0x8000 for an i16, `nan` for a float, `""` for a string; an integer
     /// may be written as text, `"0xFFFFFFFFFFFFFFFF"`, past TOML's 64-bit signed integers):
     /// read, it shows as not implemented (`n/a`, empty in CSV, null in JSON), not as a reading.
+    #[serde(skip_serializing_if = "Option::is_none")]
     pub not_implemented: Option<toml::Value>,
     /// False when the device does not implement the point at all (a SunSpec point whose scale
     /// factor read 0x8000): every value read shows as not implemented. Default true.
-    #[serde(default = "yes")]
+    #[serde(skip_serializing_if = "is_true", default = "yes")]
     pub implemented: bool,
+}
+
+impl BitDef {
+    /// One read-only bit numbered `number`, named `name`, with every other key at its default.
+    pub fn new(number: u32, name: &str) -> BitDef {
+        BitDef {
+            number,
+            count: 1,
+            name: name.to_string(),
+            label: None,
+            description: String::new(),
+            access: Access::default(),
+            default: None,
+            group: None,
+            backup: None,
+            source: None,
+            confirmed: true,
+        }
+    }
+}
+
+impl RegisterDef {
+    /// One read-only value of `value_type` at `number`, named `name`, with every other key at
+    /// its default (no unit, no scale, the profile's word order).
+    pub fn new(number: u32, name: &str, value_type: ValueType) -> RegisterDef {
+        RegisterDef {
+            number,
+            count: 1,
+            value_type,
+            order: None,
+            length: None,
+            name: name.to_string(),
+            label: None,
+            description: String::new(),
+            unit: None,
+            scale: None,
+            offset: None,
+            min: None,
+            max: None,
+            access: Access::default(),
+            while_running: true,
+            group: None,
+            values: BTreeMap::new(),
+            bits: BTreeMap::new(),
+            depends_on: Vec::new(),
+            backup: None,
+            source: None,
+            confirmed: true,
+            default: None,
+            not_implemented: None,
+            implemented: true,
+        }
+    }
 }
 
 fn one() -> u32 {
@@ -485,7 +633,7 @@ fn one() -> u32 {
 }
 
 /// The four tables of the data model.
-#[derive(Clone, Copy, PartialEq, Eq, Hash, Debug, PartialOrd, Ord, Deserialize)]
+#[derive(Clone, Copy, PartialEq, Eq, Hash, Debug, PartialOrd, Ord, Deserialize, Serialize)]
 pub enum Table {
     /// Coils (read/write bits).
     #[serde(rename = "coils")]
@@ -522,7 +670,7 @@ impl Table {
 }
 
 /// `[[span]]`: a range (manual numbering) in which the device answers reads of every address.
-#[derive(Clone, Copy, Debug, Deserialize)]
+#[derive(Clone, Copy, Debug, Deserialize, Serialize)]
 #[serde(deny_unknown_fields)]
 pub struct SpanDef {
     /// The table.
@@ -534,25 +682,27 @@ pub struct SpanDef {
 }
 
 /// `[state]`
-#[derive(Clone, Debug, Default, Deserialize)]
+#[derive(Clone, Debug, Default, Deserialize, Serialize, PartialEq)]
 #[serde(deny_unknown_fields)]
 pub struct State {
     /// How to tell that the drive runs.
+    #[serde(skip_serializing_if = "Option::is_none")]
     pub running: Option<RunningRule>,
 }
 
 /// `[state] running = { point = "running", values = [1] }`
-#[derive(Clone, Debug, Deserialize)]
+#[derive(Clone, Debug, Deserialize, Serialize, PartialEq)]
 #[serde(deny_unknown_fields)]
 pub struct RunningRule {
     /// A coil, discrete input or register code.
     pub point: String,
     /// The raw values that mean running.
+    #[serde(skip_serializing_if = "Vec::is_empty")]
     pub values: Vec<i64>,
 }
 
 /// `[[exception_meaning]]`
-#[derive(Clone, Debug, Deserialize)]
+#[derive(Clone, Debug, Deserialize, Serialize)]
 #[serde(deny_unknown_fields)]
 pub struct ExceptionMeaning {
     /// The exception code.
@@ -562,7 +712,7 @@ pub struct ExceptionMeaning {
 }
 
 /// `[files]`
-#[derive(Clone, Copy, Debug, Deserialize)]
+#[derive(Clone, Copy, Debug, Deserialize, Serialize)]
 #[serde(deny_unknown_fields)]
 pub struct Files {
     /// Files 1..=count.
@@ -572,7 +722,7 @@ pub struct Files {
 }
 
 /// `[fifo]`
-#[derive(Clone, Copy, Debug, Deserialize)]
+#[derive(Clone, Copy, Debug, Deserialize, Serialize)]
 #[serde(deny_unknown_fields)]
 pub struct Fifo {
     /// The FIFO pointer address (a holding register holding the count).
@@ -638,6 +788,64 @@ pub const BUILTIN: &[(&str, &str)] = &[
 ];
 
 impl Profile {
+    /// A profile of `device` and nothing else, for a program to fill in as data (its entries,
+    /// its limits), check with [`Profile::build`] and write with [`Profile::to_toml`]: the
+    /// importer and SunSpec discovery build profiles so, not as text.
+    ///
+    /// ```
+    /// use ferrobus_profile::{DeviceSection, Profile, RegisterDef, ValueType};
+    ///
+    /// let mut profile = Profile::new(DeviceSection::new("A meter", "ACME", "M1", "1.0"));
+    /// let mut power = RegisterDef::new(0x0010, "power", ValueType::F32);
+    /// power.unit = Some("W".into());
+    /// profile.inputs.push(power);
+    /// let profile = profile.build("a meter of mine").unwrap();
+    /// assert_eq!(profile.points()[0].code, "power");
+    /// assert!(profile.to_toml().contains("[[inputs]]"));
+    /// ```
+    pub fn new(device: DeviceSection) -> Profile {
+        Profile {
+            device,
+            addressing: Addressing::default(),
+            comm: Comm::default(),
+            limits: Limits::default(),
+            exceptions: Exceptions::default(),
+            tables: Tables::default(),
+            model: None,
+            coils: Vec::new(),
+            discrete_inputs: Vec::new(),
+            registers: Vec::new(),
+            inputs: Vec::new(),
+            span: Vec::new(),
+            state: State::default(),
+            exception_meaning: Vec::new(),
+            files: None,
+            fifo: None,
+            faults: None,
+            fault_rule: Vec::new(),
+            origin: String::new(),
+            faults_place: None,
+            fault_rule_places: Vec::new(),
+            points: Vec::new(),
+        }
+    }
+
+    /// The profile as a profile file says it: TOML that [`Profile::parse`] reads back to the
+    /// same profile, its defaults left out.
+    pub fn to_toml(&self) -> String {
+        // Every field is a string, a number, a bool, an array or a table of them: nothing
+        // TOML cannot hold, so the serializer has no error to give.
+        toml::to_string(self).unwrap_or_default()
+    }
+
+    /// Checks a profile built as data ([`Profile::new`]) and resolves its points, naming it
+    /// `origin` in messages. It is checked as its file would be, by the one reader of
+    /// profiles: written with [`Profile::to_toml`] and read back, so that no check is written
+    /// twice; every mistake is returned, placed in that text.
+    pub fn build(self, origin: &str) -> Result<Profile, Vec<ProfileError>> {
+        Profile::parse_all(&self.to_toml(), origin)
+    }
+
     /// A built-in profile by name.
     pub fn builtin(name: &str) -> Result<Profile, ProfileError> {
         match BUILTIN.iter().find(|(n, _)| *n == name) {

@@ -31,7 +31,7 @@ use std::path::Path;
 pub use def::{Count, DefError, GroupDef, ModelDef, PointDef, PointType, ScaleFactor};
 pub use discover::{BASES, DiscoverError, Discovery, END, Found, MARKER, discover};
 pub use layout::{Layout, Placed, SfAt, layout};
-pub use profile::{not_implemented, not_implemented_value, profile, profile_text};
+pub use profile::{not_implemented, not_implemented_value, profile, profile_data};
 
 mod embedded {
     include!(concat!(env!("OUT_DIR"), "/models.rs"));

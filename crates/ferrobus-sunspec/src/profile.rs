@@ -34,8 +34,8 @@
 
 use std::collections::BTreeMap;
 
-use ferrobus_profile::{Profile, ProfileError};
-use toml::{Table, Value};
+use ferrobus_profile::{Access, DeviceSection, Profile, ProfileError, RegisterDef, ValueType};
+use toml::Value;
 
 use crate::Definitions;
 use crate::def::PointType;
@@ -123,26 +123,30 @@ fn printable(text: &str, max: usize) -> String {
     }
 }
 
-/// The profile's type name and whether the point is kept.
-fn value_type(kind: PointType) -> Option<&'static str> {
+/// The profile's type of a point, if the point is kept.
+fn value_type(kind: PointType) -> Option<ValueType> {
     Some(match kind {
-        PointType::Uint16 | PointType::Acc16 | PointType::Count | PointType::Enum16 | PointType::Bitfield16 => "u16",
-        PointType::Int16 | PointType::Sunssf => "i16",
-        PointType::Uint32 | PointType::Acc32 | PointType::Enum32 | PointType::Bitfield32 | PointType::Ipaddr => "u32",
-        PointType::Int32 => "i32",
-        PointType::Uint64 | PointType::Acc64 | PointType::Bitfield64 | PointType::Eui48 => "u64",
-        PointType::Int64 => "i64",
-        PointType::Float32 => "f32",
-        PointType::Float64 => "f64",
-        PointType::String => "string",
+        PointType::Uint16 | PointType::Acc16 | PointType::Count | PointType::Enum16 | PointType::Bitfield16 => {
+            ValueType::U16
+        }
+        PointType::Int16 | PointType::Sunssf => ValueType::I16,
+        PointType::Uint32 | PointType::Acc32 | PointType::Enum32 | PointType::Bitfield32 | PointType::Ipaddr => {
+            ValueType::U32
+        }
+        PointType::Int32 => ValueType::I32,
+        PointType::Uint64 | PointType::Acc64 | PointType::Bitfield64 | PointType::Eui48 => ValueType::U64,
+        PointType::Int64 => ValueType::I64,
+        PointType::Float32 => ValueType::F32,
+        PointType::Float64 => ValueType::F64,
+        PointType::String => ValueType::String,
         PointType::Pad | PointType::Ipv6addr => return None,
     })
 }
 
-/// The TOML text of the profile of `discovery` (see the module doc); `origin` names the device
-/// (`sunspec at 10.0.0.5:502 unit 1`), `limit` is the registers per read request.
-pub fn profile_text(discovery: &Discovery, defs: &Definitions, origin: &str, limit: u16) -> String {
-    let mut root = Table::new();
+/// The profile of `discovery` as data, not yet checked (see the module doc; its file is
+/// [`Profile::to_toml`]); `origin` names
+/// the device (`sunspec at 10.0.0.5:502 unit 1`), `limit` is the registers per read request.
+pub fn profile_data(discovery: &Discovery, defs: &Definitions, origin: &str, limit: u16) -> Profile {
     let text_of = |m: &Found, point: &str| -> Option<String> {
         let def = defs.get(m.id)?;
         let placed = layout(def, m.length, &m.registers);
@@ -155,21 +159,14 @@ pub fn profile_text(discovery: &Discovery, defs: &Definitions, origin: &str, lim
     };
     let common = discovery.models.iter().find(|m| m.id == 1);
     let field = |point: &str| common.and_then(|m| text_of(m, point));
-    let mut device = Table::new();
     let vendor = field("Mn").unwrap_or_else(|| "unknown".into());
     let product = field("Md").unwrap_or_else(|| "unknown".into());
     let name = printable(&format!("SunSpec device {vendor} {product} ({origin})"), ferrobus_profile::LABEL_MAX);
-    device.insert("name".into(), Value::String(name));
-    device.insert("vendor".into(), Value::String(vendor));
-    device.insert("product_code".into(), Value::String(product));
-    device.insert("revision".into(), Value::String(field("Vr").unwrap_or_default()));
-    device.insert("identification".into(), Value::Boolean(false));
-    root.insert("device".into(), Value::Table(device));
-    let mut limits = Table::new();
-    limits.insert("read_registers".into(), Value::Integer(i64::from(limit.clamp(1, 125))));
-    root.insert("limits".into(), Value::Table(limits));
+    let mut device = DeviceSection::new(&name, &vendor, &product, &field("Vr").unwrap_or_default());
+    device.identification = false;
+    let mut profile = Profile::new(device);
+    profile.limits.read_registers = Some(limit.clamp(1, 125));
 
-    let mut registers = Vec::new();
     let mut seen: BTreeMap<String, usize> = BTreeMap::new();
     for m in &discovery.models {
         let Some(def) = defs.get(m.id) else { continue };
@@ -182,61 +179,49 @@ pub fn profile_text(discovery: &Discovery, defs: &Definitions, origin: &str, lim
         let placed = layout(def, m.length, &m.registers);
         for p in &placed.points {
             let Some(ty) = value_type(p.def.kind) else { continue };
-            let mut e = Table::new();
-            e.insert("number".into(), Value::Integer(i64::from(m.start) + i64::from(p.offset)));
-            e.insert("name".into(), Value::String(format!("{model}.{}", p.name)));
-            e.insert("type".into(), Value::String(ty.into()));
+            let mut e =
+                RegisterDef::new(u32::from(m.start).saturating_add(p.offset), &format!("{model}.{}", p.name), ty);
             if p.def.kind == PointType::String {
-                e.insert("length".into(), Value::Integer(i64::from(p.def.size)));
+                e.length = Some(p.def.size);
             }
-            if let Some(label) = &p.def.label {
-                e.insert("label".into(), Value::String(printable(label, ferrobus_profile::LABEL_MAX)));
-            }
+            e.label = p.def.label.as_ref().map(|label| printable(label, ferrobus_profile::LABEL_MAX));
             if let Some(desc) = &p.def.desc {
-                e.insert("description".into(), Value::String(printable(desc, ferrobus_profile::TEXT_MAX)));
+                e.description = printable(desc, ferrobus_profile::TEXT_MAX);
             }
-            if let Some(units) = p.def.units.as_ref().filter(|u| !u.is_empty()) {
-                e.insert("unit".into(), Value::String(printable(units, ferrobus_profile::UNIT_MAX)));
-            }
-            if let Some(sentinel) = not_implemented_value(p.def.kind) {
-                e.insert("not_implemented".into(), sentinel);
-            }
+            e.unit = p.def.units.as_ref().filter(|u| !u.is_empty()).map(|u| printable(u, ferrobus_profile::UNIT_MAX));
+            e.not_implemented = not_implemented_value(p.def.kind);
             let (sf, implemented) = scale_of(p.sf, &m.registers);
-            if !implemented {
-                // The scale factor is not implemented: nor is the value it scales.
-                e.insert("implemented".into(), Value::Boolean(false));
-            }
-            if let Some(sf) = sf.filter(|sf| *sf != 0) {
-                e.insert("scale".into(), Value::Float(10f64.powi(i32::from(sf))));
-            }
-            e.insert("access".into(), Value::String(if p.def.writable { "rw" } else { "ro" }.into()));
-            e.insert("group".into(), Value::String(model.clone()));
-            let symbols = |limit: i64| -> Table {
+            // A scale factor not implemented: nor is the value it scales.
+            e.implemented = implemented;
+            e.scale = sf.filter(|sf| *sf != 0).map(|sf| 10f64.powi(i32::from(sf)));
+            e.access = if p.def.writable { Access::Rw } else { Access::Ro };
+            e.group = Some(model.clone());
+            let symbols = |limit: i64| -> BTreeMap<String, String> {
                 p.def
                     .symbols
                     .iter()
                     .filter(|(v, _)| (0..limit).contains(v))
-                    .map(|(v, n)| (v.to_string(), Value::String(printable(n, ferrobus_profile::LABEL_MAX))))
+                    .map(|(v, n)| (v.to_string(), printable(n, ferrobus_profile::LABEL_MAX)))
                     .collect()
             };
             match p.def.kind {
                 PointType::Enum16 | PointType::Enum32 if !p.def.symbols.is_empty() => {
                     let max = if p.def.kind == PointType::Enum16 { 0x1_0000 } else { 0x1_0000_0000 };
-                    e.insert("values".into(), Value::Table(symbols(max)));
+                    e.values = symbols(max);
                 }
                 PointType::Bitfield16 | PointType::Bitfield32 | PointType::Bitfield64 if !p.def.symbols.is_empty() => {
-                    e.insert("bits".into(), Value::Table(symbols(i64::from(p.def.size) * 16)));
+                    e.bits = symbols(i64::from(p.def.size) * 16);
                 }
                 _ => {}
             }
-            registers.push(Value::Table(e));
+            profile.registers.push(e);
         }
     }
-    root.insert("registers".into(), Value::Array(registers));
-    toml::to_string(&root).unwrap_or_default()
+    profile
 }
 
-/// The profile of `discovery`: [`profile_text`] parsed.
+/// The profile of `discovery`: [`profile_data`] checked and its points resolved, or the
+/// first mistake found.
 pub fn profile(discovery: &Discovery, defs: &Definitions, origin: &str, limit: u16) -> Result<Profile, ProfileError> {
-    Profile::parse(&profile_text(discovery, defs, origin, limit), origin)
+    profile_data(discovery, defs, origin, limit).build(origin).map_err(|mut mistakes| mistakes.swap_remove(0))
 }

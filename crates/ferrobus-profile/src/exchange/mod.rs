@@ -118,8 +118,10 @@ impl fmt::Display for Unmapped {
 /// A map turned into a profile.
 #[derive(Clone, Debug)]
 pub struct Imported {
-    /// The profile, as TOML text that `Profile::parse` accepts.
+    /// The profile's file: a header saying where it came from, then [`Profile::to_toml`](crate::Profile::to_toml).
     pub toml: String,
+    /// The profile, checked, its points resolved.
+    pub profile: crate::Profile,
     /// How many points (entries) it has.
     pub points: usize,
     /// What of the source it does not carry, in the source's order.
@@ -602,12 +604,15 @@ impl Draft {
         let name = self.options.name.clone().unwrap_or_else(|| default_name(&self.origin));
         // A device's name is a label: printable, and cut to its length.
         let name: String = spelled(&name, |_| false).chars().take(LABEL_MAX).collect();
-        let toml = write::profile(&name, &self.origin, self.format, &self.notes, &self.entries);
-        if let Err(mistakes) = crate::Profile::parse_all(&toml, &self.origin) {
-            let message = mistakes.first().map(ToString::to_string).unwrap_or_default();
-            return Err(ImportError::Invalid { origin: self.origin, message });
-        }
-        Ok(Imported { toml, points: self.entries.len(), unmapped: self.unmapped, notes: self.notes })
+        let profile = match write::profile(&name, &self.entries).build(&self.origin) {
+            Ok(profile) => profile,
+            Err(mistakes) => {
+                let message = mistakes.first().map(ToString::to_string).unwrap_or_default();
+                return Err(ImportError::Invalid { origin: self.origin, message });
+            }
+        };
+        let toml = write::file(&profile, &self.origin, self.format, &self.notes);
+        Ok(Imported { toml, profile, points: self.entries.len(), unmapped: self.unmapped, notes: self.notes })
     }
 }
 

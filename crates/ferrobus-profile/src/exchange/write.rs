@@ -3,11 +3,29 @@
 use std::fmt::Write as _;
 
 use super::{Entry, Format};
-use crate::model::{Table, ValueType};
+use crate::model::{BitDef, DeviceSection, Profile, RegisterDef, Table, ValueType};
 
-/// The profile named `name` with `entries`, from `origin` in `format`; `notes` say how the
-/// source was read.
-pub(crate) fn profile(name: &str, origin: &str, format: Format, notes: &[String], entries: &[Entry]) -> String {
+/// The profile named `name` with `entries`, as data, not yet checked.
+pub(crate) fn profile(name: &str, entries: &[Entry]) -> Profile {
+    let mut device = DeviceSection::new(name, "unknown", "imported", "unknown");
+    device.identification = false;
+    let mut profile = Profile::new(device);
+    for table in [Table::Coils, Table::DiscreteInputs, Table::Holding, Table::Input] {
+        for e in entries.iter().filter(|e| e.table == table) {
+            match table {
+                Table::Coils => profile.coils.push(bit(e)),
+                Table::DiscreteInputs => profile.discrete_inputs.push(bit(e)),
+                Table::Holding => profile.registers.push(register(e)),
+                Table::Input => profile.inputs.push(register(e)),
+            }
+        }
+    }
+    profile
+}
+
+/// The file of `profile`, imported from `origin` in `format`: a header that says so, with
+/// `notes` on how the source was read, then the profile.
+pub(crate) fn file(profile: &Profile, origin: &str, format: Format, notes: &[String]) -> String {
     let mut out = String::new();
     let _ = writeln!(out, "# Imported by `ferrobus profile import --from {}` from {}.", format.name(), line(origin));
     for note in notes {
@@ -15,94 +33,36 @@ pub(crate) fn profile(name: &str, origin: &str, format: Format, notes: &[String]
     }
     out.push_str("# Addresses are the frame's (from 0). Check the units, scales and access against the\n");
     out.push_str("# device's manual: a map says what a tool read, not always what the device allows.\n\n");
-    out.push_str("[device]\n");
-    let _ = writeln!(out, "name = {}", string(name));
-    out.push_str("vendor = \"unknown\"\n");
-    out.push_str("product_code = \"imported\"\n");
-    out.push_str("revision = \"unknown\"\n");
-    out.push_str("identification = false\n\n");
-    out.push_str("[addressing]\nbase = 0\n");
-    for table in [Table::Coils, Table::DiscreteInputs, Table::Holding, Table::Input] {
-        for entry in entries.iter().filter(|e| e.table == table) {
-            out.push('\n');
-            write_entry(&mut out, entry);
-        }
-    }
+    out.push_str(&profile.to_toml());
     out
 }
 
-/// The list an entry of `table` goes in.
-fn list(table: Table) -> &'static str {
-    match table {
-        Table::Coils => "coils",
-        Table::DiscreteInputs => "discrete_inputs",
-        Table::Holding => "registers",
-        Table::Input => "inputs",
-    }
+/// A coil or discrete input: a name, an access, a group and a default only (the draft listed
+/// whatever else its source gave it).
+fn bit(e: &Entry) -> BitDef {
+    let mut bit = BitDef::new(u32::from(e.address), &e.name);
+    bit.label.clone_from(&e.label);
+    bit.description.clone_from(&e.description);
+    bit.access = e.access;
+    bit.group.clone_from(&e.group);
+    bit.default = e.default.as_ref().and_then(toml::Value::as_bool);
+    bit
 }
 
-fn write_entry(out: &mut String, e: &Entry) {
-    let _ = writeln!(out, "[[{}]]", list(e.table));
-    let _ = writeln!(out, "number = {}", e.address);
-    let _ = writeln!(out, "name = {}", string(&e.name));
-    if let Some(label) = &e.label {
-        let _ = writeln!(out, "label = {}", string(label));
-    }
-    if !e.description.is_empty() {
-        let _ = writeln!(out, "description = {}", string(&e.description));
-    }
-    if e.table.is_bits() {
-        // A coil or discrete input has a name, an access, a group and a default only (the
-        // draft listed whatever else its source gave it).
-        let _ = writeln!(out, "access = \"{}\"", e.access.name());
-        if let Some(group) = &e.group {
-            let _ = writeln!(out, "group = {}", string(group));
-        }
-        if let Some(default) = &e.default {
-            let _ = writeln!(out, "default = {default}");
-        }
-        return;
-    }
-    if e.value_type != ValueType::U16 {
-        let _ = writeln!(out, "type = \"{}\"", e.value_type.name());
-    }
-    if let Some(length) = e.length.filter(|_| e.value_type == ValueType::String) {
-        let _ = writeln!(out, "length = {length}");
-    }
-    if let Some(order) = e.order.filter(|_| e.value_type.registers() > 1) {
-        let _ = writeln!(out, "order = \"{}\"", order.name());
-    }
-    for (key, value) in [("scale", e.scale), ("offset", e.offset), ("min", e.min), ("max", e.max)] {
-        if let Some(value) = value {
-            let _ = writeln!(out, "{key} = {}", number(value));
-        }
-    }
-    if let Some(unit) = &e.unit {
-        let _ = writeln!(out, "unit = {}", string(unit));
-    }
-    let _ = writeln!(out, "access = \"{}\"", e.access.name());
-    if let Some(group) = &e.group {
-        let _ = writeln!(out, "group = {}", string(group));
-    }
-    for (key, pairs) in [("values", &e.values), ("bits", &e.bits)] {
-        if !pairs.is_empty() {
-            let inner: Vec<String> = pairs.iter().map(|(k, v)| format!("{} = {}", string(k), string(v))).collect();
-            let _ = writeln!(out, "{key} = {{ {} }}", inner.join(", "));
-        }
-    }
-    if let Some(default) = &e.default {
-        let _ = writeln!(out, "default = {default}");
-    }
-}
-
-/// A TOML basic string, escaped by the TOML writer.
-fn string(text: &str) -> String {
-    toml::Value::String(text.to_string()).to_string()
-}
-
-/// A TOML float that reads back as the same f64 (Rust's shortest round-trip form).
-fn number(value: f64) -> String {
-    format!("{value:?}")
+fn register(e: &Entry) -> RegisterDef {
+    let mut r = RegisterDef::new(u32::from(e.address), &e.name, e.value_type);
+    r.label.clone_from(&e.label);
+    r.description.clone_from(&e.description);
+    r.length = e.length.filter(|_| e.value_type == ValueType::String);
+    r.order = e.order.filter(|_| e.value_type.registers() > 1);
+    (r.scale, r.offset, r.min, r.max) = (e.scale, e.offset, e.min, e.max);
+    r.unit.clone_from(&e.unit);
+    r.access = e.access;
+    r.group.clone_from(&e.group);
+    r.values = e.values.iter().cloned().collect();
+    r.bits = e.bits.iter().cloned().collect();
+    r.default.clone_from(&e.default);
+    r
 }
 
 /// `text` on one line, for a comment.
