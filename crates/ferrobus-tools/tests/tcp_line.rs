@@ -19,14 +19,10 @@ use tokio::net::TcpListener;
 #[path = "../../ferrobus/tests/support/mod.rs"]
 mod support;
 
-use support::pipelined::{answer, asked, hold_and_answer_backwards, value};
+use support::pipelined::{answer, asked, hold_and_answer_backwards, pipelined, value};
 use support::sources::{PER_SOURCE, connect_from, polled, server, until};
 use support::stalling::{First, stalling};
 use support::{mbap, read_mbap};
-
-fn pipelined(in_flight: usize, timeout: Duration, retries: u32) -> ClientConfig {
-    ClientConfig { in_flight, timeout, retries, backoff: None, ..ClientConfig::default() }
-}
 
 /// A client connection to `gateway`, served as a TCP connection would be.
 fn connect(gateway: &Gateway) -> DuplexStream {

@@ -7,16 +7,12 @@
 
 use std::time::Duration;
 
-use ferrobus::{Client, ClientConfig, Error, Transport};
+use ferrobus::{Client, Error, Transport};
 use tokio::net::TcpListener;
 
 mod support;
 
-use support::pipelined::{Asked, answer, asked, hold_and_answer_backwards, value};
-
-fn pipelined(in_flight: usize, timeout: Duration, retries: u32) -> ClientConfig {
-    ClientConfig { in_flight, timeout, retries, backoff: None, ..ClientConfig::default() }
-}
+use support::pipelined::{Asked, answer, asked, hold_and_answer_backwards, pipelined, value};
 
 #[tokio::test]
 async fn requests_go_out_without_waiting_for_replies_and_each_caller_gets_the_reply_to_its_own() {

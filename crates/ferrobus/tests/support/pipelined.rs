@@ -1,6 +1,9 @@
 //! A Modbus/TCP device that holds requests back and answers them out of order, for the
 //! pipelined client and the pipelined gateway line.
 
+use std::time::Duration;
+
+use ferrobus::ClientConfig;
 use tokio::io::{AsyncReadExt, AsyncWriteExt};
 use tokio::net::TcpStream;
 
@@ -43,4 +46,9 @@ pub(crate) async fn hold_and_answer_backwards(device: &mut TcpStream, n: usize) 
         answer(device, *a).await;
     }
     held
+}
+
+/// A client of `in_flight` requests at once, with `timeout` and `retries` and no backoff.
+pub(crate) fn pipelined(in_flight: usize, timeout: Duration, retries: u32) -> ClientConfig {
+    ClientConfig { in_flight, timeout, retries, backoff: None, ..ClientConfig::default() }
 }
