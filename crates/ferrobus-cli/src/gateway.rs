@@ -24,7 +24,7 @@ use std::sync::Arc;
 use std::time::Duration;
 
 use clap::Args;
-use ferrobus::server::{TcpCounts, TcpLimits};
+use ferrobus::server::TcpCounts;
 use ferrobus::{Client, Transport};
 use ferrobus_tools::gateway::{
     AllowAll, Authorize, FrontConfig, Gateway, GatewayConfig, GatewayLine, Inbound, OnFailure, Route, Routes, Rules,
@@ -34,6 +34,7 @@ use ferrobus_tools::gateway::{
 use crate::connect::{ConnectArgs, Target, parse_duration};
 use crate::exit::CliError;
 use crate::interrupt::Interrupt;
+use crate::server_limits::ServerLimitsArgs;
 use crate::server_tls::ServerTlsArgs;
 
 /// Arguments of `ferrobus gateway`.
@@ -129,25 +130,8 @@ pub(crate) struct GatewayArgs {
     #[arg(long = "late-guard", value_name = "DURATION", default_value = "100ms", value_parser = parse_duration)]
     late_guard: Duration,
 
-    /// Connections served at once; past it a new one is served and the one least worth keeping
-    /// is closed to make room (one in its TLS handshake, then one never answered, then the one
-    /// idle longest; from the address holding the most first)
-    #[arg(long = "max-connections", default_value_t = 1000, value_parser = clap::value_parser!(u32).range(1..))]
-    max_connections: u32,
-
-    /// Connections served at once from one client address (an IPv6 /64); past it a new one from
-    /// there is closed at once, so one host cannot take every connection
-    #[arg(long = "max-per-source", value_name = "N", default_value_t = 100,
-          value_parser = clap::value_parser!(u32).range(1..))]
-    max_per_source: u32,
-
-    /// Close a connection idle this long with nothing outstanding (0: never)
-    #[arg(long = "idle-timeout", value_name = "DURATION", default_value = "60s", value_parser = parse_duration)]
-    idle_timeout: Duration,
-
-    /// Close a connection whose frame begun is not finished this long after (0: never)
-    #[arg(long = "frame-timeout", value_name = "DURATION", default_value = "5s", value_parser = parse_duration)]
-    frame_timeout: Duration,
+    #[command(flatten)]
+    limits: ServerLimitsArgs,
 
     /// Reverse: a slave on the serial --port for the units of --route UNIT=HOST:PORT[/UNIT],
     /// forwarding each request to that Modbus/TCP server
@@ -214,17 +198,10 @@ pub(crate) async fn run(connection: &ConnectArgs, args: &GatewayArgs) -> Result<
         },
         lines.iter().enumerate().map(|(i, l)| format!("{i}={l}")).collect::<Vec<_>>().join(", ")
     );
-    let limits = TcpLimits {
-        max_connections: usize::try_from(args.max_connections).unwrap_or(usize::MAX),
-        idle_timeout: Some(args.idle_timeout).filter(|d| !d.is_zero()),
-        frame_timeout: Some(args.frame_timeout).filter(|d| !d.is_zero()),
-        max_per_source: usize::try_from(args.max_per_source).unwrap_or(usize::MAX),
-        release_memory_after_bursts: true,
-        stats: Arc::default(),
-    };
-    let tcp = Arc::clone(&limits.stats);
     let pipeline = usize::try_from(args.pipeline).unwrap_or(usize::MAX);
-    let front = FrontConfig { inbound, limits, pipeline };
+    let limits = args.limits.limits(pipeline);
+    let tcp = Arc::clone(&limits.stats);
+    let front = FrontConfig { inbound, limits };
     let serving = {
         let gateway = gateway.clone();
         tokio::spawn(async move {

@@ -68,6 +68,7 @@ mod read;
 mod readwrite;
 mod run_lock;
 mod scan;
+mod server_limits;
 mod server_tls;
 mod set;
 mod sim;

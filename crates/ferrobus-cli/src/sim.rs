@@ -18,7 +18,7 @@ use clap::Args;
 #[cfg(unix)]
 use ferrobus::Pty;
 use ferrobus::server::{
-    ServerEvent, ServerOptions, Shared, TcpCounts, TcpLimits, TcpServeConfig, serve_tcp_with, serve_transport,
+    ConnectionPolicy, ServerEvent, ServerOptions, Shared, TcpCounts, TcpServeConfig, serve_tcp_with, serve_transport,
 };
 use ferrobus::tls::{ServerTls, serve_tls_with};
 use ferrobus::{Framing, Timer, Transport};
@@ -30,6 +30,7 @@ use hdrhistogram::Histogram;
 use crate::connect::{ConnectArgs, MBAPS_PORT, MODBUS_TCP_PORT, Target, parse_duration};
 use crate::exit::CliError;
 use crate::interrupt::Interrupt;
+use crate::server_limits::ServerLimitsArgs;
 use crate::server_tls::ServerTlsArgs;
 
 /// Arguments of `ferrobus sim`.
@@ -68,26 +69,8 @@ pub(crate) struct SimArgs {
     #[arg(long, value_name = "DURATION", value_parser = parse_duration)]
     duration: Option<Duration>,
 
-    /// TCP: connections served at once; past it a new one is served and the one least worth
-    /// keeping is closed to make room (one in its TLS handshake, then one never answered, then
-    /// the one idle longest; from the address holding the most first)
-    #[arg(long = "max-connections", value_name = "N", default_value_t = 1000,
-          value_parser = clap::value_parser!(u32).range(1..))]
-    max_connections: u32,
-
-    /// TCP: connections served at once from one client address (an IPv6 /64); past it a new one
-    /// from there is closed at once, so one host cannot take every connection
-    #[arg(long = "max-per-source", value_name = "N", default_value_t = 100,
-          value_parser = clap::value_parser!(u32).range(1..))]
-    max_per_source: u32,
-
-    /// TCP: close a connection when nothing arrives or leaves for this long (0: never)
-    #[arg(long = "idle-timeout", value_name = "DURATION", default_value = "60s", value_parser = parse_duration)]
-    idle_timeout: Duration,
-
-    /// TCP: close a connection when a frame begun is not complete this long after its first byte (0: never)
-    #[arg(long = "frame-timeout", value_name = "DURATION", default_value = "5s", value_parser = parse_duration)]
-    frame_timeout: Duration,
+    #[command(flatten)]
+    limits: ServerLimitsArgs,
 
     /// Modbus/TCP: answer every unit id, the units not simulated by the first --unit's device
     #[arg(long = "any-unit")]
@@ -202,14 +185,7 @@ pub(crate) async fn run(connection: &ConnectArgs, args: &SimArgs) -> Result<(), 
     };
     let counters = Arc::new(Mutex::new(Counters::default()));
     let sim = Shared::new(sim);
-    let limits = TcpLimits {
-        max_connections: usize::try_from(args.max_connections).unwrap_or(usize::MAX),
-        max_per_source: usize::try_from(args.max_per_source).unwrap_or(usize::MAX),
-        idle_timeout: Some(args.idle_timeout).filter(|d| !d.is_zero()),
-        frame_timeout: Some(args.frame_timeout).filter(|d| !d.is_zero()),
-        release_memory_after_bursts: true,
-        stats: Arc::default(),
-    };
+    let limits = args.limits.limits(ConnectionPolicy::TCP.max_pending);
     let tcp_stats = Arc::clone(&limits.stats);
     let options = {
         let (sim, counters, transport) = (sim.clone(), Arc::clone(&counters), transport.clone());

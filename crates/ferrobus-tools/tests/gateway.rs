@@ -6,7 +6,7 @@ use std::collections::BTreeMap;
 use std::time::Duration;
 
 use ferrobus::port::{BoxPort, ConnectWith, Framing};
-use ferrobus::server::{Answering, Fate, ReplyFilter, ServerOptions, Shared, serve};
+use ferrobus::server::{Answering, ConnectionPolicy, Fate, ReplyFilter, ServerOptions, Shared, serve};
 use ferrobus::{ClientConfig, Timer, Transport};
 use ferrobus_proto::ExceptionCode;
 use ferrobus_proto::frame::rtu::RtuCodec;
@@ -15,7 +15,7 @@ use ferrobus_proto::pdu::Request;
 use ferrobus_proto::slave::{Admission, Handler, Slave, SlaveConfig, UnitSet};
 use ferrobus_tools::gateway::stats::Malformed;
 use ferrobus_tools::gateway::{
-    AllowAll, Authorize, Gateway, GatewayConfig, GatewayLine, Inbound, Route, Routes, Rules, Timeouts,
+    AllowAll, Authorize, Gateway, GatewayConfig, GatewayLine, Inbound, Route, Routes, Rules,
 };
 use tokio::io::{AsyncReadExt, AsyncWriteExt, DuplexStream};
 
@@ -149,7 +149,7 @@ fn connect(gateway: &Gateway, authorize: Box<dyn Authorize>) -> DuplexStream {
     let gateway = gateway.clone();
     tokio::spawn(async move {
         let mut authorize = authorize;
-        gateway.serve_connection(server, "test client", Inbound::Mbap, authorize.as_mut(), Timeouts::default()).await
+        gateway.serve_connection(server, "test client", Inbound::Mbap, authorize.as_mut(), ConnectionPolicy::TCP).await
     });
     client
 }
@@ -345,7 +345,7 @@ async fn rtu_over_tcp_in_a_framed_request_gets_a_framed_reply_with_its_crc() {
     let front = gw.clone();
     tokio::spawn(async move {
         let mut authorize = AllowAll;
-        front.serve_connection(server, "rtu client", Inbound::RtuOverTcp, &mut authorize, Timeouts::default()).await
+        front.serve_connection(server, "rtu client", Inbound::RtuOverTcp, &mut authorize, ConnectionPolicy::TCP).await
     });
     let mut request = vec![0x02, 0x06, 0x00, 0x03, 0x00, 0x2A];
     request.extend(crc16_wire(&request));
@@ -423,10 +423,10 @@ async fn a_client_that_writes_200_requests_at_once_never_has_more_than_its_pipel
     let gw = gateway(&bus, Setup::default()).await;
     let (mut client, server) = tokio::io::duplex(8192);
     let front = gw.clone();
-    let timeouts = Timeouts { pipeline: 16, ..Timeouts::default() };
+    let connection = ConnectionPolicy { max_pending: 16, ..ConnectionPolicy::TCP };
     tokio::spawn(async move {
         let mut authorize = AllowAll;
-        front.serve_connection(server, "flood", Inbound::Mbap, &mut authorize, timeouts).await
+        front.serve_connection(server, "flood", Inbound::Mbap, &mut authorize, connection).await
     });
     let burst: Vec<u8> = (0..200u16).flat_map(|t| mbap(t, 1, &READ_0_2)).collect();
     client.write_all(&burst).await.unwrap();
@@ -440,12 +440,15 @@ async fn a_client_that_writes_200_requests_at_once_never_has_more_than_its_pipel
     assert_eq!((stats.total.replies, stats.total.busy), (200, 0), "{}", stats.total);
 }
 
-/// A connection served with `timeouts`, and the task serving it.
-fn connect_with(gateway: &Gateway, timeouts: Timeouts) -> (DuplexStream, tokio::task::JoinHandle<std::io::Result<()>>) {
+/// A connection served on `connection`'s policy, and the task serving it.
+fn connect_with(
+    gateway: &Gateway,
+    connection: ConnectionPolicy,
+) -> (DuplexStream, tokio::task::JoinHandle<std::io::Result<()>>) {
     let (client, server) = tokio::io::duplex(4096);
     let gateway = gateway.clone();
     let task = tokio::spawn(async move {
-        gateway.serve_connection(server, "test client", Inbound::Mbap, &mut AllowAll, timeouts).await
+        gateway.serve_connection(server, "test client", Inbound::Mbap, &mut AllowAll, connection).await
     });
     (client, task)
 }
@@ -455,14 +458,14 @@ async fn a_bad_mbap_header_closes_the_connection_after_the_request_before_it_is_
  {
     let bus = Shared::new(Bus::default());
     let gw = gateway(&bus, Setup::default()).await;
-    let (mut client, task) = connect_with(&gw, Timeouts::default());
+    let (mut client, task) = connect_with(&gw, ConnectionPolicy::TCP);
     let mut input = mbap(1, 1, &READ_0_2);
     input.extend([0x00, 0x02, 0x00, 0x07, 0x00, 0x06, 0x01]);
     input.extend(mbap(3, 1, &[0x06, 0x00, 0x05, 0x12, 0x34]));
     client.write_all(&input).await.unwrap();
     assert_eq!(reply(&mut client).await, (1, 1, vec![0x03, 0x04, 0, 0, 0, 0]), "the request before the header");
     let err = task.await.unwrap().expect_err("closed");
-    assert_eq!(ferrobus::server::Closed::of(&err), Some(ferrobus::server::Closed::BadHeader), "{err}");
+    assert_eq!(ferrobus::server::close_reason(&err), Some(ferrobus::server::Closed::BadHeader), "{err}");
     let mut rest = Vec::new();
     client.read_to_end(&mut rest).await.unwrap();
     assert!(rest.is_empty(), "answered after the bad header: {rest:02X?}");
@@ -475,13 +478,13 @@ async fn an_idle_connection_is_closed_after_the_idle_timeout_but_never_while_a_r
     let gw = gateway(&bus, Setup::default()).await;
     // The dead unit's answer (two attempts of 50 ms) takes longer than the idle timeout.
     let idle = Duration::from_millis(30);
-    let (mut client, task) = connect_with(&gw, Timeouts { idle: Some(idle), ..Timeouts::default() });
+    let (mut client, task) = connect_with(&gw, ConnectionPolicy { idle: Some(idle), ..ConnectionPolicy::TCP });
     let asked = tokio::time::Instant::now();
     assert_eq!(ask(&mut client, 1, 7, &READ_0_2).await, [0x83, 0x0B], "closed while the line was asked");
     let answered = tokio::time::Instant::now();
     assert!(answered - asked > idle, "the answer came within the idle timeout: the test shows nothing");
     let err = task.await.unwrap().expect_err("closed");
-    assert_eq!(ferrobus::server::Closed::of(&err), Some(ferrobus::server::Closed::Idle(idle)), "{err}");
+    assert_eq!(ferrobus::server::close_reason(&err), Some(ferrobus::server::Closed::Idle(idle)), "{err}");
     let closed = tokio::time::Instant::now() - answered;
     assert!(closed >= idle && closed <= idle + Duration::from_millis(2), "closed {closed:?} after the reply");
 }
@@ -492,11 +495,11 @@ async fn a_frame_begun_and_never_finished_closes_the_connection_after_the_frame_
     let gw = gateway(&bus, Setup::default()).await;
     let frame = Duration::from_secs(5);
     let (mut client, server) = tokio::io::duplex(4096);
-    let timeouts = Timeouts { frame: Some(frame), ..Timeouts::default() };
+    let connection = ConnectionPolicy { frame: Some(frame), ..ConnectionPolicy::TCP };
     let front = gw.clone();
     let began = tokio::time::Instant::now();
     let task = tokio::spawn(async move {
-        let ended = front.serve_connection(server, "slow", Inbound::Mbap, &mut AllowAll, timeouts).await;
+        let ended = front.serve_connection(server, "slow", Inbound::Mbap, &mut AllowAll, connection).await;
         (ended, began.elapsed())
     });
     // One byte a second: never idle, the frame never complete.
@@ -508,7 +511,7 @@ async fn a_frame_begun_and_never_finished_closes_the_connection_after_the_frame_
     }
     let (ended, after) = task.await.unwrap();
     let err = ended.expect_err("closed");
-    assert_eq!(ferrobus::server::Closed::of(&err), Some(ferrobus::server::Closed::UnfinishedFrame(frame)), "{err}");
+    assert_eq!(ferrobus::server::close_reason(&err), Some(ferrobus::server::Closed::UnfinishedFrame(frame)), "{err}");
     assert!(after >= frame && after < frame + Duration::from_secs(1), "closed after {after:?}");
 }
 

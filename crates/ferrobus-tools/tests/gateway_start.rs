@@ -5,11 +5,10 @@
 //! Modbus/TCP line alone takes every unit id, 0 (no broadcast there) and 255 among them; with no
 //! serial line, a broadcast has nowhere to go.
 
+use ferrobus::server::ConnectionPolicy;
 use ferrobus::{ClientConfig, Error, SerialConfig, Transport};
 use ferrobus_proto::frame::LineConfig;
-use ferrobus_tools::gateway::{
-    AllowAll, Gateway, GatewayConfig, GatewayError, GatewayLine, Inbound, Route, Routes, Timeouts,
-};
+use ferrobus_tools::gateway::{AllowAll, Gateway, GatewayConfig, GatewayError, GatewayLine, Inbound, Route, Routes};
 use tokio::io::{AsyncWriteExt, DuplexStream};
 use tokio::net::{TcpListener, TcpStream};
 
@@ -80,7 +79,7 @@ async fn a_tcp_device_down_at_start_gets_0a_then_is_connected_once_up_and_reconn
     let serving = gateway.clone();
     tokio::spawn(async move {
         let mut authorize = AllowAll;
-        serving.serve_connection(server, "test client", Inbound::Mbap, &mut authorize, Timeouts::default()).await
+        serving.serve_connection(server, "test client", Inbound::Mbap, &mut authorize, ConnectionPolicy::TCP).await
     });
     assert_eq!(read(&mut client, 1).await, [0x83, 0x0A], "the device is down: gateway path unavailable");
     let down = &gateway.stats()[0];
@@ -161,7 +160,7 @@ async fn a_modbus_tcp_line_is_not_held_quiet_after_a_timeout_and_drops_the_late_
     let serving = gateway.clone();
     tokio::spawn(async move {
         let mut authorize = AllowAll;
-        serving.serve_connection(server, "test client", Inbound::Mbap, &mut authorize, Timeouts::default()).await
+        serving.serve_connection(server, "test client", Inbound::Mbap, &mut authorize, ConnectionPolicy::TCP).await
     });
     assert_eq!(read(&mut client, 1).await, [0x83, 0x0B], "no reply within the timeout");
     let second = tokio::time::timeout(std::time::Duration::from_secs(10), read(&mut client, 2)).await;
@@ -210,7 +209,7 @@ async fn a_modbus_tcp_line_alone_takes_every_unit_id_and_unit_0_there_is_the_dev
     let (mut client, server) = tokio::io::duplex(4096);
     tokio::spawn(async move {
         let mut authorize = AllowAll;
-        gateway.serve_connection(server, "test client", Inbound::Mbap, &mut authorize, Timeouts::default()).await
+        gateway.serve_connection(server, "test client", Inbound::Mbap, &mut authorize, ConnectionPolicy::TCP).await
     });
     for (t, unit, pdu, reply) in [
         (1, 255, vec![0x03, 0x00, 0x00, 0x00, 0x01], vec![0x03, 0x02, 0x00, 255]),
@@ -236,7 +235,7 @@ async fn with_no_serial_line_a_write_to_an_unrouted_unit_0_has_no_broadcast_to_g
     let serving = gateway.clone();
     tokio::spawn(async move {
         let mut authorize = AllowAll;
-        serving.serve_connection(server, "test client", Inbound::Mbap, &mut authorize, Timeouts::default()).await
+        serving.serve_connection(server, "test client", Inbound::Mbap, &mut authorize, ConnectionPolicy::TCP).await
     });
     client.write_all(&mbap_to(1, 0, &[0x06, 0x00, 0x05, 0x00, 0x09])).await.unwrap();
     assert_eq!(adu(&mut client).await, (1, 0, vec![0x86, 0x0A]));

@@ -7,11 +7,9 @@
 use std::sync::Arc;
 use std::time::Duration;
 
-use ferrobus::server::TcpLimits;
+use ferrobus::server::{ConnectionPolicy, TcpLimits};
 use ferrobus::{ClientConfig, Transport};
-use ferrobus_tools::gateway::{
-    AllowAll, Authorize, FrontConfig, Gateway, GatewayConfig, GatewayLine, Inbound, Routes, Timeouts,
-};
+use ferrobus_tools::gateway::{AllowAll, Authorize, FrontConfig, Gateway, GatewayConfig, GatewayLine, Inbound, Routes};
 use tokio::io::{AsyncWriteExt, DuplexStream};
 use tokio::net::TcpListener;
 
@@ -30,7 +28,7 @@ fn connect(gateway: &Gateway) -> DuplexStream {
     let serving = gateway.clone();
     tokio::spawn(async move {
         let mut authorize = AllowAll;
-        serving.serve_connection(server, "test client", Inbound::Mbap, &mut authorize, Timeouts::default()).await
+        serving.serve_connection(server, "test client", Inbound::Mbap, &mut authorize, ConnectionPolicy::TCP).await
     });
     client
 }
@@ -143,8 +141,12 @@ async fn the_gateway_serves_a_new_client_while_many_addresses_fill_its_cap_and_k
     let gateway = Gateway::start(config).await.unwrap();
     let listener = tokio::net::TcpListener::bind("127.0.0.1:0").await.unwrap();
     let addr = listener.local_addr().unwrap();
-    let limits =
-        TcpLimits { max_connections: 6, max_per_source: PER_SOURCE, idle_timeout: None, ..TcpLimits::default() };
+    let limits = TcpLimits {
+        max_connections: 6,
+        max_per_source: PER_SOURCE,
+        connection: ConnectionPolicy { idle: None, ..ConnectionPolicy::TCP },
+        ..TcpLimits::default()
+    };
     let stats = Arc::clone(&limits.stats);
     let front = FrontConfig { limits, ..FrontConfig::default() };
     let allow = |_| Box::new(AllowAll) as Box<dyn Authorize>;

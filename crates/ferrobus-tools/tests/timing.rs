@@ -8,7 +8,7 @@ use std::sync::{Arc, Mutex};
 use std::time::Duration;
 
 use ferrobus::port::{BoxPort, ConnectWith, Framing};
-use ferrobus::server::{Answering, Fate, ReplyFilter, ServerOptions, serve};
+use ferrobus::server::{Answering, ConnectionPolicy, Fate, ReplyFilter, ServerOptions, serve};
 use ferrobus::{Client, ClientConfig, Timer, Transport};
 use ferrobus_proto::ExceptionCode;
 use ferrobus_proto::crc::crc16_wire;
@@ -17,7 +17,7 @@ use ferrobus_proto::frame::rtu::RtuCodec;
 use ferrobus_proto::frame::{Expect, LineConfig, LineTiming};
 use ferrobus_proto::slave::{Handler, Slave, SlaveConfig};
 use ferrobus_tools::gateway::{
-    AllowAll, Gateway, GatewayConfig, GatewayLine, Inbound, OnFailure, Routes, Timeouts, Upstream, serve_reverse,
+    AllowAll, Gateway, GatewayConfig, GatewayLine, Inbound, OnFailure, Routes, Upstream, serve_reverse,
 };
 use tokio::io::{AsyncReadExt, AsyncWriteExt, DuplexStream};
 use tokio::time::Instant;
@@ -190,7 +190,7 @@ async fn the_gateway_front_answers_rtu_over_tcp_no_earlier_than_t3_5_even_from_i
     let gw = gateway(&device).await;
     let (mut client, server) = tokio::io::duplex(4096);
     tokio::spawn(async move {
-        gw.serve_connection(server, "rtu client", Inbound::RtuOverTcp, &mut AllowAll, Timeouts::default()).await
+        gw.serve_connection(server, "rtu client", Inbound::RtuOverTcp, &mut AllowAll, ConnectionPolicy::TCP).await
     });
     let t3_5 = *Transport::rtu_over_tcp("the gateway's clients").timing();
     let t3_5 = t3_5.t3_5();

@@ -19,9 +19,10 @@
 //! once, so that one host cannot take every slot; past [`TcpLimits::max_connections`] the
 //! connection least worth keeping (one in its handshake, one never answered, the one idle
 //! longest) is closed to make room, so that many hosts cannot lock a new client out
-//! ([`TcpLimits`] says which). A connection is closed when it is idle for [`ServerOptions::idle_timeout`], when a
-//! frame begun is not finished within [`ServerOptions::frame_timeout`], or when its MBAP framing
-//! is lost (a bad header: nothing after it is executed); each is logged and counted. Requests
+//! ([`TcpLimits`] says which). A connection is closed on its [`ConnectionPolicy`], which the
+//! core's slave engine applies on its own time: when it is idle (nothing outstanding), when a
+//! frame begun is not finished in time, or when its MBAP framing is lost (a bad header:
+//! nothing after it is executed); each is logged and counted. Requests
 //! written back to back are answered in order; while the engine's reply queue is full the
 //! driver stops reading the socket, so a client that does not read its replies is slowed by
 //! TCP, not answered out of order or dropped.
@@ -37,7 +38,6 @@ use std::sync::{Arc, Mutex, MutexGuard, PoisonError};
 use std::time::Duration;
 
 use ferrobus_proto::FunctionCode;
-use ferrobus_proto::error::DiscardReason;
 use ferrobus_proto::frame::{Framing, LineTiming};
 use ferrobus_proto::master::MAX_TX_LEN;
 use ferrobus_proto::pdu::AddressRange;
@@ -51,6 +51,7 @@ use crate::timer::Timer;
 pub use accept::{ACCEPT_BACKOFF, TcpCounts, TcpLimits, TcpStats};
 pub use accept::{Handshake, Tracked, Tracker, accept_connections, accept_handshaking};
 pub use authorize::Authorize;
+pub use ferrobus_proto::slave::{Closed, ConnectionPolicy};
 
 /// What happens to a reply on its way out.
 #[derive(Clone, Copy, PartialEq, Eq, Debug)]
@@ -191,55 +192,26 @@ pub struct ServerOptions {
     pub filter: Option<Box<dyn ReplyFilter>>,
     /// Called with every event.
     pub observer: Option<Box<dyn FnMut(ServerEvent) + Send>>,
-    /// Close the port when nothing arrives or leaves for this long (a TCP connection; `None`:
-    /// never).
-    pub idle_timeout: Option<Duration>,
-    /// Close the port when a frame begun is not complete this long after its first byte
-    /// (framings that end frames by time never are; `None`: never).
-    pub frame_timeout: Option<Duration>,
+    /// When the connection is closed, and how many requests it may have outstanding (`None`:
+    /// the listener's [`TcpLimits::connection`] over TCP, [`ConnectionPolicy::NONE`] on a
+    /// serial line).
+    pub connection: Option<ConnectionPolicy>,
     /// Checks every request before it is answered (a TLS client's role): `Err(code)`
     /// answers it with exception `code` (a broadcast: not at all) and the [`Service`] never
     /// sees it.
     pub authorize: Option<Box<dyn Authorize>>,
 }
 
-/// Why the server closed a connection: the payload of the error [`serve`] returns for it.
-#[derive(Clone, Copy, PartialEq, Eq, Debug)]
-#[non_exhaustive]
-pub enum Closed {
-    /// Nothing arrived or left for [`ServerOptions::idle_timeout`].
-    Idle(Duration),
-    /// A frame begun was not complete [`ServerOptions::frame_timeout`] after its first byte.
-    UnfinishedFrame(Duration),
-    /// An MBAP header with a protocol id other than 0 or a length outside 2..=254: the
-    /// stream's framing is lost.
-    BadHeader,
+/// The error a session ends with when it closes its connection for `reason` (what
+/// [`close_reason`] finds again).
+pub fn close_error(reason: Closed) -> io::Error {
+    let kind = if reason == Closed::BadHeader { io::ErrorKind::InvalidData } else { io::ErrorKind::TimedOut };
+    io::Error::new(kind, reason)
 }
 
-impl std::fmt::Display for Closed {
-    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        match self {
-            Closed::Idle(d) => write!(f, "idle for {d:?}: connection closed"),
-            Closed::UnfinishedFrame(d) => write!(f, "a frame begun was not finished within {d:?}: connection closed"),
-            Closed::BadHeader => f.write_str("invalid MBAP header (framing lost): connection closed"),
-        }
-    }
-}
-
-impl std::error::Error for Closed {}
-
-impl Closed {
-    /// The error a session ends with when it closes its connection for this reason (what
-    /// [`Closed::of`] finds again).
-    pub fn error(self) -> io::Error {
-        let kind = if self == Closed::BadHeader { io::ErrorKind::InvalidData } else { io::ErrorKind::TimedOut };
-        io::Error::new(kind, self)
-    }
-
-    /// The reason behind `error`, if the server closed the connection itself.
-    pub fn of(error: &io::Error) -> Option<Closed> {
-        error.get_ref().and_then(|e| e.downcast_ref::<Closed>()).copied()
-    }
+/// Why the server closed the connection itself, if `error` says it did ([`close_error`]).
+pub fn close_reason(error: &io::Error) -> Option<Closed> {
+    error.get_ref().and_then(|e| e.downcast_ref::<Closed>()).copied()
 }
 
 impl ServerOptions {
@@ -252,8 +224,7 @@ impl ServerOptions {
             timing,
             filter: None,
             observer: None,
-            idle_timeout: None,
-            frame_timeout: None,
+            connection: None,
             authorize: None,
         }
     }
@@ -266,8 +237,7 @@ impl ServerOptions {
             timing: *transport.timing(),
             filter: None,
             observer: None,
-            idle_timeout: None,
-            frame_timeout: None,
+            connection: None,
             authorize: None,
         }
     }
@@ -300,16 +270,13 @@ pub fn serve<'a, F: Framing + 'a, S: Service + ?Sized>(
     let mut engine = Box::new(slave);
     async move {
         let mut pump = Pump::new(options.timer.sleeper());
+        engine.set_connection_policy(options.connection.unwrap_or_default(), pump.clock().now());
         let mut session = Box::new(Replies {
             service,
             options,
             tx: [0u8; MAX_TX_LEN],
             delayed: VecDeque::new(),
             answering: VecDeque::new(),
-            last_activity: tokio::time::Instant::now(),
-            frame_began: None,
-            idle_at: None,
-            unfinished_at: None,
             woke: false,
         });
         let ended = pump.run(&mut port, &mut *engine, &mut *session).await;
@@ -319,8 +286,8 @@ pub fn serve<'a, F: Framing + 'a, S: Service + ?Sized>(
 
 /// The server's session around the pump: answers the requests the engine hands out (the
 /// authorization filter first, then the service), reports events, passes replies through
-/// the reply filter and writes them in order, and closes the port on the idle and
-/// unfinished-frame timeouts.
+/// the reply filter and writes them in order, and closes the port when the engine is done with
+/// the connection ([`Slave::closed`]).
 struct Replies<'o, S: ?Sized> {
     service: &'o mut S,
     options: &'o mut ServerOptions,
@@ -330,12 +297,6 @@ struct Replies<'o, S: ?Sized> {
     delayed: VecDeque<(Outgoing, tokio::time::Instant)>,
     /// The requests whose replies have not gone out yet, oldest first.
     answering: VecDeque<Answering>,
-    last_activity: tokio::time::Instant,
-    /// When the frame now being received began.
-    frame_began: Option<tokio::time::Instant>,
-    /// When the idle and the unfinished-frame timeouts are due, as the last turn set them.
-    idle_at: Option<tokio::time::Instant>,
-    unfinished_at: Option<tokio::time::Instant>,
     /// A deadline came: held replies now due go out before anything else.
     woke: bool,
 }
@@ -344,19 +305,23 @@ impl<F: Framing, S: Service + ?Sized> Session<Slave<F>> for Replies<'_, S> {
     type Output = io::Result<()>;
 
     async fn serve(&mut self, pump: &Pump, port: &mut BoxPort, engine: &mut Slave<F>) -> Option<Self::Output> {
+        if let Some(closed @ (Closed::Idle(_) | Closed::UnfinishedFrame(_))) = engine.closed() {
+            // (The replies owed before a bad header still go out.)
+            return Some(Err(close_error(closed)));
+        }
         answer_requests(engine, &mut *self.service, &mut self.options.authorize);
+        let idle = engine.connection_policy().idle;
         if std::mem::take(&mut self.woke) {
             while self.delayed.front().is_some_and(|(_, at)| *at <= tokio::time::Instant::now()) {
                 let Some((reply, _)) = self.delayed.pop_front() else { break };
-                if let Err(e) = send(port, reply, self.options).await {
+                if let Err(e) = send(port, reply, idle, self.options).await {
                     return Some(Err(e));
                 }
-                self.last_activity = tokio::time::Instant::now();
             }
         }
         let now = pump.clock().now();
         // Events first: a request is known before its reply leaves (on TCP, at once).
-        let lost = take_events(engine, &mut self.answering, self.options);
+        take_events(engine, &mut self.answering, self.options);
         loop {
             let due = engine.reply_due().map_or_else(tokio::time::Instant::now, |t| pump.clock().to_tokio(t));
             let Some(n) = engine.poll_transmit(now, &mut self.tx) else { break };
@@ -375,10 +340,9 @@ impl<F: Framing, S: Service + ?Sized> Session<Slave<F>> for Replies<'_, S> {
             let reply = Outgoing { frame, due, gap };
             let behind = self.delayed.back().map(|(_, at)| *at);
             if wait.is_zero() && behind.is_none() {
-                if let Err(e) = send(port, reply, self.options).await {
+                if let Err(e) = send(port, reply, idle, self.options).await {
                     return Some(Err(e));
                 }
-                self.last_activity = tokio::time::Instant::now();
                 continue;
             }
             // A delay too long to add to an instant never ends: the reply is as good as dropped.
@@ -390,26 +354,16 @@ impl<F: Framing, S: Service + ?Sized> Session<Slave<F>> for Replies<'_, S> {
         }
         // The replies to the requests before a bad header have gone; nothing after it is
         // executed.
-        lost.then(|| Err(Closed::BadHeader.error()))
+        engine.closed().map(|closed| Err(close_error(closed)))
     }
 
-    fn deadline(&mut self, engine: &Slave<F>) -> Option<tokio::time::Instant> {
-        self.frame_began =
-            if engine.framing().is_mid_frame() { self.frame_began.or(Some(self.last_activity)) } else { None };
-        // A timeout too long to add to an instant is no deadline at all.
-        self.idle_at = self.options.idle_timeout.and_then(|d| self.last_activity.checked_add(d));
-        self.unfinished_at =
-            self.options.frame_timeout.zip(self.frame_began).and_then(|(d, began)| began.checked_add(d));
-        [self.delayed.front().map(|(_, d)| *d), self.idle_at, self.unfinished_at].into_iter().flatten().min()
-    }
-
-    fn on_read(&mut self) {
-        self.last_activity = tokio::time::Instant::now();
+    fn deadline(&mut self, _engine: &Slave<F>) -> Option<tokio::time::Instant> {
+        self.delayed.front().map(|(_, at)| *at)
     }
 
     fn on_wake(&mut self) -> Option<Self::Output> {
         self.woke = true;
-        overdue(self.options, self.idle_at, self.unfinished_at).map(|closed| Err(closed.error()))
+        None
     }
 
     fn on_end(&mut self, error: Option<io::Error>) -> Self::Output {
@@ -436,16 +390,9 @@ pub(crate) fn answer_requests<F: Framing, S: Service + ?Sized>(
     }
 }
 
-/// Reports the engine's events and notes what each reply to come answers. Returns whether
-/// the MBAP framing was lost (a bad header): the connection must close.
-fn take_events<F: Framing>(
-    engine: &mut Slave<F>,
-    answering: &mut VecDeque<Answering>,
-    options: &mut ServerOptions,
-) -> bool {
-    let mut lost = false;
+/// Reports the engine's events and notes what each reply to come answers.
+fn take_events<F: Framing>(engine: &mut Slave<F>, answering: &mut VecDeque<Answering>, options: &mut ServerOptions) {
     while let Some(event) = engine.poll_event() {
-        lost |= matches!(event, SlaveEvent::Discarded { reason: DiscardReason::BadHeader, .. });
         if let Some(request) = Answering::of(&event) {
             if answering.len() == ANSWERING_MAX {
                 answering.pop_front();
@@ -454,7 +401,6 @@ fn take_events<F: Framing>(
         }
         options.observe(ServerEvent::Slave { event, at: tokio::time::Instant::now() });
     }
-    lost
 }
 
 /// A reply on its way out.
@@ -466,10 +412,15 @@ struct Outgoing {
     gap: Option<Duration>,
 }
 
-/// Writes `reply` and reports it.
-async fn send(port: &mut BoxPort, reply: Outgoing, options: &mut ServerOptions) -> io::Result<()> {
+/// Writes `reply` within `idle` and reports it.
+async fn send(
+    port: &mut BoxPort,
+    reply: Outgoing,
+    idle: Option<Duration>,
+    options: &mut ServerOptions,
+) -> io::Result<()> {
     let at = tokio::time::Instant::now();
-    let (idle, rs485, timing) = (options.idle_timeout, options.rs485, options.timing);
+    let (rs485, timing) = (options.rs485, options.timing);
     match reply.gap {
         None => write(port, &reply.frame, idle, rs485, timing).await?,
         Some(gap) => {
@@ -485,21 +436,6 @@ async fn send(port: &mut BoxPort, reply: Outgoing, options: &mut ServerOptions) 
     Ok(())
 }
 
-/// The close due now, if the idle or the unfinished-frame deadline has passed.
-fn overdue(
-    options: &ServerOptions,
-    idle_at: Option<tokio::time::Instant>,
-    unfinished_at: Option<tokio::time::Instant>,
-) -> Option<Closed> {
-    let now = tokio::time::Instant::now();
-    let passed = |at: Option<tokio::time::Instant>| at.is_some_and(|at| now >= at);
-    match (options.idle_timeout, options.frame_timeout) {
-        (Some(d), _) if passed(idle_at) => Some(Closed::Idle(d)),
-        (_, Some(d)) if passed(unfinished_at) => Some(Closed::UnfinishedFrame(d)),
-        _ => None,
-    }
-}
-
 /// Writes `frame`; a write that does not finish within the idle timeout (a peer that reads
 /// nothing) fails.
 async fn write(
@@ -512,7 +448,7 @@ async fn write(
     match idle_timeout {
         Some(d) => tokio::time::timeout(d, write_frame(port, frame, rs485, &timing))
             .await
-            .unwrap_or_else(|_| Err(Closed::Idle(d).error())),
+            .unwrap_or_else(|_| Err(close_error(Closed::Idle(d)))),
         None => write_frame(port, frame, rs485, &timing).await,
     }
 }
@@ -582,15 +518,14 @@ where
 {
     let TcpServeConfig { transport, slave: config, limits } = serve;
     let options = Arc::new(options);
-    let (idle, unfinished) = (limits.idle_timeout, limits.frame_timeout);
+    let connection = limits.connection;
     accept_connections(listener, &limits, move |stream, _peer| {
         let transport = transport.clone();
         let mut handler = handler.clone();
         let options = Arc::clone(&options);
         async move {
             let mut options = options();
-            options.idle_timeout = options.idle_timeout.or(idle);
-            options.frame_timeout = options.frame_timeout.or(unfinished);
+            options.connection = options.connection.or(Some(connection));
             serve_transport(&transport, Box::new(stream), config, &mut handler, &mut options).await
         }
     })

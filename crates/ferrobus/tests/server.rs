@@ -6,7 +6,9 @@
 use std::time::Duration;
 
 use ferrobus::Timer;
-use ferrobus::server::{Answering, Closed, Fate, ReplyFilter, ServerOptions, Service, Shared, serve};
+use ferrobus::server::{
+    Answering, Closed, ConnectionPolicy, Fate, ReplyFilter, ServerOptions, Service, Shared, close_reason, serve,
+};
 use ferrobus_proto::ExceptionCode;
 use ferrobus_proto::frame::mbap::MbapCodec;
 use ferrobus_proto::frame::{Framing, LineConfig, LineTiming};
@@ -45,8 +47,7 @@ fn mbap(t: u16, unit: u8, pdu: &[u8]) -> Vec<u8> {
 
 fn options(idle: Option<Duration>, frame: Option<Duration>) -> ServerOptions {
     let mut options = ServerOptions::new(LineTiming::new(&LineConfig::new(19_200).unwrap()), Timer::Tokio);
-    options.idle_timeout = idle;
-    options.frame_timeout = frame;
+    options.connection = Some(ConnectionPolicy { idle, frame, ..ConnectionPolicy::NONE });
     options
 }
 
@@ -71,7 +72,7 @@ async fn an_idle_connection_is_closed_after_the_idle_timeout_and_not_before() {
     let (_client, server) = start(1024, options(Some(Duration::from_secs(60)), Some(Duration::from_secs(5))));
     let (ended, _, after) = server.await.unwrap();
     let err = ended.expect_err("closed");
-    assert_eq!(Closed::of(&err), Some(Closed::Idle(Duration::from_secs(60))), "{err}");
+    assert_eq!(close_reason(&err), Some(Closed::Idle(Duration::from_secs(60))), "{err}");
     assert!(after >= Duration::from_secs(60) && after < Duration::from_secs(61), "closed after {after:?}");
 }
 
@@ -87,7 +88,7 @@ async fn a_frame_begun_and_never_finished_is_closed_after_the_frame_timeout() {
     }
     let (ended, _, after) = server.await.unwrap();
     let err = ended.expect_err("closed");
-    assert_eq!(Closed::of(&err), Some(Closed::UnfinishedFrame(Duration::from_secs(5))), "{err}");
+    assert_eq!(close_reason(&err), Some(Closed::UnfinishedFrame(Duration::from_secs(5))), "{err}");
     assert!(after >= Duration::from_secs(5) && after < Duration::from_secs(6), "closed after {after:?}");
 }
 
@@ -99,7 +100,7 @@ async fn a_bad_mbap_header_closes_the_connection_and_the_write_behind_it_is_not_
     client.write_all(&input).await.unwrap();
     let (ended, device, _) = server.await.unwrap();
     let err = ended.expect_err("closed");
-    assert_eq!(Closed::of(&err), Some(Closed::BadHeader), "{err}");
+    assert_eq!(close_reason(&err), Some(Closed::BadHeader), "{err}");
     assert_eq!((device.writes, device.registers[5]), (0, 0), "nothing executed");
     let mut rest = Vec::new();
     client.read_to_end(&mut rest).await.unwrap();

@@ -24,6 +24,7 @@
 //!   rest, stops reading, and hands them in again once replies are written and events
 //!   polled ([`Slave::is_blocked`]). Nothing is dropped; over TCP that is back-pressure.
 
+mod connection;
 mod deferred;
 mod diag;
 mod handler;
@@ -35,6 +36,7 @@ mod tests;
 
 use core::time::Duration;
 
+pub use connection::{Closed, ConnectionPolicy};
 pub use deferred::{ANSWER_LIMIT, AnswerError, Incoming};
 pub use diag::{Counters, EventLog, event};
 pub use handler::{Admission, Handler};
@@ -46,6 +48,7 @@ use crate::frame::{Adu, Direction, Framing, RxEvent};
 use crate::master::MAX_TX_LEN;
 use crate::pdu::{AddressRange, CommEventLog, Diagnostic, ExceptionResponse, MAX_PDU_LEN, Request, Response};
 use crate::time::{Instant, earliest};
+use connection::Watch;
 use diag::bump;
 use pending::{Entry, Slots, State};
 use ring::Ring;
@@ -188,7 +191,7 @@ pub const EVENT_QUEUE: usize = REPLY_QUEUE + 8;
 
 /// The requests that may be in the engine at once over a framing without broadcast
 /// (Modbus/TCP): waiting for their answer or for their reply to go out, the one being sent
-/// included (fewer with [`Slave::set_max_pending`]). A serial line holds one.
+/// included (fewer with [`ConnectionPolicy::max_pending`]). A serial line holds one.
 pub const REPLY_QUEUE: usize = 16;
 
 /// The most events one frame can report.
@@ -247,8 +250,8 @@ struct Core {
     gap: Duration,
     /// How long a request handed out may wait for its answer.
     answer_limit: Option<Duration>,
-    /// The requests that may be in the engine at once, 1..=REPLY_QUEUE (not serial).
-    max_pending: usize,
+    /// The connection's policy, and what applying it needs.
+    watch: Watch,
     counters: Counters,
     /// The comm event counter of 0x0B.
     comm_events: u16,
@@ -296,7 +299,7 @@ impl<F: Framing> Slave<F> {
                 serial,
                 gap,
                 answer_limit: Some(ANSWER_LIMIT),
-                max_pending: REPLY_QUEUE,
+                watch: Watch::new(),
                 counters: Counters::default(),
                 comm_events: 0,
                 log: EventLog::default(),
@@ -334,16 +337,8 @@ impl<F: Framing> Slave<F> {
         self.core.answer_limit = limit;
     }
 
-    /// How many requests may be in the engine at once over a framing without broadcast: past
-    /// it the engine takes no more bytes ([`Slave::is_blocked`]) until a reply has gone out —
-    /// a gateway's bound on what one client has outstanding. At least 1, at most
-    /// [`REPLY_QUEUE`] (the default).
-    pub fn set_max_pending(&mut self, max: usize) {
-        self.core.max_pending = max.clamp(1, REPLY_QUEUE);
-    }
-
     /// Takes a serial framing's requests as a stream's: several may be outstanding (up to
-    /// [`Slave::set_max_pending`]) and unit 0 is a unit like any other, handed out without
+    /// [`ConnectionPolicy::max_pending`]) and unit 0 is a unit like any other, handed out without
     /// the broadcast flag — RTU frames over TCP to a gateway, which decides itself what unit 0
     /// means. Without it (the default) a serial framing keeps the line's rules: one request
     /// at a time, unit 0 a broadcast.
@@ -391,7 +386,7 @@ impl<F: Framing> Slave<F> {
         let core = &self.core;
         let waiting = core.slots.iter().filter(|e| e.is_waiting()).count();
         core.events.len().saturating_add(EVENTS_PER_FRAME).saturating_add(waiting) > EVENT_QUEUE
-            || (!core.serial && core.pending_replies() >= core.max_pending)
+            || (!core.serial && core.pending_replies() >= core.watch.policy.max_pending)
     }
 
     /// Bytes arrived at `now`; returns how many were taken. Every request framed is answered
@@ -411,16 +406,21 @@ impl<F: Framing> Slave<F> {
         self.drain(handler.as_deref_mut());
         loop {
             if self.is_blocked() {
-                return consumed;
+                break;
             }
             let rest = bytes.get(consumed..).unwrap_or_default();
             let n = self.framing.push(now, rest);
             consumed = consumed.saturating_add(n).min(bytes.len());
             let any = self.drain(handler.as_deref_mut());
             if !any && (consumed >= bytes.len() || n == 0) {
-                return consumed;
+                break;
             }
         }
+        if consumed > 0 {
+            self.core.watch.active(now);
+        }
+        self.core.watch.track_frame(self.framing.is_mid_frame(), now, false);
+        consumed
     }
 
     /// Hands the receiver's events to the engine while it has room for them; returns whether
@@ -453,7 +453,8 @@ impl<F: Framing> Slave<F> {
     /// The next instant [`Slave::handle_timeout`] (or [`Slave::wake`]) must be called.
     pub fn poll_timeout(&self) -> Option<Instant> {
         let limit = self.core.slots.iter().filter(|e| e.is_waiting()).filter_map(|e| e.limit).min();
-        earliest(earliest(self.framing.poll_timeout(), self.core.tx_due), limit)
+        let engine = earliest(earliest(self.framing.poll_timeout(), self.core.tx_due), limit);
+        earliest(engine, self.connection_deadline())
     }
 
     /// `now` has come: ends silent intervals and answers, through `handler`, the requests the
@@ -465,7 +466,8 @@ impl<F: Framing> Slave<F> {
         self.on_bytes(now, &[], handler);
     }
 
-    /// Finishes, without a reply, the requests whose answer limit has passed at `now`.
+    /// Finishes, without a reply, the requests whose answer limit has passed at `now`, then
+    /// closes the connection if its policy says so.
     fn expire(&mut self, now: Instant) {
         loop {
             let expired = self.core.slots.iter().find(|e| e.is_waiting() && e.limit.is_some_and(|l| now >= l));
@@ -473,6 +475,7 @@ impl<F: Framing> Slave<F> {
             let _ = self.core.complete(id, Outcome::Silent, Duration::ZERO);
         }
         self.apply();
+        self.check_connection(now);
     }
 
     /// When the pending reply is due, if there is one.
@@ -483,11 +486,13 @@ impl<F: Framing> Slave<F> {
     /// The reply to write now, if one is due: copies it into `buf` (which should hold
     /// [`MAX_TX_LEN`] bytes) and returns its length.
     pub fn poll_transmit(&mut self, now: Instant, buf: &mut [u8]) -> Option<usize> {
-        let core = &mut self.core;
-        if core.tx_due.is_none_or(|due| now < due) {
+        if self.core.tx_due.is_none_or(|due| now < due) {
             return None;
         }
+        let held_back = self.is_blocked();
+        let core = &mut self.core;
         core.tx_due = None;
+        core.watch.active(now);
         let n = core.tx_len;
         let copied = match (buf.get_mut(..n), core.tx.get(..n)) {
             (Some(dst), Some(src)) => {
@@ -498,6 +503,10 @@ impl<F: Framing> Slave<F> {
             _ => None,
         };
         self.load_next();
+        if held_back && !self.is_blocked() {
+            // The engine reads again: a frame begun is timed from now.
+            self.core.watch.track_frame(self.framing.is_mid_frame(), now, true);
+        }
         copied
     }
 
@@ -572,6 +581,10 @@ impl Core {
                         bump(&mut self.counters.bus_char_overruns);
                         event::RECEIVE_OVERRUN
                     }
+                    DiscardReason::BadHeader => {
+                        self.watch.closed = self.watch.closed.or(Some(Closed::BadHeader));
+                        0
+                    }
                     _ => 0,
                 };
                 if flag != 0 {
@@ -621,7 +634,11 @@ impl Core {
             }
             return silent(self);
         }
-        let busy = if self.serial { self.pending_replies() > 0 } else { self.pending_replies() >= self.max_pending };
+        let busy = if self.serial {
+            self.pending_replies() > 0
+        } else {
+            self.pending_replies() >= self.watch.policy.max_pending
+        };
         // A serial line: still answering the previous request, a master that does not wait.
         // Over TCP the queue is full, which `Slave::is_blocked` prevents. A PDU longer than
         // any valid one cannot be held.

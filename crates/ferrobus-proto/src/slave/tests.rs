@@ -913,7 +913,7 @@ fn answer_with_is_the_same_dispatch_as_answering_at_once() {
 #[test]
 fn a_max_pending_bound_blocks_the_engine_at_that_many_requests_and_frees_it_with_a_reply() {
     let mut slave = Slave::new(MbapCodec::strict(), SlaveConfig::unit(1));
-    slave.set_max_pending(3);
+    slave.set_connection_policy(ConnectionPolicy { max_pending: 3, ..ConnectionPolicy::NONE }, Instant::ZERO);
     let input: Vec<u8> = (0..5u16).flat_map(|t| mbap(t, 1, &[0x03, 0, 0, 0, 1])).collect();
     let taken = slave.receive(Instant::ZERO, &input);
     let ids: Vec<RequestId> = core::iter::from_fn(|| slave.poll_request().map(|r| r.id)).collect();
@@ -941,4 +941,113 @@ fn rtu_taken_as_a_stream_pipelines_and_hands_unit_0_out_as_a_unit() {
     let due = slave.reply_due().expect("the first reply is due");
     assert_eq!(sent_at(&mut slave, due), rtu(1, &[0x03, 0x02, 0, 0]), "in request order");
     assert_eq!(slave.poll_transmit(due, &mut [0u8; MAX_TX_LEN]).map(|_| ()), Some(()), "unit 0 answered too");
+}
+
+/// A Modbus/TCP slave of unit 1 under `policy`, opened at 0.
+fn tcp_slave(policy: ConnectionPolicy) -> Slave<MbapCodec> {
+    let mut slave = Slave::new(MbapCodec::strict(), SlaveConfig::unit(1));
+    slave.set_connection_policy(policy, Instant::ZERO);
+    slave
+}
+
+const SECOND: Duration = Duration::from_secs(1);
+
+#[test]
+fn an_idle_connection_closes_at_its_idle_time_after_the_last_byte_and_not_a_nanosecond_before() {
+    let mut slave = tcp_slave(ConnectionPolicy { idle: Some(SECOND), ..ConnectionPolicy::NONE });
+    assert_eq!(slave.poll_timeout(), Some(Instant::from_secs(1)), "quiet since it was opened");
+    let read = mbap(1, 1, &[0x03, 0, 0, 0, 1]);
+    slave.on_bytes(Instant::from_millis(400), &read, &mut Device::new());
+    let due = slave.reply_due().unwrap();
+    assert!(slave.poll_transmit(due, &mut [0u8; MAX_TX_LEN]).is_some());
+    let at = due.checked_add(SECOND).unwrap();
+    assert_eq!(slave.poll_timeout(), Some(at), "quiet from the reply on");
+    slave.wake(Instant::from_nanos(at.as_nanos() - 1));
+    assert_eq!(slave.closed(), None);
+    slave.wake(at);
+    assert_eq!(slave.closed(), Some(Closed::Idle(SECOND)));
+    assert_eq!(slave.poll_timeout(), None, "a closed connection has no deadline left");
+}
+
+#[test]
+fn a_connection_is_never_idle_while_a_request_waits_for_its_answer() {
+    let mut slave = tcp_slave(ConnectionPolicy { idle: Some(SECOND), ..ConnectionPolicy::NONE });
+    slave.set_answer_limit(None);
+    slave.receive(Instant::ZERO, &mbap(1, 1, &[0x03, 0, 0, 0, 1]));
+    let id = slave.poll_request().unwrap().id;
+    assert_eq!(slave.poll_timeout(), None, "a slow device behind a gateway");
+    slave.wake(Instant::from_secs(3600));
+    assert_eq!(slave.closed(), None);
+    slave.respond(id, &[0x03, 0x02, 0, 7]).unwrap();
+    let at = Instant::from_secs(3601);
+    assert!(slave.poll_transmit(at, &mut [0u8; MAX_TX_LEN]).is_some());
+    assert_eq!(slave.poll_timeout(), Some(Instant::from_secs(3602)), "idle counts from the reply");
+}
+
+#[test]
+fn a_frame_begun_and_not_finished_closes_at_its_frame_time_after_its_first_byte() {
+    let policy = ConnectionPolicy { frame: Some(SECOND), ..ConnectionPolicy::NONE };
+    let read = mbap(1, 1, &[0x03, 0, 0, 0, 1]);
+    let mut slave = tcp_slave(policy);
+    assert_eq!(slave.poll_timeout(), None, "no frame begun");
+    slave.on_bytes(Instant::from_millis(100), &read[..3], &mut Device::new());
+    slave.on_bytes(Instant::from_millis(900), &read[3..5], &mut Device::new());
+    assert_eq!(slave.poll_timeout(), Some(Instant::from_millis(1100)), "from the first byte, not the last");
+    slave.wake(Instant::from_millis(1100));
+    assert_eq!(slave.closed(), Some(Closed::UnfinishedFrame(SECOND)));
+
+    let mut finished = tcp_slave(policy);
+    finished.on_bytes(Instant::from_millis(100), &read[..3], &mut Device::new());
+    finished.on_bytes(Instant::from_millis(900), &read[3..], &mut Device::new());
+    let due = finished.reply_due().unwrap();
+    assert!(finished.poll_transmit(due, &mut [0u8; MAX_TX_LEN]).is_some());
+    assert_eq!(finished.poll_timeout(), None, "the frame was finished");
+    finished.wake(Instant::from_secs(60));
+    assert_eq!(finished.closed(), None);
+}
+
+#[test]
+fn a_frame_is_not_timed_while_the_engine_holds_the_client_back_and_is_from_when_it_reads_again() {
+    let policy = ConnectionPolicy { frame: Some(SECOND), max_pending: 1, ..ConnectionPolicy::NONE };
+    let mut slave = tcp_slave(policy);
+    slave.set_answer_limit(None);
+    let second = mbap(2, 1, &[0x03, 0, 0, 0, 1]);
+    let input = [mbap(1, 1, &[0x03, 0, 0, 0, 1]).as_slice(), &second[..4]].concat();
+    slave.receive(Instant::ZERO, &input);
+    let id = slave.poll_request().unwrap().id;
+    assert!(slave.is_blocked() && slave.framing().is_mid_frame(), "a half frame behind a request outstanding");
+    slave.wake(Instant::from_secs(5));
+    assert_eq!((slave.poll_timeout(), slave.closed()), (None, None), "nothing is read: nothing is timed");
+    slave.respond(id, &[0x03, 0x02, 0, 7]).unwrap();
+    assert!(slave.poll_transmit(Instant::from_secs(10), &mut [0u8; MAX_TX_LEN]).is_some());
+    assert_eq!(slave.poll_timeout(), Some(Instant::from_secs(11)), "timed from when the engine reads again");
+    slave.receive(Instant::from_millis(10_500), &second[4..]);
+    assert_eq!(slave.poll_request().map(|r| r.transaction), Some(2));
+    assert_eq!(slave.poll_timeout(), None, "finished in time");
+}
+
+#[test]
+fn a_bad_mbap_header_closes_the_connection_after_the_replies_owed_before_it() {
+    let mut slave = tcp_slave(ConnectionPolicy::TCP);
+    let bad = [0u8, 9, 0, 7, 0, 6, 1, 3, 0, 0, 0, 1];
+    let input = [mbap(1, 1, &[0x03, 0, 0, 0, 1]).as_slice(), &bad].concat();
+    slave.on_bytes(Instant::ZERO, &input, &mut Device::new());
+    assert_eq!(slave.closed(), Some(Closed::BadHeader));
+    let due = slave.reply_due().expect("the request before it is still answered");
+    assert!(slave.poll_transmit(due, &mut [0u8; MAX_TX_LEN]).is_some());
+    assert_eq!(slave.poll_timeout(), None);
+}
+
+#[test]
+fn without_a_policy_nothing_closes_a_connection() {
+    let mut slave = Slave::new(MbapCodec::strict(), SlaveConfig::unit(1));
+    assert_eq!(slave.connection_policy(), ConnectionPolicy::NONE);
+    slave.receive(Instant::ZERO, &mbap(1, 1, &[0x03, 0, 0])[..5]);
+    assert_eq!(slave.poll_timeout(), None);
+    slave.wake(Instant::from_secs(u64::from(u32::MAX)));
+    assert_eq!(slave.closed(), None);
+    let huge = ConnectionPolicy { idle: Some(Duration::MAX), frame: Some(Duration::MAX), max_pending: 0 };
+    let slave = tcp_slave(huge);
+    assert_eq!(slave.connection_policy().max_pending, 1, "at least one request");
+    assert_eq!(slave.poll_timeout(), None, "a time past representable time is no deadline");
 }

@@ -7,9 +7,10 @@
 //! sends the replies in request order. The connection is generic over its stream, so a TLS
 //! stream is served by the same code as plain TCP. It keeps the hardened server's rules: a
 //! strict MBAP receiver (a bad header closes the connection: the stream's framing is lost),
-//! an idle timeout while nothing is outstanding, a timeout on a frame begun and never
-//! finished, and at most [`Timeouts::pipeline`] requests outstanding (the engine's
-//! [`Slave::set_max_pending`]). The bound holds frame by frame: the engine frames bytes only
+//! and the connection's [`ConnectionPolicy`], which the engine applies on its own time (an
+//! idle timeout while nothing is outstanding, a timeout on a frame begun and never finished,
+//! at most [`ConnectionPolicy::max_pending`] requests outstanding; [`Slave::closed`] says when
+//! it is done with the connection). The bound holds frame by frame: the engine frames bytes only
 //! while there is room for another request, and the socket is read again only once every
 //! byte read has been framed — so a client that floods (one read may hold a hundred requests)
 //! is held back by TCP instead of filling the lines' queues.
@@ -29,11 +30,11 @@ use tokio::io::{AsyncRead, AsyncWrite, AsyncWriteExt};
 use tokio::sync::oneshot;
 
 use super::back::{Job, exception};
-use super::{Authorize, Inbound, Inner, Timeouts, screen};
+use super::{Authorize, Inbound, Inner, screen};
 use ferrobus::log::Hex;
 use ferrobus::port::{BoxPort, Port};
 use ferrobus::pump::{Codec, Pump, Role, Session};
-use ferrobus::server::Closed;
+use ferrobus::server::{Closed, ConnectionPolicy, close_error};
 use ferrobus::timer::Timer;
 
 /// A request sent to a line (or to every line), waiting for its reply.
@@ -55,7 +56,7 @@ pub(crate) async fn serve<S>(
     peer: &str,
     inbound: Inbound,
     authorize: &mut dyn Authorize,
-    timeouts: Timeouts,
+    connection: ConnectionPolicy,
 ) -> io::Result<()>
 where
     S: AsyncRead + AsyncWrite + Unpin + Send + 'static,
@@ -65,24 +66,19 @@ where
     let config = SlaveConfig { units: (0..=u8::MAX).collect::<UnitSet>(), response_wait: Duration::ZERO };
     let mut slave = Box::new(Slave::new(Codec::for_transport(&inbound.transport(), Role::Server), config));
     slave.set_stream(true);
-    slave.set_max_pending(timeouts.pipeline);
     // Every line job is answered (its worker times the device out), or its channel closes.
     slave.set_answer_limit(None);
+    let mut pump = Pump::new(Timer::Tokio.sleeper());
+    slave.set_connection_policy(connection, pump.clock().now());
     let mut front = Box::new(Front {
         gateway,
         connection: gateway.next_connection(),
         peer,
         authorize,
-        timeouts,
         waiting: VecDeque::new(),
-        lost: false,
         tx: [0u8; MAX_TX_LEN],
-        last_activity: tokio::time::Instant::now(),
-        frame_began: None,
-        idle_at: None,
-        unfinished_at: None,
     });
-    Pump::new(Timer::Tokio.sleeper()).run(&mut port, &mut *slave, &mut *front).await
+    pump.run(&mut port, &mut *slave, &mut *front).await
 }
 
 /// The client's stream as a port of the pump.
@@ -124,36 +120,29 @@ impl<S: AsyncRead + AsyncWrite + Unpin + Send + 'static> Port for Stream<S> {}
 
 /// The connection's session around the pump: what checks, routes and queues each request
 /// the engine hands out, brings the lines' replies back into it, writes what it sends, and
-/// closes the connection on the idle and unfinished-frame timeouts.
+/// closes the connection when the engine is done with it.
 struct Front<'a> {
     gateway: &'a Inner,
     connection: u64,
     peer: &'a str,
     authorize: &'a mut dyn Authorize,
-    timeouts: Timeouts,
     /// The requests sent to a line, oldest first.
     waiting: VecDeque<Waiting>,
-    /// The stream's framing is lost (a bad MBAP header): nothing more is executed.
-    lost: bool,
     tx: [u8; MAX_TX_LEN],
-    last_activity: tokio::time::Instant,
-    /// When the frame now being received began.
-    frame_began: Option<tokio::time::Instant>,
-    /// When the idle and the unfinished-frame timeouts are due, as the last turn set them.
-    idle_at: Option<tokio::time::Instant>,
-    unfinished_at: Option<tokio::time::Instant>,
 }
 
 impl<F: Framing> Session<Slave<F>> for Front<'_> {
     type Output = io::Result<()>;
 
     async fn serve(&mut self, pump: &Pump, port: &mut BoxPort, engine: &mut Slave<F>) -> Option<Self::Output> {
+        if let Some(closed @ (Closed::Idle(_) | Closed::UnfinishedFrame(_))) = engine.closed() {
+            return Some(Err(close_error(closed)));
+        }
         self.settle(engine);
         let peer = self.peer;
         while let Some(event) = engine.poll_event() {
             if let SlaveEvent::Discarded { bytes, reason, .. } = event {
                 tracing::info!(%peer, "discarded {bytes} bytes: {reason:?}");
-                self.lost |= reason == ferrobus_proto::error::DiscardReason::BadHeader;
             }
         }
         // The strict receiver frames nothing after a bad header: every request handed out
@@ -166,7 +155,7 @@ impl<F: Framing> Session<Slave<F>> for Front<'_> {
         if let Err(e) = self.send_due(pump, port, engine).await {
             return Some(Err(e));
         }
-        if !self.lost {
+        if engine.closed() != Some(Closed::BadHeader) {
             return None;
         }
         // Nothing after a bad header is executed; what came before is still answered.
@@ -182,21 +171,7 @@ impl<F: Framing> Session<Slave<F>> for Front<'_> {
             front.settled = Some((&mut front.reply).await);
             self.settle(engine);
         }
-        Some(Err(Closed::BadHeader.error()))
-    }
-
-    fn deadline(&mut self, engine: &Slave<F>) -> Option<tokio::time::Instant> {
-        let reading = !engine.is_blocked();
-        self.frame_began = if reading && engine.framing().is_mid_frame() {
-            self.frame_began.or(Some(self.last_activity))
-        } else {
-            None
-        };
-        let outstanding = !self.waiting.is_empty() || engine.pending_replies() > 0;
-        // A timeout too long to add to an instant is no deadline at all.
-        self.idle_at = self.timeouts.idle.filter(|_| !outstanding).and_then(|d| self.last_activity.checked_add(d));
-        self.unfinished_at = self.timeouts.frame.zip(self.frame_began).and_then(|(d, began)| began.checked_add(d));
-        [self.idle_at, self.unfinished_at].into_iter().flatten().min()
+        Some(Err(close_error(Closed::BadHeader)))
     }
 
     async fn wait(&mut self) {
@@ -205,22 +180,6 @@ impl<F: Framing> Session<Slave<F>> for Front<'_> {
             Some(waiting) => waiting.settled = Some((&mut waiting.reply).await),
             None => std::future::pending().await,
         }
-    }
-
-    fn on_read(&mut self) {
-        self.last_activity = tokio::time::Instant::now();
-    }
-
-    fn on_wake(&mut self) -> Option<Self::Output> {
-        let now = tokio::time::Instant::now();
-        let passed = |at: Option<tokio::time::Instant>| at.is_some_and(|at| now >= at);
-        if let Some(d) = self.timeouts.idle.filter(|_| passed(self.idle_at)) {
-            return Some(Err(Closed::Idle(d).error()));
-        }
-        if let Some(d) = self.timeouts.frame.filter(|_| passed(self.unfinished_at)) {
-            return Some(Err(Closed::UnfinishedFrame(d).error()));
-        }
-        None
     }
 
     fn on_end(&mut self, error: Option<io::Error>) -> Self::Output {
@@ -303,11 +262,11 @@ impl Front<'_> {
 
     /// Writes the replies the engine has due, in request order.
     async fn send_due<F: Framing>(&mut self, pump: &Pump, port: &mut BoxPort, engine: &mut Slave<F>) -> io::Result<()> {
+        let idle = engine.connection_policy().idle;
         while let Some(n) = engine.poll_transmit(pump.clock().now(), &mut self.tx) {
             let frame = self.tx.get(..n).unwrap_or_default();
             tracing::info!(peer = %self.peer, "reply {}", Hex(frame));
-            write(port, frame, self.timeouts).await?;
-            self.last_activity = tokio::time::Instant::now();
+            write(port, frame, idle).await?;
         }
         Ok(())
     }
@@ -321,15 +280,15 @@ fn respond<F: Framing>(engine: &mut Slave<F>, id: RequestId, pdu: &[u8]) {
     }
 }
 
-/// Writes `frame`; a write that does not finish within the idle timeout (a peer that reads
-/// nothing) fails.
-async fn write(port: &mut BoxPort, frame: &[u8], timeouts: Timeouts) -> io::Result<()> {
+/// Writes `frame`; a write that does not finish within `idle` (a peer that reads nothing)
+/// fails.
+async fn write(port: &mut BoxPort, frame: &[u8], idle: Option<Duration>) -> io::Result<()> {
     let write = async {
         port.write_all(frame).await?;
         port.flush().await
     };
-    match timeouts.idle {
-        Some(d) => tokio::time::timeout(d, write).await.unwrap_or_else(|_| Err(Closed::Idle(d).error())),
+    match idle {
+        Some(d) => tokio::time::timeout(d, write).await.unwrap_or_else(|_| Err(close_error(Closed::Idle(d)))),
         None => write.await,
     }
 }

@@ -65,7 +65,7 @@
 //! parsed), so one client's odd requests — a user code the device ignores — never make a live
 //! unit answer 0x0B to every other client.
 //!
-//! One connection may have [`Timeouts::pipeline`] requests outstanding (queued or on the
+//! One connection may have [`ConnectionPolicy::max_pending`] requests outstanding (queued or on the
 //! line); past it the gateway stops reading that connection until a reply has gone out, so a
 //! client that writes faster than the line serves is held back by TCP's flow control. That is
 //! how a TCP server pushes back, and it loses nothing: a Modbus/TCP client that pipelines
@@ -126,7 +126,7 @@ use cache::Cache;
 pub use reverse::{OnFailure, Upstream, serve_reverse};
 use stats::{FrontStats, LineTraffic};
 
-use ferrobus::server::TcpLimits;
+use ferrobus::server::{ConnectionPolicy, TcpLimits};
 use ferrobus::{Client, ClientConfig, Error, Transport};
 
 /// Where requests for one unit go.
@@ -251,48 +251,15 @@ impl Inbound {
     }
 }
 
-/// The limits of each connection.
-#[derive(Clone, Copy, PartialEq, Eq, Debug)]
-pub struct Timeouts {
-    /// Close a connection when nothing arrives or leaves for this long while it has nothing
-    /// outstanding.
-    pub idle: Option<Duration>,
-    /// Close a connection whose frame begun is not finished this long after.
-    pub frame: Option<Duration>,
-    /// Requests one connection may have outstanding, queued or on the line (at least 1, at
-    /// most [`REPLY_QUEUE`](ferrobus_proto::slave::REPLY_QUEUE), the slave engine's slots);
-    /// past it its socket is not read until a reply has gone out.
-    pub pipeline: usize,
-}
-
-impl Default for Timeouts {
-    /// The TCP server's: 60 s idle, 5 s for a frame; 16 requests outstanding.
-    fn default() -> Self {
-        let limits = TcpLimits::default();
-        Timeouts { idle: limits.idle_timeout, frame: limits.frame_timeout, pipeline: 16 }
-    }
-}
-
 /// How the gateway's front end listens.
-#[derive(Clone, Debug)]
+#[derive(Clone, Debug, Default)]
 pub struct FrontConfig {
     /// What clients send.
     pub inbound: Inbound,
-    /// Connection caps and timeouts of the listener.
+    /// The listener's connection caps, and each connection's policy
+    /// ([`TcpLimits::connection`]: idle and frame timeouts, requests outstanding; past
+    /// [`ConnectionPolicy::max_pending`] its socket is not read until a reply has gone out).
     pub limits: TcpLimits,
-    /// Requests one connection may have outstanding ([`Timeouts::pipeline`]).
-    pub pipeline: usize,
-}
-
-impl Default for FrontConfig {
-    /// Modbus/TCP, the TCP server's limits, 16 requests outstanding per connection.
-    fn default() -> Self {
-        FrontConfig {
-            inbound: Inbound::default(),
-            limits: TcpLimits::default(),
-            pipeline: Timeouts::default().pipeline,
-        }
-    }
 }
 
 /// A gateway's settings.
@@ -436,20 +403,21 @@ impl Gateway {
     }
 
     /// Serves one client connection on `stream` until the client closes it (`Ok`), it fails,
-    /// or it is closed for cause (an error carrying a [`Closed`](ferrobus::server::Closed)
-    /// reason). `peer` names the client in the logs; every request passes `authorize` first.
+    /// or it is closed for cause on `connection`'s policy (an error carrying a
+    /// [`Closed`](ferrobus::server::Closed) reason, [`close_reason`](ferrobus::server::close_reason)).
+    /// `peer` names the client in the logs; every request passes `authorize` first.
     pub async fn serve_connection<S>(
         &self,
         stream: S,
         peer: &str,
         inbound: Inbound,
         authorize: &mut dyn Authorize,
-        timeouts: Timeouts,
+        connection: ConnectionPolicy,
     ) -> io::Result<()>
     where
         S: AsyncRead + AsyncWrite + Unpin + Send + 'static,
     {
-        front::serve(&self.inner, stream, peer, inbound, authorize, timeouts).await
+        front::serve(&self.inner, stream, peer, inbound, authorize, connection).await
     }
 
     /// Serves every connection `listener` accepts, as `front` says, within its limits (the
@@ -459,15 +427,15 @@ impl Gateway {
     where
         A: Fn(SocketAddr) -> Box<dyn Authorize> + Send + Sync + 'static,
     {
-        let FrontConfig { inbound, limits, pipeline } = front;
-        let timeouts = Timeouts { idle: limits.idle_timeout, frame: limits.frame_timeout, pipeline };
+        let FrontConfig { inbound, limits } = front;
+        let connection = limits.connection;
         let authorize = Arc::new(authorize);
         ferrobus::server::accept_connections(listener, &limits, |stream, peer| {
             let gateway = self.clone();
             let authorize = Arc::clone(&authorize);
             async move {
                 let mut auth = authorize(peer);
-                gateway.serve_connection(stream, &peer.to_string(), inbound, auth.as_mut(), timeouts).await
+                gateway.serve_connection(stream, &peer.to_string(), inbound, auth.as_mut(), connection).await
             }
         })
         .await

@@ -7,7 +7,7 @@ use std::sync::Arc;
 
 use tokio::net::TcpListener;
 
-use crate::gateway::{Authorize, Chain, FrontConfig, Gateway, Timeouts};
+use crate::gateway::{Authorize, Chain, FrontConfig, Gateway};
 use ferrobus::tls::{ServerTls, handshake};
 
 impl Gateway {
@@ -32,8 +32,8 @@ impl Gateway {
     where
         A: Fn(SocketAddr) -> Box<dyn Authorize> + Send + Sync + 'static,
     {
-        let FrontConfig { inbound, limits, pipeline } = front;
-        let timeouts = Timeouts { idle: limits.idle_timeout, frame: limits.frame_timeout, pipeline };
+        let FrontConfig { inbound, limits } = front;
+        let connection = limits.connection;
         let authorize = Arc::new(authorize);
         let stats = Arc::clone(&limits.stats);
         ferrobus::server::accept_handshaking(
@@ -51,7 +51,7 @@ impl Gateway {
                     };
                     let mut chain = Chain(vec![authorize(peer), Box::new(check)]);
                     gateway
-                        .serve_connection(tracker.track(stream), &peer.to_string(), inbound, &mut chain, timeouts)
+                        .serve_connection(tracker.track(stream), &peer.to_string(), inbound, &mut chain, connection)
                         .await
                 }
             },

@@ -23,8 +23,8 @@ use tokio::net::{TcpListener, TcpStream};
 
 use self::room::{Activity, Evicted, Slot, Slots, Standing};
 pub use self::room::{Tracked, Tracker};
-use super::Closed;
 use super::trim::Bursts;
+use super::{Closed, ConnectionPolicy};
 use crate::log::escape;
 
 /// How long accepting pauses when the process (or system) is out of file descriptors (handles
@@ -63,12 +63,10 @@ pub struct TcpLimits {
     /// Connections served at once from one source (an IPv4 address, an IPv6 /64); past it
     /// a new one from there is accepted and closed at once, logged and counted.
     pub max_per_source: usize,
-    /// Close a connection when nothing arrives or leaves for this long, unless its
-    /// [`ServerOptions::idle_timeout`](super::ServerOptions::idle_timeout) is set.
-    pub idle_timeout: Option<Duration>,
-    /// Close a connection whose frame begun is unfinished this long, unless its
-    /// [`ServerOptions::frame_timeout`](super::ServerOptions::frame_timeout) is set.
-    pub frame_timeout: Option<Duration>,
+    /// When each connection is closed (idle, a frame unfinished) and how many requests it
+    /// may have outstanding, unless its
+    /// [`ServerOptions::connection`](super::ServerOptions::connection) is set.
+    pub connection: ConnectionPolicy,
     /// After a burst of connections (see `server/trim.rs`), ask the allocator to give their
     /// freed memory back to the system (glibc's `malloc_trim`; elsewhere nothing). The
     /// application's decision, off by default: the `ferrobus` binary's servers turn it on.
@@ -79,13 +77,13 @@ pub struct TcpLimits {
 
 impl Default for TcpLimits {
     /// 1,000 connections (fits the common descriptor limit of 1,024), 100 from one source,
-    /// 60 s idle, 5 s for a frame, freed memory left to the allocator.
+    /// [`ConnectionPolicy::TCP`] (60 s idle, 5 s for a frame), freed memory left to the
+    /// allocator.
     fn default() -> Self {
         TcpLimits {
             max_connections: 1000,
             max_per_source: 100,
-            idle_timeout: Some(Duration::from_secs(60)),
-            frame_timeout: Some(Duration::from_secs(5)),
+            connection: ConnectionPolicy::TCP,
             release_memory_after_bursts: false,
             stats: Arc::default(),
         }
@@ -568,7 +566,7 @@ fn report(peer: SocketAddr, ended: io::Result<()>, stats: &TcpStats) {
         Err(e) => e,
     };
     // A front end's error may quote what the peer sent: escaped.
-    let Some(closed) = Closed::of(&e) else {
+    let Some(closed) = super::close_reason(&e) else {
         return tracing::debug!(%peer, "connection failed: {}", escape(&e.to_string()));
     };
     bump(match closed {

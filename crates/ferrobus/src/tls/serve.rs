@@ -34,7 +34,7 @@ where
 {
     let TcpServeConfig { transport, slave: config, limits } = serve;
     let options = Arc::new(options);
-    let (idle, unfinished) = (limits.idle_timeout, limits.frame_timeout);
+    let connection = limits.connection;
     let stats = Arc::clone(&limits.stats);
     crate::server::accept_handshaking(
         listener,
@@ -52,8 +52,7 @@ where
                 };
                 let mut options = options();
                 options.authorize = Some(Box::new(check));
-                options.idle_timeout = options.idle_timeout.or(idle);
-                options.frame_timeout = options.frame_timeout.or(unfinished);
+                options.connection = options.connection.or(Some(connection));
                 serve_transport(&transport, Box::new(tracker.track(stream)), config, &mut handler, &mut options).await
             }
         },

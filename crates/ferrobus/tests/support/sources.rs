@@ -6,7 +6,9 @@ use std::net::SocketAddr;
 use std::sync::Arc;
 use std::time::Duration;
 
-use ferrobus::server::{ServerOptions, Shared, TcpCounts, TcpLimits, TcpServeConfig, TcpStats, serve_tcp_with};
+use ferrobus::server::{
+    ConnectionPolicy, ServerOptions, Shared, TcpCounts, TcpLimits, TcpServeConfig, TcpStats, serve_tcp_with,
+};
 use ferrobus::{Timer, Transport};
 use ferrobus_proto::ExceptionCode;
 use ferrobus_proto::frame::LineTiming;
@@ -31,8 +33,12 @@ pub(crate) const PER_SOURCE: usize = 2;
 pub(crate) async fn server() -> (SocketAddr, Arc<TcpStats>) {
     let listener = tokio::net::TcpListener::bind("127.0.0.1:0").await.unwrap();
     let addr = listener.local_addr().unwrap();
-    let limits =
-        TcpLimits { max_connections: MAX, max_per_source: PER_SOURCE, idle_timeout: None, ..TcpLimits::default() };
+    let limits = TcpLimits {
+        max_connections: MAX,
+        max_per_source: PER_SOURCE,
+        connection: ConnectionPolicy { idle: None, ..ConnectionPolicy::TCP },
+        ..TcpLimits::default()
+    };
     let stats = Arc::clone(&limits.stats);
     let options = || ServerOptions::new(LineTiming::unpaced(), Timer::Tokio);
     let serve =
