@@ -7,8 +7,9 @@ pub(crate) mod text;
 use std::collections::HashMap;
 use std::ops::Range;
 
-use crate::model::{Profile, RegisterDef, ValueType};
-use crate::read::Spans;
+use toml::de::DeTable;
+
+use crate::model::{Profile, RegisterDef, ValueType, parse_key};
 use crate::source::Place;
 
 /// The byte offset of `field` in the entry whose header is at `span` of `text` (up to the
@@ -34,6 +35,46 @@ fn field_offset(text: &str, span: &Range<usize>, field: &str) -> usize {
 
 /// A problem, with the byte offset of the entry or field at fault when known.
 pub(crate) type Problem = (Option<usize>, String);
+
+/// The lists of entries, each an array of tables.
+pub(crate) const LISTS: [&str; 7] =
+    ["coils", "discrete_inputs", "registers", "inputs", "span", "exception_meaning", "fault_rule"];
+
+/// Where each entry that was read lies in the text (the span the TOML reader gives its table),
+/// in the order of the profile's lists: the reader finds them, the checks place problems by them.
+#[derive(Default)]
+pub(crate) struct Spans {
+    pub(crate) coils: Vec<Range<usize>>,
+    pub(crate) discrete_inputs: Vec<Range<usize>>,
+    pub(crate) registers: Vec<Range<usize>>,
+    pub(crate) inputs: Vec<Range<usize>>,
+    pub(crate) span: Vec<Range<usize>>,
+    pub(crate) fault_rule: Vec<Range<usize>>,
+    pub(crate) faults: Option<Range<usize>>,
+    pub(crate) state: Option<Range<usize>>,
+    /// The names of the entries that could not be read: a reference to one of them is not a
+    /// second mistake.
+    pub(crate) unread_names: Vec<String>,
+}
+
+/// What an entry of list `kind` is called in a message, as the checks call it:
+/// `[[registers]] 3 (F001)` by its number and name, `[[registers]] entry 3 (F001)` (counted
+/// from 1) when its number cannot be read.
+pub(crate) fn entry_name(kind: &str, index: usize, table: Option<&DeTable<'_>>) -> String {
+    let name = table
+        .and_then(|t| t.get("name"))
+        .and_then(|v| v.get_ref().as_str())
+        .map(|n| format!(" ({})", crate::source::bounded(&n.chars().take(64).collect::<String>())))
+        .unwrap_or_default();
+    let number = table
+        .and_then(|t| t.get("number"))
+        .and_then(|v| v.get_ref().as_integer())
+        .and_then(|n| u32::from_str_radix(&n.as_str().replace('_', ""), n.radix()).ok());
+    match number {
+        Some(number) => format!("[[{kind}]] {number}{name}"),
+        None => format!("[[{kind}]] entry {}{name}", index.saturating_add(1)),
+    }
+}
 
 impl Profile {
     /// Every problem of the profile parsed from `text`, in the file's sections' order.
@@ -201,11 +242,6 @@ impl Profile {
             }
         }
     }
-}
-
-/// A raw integer written in a profile key: the one grammar of integers, [`crate::text::integer`].
-pub(crate) fn parse_key(key: &str) -> Option<i128> {
-    crate::text::integer(key).map(|(value, _)| value)
 }
 
 #[allow(clippy::too_many_lines)]

@@ -7,55 +7,8 @@
 //! read and write on a [`Point::raw`] of the type and word order typed. The layout of bytes
 //! over registers is the core's [`Order`] (`ferrobus_proto::words`).
 
-use std::fmt;
-
-use crate::model::{Order, ValueType};
-use crate::point::Point;
+use crate::model::{Order, Point, Value, ValueType};
 use crate::text::{self, Radix};
-
-/// A point's raw value, as the device holds it.
-#[derive(Clone, Debug, PartialEq)]
-pub enum Value {
-    /// A coil or discrete input.
-    Bool(bool),
-    /// An integer register value (any of u16 ... i64).
-    Int(i128),
-    /// An f32 or f64 register value.
-    Float(f64),
-    /// A string register value, NUL padding removed.
-    Text(String),
-}
-
-impl Value {
-    /// The value as an integer, if it is one (a bit is 0 or 1).
-    pub fn as_int(&self) -> Option<i128> {
-        match self {
-            Value::Bool(b) => Some(i128::from(*b)),
-            Value::Int(n) => Some(*n),
-            Value::Float(_) | Value::Text(_) => None,
-        }
-    }
-
-    /// The value as a float, if it is a number.
-    #[allow(clippy::cast_precision_loss)]
-    pub fn as_f64(&self) -> Option<f64> {
-        match self {
-            Value::Float(x) => Some(*x),
-            other => other.as_int().map(|n| n as f64),
-        }
-    }
-}
-
-impl fmt::Display for Value {
-    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
-        match self {
-            Value::Bool(b) => write!(f, "{}", u8::from(*b)),
-            Value::Int(n) => write!(f, "{n}"),
-            Value::Float(x) => write!(f, "{x}"),
-            Value::Text(s) => write!(f, "{s:?}"),
-        }
-    }
-}
 
 /// Whether a number read now, `now`, has moved beyond `deadband` from `last`, the one last
 /// reported: the one deadband rule of report-by-exception (`poll --on-change`, the bridge).

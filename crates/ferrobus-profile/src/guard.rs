@@ -17,9 +17,8 @@
 //!   guard_span(run_locked_in(table, start, count), state)     the run lock of a write by address
 //! ```
 
-use crate::codec::{Value, ValueError};
-use crate::model::{Profile, Table};
-use crate::point::Point;
+use crate::codec::ValueError;
+use crate::model::{Point, Profile, Table, Value};
 
 /// One write a writer is about to send: the point, the raw value, and how it was given (the
 /// user's text, or the value shown in the point's unit), for the refusal's message.

@@ -28,13 +28,12 @@ pub mod text;
 mod write;
 
 pub use check::text::{LABEL_MAX, NAME_MAX, TEXT_MAX, UNIT_MAX};
-pub use codec::{NOT_IMPLEMENTED, Value, ValueError, beyond_deadband};
+pub use codec::{NOT_IMPLEMENTED, ValueError, beyond_deadband};
 pub use guard::{Refusal, RunState, Write};
 pub use model::{
     Access, Addressing, BUILTIN, BitDef, Comm, DeviceSection, ExceptionMeaning, Exceptions, Fifo, Files, Limits,
-    ModelSection, Order, Polarity, Profile, ProfileError, RegisterDef, RunningRule, SpanDef, State, Table, Tables,
-    ValueType,
+    ModelSection, Order, Point, Polarity, Profile, ProfileError, RegisterDef, RunningRule, SpanDef, State, Table,
+    Tables, Value, ValueType,
 };
 pub use plan::{Extent, PlanError, Request, plan};
-pub use point::Point;
 pub use write::{Takes, WireWrite, WriteRules};

@@ -1,4 +1,5 @@
-//! The profile file: its sections and entries as written, parsed and checked.
+//! The profile's data: its sections and entries as a file writes them, and the points they
+//! resolve to ([`Point`]) with their raw values ([`Value`]).
 //!
 //! A profile says which function codes the device answers, how many items it takes per
 //! request, its register and coil map (codes, labels, types, word orders, units, scaling,
@@ -8,19 +9,16 @@
 //! identification, and the faults a simulated unit starts with. The built-in profiles are in
 //! `profiles/` and compiled in; users write their own in the same format.
 //!
-//! A profile is refused when its entries of one kind overlap (two registers sharing an
-//! address, a 32-bit value covering the next register), and every error names the file, the
-//! line and column, and the entry and field at fault ([`crate::source`]);
-//! [`Profile::parse_all`] lists every mistake of a file at once.
+//! These are plain data: `read` reads a file into them, `check` checks them and `point`
+//! resolves the points.
 
 use std::collections::BTreeMap;
 use std::fmt;
-use std::path::Path;
 
 use serde::{Deserialize, Serialize};
 
-use crate::point::{self, Point};
-use crate::source::{self, Located, NotText, Place, ReadError};
+use crate::source::{Located, NotText, Place};
+use crate::text;
 
 /// A device model.
 #[derive(Clone, Debug, Deserialize, Serialize)]
@@ -95,7 +93,7 @@ pub struct Profile {
     pub fault_rule_places: Vec<Option<Place>>,
     /// Every coil, discrete input and register entry resolved to points, in profile order.
     #[serde(skip)]
-    points: Vec<Point>,
+    pub(crate) points: Vec<Point>,
 }
 
 /// `[device]`
@@ -729,6 +727,112 @@ pub struct Fifo {
     pub address: u16,
 }
 
+/// One value of the device: a coil, a discrete input, or a register value of any type.
+#[derive(Clone, Debug, PartialEq)]
+#[allow(clippy::struct_excessive_bools)] // each one a fact of the profile's own entry
+pub struct Point {
+    /// Its table.
+    pub table: Table,
+    /// The wire address of its first register or bit (the manual's number − base).
+    pub address: u16,
+    /// The manual's number.
+    pub number: u32,
+    /// The code (the entry's `name`; NAME1, NAME2, ... for the items of a run).
+    pub code: String,
+    /// The short descriptive name (empty when the profile gives none).
+    pub label: String,
+    /// What it is.
+    pub description: String,
+    /// The value's type ([`ValueType::Bit`] for coils and discrete inputs).
+    pub value_type: ValueType,
+    /// The order of a multi-register value.
+    pub order: Order,
+    /// Registers (or bits) it takes.
+    pub width: u16,
+    /// Engineering unit.
+    pub unit: Option<String>,
+    /// Engineering value = raw × scale + offset.
+    pub scale: f64,
+    /// Engineering value = raw × scale + offset.
+    pub offset: f64,
+    /// The lowest raw value a write may set.
+    pub min: Option<f64>,
+    /// The highest raw value a write may set.
+    pub max: Option<f64>,
+    /// Access.
+    pub access: Access,
+    /// Whether it may be written while the drive runs.
+    pub while_running: bool,
+    /// Its group, if any.
+    pub group: Option<String>,
+    /// An enumeration: raw value → meaning, by raw value.
+    pub values: Vec<(i128, String)>,
+    /// A bit field: bit index → meaning, by bit.
+    pub bits: Vec<(u8, String)>,
+    /// Codes a restore writes before this one.
+    pub depends_on: Vec<String>,
+    /// Whether a backup saves it.
+    pub backup: bool,
+    /// The manual section it comes from.
+    pub source: Option<String>,
+    /// False when a fact about it could not be confirmed.
+    pub confirmed: bool,
+    /// The raw value at start (the simulator's): the profile's `default`, else zero (off).
+    pub default: Value,
+    /// The profile's `default` when it gives one: the value the device leaves the factory
+    /// with (`diff --defaults` compares with it); `None` where `default` is a mere zero.
+    pub factory_default: Option<Value>,
+    /// The raw value by which the device says it does not implement the point (SunSpec's
+    /// sentinels: 0xFFFF for a u16, ...), if it has one; see [`Point::implemented`].
+    pub not_implemented: Option<Value>,
+    /// False when the device does not implement the point at all: no value read is a reading.
+    pub implemented: bool,
+}
+
+/// A point's raw value, as the device holds it.
+#[derive(Clone, Debug, PartialEq)]
+pub enum Value {
+    /// A coil or discrete input.
+    Bool(bool),
+    /// An integer register value (any of u16 ... i64).
+    Int(i128),
+    /// An f32 or f64 register value.
+    Float(f64),
+    /// A string register value, NUL padding removed.
+    Text(String),
+}
+
+impl Value {
+    /// The value as an integer, if it is one (a bit is 0 or 1).
+    pub fn as_int(&self) -> Option<i128> {
+        match self {
+            Value::Bool(b) => Some(i128::from(*b)),
+            Value::Int(n) => Some(*n),
+            Value::Float(_) | Value::Text(_) => None,
+        }
+    }
+
+    /// The value as a float, if it is a number.
+    #[allow(clippy::cast_precision_loss)]
+    pub fn as_f64(&self) -> Option<f64> {
+        match self {
+            Value::Float(x) => Some(*x),
+            other => other.as_int().map(|n| n as f64),
+        }
+    }
+}
+
+impl fmt::Display for Value {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        match self {
+            Value::Bool(b) => write!(f, "{}", u8::from(*b)),
+            Value::Int(n) => write!(f, "{n}"),
+            Value::Float(x) => write!(f, "{x}"),
+            Value::Text(s) => write!(f, "{s:?}"),
+        }
+    }
+}
+
 /// Why a profile could not be loaded.
 #[derive(Debug, thiserror::Error)]
 #[non_exhaustive]
@@ -838,110 +942,6 @@ impl Profile {
         toml::to_string(self).unwrap_or_default()
     }
 
-    /// Checks a profile built as data ([`Profile::new`]) and resolves its points, naming it
-    /// `origin` in messages. It is checked as its file would be, by the one reader of
-    /// profiles: written with [`Profile::to_toml`] and read back, so that no check is written
-    /// twice; every mistake is returned, placed in that text.
-    pub fn build(self, origin: &str) -> Result<Profile, Vec<ProfileError>> {
-        Profile::parse_all(&self.to_toml(), origin)
-    }
-
-    /// A built-in profile by name.
-    pub fn builtin(name: &str) -> Result<Profile, ProfileError> {
-        match BUILTIN.iter().find(|(n, _)| *n == name) {
-            Some((name, text)) => Profile::parse(text, name),
-            None => Err(ProfileError::Unknown { name: name.to_string() }),
-        }
-    }
-
-    /// A built-in profile by name, or a profile file by path.
-    pub fn load(name_or_path: &str) -> Result<Profile, ProfileError> {
-        if BUILTIN.iter().any(|(n, _)| *n == name_or_path) {
-            return Profile::builtin(name_or_path);
-        }
-        let path = Path::new(name_or_path);
-        if !path.exists() {
-            let looks_like_a_path = name_or_path.contains(['/', '\\'])
-                || name_or_path.starts_with('.')
-                || path.extension().is_some_and(|e| e.eq_ignore_ascii_case("toml"));
-            return Err(if looks_like_a_path {
-                ProfileError::NoSuchFile { path: name_or_path.to_string() }
-            } else {
-                ProfileError::Unknown { name: name_or_path.to_string() }
-            });
-        }
-        let shown = path.display().to_string();
-        let text = source::read(path).map_err(|e| match e {
-            ReadError::Io(source) => ProfileError::Read { path: shown.clone(), source },
-            ReadError::NotText(error) => ProfileError::NotText { path: shown.clone(), error },
-        })?;
-        Profile::parse(&text, &shown)
-    }
-
-    /// A built-in profile by name, or a profile file by path, with every mistake of the file
-    /// (see [`Profile::parse_all`]).
-    pub fn load_all(name_or_path: &str) -> Result<Profile, Vec<ProfileError>> {
-        let path = Path::new(name_or_path);
-        if BUILTIN.iter().any(|(n, _)| *n == name_or_path) || !path.exists() {
-            return Profile::load(name_or_path).map_err(|e| vec![e]);
-        }
-        let shown = path.display().to_string();
-        match source::read(path) {
-            Ok(text) => Profile::parse_all(&text, &shown),
-            Err(ReadError::Io(source)) => Err(vec![ProfileError::Read { path: shown, source }]),
-            Err(ReadError::NotText(error)) => Err(vec![ProfileError::NotText { path: shown, error }]),
-        }
-    }
-
-    /// Parses and checks a profile; `origin` names it in errors, with the place at fault. The
-    /// first mistake of the file (see [`Profile::parse_all`] for every one).
-    pub fn parse(text: &str, origin: &str) -> Result<Profile, ProfileError> {
-        Profile::parse_all(text, origin).map_err(|mut mistakes| mistakes.swap_remove(0))
-    }
-
-    /// Parses and checks a profile, with every mistake of the file when it has any, in the
-    /// file's order: the TOML reader stops at its first, the checks of a well-formed file
-    /// find them all. Never an empty list.
-    pub fn parse_all(text: &str, origin: &str) -> Result<Profile, Vec<ProfileError>> {
-        let read = crate::read::read(text).map_err(|e| {
-            let mut mistake = Located::toml(text, &e);
-            mistake.message = with_migration_hint(&mistake.message);
-            vec![ProfileError::Parse { origin: origin.to_string(), mistake }]
-        })?;
-        let spans = read.spans;
-        // The reader's mistakes, then the checks' of the entries it read: all in the file's order.
-        let mut mistakes: Vec<(Option<usize>, String, bool)> =
-            read.mistakes.into_iter().map(|(at, message)| (at, message, true)).collect();
-        let mut profile = read.profile;
-        if let Some(profile) = profile.as_mut() {
-            profile.origin = origin.to_string();
-            profile.faults_place = spans.faults.as_ref().map(|f| Place::of(text, f.start));
-            profile.fault_rule_places = spans.fault_rule.iter().map(|e| Some(Place::of(text, e.start))).collect();
-            mistakes.extend(profile.validate(text, &spans).into_iter().map(|(at, message)| (at, message, false)));
-        }
-        match profile {
-            Some(mut profile) if mistakes.is_empty() => {
-                profile.points = point::resolve(&profile);
-                Ok(profile)
-            }
-            _ => {
-                mistakes.sort_by_key(|(at, _, _)| at.unwrap_or(0));
-                Err(mistakes
-                    .into_iter()
-                    .map(|(at, message, parse)| {
-                        let mistake = Located::new(text, at.map(|a| a..a), &message);
-                        let origin = origin.to_string();
-                        if parse {
-                            ProfileError::Parse { origin, mistake }
-                        } else {
-                            ProfileError::Invalid { origin, mistake }
-                        }
-                    })
-                    .collect())
-            }
-        }
-    }
-
     /// Every coil, discrete input and register entry as points, in profile order (coils,
     /// discrete inputs, holding registers, input registers); a run of `count` items gives
     /// `count` points.
@@ -956,20 +956,6 @@ impl Profile {
     }
 }
 
-/// A TOML reader's message, with the new keys named when it refuses an old one.
-pub(crate) fn with_migration_hint(message: &str) -> String {
-    let old =
-        ["`size`", "`signed`", "`word_order`"].iter().any(|key| message.starts_with(&format!("unknown field {key}")));
-    if old {
-        format!(
-            "{message} (size, signed and word_order are now type and order: type = \"u32\" or \"i32\", \
-             order = \"ABCD\" for high-first or \"CDAB\" for low-first)"
-        )
-    } else {
-        message.to_string()
-    }
-}
-
 impl RegisterDef {
     /// Registers of one item: by its type, or its `length` for a string.
     pub fn width(&self) -> u16 {
@@ -980,11 +966,13 @@ impl RegisterDef {
     }
 }
 
+/// A raw integer written in a profile key: the one grammar of integers, [`text::integer`].
+pub(crate) fn parse_key(key: &str) -> Option<i128> {
+    text::integer(key).map(|(value, _)| value)
+}
+
 impl fmt::Display for Profile {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
         write!(f, "{} ({} {})", self.device.name, self.device.vendor, self.device.product_code)
     }
 }
-
-#[cfg(test)]
-mod tests;

@@ -1,70 +1,7 @@
 //! Points: the profile's entries resolved to one value each, at a wire address, and the ways
 //! to find them (code, label, glob, group).
 
-use crate::check::parse_key;
-use crate::model::{Access, Order, Profile, Table, ValueType};
-
-/// One value of the device: a coil, a discrete input, or a register value of any type.
-#[derive(Clone, Debug, PartialEq)]
-#[allow(clippy::struct_excessive_bools)] // each one a fact of the profile's own entry
-pub struct Point {
-    /// Its table.
-    pub table: Table,
-    /// The wire address of its first register or bit (the manual's number − base).
-    pub address: u16,
-    /// The manual's number.
-    pub number: u32,
-    /// The code (the entry's `name`; NAME1, NAME2, ... for the items of a run).
-    pub code: String,
-    /// The short descriptive name (empty when the profile gives none).
-    pub label: String,
-    /// What it is.
-    pub description: String,
-    /// The value's type ([`ValueType::Bit`] for coils and discrete inputs).
-    pub value_type: ValueType,
-    /// The order of a multi-register value.
-    pub order: Order,
-    /// Registers (or bits) it takes.
-    pub width: u16,
-    /// Engineering unit.
-    pub unit: Option<String>,
-    /// Engineering value = raw × scale + offset.
-    pub scale: f64,
-    /// Engineering value = raw × scale + offset.
-    pub offset: f64,
-    /// The lowest raw value a write may set.
-    pub min: Option<f64>,
-    /// The highest raw value a write may set.
-    pub max: Option<f64>,
-    /// Access.
-    pub access: Access,
-    /// Whether it may be written while the drive runs.
-    pub while_running: bool,
-    /// Its group, if any.
-    pub group: Option<String>,
-    /// An enumeration: raw value → meaning, by raw value.
-    pub values: Vec<(i128, String)>,
-    /// A bit field: bit index → meaning, by bit.
-    pub bits: Vec<(u8, String)>,
-    /// Codes a restore writes before this one.
-    pub depends_on: Vec<String>,
-    /// Whether a backup saves it.
-    pub backup: bool,
-    /// The manual section it comes from.
-    pub source: Option<String>,
-    /// False when a fact about it could not be confirmed.
-    pub confirmed: bool,
-    /// The raw value at start (the simulator's): the profile's `default`, else zero (off).
-    pub default: crate::Value,
-    /// The profile's `default` when it gives one: the value the device leaves the factory
-    /// with (`diff --defaults` compares with it); `None` where `default` is a mere zero.
-    pub factory_default: Option<crate::Value>,
-    /// The raw value by which the device says it does not implement the point (SunSpec's
-    /// sentinels: 0xFFFF for a u16, ...), if it has one; see [`Point::implemented`].
-    pub not_implemented: Option<crate::Value>,
-    /// False when the device does not implement the point at all: no value read is a reading.
-    pub implemented: bool,
-}
+use crate::model::{Access, Order, Point, Profile, Table, ValueType, parse_key};
 
 impl Point {
     /// A point no profile describes: `value_type` at wire `address` of `table` (a bit for the

@@ -1,73 +1,45 @@
-//! Reading a profile's TOML: the document is parsed once, then every section and every entry
-//! of the entry lists (`[[registers]]`, `[[coils]]`, ...) is read on its own, so that a type
-//! error in one entry does not hide the mistakes of the others.
+//! Reading a profile: a built-in one by name or a file by path ([`Profile::load`]), or its text
+//! ([`Profile::parse`]), into the model's sections and entries, checked, with its points
+//! resolved; a profile built as data is checked the same way ([`Profile::build`]).
+//!
+//! The document is parsed once, then every section and every entry of the entry lists
+//! (`[[registers]]`, `[[coils]]`, ...) is read on its own, so that a type error in one entry
+//! does not hide the mistakes of the others.
 //!
 //! A syntax error stops the reading (the TOML reader cannot go on past one); everything else —
 //! a field of the wrong type, an unknown key, a missing field, a string with a control
 //! character or past its length ([`crate::check::text`]) — is collected with the byte span
 //! the reader gives, and the entries read well are checked further ([`Profile::validate`]).
+//!
+//! A profile is refused when its entries of one kind overlap (two registers sharing an
+//! address, a 32-bit value covering the next register), and every error names the file, the
+//! line and column, and the entry and field at fault ([`crate::source`]);
+//! [`Profile::parse_all`] lists every mistake of a file at once.
 
 use std::ops::Range;
+use std::path::Path;
 
 use serde::de::DeserializeOwned;
 use toml::Spanned;
 use toml::de::{DeTable, DeValue, ValueDeserializer};
 
-use crate::check::Problem;
-use crate::model::{BitDef, ExceptionMeaning, Profile, RegisterDef, SpanDef};
-
-/// The lists of entries, each an array of tables.
-pub(crate) const LISTS: [&str; 7] =
-    ["coils", "discrete_inputs", "registers", "inputs", "span", "exception_meaning", "fault_rule"];
+use crate::check::{LISTS, Problem, Spans, entry_name};
+use crate::model::{BUILTIN, BitDef, ExceptionMeaning, Profile, ProfileError, RegisterDef, SpanDef};
+use crate::point;
+use crate::source::{self, Located, Place, ReadError};
 
 /// The sections that are one table or one value.
 const SECTIONS: [&str; 11] =
     ["device", "addressing", "comm", "limits", "exceptions", "tables", "model", "state", "files", "fifo", "faults"];
 
-/// Where each entry that was read lies in the text (the span the TOML reader gives its table),
-/// in the order of the profile's lists.
-#[derive(Default)]
-pub(crate) struct Spans {
-    pub(crate) coils: Vec<Range<usize>>,
-    pub(crate) discrete_inputs: Vec<Range<usize>>,
-    pub(crate) registers: Vec<Range<usize>>,
-    pub(crate) inputs: Vec<Range<usize>>,
-    pub(crate) span: Vec<Range<usize>>,
-    pub(crate) fault_rule: Vec<Range<usize>>,
-    pub(crate) faults: Option<Range<usize>>,
-    pub(crate) state: Option<Range<usize>>,
-    /// The names of the entries that could not be read: a reference to one of them is not a
-    /// second mistake.
-    pub(crate) unread_names: Vec<String>,
-}
-
 /// A profile read from TOML, with the mistakes found on the way.
-pub(crate) struct Read {
+struct Read {
     /// The profile, unless a section it cannot do without (`[device]`) could not be read.
-    pub(crate) profile: Option<Profile>,
+    profile: Option<Profile>,
     /// Where its entries are.
-    pub(crate) spans: Spans,
+    spans: Spans,
     /// Every mistake found while reading, with its byte offset.
-    pub(crate) mistakes: Vec<Problem>,
-}
-
-/// What an entry of list `kind` is called in a message, as the checks call it:
-/// `[[registers]] 3 (F001)` by its number and name, `[[registers]] entry 3 (F001)` (counted
-/// from 1) when its number cannot be read.
-pub(crate) fn entry_name(kind: &str, index: usize, table: Option<&DeTable<'_>>) -> String {
-    let name = table
-        .and_then(|t| t.get("name"))
-        .and_then(|v| v.get_ref().as_str())
-        .map(|n| format!(" ({})", crate::source::bounded(&n.chars().take(64).collect::<String>())))
-        .unwrap_or_default();
-    let number = table
-        .and_then(|t| t.get("number"))
-        .and_then(|v| v.get_ref().as_integer())
-        .and_then(|n| u32::from_str_radix(&n.as_str().replace('_', ""), n.radix()).ok());
-    match number {
-        Some(number) => format!("[[{kind}]] {number}{name}"),
-        None => format!("[[{kind}]] entry {}{name}", index.saturating_add(1)),
-    }
+    mistakes: Vec<Problem>,
 }
 
 /// One value read as `T`, or the reader's mistake (with its place) said of `what`.
@@ -75,7 +47,7 @@ fn one<T: DeserializeOwned>(value: Spanned<DeValue<'_>>, what: &str) -> Result<T
     let span = value.span();
     T::deserialize(ValueDeserializer::from(value)).map_err(|e| {
         let at = e.span().filter(|s| s.start > 0 || s.end > 0).unwrap_or(span);
-        (Some(at.start), format!("{what}: {}", crate::model::with_migration_hint(e.message())))
+        (Some(at.start), format!("{what}: {}", with_migration_hint(e.message())))
     })
 }
 
@@ -113,7 +85,7 @@ fn list<T: DeserializeOwned>(
 }
 
 /// Reads the profile of `text`; `Err` for a syntax error (the reader's place and message).
-pub(crate) fn read(text: &str) -> Result<Read, toml::de::Error> {
+fn read(text: &str) -> Result<Read, toml::de::Error> {
     let root = DeTable::parse(text)?;
     let root_span = root.span();
     let mut root = root.into_inner();
@@ -208,8 +180,129 @@ fn section(key: &str, value: Spanned<DeValue<'_>>, what: &str) -> Result<(), Pro
 }
 
 impl Profile {
+    /// Checks a profile built as data ([`Profile::new`]) and resolves its points, naming it
+    /// `origin` in messages. It is checked as its file would be, by the one reader of
+    /// profiles: written with [`Profile::to_toml`] and read back, so that no check is written
+    /// twice; every mistake is returned, placed in that text.
+    pub fn build(self, origin: &str) -> Result<Profile, Vec<ProfileError>> {
+        Profile::parse_all(&self.to_toml(), origin)
+    }
+
+    /// A built-in profile by name.
+    pub fn builtin(name: &str) -> Result<Profile, ProfileError> {
+        match BUILTIN.iter().find(|(n, _)| *n == name) {
+            Some((name, text)) => Profile::parse(text, name),
+            None => Err(ProfileError::Unknown { name: name.to_string() }),
+        }
+    }
+
+    /// A built-in profile by name, or a profile file by path.
+    pub fn load(name_or_path: &str) -> Result<Profile, ProfileError> {
+        if BUILTIN.iter().any(|(n, _)| *n == name_or_path) {
+            return Profile::builtin(name_or_path);
+        }
+        let path = Path::new(name_or_path);
+        if !path.exists() {
+            let looks_like_a_path = name_or_path.contains(['/', '\\'])
+                || name_or_path.starts_with('.')
+                || path.extension().is_some_and(|e| e.eq_ignore_ascii_case("toml"));
+            return Err(if looks_like_a_path {
+                ProfileError::NoSuchFile { path: name_or_path.to_string() }
+            } else {
+                ProfileError::Unknown { name: name_or_path.to_string() }
+            });
+        }
+        let shown = path.display().to_string();
+        let text = source::read(path).map_err(|e| match e {
+            ReadError::Io(source) => ProfileError::Read { path: shown.clone(), source },
+            ReadError::NotText(error) => ProfileError::NotText { path: shown.clone(), error },
+        })?;
+        Profile::parse(&text, &shown)
+    }
+
+    /// A built-in profile by name, or a profile file by path, with every mistake of the file
+    /// (see [`Profile::parse_all`]).
+    pub fn load_all(name_or_path: &str) -> Result<Profile, Vec<ProfileError>> {
+        let path = Path::new(name_or_path);
+        if BUILTIN.iter().any(|(n, _)| *n == name_or_path) || !path.exists() {
+            return Profile::load(name_or_path).map_err(|e| vec![e]);
+        }
+        let shown = path.display().to_string();
+        match source::read(path) {
+            Ok(text) => Profile::parse_all(&text, &shown),
+            Err(ReadError::Io(source)) => Err(vec![ProfileError::Read { path: shown, source }]),
+            Err(ReadError::NotText(error)) => Err(vec![ProfileError::NotText { path: shown, error }]),
+        }
+    }
+
+    /// Parses and checks a profile; `origin` names it in errors, with the place at fault. The
+    /// first mistake of the file (see [`Profile::parse_all`] for every one).
+    pub fn parse(text: &str, origin: &str) -> Result<Profile, ProfileError> {
+        Profile::parse_all(text, origin).map_err(|mut mistakes| mistakes.swap_remove(0))
+    }
+
+    /// Parses and checks a profile, with every mistake of the file when it has any, in the
+    /// file's order: the TOML reader stops at its first, the checks of a well-formed file
+    /// find them all. Never an empty list.
+    pub fn parse_all(text: &str, origin: &str) -> Result<Profile, Vec<ProfileError>> {
+        let read = read(text).map_err(|e| {
+            let mut mistake = Located::toml(text, &e);
+            mistake.message = with_migration_hint(&mistake.message);
+            vec![ProfileError::Parse { origin: origin.to_string(), mistake }]
+        })?;
+        let spans = read.spans;
+        // The reader's mistakes, then the checks' of the entries it read: all in the file's order.
+        let mut mistakes: Vec<(Option<usize>, String, bool)> =
+            read.mistakes.into_iter().map(|(at, message)| (at, message, true)).collect();
+        let mut profile = read.profile;
+        if let Some(profile) = profile.as_mut() {
+            profile.origin = origin.to_string();
+            profile.faults_place = spans.faults.as_ref().map(|f| Place::of(text, f.start));
+            profile.fault_rule_places = spans.fault_rule.iter().map(|e| Some(Place::of(text, e.start))).collect();
+            mistakes.extend(profile.validate(text, &spans).into_iter().map(|(at, message)| (at, message, false)));
+        }
+        match profile {
+            Some(mut profile) if mistakes.is_empty() => {
+                profile.points = point::resolve(&profile);
+                Ok(profile)
+            }
+            _ => {
+                mistakes.sort_by_key(|(at, _, _)| at.unwrap_or(0));
+                Err(mistakes
+                    .into_iter()
+                    .map(|(at, message, parse)| {
+                        let mistake = Located::new(text, at.map(|a| a..a), &message);
+                        let origin = origin.to_string();
+                        if parse {
+                            ProfileError::Parse { origin, mistake }
+                        } else {
+                            ProfileError::Invalid { origin, mistake }
+                        }
+                    })
+                    .collect())
+            }
+        }
+    }
+
     /// The profile of a document whose entry lists were taken out (they are read one by one).
     fn deserialize_rest(root: Spanned<DeValue<'_>>) -> Result<Profile, Problem> {
         one::<Profile>(root, "the profile")
     }
 }
+
+/// A TOML reader's message, with the new keys named when it refuses an old one.
+fn with_migration_hint(message: &str) -> String {
+    let old =
+        ["`size`", "`signed`", "`word_order`"].iter().any(|key| message.starts_with(&format!("unknown field {key}")));
+    if old {
+        format!(
+            "{message} (size, signed and word_order are now type and order: type = \"u32\" or \"i32\", \
+             order = \"ABCD\" for high-first or \"CDAB\" for low-first)"
+        )
+    } else {
+        message.to_string()
+    }
+}
+
+#[cfg(test)]
+mod tests;

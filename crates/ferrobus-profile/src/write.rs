@@ -18,10 +18,9 @@
 use ferrobus_proto::pdu::{Bits, Registers, Request, WriteCoil, WriteCoils, WriteRegister, WriteRegisters};
 use ferrobus_proto::{FunctionCode, PduError};
 
-use crate::codec::{Value, ValueError};
+use crate::codec::ValueError;
 use crate::guard::{Refusal, RunState, Write};
-use crate::model::{Profile, Table};
-use crate::point::Point;
+use crate::model::{Point, Profile, Table, Value};
 
 /// What a device takes in its writes.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]

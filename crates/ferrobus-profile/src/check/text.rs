@@ -16,8 +16,7 @@
 use toml::Spanned;
 use toml::de::{DeTable, DeValue};
 
-use crate::check::Problem;
-use crate::read::{LISTS, entry_name};
+use crate::check::{LISTS, Problem, entry_name};
 
 /// The most characters of a name, a code, a group, a reference to another point, an order, ...
 pub const NAME_MAX: usize = 128;

@@ -587,7 +587,7 @@ fn pairs(text: &str, bits: bool) -> Option<Vec<(String, String)>> {
     let mut out = Vec::new();
     for pair in text.split(separator).map(str::trim).filter(|p| !p.is_empty()) {
         let (key, meaning) = pair.split_once('=').or_else(|| pair.split_once(':'))?;
-        let key = crate::check::parse_key(key)?;
+        let key = crate::model::parse_key(key)?;
         if bits && !(0..64).contains(&key) {
             return None;
         }
@@ -607,7 +607,7 @@ fn default_of(text: &str, value_type: ValueType) -> Option<toml::Value> {
         ValueType::String => Some(toml::Value::String(text.to_string())),
         ValueType::F32 | ValueType::F64 => real(text).map(toml::Value::Float),
         _ => {
-            let value = crate::check::parse_key(text)?;
+            let value = crate::model::parse_key(text)?;
             let (low, high) = value_type.integer_range();
             (low..=high).contains(&value).then(|| i64::try_from(value).ok().map(toml::Value::Integer))?
         }

@@ -537,7 +537,7 @@ impl Draft {
     ) -> Vec<(String, String)> {
         let mut kept = Vec::new();
         for (key, meaning) in pairs {
-            if ty.is_integer() && crate::check::parse_key(&key).is_some_and(&fits) {
+            if ty.is_integer() && crate::model::parse_key(&key).is_some_and(&fits) {
                 kept.push((key, meaning));
                 continue;
             }

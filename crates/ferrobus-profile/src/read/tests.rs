@@ -1,7 +1,7 @@
 //! The profile reader's tests: built-ins load, mistakes are named with file, line and field.
 
 use super::*;
-use crate::{LABEL_MAX, NAME_MAX, TEXT_MAX, UNIT_MAX, Value};
+use crate::{LABEL_MAX, NAME_MAX, Order, TEXT_MAX, UNIT_MAX, Value};
 
 #[test]
 fn every_builtin_profile_loads() {
