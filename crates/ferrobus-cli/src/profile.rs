@@ -307,13 +307,13 @@ fn show(name: &str, group: Option<&str>, format: Format) -> Result<(), CliError>
         Some(g) => profile.group(g),
         None => profile.points().iter().collect(),
     };
-    if points.is_empty() {
-        if let Some(g) = group {
-            return Err(CliError::Usage(format!(
-                "{name} has no group {g:?}: its groups are {}",
-                profile.groups().join(", ")
-            )));
-        }
+    if points.is_empty()
+        && let Some(g) = group
+    {
+        return Err(CliError::Usage(format!(
+            "{name} has no group {g:?}: its groups are {}",
+            profile.groups().join(", ")
+        )));
     }
     let text = if format == Format::Json {
         output::json_line(&json!({

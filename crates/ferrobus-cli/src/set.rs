@@ -87,15 +87,15 @@ pub(crate) async fn run(connection: &ConnectArgs, args: &SetArgs) -> Result<(), 
         Err(WriteError::Bus(error)) => return Err(error.into()),
         Err(other) => return Err(CliError::Usage(format!("not sent: {other}"))),
     };
-    if let Ok(back) = &outcome {
-        if *back != raw {
-            eprintln!(
-                "set: {} reads back {}, not the {} written (the device may round or limit it)",
-                point.code,
-                point.show(back),
-                point.show(&raw)
-            );
-        }
+    if let Ok(back) = &outcome
+        && *back != raw
+    {
+        eprintln!(
+            "set: {} reads back {}, not the {} written (the device may round or limit it)",
+            point.code,
+            point.show(back),
+            point.show(&raw)
+        );
     }
     let text = match args.output.format() {
         Format::Json => output::json_line(&json!({

@@ -165,13 +165,13 @@ impl Profile {
                 }
             }
         }
-        if let Some(running) = &self.state.running {
-            if !names.contains(&running.point.as_str()) {
-                problems.push((
-                    spans.state.as_ref().map(|s| field_offset(text, s, "running")),
-                    format!("[state] running: point {:?} is not in the profile", running.point),
-                ));
-            }
+        if let Some(running) = &self.state.running
+            && !names.contains(&running.point.as_str())
+        {
+            problems.push((
+                spans.state.as_ref().map(|s| field_offset(text, s, "running")),
+                format!("[state] running: point {:?} is not in the profile", running.point),
+            ));
         }
     }
 }
@@ -282,10 +282,10 @@ fn check_register(
     if r.scale == Some(0.0) {
         problem("scale", "scale = 0 would make every value the same".into());
     }
-    if let (Some(min), Some(max)) = (r.min, r.max) {
-        if min > max {
-            problem("max", format!("min = {min} is above max = {max}"));
-        }
+    if let (Some(min), Some(max)) = (r.min, r.max)
+        && min > max
+    {
+        problem("max", format!("min = {min} is above max = {max}"));
     }
     if ty == ValueType::String && (r.min.is_some() || r.max.is_some() || r.scale.is_some() || r.offset.is_some()) {
         problem("type", "a string has no min, max, scale or offset".into());
@@ -363,18 +363,18 @@ fn no_overlaps<'a>(
         if items == 0 {
             continue;
         }
-        if let Some((_, owner)) = reach.filter(|&(end, _)| start < end) {
-            if let (Some(a), Some(b)) = (sorted.get(owner), sorted.get(k)) {
-                // Name the entry written later, and the line of the one written first.
-                let (first, later) = if a.3 < b.3 { (a, b) } else { (b, a) };
-                let what = if a.0 == b.0 { "is at the same number as" } else { "overlaps" };
-                let earlier =
-                    start_of(first.3).map_or(String::new(), |at| format!(" on line {}", Place::of(text, at).line));
-                problems.push((
-                    start_of(later.3),
-                    format!("[[{kind}]] {} ({}) {what} {} ({}){earlier}", later.0, later.2, first.0, first.2),
-                ));
-            }
+        if let Some((_, owner)) = reach.filter(|&(end, _)| start < end)
+            && let (Some(a), Some(b)) = (sorted.get(owner), sorted.get(k))
+        {
+            // Name the entry written later, and the line of the one written first.
+            let (first, later) = if a.3 < b.3 { (a, b) } else { (b, a) };
+            let what = if a.0 == b.0 { "is at the same number as" } else { "overlaps" };
+            let earlier =
+                start_of(first.3).map_or(String::new(), |at| format!(" on line {}", Place::of(text, at).line));
+            problems.push((
+                start_of(later.3),
+                format!("[[{kind}]] {} ({}) {what} {} ({}){earlier}", later.0, later.2, first.0, first.2),
+            ));
         }
         let end = start.saturating_add(items);
         if reach.is_none_or(|(furthest, _)| end > furthest) {

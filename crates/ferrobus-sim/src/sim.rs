@@ -126,12 +126,13 @@ impl Sim {
         for ticker in &self.tickers {
             ticker.apply(u.device.memory_mut());
         }
-        if let Some(after) = u.faults.trip_after {
-            if !u.tripped && now >= after {
-                u.tripped = true;
-                // E07, overvoltage: an arbitrary but recognisable trip.
-                u.device.trip(7);
-            }
+        if let Some(after) = u.faults.trip_after
+            && !u.tripped
+            && now >= after
+        {
+            u.tripped = true;
+            // E07, overvoltage: an arbitrary but recognisable trip.
+            u.device.trip(7);
         }
         Some(&mut u.device)
     }

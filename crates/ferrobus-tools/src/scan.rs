@@ -391,10 +391,10 @@ impl<P: Reconfigure> Scanner<P> {
         on_event(&Event::SecondPass { leads: pending.len() });
         let mut lines: Vec<LineConfig> = Vec::new();
         for &i in &pending {
-            if let Some(lead) = report.leads.get(i) {
-                if !lines.contains(&lead.line) {
-                    lines.push(lead.line);
-                }
+            if let Some(lead) = report.leads.get(i)
+                && !lines.contains(&lead.line)
+            {
+                lines.push(lead.line);
             }
         }
         for line in lines {

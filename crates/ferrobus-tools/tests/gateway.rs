@@ -68,16 +68,17 @@ struct Filter(Faults);
 impl ReplyFilter for Filter {
     fn filter(&mut self, answering: Option<&Answering>, frame: &mut Vec<u8>) -> Fate {
         let unit = answering.map(|a| a.unit);
-        if unit.is_some() && unit == self.0.corrupt {
-            if let Some(last) = frame.last_mut() {
-                *last ^= 0xFF;
-            }
+        if unit.is_some()
+            && unit == self.0.corrupt
+            && let Some(last) = frame.last_mut()
+        {
+            *last ^= 0xFF;
         }
-        if let Some((u, d)) = self.0.delay_first {
-            if unit == Some(u) {
-                self.0.delay_first = None;
-                return Fate::Delay(d);
-            }
+        if let Some((u, d)) = self.0.delay_first
+            && unit == Some(u)
+        {
+            self.0.delay_first = None;
+            return Fate::Delay(d);
         }
         Fate::Send
     }

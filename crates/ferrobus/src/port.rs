@@ -377,11 +377,11 @@ impl SerialTarget {
         // Identify before opening: opening a tty can change its settings, and another's line
         // must not be touched at all.
         let now = crate::sys::identify(&self.config.path);
-        if let Some(first) = first.as_ref() {
-            if let Err(reason) = first.reopen_check(now.as_ref()) {
-                let lasting = matches!(first, Identity::Pty(_));
-                return Err(io::Error::other(NotSame { reason, lasting }));
-            }
+        if let Some(first) = first.as_ref()
+            && let Err(reason) = first.reopen_check(now.as_ref())
+        {
+            let lasting = matches!(first, Identity::Pty(_));
+            return Err(io::Error::other(NotSame { reason, lasting }));
         }
         let port = open_serial(&self.config)?;
         if first.is_none() {

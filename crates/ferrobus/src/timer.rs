@@ -250,10 +250,10 @@ impl Wheel {
                 }
                 continue;
             }
-            if let Some(Reverse(due)) = queue.pop() {
-                if !due.cancelled.load(Ordering::Relaxed) {
-                    due.waker.wake();
-                }
+            if let Some(Reverse(due)) = queue.pop()
+                && !due.cancelled.load(Ordering::Relaxed)
+            {
+                due.waker.wake();
             }
         }
     }

@@ -385,14 +385,14 @@ impl Wire {
         // A frame begins when this sender was not already transmitting (or within t1.5 of
         // its last character): the line must then have been silent for t3.5.
         let continuing = busy_until.is_some_and(|t| t.saturating_add(self.timing.t1_5()) > now);
-        if !continuing && self.options.paced && from != NOISE {
-            if let Some(last) = self.last_end {
-                if start < last.saturating_add(self.timing.t3_5()) {
-                    if let Some(e) = self.stats.endpoints.get_mut(from) {
-                        e.gap_violations += 1;
-                    }
-                }
-            }
+        if !continuing
+            && self.options.paced
+            && from != NOISE
+            && let Some(last) = self.last_end
+            && start < last.saturating_add(self.timing.t3_5())
+            && let Some(e) = self.stats.endpoints.get_mut(from)
+        {
+            e.gap_violations += 1;
         }
         for (i, &byte) in bytes.iter().enumerate() {
             if i > 0 && chance(&mut self.rng, self.options.faults.stretch_rate) {

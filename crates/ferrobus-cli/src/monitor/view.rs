@@ -116,10 +116,10 @@ fn draw_pane(frame: &mut Frame<'_>, area: Rect, app: &App, index: usize, pane: &
         return;
     }
     let mut lines = vec![Line::from(status(pane))];
-    if let Some(error) = &pane.last_error {
-        if pane.counters.errors() > 0 {
-            lines.push(Line::styled(format!("last error: {error}"), Style::new().fg(Color::Red)));
-        }
+    if let Some(error) = &pane.last_error
+        && pane.counters.errors() > 0
+    {
+        lines.push(Line::styled(format!("last error: {error}"), Style::new().fg(Color::Red)));
     }
     let texts: Vec<String> = pane
         .cells

@@ -96,10 +96,10 @@ fn one_device<'a>(blocks: Vec<Block<'a>>, draft: &mut Draft) -> Result<Vec<Block
             endpoints.push((&block.endpoint, Vec::new()));
             endpoints.len() - 1
         });
-        if let (Some(name), Some((_, names))) = (block.device.as_deref(), endpoints.get_mut(at)) {
-            if !names.contains(&name) {
-                names.push(name);
-            }
+        if let (Some(name), Some((_, names))) = (block.device.as_deref(), endpoints.get_mut(at))
+            && !names.contains(&name)
+        {
+            names.push(name);
         }
     }
     let label = |(endpoint, names): &(&str, Vec<&str>)| {

@@ -282,11 +282,11 @@ fn value_of(m: &Mapping, entry: &mut Entry, place: &str, draft: &mut Draft) -> b
     entry.value_type = value_type;
     if value_type == ValueType::String {
         entry.length = Some(count.unwrap_or(1));
-    } else if let Some(count) = count.filter(|c| *c != value_type.registers()) {
-        if !matches!(data_type.as_str(), "int" | "uint" | "float") {
-            let why = format!("{data_type} takes {} registers: read as one {data_type}", value_type.registers());
-            draft.unmapped(place, "count", &count.to_string(), &why);
-        }
+    } else if let Some(count) = count.filter(|c| *c != value_type.registers())
+        && !matches!(data_type.as_str(), "int" | "uint" | "float")
+    {
+        let why = format!("{data_type} takes {} registers: read as one {data_type}", value_type.registers());
+        draft.unmapped(place, "count", &count.to_string(), &why);
     }
     let reverse = m.get("reverse_order").and_then(Value::as_bool).unwrap_or(false);
     let swap = m.get("swap").and_then(text).unwrap_or_else(|| "none".to_string());
@@ -545,11 +545,11 @@ fn climate(m: &Mapping, name: &str, address: u16, place: &str, draft: &mut Draft
                 }
             }
         }
-        if let (Some(min), Some(max)) = (entry.min, entry.max) {
-            if min > max {
-                entry.min = Some(max);
-                entry.max = Some(min);
-            }
+        if let (Some(min), Some(max)) = (entry.min, entry.max)
+            && min > max
+        {
+            entry.min = Some(max);
+            entry.max = Some(min);
         }
         entries.push(entry);
     }

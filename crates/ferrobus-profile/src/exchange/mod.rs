@@ -495,13 +495,13 @@ impl Draft {
                 }
             }
         }
-        if let (Some(min), Some(max)) = (entry.min, entry.max) {
-            if min > max {
-                let why = format!("above max = {max}: the range is left out");
-                self.unmapped(&place, "min", &min.to_string(), &why);
-                entry.min = None;
-                entry.max = None;
-            }
+        if let (Some(min), Some(max)) = (entry.min, entry.max)
+            && min > max
+        {
+            let why = format!("above max = {max}: the range is left out");
+            self.unmapped(&place, "min", &min.to_string(), &why);
+            entry.min = None;
+            entry.max = None;
         }
         let (lo, hi) = ty.integer_range();
         let bit_count = i128::from(ty.registers()) * 16;
@@ -518,10 +518,8 @@ impl Draft {
             (Some(toml::Value::Integer(_) | toml::Value::Float(_)), t) => t.is_float(),
             _ => false,
         };
-        if !default_fits {
-            if let Some(default) = entry.default.take() {
-                self.unmapped(&place, "default", &default.to_string(), &format!("not a {name} value: left out"));
-            }
+        if !default_fits && let Some(default) = entry.default.take() {
+            self.unmapped(&place, "default", &default.to_string(), &format!("not a {name} value: left out"));
         }
     }
 

@@ -268,12 +268,12 @@ impl RtuCodec {
 
     /// Consumes a frame handed out by `poll_event`.
     fn release(&mut self) {
-        if let Some(found) = self.found {
-            if found.handed_out {
-                self.start = self.start.saturating_add(found.len).min(self.len);
-                self.clean = true;
-                self.found = None;
-            }
+        if let Some(found) = self.found
+            && found.handed_out
+        {
+            self.start = self.start.saturating_add(found.len).min(self.len);
+            self.clean = true;
+            self.found = None;
         }
     }
 
@@ -551,14 +551,14 @@ impl Framing for RtuCodec {
             self.evaluate(now, false);
             return 0;
         }
-        if self.strict_t1_5 && self.start < self.len {
-            if let Some(last) = self.last_rx {
-                if now.saturating_duration_since(last) > self.timing.t1_5() {
-                    self.silence_from = None;
-                    let n = self.len.saturating_sub(self.start);
-                    self.drop_bytes(n, DiscardReason::InterCharacterGap, now);
-                }
-            }
+        if self.strict_t1_5
+            && self.start < self.len
+            && let Some(last) = self.last_rx
+            && now.saturating_duration_since(last) > self.timing.t1_5()
+        {
+            self.silence_from = None;
+            let n = self.len.saturating_sub(self.start);
+            self.drop_bytes(n, DiscardReason::InterCharacterGap, now);
         }
         self.last_rx = Some(now);
         let mut consumed = 0usize;

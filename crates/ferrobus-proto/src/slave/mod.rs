@@ -627,10 +627,11 @@ impl Core {
         };
         if self.listen_only {
             // Only 0x08/0x01 is heard; it leaves listen-only mode without a reply.
-            if let Ok(Request::Diagnostics(d)) = request {
-                if d.sub_function() == DiagnosticCode::RestartCommunications && !broadcast {
-                    self.restart(d.word() == Some(0xFF00));
-                }
+            if let Ok(Request::Diagnostics(d)) = request
+                && d.sub_function() == DiagnosticCode::RestartCommunications
+                && !broadcast
+            {
+                self.restart(d.word() == Some(0xFF00));
             }
             return silent(self);
         }

@@ -289,10 +289,10 @@ impl Pipelined {
     /// Sends `pending` again if the retry policy says so; else records the unit's health and
     /// answers its client.
     fn settle(&mut self, mut pending: Pending, result: Result<Reply, Error>) {
-        if let Err(Error::Timeout { heard: Some(now), .. }) = result {
-            if pending.heard.is_none_or(|kept| now.weight() >= kept.weight()) {
-                pending.heard = Some(now);
-            }
+        if let Err(Error::Timeout { heard: Some(now), .. }) = result
+            && pending.heard.is_none_or(|kept| now.weight() >= kept.weight())
+        {
+            pending.heard = Some(now);
         }
         let command = &pending.command;
         if should_retry(outcome(command, &result), pending.attempts, pending.retries) {

@@ -65,22 +65,22 @@ impl<S: AsyncRead + Unpin> AsyncRead for FirstBytes<S> {
         let before = buf.filled().len();
         let this = &mut *self;
         let polled = Pin::new(&mut this.inner).poll_read(cx, buf);
-        if this.seen < this.head.len() {
-            if let Poll::Ready(Ok(())) = polled {
-                for &byte in buf.filled().get(before..).unwrap_or_default() {
-                    if let Some(slot) = this.head.get_mut(this.seen) {
-                        *slot = byte;
-                        this.seen += 1;
-                    }
+        if this.seen < this.head.len()
+            && let Poll::Ready(Ok(())) = polled
+        {
+            for &byte in buf.filled().get(before..).unwrap_or_default() {
+                if let Some(slot) = this.head.get_mut(this.seen) {
+                    *slot = byte;
+                    this.seen += 1;
                 }
-                if this.seen == this.head.len() && is_tls_record(this.head) {
-                    // A read that fails hands over no bytes.
-                    buf.set_filled(before);
-                    return Poll::Ready(Err(io::Error::new(
-                        io::ErrorKind::InvalidData,
-                        TlsAnswer { record: this.head[0] },
-                    )));
-                }
+            }
+            if this.seen == this.head.len() && is_tls_record(this.head) {
+                // A read that fails hands over no bytes.
+                buf.set_filled(before);
+                return Poll::Ready(Err(io::Error::new(
+                    io::ErrorKind::InvalidData,
+                    TlsAnswer { record: this.head[0] },
+                )));
             }
         }
         polled

@@ -54,10 +54,10 @@ fn plain(text: String) -> Value {
     if let Some(n) = negative_int(&text) {
         return Value::Number(n.into());
     }
-    if !leading_zero(&text) {
-        if let Some(f) = float(&text) {
-            return Value::Number(f.into());
-        }
+    if !leading_zero(&text)
+        && let Some(f) = float(&text)
+    {
+        return Value::Number(f.into());
     }
     Value::String(text)
 }
@@ -91,10 +91,10 @@ fn unsigned_int(text: &str) -> Option<u64> {
 fn negative_int(text: &str) -> Option<i64> {
     let rest = text.strip_prefix('-')?;
     for (prefix, radix) in [("0x", 16), ("0o", 8), ("0b", 2)] {
-        if let Some(digits) = rest.strip_prefix(prefix) {
-            if let Ok(n) = i64::from_str_radix(&format!("-{digits}"), radix) {
-                return Some(n);
-            }
+        if let Some(digits) = rest.strip_prefix(prefix)
+            && let Ok(n) = i64::from_str_radix(&format!("-{digits}"), radix)
+        {
+            return Some(n);
         }
     }
     if leading_zero(text) {
