@@ -25,6 +25,8 @@
 //!                                            the reverse gateway: each request forwarded to its
 //!                                            TCP server, the answer back (Session::wait)
 //!   ferrobus_proto::scan::Survey   ◀── Engine (never transmits): scan's listen phase
+//!   ferrobus_proto::sniff::Sniffer ◀── Engine (Sniffing, never transmits): the tools'
+//!                                       sniff::Listener, each event to its caller
 //! ```
 //!
 //! Every role is an [`Engine`] — the client's [`Master`], the server's [`Slave`] in its
@@ -42,11 +44,13 @@
 //!
 //! Outside this crate, a program drives an engine of its own with [`Pump::new`] and
 //! [`Pump::run`], writing its frames with [`write_frame`], and takes its codec with
-//! [`Codec::for_transport`]: the tools crate's gateway front and reverse gateway and its
-//! scanner do exactly that.
+//! [`Codec::for_transport`]: the tools crate's gateway front and reverse gateway, its
+//! scanner and its sniffer do exactly that.
 
+use std::collections::VecDeque;
 use std::future::Future;
 use std::io;
+use std::time::Duration;
 
 use ferrobus_proto::Instant;
 use ferrobus_proto::error::BufferTooSmall;
@@ -58,6 +62,7 @@ use ferrobus_proto::master::pipeline::{Pipeline, Ticket};
 use ferrobus_proto::master::{Completion, Master};
 use ferrobus_proto::scan::Survey;
 use ferrobus_proto::slave::{Slave, SlaveEvent};
+use ferrobus_proto::sniff::{SniffEvent, Sniffer};
 use tokio::io::{AsyncReadExt, AsyncWriteExt};
 
 use crate::clock::Clock;
@@ -183,6 +188,73 @@ impl Engine for Survey {
     }
     fn poll_event(&mut self) -> Option<()> {
         None
+    }
+}
+
+/// The core's passive decoder (`ferrobus sniff`) as an engine: it never transmits, and what
+/// it hears is kept, owned as `T`, until the session takes it ([`Engine::poll_event`]).
+///
+/// The decoder counts its instants from an epoch of the caller's (the tools' listener: the
+/// Unix epoch, as pcapng does): the pump's instants, `epoch` later. The engine only shifts
+/// them; each chunk's arrival is the pump's, from the port's [`Port::last_arrival`] when it
+/// stamps its reads.
+///
+/// [`Port::last_arrival`]: crate::port::Port::last_arrival
+#[derive(Debug)]
+pub struct Sniffing<T> {
+    sniffer: Sniffer,
+    /// The decoder's instant at the pump's epoch.
+    epoch: Duration,
+    heard: VecDeque<T>,
+}
+
+impl<T: for<'a> From<SniffEvent<'a>>> Sniffing<T> {
+    /// `sniffer`, its instants `epoch` after the pump's.
+    pub fn new(sniffer: Sniffer, epoch: Duration) -> Self {
+        Sniffing { sniffer, epoch, heard: VecDeque::new() }
+    }
+
+    /// The decoder.
+    pub fn sniffer(&self) -> &Sniffer {
+        &self.sniffer
+    }
+
+    /// Settles what the decoder holds (a frame not yet ended), as if the line had gone
+    /// silent for good: the end of listening. What it completes is kept with the rest.
+    pub fn finish(&mut self) {
+        let heard = &mut self.heard;
+        self.sniffer.finish(|e| heard.push_back(e.into()));
+    }
+
+    /// A pump instant as the decoder counts it.
+    fn shifted(&self, now: Instant) -> Instant {
+        now.saturating_add(self.epoch)
+    }
+}
+
+impl<T: for<'a> From<SniffEvent<'a>>> Engine for Sniffing<T> {
+    type Event<'a>
+        = T
+    where
+        T: 'a;
+
+    fn on_bytes(&mut self, now: Instant, bytes: &[u8]) -> usize {
+        let (now, heard) = (self.shifted(now), &mut self.heard);
+        self.sniffer.feed(now, bytes, |e| heard.push_back(e.into()));
+        bytes.len()
+    }
+    fn poll_timeout(&self) -> Option<Instant> {
+        self.sniffer.poll_timeout().map(|t| t.saturating_sub(self.epoch))
+    }
+    fn handle_timeout(&mut self, now: Instant) {
+        let (now, heard) = (self.shifted(now), &mut self.heard);
+        self.sniffer.expire(now, |e| heard.push_back(e.into()));
+    }
+    fn poll_transmit(&mut self, _: Instant, _: &mut [u8]) -> Option<usize> {
+        None
+    }
+    fn poll_event(&mut self) -> Option<T> {
+        self.heard.pop_front()
     }
 }
 
@@ -703,6 +775,42 @@ mod tests {
         let mut engine = Taker { took: Vec::new(), room: 8 };
         let step = pump.step(&mut port, &mut engine, None, std::future::ready(7)).await;
         assert!(matches!(step, Step::Other(7)), "the session's future did not end the step");
+    }
+
+    /// What the sniffing engine heard, owned: the bytes and when they ended.
+    #[derive(PartialEq, Debug)]
+    struct Heard(Vec<u8>, Instant);
+
+    impl From<SniffEvent<'_>> for Heard {
+        fn from(event: SniffEvent<'_>) -> Self {
+            match event {
+                SniffEvent::Frame(f) => Heard(f.adu().to_vec(), f.time.end),
+                SniffEvent::Fragment(f) => Heard(f.bytes.to_vec(), f.time.end),
+                SniffEvent::Unanswered(u) => Heard(Vec::new(), u.request_end),
+            }
+        }
+    }
+
+    #[test]
+    fn the_sniffing_engine_never_transmits_and_counts_its_instants_epoch_after_the_pumps() {
+        let timing = LineTiming::new(&LineConfig::new(9600).unwrap());
+        let epoch = Duration::from_secs(1_700_000_000);
+        let mut engine = Sniffing::<Heard>::new(Sniffer::new(timing), epoch);
+        let request = [0x01, 0x03, 0x00, 0x00, 0x00, 0x01, 0x84, 0x0A];
+        let at = Instant::from_millis(5);
+        assert_eq!(engine.on_bytes(at, &request), request.len(), "the engine left bytes untaken");
+        // Whatever deadline it has is on the pump's clock, soon after the frame.
+        for _ in 0..4 {
+            let Some(due) = engine.poll_timeout() else { break };
+            assert!(due >= at && due.saturating_duration_since(at) < Duration::from_secs(1), "due at {due:?}");
+            engine.handle_timeout(due);
+        }
+        assert_eq!(engine.poll_event(), Some(Heard(request.to_vec(), at.saturating_add(epoch))));
+        assert_eq!(engine.poll_event(), None);
+        assert_eq!(engine.poll_transmit(at, &mut [0; 256]), None, "the sniffing engine transmitted");
+        assert!(!engine.is_blocked());
+        engine.finish();
+        assert_eq!(engine.poll_event(), None, "finishing an idle decoder made something up");
     }
 
     #[test]

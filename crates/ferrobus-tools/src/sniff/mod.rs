@@ -1,35 +1,54 @@
 //! The passive sniffer of an RTU line: listening without transmitting, with the core's
-//! decoder ([`ferrobus_proto::sniff`]), and what is made of what was heard.
+//! decoder ([`ferrobus_proto::sniff`]) driven by the one loop, and what is made of what was
+//! heard.
 //!
 //! ```text
-//!   port ── reading thread (stamps each chunk) ──▶ Listener ── core Sniffer ──▶ BusEvent
-//!                                                   (shared Clock, Sleeper)       │
-//!                          Filter ─ Stats ─ SniffCapture (pcapng) ◀───────────────┘
+//!   port ── reading thread: read, stamp ──▶ Stamped (a Port: last_arrival = the stamp)
+//!                                              │
+//!            Pump::run ── Engine: Sniffing (the core Sniffer, never transmits) ──▶ BusEvent
+//!            (session Heard: ends the run with each event)                          │
+//!                          Filter ─ Stats ─ SniffCapture (pcapng) ◀─────────────────┘
 //! ```
 //!
 //! - [`Listener`] opens the port and only ever reads it: nothing is written, so it cannot
-//!   disturb the bus. A thread of its own reads the port and stamps each chunk the moment the
-//!   read returns, so that whatever the caller does with an event never delays a timestamp.
-//!   The decoder takes it from there (the chunk's last byte ended at that instant, the ones
-//!   before it back to back); frames are found in both directions and a response is paired
-//!   with its request there. The listener sleeps until the decoder's next deadline (a frame
-//!   cut short, a silence that ends a frame) with the shared [`Clock`] and a
-//!   [`Sleeper`], and hands out each event owned, as a [`BusEvent`].
+//!   disturb the bus (the port it hands the pump refuses writes, and the engine never has
+//!   any). The decoding runs on the pump as every other role does ([`Pump::run`] with the
+//!   [`Sniffing`] engine): each chunk goes to the decoder with its arrival, the pump sleeps
+//!   until the decoder's next deadline (a frame cut short, a silence that ends a frame), and
+//!   [`Listener::next`] returns each event owned, as a [`BusEvent`], as soon as the engine
+//!   has one. The decoder takes each chunk's arrival as the end of its last byte, the ones
+//!   before it back to back; frames are found in both directions and a response is paired
+//!   with its request there.
 //! - [`Filter`] decides which events are shown (by unit and function code), [`Stats`]
 //!   counts them per unit, and [`SniffCapture`] writes them as pcapng that tshark and
 //!   Wireshark decode, with what was wrong on the line as each packet's comment.
 //!
-//! Every instant of a [`BusEvent`] counts nanoseconds since the Unix epoch (as pcapng does).
+//! # Timestamps
+//!
+//! The pump stamps a read with [`Port::last_arrival`] when the port has one, else with the
+//! clock when the read returns. Read on the caller's task, that would be when the caller next
+//! awaits [`Listener::next`]: whatever it does with an event (printing it, or writing to a
+//! pipe that is full, as `sniff --pcap - | tshark` may be) would delay the stamps of the bytes
+//! that came meanwhile. So the port is read by a thread of its own, which stamps each chunk
+//! the moment its read returns and does nothing else; the pump reads the stamped chunks from
+//! it (`reader::Stamped`, a port whose `last_arrival` is the thread's stamp). The stamps are
+//! the thread's, as before the sniffer ran on the pump, and the caller's pace changes none of
+//! them: `bench/SNIFF.md` measures both, back to back.
+//!
+//! Every instant of a [`BusEvent`] counts nanoseconds since the Unix epoch (as pcapng does):
+//! the engine shifts the pump's instants by the Unix time at the pump's epoch ([`WallClock`]).
 //! The error of a timestamp is how late the OS hands over the bytes: on a pty (the virtual
 //! line) tens of microseconds, more under load; behind a USB adapter up to its latency timer
 //! (16 ms on an FTDI by default, 1 ms with `low_latency`), plus the USB poll interval. Bytes
 //! delivered together look back to back, so behind an adapter a short silence before a frame
 //! may be a delivery artefact.
+//!
+//! [`Port::last_arrival`]: ferrobus::port::Port::last_arrival
 
 mod capture;
+mod reader;
 mod stats;
 
-use std::collections::VecDeque;
 use std::io;
 use std::time::{Duration, SystemTime, UNIX_EPOCH};
 
@@ -37,14 +56,14 @@ use ferrobus_proto::Instant;
 use ferrobus_proto::frame::LineTiming;
 use ferrobus_proto::frame::timing::PC_INCOMPLETE_TIMEOUT;
 use ferrobus_proto::sniff::{FragmentKind, Role, SniffEvent, Sniffer, WireTime};
-use tokio::io::AsyncReadExt;
-use tokio::sync::mpsc;
 
 pub use capture::SniffCapture;
 pub use stats::{Filter, Stats, UnitStats};
 
 use ferrobus::clock::Clock;
-use ferrobus::timer::{Sleeper, Timer};
+use ferrobus::port::BoxPort;
+use ferrobus::pump::{Engine, Pump, Session, Sniffing};
+use ferrobus::timer::Timer;
 use ferrobus::{Error, SerialConfig};
 
 /// What went wrong while listening.
@@ -173,18 +192,9 @@ impl From<SniffEvent<'_>> for BusEvent {
     }
 }
 
-/// What the reading thread sends.
-#[derive(Debug)]
-enum Chunk {
-    /// Bytes, and the instant the read returned.
-    Bytes(Vec<u8>, tokio::time::Instant),
-    /// The port failed.
-    Failed(io::Error),
-}
-
 /// The shared [`Clock`], its instants shifted to count from the Unix epoch: how a listener
 /// stamps what it hears (and how a tap's record can be stamped alike). The system clock is
-/// read once, at the epoch; later instants follow the monotonic clock.
+/// read once, at the start; later instants follow the monotonic clock.
 #[derive(Clone, Copy, Debug)]
 pub struct WallClock {
     clock: Clock,
@@ -195,36 +205,46 @@ pub struct WallClock {
 impl WallClock {
     /// A clock whose epoch is now, with the system clock read now.
     pub fn now() -> Self {
-        let clock = Clock::new();
+        WallClock::of(Clock::new())
+    }
+
+    /// `clock`, with the system clock read now.
+    fn of(clock: Clock) -> Self {
         let unix = SystemTime::now().duration_since(UNIX_EPOCH).unwrap_or_default();
-        WallClock { clock, unix_at_epoch: u64::try_from(unix.as_nanos()).unwrap_or(u64::MAX) }
+        let since_epoch = clock.now().since_epoch();
+        let at_epoch = unix.saturating_sub(since_epoch);
+        WallClock { clock, unix_at_epoch: u64::try_from(at_epoch.as_nanos()).unwrap_or(u64::MAX) }
     }
 
     /// A tokio instant (not earlier than the epoch), counted from the Unix epoch.
     pub fn unix(&self, t: tokio::time::Instant) -> Instant {
         Instant::from_nanos(self.clock.from_tokio(t).as_nanos().saturating_add(self.unix_at_epoch))
     }
-
-    /// An instant counted from the Unix epoch, as a tokio instant (the clock's epoch if
-    /// earlier).
-    fn tokio(&self, t: Instant) -> tokio::time::Instant {
-        self.clock.to_tokio(Instant::from_nanos(t.as_nanos().saturating_sub(self.unix_at_epoch)))
-    }
 }
 
-/// A port being listened to: the decoder, fed by the reading thread, woken at its deadlines.
-#[derive(Debug)]
+/// A port being listened to: the core's decoder as an engine ([`Sniffing`]) on the one loop
+/// ([`Pump::run`]), fed by the port's reading thread.
 pub struct Listener {
-    chunks: mpsc::UnboundedReceiver<Chunk>,
-    sniffer: Sniffer,
+    /// `None` once the port has ended or failed, or listening has finished.
+    port: Option<BoxPort>,
+    pump: Pump,
+    engine: Sniffing<BusEvent>,
     clock: WallClock,
-    sleeper: Sleeper,
-    ready: VecDeque<BusEvent>,
     /// The port's path, for errors.
     path: String,
     /// Bytes waiting in the port when it was opened.
     predating: usize,
-    ended: bool,
+}
+
+impl std::fmt::Debug for Listener {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("Listener")
+            .field("path", &self.path)
+            .field("predating", &self.predating)
+            .field("ended", &self.port.is_none())
+            .field("clock", &self.clock)
+            .finish_non_exhaustive()
+    }
 }
 
 impl Listener {
@@ -234,22 +254,18 @@ impl Listener {
     /// ([`Listener::predating`]). Needs a tokio runtime with time enabled.
     pub fn open(serial: SerialConfig, timing: LineTiming) -> Result<Listener, SniffError> {
         let path = serial.path.display().to_string();
-        let (chunks, predating) = read_in_thread(serial)?;
-        Ok(Listener::over(chunks, timing, path, predating))
+        let (port, predating) = reader::read_in_thread(serial)?;
+        Ok(Listener::over(Box::new(port), timing, path, predating))
     }
 
-    /// A listener fed by `chunks` (the reading thread, or a test).
-    fn over(chunks: mpsc::UnboundedReceiver<Chunk>, timing: LineTiming, path: String, predating: usize) -> Self {
-        Listener {
-            chunks,
-            sniffer: Sniffer::new(timing).with_incomplete_timeout(PC_INCOMPLETE_TIMEOUT),
-            clock: WallClock::now(),
-            sleeper: Timer::Tokio.sleeper(),
-            ready: VecDeque::new(),
-            path,
-            predating,
-            ended: false,
-        }
+    /// A listener on `port` (the reading thread's, or a test's).
+    fn over(port: BoxPort, timing: LineTiming, path: String, predating: usize) -> Self {
+        let pump = Pump::new(Timer::Tokio.sleeper());
+        // The decoder counts from the Unix epoch, the pump from its own: the engine shifts.
+        let clock = WallClock::of(*pump.clock());
+        let sniffer = Sniffer::new(timing).with_incomplete_timeout(PC_INCOMPLETE_TIMEOUT);
+        let engine = Sniffing::new(sniffer, Duration::from_nanos(clock.unix_at_epoch));
+        Listener { port: Some(port), pump, engine, clock, path, predating }
     }
 
     /// How many bytes were waiting in the port when it opened (dropped: they came before).
@@ -259,111 +275,63 @@ impl Listener {
 
     /// The line timing the decoder uses.
     pub fn timing(&self) -> &LineTiming {
-        self.sniffer.timing()
+        self.engine.sniffer().timing()
     }
 
     /// The next thing heard, in the order it was on the wire; `Ok(None)` once the port has
     /// ended (end of file). A read error is returned once, after every event before it; the
-    /// listener ends with it. Cancel-safe: dropped while waiting, it loses nothing.
+    /// listener ends with it. Cancel-safe: dropped while waiting, it loses nothing (the pump
+    /// hands the engine a chunk in the same poll that reads it, and the engine keeps what it
+    /// heard until it is taken).
     pub async fn next(&mut self) -> Result<Option<BusEvent>, SniffError> {
-        loop {
-            if let Some(event) = self.ready.pop_front() {
-                return Ok(Some(event));
+        if let Some(event) = self.engine.poll_event() {
+            return Ok(Some(event));
+        }
+        let Some(port) = self.port.as_mut() else { return Ok(None) };
+        match self.pump.run(port, &mut self.engine, &mut Heard).await {
+            Turn::Heard(event) => Ok(Some(event)),
+            Turn::Ended => {
+                self.port = None;
+                Ok(None)
             }
-            if self.ended {
-                return Ok(None);
-            }
-            let deadline = self.sniffer.poll_timeout();
-            let wake = deadline.map(|d| self.clock.tokio(d));
-            let chunk = tokio::select! {
-                () = self.sleeper.sleep_until(wake) => None,
-                chunk = self.chunks.recv() => Some(chunk),
-            };
-            let ready = &mut self.ready;
-            match chunk {
-                None => {
-                    if let Some(d) = deadline {
-                        self.sniffer.expire(d, |e| ready.push_back(e.into()));
-                    }
-                }
-                Some(Some(Chunk::Bytes(bytes, at))) => {
-                    self.sniffer.feed(self.clock.unix(at), &bytes, |e| ready.push_back(e.into()));
-                }
-                Some(Some(Chunk::Failed(source))) => {
-                    self.ended = true;
-                    return Err(SniffError::Read { path: self.path.clone(), source });
-                }
-                Some(None) => self.ended = true,
+            Turn::Failed(source) => {
+                self.port = None;
+                Err(SniffError::Read { path: self.path.clone(), source })
             }
         }
     }
 
     /// Settles what the decoder holds (a frame not yet ended, a request still waiting) and
-    /// returns it with every event not yet taken: the end of listening.
+    /// returns it with every event not yet taken: the end of listening (the port is closed).
     pub fn finish(&mut self) -> Vec<BusEvent> {
-        let ready = &mut self.ready;
-        self.sniffer.finish(|e| ready.push_back(e.into()));
-        self.ended = true;
-        self.ready.drain(..).collect()
+        self.port = None;
+        self.engine.finish();
+        std::iter::from_fn(|| self.engine.poll_event()).collect()
     }
 }
 
-/// Opens the port in a thread of its own that only reads it, stamping each chunk as the read
-/// returns; also returns how many bytes were waiting in the port when it opened, which are
-/// dropped. An error opening it is returned here.
-fn read_in_thread(config: SerialConfig) -> Result<(mpsc::UnboundedReceiver<Chunk>, usize), SniffError> {
-    let (tx, rx) = mpsc::unbounded_channel();
-    let (opened_tx, opened_rx) = std::sync::mpsc::channel::<io::Result<usize>>();
-    let (path, line) = (config.path.display().to_string(), config.line);
-    std::thread::Builder::new()
-        .name("sniff-reader".into())
-        .spawn(move || {
-            let runtime = match tokio::runtime::Builder::new_current_thread().enable_all().build() {
-                Ok(r) => r,
-                Err(e) => {
-                    let _ = opened_tx.send(Err(e));
-                    return;
-                }
-            };
-            runtime.block_on(async move {
-                // Read only: nothing is ever written to the port.
-                let opened = ferrobus::port::open_serial(&config)
-                    .and_then(|mut port| port.discard_input().map(|stale| (port, stale)));
-                let mut port = match opened {
-                    Ok((port, stale)) => {
-                        let _ = opened_tx.send(Ok(stale));
-                        port
-                    }
-                    Err(e) => {
-                        let _ = opened_tx.send(Err(e));
-                        return;
-                    }
-                };
-                let mut buf = [0u8; 1024];
-                loop {
-                    match port.read(&mut buf).await {
-                        Ok(0) => return,
-                        Ok(n) => {
-                            let at = tokio::time::Instant::now();
-                            let bytes = buf.get(..n).unwrap_or_default().to_vec();
-                            if tx.send(Chunk::Bytes(bytes, at)).is_err() {
-                                return;
-                            }
-                        }
-                        Err(e) if e.kind() == io::ErrorKind::Interrupted => {}
-                        Err(e) => {
-                            let _ = tx.send(Chunk::Failed(e));
-                            return;
-                        }
-                    }
-                }
-            });
-        })
-        .map_err(|source| SniffError::Thread { source })?;
-    match opened_rx.recv() {
-        Ok(Ok(stale)) => Ok((rx, stale)),
-        Ok(Err(source)) => Err(SniffError::Open { path, line, source }),
-        Err(_) => Err(SniffError::Open { path, line, source: io::Error::other("the reading thread ended") }),
+/// How one run of the pump ended for the listener.
+enum Turn {
+    /// The engine heard something (its first event; the rest wait in the engine).
+    Heard(BusEvent),
+    /// The port ended.
+    Ended,
+    /// Reading failed.
+    Failed(io::Error),
+}
+
+/// The listener's session on the pump: nothing to write, no deadline of its own; it ends the
+/// run with the first thing the engine heard, or with the port.
+struct Heard;
+
+impl Session<Sniffing<BusEvent>> for Heard {
+    type Output = Turn;
+
+    async fn serve(&mut self, _: &Pump, _: &mut BoxPort, engine: &mut Sniffing<BusEvent>) -> Option<Turn> {
+        engine.poll_event().map(Turn::Heard)
+    }
+    fn on_end(&mut self, error: Option<io::Error>) -> Turn {
+        error.map_or(Turn::Ended, Turn::Failed)
     }
 }
 

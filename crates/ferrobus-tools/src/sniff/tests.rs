@@ -6,6 +6,7 @@ use ferrobus_proto::sniff::{FragmentKind, Role};
 use tokio::sync::mpsc;
 
 use super::capture::packet;
+use super::reader::{Chunk, Stamped};
 use super::*;
 use crate::pcapng::Content;
 
@@ -33,7 +34,7 @@ fn reply() -> Vec<u8> {
 /// A listener fed by the returned sender, as the reading thread would feed it.
 fn listener() -> (mpsc::UnboundedSender<Chunk>, Listener) {
     let (tx, rx) = mpsc::unbounded_channel();
-    (tx, Listener::over(rx, timing(), "/dev/test".into(), 0))
+    (tx, Listener::over(Box::new(Stamped::new(rx)), timing(), "/dev/test".into(), 0))
 }
 
 fn now() -> tokio::time::Instant {
@@ -106,6 +107,71 @@ async fn the_end_of_the_port_ends_the_listener_and_finish_settles_what_it_held()
         "{held:?}"
     );
     assert!(listener.finish().is_empty());
+}
+
+#[tokio::test(start_paused = true)]
+async fn each_chunk_is_stamped_with_its_arrival_not_with_when_the_caller_came_to_take_it() {
+    let (tx, mut listener) = listener();
+    let asked = now();
+    tx.send(Chunk::Bytes(request(), asked)).unwrap();
+    tokio::time::advance(Duration::from_millis(30)).await;
+    let answered = now();
+    tx.send(Chunk::Bytes(reply(), answered)).unwrap();
+    // The caller comes back a second later: both chunks wait, with their stamps.
+    tokio::time::advance(Duration::from_secs(1)).await;
+    let Some(BusEvent::Frame { time: first, .. }) = listener.next().await.unwrap() else { panic!("no request") };
+    let Some(BusEvent::Frame { time: second, response_time, .. }) = listener.next().await.unwrap() else {
+        panic!("no reply")
+    };
+    assert_eq!((first.end, second.end), (listener.clock.unix(asked), listener.clock.unix(answered)));
+    assert_eq!(response_time, Some(Duration::from_millis(30)));
+}
+
+#[test]
+fn the_port_the_pump_is_handed_refuses_every_write() {
+    let (_tx, rx) = mpsc::unbounded_channel();
+    let mut port: BoxPort = Box::new(Stamped::new(rx));
+    let runtime = tokio::runtime::Builder::new_current_thread().build().unwrap();
+    let written = runtime.block_on(tokio::io::AsyncWriteExt::write_all(&mut port, &request()));
+    assert_eq!(written.unwrap_err().kind(), io::ErrorKind::PermissionDenied);
+}
+
+#[cfg(unix)]
+#[tokio::test]
+async fn a_listener_on_a_pty_holds_it_alone_hears_a_frame_stamped_as_it_came_and_writes_nothing_back() {
+    use ferrobus::port::{Port, Pty};
+    use ferrobus_proto::frame::Parity;
+    use tokio::io::AsyncWriteExt;
+
+    let mut pty = Pty::open().unwrap();
+    let line = LineConfig::new(9600).unwrap().with_parity(Parity::None);
+    let mut listener = Listener::open(SerialConfig::new(&pty.path, line), timing()).unwrap();
+    // Held exclusively: a second listener is refused while the first listens.
+    let second = Listener::open(SerialConfig::new(&pty.path, line), timing()).unwrap_err();
+    assert_eq!(second.io_error().kind(), io::ErrorKind::ResourceBusy, "{second}");
+    let before = listener.clock.unix(now());
+    pty.port.write_all(&request()).await.unwrap();
+    let heard = tokio::time::timeout(Duration::from_secs(5), listener.next()).await.unwrap().unwrap();
+    let after = listener.clock.unix(now());
+    let Some(BusEvent::Frame { role: Role::Request, crc_ok: true, bytes, time, .. }) = heard else {
+        panic!("{heard:?}")
+    };
+    assert_eq!(bytes, request());
+    assert!(before <= time.end && time.end <= after, "stamped {:?} outside the read", time.end);
+    tokio::time::sleep(Duration::from_millis(20)).await;
+    let mut back = [0u8; 64];
+    assert_eq!(pty.port.read_buffered(&mut back).unwrap(), 0, "the listener wrote to the port");
+    assert!(listener.finish().is_empty());
+    // Finished, the port is let go at once (its thread ends without waiting for a chunk).
+    let mut again = Listener::open(SerialConfig::new(&pty.path, line), timing());
+    for _ in 0..100 {
+        if again.is_ok() {
+            break;
+        }
+        tokio::time::sleep(Duration::from_millis(50)).await;
+        again = Listener::open(SerialConfig::new(&pty.path, line), timing());
+    }
+    assert!(again.is_ok(), "the finished listener still holds the port: {:?}", again.err());
 }
 
 #[test]
@@ -200,4 +266,12 @@ fn a_capture_writes_a_packet_per_frame_after_its_headers() {
     assert!(out.len() > headers);
     let frame = request();
     assert!(out.windows(frame.len()).any(|w| w == frame.as_slice()), "the frame's bytes are in the capture");
+}
+
+#[test]
+fn a_listener_and_its_next_event_may_move_between_threads() {
+    fn send<T: Send>(_: &T) {}
+    let (_tx, mut listener) = listener();
+    send(&listener);
+    send(&listener.next());
 }
