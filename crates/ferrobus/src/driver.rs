@@ -53,7 +53,7 @@ use crate::clock::Clock;
 use crate::config::{ClientConfig, RequestOptions};
 use crate::error::Error;
 use crate::port::{BoxPort, Transport};
-use crate::pump::{Engine, Pump, Session, Step, write_frame};
+use crate::pump::{Engine, Pump, Session, write_frame};
 
 pub(crate) use pipelined::Pipelined;
 
@@ -349,21 +349,21 @@ impl<F: Framing + Send + 'static> Driver<F> {
             // Between requests, keep reading: the engine must know when the line was last
             // busy, and stale bytes must not be taken for the next reply.
             let command = match self.link.port.as_mut() {
-                // No deadline: between requests the engine has nothing due.
-                Some(port) => match self.pump.step(port, &mut self.master, None, commands.recv()).await {
-                    Step::Other(command) => command,
-                    Step::Read => {
-                        // A late reply, say: counted as it comes, not at the next request.
+                Some(port) => match self.pump.run(port, &mut self.master, &mut Between::new(&mut commands, true)).await
+                {
+                    Turn::Command(command) => command,
+                    // A late reply, say, or the end of a late window: counted as it comes, not
+                    // at the next request.
+                    Turn::Read | Turn::Woke => {
                         self.publish_stats();
                         continue;
                     }
-                    Step::Woke => continue,
-                    Step::Closed => {
+                    Turn::Ended(None) => {
                         tracing::warn!(port = %self.link.transport.describe(), "the port closed; it will be reopened");
                         self.lose_port();
                         continue;
                     }
-                    Step::Failed(e) => {
+                    Turn::Ended(Some(e)) => {
                         tracing::warn!(port = %self.link.transport.describe(), "read failed, reopening on the next request: {e}");
                         self.lose_port();
                         continue;
@@ -546,6 +546,65 @@ impl<F: Framing> Session<Master<F>> for Transaction<'_> {
     fn on_end(&mut self, error: Option<std::io::Error>) -> Self::Output {
         let error = error.unwrap_or_else(|| std::io::ErrorKind::UnexpectedEof.into());
         Err(Error::io(format!("reading from {}", self.transport.describe()), error))
+    }
+}
+
+/// What ended a turn of the pump between a driver's own acts ([`Between`]).
+pub(super) enum Turn {
+    /// A command came (`None`: every client has gone).
+    Command(Option<Command>),
+    /// Bytes were read (a reply, a late one): the engine may have completions or new counts.
+    Read,
+    /// A deadline of the engine's came and was handled.
+    Woke,
+    /// The port reached its end (`None`) or reading failed.
+    Ended(Option<std::io::Error>),
+}
+
+/// The drivers' session between their own acts (sending, retrying, reopening): the pump reads
+/// the port and keeps the engine's time until a command comes (taken only while `room`), bytes
+/// are read, a deadline is handled, or the port ends; the driver then acts and runs it again.
+pub(super) struct Between<'c> {
+    commands: &'c mut mpsc::Receiver<Command>,
+    room: bool,
+    turn: Option<Turn>,
+}
+
+impl<'c> Between<'c> {
+    /// A turn that takes the next command from `commands` if `room`.
+    pub(super) fn new(commands: &'c mut mpsc::Receiver<Command>, room: bool) -> Self {
+        Between { commands, room, turn: None }
+    }
+}
+
+impl<E: Engine> Session<E> for Between<'_> {
+    type Output = Turn;
+
+    async fn serve(&mut self, _pump: &Pump, _port: &mut BoxPort, _engine: &mut E) -> Option<Turn> {
+        self.turn.take()
+    }
+
+    /// Cancel-safe: a read that comes first leaves the command in the channel.
+    async fn wait(&mut self) {
+        if self.room {
+            self.turn = Some(Turn::Command(self.commands.recv().await));
+        } else {
+            std::future::pending::<()>().await;
+        }
+    }
+
+    fn on_read(&mut self) {
+        self.turn = Some(Turn::Read);
+    }
+
+    /// The pump handles the engine's deadline next; the turn ends after it.
+    fn on_wake(&mut self) -> Option<Turn> {
+        self.turn = Some(Turn::Woke);
+        None
+    }
+
+    fn on_end(&mut self, error: Option<std::io::Error>) -> Turn {
+        Turn::Ended(error)
     }
 }
 

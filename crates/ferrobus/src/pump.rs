@@ -14,7 +14,9 @@
 //! ```text
 //!   ferrobus_proto::master::Master ◀── Engine ──▶ ferrobus_proto::slave::Slave (deferred)
 //!            │                                                  │ poll_request / respond
-//!   driver::Transaction (Client)          server::Replies: authorize filter, then Service::answer
+//!   driver::Transaction (a request)       server::Replies: authorize filter, then Service::answer
+//!   driver::Between (between requests)
+//!   driver::Linger (a reply owed at the end)
 //!                                            ├─ server::serve, serve_tcp   (a Handler, a Shared one)
 //!                                            ├─ the simulator              (Shared<Sim> + FaultFilter)
 //!                                            └─ tls::serve_tls_with        (RoleCheck as the filter)
@@ -35,9 +37,10 @@
 //! blocked engine did not take, sleeping and waking are written once. The role-specific parts
 //! are a [`Session`] the loop calls at fixed points (serve the engine's output, add deadlines,
 //! note a read, act on a wake before the engine, end with the port): the client's request
-//! (`driver::Transaction`) and the server's replies with their filters, observer and idle
-//! timeouts (`server::Replies`). Between requests the client waits on its command channel
-//! and the port at once with the loop's one turn (`Pump::step`). Which codec a transport
+//! (`driver::Transaction`), the time between requests, when the client waits on its command
+//! channel and the port at once (`driver::Between`, the pipelined driver's whole turn too),
+//! and the server's replies with their filters and observer (`server::Replies`; when a
+//! connection closes is the slave engine's own policy). Which codec a transport
 //! takes is decided once too (`Codec::for_transport`). Echo suppression is the master
 //! engine's own (it counts its echo off the bytes it is fed), so the pump feeds every byte
 //! unchanged.
@@ -290,7 +293,7 @@ pub trait Session<E: Engine> {
 }
 
 /// What one [`Pump::step`] saw.
-pub(crate) enum Step<T> {
+enum Step<T> {
     /// Bytes arrived and were handed to the engine (what it did not take is kept).
     Read,
     /// The port reached its end.
@@ -336,13 +339,13 @@ impl Pump {
     }
 
     /// The engine's next deadline on tokio's clock.
-    pub(crate) fn deadline<E: Engine>(&self, engine: &E) -> Option<tokio::time::Instant> {
+    fn deadline<E: Engine>(&self, engine: &E) -> Option<tokio::time::Instant> {
         engine.poll_timeout().map(|t| self.clock.to_tokio(t))
     }
 
     /// Hands the engine the bytes it did not take before, if it takes bytes again; returns
     /// whether it did (the session then serves the engine's output before the next step).
-    pub(crate) fn feed_kept<E: Engine>(&mut self, engine: &mut E) -> bool {
+    fn feed_kept<E: Engine>(&mut self, engine: &mut E) -> bool {
         if engine.is_blocked() || (!self.stalled && self.kept.is_empty()) {
             return false;
         }
@@ -368,7 +371,7 @@ impl Pump {
     }
 
     /// Tells the engine that its deadline has come.
-    pub(crate) fn handle_timeout<E: Engine>(&mut self, engine: &mut E) {
+    fn handle_timeout<E: Engine>(&mut self, engine: &mut E) {
         engine.handle_timeout(self.clock.now());
         self.stalled |= engine.is_blocked();
     }
@@ -407,7 +410,7 @@ impl Pump {
 
     /// Waits for the first of: bytes from `port` (read only while the engine takes them and
     /// nothing is kept), `deadline`, and `other`.
-    pub(crate) async fn step<E: Engine, T>(
+    async fn step<E: Engine, T>(
         &mut self,
         port: &mut BoxPort,
         engine: &mut E,

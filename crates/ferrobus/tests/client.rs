@@ -366,3 +366,31 @@ async fn over_tcp_a_server_answers_each_connection() {
     assert!(err.to_string().starts_with("opening 127.0.0.1:1: "), "{err}");
     server.abort();
 }
+
+#[tokio::test(start_paused = true)]
+async fn a_late_rtu_reply_between_requests_is_counted_as_it_comes_not_at_the_next_request() {
+    use ferrobus_proto::crc::crc16_wire;
+    let (client_end, mut device) = tokio::io::duplex(4096);
+    let port = Arc::new(std::sync::Mutex::new(Some(client_end)));
+    let connector = ConnectWith::new("a slow device", move || -> Connecting {
+        let port = port.lock().unwrap().take();
+        Box::pin(async move { port.map(|p| Box::new(p) as BoxPort).ok_or_else(|| std::io::ErrorKind::NotFound.into()) })
+    });
+    let client = Client::connect(Transport::custom(Framing::Rtu, timing(), connector), config()).await.unwrap();
+    let replying = tokio::spawn(async move {
+        let mut request = [0u8; 8];
+        device.read_exact(&mut request).await.unwrap();
+        // Past the client's 200 ms: the reply is late.
+        tokio::time::sleep(Duration::from_millis(300)).await;
+        let mut reply = vec![1, 0x03, 2, 0x12, 0x34];
+        reply.extend(crc16_wire(&reply));
+        device.write_all(&reply).await.unwrap();
+        device
+    });
+    let err = client.read_holding_registers(1, 0, 1).await.unwrap_err();
+    assert!(matches!(err, Error::Timeout { .. }), "{err}");
+    let _device = replying.await.unwrap();
+    // No request follows: the driver, between requests, reads and publishes what it heard.
+    tokio::time::sleep(Duration::from_millis(20)).await;
+    assert_eq!(client.stats().master.late_replies, 1, "{:?}", client.stats());
+}

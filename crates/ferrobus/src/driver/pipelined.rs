@@ -36,11 +36,11 @@ use ferrobus_proto::pdu::Request;
 use ferrobus_proto::retry::should_retry;
 use tokio::sync::mpsc;
 
-use super::{ClientStats, Command, Link, Reply, convert, outcome};
+use super::{Between, ClientStats, Command, Link, Reply, Turn, convert, outcome};
 use crate::config::ClientConfig;
 use crate::error::Error;
 use crate::port::{BoxPort, Transport};
-use crate::pump::{Pump, Step, write_frame};
+use crate::pump::{Pump, write_frame};
 
 /// A request and its attempts so far.
 struct Pending {
@@ -130,11 +130,9 @@ impl Pipelined {
                 return;
             }
             let room = open && self.engine.has_room() && self.again.is_empty();
-            let deadline = self.pump.deadline(&self.engine);
             let Some(port) = self.link.port.as_mut() else { continue };
-            let next = async { if room { commands.recv().await } else { std::future::pending().await } };
-            match self.pump.step(port, &mut self.engine, deadline, next).await {
-                Step::Other(Some(command)) => {
+            match self.pump.run(port, &mut self.engine, &mut Between::new(&mut commands, room)).await {
+                Turn::Command(Some(command)) => {
                     self.start(command).await;
                     // Whatever else is waiting goes out in the same write.
                     while self.engine.has_room() && self.link.port.is_some() {
@@ -142,11 +140,12 @@ impl Pipelined {
                         self.start(command).await;
                     }
                 }
-                Step::Other(None) => open = false,
-                Step::Read => read = true,
-                Step::Woke => self.pump.handle_timeout(&mut self.engine),
-                Step::Closed => self.lost(&std::io::ErrorKind::UnexpectedEof.into()),
-                Step::Failed(e) => self.lost(&e),
+                Turn::Command(None) => open = false,
+                Turn::Read => read = true,
+                // The engine's deadline was handled: its completions are delivered next.
+                Turn::Woke => {}
+                Turn::Ended(None) => self.lost(&std::io::ErrorKind::UnexpectedEof.into()),
+                Turn::Ended(Some(e)) => self.lost(&e),
             }
         }
     }
