@@ -10,7 +10,8 @@
 # (npm sparkplug-payload, pinned by tests/peers/sparkplug/tahu/package-lock.json;
 # nodejs and npm from apt when missing).
 # Installs what the peers need (apt: socat, libmodbus-dev, mbpoll, libudev-dev,
-# pkg-config, gcc; pip: pymodbus==3.16.1, pyserial==3.5, pysunspec2==1.3.7), compiles the
+# pkg-config, gcc, chromium for the status page; pip: pymodbus==3.16.1, pyserial==3.5,
+# pysunspec2==1.3.7, prometheus-client==0.26.0 for the metrics), compiles the
 # libmodbus fixtures into target/peers/ and builds tokio-modbus-peer (release,
 # its own target dir target/peers/tokio-modbus-peer, --locked). Prints a
 # one-line version summary at the end.
@@ -39,6 +40,8 @@ PYSERIAL_VERSION="3.5"
 # pysunspec2: the SunSpec Alliance's own client, and the source of the model
 # definitions crates/ferrobus-sunspec embeds at build time (sunspec2/models/json).
 PYSUNSPEC2_VERSION="1.3.7"
+# prometheus_client's OpenMetrics parser reads what `--metrics` serves, as Prometheus would.
+PROMETHEUS_CLIENT_VERSION="0.26.0"
 APT_PACKAGES=(socat libmodbus-dev mbpoll libudev-dev pkg-config gcc)
 # tshark decodes the captures of `ferrobus sniff` in its tests.
 APT_PACKAGES+=(tshark)
@@ -52,6 +55,8 @@ APT_PACKAGES+=(zsh)
 APT_PACKAGES+=(tmux)
 # The bridge's tests: their own broker, protoc for the raw payload, and the venv for pysparkplug.
 APT_PACKAGES+=(mosquitto protobuf-compiler python3-venv)
+# The status page (`--metrics`) is tested in a real browser: headless Chromium runs its script.
+APT_PACKAGES+=(chromium)
 PYSPARKPLUG_VERSION="0.6.1"
 SPARKPLUG_VENV="$OUT/sparkplug-venv"
 export DEBIAN_FRONTEND=noninteractive
@@ -129,11 +134,12 @@ fi
 
 # ---- python packages ---------------------------------------------------------
 py_versions_ok() {
-    "$PYTHON" - "$PYMODBUS_VERSION" "$PYSUNSPEC2_VERSION" <<'EOF' 2>/dev/null
+    "$PYTHON" - "$PYMODBUS_VERSION" "$PYSUNSPEC2_VERSION" "$PROMETHEUS_CLIENT_VERSION" <<'EOF' 2>/dev/null
 import sys
 from importlib.metadata import version
-import pymodbus, serial, sunspec2
-sys.exit(0 if (pymodbus.__version__, version("pysunspec2")) == tuple(sys.argv[1:3]) else 1)
+import pymodbus, serial, sunspec2, prometheus_client
+found = (pymodbus.__version__, version("pysunspec2"), version("prometheus-client"))
+sys.exit(0 if found == tuple(sys.argv[1:4]) else 1)
 EOF
 }
 
@@ -147,7 +153,8 @@ if ! py_versions_ok; then
         missing python3 "$PYTHON not found and could not be installed"
     else
         PIP=("$PYTHON" -m pip install --quiet --disable-pip-version-check
-            "pymodbus==$PYMODBUS_VERSION" "pyserial==$PYSERIAL_VERSION" "pysunspec2==$PYSUNSPEC2_VERSION")
+            "pymodbus==$PYMODBUS_VERSION" "pyserial==$PYSERIAL_VERSION" "pysunspec2==$PYSUNSPEC2_VERSION"
+            "prometheus-client==$PROMETHEUS_CLIENT_VERSION")
         log "${PIP[*]}"
         PIP_LOG="$(mktemp)"
         if ! "${PIP[@]}" >"$PIP_LOG" 2>&1; then
@@ -160,7 +167,7 @@ if ! py_versions_ok; then
         if ! py_versions_ok; then
             cat "$PIP_LOG" >&2
             rm -f "$PIP_LOG"
-            missing pymodbus "cannot install pymodbus==$PYMODBUS_VERSION / pyserial==$PYSERIAL_VERSION / pysunspec2==$PYSUNSPEC2_VERSION for $PYTHON"
+            missing pymodbus "cannot install pymodbus==$PYMODBUS_VERSION / pyserial==$PYSERIAL_VERSION / pysunspec2==$PYSUNSPEC2_VERSION / prometheus-client==$PROMETHEUS_CLIENT_VERSION for $PYTHON"
         fi
         rm -f "$PIP_LOG"
     fi
@@ -263,6 +270,10 @@ v_rustc="$(rustc --version 2>/dev/null | awk '{ print $2 }')"
 echo "peers: libmodbus ${v_libmodbus}, pymodbus ${v_pymodbus} (python ${v_python}, pyserial ${v_pyserial}), pysunspec2 ${v_pysunspec2}," \
     "tokio-modbus ${v_tokio_modbus:-?} (rustc ${v_rustc:-missing}), socat ${v_socat:-missing}," \
     "mbpoll ${v_mbpoll}, gcc ${v_gcc} -> target/peers/"
+
+v_chromium="$(chromium --version 2>/dev/null || echo 'chromium missing')"
+v_promclient="$("$PYTHON" -c 'from importlib.metadata import version; print(version("prometheus-client"))' 2>/dev/null || echo missing)"
+echo "peers: ${v_chromium}, prometheus-client ${v_promclient}"
 
 v_tshark="$(tshark --version 2>/dev/null || true)"
 v_tshark="${v_tshark%%$'\n'*}"

@@ -26,6 +26,7 @@ use std::time::Duration;
 use clap::Args;
 use ferrobus::server::TcpCounts;
 use ferrobus::{Client, Transport};
+use ferrobus_tools::gateway::status::GatewayStatus;
 use ferrobus_tools::gateway::{
     AllowAll, Authorize, FrontConfig, Gateway, GatewayConfig, GatewayLine, Inbound, OnFailure, Route, Routes, Rules,
     Upstream, serve_reverse,
@@ -34,6 +35,7 @@ use ferrobus_tools::gateway::{
 use crate::connect::{ConnectArgs, Target, parse_duration};
 use crate::exit::CliError;
 use crate::interrupt::Interrupt;
+use crate::metrics::{self, MetricsArgs};
 use crate::server_limits::ServerLimitsArgs;
 use crate::server_tls::ServerTlsArgs;
 
@@ -150,6 +152,9 @@ pub(crate) struct GatewayArgs {
     /// Modbus/TCP Security: TLS with client certificates and roles.
     #[command(flatten)]
     tls: ServerTlsArgs,
+
+    #[command(flatten)]
+    metrics: MetricsArgs,
 }
 
 /// What the reverse gateway does when the TCP side gives no answer, as typed.
@@ -181,14 +186,15 @@ pub(crate) async fn run(connection: &ConnectArgs, args: &GatewayArgs) -> Result<
         .await
         .map_err(|e| ferrobus::Error::io(format!("listening on {}", args.listen), e))?;
     let bound = listener.local_addr().map_err(|e| ferrobus::Error::io("listening", e))?;
+    let status = args.metrics.bind().await?;
     let lines: Vec<String> = config.lines.iter().map(|l| l.transport.describe()).collect();
     let gateway = Gateway::start(config).await?;
     // A request a line has in flight when the gateway stops is owed its reply: the process
     // keeps the port until it has come or its window has passed.
     gateway.releases().into_iter().for_each(crate::interrupt::keep);
     let inbound = if args.rtu_in { Inbound::RtuOverTcp } else { Inbound::Mbap };
-    eprintln!(
-        "gateway: listening on {bound} ({}), lines: {}",
+    let summary = format!(
+        "listening on {bound} ({}), lines: {}",
         if args.rtu_in {
             "RTU over TCP"
         } else if secure {
@@ -198,9 +204,14 @@ pub(crate) async fn run(connection: &ConnectArgs, args: &GatewayArgs) -> Result<
         },
         lines.iter().enumerate().map(|(i, l)| format!("{i}={l}")).collect::<Vec<_>>().join(", ")
     );
+    eprintln!("gateway: {summary}");
     let pipeline = usize::try_from(args.pipeline).unwrap_or(usize::MAX);
     let limits = args.limits.limits(pipeline);
     let tcp = Arc::clone(&limits.stats);
+    if let Some(listener) = status {
+        let source = GatewayStatus::new(gateway.clone(), Arc::clone(&tcp), summary);
+        metrics::spawn(listener, Arc::new(source), "gateway");
+    }
     let front = FrontConfig { inbound, limits };
     let serving = {
         let gateway = gateway.clone();
@@ -242,6 +253,9 @@ async fn reverse(connection: &ConnectArgs, args: &GatewayArgs) -> Result<(), Cli
     let Target::Serial { path, line, ascii } = connection.target()? else {
         return Err(CliError::Usage("--reverse serves a serial line: give --port PATH".into()));
     };
+    if args.metrics.given() {
+        return Err(CliError::Usage("--metrics is the forward gateway's: not with --reverse".into()));
+    }
     if args.routes.is_empty() {
         return Err(CliError::Usage(
             "--reverse needs the units it stands for: --route 5=10.0.0.7:502 (or 5=10.0.0.7:502/1 to ask the server \

@@ -57,6 +57,7 @@ mod interrupt;
 mod line;
 mod man;
 mod mask;
+mod metrics;
 mod monitor;
 mod output;
 mod poll;
@@ -434,14 +435,17 @@ fn init_logging(verbose: u8) {
     };
     let filter = tracing_subscriber::EnvFilter::try_from_default_env()
         .unwrap_or_else(|_| tracing_subscriber::EnvFilter::new(level));
-    tracing_subscriber::fmt()
+    let log = tracing_subscriber::fmt()
         .with_env_filter(filter)
         .with_writer(stderr::Log)
         .with_ansi(std::io::stderr().is_terminal())
         // A failed write is kept by stderr::Log; reporting it on stderr would panic.
         .log_internal_errors(false)
         .with_target(false)
-        .init();
+        .finish();
+    // The warnings are kept for a status page too (`--metrics`).
+    let log = tracing_subscriber::layer::SubscriberExt::with(log, metrics::RecentWarnings);
+    tracing_subscriber::util::SubscriberInitExt::init(log);
 }
 
 fn main() -> ExitCode {

@@ -26,6 +26,8 @@
 //! - [`write`](mod@write): writing a named point — the guard, the one request the device takes, the
 //!   read-back — the one act every writer calls; [`guard`]: the write guard with its reading
 //!   of the run state.
+//! - `status` (the `status` feature): the status endpoint of a long-running command —
+//!   OpenMetrics at `/metrics`, `/healthz` and a live status page.
 
 pub mod backup;
 pub mod gateway;
@@ -34,4 +36,6 @@ pub mod pcapng;
 pub mod poll;
 pub mod scan;
 pub mod sniff;
+#[cfg(feature = "status")]
+pub mod status;
 pub mod write;

@@ -32,6 +32,35 @@ fn gateway_usage_errors_name_the_option_and_what_is_wrong() {
 }
 
 #[test]
+fn a_bad_or_busy_metrics_address_is_refused_before_any_line_is_opened() {
+    let gateway = ["--port", "/dev/null-no-such-port", "gateway", "--listen", "127.0.0.1:0"];
+    let with = |extra: &[&str]| -> Vec<String> { gateway.iter().chain(extra).map(ToString::to_string).collect() };
+    let refused =
+        |args: Vec<String>, expected: &str| usage_error(&args.iter().map(String::as_str).collect::<Vec<_>>(), expected);
+    refused(with(&["--metrics", "nonsense"]), "--metrics 'nonsense': give ADDR:PORT");
+    refused(with(&["--metrics", "1.2.3.4:70000"]), "--metrics '1.2.3.4:70000'");
+    usage_error(
+        &[
+            "--port",
+            "/dev/null-no-such-port",
+            "gateway",
+            "--reverse",
+            "--route",
+            "5=127.0.0.1:1502",
+            "--metrics",
+            "9100",
+        ],
+        "--metrics is the forward gateway's: not with --reverse",
+    );
+    let busy = std::net::TcpListener::bind("127.0.0.1:0").unwrap();
+    let taken = busy.local_addr().unwrap().to_string();
+    let args = with(&["--metrics", &taken]);
+    let err = stderr(&offline(&args.iter().map(String::as_str).collect::<Vec<_>>()).failure());
+    assert!(err.contains(&format!("--metrics: listening on {taken}")), "{err}");
+    assert!(!err.contains("/dev/null-no-such-port"), "the line was opened first: {err}");
+}
+
+#[test]
 fn a_port_that_cannot_be_opened_is_named() {
     let err = stderr(&offline(&["--port", "/dev/null-no-such-port", "gateway", "--listen", "127.0.0.1:0"]).failure());
     assert!(err.contains("/dev/null-no-such-port"), "{err}");

@@ -23,6 +23,8 @@
 //! - [`reply_timing`]: when the simulator's reply starts, with a 20 ms response wait.
 //! - [`skips`]: what a test whose peer is missing does, in and outside CI.
 //! - [`stale_reply`]: a reply left in the port by an interrupted command, dropped by the next.
+//! - [`status`]: `gateway --metrics`: `/metrics` parsed by Prometheus's Python client, and the
+//!   status page run in headless Chromium.
 //! - [`sunspec`]: pysunspec2, the SunSpec Alliance's client, against the simulated inverter,
 //!   beside `scan --sunspec` and `get --device sunspec`.
 //! - [`tcp_server`]: `ferrobus sim --tcp` under pipelining, corrupt headers, unit ids over TCP,
@@ -47,6 +49,7 @@ mod port_reopen;
 mod reply_timing;
 mod skips;
 mod stale_reply;
+mod status;
 mod sunspec;
 mod support;
 mod tcp_server;

@@ -105,6 +105,8 @@ mod front;
 mod reverse;
 mod screen;
 pub mod stats;
+#[cfg(feature = "status")]
+pub mod status;
 #[cfg(feature = "tls")]
 mod tls;
 

@@ -1,0 +1,141 @@
+//! `gateway --metrics`: the status endpoint read as its users read it. Prometheus's own
+//! client library parses `/metrics` (`prometheus_client`'s OpenMetrics parser, which refuses
+//! what Prometheus would), `/healthz` answers a probe, and the status page is loaded in
+//! headless Chromium, whose script fills it from `/status.json`: the units with their health.
+
+use std::io::{Read, Write};
+use std::net::TcpStream;
+use std::process::Command;
+use std::time::Duration;
+
+use serde_json::Value;
+
+use crate::support::env::require_tool;
+use crate::support::peers::free_port;
+use crate::support::process::{Proc, Stream, output_within};
+use crate::support::{Link, Over, Parity, TempDir, require, sim};
+
+const STEP: Duration = Duration::from_secs(20);
+
+/// GET `path` on `addr`: the status code and the body.
+fn get(addr: &str, path: &str) -> (u16, String) {
+    let mut stream = TcpStream::connect(addr).unwrap();
+    write!(stream, "GET {path} HTTP/1.1\r\nHost: {addr}\r\nConnection: close\r\n\r\n").unwrap();
+    let mut answer = String::new();
+    stream.read_to_string(&mut answer).unwrap();
+    let code = answer.split(' ').nth(1).and_then(|c| c.parse().ok()).unwrap_or(0);
+    let body = answer.split_once("\r\n\r\n").map(|(_, b)| b.to_string()).unwrap_or_default();
+    (code, body)
+}
+
+/// `ferrobus --tcp GATEWAY --unit UNIT read holding ADDRESS`, its exit status.
+fn read(gateway: &str, unit: &str, address: &str) -> bool {
+    let mut command = Command::new(env!("CARGO_BIN_EXE_ferrobus"));
+    command.args(["--tcp", gateway, "--timeout", "2s", "--unit", unit, "read", "holding", address]);
+    output_within(&mut command, "", STEP).status.success()
+}
+
+/// The samples of an OpenMetrics text as Prometheus's Python client parses them: one JSON
+/// object per sample (name, labels, value), or the parser's error.
+const PARSE: &str = r#"
+import json, sys
+from prometheus_client.openmetrics.parser import text_string_to_metric_families
+for family in text_string_to_metric_families(sys.stdin.read()):
+    for s in family.samples:
+        print(json.dumps({"family": family.name, "type": family.type, "name": s.name, "labels": s.labels, "value": s.value}))
+"#;
+
+fn python_has_prometheus_client() -> bool {
+    Command::new("python3").args(["-c", "import prometheus_client"]).output().is_ok_and(|o| o.status.success())
+}
+
+#[test]
+fn the_gateways_metrics_parse_as_openmetrics_and_its_page_shows_each_units_health_in_a_browser() {
+    let Some(_turn) = require(&[]) else { return };
+    if !require_tool(
+        python_has_prometheus_client(),
+        "python3 prometheus_client",
+        "pip install prometheus-client (or .ci/setup-peers.sh)",
+    ) || !require_tool(which("chromium"), "chromium", "apt install chromium (or .ci/setup-peers.sh)")
+    {
+        return;
+    }
+    let drive = sim(Over::Tcp, Parity::Even, &["--profile", "omron-3g3rx"]);
+    let Link::Tcp(device) = &drive.link else { unreachable!("a TCP sim") };
+    let listen = format!("127.0.0.1:{}", free_port());
+    let status = format!("127.0.0.1:{}", free_port());
+    let mut command = Command::new(env!("CARGO_BIN_EXE_ferrobus"));
+    command.args(["--tcp", device, "--timeout", "300ms", "gateway", "--listen", &listen, "--metrics", &status]);
+    let gateway = Proc::spawn("ferrobus gateway --metrics", &mut command);
+    let said = gateway.wait_for(Stream::Err, |l| l.starts_with("gateway: status on"), STEP);
+    assert!(said.contains(&format!("http://{status}/")), "{said}");
+
+    // The window of the units' health starts at the first look.
+    assert_eq!(get(&status, "/status.json").0, 200);
+    for _ in 0..3 {
+        assert!(read(&listen, "1", "0"), "unit 1 answers through the gateway");
+    }
+    assert!(!read(&listen, "1", "60000"), "an address the drive does not have: 0x02");
+    assert!(!read(&listen, "9", "0"), "no unit 9 behind it: 0x0B");
+
+    let (code, text) = get(&status, "/metrics");
+    assert_eq!(code, 200);
+    let mut parse = Command::new("python3");
+    parse.args(["-c", PARSE]);
+    let parsed = output_within(&mut parse, &text, STEP);
+    assert!(
+        parsed.status.success(),
+        "prometheus_client refused it: {}\n{text}",
+        String::from_utf8_lossy(&parsed.stderr)
+    );
+    let samples: Vec<Value> =
+        String::from_utf8_lossy(&parsed.stdout).lines().map(|l| serde_json::from_str(l).unwrap()).collect();
+    let value = |name: &str, labels: &[(&str, &str)]| {
+        samples
+            .iter()
+            .find(|s| s["name"] == name && labels.iter().all(|(k, v)| s["labels"][*k] == *v))
+            .and_then(|s| s["value"].as_f64())
+    };
+    let unit1 = [("line", "0"), ("unit", "1")];
+    assert_eq!(value("ferrobus_gateway_requests_total", &unit1), Some(4.0), "{text}");
+    assert_eq!(value("ferrobus_gateway_replies_total", &unit1), Some(3.0), "{text}");
+    assert_eq!(value("ferrobus_gateway_exceptions_total", &[("unit", "1"), ("code", "0x02")]), Some(1.0), "{text}");
+    assert_eq!(value("ferrobus_gateway_timeouts_total", &[("unit", "9")]), Some(1.0), "{text}");
+    assert_eq!(value("ferrobus_gateway_response_seconds_count", &unit1), Some(4.0), "{text}");
+    assert_eq!(value("ferrobus_gateway_response_seconds_bucket", &[("unit", "1"), ("le", "+Inf")]), Some(4.0));
+    assert_eq!(value("ferrobus_tcp_connections_accepted_total", &[]), Some(5.0), "five clients: {text}");
+    let families: std::collections::BTreeSet<&str> = samples.iter().filter_map(|s| s["family"].as_str()).collect();
+    assert!(families.contains("ferrobus_gateway_response_seconds"), "{families:?}");
+
+    // The health of the window: let it pass, then the browser's first look shows it.
+    std::thread::sleep(Duration::from_millis(2100));
+    let profile = TempDir::new();
+    let mut browser = Command::new("chromium");
+    browser.args([
+        "--headless",
+        "--no-sandbox",
+        "--disable-gpu",
+        "--disable-quic",
+        "--no-first-run",
+        "--disable-background-networking",
+        "--disable-component-update",
+        "--disable-sync",
+        "--virtual-time-budget=3000",
+    ]);
+    browser.arg(format!("--user-data-dir={}", profile.path().display()));
+    browser.args(["--dump-dom", &format!("http://{status}/")]);
+    let page = output_within(&mut browser, "", Duration::from_secs(60));
+    let dom = String::from_utf8_lossy(&page.stdout);
+    assert!(dom.contains("<span id=\"health\" class=\"ok\">healthy</span>"), "{dom}");
+    assert!(dom.contains("ferrobus gateway"), "{dom}");
+    let table = dom.split("data-title=\"Units\"").nth(1).unwrap_or_default();
+    assert!(table.contains("<td>1</td><td class=\"ok\">ok</td>"), "unit 1 answered: {table}");
+    assert!(table.contains("<td>9</td><td class=\"silent\">silent</td>"), "unit 9 never did: {table}");
+    // Healthy: one unit answered in the window (a probe after the page: the same window).
+    assert_eq!(get(&status, "/healthz"), (200, "ok\n".to_string()));
+    drop(gateway);
+}
+
+fn which(program: &str) -> bool {
+    Command::new(program).arg("--version").output().is_ok_and(|o| o.status.success())
+}
