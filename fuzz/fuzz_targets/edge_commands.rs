@@ -44,7 +44,7 @@ static PLANTS: LazyLock<Vec<Plant>> = LazyLock::new(|| {
         config.uint_encoding = UintEncoding::LongValue;
     }
     let mut plain = demo.clone();
-    plain.mode = Mode::Plain(PlainConfig { prefix: PREFIX.to_owned(), retain: true, qos: 1 });
+    plain.mode = Mode::Plain(PlainConfig { prefix: PREFIX.to_owned(), retain: true, qos: 1, discovery: None });
     vec![demo, hosted, plain]
 });
 

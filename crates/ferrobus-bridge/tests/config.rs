@@ -177,7 +177,23 @@ fn the_real_plant_example_says_what_a_plant_has() {
         "the store's dir is relative to the file"
     );
     let plain = Plant::load(&examples().join("plain.toml")).unwrap_or_else(|e| panic!("{e}"));
-    assert!(matches!(plain.mode, Mode::Plain(_)));
+    assert!(matches!(&plain.mode, Mode::Plain(p) if p.discovery.is_none()), "discovery is off by default");
+}
+
+#[test]
+fn home_assistant_discovery_is_off_by_default_and_under_homeassistant_when_on() {
+    let text = std::fs::read_to_string(examples().join("plain.toml")).expect("the plain example");
+    let discovery = |keys: &str| {
+        let text = text.replacen("[plain]\n", &format!("[plain]\n{keys}"), 1);
+        match Plant::parse(&text, "plain.toml", &examples()).unwrap_or_else(|e| panic!("{keys}: {e}")).mode {
+            Mode::Plain(p) => p.discovery,
+            Mode::Sparkplug(_) => panic!("plain"),
+        }
+    };
+    assert_eq!(discovery(""), None);
+    assert_eq!(discovery("discovery = false\n"), None);
+    assert_eq!(discovery("discovery = true\n").as_deref(), Some("homeassistant"));
+    assert_eq!(discovery("discovery = true\ndiscovery_prefix = \"ha/site-2\"\n").as_deref(), Some("ha/site-2"));
 }
 
 /// The start of every test plant: a broker, Sparkplug, one simulated line.
@@ -259,6 +275,17 @@ const FILE_CASES: &[(&str, &str, &[&str])] = &[
         &["both [sparkplug] and [plain]"],
     ),
     ("a plain prefix with +", "[plain]\nprefix = »\"plant/+\"\nqos = »3\n", &["has no + or #", "QoS is 0, 1 or 2"]),
+    (
+        "a discovery prefix without discovery",
+        "[plain]\nprefix = \"p\"\ndiscovery_prefix = »\"ha\"\n",
+        &["discovery_prefix = \"ha\" without discovery = true: nothing is discovered"],
+    ),
+    ("discovery not a boolean", "[plain]\nprefix = \"p\"\ndiscovery = »\"yes\"\n", &["expected a boolean"]),
+    (
+        "a discovery prefix ending with /",
+        "[plain]\nprefix = \"p\"\ndiscovery = true\ndiscovery_prefix = »\"homeassistant/\"\n",
+        &["discovery_prefix = \"homeassistant/\": a topic prefix is not empty"],
+    ),
     (
         "a bad broker address",
         "[broker]\naddress = »\"mqtt://h\"\nkeep_alive = »\"0.5s\"\n",

@@ -864,7 +864,7 @@ fn a_device_dead_at_the_connection_dies_at_its_next_silent_poll_if_the_replay_is
 // ---------------------------------------------------------------------------------------------
 
 fn plain_plant(retain: bool) -> Plant {
-    plant(Mode::Plain(PlainConfig { prefix: "factory/line1".into(), retain, qos: 1 }))
+    plant(Mode::Plain(PlainConfig { prefix: "factory/line1".into(), retain, qos: 1, discovery: None }))
 }
 
 fn json(p: &Publish) -> serde_json::Value {
@@ -906,6 +906,44 @@ fn plain_publishes_each_point_as_json_on_its_topic_by_exception() {
     let temperature = raw.iter().find(|p| p.topic == "factory/line1/meter/temperature").unwrap();
     assert_eq!(json(temperature)["value"], 215, "an unscaled integer stays an integer");
     assert!(json(temperature).get("unit").is_none());
+}
+
+#[test]
+fn plain_with_discovery_publishes_home_assistants_configs_retained_at_every_connection() {
+    let mut plant = plain_plant(false);
+    if let Mode::Plain(p) = &mut plant.mode {
+        p.discovery = Some("homeassistant".into());
+    }
+    let mut edge = Edge::new(&plant);
+    let hello = edge.connected(t(0));
+    assert_eq!((hello[0].topic.as_str(), hello[0].payload.as_slice()), ("factory/line1/status", &b"online"[..]));
+    let configs: Vec<&Publish> = hello.iter().filter(|p| p.topic.starts_with("homeassistant/")).collect();
+    assert_eq!(configs.len(), hello.len() - 1, "the status, then a config per point: {hello:?}");
+    let component = |name: &str| {
+        let p =
+            configs.iter().find(|p| json(p)["state_topic"].as_str().is_some_and(|t| t.ends_with(&format!("/{name}"))));
+        p.map(|p| p.topic.split('/').nth(1).unwrap_or_default().to_string()).unwrap_or_default()
+    };
+    // drive1: F001 (rw, a range), d001 (ro), running (a ro coil); meter: two raw holding registers.
+    assert_eq!(
+        ["F001", "d001", "running", "temperature", "0x0001"].map(component),
+        ["number", "sensor", "binary_sensor", "number", "number"]
+    );
+    assert!(configs.iter().all(|p| p.retain && p.qos == 1 && p.topic.ends_with("/config")), "{configs:?}");
+    let f001 =
+        configs.iter().find(|p| p.topic.starts_with("homeassistant/number/") && p.topic.contains("drive1")).unwrap();
+    assert_eq!(json(f001)["command_topic"], "factory/line1/drive1/F001/set", "the existing checked write path");
+    let meter = configs.iter().find(|p| json(p)["state_topic"] == "factory/line1/meter/temperature").unwrap();
+    assert_eq!(json(meter)["device"]["name"], "meter");
+    assert!(json(meter)["device"].get("manufacturer").is_none(), "no profile, no vendor: {}", json(meter));
+    // The same configs, byte for byte, at the next connection: the topics and ids are stable.
+    edge.disconnected();
+    let again = edge.connected(t(10));
+    let again: Vec<&Publish> = again.iter().filter(|p| p.topic.starts_with("homeassistant/")).collect();
+    assert_eq!(again, configs);
+    // Without discovery: nothing under homeassistant/.
+    let mut plain = Edge::new(&plain_plant(false));
+    assert!(plain.connected(t(0)).iter().all(|p| !p.topic.starts_with("homeassistant/")));
 }
 
 #[test]
@@ -1149,7 +1187,7 @@ mod hostile {
 
         #[test]
         fn any_payload_on_any_topic_is_taken_or_refused(topic in 0..TOPICS.len(), payload in proptest::collection::vec(any::<u8>(), 0..64)) {
-            for mode in [Mode::Sparkplug(sparkplug_config(Some("scada"))), Mode::Plain(PlainConfig { prefix: "factory/line1".into(), retain: false, qos: 0 })] {
+            for mode in [Mode::Sparkplug(sparkplug_config(Some("scada"))), Mode::Plain(PlainConfig { prefix: "factory/line1".into(), retain: false, qos: 0, discovery: None })] {
                 let plant = plant(mode);
                 let mut edge = Edge::new(&plant);
                 edge.connected(t(0));

@@ -116,6 +116,9 @@ pub struct PlainConfig {
     pub retain: bool,
     /// The QoS of values (0, 1 or 2).
     pub qos: u8,
+    /// Home Assistant MQTT discovery: the discovery prefix its configs are published under
+    /// (`homeassistant` unless given); `None` when off (`discovery = false`, the default).
+    pub discovery: Option<String>,
 }
 
 /// One field bus and the devices on it.

@@ -53,6 +53,8 @@ pub(super) struct Plain {
     #[serde(default)]
     pub retain: bool,
     pub qos: Option<Spanned<i64>>,
+    pub discovery: Option<Spanned<bool>>,
+    pub discovery_prefix: Option<Text>,
 }
 
 /// `[store]`.

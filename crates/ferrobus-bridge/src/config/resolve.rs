@@ -23,6 +23,9 @@ use crate::store::StoreConfig;
 mod device;
 mod line;
 
+/// Home Assistant's default discovery prefix.
+const DISCOVERY_PREFIX: &str = "homeassistant";
+
 /// The slowest first reconnect delay (the delay doubles up to it).
 const MAX_RECONNECT: Duration = Duration::from_secs(30);
 
@@ -356,7 +359,36 @@ fn resolve_plain(cx: &mut Cx<'_>, p: &raw::Plain) -> Option<PlainConfig> {
             }
         }
     };
-    ok.then(|| PlainConfig { prefix: prefix.clone(), retain: p.retain, qos })
+    let discovery = resolve_discovery(cx, p);
+    ok &= discovery.is_ok();
+    ok.then(|| PlainConfig { prefix: prefix.clone(), retain: p.retain, qos, discovery: discovery.ok().flatten() })
+}
+
+/// Home Assistant's discovery prefix when `discovery = true` (`homeassistant` by default);
+/// `discovery_prefix` without it is a mistake (nothing would be discovered).
+fn resolve_discovery(cx: &mut Cx<'_>, p: &raw::Plain) -> Result<Option<String>, ()> {
+    let on = p.discovery.as_ref().is_some_and(|d| *d.get_ref());
+    let Some(given) = &p.discovery_prefix else { return Ok(on.then(|| DISCOVERY_PREFIX.to_string())) };
+    let prefix = given.get_ref();
+    if !on {
+        cx.at(
+            given.span(),
+            format!(
+                "discovery_prefix = {prefix:?} without discovery = true: nothing is discovered; add discovery = true"
+            ),
+        );
+        return Err(());
+    }
+    if prefix.is_empty() || prefix.contains(['+', '#']) || prefix.starts_with('/') || prefix.ends_with('/') {
+        cx.at(
+            given.span(),
+            format!(
+                "discovery_prefix = {prefix:?}: a topic prefix is not empty, has no + or #, and neither starts nor ends with / (Home Assistant's is \"homeassistant\")"
+            ),
+        );
+        return Err(());
+    }
+    Ok(Some(prefix.clone()))
 }
 
 fn resolve_store(cx: &mut Cx<'_>, s: &raw::Store) -> StoreConfig {

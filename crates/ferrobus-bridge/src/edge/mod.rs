@@ -65,10 +65,13 @@
 //! # Plain JSON
 //!
 //! See `plain.rs`: `PREFIX/DEVICE/POINT` messages by exception with the same deadbands,
-//! device and bridge status topics, writes on `.../set` with the result on `.../set/result`.
+//! device and bridge status topics, writes on `.../set` with the result on `.../set/result`;
+//! with `discovery`, Home Assistant's MQTT discovery config of every point at each connection
+//! (`discovery.rs`).
 
 mod deadband;
 mod device;
+mod discovery;
 mod plain;
 mod record;
 mod sparkplug;

@@ -13,6 +13,8 @@
 //!                                 retain, every point's last value again); the Will "offline" (retained)
 //!   PREFIX/DEVICE/POINT/set      a write: "45", "45 Hz", "on", or {"value":45}
 //!   PREFIX/DEVICE/POINT/set/result  {"ok":true,"value":"45"} or {"ok":false,"value":"45","error":"..."}
+//!   DISCOVERY/COMPONENT/NODE/OBJECT/config  with `discovery`, Home Assistant's config of each point
+//!                                 at the connection (retained; see `discovery.rs`)
 //! ```
 
 use std::collections::{HashMap, VecDeque};
@@ -23,6 +25,7 @@ use ferrobus_tools::poll::{Cell, Sample, iso8601_ms};
 
 use super::deadband::Seen;
 use super::device::{Device, Liveness, devices_of};
+use super::discovery;
 use super::record::Record;
 use super::{Action, DeviceRef, EdgeError, EdgeStats, Output, Publish, Reply};
 use crate::config::{PlainConfig, Plant};
@@ -42,6 +45,8 @@ pub(crate) struct PlainEdge {
     config: PlainConfig,
     devices: Vec<PlainDevice>,
     connected: bool,
+    /// With `discovery`: Home Assistant's config of every point, published at each connection.
+    discovery: Vec<Publish>,
     /// The values of the writes asked and not yet [`PlainEdge::written`], by cell, oldest first.
     pending: HashMap<(DeviceRef, usize, usize), VecDeque<String>>,
     pub(crate) stats: EdgeStats,
@@ -67,10 +72,12 @@ impl PlainEdge {
                 PlainDevice { device, stale }
             })
             .collect();
+        let discovery = config.discovery.as_deref().map(|at| discovery::configs(plant, config, at)).unwrap_or_default();
         PlainEdge {
             config: config.clone(),
             devices,
             connected: false,
+            discovery,
             pending: HashMap::new(),
             stats: EdgeStats::default(),
         }
@@ -97,12 +104,13 @@ impl PlainEdge {
         self.will()
     }
 
-    /// The bridge's status, each known device's, and with `retain` the last value of every
-    /// point read (what the broker retains must not stay as it was before the outage; the
+    /// The bridge's status, Home Assistant's discovery configs (with `discovery`), each known
+    /// device's status, and with `retain` the last value of every point read (what the broker retains must not stay as it was before the outage; the
     /// values taken meanwhile follow as historical, unretained, from the store).
     pub(crate) fn connected(&mut self) -> Vec<Publish> {
         self.connected = true;
         let mut out = vec![Self::status(self.status_topic(), "online")];
+        out.extend(self.discovery.iter().cloned());
         for d in self.devices.iter().filter(|d| d.device.answered_once()) {
             out.push(self.device_status(&d.device));
             if !self.config.retain {

@@ -99,6 +99,13 @@ impl Plant {
         self
     }
 
+    /// Turns Home Assistant discovery on in `[plain]` (under `homeassistant/`).
+    #[must_use]
+    pub(crate) fn discovery(mut self) -> Plant {
+        self.text = self.text.replacen("[plain]\n", "[plain]\ndiscovery = true\n", 1);
+        self
+    }
+
     /// Adds TOML as written (a `[store]` section, ...).
     #[must_use]
     pub(crate) fn with(mut self, toml: &str) -> Plant {

@@ -8,6 +8,8 @@
 //!   DCMD to F001, DDEATH and DBIRTH, a primary host's STATE;
 //! - [`outage`]: the broker away for 30 s, the samples meanwhile delivered as historical;
 //! - [`plain`]: plain JSON per point, writes on `.../set`, retained last values;
+//! - [`discovery`]: plain mode's Home Assistant discovery configs, retained, checked against
+//!   HA's documented schema, a sensor's state and a number's and a select's commands;
 //! - [`guard`]: a DCMD and a plain `.../set` of a run-locked point, taken stopped, refused running;
 //! - [`cli`]: `--check` on a broken file and the shipped examples, and `--demo`;
 //! - [`harness`] (drives, plant.toml, the bridge process) and [`spb`] (recorder, checker,
@@ -19,6 +21,7 @@
 
 mod checker;
 mod cli;
+mod discovery;
 mod guard;
 mod harness;
 mod outage;
