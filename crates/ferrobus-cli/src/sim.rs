@@ -26,12 +26,16 @@ use ferrobus_proto::ExceptionCode;
 use ferrobus_proto::slave::{Disposition, SlaveConfig, SlaveEvent, UnitSet};
 use ferrobus_sim::{Device, FaultFilter, Faults, Profile, ProfileFaults, Sim, Ticker, Unserved, tokio_clock};
 use hdrhistogram::Histogram;
+use status::SimStatus;
 
 use crate::connect::{ConnectArgs, MBAPS_PORT, MODBUS_TCP_PORT, Target, parse_duration};
 use crate::exit::CliError;
 use crate::interrupt::Interrupt;
+use crate::metrics::{self, MetricsArgs};
 use crate::server_limits::ServerLimitsArgs;
 use crate::server_tls::ServerTlsArgs;
+
+mod status;
 
 /// Arguments of `ferrobus sim`.
 #[derive(Args, Clone, Debug)]
@@ -85,6 +89,9 @@ pub(crate) struct SimArgs {
     /// Modbus/TCP Security (`--tls-cert` ...; `--tcp` port 802 if omitted).
     #[command(flatten)]
     tls: ServerTlsArgs,
+
+    #[command(flatten)]
+    metrics: MetricsArgs,
 }
 
 /// What the simulator has done, kept by its observer.
@@ -171,6 +178,7 @@ impl Counters {
 pub(crate) async fn run(connection: &ConnectArgs, args: &SimArgs) -> Result<(), CliError> {
     let mut sim = build(connection, args)?;
     let tls = server_tls(connection, args)?;
+    let status = args.metrics.bind().await?;
     // Listened for before it says where it serves, so that no early signal kills it.
     let mut signals = Signals::listen()?;
     let (transport, port) = open(connection, args).await?;
@@ -187,6 +195,12 @@ pub(crate) async fn run(connection: &ConnectArgs, args: &SimArgs) -> Result<(), 
     let sim = Shared::new(sim);
     let limits = args.limits.limits(ConnectionPolicy::TCP.max_pending);
     let tcp_stats = Arc::clone(&limits.stats);
+    if let Some(listener) = status {
+        let tcp = matches!(port, Served::Listener(_)).then(|| Arc::clone(&tcp_stats));
+        let summary = format!("serving {} ({:?})", transport.describe(), framing);
+        let source = SimStatus { counters: Arc::clone(&counters), tcp, summary };
+        metrics::spawn(listener, Arc::new(source), "sim");
+    }
     let options = {
         let (sim, counters, transport) = (sim.clone(), Arc::clone(&counters), transport.clone());
         move || {

@@ -1,4 +1,4 @@
-//! `gateway --metrics`: the status endpoint read as its users read it. Prometheus's own
+//! `gateway --metrics` and `sim --metrics`: the status endpoint read as its users read it. Prometheus's own
 //! client library parses `/metrics` (`prometheus_client`'s OpenMetrics parser, which refuses
 //! what Prometheus would), `/healthz` answers a probe, and the status page is loaded in
 //! headless Chromium, whose script fills it from `/status.json`: the units with their health.
@@ -50,7 +50,7 @@ fn python_has_prometheus_client() -> bool {
 }
 
 #[test]
-fn the_gateways_metrics_parse_as_openmetrics_and_its_page_shows_each_units_health_in_a_browser() {
+fn the_gateways_and_the_sims_metrics_parse_as_openmetrics_and_the_page_shows_each_units_health_in_a_browser() {
     let Some(_turn) = require(&[]) else { return };
     if !require_tool(
         python_has_prometheus_client(),
@@ -60,7 +60,8 @@ fn the_gateways_metrics_parse_as_openmetrics_and_its_page_shows_each_units_healt
     {
         return;
     }
-    let drive = sim(Over::Tcp, Parity::Even, &["--profile", "omron-3g3rx"]);
+    let sim_status = format!("127.0.0.1:{}", free_port());
+    let drive = sim(Over::Tcp, Parity::Even, &["--profile", "omron-3g3rx", "--metrics", &sim_status]);
     let Link::Tcp(device) = &drive.link else { unreachable!("a TCP sim") };
     let listen = format!("127.0.0.1:{}", free_port());
     let status = format!("127.0.0.1:{}", free_port());
@@ -80,22 +81,8 @@ fn the_gateways_metrics_parse_as_openmetrics_and_its_page_shows_each_units_healt
 
     let (code, text) = get(&status, "/metrics");
     assert_eq!(code, 200);
-    let mut parse = Command::new("python3");
-    parse.args(["-c", PARSE]);
-    let parsed = output_within(&mut parse, &text, STEP);
-    assert!(
-        parsed.status.success(),
-        "prometheus_client refused it: {}\n{text}",
-        String::from_utf8_lossy(&parsed.stderr)
-    );
-    let samples: Vec<Value> =
-        String::from_utf8_lossy(&parsed.stdout).lines().map(|l| serde_json::from_str(l).unwrap()).collect();
-    let value = |name: &str, labels: &[(&str, &str)]| {
-        samples
-            .iter()
-            .find(|s| s["name"] == name && labels.iter().all(|(k, v)| s["labels"][*k] == *v))
-            .and_then(|s| s["value"].as_f64())
-    };
+    let samples = parsed(&text);
+    let value = |name: &str, labels: &[(&str, &str)]| value_of(&samples, name, labels);
     let unit1 = [("line", "0"), ("unit", "1")];
     assert_eq!(value("ferrobus_gateway_requests_total", &unit1), Some(4.0), "{text}");
     assert_eq!(value("ferrobus_gateway_replies_total", &unit1), Some(3.0), "{text}");
@@ -106,6 +93,15 @@ fn the_gateways_metrics_parse_as_openmetrics_and_its_page_shows_each_units_healt
     assert_eq!(value("ferrobus_tcp_connections_accepted_total", &[]), Some(5.0), "five clients: {text}");
     let families: std::collections::BTreeSet<&str> = samples.iter().filter_map(|s| s["family"].as_str()).collect();
     assert!(families.contains("ferrobus_gateway_response_seconds"), "{families:?}");
+
+    // The simulator behind it counts what reached it, over the gateway's one connection.
+    let (code, text) = get(&sim_status, "/metrics");
+    assert_eq!(code, 200);
+    let samples = parsed(&text);
+    let sim = |name: &str| value_of(&samples, name, &[]);
+    assert!(sim("ferrobus_sim_requests_total") >= Some(4.0), "{text}");
+    assert_eq!(sim("ferrobus_sim_reply_lateness_seconds_count"), sim("ferrobus_sim_replies_total"), "{text}");
+    assert_eq!(sim("ferrobus_tcp_connections_accepted_total"), Some(1.0), "the gateway's one line: {text}");
 
     // The health of the window: let it pass, then the browser's first look shows it.
     std::thread::sleep(Duration::from_millis(2100));
@@ -134,6 +130,24 @@ fn the_gateways_metrics_parse_as_openmetrics_and_its_page_shows_each_units_healt
     // Healthy: one unit answered in the window (a probe after the page: the same window).
     assert_eq!(get(&status, "/healthz"), (200, "ok\n".to_string()));
     drop(gateway);
+}
+
+/// The samples of `text` as Prometheus's Python client parses them; a text it refuses fails.
+fn parsed(text: &str) -> Vec<Value> {
+    let mut parse = Command::new("python3");
+    parse.args(["-c", PARSE]);
+    let parsed = output_within(&mut parse, text, STEP);
+    let refused = String::from_utf8_lossy(&parsed.stderr);
+    assert!(parsed.status.success(), "prometheus_client refused it: {refused}\n{text}");
+    String::from_utf8_lossy(&parsed.stdout).lines().map(|l| serde_json::from_str(l).unwrap()).collect()
+}
+
+/// The value of the first sample `name` with `labels`.
+fn value_of(samples: &[Value], name: &str, labels: &[(&str, &str)]) -> Option<f64> {
+    samples
+        .iter()
+        .find(|s| s["name"] == name && labels.iter().all(|(k, v)| s["labels"][*k] == *v))
+        .and_then(|s| s["value"].as_f64())
 }
 
 fn which(program: &str) -> bool {

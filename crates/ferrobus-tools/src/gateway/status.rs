@@ -30,7 +30,7 @@ use prometheus_client::encoding::DescriptorEncoder;
 
 use super::Gateway;
 use super::stats::{Counters, LineTraffic};
-use crate::status::{Family, Health, Labels, Source, Status, Table};
+use crate::status::{self, Family, Health, Labels, Source, Status, Table};
 
 /// A counter of `T`: its name, its help, and how to read it.
 type Count<T> = (&'static str, &'static str, fn(&T) -> u64);
@@ -165,6 +165,7 @@ impl Collector for GatewayStatus {
         out.seconds_histogram(
             "gateway_response",
             "Response time on the line, from the request's turn to its reply.",
+            &status::RESPONSE_BOUNDS,
             units().map(|(labels, c)| (labels, &c.response_us)),
         )?;
         let per_line = || lines.iter().zip(&names).map(|(line, name)| (Labels::of(&[("line", name)]), line));
@@ -198,45 +199,8 @@ impl Collector for GatewayStatus {
             "Requests the front end refused before any line, by reason.",
             front.refused.iter().map(|(reason, n)| (Labels::none().with("reason", reason), *n)),
         )?;
-        tcp_metrics(&mut out, &self.tcp)
+        status::tcp_metrics(&mut out, &self.tcp)
     }
-}
-
-/// A TCP listener's counts as metrics: what it accepted, holds, refused and closed.
-pub(crate) fn tcp_metrics(out: &mut Family<'_, '_>, tcp: &TcpStats) -> Result<(), std::fmt::Error> {
-    let c = tcp.counts();
-    out.counter("tcp_connections_accepted", "Connections accepted and served.", [(Labels::none(), c.accepted)])?;
-    out.gauge(
-        "tcp_connections_open",
-        "Connections open now.",
-        [(Labels::none(), i64::try_from(c.open).unwrap_or(i64::MAX))],
-    )?;
-    let refused = [("cap", c.refused), ("source", c.refused_source), ("handshakes", c.refused_handshakes)];
-    out.counter(
-        "tcp_refused",
-        "Connections closed at once, by the limit they met.",
-        refused.map(|(reason, n)| (Labels::none().with("reason", reason), n)),
-    )?;
-    let closed = [
-        ("idle", c.closed_idle),
-        ("unfinished_frame", c.closed_unfinished),
-        ("bad_header", c.closed_bad_header),
-        ("evicted_handshake", c.evicted_handshakes),
-        ("evicted_unanswered", c.evicted_unanswered),
-        ("evicted_idle", c.evicted_idle),
-    ];
-    out.counter(
-        "tcp_closed",
-        "Connections the server closed, by why.",
-        closed.map(|(reason, n)| (Labels::none().with("reason", reason), n)),
-    )?;
-    out.counter("tcp_tls_refused", "TLS handshakes refused.", [(Labels::none(), c.tls_refused)])?;
-    out.counter("tcp_denied", "Requests a TLS client's role did not allow.", [(Labels::none(), c.denied)])?;
-    out.counter(
-        "tcp_descriptor_waits",
-        "Times accepting paused out of descriptors or buffers.",
-        [(Labels::none(), c.descriptor_waits)],
-    )
 }
 
 impl Source for GatewayStatus {

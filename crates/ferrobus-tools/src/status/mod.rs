@@ -26,6 +26,7 @@ use axum::Router;
 use axum::http::{StatusCode, header};
 use axum::response::{Html, IntoResponse, Response};
 use axum::routing::get;
+use ferrobus::server::TcpStats;
 use prometheus_client::collector::Collector;
 use prometheus_client::encoding::{DescriptorEncoder, EncodeMetric, NoLabelSet};
 use prometheus_client::metrics::MetricType;
@@ -204,20 +205,20 @@ impl<'e, 'd> Family<'e, 'd> {
         Ok(())
     }
 
-    /// A histogram `name` in seconds from samples in µs (an hdrhistogram each), with the
-    /// buckets Prometheus uses by default for a response time (5 ms to 10 s).
+    /// A histogram `name` in seconds, with buckets up to each of `bounds` (and `+Inf`), from
+    /// samples in µs (an hdrhistogram each).
     pub fn seconds_histogram<'l, 'h>(
         &mut self,
         name: &str,
         help: &str,
+        bounds: &[f64],
         samples: impl IntoIterator<Item = (Labels<'l>, &'h hdrhistogram::Histogram<u64>)>,
     ) -> Result<(), std::fmt::Error> {
-        const BOUNDS: [f64; 11] = [0.005, 0.01, 0.025, 0.05, 0.1, 0.25, 0.5, 1.0, 2.5, 5.0, 10.0];
         let mut family = self.encoder.encode_descriptor(name, help, Some(&Unit::Seconds), MetricType::Histogram)?;
         for (labels, h) in samples {
             let mut below = 0u64;
-            let mut buckets = Vec::with_capacity(BOUNDS.len() + 1);
-            for bound in BOUNDS {
+            let mut buckets = Vec::with_capacity(bounds.len() + 1);
+            for &bound in bounds {
                 let up_to = h.count_between(0, micros(bound));
                 buckets.push((bound, up_to.saturating_sub(below)));
                 below = up_to;
@@ -232,6 +233,47 @@ impl<'e, 'd> Family<'e, 'd> {
         Ok(())
     }
 }
+
+/// A TCP listener's counts as metrics (`tcp_*`): what it accepted, holds, refused and
+/// closed, by why.
+pub fn tcp_metrics(out: &mut Family<'_, '_>, tcp: &TcpStats) -> Result<(), std::fmt::Error> {
+    let c = tcp.counts();
+    out.counter("tcp_connections_accepted", "Connections accepted and served.", [(Labels::none(), c.accepted)])?;
+    out.gauge(
+        "tcp_connections_open",
+        "Connections open now.",
+        [(Labels::none(), i64::try_from(c.open).unwrap_or(i64::MAX))],
+    )?;
+    let refused = [("cap", c.refused), ("source", c.refused_source), ("handshakes", c.refused_handshakes)];
+    out.counter(
+        "tcp_refused",
+        "Connections closed at once, by the limit they met.",
+        refused.map(|(reason, n)| (Labels::none().with("reason", reason), n)),
+    )?;
+    let closed = [
+        ("idle", c.closed_idle),
+        ("unfinished_frame", c.closed_unfinished),
+        ("bad_header", c.closed_bad_header),
+        ("evicted_handshake", c.evicted_handshakes),
+        ("evicted_unanswered", c.evicted_unanswered),
+        ("evicted_idle", c.evicted_idle),
+    ];
+    out.counter(
+        "tcp_closed",
+        "Connections the server closed, by why.",
+        closed.map(|(reason, n)| (Labels::none().with("reason", reason), n)),
+    )?;
+    out.counter("tcp_tls_refused", "TLS handshakes refused.", [(Labels::none(), c.tls_refused)])?;
+    out.counter("tcp_denied", "Requests a TLS client's role did not allow.", [(Labels::none(), c.denied)])?;
+    out.counter(
+        "tcp_descriptor_waits",
+        "Times accepting paused out of descriptors or buffers.",
+        [(Labels::none(), c.descriptor_waits)],
+    )
+}
+
+/// The buckets Prometheus gives a response time by default: 5 ms to 10 s.
+pub const RESPONSE_BOUNDS: [f64; 11] = [0.005, 0.01, 0.025, 0.05, 0.1, 0.25, 0.5, 1.0, 2.5, 5.0, 10.0];
 
 /// The labels of one sample, as (name, value) pairs.
 pub struct Labels<'l>(pub Vec<(&'static str, std::borrow::Cow<'l, str>)>);

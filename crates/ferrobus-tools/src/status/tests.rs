@@ -20,7 +20,7 @@ impl Collector for Fake {
         let mut h = hdrhistogram::Histogram::<u64>::new(2).unwrap();
         h.record(3_000).unwrap();
         h.record(40_000).unwrap();
-        out.seconds_histogram("fake_response", "Response time.", [(Labels::none(), &h)])
+        out.seconds_histogram("fake_response", "Response time.", &RESPONSE_BOUNDS, [(Labels::none(), &h)])
     }
 }
 
