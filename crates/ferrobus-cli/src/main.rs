@@ -134,6 +134,11 @@ pub(crate) struct Cli {
     #[arg(short, long, action = clap::ArgAction::Count, global = true)]
     verbose: u8,
 
+    /// How the log on stderr is written: text for people, or json, one object a line
+    /// (timestamp, level, message and fields) for a log collector
+    #[arg(long = "log-format", value_name = "FORMAT", value_enum, default_value_t = LogFormat::Text, global = true)]
+    log_format: LogFormat,
+
     /// What to do.
     #[command(subcommand)]
     command: Command,
@@ -426,7 +431,16 @@ fn refuse_ignored_options(matches: &clap::ArgMatches) -> Result<(), CliError> {
     )))
 }
 
-fn init_logging(verbose: u8) {
+/// How the log is written ([`Cli::log_format`]).
+#[derive(clap::ValueEnum, Clone, Copy, PartialEq, Eq, Debug)]
+enum LogFormat {
+    Text,
+    Json,
+}
+
+fn init_logging(verbose: u8, format: LogFormat) {
+    use tracing_subscriber::layer::SubscriberExt as _;
+    use tracing_subscriber::util::SubscriberInitExt as _;
     let level = match verbose {
         0 => "warn",
         1 => "info",
@@ -438,14 +452,14 @@ fn init_logging(verbose: u8) {
     let log = tracing_subscriber::fmt()
         .with_env_filter(filter)
         .with_writer(stderr::Log)
-        .with_ansi(std::io::stderr().is_terminal())
         // A failed write is kept by stderr::Log; reporting it on stderr would panic.
         .log_internal_errors(false)
-        .with_target(false)
-        .finish();
+        .with_target(false);
     // The warnings are kept for a status page too (`--metrics`).
-    let log = tracing_subscriber::layer::SubscriberExt::with(log, metrics::RecentWarnings);
-    tracing_subscriber::util::SubscriberInitExt::init(log);
+    match format {
+        LogFormat::Text => log.with_ansi(std::io::stderr().is_terminal()).finish().with(metrics::RecentWarnings).init(),
+        LogFormat::Json => log.json().flatten_event(true).finish().with(metrics::RecentWarnings).init(),
+    }
 }
 
 fn main() -> ExitCode {
@@ -475,7 +489,7 @@ fn main() -> ExitCode {
     if let (Command::Poll(args), Some(poll)) = (&mut cli.command, matches.subcommand_matches("poll")) {
         args.positions_from(poll);
     }
-    init_logging(cli.verbose);
+    init_logging(cli.verbose, cli.log_format);
     cli.layered.log();
     if cli.command.needs_bus()
         && cli.connection.port.is_none()

@@ -72,3 +72,21 @@ fn a_closed_stderr_is_as_if_it_were_dev_null_and_each_outcome_keeps_its_exit_cod
     let refused = with_closed_stderr(&["--tcp", "127.0.0.1:1", "--device", "omron-3g3rx", "get", "F002"]);
     assert_eq!(refused.status.code(), Some(4));
 }
+
+#[test]
+fn with_log_format_json_every_log_line_is_one_json_object_with_its_time_level_and_message() {
+    let args = ["--log-format", "json", "-v", "--tcp", "127.0.0.1:1", "--timeout", "100ms", "read", "holding", "0"];
+    let err = crate::server::stderr(&crate::server::offline(&args).failure());
+    let logged: Vec<serde_json::Value> =
+        err.lines().filter(|l| l.starts_with('{')).map(|l| serde_json::from_str(l).expect(l)).collect();
+    assert!(!logged.is_empty(), "{err}");
+    for line in &logged {
+        assert!(line["timestamp"].as_str().is_some_and(|t| t.ends_with('Z')), "{line}");
+        assert!(["INFO", "WARN", "ERROR", "DEBUG"].contains(&line["level"].as_str().unwrap_or_default()), "{line}");
+        assert!(line["message"].is_string(), "{line}");
+    }
+    // The command's own error is for people, after the log.
+    assert!(err.lines().any(|l| l.starts_with("error: ")), "{err}");
+    let refused = crate::server::stderr(&crate::server::offline(&["--log-format", "xml", "crc", "01"]).code(2));
+    assert!(refused.contains("invalid value 'xml' for '--log-format <FORMAT>'"), "{refused}");
+}
