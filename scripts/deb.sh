@@ -9,6 +9,7 @@
 #   usr/share/zsh/vendor-completions/_ferrobus            ferrobus completions zsh
 #   usr/share/fish/vendor_completions.d/ferrobus.fish     ferrobus completions fish
 #   usr/share/ferrobus/profiles/*.toml                    the built-in device profiles
+#   usr/lib/systemd/system/ferrobus-{gateway,bridge}.service   scripts/systemd/
 #   usr/share/doc/ferrobus/{copyright,README.md.gz}
 #
 # The man pages and completions are made by running the binary, so it must run here: for another
@@ -75,6 +76,10 @@ mkdir -p "$comp/bash-completion/completions" "$comp/zsh/vendor-completions" "$co
 "$gen" completions bash >"$comp/bash-completion/completions/ferrobus"
 "$gen" completions zsh >"$comp/zsh/vendor-completions/_ferrobus"
 "$gen" completions fish >"$comp/fish/vendor_completions.d/ferrobus.fish"
+# The services a plant runs (Type=notify, with the watchdog): started by no one until enabled.
+for unit in "$root"/scripts/systemd/*.service; do
+    install -D -m 0644 "$unit" "$pkg/usr/lib/systemd/system/$(basename "$unit")"
+done
 mkdir -p "$pkg/usr/share/ferrobus/profiles"
 # Wherever the crate that ships them keeps them (crates/*/profiles/).
 find "$root/crates" -path '*/profiles/*.toml' -not -path '*/target/*' -exec install -m 0644 {} "$pkg/usr/share/ferrobus/profiles/" \;

@@ -102,7 +102,9 @@ pub(crate) async fn run(plant_file: Option<&Path>, args: &BridgeArgs) -> Result<
     tokio::spawn(async move {
         let Ok(lines) = running.await else { return };
         lines.iter().filter(|l| l.sim.is_none()).for_each(|l| crate::interrupt::keep_release(&l.client));
+        let watchdog = crate::systemd::ready(&format!("bridge: {} lines running", lines.len()));
         let _ = demo_tx.send(lines);
+        watchdog.feed_forever().await;
     });
     let demo = inverter.map(|target| tokio::spawn(drive_inverter(target, demo_lines, born, args.quiet)));
     let duration = args.duration;
@@ -114,6 +116,7 @@ pub(crate) async fn run(plant_file: Option<&Path>, args: &BridgeArgs) -> Result<
     };
     let options = Options { running: Some(running_tx) };
     let report = run_with(plant, stop, Some(status_tx), options).await;
+    crate::systemd::stopping();
     if let Some(demo) = demo {
         demo.abort();
     }

@@ -38,6 +38,7 @@ use crate::interrupt::Interrupt;
 use crate::metrics::{self, MetricsArgs};
 use crate::server_limits::ServerLimitsArgs;
 use crate::server_tls::ServerTlsArgs;
+use crate::systemd;
 
 /// Arguments of `ferrobus gateway`.
 #[derive(Args, Clone, Debug)]
@@ -232,6 +233,7 @@ pub(crate) async fn run(connection: &ConnectArgs, args: &GatewayArgs) -> Result<
         }
     };
     tokio::pin!(until);
+    let watchdog = systemd::ready(&format!("gateway: listening on {bound}"));
     loop {
         #[cfg(unix)]
         let usr1 = usr1.recv();
@@ -241,8 +243,10 @@ pub(crate) async fn run(connection: &ConnectArgs, args: &GatewayArgs) -> Result<
             () = interrupt.wait() => break,
             () = &mut until => break,
             _ = usr1 => print(&gateway, &tcp.counts(), secure),
+            () = watchdog.tick() => watchdog.feed(),
         }
     }
+    systemd::stopping();
     serving.abort();
     print(&gateway, &tcp.counts(), secure);
     Ok(())

@@ -76,6 +76,7 @@ mod sim;
 mod sniff;
 mod stderr;
 mod sunspec;
+mod systemd;
 mod target;
 #[cfg(not(unix))]
 mod unix_only;

@@ -32,6 +32,7 @@ mod service;
 mod sniff;
 mod stderr;
 mod sunspec;
+mod systemd;
 mod tls;
 mod values;
 mod word_order;

@@ -59,8 +59,20 @@ fn the_deb_unpacks_and_its_ferrobus_runs_version_and_demo_with_man_pages_complet
         "usr/share/ferrobus/profiles/sdp-servo.toml",
         "usr/share/ferrobus/profiles/generic.toml",
         "usr/share/doc/ferrobus/copyright",
+        "usr/lib/systemd/system/ferrobus-gateway.service",
+        "usr/lib/systemd/system/ferrobus-bridge.service",
     ] {
         assert!(unpacked.join(file).is_file(), "{file} in the package");
+    }
+    for unit in ["ferrobus-gateway", "ferrobus-bridge"] {
+        let text = std::fs::read_to_string(unpacked.join(format!("usr/lib/systemd/system/{unit}.service"))).unwrap();
+        assert!(text.contains("Type=notify") && text.contains("WatchdogSec="), "{unit}: {text}");
+        let exec = text.lines().find_map(|l| l.strip_prefix("ExecStart=")).unwrap();
+        let mut words = exec.split_whitespace();
+        assert_eq!(words.next(), Some("/usr/bin/ferrobus"), "{exec}");
+        // The unit's command line parses as the packaged ferrobus takes it (--help stops before running).
+        let help = Command::new(&bin).args(words).arg("--help").env("XDG_CONFIG_HOME", &dir.0).output().unwrap();
+        assert!(help.status.success(), "{unit}: {exec}: {}", String::from_utf8_lossy(&help.stderr));
     }
     let bash = std::fs::read_to_string(unpacked.join("usr/share/bash-completion/completions/ferrobus")).unwrap();
     assert!(bash.contains("FERROBUS_COMPLETE=\"bash\"") || bash.contains("FERROBUS_COMPLETE="), "{bash}");
