@@ -48,10 +48,13 @@ impl Watchdog {
 
     /// Feeds the watchdog.
     pub(crate) fn feed(&self) {
+        let due = self.every.is_some();
         #[cfg(unix)]
-        if self.every.is_some() {
+        if due {
             send(&[sd_notify::NotifyState::Watchdog]);
         }
+        #[cfg(not(unix))]
+        let _ = due;
     }
 
     /// Feeds it at every tick, for as long as the runtime turns.
