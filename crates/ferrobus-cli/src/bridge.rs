@@ -7,20 +7,25 @@
 //! settings file: the bridge reads no connection settings, each line has its own).
 
 use std::path::Path;
-use std::sync::Arc;
+use std::sync::{Arc, Mutex};
 use std::time::Duration;
 
 use clap::Args;
 use ferrobus::Client;
 use ferrobus_bridge::config::{ConfigErrors, Mode, Plant};
-use ferrobus_bridge::run::{Options, RunningLine, Status, run_with};
+use ferrobus_bridge::run::{Live, Options, RunningLine, Status, run_with};
 use ferrobus_profile::{Point, Profile};
 use tokio::sync::{Notify, mpsc, oneshot};
 
 use crate::connect::parse_duration;
 use crate::exit::CliError;
 use crate::interrupt::Interrupt;
+use crate::metrics::{self, MetricsArgs};
 use crate::output;
+
+mod status;
+
+use status::BridgeStatus;
 
 /// The demo's broker when none is given.
 const DEMO_BROKER: &str = "127.0.0.1:1883";
@@ -76,6 +81,9 @@ pub(crate) struct BridgeArgs {
     /// No status lines: only errors and the summary
     #[arg(long, short)]
     quiet: bool,
+
+    #[command(flatten)]
+    metrics: MetricsArgs,
 }
 
 /// Runs `ferrobus bridge`; `plant_file` is the global `--config`.
@@ -84,6 +92,7 @@ pub(crate) async fn run(plant_file: Option<&Path>, args: &BridgeArgs) -> Result<
     if args.check {
         return output::print(&format!("{}\n", summary(&origin, &plant)));
     }
+    let status = args.metrics.bind().await?;
     let mut interrupt = Interrupt::listen()?;
     if args.demo && !args.quiet {
         let (host, port) = (&plant.broker.host, plant.broker.port);
@@ -114,7 +123,13 @@ pub(crate) async fn run(plant_file: Option<&Path>, args: &BridgeArgs) -> Result<
             () = until(duration) => {}
         }
     };
-    let options = Options { running: Some(running_tx) };
+    let live = status.map(|listener| {
+        let live = Arc::new(Mutex::new(Live::default()));
+        let source = BridgeStatus { live: Arc::clone(&live), summary: summary(&origin, &plant) };
+        metrics::spawn(listener, Arc::new(source), "bridge");
+        live
+    });
+    let options = Options { running: Some(running_tx), live };
     let report = run_with(plant, stop, Some(status_tx), options).await;
     crate::systemd::stopping();
     if let Some(demo) = demo {

@@ -43,7 +43,7 @@ mod status;
 
 use std::collections::{BTreeMap, VecDeque};
 use std::future::Future;
-use std::sync::Arc;
+use std::sync::{Arc, Mutex};
 use std::time::{Duration, SystemTime};
 
 use ferrobus_tools::poll::{Event, Sample};
@@ -104,7 +104,24 @@ pub struct Options {
     /// Receives the running lines once they are started: their clients (to command a device
     /// beside the poller, as `bridge --demo` does), pollers and simulated lines.
     pub running: Option<oneshot::Sender<Vec<RunningLine>>>,
+    /// Kept up to date while the bridge runs, every [`LIVE_EVERY`]: what a status endpoint
+    /// shows (`bridge --metrics`).
+    pub live: Option<Arc<Mutex<Live>>>,
 }
+
+/// A running bridge as it is now ([`Options::live`]).
+#[derive(Clone, Debug, Default, PartialEq, Eq)]
+pub struct Live {
+    /// What it has done so far, its lines' polls included.
+    pub report: Report,
+    /// Records waiting in the store.
+    pub stored_now: u64,
+    /// Whether a session with the broker is up.
+    pub online: bool,
+}
+
+/// How often [`Options::live`] is brought up to date.
+pub const LIVE_EVERY: Duration = Duration::from_millis(500);
 
 /// Runs the bridge of `plant` until `stop` completes; `events`, if given, hears what happens
 /// as it happens (never waited for: a full channel loses the status, not the bridge's time).
@@ -127,6 +144,7 @@ pub async fn run_with(
     if let Some(running) = options.running {
         let _ = running.send(bridge.lines.iter().map(|l| l.running.clone()).collect());
     }
+    bridge.live = options.live;
     bridge.serve(stop).await;
     Ok(bridge.finish().await)
 }
@@ -174,6 +192,8 @@ struct Bridge {
     /// (then they are stored). `None` once the first attempt has its outcome.
     held: Option<VecDeque<(usize, Event)>>,
     report: Report,
+    /// Where the bridge as it is now is kept, for a status endpoint.
+    live: Option<Arc<Mutex<Live>>>,
 }
 
 impl Bridge {
@@ -215,6 +235,7 @@ impl Bridge {
             dropping: 0,
             held: Some(VecDeque::new()),
             report,
+            live: None,
         };
         if let Some(note) = note {
             bridge.say(Status::Note(note));
@@ -232,6 +253,8 @@ impl Bridge {
     /// Loops until `stop`.
     async fn serve(&mut self, stop: impl Future<Output = ()>) {
         tokio::pin!(stop);
+        let mut show = tokio::time::interval(LIVE_EVERY);
+        show.set_missed_tick_behavior(tokio::time::MissedTickBehavior::Delay);
         loop {
             let reconnect_at = self.reconnect_at;
             let replaying = self.online && self.born && !self.store.is_empty();
@@ -253,8 +276,18 @@ impl Bridge {
                     self.replay();
                     self.replay_at = Instant::now() + REPLAY_PACE;
                 }
+                _ = show.tick(), if self.live.is_some() => self.show_live(),
             }
         }
+    }
+
+    /// Brings [`Options::live`] up to date: the report so far with the lines' polls.
+    fn show_live(&self) {
+        let Some(live) = &self.live else { return };
+        let mut report = self.report.clone();
+        report.finish(&self.lines.iter().map(|l| l.running.poll.counters()).collect::<Vec<_>>(), &self.store);
+        let now = Live { report, stored_now: self.store.len(), online: self.online };
+        *live.lock().unwrap_or_else(std::sync::PoisonError::into_inner) = now;
     }
 
     /// Stops: NDEATH, DISCONNECT, the pollers; the report.

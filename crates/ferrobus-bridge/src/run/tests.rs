@@ -274,6 +274,34 @@ async fn an_unreachable_broker_is_retried_with_backoff_while_the_lines_poll() {
     let _ = std::fs::remove_dir_all(&dir);
 }
 
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn the_live_view_shows_the_lines_polling_and_the_store_filling_while_the_broker_is_away() {
+    let port = free_port();
+    let dir = temporary_dir("live");
+    let plant = demo_plant(port, &dir.join("store"));
+    let live = Arc::new(Mutex::new(Live::default()));
+    let options = Options { live: Some(Arc::clone(&live)), ..Options::default() };
+    let (stop_tx, stop_rx) = oneshot::channel::<()>();
+    let bridge = tokio::spawn(run_with(plant, async move { drop(stop_rx.await) }, None, options));
+    let seen = tokio::time::timeout(Duration::from_secs(20), async {
+        loop {
+            tokio::time::sleep(LIVE_EVERY).await;
+            let now = live.lock().unwrap().clone();
+            if now.report.lines.first().is_some_and(|l| l.ok > 0) && now.stored_now > 0 {
+                return now;
+            }
+        }
+    })
+    .await
+    .expect("the live view shows polls and stored records");
+    assert!(!seen.online, "no broker listens on {port}");
+    assert_eq!(seen.report.connections, 0);
+    stop_tx.send(()).expect("the bridge runs");
+    let report = bridge.await.expect("the bridge's task").expect("the bridge ran");
+    assert!(report.lines[0].ok >= seen.report.lines[0].ok, "the report at the end is not behind the live view");
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
 /// A CA and a certificate for `broker.test` signed by it, made by openssl in `dir`; `None`
 /// (skipped) without openssl.
 fn certificates(dir: &Path) -> Option<()> {
@@ -398,7 +426,7 @@ async fn while_the_broker_is_away_samples_are_stored_and_replayed_as_historical_
     let (status_tx, mut statuses) = mpsc::channel(1024);
     let (stop_tx, stop_rx) = oneshot::channel::<()>();
     let (running_tx, running) = oneshot::channel();
-    let options = Options { running: Some(running_tx) };
+    let options = Options { running: Some(running_tx), ..Options::default() };
     let bridge = tokio::spawn(run_with(plant, async move { drop(stop_rx.await) }, Some(status_tx), options));
     let running = running.await.expect("the running lines");
     let (client, poll) = (running[0].client.clone(), running[0].poll.clone());
@@ -541,7 +569,7 @@ async fn samples_polled_before_the_first_connack_are_live_data_after_the_births_
     let plant = demo_plant(proxy, &broker.dir.join("store"));
     let (stop_tx, stop_rx) = oneshot::channel::<()>();
     let (running_tx, running) = oneshot::channel();
-    let options = Options { running: Some(running_tx) };
+    let options = Options { running: Some(running_tx), ..Options::default() };
     let bridge = tokio::spawn(run_with(plant, async move { drop(stop_rx.await) }, None, options));
     let poll = running.await.expect("the running lines")[0].poll.clone();
     // Every group polled twice while the CONNECT waits: their first samples are in the bridge.

@@ -1,0 +1,143 @@
+//! `bridge --metrics`: the bridge on its status endpoint ([`ferrobus_tools::status`]), from
+//! its live view ([`Live`], brought up to date by the bridge twice a second).
+//!
+//! ```text
+//!   ferrobus_bridge_published_total{type}   NBIRTH, DBIRTH, DDATA, DDEATH, NDEATH; plain, result
+//!   bridge_unsent_total  bridge_stored_total  bridge_replayed_total  bridge_dropped_total
+//!   bridge_unreplayable_total  bridge_store_errors_total  bridge_commands_refused_total
+//!   bridge_commands_discarded_total  bridge_writes_total  bridge_write_failures_total
+//!   bridge_broker_sessions_total  bridge_broker_lost_total
+//!   bridge_store_depth  bridge_broker_connected                 gauges
+//!   bridge_polls_total{line}  bridge_poll_failures_total{line,kind}  bridge_poll_overruns_total{line}
+//! ```
+
+use std::sync::{Arc, Mutex, PoisonError};
+
+use ferrobus_bridge::run::Live;
+use ferrobus_tools::status::{Family, Health, Labels, Source, Status, Table};
+use prometheus_client::collector::Collector;
+use prometheus_client::encoding::DescriptorEncoder;
+
+/// The bridge as its status endpoint shows it.
+pub(super) struct BridgeStatus {
+    pub(super) live: Arc<Mutex<Live>>,
+    pub(super) summary: String,
+}
+
+impl std::fmt::Debug for BridgeStatus {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("BridgeStatus").field("summary", &self.summary).finish_non_exhaustive()
+    }
+}
+
+impl BridgeStatus {
+    fn now(&self) -> Live {
+        self.live.lock().unwrap_or_else(PoisonError::into_inner).clone()
+    }
+}
+
+impl Collector for BridgeStatus {
+    fn encode(&self, mut encoder: DescriptorEncoder<'_>) -> Result<(), std::fmt::Error> {
+        let live = self.now();
+        let r = &live.report;
+        let mut out = Family::on(&mut encoder);
+        out.counter(
+            "bridge_published",
+            "Messages handed to the MQTT client, by type.",
+            r.published.iter().map(|(kind, n)| (Labels::none().with("type", kind), *n)),
+        )?;
+        let counts = [
+            ("bridge_unsent", "Messages the MQTT client could not take (its queue was full).", r.unsent),
+            ("bridge_stored", "Records kept in the store while the broker was away.", r.stored),
+            ("bridge_replayed", "Records replayed from the store.", r.replayed),
+            ("bridge_unreplayable", "Stored records passed over: they no longer map to the plant.", r.unreplayable),
+            ("bridge_dropped", "New records dropped because the store was full.", r.dropped),
+            ("bridge_store_errors", "Store errors.", r.store_errors),
+            ("bridge_commands_refused", "Commands refused, nothing written.", r.refused),
+            ("bridge_commands_discarded", "Incoming messages discarded unread: too large.", r.discarded),
+            ("bridge_writes", "Writes done.", r.writes),
+            ("bridge_write_failures", "Writes the bus failed.", r.write_failures),
+            ("bridge_broker_sessions", "Sessions the broker accepted.", r.connections),
+            ("bridge_broker_lost", "Sessions lost.", r.broker_lost),
+        ];
+        for (name, help, n) in counts {
+            out.counter(name, help, [(Labels::none(), n)])?;
+        }
+        let gauge = |n: u64| i64::try_from(n).unwrap_or(i64::MAX);
+        out.gauge(
+            "bridge_store_depth",
+            "Records waiting in the store now.",
+            [(Labels::none(), gauge(live.stored_now))],
+        )?;
+        out.gauge(
+            "bridge_broker_connected",
+            "1 while a session with the broker is up.",
+            [(Labels::none(), i64::from(live.online))],
+        )?;
+        let lines = || r.lines.iter().map(|l| (Labels::of(&[("line", l.name.as_str())]), l));
+        out.counter("bridge_polls", "Polls of the line's devices.", lines().map(|(labels, l)| (labels, l.polls)))?;
+        out.counter(
+            "bridge_poll_failures",
+            "Failed polls, by kind.",
+            lines().flat_map(|(labels, l)| {
+                l.failures.iter().map(move |(kind, n)| (Labels(labels.0.clone()).with("kind", format!("{kind:?}")), *n))
+            }),
+        )?;
+        out.counter(
+            "bridge_poll_overruns",
+            "Polls that ended after their next was due.",
+            lines().map(|(labels, l)| (labels, l.overruns)),
+        )
+    }
+}
+
+impl Source for BridgeStatus {
+    fn status(&self) -> Status {
+        let live = self.now();
+        let r = &live.report;
+        let mut broker = Table::new("Broker", &["state", "sessions", "lost", "published", "not sent"]);
+        broker.rows.push(vec![
+            if live.online { "ok" } else { "failing" }.to_string(),
+            r.connections.to_string(),
+            r.broker_lost.to_string(),
+            r.published.values().sum::<u64>().to_string(),
+            r.unsent.to_string(),
+        ]);
+        let mut store = Table::new("Store", &["waiting", "stored", "replayed", "dropped", "errors"]);
+        store.rows.push(vec![
+            live.stored_now.to_string(),
+            r.stored.to_string(),
+            r.replayed.to_string(),
+            r.dropped.to_string(),
+            r.store_errors.to_string(),
+        ]);
+        let mut lines = Table::new("Lines", &["line", "polls", "ok", "failed", "overruns"]);
+        for l in &r.lines {
+            let failed: u64 = l.failures.values().sum();
+            lines.rows.push(vec![
+                l.name.clone(),
+                l.polls.to_string(),
+                l.ok.to_string(),
+                failed.to_string(),
+                l.overruns.to_string(),
+            ]);
+        }
+        let mut commands = Table::new("Commands", &["writes", "write failures", "refused", "discarded"]);
+        commands.rows.push(vec![
+            r.writes.to_string(),
+            r.write_failures.to_string(),
+            r.refused.to_string(),
+            r.discarded.to_string(),
+        ]);
+        Status { service: "bridge".into(), summary: self.summary.clone(), tables: vec![broker, store, lines, commands] }
+    }
+
+    /// Failing while no session with the broker is up: what is read goes to the store.
+    fn health(&self) -> Health {
+        if self.now().online {
+            Health::Ok
+        } else {
+            Health::Failing("not connected to the broker (storing what is read)".into())
+        }
+    }
+}
