@@ -147,9 +147,11 @@ pub(crate) async fn run(connection: &ConnectArgs, args: &SniffArgs) -> Result<()
             }
         }
     }
-    for event in listener.finish() {
+    let (rest, late_failure) = listener.finish();
+    for event in rest {
         sinks.take(&event)?;
     }
+    failure = failure.or(late_failure);
     if let Some((pcap, what)) = &mut sinks.pcap {
         pcap.flush().map_err(|source| CliError::Output { what: what.clone(), source })?;
     }

@@ -52,6 +52,8 @@ mod stats;
 use std::io;
 use std::time::{Duration, SystemTime, UNIX_EPOCH};
 
+use futures_util::FutureExt;
+
 use ferrobus_proto::Instant;
 use ferrobus_proto::frame::LineTiming;
 use ferrobus_proto::frame::timing::PC_INCOMPLETE_TIMEOUT;
@@ -301,12 +303,29 @@ impl Listener {
         }
     }
 
-    /// Settles what the decoder holds (a frame not yet ended, a request still waiting) and
-    /// returns it with every event not yet taken: the end of listening (the port is closed).
-    pub fn finish(&mut self) -> Vec<BusEvent> {
+    /// The end of listening: hears what the port has already read (a reply that came as
+    /// listening was stopped is not lost in the reading thread's queue), without waiting for
+    /// more; closes the port; settles what the decoder holds (a frame not yet ended, a request
+    /// still waiting); and returns it with every event not yet taken, in order. A read error
+    /// among what was already read ends the draining and is returned beside the events before it.
+    pub fn finish(&mut self) -> (Vec<BusEvent>, Option<SniffError>) {
+        let mut events = Vec::new();
+        let mut failure = None;
+        // `next` is cancel-safe: a poll that would wait is dropped and loses nothing.
+        while let Some(heard) = self.next().now_or_never() {
+            match heard {
+                Ok(Some(event)) => events.push(event),
+                Ok(None) => break,
+                Err(e) => {
+                    failure = Some(e);
+                    break;
+                }
+            }
+        }
         self.port = None;
         self.engine.finish();
-        std::iter::from_fn(|| self.engine.poll_event()).collect()
+        events.extend(std::iter::from_fn(|| self.engine.poll_event()));
+        (events, failure)
     }
 }
 

@@ -101,12 +101,35 @@ async fn the_end_of_the_port_ends_the_listener_and_finish_settles_what_it_held()
     drop(tx);
     // The port ended before the decoder's deadline: the two bytes are still held.
     assert!(matches!(listener.next().await, Ok(None)));
-    let held = listener.finish();
+    let (held, failure) = listener.finish();
     assert!(
         matches!(held.as_slice(), [BusEvent::Fragment { bytes, kind: FragmentKind::Partial { .. }, .. }] if bytes == &[1, 3]),
         "{held:?}"
     );
-    assert!(listener.finish().is_empty());
+    assert!(failure.is_none());
+    assert!(listener.finish().0.is_empty());
+}
+
+#[tokio::test(start_paused = true)]
+async fn finish_hears_what_the_reading_thread_had_read_and_a_read_error_after_it() {
+    let (tx, mut listener) = listener();
+    // Read before listening stopped, never asked for by `next`: a request and its reply.
+    tx.send(Chunk::Bytes(request(), now())).unwrap();
+    tokio::time::advance(Duration::from_millis(30)).await;
+    tx.send(Chunk::Bytes(reply(), now())).unwrap();
+    tx.send(Chunk::Failed(io::Error::other("unplugged"))).unwrap();
+    let (heard, failure) = listener.finish();
+    let roles: Vec<Role> = heard
+        .iter()
+        .map(|e| match e {
+            BusEvent::Frame { role, crc_ok: true, .. } => *role,
+            other => panic!("{other:?}"),
+        })
+        .collect();
+    assert_eq!(roles, [Role::Request, Role::Response], "{heard:?}");
+    assert!(matches!(&failure, Some(SniffError::Read { path, .. }) if path == "/dev/test"), "{failure:?}");
+    let (nothing, none) = listener.finish();
+    assert!(nothing.is_empty() && none.is_none());
 }
 
 #[tokio::test(start_paused = true)]
@@ -161,7 +184,7 @@ async fn a_listener_on_a_pty_holds_it_alone_hears_a_frame_stamped_as_it_came_and
     tokio::time::sleep(Duration::from_millis(20)).await;
     let mut back = [0u8; 64];
     assert_eq!(pty.port.read_buffered(&mut back).unwrap(), 0, "the listener wrote to the port");
-    assert!(listener.finish().is_empty());
+    assert!(listener.finish().0.is_empty());
     // Finished, the port is let go at once (its thread ends without waiting for a chunk).
     let mut again = Listener::open(SerialConfig::new(&pty.path, line), timing());
     for _ in 0..100 {
