@@ -24,9 +24,15 @@ set -euo pipefail
 root="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
 cd "$root"
 
+# Each step says how much disk is left: a full disk shows as a linker's bus error.
 step() {
-    printf '\n=== %s\n' "$*"
+    printf '\n=== %s (%s free)\n' "$*" "$(df -Pk . | awk 'NR == 2 { printf "%.1f GiB", $4 / 1048576 }')"
 }
+
+if [ -n "${CI:-}" ]; then
+    # A fresh clone builds once: an incremental cache would only take disk.
+    export CARGO_INCREMENTAL=0
+fi
 
 started=$SECONDS
 
