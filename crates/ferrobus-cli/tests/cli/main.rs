@@ -8,6 +8,7 @@ mod backup_safety;
 mod bench_failures;
 mod completions;
 mod config;
+mod container;
 mod defaults;
 mod device;
 mod errors;
