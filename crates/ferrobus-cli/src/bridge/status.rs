@@ -46,7 +46,7 @@ impl Collector for BridgeStatus {
             "Messages handed to the MQTT client, by type.",
             r.published.iter().map(|(kind, n)| (Labels::none().with("type", kind), *n)),
         )?;
-        let counts = [
+        out.counters(&[
             ("bridge_unsent", "Messages the MQTT client could not take (its queue was full).", r.unsent),
             ("bridge_stored", "Records kept in the store while the broker was away.", r.stored),
             ("bridge_replayed", "Records replayed from the store.", r.replayed),
@@ -59,10 +59,7 @@ impl Collector for BridgeStatus {
             ("bridge_write_failures", "Writes the bus failed.", r.write_failures),
             ("bridge_broker_sessions", "Sessions the broker accepted.", r.connections),
             ("bridge_broker_lost", "Sessions lost.", r.broker_lost),
-        ];
-        for (name, help, n) in counts {
-            out.counter(name, help, [(Labels::none(), n)])?;
-        }
+        ])?;
         let gauge = |n: u64| i64::try_from(n).unwrap_or(i64::MAX);
         out.gauge(
             "bridge_store_depth",

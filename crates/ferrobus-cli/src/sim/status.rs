@@ -37,7 +37,7 @@ impl Collector for SimStatus {
     fn encode(&self, mut encoder: DescriptorEncoder<'_>) -> Result<(), std::fmt::Error> {
         let c = self.counters.lock().unwrap_or_else(PoisonError::into_inner);
         let mut out = Family::on(&mut encoder);
-        let counts = [
+        out.counters(&[
             ("sim_requests", "Requests for a simulated unit.", c.requests),
             ("sim_replies", "Replies sent (exceptions included).", c.replies),
             ("sim_exceptions", "Exception replies sent.", c.exceptions),
@@ -45,10 +45,7 @@ impl Collector for SimStatus {
             ("sim_other_units", "Frames for units the simulator does not answer.", c.other_units),
             ("sim_discarded", "Runs of bytes discarded: noise, broken frames, bad CRCs.", c.discarded),
             ("sim_dropped_replies", "Replies dropped by the fault injection.", c.dropped_replies),
-        ];
-        for (name, help, n) in counts {
-            out.counter(name, help, [(Labels::none(), n)])?;
-        }
+        ])?;
         out.seconds_histogram(
             "sim_reply_lateness",
             "How late each reply began after it was due (t3.5 plus the response wait).",

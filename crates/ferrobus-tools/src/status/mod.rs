@@ -1,4 +1,5 @@
-//! The status endpoint of a long-running command (`--metrics ADDR:PORT` on `gateway`, `sim`):
+//! The status endpoint of a long-running command (`--metrics ADDR:PORT` on `gateway`, `poll`,
+//! `bridge`, `sim`):
 //! what it counts as OpenMetrics, whether it is healthy, and a page that shows it live.
 //!
 //! ```text
@@ -28,7 +29,7 @@ use axum::response::{Html, IntoResponse, Response};
 use axum::routing::get;
 use ferrobus::server::TcpStats;
 use prometheus_client::collector::Collector;
-use prometheus_client::encoding::{DescriptorEncoder, EncodeMetric, NoLabelSet};
+use prometheus_client::encoding::{DescriptorEncoder, EncodeGaugeValue, EncodeMetric, NoLabelSet};
 use prometheus_client::metrics::MetricType;
 use prometheus_client::metrics::counter::ConstCounter;
 use prometheus_client::metrics::gauge::ConstGauge;
@@ -188,12 +189,21 @@ impl<'e, 'd> Family<'e, 'd> {
         Ok(())
     }
 
-    /// A gauge `name` with a sample per `(labels, value)`.
-    pub fn gauge<'l>(
+    /// A counter without labels per `(name, help, value)`: the totals a command keeps.
+    pub fn counters(&mut self, counts: &[(&str, &str, u64)]) -> Result<(), std::fmt::Error> {
+        for &(name, help, value) in counts {
+            self.counter(name, help, [(Labels::none(), value)])?;
+        }
+        Ok(())
+    }
+
+    /// A gauge `name` with a sample per `(labels, value)`: a count (`i64`) or a measured
+    /// value (`f64`).
+    pub fn gauge<'l, N: EncodeGaugeValue>(
         &mut self,
         name: &str,
         help: &str,
-        samples: impl IntoIterator<Item = (Labels<'l>, i64)>,
+        samples: impl IntoIterator<Item = (Labels<'l>, N)>,
     ) -> Result<(), std::fmt::Error> {
         let mut family = self.encoder.encode_descriptor(name, help, None, MetricType::Gauge)?;
         for (labels, value) in samples {
