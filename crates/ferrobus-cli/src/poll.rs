@@ -14,6 +14,7 @@ use std::collections::HashMap;
 use std::fmt::Write as _;
 use std::io::{IsTerminal, Write as _};
 use std::path::{Path, PathBuf};
+use std::sync::{Arc, Mutex, PoisonError};
 use std::time::Duration;
 
 use clap::Args;
@@ -26,7 +27,12 @@ use crate::address::{AddressArgs, RangeWord};
 use crate::connect::{ConnectArgs, parse_duration};
 use crate::exit::CliError;
 use crate::interrupt::Interrupt;
+use crate::metrics::{self, MetricsArgs};
 use crate::output;
+
+mod status;
+
+use status::{Latest, PollStatus};
 
 /// `poll [--unit N] TABLE ADDRESS [--count N] [--every D] ... | NAME...`.
 #[derive(Args, Debug)]
@@ -116,6 +122,9 @@ pub(crate) struct PollArgs {
     /// Stop after this long (scripts, tests); default: until Ctrl-C or SIGTERM
     #[arg(long, value_name = "DURATION", value_parser = parse_duration)]
     pub(crate) duration: Option<Duration>,
+
+    #[command(flatten)]
+    pub(crate) metrics: MetricsArgs,
 
     /// The command line's groups, from the positions of their arguments (set by `main`).
     #[arg(skip)]
@@ -608,25 +617,14 @@ fn create(path: &Path) -> Result<std::fs::File, CliError> {
 /// The table shown on a terminal, redrawn in place.
 #[derive(Default)]
 struct Screen {
-    /// Per group: its status, and the cells' values as shown.
-    rows: HashMap<usize, (String, Vec<String>)>,
+    /// The lines drawn last time.
     drawn: usize,
 }
 
 impl Screen {
-    fn update(&mut self, sample: &Sample) {
-        let entry = self.rows.entry(sample.group).or_default();
-        match &sample.result {
-            Ok(readings) => {
-                entry.0 = "ok".into();
-                entry.1 = readings.iter().map(|r| r.shown.clone()).collect();
-            }
-            Err(f) => entry.0 = f.kind.name().into(),
-        }
-    }
-
-    /// The table, preceded after the first time by the escape that moves back to its top.
-    fn draw(&mut self, groups: &[Group], counters: &[ferrobus_tools::poll::Counters]) -> String {
+    /// The table of what the groups last gave, preceded after the first time by the escape
+    /// that moves back to its top.
+    fn draw(&mut self, groups: &[Group], counters: &[ferrobus_tools::poll::Counters], latest: &Latest) -> String {
         let mut rows = output::Rows::new(&[
             ("group", output::Align::Left),
             ("point", output::Align::Left),
@@ -637,7 +635,7 @@ impl Screen {
             ("last ms", output::Align::Right),
         ]);
         for (i, g) in groups.iter().enumerate() {
-            let (status, values) = self.rows.get(&i).cloned().unwrap_or_default();
+            let (status, values) = latest.shown(i);
             let c = counters.get(i).cloned().unwrap_or_default();
             for (k, cell) in g.cells.iter().enumerate() {
                 let first = k == 0;
@@ -725,6 +723,7 @@ pub(crate) async fn run(connection: &ConnectArgs, args: &PollArgs) -> Result<(),
         Some(path) => Some(Log::open(path, (log_style == Style::Csv).then_some(CSV_HEADER), args)?),
         None => None,
     };
+    let status = args.metrics.bind().await?;
     let mut interrupt = Interrupt::listen()?;
     let target = connection.target()?;
     let transport = connection.transport(&target);
@@ -741,6 +740,13 @@ pub(crate) async fn run(connection: &ConnectArgs, args: &PollArgs) -> Result<(),
     }
     let mut poller = Poller::start(client, groups.clone(), PollConfig { line });
     let handle = poller.handle();
+    let latest = Arc::new(Mutex::new(Latest::new(groups.len())));
+    if let Some(listener) = status {
+        let summary = format!("polling {} groups on {target}", groups.len());
+        let source =
+            PollStatus { handle: handle.clone(), groups: groups.clone(), latest: Arc::clone(&latest), summary };
+        metrics::spawn(listener, Arc::new(source), "poll");
+    }
     let mut changes = Changes::default();
     let mut screen = Screen::default();
     let end = args.duration.map(|d| tokio::time::Instant::now() + d);
@@ -752,11 +758,15 @@ pub(crate) async fn run(connection: &ConnectArgs, args: &PollArgs) -> Result<(),
             }
             Event::Sample(sample) => {
                 let Some(group) = groups.get(sample.group) else { return Ok(()) };
+                let latest = {
+                    let mut latest = latest.lock().unwrap_or_else(PoisonError::into_inner);
+                    latest.update(&sample);
+                    latest.clone()
+                };
                 let (keep, any) =
                     if args.on_change { changes.filter(&sample, args.deadband) } else { (Vec::new(), true) };
                 if style == Style::Table {
-                    screen.update(&sample);
-                    output::print(&screen.draw(&groups, &handle.counters()))?;
+                    output::print(&screen.draw(&groups, &handle.counters(), &latest))?;
                 } else if any {
                     output::print(&records(&sample, group, style, &keep))?;
                 }
@@ -873,14 +883,29 @@ mod tests {
         let range = ferrobus_tools::poll::RawRange { count: 2, ..ferrobus_tools::poll::RawRange::default() };
         let g = Group::raw("u1 holding 0x0000", range, &Layout::default()).unwrap();
         let mut screen = Screen::default();
-        let first = screen.draw(std::slice::from_ref(&g), &[]);
+        let mut latest = Latest::new(1);
+        let first = screen.draw(std::slice::from_ref(&g), &[], &latest);
         assert!(first.starts_with("group"), "{first:?}");
         assert!(first.contains("0x0001"));
-        screen.update(&sample(0, Ok(vec![reading(0, 7.0), reading(1, 8.0)])));
-        let second = screen.draw(std::slice::from_ref(&g), &[]);
+        latest.update(&sample(0, Ok(vec![reading(0, 7.0), reading(1, 8.0)])));
+        let second = screen.draw(std::slice::from_ref(&g), &[], &latest);
         assert!(second.starts_with("\x1b[3F"), "back up over the header and two rows: {second:?}");
         assert!(second.lines().all(|l| l.ends_with("\x1b[K")), "each line cleared to its end");
         assert!(second.contains(" 7 ") || second.contains(" 7\x1b"), "{second:?}");
+    }
+
+    #[test]
+    fn a_failed_poll_keeps_the_last_values_read_and_says_how_it_failed() {
+        let mut latest = Latest::new(2);
+        assert_eq!(latest.shown(0), (String::new(), vec![]), "nothing polled yet");
+        latest.update(&sample(0, Ok(vec![reading(0, 7.0)])));
+        assert_eq!(latest.shown(0), ("ok".to_string(), vec!["7".to_string()]));
+        let timeout =
+            ferrobus_tools::poll::Failure { kind: FailureKind::Timeout, exception: None, diagnosis: "no reply".into() };
+        latest.update(&sample(0, Err(timeout)));
+        assert_eq!(latest.shown(0), ("timeout".to_string(), vec!["7".to_string()]));
+        assert_eq!(latest.shown(1), (String::new(), vec![]), "the other group is its own");
+        assert_eq!(latest.shown(5), (String::new(), vec![]), "no such group");
     }
 
     #[test]
@@ -941,6 +966,7 @@ mod tests {
             on_change: false,
             deadband: 0.0,
             duration: None,
+            metrics: MetricsArgs::default(),
             address_args: AddressArgs::default(),
             positions: tokens.into_iter().enumerate().collect(),
             units_on_both_sides: false,

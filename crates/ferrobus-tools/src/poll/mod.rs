@@ -31,6 +31,7 @@ use ferrobus_proto::frame::LineTiming;
 use ferrobus_proto::pdu::{ReadBits, ReadRegisters, Request, Response};
 use ferrobus_proto::schedule::{READ_REQUEST_CHARS, Schedule, read_reply_chars, wire_time};
 use ferrobus_proto::time::Instant as CoreInstant;
+use hdrhistogram::Histogram;
 use tokio::sync::{mpsc, watch};
 use tokio::time::Instant;
 
@@ -232,6 +233,12 @@ impl PollHandle {
     /// Response times per unit (successful polls and exceptions: the polls a reply ended).
     pub fn response_times(&self) -> Vec<UnitTimes> {
         self.stats().unit_times()
+    }
+
+    /// The histogram of those response times per unit, in µs (two significant figures), for
+    /// an exporter's buckets.
+    pub fn response_histograms(&self) -> Vec<(u8, Histogram<u64>)> {
+        self.stats().histograms()
     }
 
     /// Writes `text` to a cell, as its point parses it (`45 Hz`, `run`, `0x10`), with

@@ -177,6 +177,10 @@ impl Stats {
         }
     }
 
+    pub(super) fn histograms(&self) -> Vec<(u8, Histogram<u64>)> {
+        self.times.iter().filter_map(|(unit, h)| Some((*unit, h.clone()?))).collect()
+    }
+
     pub(super) fn unit_times(&self) -> Vec<UnitTimes> {
         self.times
             .iter()
