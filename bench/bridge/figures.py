@@ -252,7 +252,14 @@ def main() -> int:
     start, end = run["window_start_ns"], run["window_end_ns"]
     window_s = (end - start) / 1e9
     figures = {k: run[k] for k in ("mode", "baud", "devices", "points_per_device", "binary", "load_average")}
+    figures["transport"] = run.get("transport", "serial")
+    figures["every"] = run.get("every", "1s")
     figures["window_s"] = round(window_s, 1)
+    if run.get("polls_in_window"):
+        # A poll is one planned read; a device's points are read in `reads_per_device` of them.
+        reads = run["reads_per_device"]
+        figures["polls_per_s"] = round(run["polls_in_window"] / window_s, 1)
+        figures["points_per_s"] = round(run["polls_in_window"] / window_s * run["points_per_device"] / reads)
     figures["cpu_share_of_one_core"] = round(run["cpu_ticks"] / run["clk_tck"] / window_s, 4)
     figures["rss_kb"] = {"start": run["rss_start_kb"], "end": run["rss_end_kb"], "hwm": run["hwm_kb"]}
     figures["memory_kb"] = run.get("memory_kb", {})
@@ -272,8 +279,9 @@ def main() -> int:
 def print_table(f: dict) -> None:
     lat = f["latency_ms"]
     rows = [
-        ("run", f"{f['mode']}, {f['devices']} devices × {f['points_per_device']} points at 1 s, "
-                f"{f['baud']} 8N1, {f['window_s']} s window, load average {f['load_average']}"),
+        ("run", f"{f['mode']}, {f['devices']} devices × {f['points_per_device']} points every {f['every']}, "
+                + (f"{f['baud']} 8N1" if f["transport"] == "serial" else "Modbus/TCP")
+                + f", {f['window_s']} s window, load average {f['load_average']}"),
         ("binary", f["binary"]),
         ("CPU, share of one core", f"{f['cpu_share_of_one_core'] * 100:.2f} %"),
         ("RSS start → end of window (VmHWM)",
@@ -288,6 +296,8 @@ def print_table(f: dict) -> None:
                      ", ".join(f"{k} {v} kB" for k, v in m["by_kind_kb"].items())
                      + f"; {m['anonymous_mappings']} anonymous mappings resident, the largest "
                      + ", ".join(str(v) for v in m["largest_anonymous_kb"]) + f" kB; {f['threads']} threads"))
+    if "polls_per_s" in f:
+        rows.append(("polls (reads) per second / points read per second", f"{f['polls_per_s']} / {f['points_per_s']}"))
     rows.append(("latency change → message (n)",
                  f"p50 {lat.get('p50')} ms, p99 {lat.get('p99')} ms, max {lat.get('max')} ms ({lat['n']})"))
     if f["mode"] == "bridge":
