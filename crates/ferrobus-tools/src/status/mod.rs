@@ -1,6 +1,6 @@
 //! The status endpoint of a long-running command (`--metrics ADDR:PORT` on `gateway`, `poll`,
-//! `bridge`, `sim`):
-//! what it counts as OpenMetrics, whether it is healthy, and a page that shows it live.
+//! `bridge`, `sim`): what it counts as OpenMetrics, whether it is healthy, and a page that
+//! shows it live.
 //!
 //! ```text
 //!   GET /metrics      OpenMetrics text (Prometheus scrapes it): the counters the command
