@@ -13,7 +13,8 @@
 //! SIGUSR1 and at exit. `--reverse` turns it around: a
 //! slave on `--port` for the units of `--route UNIT=HOST:PORT[/UNIT]`, each forwarded to its
 //! Modbus/TCP server. `--lines-file FILE` gives every line its own settings and units instead
-//! (see [`lines`]).
+//! (see [`lines`]); SIGHUP reads it again and changes what changed, the rest running on
+//! ([`ferrobus_tools::gateway::reload`]; Unix only: Windows has no SIGHUP).
 
 mod lines;
 
@@ -26,6 +27,7 @@ use std::time::Duration;
 use clap::Args;
 use ferrobus::server::TcpCounts;
 use ferrobus::{Client, Transport};
+use ferrobus_tools::gateway::config::LinesFile;
 use ferrobus_tools::gateway::status::GatewayStatus;
 use ferrobus_tools::gateway::{
     AllowAll, Authorize, FrontConfig, Gateway, GatewayConfig, GatewayLine, Inbound, OnFailure, Route, Routes, Rules,
@@ -34,7 +36,7 @@ use ferrobus_tools::gateway::{
 
 use crate::connect::{ConnectArgs, Target, parse_duration};
 use crate::exit::CliError;
-use crate::interrupt::Interrupt;
+use crate::interrupt::{Hangup, Interrupt};
 use crate::metrics::{self, MetricsArgs};
 use crate::server_limits::ServerLimitsArgs;
 use crate::server_tls::ServerTlsArgs;
@@ -66,7 +68,10 @@ pub(crate) struct GatewayArgs {
     /// Lines from a TOML file instead of --port/--tcp/--rtu-tcp, --line and --route: [[line]]
     /// tables, each with its port (or tcp = "HOST[:PORT]", rtu-tcp = "HOST:PORT"), line options
     /// (baud, parity, timeout, response-wait, ...) and units (units, renumber); what a line
-    /// leaves out comes from the connection options
+    /// leaves out comes from the connection options. SIGHUP reads it again: a line whose
+    /// settings are unchanged runs on, a changed one restarts, the routes change for new
+    /// requests; a file with a mistake is refused and logged, the running lines stay (not on
+    /// Windows, which has no SIGHUP)
     #[arg(long = "lines-file", value_name = "FILE", conflicts_with_all = ["lines", "routes", "reverse"])]
     pub(crate) lines_file: Option<PathBuf>,
 
@@ -172,7 +177,7 @@ pub(crate) async fn run(connection: &ConnectArgs, args: &GatewayArgs) -> Result<
     if args.reverse {
         return reverse(connection, args).await;
     }
-    let config = config(connection, args)?;
+    let (config, mut running) = config(connection, args)?;
     let rules = rules(args)?;
     if args.tls.enabled() && args.rtu_in {
         return Err(CliError::Usage("--tls-cert serves Modbus/TCP Security (MBAP frames): not with --rtu-in".into()));
@@ -180,6 +185,8 @@ pub(crate) async fn run(connection: &ConnectArgs, args: &GatewayArgs) -> Result<
     let tls = args.tls.load()?;
     let secure = tls.is_some();
     let mut interrupt = Interrupt::listen()?;
+    let mut hangup = Hangup::listen()?;
+    let mut reloads = Reloads::default();
     #[cfg(unix)]
     let mut usr1 = tokio::signal::unix::signal(tokio::signal::unix::SignalKind::user_defined1())
         .map_err(|e| CliError::from(ferrobus::Error::io("listening for SIGUSR1", e)))?;
@@ -242,14 +249,64 @@ pub(crate) async fn run(connection: &ConnectArgs, args: &GatewayArgs) -> Result<
         tokio::select! {
             () = interrupt.wait() => break,
             () = &mut until => break,
-            _ = usr1 => print(&gateway, &tcp.counts(), secure),
+            _ = usr1 => print(&gateway, &tcp.counts(), secure, running.as_ref().map(|_| &reloads)),
+            () = hangup.wait() => reload(connection, args, &gateway, &mut running, &mut reloads).await,
             () = watchdog.tick() => watchdog.feed(),
         }
     }
     systemd::stopping();
     serving.abort();
-    print(&gateway, &tcp.counts(), secure);
+    print(&gateway, &tcp.counts(), secure, running.as_ref().map(|_| &reloads));
     Ok(())
+}
+
+/// What SIGHUP has done so far.
+#[derive(Clone, Copy, Debug, Default)]
+struct Reloads {
+    /// Files read again and applied (one that changed nothing among them).
+    done: u64,
+    /// Files refused: a mistake in them, or an added line's port that does not open.
+    refused: u64,
+}
+
+/// Reads `--lines-file` again and changes in `gateway` what differs from `running` (the
+/// file it runs now, which it then becomes); a file with a mistake, or an added serial port
+/// that cannot be opened, changes nothing and is logged as an error. Tells systemd it
+/// reloads, and when it is done. Without a lines file there is nothing to read: a warning.
+async fn reload(
+    connection: &ConnectArgs,
+    args: &GatewayArgs,
+    gateway: &Gateway,
+    running: &mut Option<LinesFile>,
+    reloads: &mut Reloads,
+) {
+    let (Some(path), Some(running)) = (&args.lines_file, running.as_mut()) else {
+        tracing::warn!("SIGHUP: the gateway reads no --lines-file, so there is nothing to read again");
+        return;
+    };
+    systemd::reloading();
+    let applied = async {
+        let (config, file) = lines_file(path, connection, args)?;
+        let plan = ferrobus_tools::gateway::reload::plan(running, &file);
+        let started = gateway.reload(&plan, config).await?;
+        started.into_iter().for_each(crate::interrupt::keep);
+        *running = file;
+        Ok::<_, CliError>(plan)
+    };
+    let status = match applied.await {
+        Ok(plan) => {
+            reloads.done = reloads.done.saturating_add(1);
+            tracing::info!("reload: {plan}");
+            format!("reloaded: {plan}")
+        }
+        Err(e) => {
+            reloads.refused = reloads.refused.saturating_add(1);
+            let report = crate::exit::report(&e, None, 0);
+            tracing::error!("reload refused, the running lines stay as they are: {}", report.message);
+            "reload refused: see the log".to_string()
+        }
+    };
+    systemd::reloaded(&status);
 }
 
 /// Runs `ferrobus gateway --reverse`.
@@ -314,8 +371,9 @@ fn reverse_route(text: &str) -> Result<(u8, String, u8), CliError> {
     Ok((unit, addr.to_string(), remote))
 }
 
-/// Prints every line's and unit's counters and the TCP side's on stderr.
-fn print(gateway: &Gateway, tcp: &TcpCounts, secure: bool) {
+/// Prints every line's and unit's counters and the TCP side's on stderr, and with a lines
+/// file what SIGHUP did.
+fn print(gateway: &Gateway, tcp: &TcpCounts, secure: bool, reloads: Option<&Reloads>) {
     eprint!("{}", ferrobus_tools::gateway::report(&gateway.stats(), &gateway.front_stats()));
     eprintln!(
         "tcp: {} connections served ({} open), {} refused over --max-per-source, {} accept pauses out of file descriptors; \
@@ -340,13 +398,23 @@ fn print(gateway: &Gateway, tcp: &TcpCounts, secure: bool) {
             tcp.tls_refused, tcp.refused_handshakes, tcp.denied
         );
     }
+    if let Some(reloads) = reloads {
+        eprintln!("reload: {} done, {} refused", reloads.done, reloads.refused);
+    }
 }
 
-/// The gateway's lines and routes from the options.
-fn config(connection: &ConnectArgs, args: &GatewayArgs) -> Result<GatewayConfig, CliError> {
+/// The gateway's lines and routes from the options; with `--lines-file`, the file too, for
+/// a reload to compare.
+fn config(connection: &ConnectArgs, args: &GatewayArgs) -> Result<(GatewayConfig, Option<LinesFile>), CliError> {
     if let Some(path) = &args.lines_file {
-        return lines_file(path, connection, args);
+        return lines_file(path, connection, args).map(|(config, file)| (config, Some(file)));
     }
+    Ok((options_config(connection, args)?, None))
+}
+
+/// The gateway's lines and routes from `--port` (or `--tcp`, `--rtu-tcp`), `--line` and
+/// `--route`.
+fn options_config(connection: &ConnectArgs, args: &GatewayArgs) -> Result<GatewayConfig, CliError> {
     let first = match connection.target()? {
         Target::Serial { path, .. } => path,
         Target::Mbaps(addr) => {
@@ -408,9 +476,13 @@ fn config(connection: &ConnectArgs, args: &GatewayArgs) -> Result<GatewayConfig,
 }
 
 /// The gateway's lines and routes from `--lines-file`, the connection options the default of
-/// every line; `--port` (or `--tcp`, `--rtu-tcp`) beside it would be a line the file does not
-/// name, and is refused.
-fn lines_file(path: &std::path::Path, connection: &ConnectArgs, args: &GatewayArgs) -> Result<GatewayConfig, CliError> {
+/// every line, and the file as read; `--port` (or `--tcp`, `--rtu-tcp`) beside it would be a
+/// line the file does not name, and is refused.
+fn lines_file(
+    path: &std::path::Path,
+    connection: &ConnectArgs,
+    args: &GatewayArgs,
+) -> Result<(GatewayConfig, LinesFile), CliError> {
     let given = [("--port", &connection.port), ("--tcp", &connection.tcp), ("--rtu-tcp", &connection.rtu_tcp)];
     if let Some((option, Some(value))) = given.iter().find(|(_, v)| v.is_some()) {
         return Err(CliError::Usage(format!(
@@ -425,7 +497,8 @@ fn lines_file(path: &std::path::Path, connection: &ConnectArgs, args: &GatewayAr
         late_guard: args.late_guard,
         in_flight: in_flight(args),
     };
-    let (lines, routes) = lines::read(path, connection, base)?;
+    let file = lines::read(path, connection, base)?;
+    let (lines, routes) = (file.lines.clone(), file.routes.clone());
     for (index, line) in lines.iter().enumerate() {
         let units: Vec<String> =
             routes.iter().filter(|(_, r)| r.line == index).map(|(u, r)| format!("{u}->{}", r.unit)).collect();
@@ -441,7 +514,8 @@ fn lines_file(path: &std::path::Path, connection: &ConnectArgs, args: &GatewayAr
             units.join(" ")
         );
     }
-    Ok(GatewayConfig { lines, routes, broadcast_ack: args.broadcast_ack, cache_max_age: args.cache_max_age })
+    let config = GatewayConfig { lines, routes, broadcast_ack: args.broadcast_ack, cache_max_age: args.cache_max_age };
+    Ok((config, file))
 }
 
 /// `--in-flight`.

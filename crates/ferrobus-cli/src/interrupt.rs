@@ -112,3 +112,35 @@ impl Interrupt {
         }
     }
 }
+
+/// A listener for SIGHUP, the signal to read the configuration again (`gateway
+/// --lines-file`, `bridge`; systemd's `ExecReload`), installed when made. Windows has no
+/// SIGHUP: there it never comes.
+pub(crate) struct Hangup {
+    #[cfg(unix)]
+    hup: tokio::signal::unix::Signal,
+}
+
+impl Hangup {
+    /// Starts listening. From here on, SIGHUP no longer ends the process.
+    pub(crate) fn listen() -> Result<Hangup, CliError> {
+        #[cfg(unix)]
+        {
+            use tokio::signal::unix::{SignalKind, signal};
+            let hup = signal(SignalKind::hangup())
+                .map_err(|e| CliError::from(ferrobus::Error::io("listening for SIGHUP", e)))?;
+            Ok(Hangup { hup })
+        }
+        #[cfg(not(unix))]
+        Ok(Hangup {})
+    }
+
+    /// Waits for the next SIGHUP (for ever on Windows).
+    pub(crate) async fn wait(&mut self) {
+        #[cfg(unix)]
+        if self.hup.recv().await.is_some() {
+            return;
+        }
+        std::future::pending::<()>().await;
+    }
+}

@@ -1,7 +1,9 @@
 //! systemd's notify protocol for the commands a plant runs as services (`gateway`, `bridge`):
 //! `READY=1` once they serve ([`ready`]), `WATCHDOG=1` at half the unit's `WatchdogSec` from
 //! the command's runtime ([`Watchdog`]: a process whose runtime stops turning is restarted),
-//! `STOPPING=1` at the end ([`stopping`]). The units are `scripts/systemd/*.service`, shipped
+//! `RELOADING=1` with `MONOTONIC_USEC` when SIGHUP has it read its file again ([`reloading`],
+//! and `READY=1` once that is done or refused, [`reloaded`]), `STOPPING=1` at the end
+//! ([`stopping`]). The units are `scripts/systemd/*.service`, shipped
 //! in the deb.
 //!
 //! Outside systemd (no `NOTIFY_SOCKET`), and on Windows, every call does nothing.
@@ -29,6 +31,28 @@ pub(crate) fn ready(status: &str) -> Watchdog {
         let _ = status;
         Watchdog { every: None }
     }
+}
+
+/// Tells systemd the service is reading its configuration again: `RELOADING=1` with the
+/// monotonic clock's time, as systemd asks of a reload (`Type=notify-reload`); [`reloaded`]
+/// follows.
+pub(crate) fn reloading() {
+    #[cfg(unix)]
+    match sd_notify::NotifyState::monotonic_usec_now() {
+        Ok(now) => send(&[sd_notify::NotifyState::Reloading, now]),
+        Err(e) => {
+            tracing::warn!("reading the monotonic clock for systemd: {e}");
+            send(&[sd_notify::NotifyState::Reloading]);
+        }
+    }
+}
+
+/// Tells systemd the reload is over (done or refused) and the service ready, saying `status`.
+pub(crate) fn reloaded(status: &str) {
+    #[cfg(unix)]
+    send(&[sd_notify::NotifyState::Ready, sd_notify::NotifyState::Status(status)]);
+    #[cfg(not(unix))]
+    let _ = status;
 }
 
 /// Tells systemd the service is stopping.

@@ -106,6 +106,13 @@ impl Release {
             }
         }
     }
+
+    /// Waits until the driver has ended, its port let go: every clone of its client dropped
+    /// and no reply owed any more. What a program waits on before it opens the same port
+    /// again; [`Release::settled`] does not wait for a driver still in use.
+    pub async fn ended(mut self) {
+        while self.hold.changed().await.is_ok() {}
+    }
 }
 
 impl Client {

@@ -19,7 +19,6 @@ use std::time::Duration;
 
 use ferrobus::Backoff;
 use ferrobus_tools::gateway::config::{self, LineDefaults, LinesFile};
-use ferrobus_tools::gateway::{GatewayLine, Routes};
 
 use crate::connect::{ConnectArgs, Rs485Arg};
 use crate::exit::CliError;
@@ -61,10 +60,8 @@ fn defaults(connection: &ConnectArgs, base: Base) -> LineDefaults {
 
 /// Reads `path`: the lines, with their settings on top of `connection`'s and `base`'s, and
 /// the routes. Nothing is opened.
-pub(super) fn read(path: &Path, connection: &ConnectArgs, base: Base) -> Result<(Vec<GatewayLine>, Routes), CliError> {
-    let LinesFile { lines, routes } =
-        config::read(path, &defaults(connection, base)).map_err(|e| CliError::Usage(e.to_string()))?;
-    Ok((lines, routes))
+pub(super) fn read(path: &Path, connection: &ConnectArgs, base: Base) -> Result<LinesFile, CliError> {
+    config::read(path, &defaults(connection, base)).map_err(|e| CliError::Usage(e.to_string()))
 }
 
 #[cfg(test)]

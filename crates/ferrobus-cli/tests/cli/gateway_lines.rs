@@ -16,7 +16,7 @@ use serde_json::Value;
 use crate::server::{ferrobus, offline, stderr};
 
 /// A child process and the lines of its stdout or stderr, as they come.
-struct Proc {
+pub(crate) struct Proc {
     child: Child,
     lines: mpsc::Receiver<String>,
     seen: Vec<String>,
@@ -24,7 +24,7 @@ struct Proc {
 
 impl Proc {
     /// `ferrobus ARGS`, reading its stdout (`stdout`) or its stderr line by line.
-    fn ferrobus(args: &[&str], stdout: bool) -> Proc {
+    pub(crate) fn ferrobus(args: &[&str], stdout: bool) -> Proc {
         let mut command: Command = ferrobus();
         command.args(args).stdin(Stdio::null());
         if stdout {
@@ -55,7 +55,7 @@ impl Proc {
     }
 
     /// Reads lines until one contains `text`, and returns it.
-    fn until(&mut self, text: &str) -> String {
+    pub(crate) fn until(&mut self, text: &str) -> String {
         loop {
             let line = self.line();
             if line.contains(text) {
@@ -64,10 +64,15 @@ impl Proc {
         }
     }
 
+    /// Sends it `signal` (`HUP`, `TERM`, ...).
+    pub(crate) fn signal(&self, signal: &str) {
+        let status = Command::new("kill").args([&format!("-{signal}"), &self.child.id().to_string()]).status().unwrap();
+        assert!(status.success(), "kill -{signal}");
+    }
+
     /// SIGTERM, then waits for the end; every line it printed after.
-    fn stop(&mut self) -> Vec<String> {
-        let status = Command::new("kill").args(["-TERM", &self.child.id().to_string()]).status().unwrap();
-        assert!(status.success(), "kill -TERM");
+    pub(crate) fn stop(&mut self) -> Vec<String> {
+        self.signal("TERM");
         let exit = self.child.wait().unwrap();
         assert!(exit.success(), "{exit}; it printed {:#?}", self.seen);
         self.lines.iter().collect()
@@ -82,7 +87,7 @@ impl Drop for Proc {
 }
 
 /// A fresh directory under the target dir for one test's files.
-fn dir(name: &str) -> PathBuf {
+pub(crate) fn dir(name: &str) -> PathBuf {
     let dir = Path::new(env!("CARGO_TARGET_TMPDIR")).join(format!("gateway-lines-{name}-{}", std::process::id()));
     let _ = std::fs::remove_dir_all(&dir);
     std::fs::create_dir_all(&dir).unwrap();
@@ -91,7 +96,7 @@ fn dir(name: &str) -> PathBuf {
 
 /// A `ferrobus line` of two pty drops at `settings` (line options), its statistics to `stats`;
 /// the drops' paths.
-fn bus(settings: &[&str], stats: &Path) -> (Proc, [String; 2]) {
+pub(crate) fn bus(settings: &[&str], stats: &Path) -> (Proc, [String; 2]) {
     let args = [settings, &["line", "--drops", "2", "--stats-json", stats.to_str().unwrap()]].concat();
     let mut line = Proc::ferrobus(&args, true);
     let drops = [line.line(), line.line()];
@@ -99,7 +104,7 @@ fn bus(settings: &[&str], stats: &Path) -> (Proc, [String; 2]) {
 }
 
 /// `ferrobus sim` on `port` at `settings`, once it serves.
-fn sim(port: &str, settings: &[&str], args: &[&str]) -> Proc {
+pub(crate) fn sim(port: &str, settings: &[&str], args: &[&str]) -> Proc {
     let all = [&["--port", port][..], settings, &["sim", "--profile", "generic"], args].concat();
     let mut sim = Proc::ferrobus(&all, false);
     sim.until("serving on");
@@ -107,7 +112,7 @@ fn sim(port: &str, settings: &[&str], args: &[&str]) -> Proc {
 }
 
 /// Sends one Modbus/TCP request (unit, PDU) and returns the reply's PDU.
-fn ask(stream: &mut TcpStream, transaction: u16, unit: u8, pdu: &[u8]) -> Vec<u8> {
+pub(crate) fn ask(stream: &mut TcpStream, transaction: u16, unit: u8, pdu: &[u8]) -> Vec<u8> {
     let length = u16::try_from(pdu.len() + 1).unwrap();
     let mut adu = [&transaction.to_be_bytes()[..], &[0, 0], &length.to_be_bytes(), &[unit], pdu].concat();
     stream.write_all(&adu).unwrap();
@@ -121,8 +126,8 @@ fn ask(stream: &mut TcpStream, transaction: u16, unit: u8, pdu: &[u8]) -> Vec<u8
     reply
 }
 
-const LINE_A: [&str; 6] = ["--baud", "9600", "--parity", "none", "--stop-bits", "2"];
-const LINE_B: [&str; 4] = ["--baud", "38400", "--parity", "none"];
+pub(crate) const LINE_A: [&str; 6] = ["--baud", "9600", "--parity", "none", "--stop-bits", "2"];
+pub(crate) const LINE_B: [&str; 4] = ["--baud", "38400", "--parity", "none"];
 
 #[test]
 fn two_lines_at_their_own_baud_rates_serve_their_units_each_at_its_lines_settings() {

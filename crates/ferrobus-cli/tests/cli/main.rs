@@ -14,6 +14,7 @@ mod device;
 mod errors;
 mod gateway;
 mod gateway_lines;
+mod gateway_reload;
 mod guard;
 mod interrupted;
 mod line_settings;

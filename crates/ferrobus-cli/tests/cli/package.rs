@@ -67,6 +67,7 @@ fn the_deb_unpacks_and_its_ferrobus_runs_version_and_demo_with_man_pages_complet
     for unit in ["ferrobus-gateway", "ferrobus-bridge"] {
         let text = std::fs::read_to_string(unpacked.join(format!("usr/lib/systemd/system/{unit}.service"))).unwrap();
         assert!(text.contains("Type=notify") && text.contains("WatchdogSec="), "{unit}: {text}");
+        assert!(text.contains("\nExecReload=/bin/kill -HUP $MAINPID\n"), "{unit}: {text}");
         let exec = text.lines().find_map(|l| l.strip_prefix("ExecStart=")).unwrap();
         let mut words = exec.split_whitespace();
         assert_eq!(words.next(), Some("/usr/bin/ferrobus"), "{exec}");

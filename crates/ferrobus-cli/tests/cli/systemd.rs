@@ -1,6 +1,7 @@
 //! `Type=notify`: the gateway tells the service manager it is ready, feeds the watchdog at
 //! half its timeout, and says it is stopping — read from a datagram socket of the test's own,
-//! as systemd would (`NOTIFY_SOCKET`, `WATCHDOG_USEC`, `WATCHDOG_PID`).
+//! as systemd would (`NOTIFY_SOCKET`, `WATCHDOG_USEC`, `WATCHDOG_PID`); on SIGHUP it says it
+//! reloads (with the monotonic clock, as systemd wants it) and then that it is ready again.
 #![cfg(unix)]
 
 use std::os::unix::net::UnixDatagram;
@@ -54,4 +55,34 @@ fn without_a_watchdog_the_gateway_only_says_ready_and_stopping() {
     assert!(child.wait().unwrap().success());
     assert_eq!(heard.len(), 2, "{heard:?}");
     assert!(heard[0].starts_with("READY=1\n") && heard[1] == "STOPPING=1\n", "{heard:?}");
+}
+
+#[test]
+fn on_sighup_the_gateway_says_reloading_with_the_monotonic_clock_then_ready_again() {
+    let dir = Scratch::new("notify-reload");
+    let socket = dir.0.join("notify.sock");
+    let manager = UnixDatagram::bind(&socket).unwrap();
+    manager.set_read_timeout(Some(Duration::from_secs(20))).unwrap();
+    let lines = dir.0.join("lines.toml");
+    std::fs::write(&lines, "[[line]]\ntcp = \"127.0.0.1:1\"\n").unwrap();
+    let mut gateway = Command::new(env!("CARGO_BIN_EXE_ferrobus"));
+    gateway.args(["gateway", "--lines-file", lines.to_str().unwrap(), "--listen", "127.0.0.1:0", "--duration", "20s"]);
+    gateway.env("NOTIFY_SOCKET", &socket).env("XDG_CONFIG_HOME", &dir.0);
+    let mut child = gateway.stderr(Stdio::null()).spawn().unwrap();
+    let mut buf = [0u8; 512];
+    let mut heard = |manager: &UnixDatagram| {
+        let n = manager.recv(&mut buf).unwrap();
+        String::from_utf8_lossy(&buf[..n]).into_owned()
+    };
+    assert!(heard(&manager).starts_with("READY=1\n"));
+    std::fs::write(&lines, "[[line]]\ntcp = \"127.0.0.1:1\"\ntimeout = \"2s\"\n").unwrap();
+    let hup = Command::new("kill").args(["-HUP", &child.id().to_string()]).status().unwrap();
+    assert!(hup.success());
+    let reloading = heard(&manager);
+    let usec = reloading.strip_prefix("RELOADING=1\nMONOTONIC_USEC=").and_then(|rest| rest.strip_suffix('\n'));
+    assert!(usec.is_some_and(|u| u.parse::<u64>().is_ok_and(|u| u > 0)), "{reloading:?}");
+    let ready = heard(&manager);
+    assert!(ready.starts_with("READY=1\nSTATUS=reloaded: 0 lines added, 1 changed"), "{ready:?}");
+    child.kill().unwrap();
+    child.wait().unwrap();
 }

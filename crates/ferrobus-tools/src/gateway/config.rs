@@ -76,7 +76,7 @@ use ferrobus::text::Item;
 use ferrobus::{ClientConfig, Rs485, SerialConfig, Transport};
 
 /// What every line of a lines file starts from, before its own keys.
-#[derive(Clone, Debug)]
+#[derive(Clone, PartialEq, Eq, Debug)]
 pub struct LineDefaults {
     /// Baud, data bits, parity, stop bits.
     pub framing: LineConfig,
@@ -126,6 +126,32 @@ pub struct LinesFile {
     pub lines: Vec<GatewayLine>,
     /// The routes of every line.
     pub routes: Routes,
+    /// What each line is, as the file and the defaults resolve it, beside [`LinesFile::lines`]:
+    /// what a reload compares ([`super::reload::plan`]).
+    pub settings: Vec<LineSettings>,
+}
+
+/// One line's settings as resolved from its `[[line]]` and the defaults, its units apart: two
+/// are equal when the line would run the same (its routes may differ; they take effect
+/// without restarting it).
+#[derive(Clone, PartialEq, Eq, Debug)]
+pub struct LineSettings {
+    kind: Kind,
+    target: String,
+    resolved: LineDefaults,
+}
+
+impl LineSettings {
+    /// What the line is connected to: the serial port, or the device's `HOST:PORT`
+    /// (normalised): a line that keeps it is the same line, changed or not.
+    pub fn target(&self) -> &str {
+        &self.target
+    }
+
+    /// Whether `other` is connected to the same port or device.
+    pub fn same_target(&self, other: &LineSettings) -> bool {
+        self.kind == other.kind && self.target == other.target
+    }
 }
 
 /// Why a lines file was refused.
@@ -226,6 +252,7 @@ pub fn parse(file: &str, text: &str, defaults: &LineDefaults) -> Result<LinesFil
     }
     let several = shape.line.len() > 1;
     let mut lines = Vec::with_capacity(shape.line.len());
+    let mut settled = Vec::with_capacity(shape.line.len());
     let mut ports: Vec<(String, usize)> = Vec::new();
     // Where each client unit was routed first: its line and the place in the file.
     let mut first_seen: Vec<Option<(usize, usize)>> = vec![None; 256];
@@ -235,13 +262,14 @@ pub fn parse(file: &str, text: &str, defaults: &LineDefaults) -> Result<LinesFil
             invalid(Some(index), Located::new(text, Some(span), &format!("[[line]] {index}, {message}")))
         };
         let line = table.get_ref();
-        let (config, target) = settings(table.span(), line, defaults).map_err(what)?;
+        let (config, target, resolved) = settings(table.span(), line, defaults).map_err(what)?;
         if let Some((_, first)) = ports.iter().find(|(p, _)| *p == target.name) {
             let (row, col) = line_col(text, *first);
             let message = format!("{}: {} is a line already ({file}:{row}:{col})", target.key, target.name);
             return Err(what((target.span, message)));
         }
-        ports.push((target.name, target.span.start));
+        ports.push((target.name.clone(), target.span.start));
+        settled.push(resolved);
         let mut route = |unit: u8, out: u8, span: &Range<usize>| -> Result<(), Problem> {
             let slot = first_seen
                 .get_mut(usize::from(unit))
@@ -312,7 +340,7 @@ pub fn parse(file: &str, text: &str, defaults: &LineDefaults) -> Result<LinesFil
         }
         lines.push(config);
     }
-    Ok(LinesFile { lines, routes })
+    Ok(LinesFile { lines, routes, settings: settled })
 }
 
 /// What a line is connected to: the key that said it, the port or address (normalised, for
@@ -324,7 +352,7 @@ struct Target {
 }
 
 /// Which kind of line a `[[line]]` is.
-#[derive(Clone, Copy, PartialEq, Eq)]
+#[derive(Clone, Copy, PartialEq, Eq, Debug)]
 enum Kind {
     Serial,
     Tcp,
@@ -456,8 +484,12 @@ fn network_line(kind: Kind, addr: String, d: &LineDefaults) -> GatewayLine {
 }
 
 /// One line's settings: `defaults`, with the table's keys on top. What it is connected to,
-/// and where that was said, too.
-fn settings(table: Range<usize>, line: &LineShape, defaults: &LineDefaults) -> Result<(GatewayLine, Target), Problem> {
+/// and where that was said, too, and the settings as a reload compares them.
+fn settings(
+    table: Range<usize>,
+    line: &LineShape,
+    defaults: &LineDefaults,
+) -> Result<(GatewayLine, Target, LineSettings), Problem> {
     let (kind, target) = target(table.clone(), line)?;
     no_serial_keys(kind, &target, line)?;
     let path = target.name.clone();
@@ -533,8 +565,9 @@ fn settings(table: Range<usize>, line: &LineShape, defaults: &LineDefaults) -> R
         d.client.late_window = Some(duration(v, "late-window")?);
     }
     d.client.in_flight = in_flight(line.in_flight.as_ref(), kind, d.client.in_flight)?;
+    let resolved = LineSettings { kind, target: target.name.clone(), resolved: d.clone() };
     if kind != Kind::Serial {
-        return Ok((network_line(kind, path, &d), target));
+        return Ok((network_line(kind, path, &d), target, resolved));
     }
     if d.framing.data_bits == DataBits::Seven && !d.ascii {
         let span = line.data_bits.as_ref().map_or(table, Spanned::span);
@@ -553,7 +586,7 @@ fn settings(table: Range<usize>, line: &LineShape, defaults: &LineDefaults) -> R
         late_guard: d.late_guard,
         ..GatewayLine::new(transport.with_reopen(d.reopen), d.client)
     };
-    Ok((config, target))
+    Ok((config, target, resolved))
 }
 
 /// A line's requests in flight: its `in-flight` key on a Modbus/TCP line, else `default` there;

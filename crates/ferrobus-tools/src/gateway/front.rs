@@ -210,7 +210,8 @@ impl Front<'_> {
         // Unit 0: Modbus/TCP has no broadcast of its own, but a client of a gateway to a
         // serial line means the line's broadcast by it; unless it is routed (a Modbus/TCP
         // line's own unit 0, which its device may answer).
-        if unit == 0 && gateway.routes.get(0).is_none() {
+        let table = gateway.table();
+        if unit == 0 && table.routes.get(0).is_none() {
             if !FunctionCode::from_u8(function).is_write() || !gateway.broadcasts() {
                 // No device answers a broadcast: there is no path to a reply for a read; and
                 // with no serial line there is no broadcast to send.
@@ -228,17 +229,17 @@ impl Front<'_> {
             }
             return;
         }
-        let Some(route) = gateway.routes.get(unit) else {
+        let Some(route) = table.routes.get(unit) else {
             return refuse(engine, ExceptionCode::GatewayPathUnavailable);
         };
-        if let Some(cached) = gateway.cached(unit, pdu) {
+        if let Some(cached) = gateway.cached(&table, unit, pdu) {
             return respond(engine, id, &cached);
         }
         let (reply, rx) = oneshot::channel();
         let job = Job { unit_in: unit, unit_out: route.unit, pdu: pdu.to_vec(), reply, broadcast: false };
-        match gateway.submit(route.line, self.connection, job) {
+        match table.submit(route.line, self.connection, job) {
             Ok(()) => self.waiting.push_back(Waiting { id, function, echo: None, reply: rx, settled: None }),
-            Err(()) => refuse(engine, ExceptionCode::ServerDeviceBusy),
+            Err(code) => refuse(engine, code),
         }
     }
 

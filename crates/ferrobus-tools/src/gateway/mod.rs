@@ -102,6 +102,7 @@ mod back;
 mod cache;
 pub mod config;
 mod front;
+pub mod reload;
 mod reverse;
 mod screen;
 pub mod stats;
@@ -113,9 +114,10 @@ mod tls;
 use std::io;
 use std::net::SocketAddr;
 use std::sync::atomic::{AtomicU64, Ordering};
-use std::sync::{Arc, Mutex};
+use std::sync::{Arc, Mutex, RwLock};
 use std::time::Duration;
 
+use ferrobus_proto::ExceptionCode;
 use ferrobus_proto::frame::AduHeader;
 use ferrobus_proto::master::pipeline::MAX_IN_FLIGHT;
 use tokio::io::{AsyncRead, AsyncWrite};
@@ -125,6 +127,7 @@ use tokio::sync::oneshot;
 pub use authorize::{AllowAll, Authorize, Chain, Rules};
 use back::{Job, LineQueue, Worker};
 use cache::Cache;
+use reload::{Fate, Plan};
 pub use reverse::{OnFailure, Upstream, serve_reverse};
 use stats::{FrontStats, LineTraffic};
 
@@ -141,7 +144,7 @@ pub struct Route {
 }
 
 /// The routing table: for each unit a client may address, the line and the unit on it.
-#[derive(Clone)]
+#[derive(Clone, PartialEq, Eq)]
 pub struct Routes {
     table: Box<[Option<Route>; 256]>,
 }
@@ -318,10 +321,9 @@ pub struct Gateway {
 }
 
 pub(crate) struct Inner {
-    lines: Vec<Arc<LineQueue>>,
-    /// Each line's client, for what its driver counts between requests (connections).
-    clients: Vec<Client>,
-    routes: Routes,
+    /// The lines and the routes, swapped whole by a reload: a request is routed and queued
+    /// on one table.
+    table: RwLock<Arc<Table>>,
     broadcast_ack: bool,
     cache: Option<Arc<Cache>>,
     connections: AtomicU64,
@@ -339,39 +341,12 @@ impl Gateway {
         check_routes(&config)?;
         let cache = config.cache_max_age.map(|age| Arc::new(Cache::new(age)));
         let mut lines = Vec::with_capacity(config.lines.len());
-        let mut clients = Vec::with_capacity(config.lines.len());
-        for (index, line) in config.lines.into_iter().enumerate() {
-            let name = line.transport.describe();
-            let client = if line.transport.is_remote() {
-                // A device on the network may be down, or not up yet: the line connects on
-                // its first request and again after each loss, and fails its requests
-                // meanwhile, as a serial line does while its port is being reopened.
-                Client::spawn(line.transport.clone(), line.client)
-            } else {
-                Client::connect(line.transport.clone(), line.client)
-                    .await
-                    .map_err(|source| GatewayError::Io { line: index, source })?
-            };
-            let late_window = (line.transport.framing() != ferrobus::Framing::Mbap)
-                .then(|| line.client.late_window.unwrap_or(line.client.timeout.saturating_mul(2)));
-            let stats = Arc::new(Mutex::new(LineTraffic { name, late_window, ..LineTraffic::default() }));
-            let queue = Arc::new(LineQueue::new(line.queue, stats));
-            // A Modbus/TCP device's late reply carries its own transaction id: the master drops
-            // it, so the line need not stay quiet for it, and may keep several requests in
-            // flight.
-            let worker = if line.transport.framing() == ferrobus::Framing::Mbap {
-                Worker { in_flight: line.client.in_flight.clamp(1, MAX_IN_FLIGHT), late_guard: Duration::ZERO }
-            } else {
-                Worker { in_flight: 1, late_guard: line.late_guard }
-            };
-            tokio::spawn(back::run(Arc::clone(&queue), client.clone(), cache.clone(), worker));
-            lines.push(queue);
-            clients.push(client);
+        for (index, line) in config.lines.iter().enumerate() {
+            let client = open(index, line).await?;
+            lines.push(Some(Line::start(line, client, cache.as_ref())));
         }
         let inner = Inner {
-            lines,
-            clients,
-            routes: config.routes,
+            table: RwLock::new(Arc::new(Table { lines, routes: config.routes })),
             broadcast_ack: config.broadcast_ack,
             cache,
             connections: AtomicU64::new(0),
@@ -380,21 +355,97 @@ impl Gateway {
         Ok(Gateway { inner: Arc::new(inner) })
     }
 
+    /// Carries out `plan`, from the running lines to `config`'s ([`reload::plan`] of the two
+    /// files): an unchanged line runs on, untouched, at its new place; the routes are swapped
+    /// for new requests; connections stay open. First the added lines' serial ports are
+    /// opened: one that cannot be opened refuses the reload ([`GatewayError::Io`]), nothing
+    /// stopped. Then the changed and removed lines stop taking requests (those queued and on
+    /// the line are served, a reply owed is awaited), and once a changed line's driver has
+    /// let its port go, the line opens anew; meanwhile its requests get 0x0A. A changed
+    /// line's port that does not open again is held as a lost port is (0x0A, opened on a
+    /// later request), and logged. Returns the releases of the lines started, to wait on
+    /// before the program exits ([`Gateway::releases`]).
+    pub async fn reload(&self, plan: &Plan, config: GatewayConfig) -> Result<Vec<ferrobus::Release>, GatewayError> {
+        check_routes(&config)?;
+        let fate = |index: usize| plan.lines.get(index).copied().unwrap_or(Fate::Added);
+        let mut added = Vec::new();
+        for (index, line) in config.lines.iter().enumerate() {
+            if fate(index) == Fate::Added {
+                added.push((index, open(index, line).await?));
+            }
+        }
+        let cache = self.inner.cache.as_ref();
+        let running = self.inner.table();
+        let mut lines: Vec<Option<Line>> = (0..config.lines.len())
+            .map(|index| match fate(index) {
+                Fate::Unchanged { was } => running.line(was).cloned(),
+                Fate::Changed { .. } | Fate::Added => None,
+            })
+            .collect();
+        let mut started = Vec::new();
+        for (index, client) in added {
+            if let (Some(slot), Some(line)) = (lines.get_mut(index), config.lines.get(index)) {
+                started.push(client.release());
+                *slot = Some(Line::start(line, client, cache));
+            }
+        }
+        let changed: Vec<(usize, usize)> = (0..config.lines.len())
+            .filter_map(|index| match fate(index) {
+                Fate::Changed { was } => Some((index, was)),
+                Fate::Unchanged { .. } | Fate::Added => None,
+            })
+            .collect();
+        let stopping = changed.iter().map(|(_, was)| *was).chain(plan.removed.iter().copied());
+        let mut ending = Vec::new();
+        for was in stopping {
+            if let Some(line) = running.line(was) {
+                line.queue.close();
+                ending.push((was, line.client.release()));
+            }
+        }
+        drop(running);
+        self.inner.swap(Table { lines, routes: config.routes });
+        for (index, was) in changed {
+            if let Some((_, release)) = ending.iter().find(|(w, _)| *w == was) {
+                release.clone().ended().await;
+            }
+            let Some(line) = config.lines.get(index) else { continue };
+            let client = match open(index, line).await {
+                Ok(client) => client,
+                Err(e) => {
+                    tracing::error!(
+                        line = index,
+                        "reload: {e}; the line is held as a lost port, opened on a later request"
+                    );
+                    Client::spawn(line.transport.clone(), line.client)
+                }
+            };
+            started.push(client.release());
+            self.inner.set(index, Line::start(line, client, cache));
+        }
+        Ok(started)
+    }
+
     /// When each line's driver lets its port go, once the gateway is dropped: a program waits
     /// on them before it exits, so that a reply still on its way to a line reaches nobody else
     /// ([`Client::release`]).
     pub fn releases(&self) -> Vec<ferrobus::Release> {
-        self.inner.clients.iter().map(Client::release).collect()
+        self.inner.table().lines.iter().flatten().map(|line| line.client.release()).collect()
     }
 
-    /// What each line has counted so far.
+    /// What each line has counted so far (a line that a reload is opening anew: nothing yet).
     pub fn stats(&self) -> Vec<LineTraffic> {
-        let lines = self.inner.lines.iter().zip(&self.inner.clients);
-        lines
-            .map(|(queue, client)| {
-                let mut stats = queue.stats().clone();
-                stats.dropped(&client.stats());
-                stats
+        let table = self.inner.table();
+        table
+            .lines
+            .iter()
+            .map(|line| match line {
+                Some(line) => {
+                    let mut stats = line.queue.stats().clone();
+                    stats.dropped(&line.client.stats());
+                    stats
+                }
+                None => LineTraffic { name: "(reopening)".into(), ..LineTraffic::default() },
             })
             .collect()
     }
@@ -447,13 +498,100 @@ impl Gateway {
 impl Drop for Inner {
     /// The lines' workers end once the requests queued are done.
     fn drop(&mut self) {
-        for line in &self.lines {
-            line.close();
+        for line in self.table().lines.iter().flatten() {
+            line.queue.close();
         }
     }
 }
 
+/// Opens line `index` (a serial port; a device on the network connects on its first request).
+async fn open(index: usize, line: &GatewayLine) -> Result<Client, GatewayError> {
+    if line.transport.is_remote() {
+        // A device on the network may be down, or not up yet: the line connects on its first
+        // request and again after each loss, and fails its requests meanwhile, as a serial
+        // line does while its port is being reopened.
+        return Ok(Client::spawn(line.transport.clone(), line.client));
+    }
+    Client::connect(line.transport.clone(), line.client)
+        .await
+        .map_err(|source| GatewayError::Io { line: index, source })
+}
+
+/// The lines and routes that requests are sent by.
+struct Table {
+    /// By index; `None` while a reload opens the line anew.
+    lines: Vec<Option<Line>>,
+    routes: Routes,
+}
+
+/// One running line: its queue (with its counters) and its client.
+#[derive(Clone)]
+struct Line {
+    queue: Arc<LineQueue>,
+    /// For what its driver counts between requests (connections).
+    client: Client,
+}
+
+impl Line {
+    /// Starts `line`'s worker over `client`.
+    fn start(line: &GatewayLine, client: Client, cache: Option<&Arc<Cache>>) -> Line {
+        let name = line.transport.describe();
+        let late_window = (line.transport.framing() != ferrobus::Framing::Mbap)
+            .then(|| line.client.late_window.unwrap_or(line.client.timeout.saturating_mul(2)));
+        let stats = Arc::new(Mutex::new(LineTraffic { name, late_window, ..LineTraffic::default() }));
+        let queue = Arc::new(LineQueue::new(line.queue, stats));
+        // A Modbus/TCP device's late reply carries its own transaction id: the master drops
+        // it, so the line need not stay quiet for it, and may keep several requests in
+        // flight.
+        let worker = if line.transport.framing() == ferrobus::Framing::Mbap {
+            Worker { in_flight: line.client.in_flight.clamp(1, MAX_IN_FLIGHT), late_guard: Duration::ZERO }
+        } else {
+            Worker { in_flight: 1, late_guard: line.late_guard }
+        };
+        tokio::spawn(back::run(Arc::clone(&queue), client.clone(), cache.cloned(), worker));
+        Line { queue, client }
+    }
+}
+
+impl Table {
+    fn line(&self, index: usize) -> Option<&Line> {
+        self.lines.get(index).and_then(Option::as_ref)
+    }
+
+    /// Queues `job` on line `line` for `connection`; the exception to answer when it cannot:
+    /// 0x06 when the queue is full, 0x0A while a reload opens the line anew.
+    fn submit(&self, line: usize, connection: u64, job: Job) -> Result<(), ExceptionCode> {
+        let queue = &self.line(line).ok_or(ExceptionCode::GatewayPathUnavailable)?.queue;
+        queue.submit(connection, job).map_err(|_| ExceptionCode::ServerDeviceBusy)
+    }
+
+    /// The running lines with their index.
+    fn running(&self) -> impl Iterator<Item = (usize, &Line)> {
+        self.lines.iter().enumerate().filter_map(|(i, line)| line.as_ref().map(|l| (i, l)))
+    }
+}
+
 impl Inner {
+    /// The table now.
+    fn table(&self) -> Arc<Table> {
+        Arc::clone(&self.table.read().unwrap_or_else(std::sync::PoisonError::into_inner))
+    }
+
+    /// Puts `table` in place.
+    fn swap(&self, table: Table) {
+        *self.table.write().unwrap_or_else(std::sync::PoisonError::into_inner) = Arc::new(table);
+    }
+
+    /// Puts line `index` in place, opened anew.
+    fn set(&self, index: usize, line: Line) {
+        let mut table = self.table.write().unwrap_or_else(std::sync::PoisonError::into_inner);
+        let mut lines = table.lines.clone();
+        if let Some(slot) = lines.get_mut(index) {
+            *slot = Some(line);
+        }
+        *table = Arc::new(Table { lines, routes: table.routes.clone() });
+    }
+
     fn next_connection(&self) -> u64 {
         self.connections.fetch_add(1, Ordering::Relaxed)
     }
@@ -462,10 +600,10 @@ impl Inner {
         self.front.lock().unwrap_or_else(std::sync::PoisonError::into_inner)
     }
 
-    fn cached(&self, unit: u8, pdu: &[u8]) -> Option<Vec<u8>> {
+    fn cached(&self, table: &Table, unit: u8, pdu: &[u8]) -> Option<Vec<u8>> {
         let reply = self.cache.as_ref()?.get(unit, pdu)?;
-        if let Some(line) = self.routes.get(unit).and_then(|r| self.lines.get(r.line)) {
-            let mut stats = line.stats();
+        if let Some(line) = table.routes.get(unit).and_then(|r| table.line(r.line)) {
+            let mut stats = line.queue.stats();
             let counters = stats.units.entry(unit).or_default();
             counters.cached = counters.cached.saturating_add(1);
             stats.total.cached = stats.total.cached.saturating_add(1);
@@ -473,15 +611,9 @@ impl Inner {
         Some(reply)
     }
 
-    /// Queues `job` on line `line` for `connection`; `Err` when the queue is full.
-    fn submit(&self, line: usize, connection: u64, job: Job) -> Result<(), ()> {
-        let queue = self.lines.get(line).ok_or(())?;
-        queue.submit(connection, job).map_err(|_| ())
-    }
-
     /// Whether any line has a broadcast: a serial line, or RTU over TCP to one.
     fn broadcasts(&self) -> bool {
-        self.clients.iter().any(Client::has_broadcast)
+        self.table().running().any(|(_, line)| line.client.has_broadcast())
     }
 
     /// Sends a broadcast on every line that has one (not to a Modbus/TCP device, which would
@@ -489,11 +621,11 @@ impl Inner {
     /// such line has sent it (its reply `None`: the echo), or 0x06 if no line could take it.
     fn broadcast(&self, connection: u64, header: AduHeader, pdu: &[u8]) -> Option<oneshot::Receiver<Option<Vec<u8>>>> {
         let mut done = Vec::new();
-        let lines = self.lines.iter().zip(&self.clients).enumerate();
-        for (line, (queue, _)) in lines.filter(|(_, (_, client))| client.has_broadcast()) {
+        let table = self.table();
+        for (line, running) in table.running().filter(|(_, l)| l.client.has_broadcast()) {
             let (reply, rx) = oneshot::channel();
             let job = Job { unit_in: header.unit, unit_out: 0, pdu: pdu.to_vec(), reply, broadcast: true };
-            if queue.submit(connection, job).is_ok() {
+            if running.queue.submit(connection, job).is_ok() {
                 done.push(rx);
             } else {
                 tracing::info!(line, "broadcast not queued: the line's queue is full");

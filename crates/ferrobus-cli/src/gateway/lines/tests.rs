@@ -3,6 +3,7 @@ use std::time::Duration;
 
 use clap::{Args, FromArgMatches};
 use ferrobus_tools::gateway::Route;
+use ferrobus_tools::gateway::config::LinesFile;
 
 use super::{Base, read};
 use crate::connect::ConnectArgs;
@@ -49,7 +50,7 @@ fn keys_not_in_a_line_come_from_the_command_line_and_the_line_beats_it() {
         "3ms",
         "--echo",
     ]);
-    let (lines, routes) = read(&file.0, &args, BASE).unwrap();
+    let LinesFile { lines, routes, .. } = read(&file.0, &args, BASE).unwrap();
     assert_eq!(lines[0].transport.describe(), "/dev/ttyA at 9600 8N1");
     assert_eq!(lines[0].transport.timing().t3_5(), Duration::from_millis(3));
     assert_eq!(lines[0].client.timeout, Duration::from_millis(300));
@@ -66,7 +67,7 @@ fn the_gateways_queue_late_guard_and_backoff_go_to_every_line_unless_it_says_oth
     let file = File::new("base", text);
     let backoff = ferrobus::Backoff { after: 3, initial: Duration::from_secs(5), max: Duration::from_secs(60) };
     let base = Base { backoff: Some(backoff), queue: 9, late_guard: Duration::from_millis(40), in_flight: 1 };
-    let (lines, _) = read(&file.0, &connection(&[]), base).unwrap();
+    let lines = read(&file.0, &connection(&[]), base).unwrap().lines;
     assert!(lines.iter().all(|l| l.client.backoff == Some(backoff)));
     assert_eq!((lines[0].queue, lines[1].queue), (9, 3));
     assert!(lines.iter().all(|l| l.late_guard == Duration::from_millis(40)));

@@ -15,7 +15,7 @@ fn defaults() -> LineDefaults {
 }
 
 fn lines(text: &str) -> Result<(Vec<GatewayLine>, Routes), LinesFileError> {
-    parse("gw.toml", text, &defaults()).map(|LinesFile { lines, routes }| (lines, routes))
+    parse("gw.toml", text, &defaults()).map(|LinesFile { lines, routes, .. }| (lines, routes))
 }
 
 /// The message `text` is refused with.
@@ -101,7 +101,7 @@ fn keys_not_in_a_line_come_from_the_defaults_and_the_line_beats_them() {
     given.client.timeout = Duration::from_millis(300);
     given.client.retries = 1;
     given.t3_5 = Some(Duration::from_millis(3));
-    let LinesFile { lines, routes } = parse("gw.toml", text, &given).unwrap();
+    let LinesFile { lines, routes, .. } = parse("gw.toml", text, &given).unwrap();
     assert_eq!(lines[0].transport.describe(), "/dev/ttyA at 9600 8N1");
     assert_eq!(lines[0].transport.timing().t3_5(), Duration::from_millis(3));
     assert_eq!(lines[0].client.timeout, Duration::from_millis(300));
