@@ -5,6 +5,12 @@
 //!
 //! The plant file is the global `--config FILE` (for this command it is the plant, not the
 //! settings file: the bridge reads no connection settings, each line has its own).
+//!
+//! SIGHUP reads the plant file again and checks it whole, as at the start: a mistake is logged
+//! at error level, each problem at its place, and counted; otherwise what would change is
+//! worked out ([`ferrobus_bridge::config::reload::plan`]) and logged. This bridge does not yet
+//! apply a changed plant while it runs: the running plant stays, and the log says to restart
+//! it (Unix only: Windows has no SIGHUP).
 
 use std::path::Path;
 use std::sync::{Arc, Mutex};
@@ -19,7 +25,7 @@ use tokio::sync::{Notify, mpsc, oneshot};
 
 use crate::connect::parse_duration;
 use crate::exit::CliError;
-use crate::interrupt::Interrupt;
+use crate::interrupt::{Hangup, Interrupt};
 use crate::metrics::{self, MetricsArgs};
 use crate::output;
 
@@ -46,6 +52,8 @@ the Sparkplug group and edge node ids (or plain JSON topics), and the lines with
 points, poll rates and deadbands; examples/bridge/demo.toml is one to copy from. Status lines go \
 to stderr as things happen; the summary goes to stdout at the end (Ctrl-C, SIGTERM or \
 --duration), after the NDEATH.
+
+SIGHUP (systemctl reload) reads the plant file again and checks it: a mistake is logged and changes nothing; what a good file would change is logged, but the bridge does not yet apply it while it runs (restart it to). Windows has no SIGHUP.
 
 --demo runs that file against simulated drives (an Omron 3G3RX and an SDP servo on an in-process \
 virtual RS-485 line): after the births it sets the inverter's ramps (F002, F003 = 60 s for 400 Hz), \
@@ -94,6 +102,7 @@ pub(crate) async fn run(plant_file: Option<&Path>, args: &BridgeArgs) -> Result<
     }
     let status = args.metrics.bind().await?;
     let mut interrupt = Interrupt::listen()?;
+    let hangup = Hangup::listen()?;
     if args.demo && !args.quiet {
         let (host, port) = (&plant.broker.host, plant.broker.port);
         let at = if host.contains(':') { format!("[{host}]:{port}") } else { format!("{host}:{port}") };
@@ -130,14 +139,91 @@ pub(crate) async fn run(plant_file: Option<&Path>, args: &BridgeArgs) -> Result<
         live
     });
     let options = Options { running: Some(running_tx), live };
+    let reloads = Arc::new(Mutex::new(Reloads::default()));
+    let watching = tokio::spawn(reload_on_hangup(
+        hangup,
+        plant_file.map(Path::to_path_buf),
+        args.clone(),
+        plant.clone(),
+        Arc::clone(&reloads),
+    ));
     let report = run_with(plant, stop, Some(status_tx), options).await;
+    watching.abort();
     crate::systemd::stopping();
+    let reloads = *reloads.lock().unwrap_or_else(std::sync::PoisonError::into_inner);
+    if reloads.checked > 0 {
+        eprintln!("bridge: reload: {} files checked, {} refused", reloads.checked, reloads.refused);
+    }
     if let Some(demo) = demo {
         demo.abort();
     }
     let _ = printer.await;
     let report = report.map_err(|e| CliError::Usage(e.to_string()))?;
     output::print(&report.to_string())
+}
+
+/// What SIGHUP has done so far.
+#[derive(Clone, Copy, Debug, Default)]
+struct Reloads {
+    /// Plant files read again.
+    checked: u64,
+    /// Of them, refused: a mistake, a setting that cannot change, or a change not applied.
+    refused: u64,
+}
+
+/// At each SIGHUP, reads the plant file again (with `--broker` over it, as at the start) and
+/// checks it against `running`: a mistake, or a setting that cannot change while the bridge
+/// runs, is logged at error level; so is a change, which this bridge does not yet apply; a
+/// file that changes nothing is logged at info. Tells systemd it reloads, and when it is done.
+async fn reload_on_hangup(
+    mut hangup: Hangup,
+    plant_file: Option<std::path::PathBuf>,
+    args: BridgeArgs,
+    running: Plant,
+    reloads: Arc<Mutex<Reloads>>,
+) {
+    loop {
+        hangup.wait().await;
+        let Some(path) = plant_file.as_deref().filter(|_| !args.demo) else {
+            tracing::warn!("SIGHUP: the bridge runs the demo's plant, so there is no file to read again");
+            continue;
+        };
+        crate::systemd::reloading();
+        let outcome = match load_file(path, &args) {
+            Err(errors) => {
+                for error in &errors.0 {
+                    tracing::error!("reload refused, the running plant stays: {error}");
+                }
+                Err(format!("{} errors in the plant file", errors.0.len()))
+            }
+            Ok(new) => match ferrobus_bridge::config::reload::plan(&running, &new) {
+                Err(fixed) => {
+                    tracing::error!("reload refused: {fixed}");
+                    Err(fixed.to_string())
+                }
+                Ok(plan) if plan.is_empty() => {
+                    tracing::info!("reload: {plan}");
+                    Ok(plan.to_string())
+                }
+                Ok(plan) => {
+                    tracing::error!(
+                        "reload not applied, the running plant stays: the plant file changes {plan}, and this bridge                          applies a changed plant only at its start: restart it"
+                    );
+                    Err(format!("not applied: {plan}"))
+                }
+            },
+        };
+        let mut counts = reloads.lock().unwrap_or_else(std::sync::PoisonError::into_inner);
+        counts.checked = counts.checked.saturating_add(1);
+        if outcome.is_err() {
+            counts.refused = counts.refused.saturating_add(1);
+        }
+        drop(counts);
+        crate::systemd::reloaded(&match outcome {
+            Ok(status) => format!("reloaded: {status}"),
+            Err(why) => format!("reload refused: {why}"),
+        });
+    }
 }
 
 /// The plant: the demo's, or the file's; with `--broker` over its broker.
@@ -157,12 +243,26 @@ fn load(plant_file: Option<&Path>, args: &BridgeArgs) -> Result<(Plant, String),
         (Plant::load(path).map_err(|e| config_errors(&e))?, path.display().to_string())
     };
     if let (Some(broker), false) = (&args.broker, args.demo) {
-        let default_port = if plant.broker.tls.is_some() { 8883 } else { 1883 };
-        let (host, port) = host_port(broker, default_port)?;
-        plant.broker.host = host;
-        plant.broker.port = port;
+        (plant.broker.host, plant.broker.port) = broker_over(broker, &plant)?;
     }
     Ok((plant, origin))
+}
+
+/// The plant file at `path` with `--broker` over its broker: what a reload reads.
+fn load_file(path: &Path, args: &BridgeArgs) -> Result<Plant, ConfigErrors> {
+    let mut plant = Plant::load(path)?;
+    if let Some(broker) = &args.broker {
+        // The same --broker was taken at the start: it parses.
+        if let Ok((host, port)) = broker_over(broker, &plant) {
+            (plant.broker.host, plant.broker.port) = (host, port);
+        }
+    }
+    Ok(plant)
+}
+
+/// `--broker`'s host and port, the port by the plant's TLS when left out.
+fn broker_over(broker: &str, plant: &Plant) -> Result<(String, u16), CliError> {
+    host_port(broker, if plant.broker.tls.is_some() { 8883 } else { 1883 })
 }
 
 /// Prints every error (`file:line:col: message`) and says how many.

@@ -123,6 +123,10 @@ pub(crate) struct Hangup {
 
 impl Hangup {
     /// Starts listening. From here on, SIGHUP no longer ends the process.
+    #[cfg_attr(
+        not(unix),
+        expect(clippy::unnecessary_wraps, reason = "the signature of every platform's: Unix may fail to listen")
+    )]
     pub(crate) fn listen() -> Result<Hangup, CliError> {
         #[cfg(unix)]
         {

@@ -16,6 +16,7 @@
 //! plant to copy from and a plain JSON one.
 
 mod raw;
+pub mod reload;
 mod resolve;
 mod text;
 

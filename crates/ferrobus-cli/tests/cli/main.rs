@@ -6,6 +6,7 @@
 mod backup;
 mod backup_safety;
 mod bench_failures;
+mod bridge_reload;
 mod completions;
 mod config;
 mod container;

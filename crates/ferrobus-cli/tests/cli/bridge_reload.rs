@@ -1,0 +1,60 @@
+//! `bridge` on SIGHUP: the plant file read again and checked, the bridge running on
+//! throughout (its broker away: it keeps retrying). A mistake is logged at error level at its
+//! place; the same file changes nothing; an added device is worked out and logged, but not
+//! applied yet; a new edge node id is refused by name.
+
+use crate::gateway_lines::{Proc, dir};
+
+const PLANT: &str = r#"
+[broker]
+address = "127.0.0.1:1"
+
+[sparkplug]
+group_id = "plant"
+edge_node_id = "edge"
+
+[[line]]
+name = "a"
+simulated = true
+
+[[line.device]]
+id = "inverter"
+unit = 1
+profile = "omron-3g3rx"
+every = "200ms"
+points = ["d001"]
+"#;
+
+#[test]
+fn sighup_checks_the_plant_file_again_and_says_what_it_would_change_while_the_bridge_runs_on() {
+    let dir = dir("bridge-reload");
+    let file = dir.join("plant.toml");
+    std::fs::write(&file, PLANT).unwrap();
+    let path = file.to_str().unwrap();
+    let mut bridge = Proc::ferrobus(&["-v", "--config", path, "bridge", "--duration", "120s"], false);
+    bridge.until("bridge: polling 1 device on 1 line");
+
+    std::fs::write(&file, PLANT.replace("unit = 1", "unit = 1\nunit = 2")).unwrap();
+    bridge.signal("HUP");
+    let refused = bridge.until("reload refused");
+    assert!(refused.contains("ERROR") && refused.contains(&format!("{path}:")), "{refused}");
+
+    std::fs::write(&file, PLANT).unwrap();
+    bridge.signal("HUP");
+    let same = bridge.until("reload:");
+    assert!(same.contains("reload: 0 devices added, 0 changed, 0 removed, 1 unchanged;"), "{same}");
+
+    let added = "\n[[line.device]]\nid = \"second\"\nunit = 2\nprofile = \"omron-3g3rx\"\nevery = \"200ms\"\npoints = [\"d001\"]\n";
+    std::fs::write(&file, format!("{PLANT}{added}")).unwrap();
+    bridge.signal("HUP");
+    let not_applied = bridge.until("reload not applied");
+    assert!(not_applied.contains("1 device added, 0 changed, 0 removed, 1 unchanged"), "{not_applied}");
+
+    std::fs::write(&file, PLANT.replace("\"edge\"", "\"other\"")).unwrap();
+    bridge.signal("HUP");
+    let fixed = bridge.until("reload refused");
+    assert!(fixed.contains("[sparkplug] edge_node_id cannot change while the bridge runs"), "{fixed}");
+
+    let end = bridge.stop().join("\n");
+    assert!(end.contains("bridge: reload: 4 files checked, 3 refused"), "{end}");
+}
