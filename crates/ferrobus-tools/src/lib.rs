@@ -26,6 +26,8 @@
 //! - [`write`](mod@write): writing a named point — the guard, the one request the device takes, the
 //!   read-back — the one act every writer calls; [`guard`]: the write guard with its reading
 //!   of the run state.
+//! - [`reload`]: what a reload keeps — each item of a new configuration matched to the
+//!   running one's, unchanged, changed or added, and the ones removed.
 //! - `status` (the `status` feature): the status endpoint of a long-running command —
 //!   OpenMetrics at `/metrics`, `/healthz` and a live status page.
 
@@ -34,6 +36,7 @@ pub mod gateway;
 pub mod guard;
 pub mod pcapng;
 pub mod poll;
+pub mod reload;
 pub mod scan;
 pub mod sniff;
 #[cfg(feature = "status")]

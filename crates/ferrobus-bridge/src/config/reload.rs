@@ -25,25 +25,10 @@
 
 use std::fmt;
 
-use super::{DeviceSpec, LineSpec, Mode, Plant};
+pub use ferrobus_tools::reload::Fate;
+use ferrobus_tools::reload::{fates, removed, tally};
 
-/// What becomes of one line, or one device, of the new plant.
-#[derive(Clone, Copy, PartialEq, Eq, Debug)]
-pub enum Fate {
-    /// It was at index `was` of the running plant (its lines, or its devices in line and
-    /// device order) and goes on as it is.
-    Unchanged {
-        /// Its index in the running plant.
-        was: usize,
-    },
-    /// It was at index `was` and is stopped and started again with its new settings.
-    Changed {
-        /// Its index in the running plant.
-        was: usize,
-    },
-    /// It is new.
-    Added,
-}
+use super::{DeviceSpec, LineSpec, Mode, Plant};
 
 /// What a reload of the plant does.
 #[derive(Clone, PartialEq, Eq, Debug)]
@@ -70,22 +55,12 @@ impl Plan {
     }
 }
 
-/// `N added, N changed, N removed, N unchanged` of `fates`, `removed` besides.
-fn tally(f: &mut fmt::Formatter<'_>, what: &str, fates: &[Fate], removed: usize) -> fmt::Result {
-    let added = fates.iter().filter(|f| **f == Fate::Added).count();
-    let changed = fates.iter().filter(|f| matches!(f, Fate::Changed { .. })).count();
-    let unchanged = fates.len() - added - changed;
-    let plural = if added == 1 { "" } else { "s" };
-    write!(f, "{added} {what}{plural} added, {changed} changed, {removed} removed, {unchanged} unchanged")
-}
-
 /// `1 device added, 1 changed, 0 removed, 2 unchanged; 0 lines added, ...; broker unchanged`.
 impl fmt::Display for Plan {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
-        tally(f, "device", &self.devices, self.removed_devices.len())?;
-        f.write_str("; ")?;
-        tally(f, "line", &self.lines, self.removed_lines.len())?;
-        f.write_str(if self.reconnect { "; broker session made again" } else { "; broker unchanged" })
+        let broker = if self.reconnect { "broker session made again" } else { "broker unchanged" };
+        let devices = tally("device", &self.devices, self.removed_devices.len());
+        write!(f, "{devices}; {}; {broker}", tally("line", &self.lines, self.removed_lines.len()))
     }
 }
 
@@ -99,35 +74,16 @@ pub struct Fixed(pub Vec<&'static str>);
 /// change, if any changed.
 pub fn plan(running: &Plant, new: &Plant) -> Result<Plan, Fixed> {
     fixed(running, new)?;
-    let lines = fates(&running.lines, &new.lines, |l| &l.name, same_line);
-    let removed_lines = removed(&running.lines, &new.lines, |l| &l.name);
+    let named = |a: &LineSpec, b: &LineSpec| a.name == b.name;
+    let lines = fates(&running.lines, &new.lines, named, same_line);
+    let removed_lines = removed(&running.lines, &new.lines, named);
     let old: Vec<(&LineSpec, &DeviceSpec)> = running.devices().collect();
     let now: Vec<(&LineSpec, &DeviceSpec)> = new.devices().collect();
-    let devices = fates(&old, &now, device_id, |(la, a), (lb, b)| la.name == lb.name && same_device(a, b));
-    let removed_devices = removed(&old, &now, device_id);
+    let id = |(_, a): &(&LineSpec, &DeviceSpec), (_, b): &(&LineSpec, &DeviceSpec)| a.id == b.id;
+    let devices = fates(&old, &now, id, |(la, a), (lb, b)| la.name == lb.name && same_device(a, b));
+    let removed_devices = removed(&old, &now, id);
     let reconnect = running.broker != new.broker || running.mode != new.mode;
     Ok(Plan { lines, removed_lines, devices, removed_devices, reconnect })
-}
-
-/// Each of `new`'s fate among `old`, known by `key`, `same` telling unchanged from changed.
-fn fates<T>(old: &[T], new: &[T], key: impl Fn(&T) -> &String, same: impl Fn(&T, &T) -> bool) -> Vec<Fate> {
-    new.iter()
-        .map(|item| match old.iter().position(|o| key(o) == key(item)) {
-            Some(was) if old.get(was).is_some_and(|o| same(o, item)) => Fate::Unchanged { was },
-            Some(was) => Fate::Changed { was },
-            None => Fate::Added,
-        })
-        .collect()
-}
-
-/// The indices of `old`'s items that `new` does not name.
-fn removed<T>(old: &[T], new: &[T], key: impl Fn(&T) -> &String) -> Vec<usize> {
-    (0..old.len()).filter(|&i| old.get(i).is_some_and(|o| !new.iter().any(|n| key(n) == key(o)))).collect()
-}
-
-/// A device's id, beside its line.
-fn device_id<'a>(device: &'a (&LineSpec, &DeviceSpec)) -> &'a String {
-    &device.1.id
 }
 
 /// A line polls the same: the same connection and client settings (its devices apart).

@@ -5,52 +5,40 @@
 
 use crate::gateway_lines::{Proc, dir};
 
-const PLANT: &str = r#"
-[broker]
-address = "127.0.0.1:1"
-
-[sparkplug]
-group_id = "plant"
-edge_node_id = "edge"
-
-[[line]]
-name = "a"
-simulated = true
-
-[[line.device]]
-id = "inverter"
-unit = 1
-profile = "omron-3g3rx"
-every = "200ms"
-points = ["d001"]
-"#;
+/// The shipped demo plant (a simulated 3G3RX and servo on one virtual line), its broker at a
+/// port where none listens.
+fn plant() -> String {
+    let demo = concat!(env!("CARGO_MANIFEST_DIR"), "/../../examples/bridge/demo.toml");
+    std::fs::read_to_string(demo).unwrap().replace("127.0.0.1:1883", "127.0.0.1:1")
+}
 
 #[test]
 fn sighup_checks_the_plant_file_again_and_says_what_it_would_change_while_the_bridge_runs_on() {
     let dir = dir("bridge-reload");
     let file = dir.join("plant.toml");
-    std::fs::write(&file, PLANT).unwrap();
+    let plant = plant();
+    std::fs::write(&file, &plant).unwrap();
     let path = file.to_str().unwrap();
     let mut bridge = Proc::ferrobus(&["-v", "--config", path, "bridge", "--duration", "120s"], false);
-    bridge.until("bridge: polling 1 device on 1 line");
+    bridge.until("bridge: polling 2 devices on 1 line");
 
-    std::fs::write(&file, PLANT.replace("unit = 1", "unit = 1\nunit = 2")).unwrap();
+    std::fs::write(&file, plant.replace("unit = 1", "unit = 1\nunit = 2")).unwrap();
     bridge.signal("HUP");
     let refused = bridge.until("reload refused");
     assert!(refused.contains("ERROR") && refused.contains(&format!("{path}:")), "{refused}");
 
-    std::fs::write(&file, PLANT).unwrap();
+    std::fs::write(&file, &plant).unwrap();
     bridge.signal("HUP");
     let same = bridge.until("reload:");
-    assert!(same.contains("reload: 0 devices added, 0 changed, 0 removed, 1 unchanged;"), "{same}");
+    assert!(same.contains("reload: 0 devices added, 0 changed, 0 removed, 2 unchanged;"), "{same}");
 
-    let added = "\n[[line.device]]\nid = \"second\"\nunit = 2\nprofile = \"omron-3g3rx\"\nevery = \"200ms\"\npoints = [\"d001\"]\n";
-    std::fs::write(&file, format!("{PLANT}{added}")).unwrap();
+    let added = "\n[[line.device]]\nid = \"second\"\nunit = 3\nprofile = \"omron-3g3rx\"\nevery = \"1s\"\npoints = [\"d001\"]\n";
+    std::fs::write(&file, format!("{plant}{added}")).unwrap();
     bridge.signal("HUP");
     let not_applied = bridge.until("reload not applied");
-    assert!(not_applied.contains("1 device added, 0 changed, 0 removed, 1 unchanged"), "{not_applied}");
+    assert!(not_applied.contains("1 device added, 0 changed, 0 removed, 2 unchanged"), "{not_applied}");
 
-    std::fs::write(&file, PLANT.replace("\"edge\"", "\"other\"")).unwrap();
+    std::fs::write(&file, plant.replace("\"demo-edge\"", "\"other\"")).unwrap();
     bridge.signal("HUP");
     let fixed = bridge.until("reload refused");
     assert!(fixed.contains("[sparkplug] edge_node_id cannot change while the bridge runs"), "{fixed}");

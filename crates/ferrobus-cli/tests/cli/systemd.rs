@@ -10,12 +10,18 @@ use std::time::Duration;
 
 use crate::config::Scratch;
 
-#[test]
-fn the_gateway_says_ready_feeds_the_watchdog_at_half_its_timeout_and_says_it_is_stopping() {
-    let dir = Scratch::new("notify");
+/// The service manager's end: a datagram socket in `dir` that hears what ferrobus notifies.
+fn manager(dir: &Scratch) -> (std::path::PathBuf, UnixDatagram) {
     let socket = dir.0.join("notify.sock");
     let manager = UnixDatagram::bind(&socket).unwrap();
     manager.set_read_timeout(Some(Duration::from_secs(20))).unwrap();
+    (socket, manager)
+}
+
+#[test]
+fn the_gateway_says_ready_feeds_the_watchdog_at_half_its_timeout_and_says_it_is_stopping() {
+    let dir = Scratch::new("notify");
+    let (socket, manager) = manager(&dir);
     // WATCHDOG_PID is the service's own pid: the shell's, which exec keeps.
     let mut gateway = Command::new("sh");
     gateway.args(["-c", "WATCHDOG_PID=$$ exec \"$0\" \"$@\"", env!("CARGO_BIN_EXE_ferrobus")]);
@@ -39,9 +45,7 @@ fn the_gateway_says_ready_feeds_the_watchdog_at_half_its_timeout_and_says_it_is_
 #[test]
 fn without_a_watchdog_the_gateway_only_says_ready_and_stopping() {
     let dir = Scratch::new("notify-plain");
-    let socket = dir.0.join("notify.sock");
-    let manager = UnixDatagram::bind(&socket).unwrap();
-    manager.set_read_timeout(Some(Duration::from_secs(20))).unwrap();
+    let (socket, manager) = manager(&dir);
     let mut gateway = Command::new(env!("CARGO_BIN_EXE_ferrobus"));
     gateway.args(["--tcp", "127.0.0.1:1", "gateway", "--listen", "127.0.0.1:0", "--duration", "500ms"]);
     gateway.env("NOTIFY_SOCKET", &socket).env("XDG_CONFIG_HOME", &dir.0);
@@ -60,9 +64,7 @@ fn without_a_watchdog_the_gateway_only_says_ready_and_stopping() {
 #[test]
 fn on_sighup_the_gateway_says_reloading_with_the_monotonic_clock_then_ready_again() {
     let dir = Scratch::new("notify-reload");
-    let socket = dir.0.join("notify.sock");
-    let manager = UnixDatagram::bind(&socket).unwrap();
-    manager.set_read_timeout(Some(Duration::from_secs(20))).unwrap();
+    let (socket, manager) = manager(&dir);
     let lines = dir.0.join("lines.toml");
     std::fs::write(&lines, "[[line]]\ntcp = \"127.0.0.1:1\"\n").unwrap();
     let mut gateway = Command::new(env!("CARGO_BIN_EXE_ferrobus"));

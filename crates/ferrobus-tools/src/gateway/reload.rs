@@ -19,23 +19,8 @@
 use std::fmt;
 
 use super::config::{LineSettings, LinesFile};
-
-/// What becomes of one line of the new file.
-#[derive(Clone, Copy, PartialEq, Eq, Debug)]
-pub enum Fate {
-    /// The running line `was` (its index there) goes on as it is.
-    Unchanged {
-        /// Its index among the running lines.
-        was: usize,
-    },
-    /// The running line `was` is stopped and this one started on its port.
-    Changed {
-        /// Its index among the running lines.
-        was: usize,
-    },
-    /// A new line.
-    Added,
-}
+pub use crate::reload::Fate;
+use crate::reload::{fates, removed, tally};
 
 /// What a reload does: each new line's [`Fate`], the running lines that go, and whether the
 /// routes change.
@@ -56,47 +41,22 @@ impl Plan {
             && self.removed.is_empty()
             && self.lines.iter().all(|f| matches!(f, Fate::Unchanged { .. }))
     }
-
-    /// How many lines of the new file have `fate`'s kind.
-    fn count(&self, kind: fn(&Fate) -> bool) -> usize {
-        self.lines.iter().filter(|f| kind(f)).count()
-    }
 }
 
-/// `reload: 1 line added, 1 changed, 0 removed, 3 unchanged; routes changed`.
+/// `1 line added, 1 changed, 0 removed, 3 unchanged; routes changed`.
 impl fmt::Display for Plan {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
-        let added = self.count(|f| *f == Fate::Added);
-        let changed = self.count(|f| matches!(f, Fate::Changed { .. }));
-        let unchanged = self.count(|f| matches!(f, Fate::Unchanged { .. }));
-        let plural = if added == 1 { "line" } else { "lines" };
-        write!(
-            f,
-            "{added} {plural} added, {changed} changed, {} removed, {unchanged} unchanged; routes {}",
-            self.removed.len(),
-            if self.routes_changed { "changed" } else { "unchanged" }
-        )
+        let routes = if self.routes_changed { "changed" } else { "unchanged" };
+        write!(f, "{}; routes {routes}", tally("line", &self.lines, self.removed.len()))
     }
 }
 
 /// The plan from the running file `old` to `new`, both read and checked.
 pub fn plan(old: &LinesFile, new: &LinesFile) -> Plan {
-    plan_settings(&old.settings, &new.settings, old.routes != new.routes)
-}
-
-/// The plan from the running lines' settings to the new ones'.
-fn plan_settings(old: &[LineSettings], new: &[LineSettings], routes_changed: bool) -> Plan {
-    let lines = new
-        .iter()
-        .map(|line| match old.iter().position(|o| o.same_target(line)) {
-            Some(was) if old.get(was) == Some(line) => Fate::Unchanged { was },
-            Some(was) => Fate::Changed { was },
-            None => Fate::Added,
-        })
-        .collect();
-    let removed =
-        (0..old.len()).filter(|i| old.get(*i).is_some_and(|o| !new.iter().any(|n| n.same_target(o)))).collect();
-    Plan { lines, removed, routes_changed }
+    let (running, now) = (&old.settings, &new.settings);
+    let lines = fates(running, now, LineSettings::same_target, LineSettings::eq);
+    let removed = removed(running, now, LineSettings::same_target);
+    Plan { lines, removed, routes_changed: old.routes != new.routes }
 }
 
 #[cfg(test)]
