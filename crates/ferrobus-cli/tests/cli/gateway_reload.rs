@@ -2,7 +2,8 @@
 //! device each, a client connected throughout; a broken file changes nothing and is logged
 //! with its place; a good one adds a third line, changes one and leaves one running, and the
 //! client's one connection is answered before, between and after, the unchanged line's
-//! counters running on across the reload and the changed line's starting afresh.
+//! counters running on across the reload and the changed line's starting afresh; then the
+//! added line is removed again and its unit goes unrouted.
 
 use std::net::TcpStream;
 use std::time::Duration;
@@ -67,12 +68,21 @@ fn sighup_with_a_broken_file_changes_nothing_and_a_good_one_adds_and_changes_lin
     answers(&mut stream, 7, 1);
     answers(&mut stream, 8, 2);
 
+    // Line C removed again: unit 3 is in no route, the others answer on.
+    std::fs::write(&file, line_a(&a[0], "1") + &line_b(&b[0], "timeout = \"700ms\"\n", "2")).unwrap();
+    gateway.signal("HUP");
+    let removed = gateway.until("reload:");
+    assert!(removed.contains("reload: 0 lines added, 0 changed, 1 removed, 2 unchanged; routes changed"), "{removed}");
+    assert_eq!(ask(&mut stream, 9, 3, &[0x03, 0, 0, 0, 1]), [0x83, 0x0A], "unit 3 is in no route again");
+    answers(&mut stream, 10, 1);
+    answers(&mut stream, 11, 2);
+
     drop(stream);
     let report = gateway.stop().join("\n");
-    // Line A ran on: its counters hold every request since the start; line B restarted.
-    assert!(report.contains("  unit 1: requests 3 replies 3 timeouts 0"), "{report}");
-    assert!(report.contains("  unit 2: requests 1 replies 1 timeouts 0"), "{report}");
-    assert!(report.contains("  unit 3: requests 1 replies 1 timeouts 0"), "{report}");
+    // Line A ran on: its counters hold every request since the start; line B restarted once.
+    assert!(report.contains("  unit 1: requests 4 replies 4 timeouts 0"), "{report}");
+    assert!(report.contains("  unit 2: requests 2 replies 2 timeouts 0"), "{report}");
+    assert!(!report.contains(&format!("line {}", c[0])), "line C is gone: {report}");
     assert!(report.contains("tcp: 1 connections served"), "one connection throughout: {report}");
-    assert!(report.contains("reload: 1 done, 1 refused"), "{report}");
+    assert!(report.contains("reload: 2 done, 1 refused"), "{report}");
 }
