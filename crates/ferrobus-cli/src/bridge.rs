@@ -53,7 +53,9 @@ points, poll rates and deadbands; examples/bridge/demo.toml is one to copy from.
 to stderr as things happen; the summary goes to stdout at the end (Ctrl-C, SIGTERM or \
 --duration), after the NDEATH.
 
-SIGHUP (systemctl reload) reads the plant file again and checks it: a mistake is logged and changes nothing; what a good file would change is logged, but the bridge does not yet apply it while it runs (restart it to). Windows has no SIGHUP.
+SIGHUP (systemctl reload) reads the plant file again and checks it: a mistake is logged and \
+changes nothing; what a good file would change is logged, but the bridge does not yet apply it \
+while it runs (restart it to). Windows has no SIGHUP.
 
 --demo runs that file against simulated drives (an Omron 3G3RX and an SDP servo on an in-process \
 virtual RS-485 line): after the births it sets the inverter's ramps (F002, F003 = 60 s for 400 Hz), \
@@ -207,7 +209,8 @@ async fn reload_on_hangup(
                 }
                 Ok(plan) => {
                     tracing::error!(
-                        "reload not applied, the running plant stays: the plant file changes {plan}, and this bridge                          applies a changed plant only at its start: restart it"
+                        "reload not applied, the running plant stays: the plant file changes {plan}, and this bridge \
+                         applies a changed plant only at its start: restart it"
                     );
                     Err(format!("not applied: {plan}"))
                 }

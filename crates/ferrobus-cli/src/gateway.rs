@@ -250,7 +250,7 @@ pub(crate) async fn run(connection: &ConnectArgs, args: &GatewayArgs) -> Result<
             () = interrupt.wait() => break,
             () = &mut until => break,
             _ = usr1 => print(&gateway, &tcp.counts(), secure, running.as_ref().map(|_| &reloads)),
-            () = hangup.wait() => reload(connection, args, &gateway, &mut running, &mut reloads).await,
+            () = hangup.wait() => watchdog.feeding(reload(connection, args, &gateway, &mut running, &mut reloads)).await,
             () = watchdog.tick() => watchdog.feed(),
         }
     }

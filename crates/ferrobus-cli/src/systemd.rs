@@ -81,6 +81,18 @@ impl Watchdog {
         let _ = due;
     }
 
+    /// Runs `work` (a reload that waits for a line's reply owed, say), feeding the watchdog
+    /// meanwhile.
+    pub(crate) async fn feeding<T>(&self, work: impl std::future::Future<Output = T>) -> T {
+        tokio::pin!(work);
+        loop {
+            tokio::select! {
+                out = &mut work => return out,
+                () = self.tick() => self.feed(),
+            }
+        }
+    }
+
     /// Feeds it at every tick, for as long as the runtime turns.
     pub(crate) async fn feed_forever(self) {
         loop {
