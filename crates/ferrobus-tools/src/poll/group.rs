@@ -318,11 +318,7 @@ impl Group {
                     .filter(|p| p.table == table && p.address >= request.start && p.end() <= request.end())
                     .map(|p| Cell::point(p))
                     .collect();
-                let name = match cells.as_slice() {
-                    [one] => format!("u{unit} {}", one.name),
-                    [first, .., last] => format!("u{unit} {}..{}", first.name, last.name),
-                    [] => format!("u{unit} {}@{:#06x}", table.name(), request.start),
-                };
+                let name = name_of(unit, table, request.start, &cells);
                 out.push(Group { name, unit, table, start: request.start, count: request.count, every, cells });
             }
         }
@@ -346,6 +342,16 @@ impl Group {
                 cell.point.decode(words).map_err(|e| e.to_string())
             })
             .collect()
+    }
+}
+
+/// A group's name from its cells: `u1 d001` for one, `u1 d001..d003` for several, the table
+/// and start for none.
+pub(crate) fn name_of(unit: u8, table: Table, start: u16, cells: &[Cell]) -> String {
+    match cells {
+        [one] => format!("u{unit} {}", one.name),
+        [first, .., last] => format!("u{unit} {}..{}", first.name, last.name),
+        [] => format!("u{unit} {}@{start:#06x}", table.name()),
     }
 }
 

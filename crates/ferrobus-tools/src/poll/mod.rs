@@ -36,6 +36,7 @@ use tokio::sync::{mpsc, watch};
 use tokio::time::Instant;
 
 pub use ferrobus_profile::{Order, Point, Profile, Table, Value};
+pub(crate) use group::name_of;
 pub use group::{Cell, Format, Group, GroupError, Layout, RawRange, max_count};
 pub use stats::{Counters, FailureKind, UnitTimes};
 
@@ -466,7 +467,7 @@ async fn poll_once(client: &Client, group: &Group) -> (Result<Vec<Reading>, Fail
             let mut rx = vec![group.unit];
             rx.extend_from_slice(&reply);
             let traffic = Traffic { tx, rx: Some(rx) };
-            let Some(items) = items(&reply, group) else {
+            let Some(items) = items(&reply, group.count) else {
                 let failure = Failure {
                     kind: FailureKind::BadReply,
                     exception: None,
@@ -474,20 +475,7 @@ async fn poll_once(client: &Client, group: &Group) -> (Result<Vec<Reading>, Fail
                 };
                 return (Err(failure), traffic);
             };
-            let readings = group
-                .decode(&items)
-                .into_iter()
-                .enumerate()
-                .map(|(cell, raw)| {
-                    let (scaled, shown) = match (&raw, group.cells.get(cell)) {
-                        (Ok(v), Some(c)) => (c.scaled(v), c.show(v)),
-                        (Err(e), _) => (None, e.clone()),
-                        (Ok(v), None) => (None, v.to_string()),
-                    };
-                    Reading { cell, raw, scaled, shown }
-                })
-                .collect();
-            (Ok(readings), traffic)
+            (Ok(group.readings(&items)), traffic)
         }
         Ok(None) => {
             let failure = Failure {
@@ -507,10 +495,32 @@ async fn poll_once(client: &Client, group: &Group) -> (Result<Vec<Reading>, Fail
     }
 }
 
-/// The items of a reply to a read: registers, or bits as 0/1.
-fn items(reply: &[u8], group: &Group) -> Option<Vec<u16>> {
+impl Group {
+    /// The readings of the items a read returned (registers, or bits as 0/1, from
+    /// [`Group::start`]): each cell's raw value decoded ([`Group::decode`]), scaled and shown
+    /// as its point says. The one decoding of a poll's reply, and of a reply heard by the
+    /// sniffer ([`crate::sniff::Heard`]).
+    pub fn readings(&self, items: &[u16]) -> Vec<Reading> {
+        self.decode(items)
+            .into_iter()
+            .enumerate()
+            .map(|(cell, raw)| {
+                let (scaled, shown) = match (&raw, self.cells.get(cell)) {
+                    (Ok(v), Some(c)) => (c.scaled(v), c.show(v)),
+                    (Err(e), _) => (None, e.clone()),
+                    (Ok(v), None) => (None, v.to_string()),
+                };
+                Reading { cell, raw, scaled, shown }
+            })
+            .collect()
+    }
+}
+
+/// The `count` items of a reply to a read (the PDU): registers, or bits as 0/1; `None` for
+/// any other reply or another count.
+pub(crate) fn items(reply: &[u8], count: u16) -> Option<Vec<u16>> {
     let response = Response::parse(reply).ok()?;
-    let count = usize::from(group.count);
+    let count = usize::from(count);
     match response {
         Response::ReadCoils(v) | Response::ReadDiscreteInputs(v) => {
             let bits: Vec<u16> = v.values().iter().take(count).map(u16::from).collect();

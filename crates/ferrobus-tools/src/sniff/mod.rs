@@ -6,7 +6,7 @@
 //!   port ── reading thread: read, stamp ──▶ Stamped (a Port: last_arrival = the stamp)
 //!                                              │
 //!            Pump::run ── Engine: Sniffing (the core Sniffer, never transmits) ──▶ BusEvent
-//!            (session Heard: ends the run with each event)                          │
+//!            (session UntilHeard: ends the run with each event)                     │
 //!                          Filter ─ Stats ─ SniffCapture (pcapng) ◀─────────────────┘
 //! ```
 //!
@@ -22,6 +22,9 @@
 //! - [`Filter`] decides which events are shown (by unit and function code), [`Stats`]
 //!   counts them per unit, and [`SniffCapture`] writes them as pcapng that tshark and
 //!   Wireshark decode, with what was wrong on the line as each packet's comment.
+//! - [`Pairing`] turns a paired read reply or an acknowledged write into what the device's
+//!   memory holds ([`Heard`]), decoded through a profile as the poller decodes its replies
+//!   (`values.rs`): the passive second master of `sniff --device` and a bridge's listen line.
 //!
 //! # Timestamps
 //!
@@ -48,6 +51,7 @@
 mod capture;
 mod reader;
 mod stats;
+mod values;
 
 use std::io;
 use std::time::{Duration, SystemTime, UNIX_EPOCH};
@@ -61,6 +65,7 @@ use ferrobus_proto::sniff::{FragmentKind, Role, SniffEvent, Sniffer, WireTime};
 
 pub use capture::SniffCapture;
 pub use stats::{Filter, Stats, UnitStats};
+pub use values::{Heard, Pairing};
 
 use ferrobus::clock::Clock;
 use ferrobus::port::BoxPort;
@@ -290,7 +295,7 @@ impl Listener {
             return Ok(Some(event));
         }
         let Some(port) = self.port.as_mut() else { return Ok(None) };
-        match self.pump.run(port, &mut self.engine, &mut Heard).await {
+        match self.pump.run(port, &mut self.engine, &mut UntilHeard).await {
             Turn::Heard(event) => Ok(Some(event)),
             Turn::Ended => {
                 self.port = None;
@@ -341,9 +346,9 @@ enum Turn {
 
 /// The listener's session on the pump: nothing to write, no deadline of its own; it ends the
 /// run with the first thing the engine heard, or with the port.
-struct Heard;
+struct UntilHeard;
 
-impl Session<Sniffing<BusEvent>> for Heard {
+impl Session<Sniffing<BusEvent>> for UntilHeard {
     type Output = Turn;
 
     async fn serve(&mut self, _: &Pump, _: &mut BoxPort, engine: &mut Sniffing<BusEvent>) -> Option<Turn> {
