@@ -369,8 +369,21 @@ fn connection_options_of(name: &str) -> Option<(&'static [&'static str], &'stati
              --tcp, --rtu-tcp, --unit, --timeout, --retries and --sunspec-models",
         ),
         "sniff" => (
-            &["port", "baud", "parity", "data_bits", "stop_bits", "rs485", "low_latency", "unit", "t15", "t35"],
-            "sniff only listens: it takes the port, the line settings, --t15/--t35 and --unit as a filter",
+            &[
+                "port",
+                "baud",
+                "parity",
+                "data_bits",
+                "stop_bits",
+                "rs485",
+                "low_latency",
+                "unit",
+                "t15",
+                "t35",
+                "device",
+            ],
+            "sniff only listens: it takes the port, the line settings, --t15/--t35, --unit as a filter and \
+             --device PROFILE[:UNIT] to name the values it hears",
         ),
         _ => return None,
     })

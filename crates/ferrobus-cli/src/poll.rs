@@ -388,17 +388,17 @@ fn groups(connection: &ConnectArgs, args: &PollArgs) -> Result<Vec<Group>, CliEr
 
 /// How records are written.
 #[derive(Clone, Copy, PartialEq, Eq, Debug)]
-enum Style {
+pub(crate) enum Style {
     Table,
     Csv,
     Jsonl,
 }
 
-const CSV_HEADER: &str = "time,seq,unit,group,point,raw,value,meaning,uom,status,response_ms,diagnosis\n";
+pub(crate) const CSV_HEADER: &str = "time,seq,unit,group,point,raw,value,meaning,uom,status,response_ms,diagnosis\n";
 
 /// The records of a sample: CSV rows (one per point, or one for a failure) or one JSON line.
 /// `keep` says which cells to write (all without --on-change).
-fn records(sample: &Sample, group: &Group, style: Style, keep: &[bool]) -> String {
+pub(crate) fn records(sample: &Sample, group: &Group, style: Style, keep: &[bool]) -> String {
     let time = iso8601_ms(sample.time);
     let ms = sample.response_time.as_secs_f64() * 1e3;
     let mut out = String::new();

@@ -7,6 +7,10 @@
 //! timestamps' accuracy is measured in `bench/SNIFF.md` (a median of 81 µs from the line's
 //! write to the stamp on a pty, release build, 2 shared vCPUs, load 1.7).
 //!
+//! With `--device PROFILE[:UNIT]` it is a passive second master: what the bus's own master
+//! reads and writes is shown as the profile's named values, in `poll`'s records
+//! (`sniff/values.rs`, over [`ferrobus_tools::sniff::Pairing`]).
+//!
 //! On Ctrl-C or SIGTERM (its normal end, exit 0) or after `--duration`, it settles what it
 //! holds and prints per-unit statistics.
 
@@ -27,12 +31,21 @@ use crate::interrupt::Interrupt;
 use crate::output;
 
 mod show;
+mod values;
 
 use show::{Capture, Sinks};
 
 /// Arguments of `ferrobus sniff`.
 #[derive(Args, Clone, Debug)]
-#[command(after_help = "Filter by unit with the global --unit (repeat it for several). Decode a capture with:\n  \
+#[command(after_help = "Filter by unit with the global --unit (repeat it for several).\n\n\
+                        --device PROFILE[:UNIT] (a built-in profile such as omron-3g3rx, or a TOML file) names what \
+                        the bus's own master reads and writes: each read reply and each acknowledged write of UNIT \
+                        (default: the --unit ones, else 1) is decoded through the profile as `poll` decodes it, a \
+                        point only when the frame holds all of it, at the reply's time on the wire; stdout then \
+                        carries the values (a line each; --csv and --json: `poll`'s records), not the frames, \
+                        --pcap FILE still captures every frame and the statistics go to stderr:\n  \
+                        ferrobus --port /dev/ttyUSB1 sniff --device omron-3g3rx:1 --csv\n\n\
+                        Decode a capture with:\n  \
                         tshark -r cap.pcapng -o mbrtu.crc_verification:TRUE -o mbrtu.tcp.port:5020\n\
                         or live: ferrobus --port /dev/ttyUSB1 sniff --pcap - | tshark -i - -o mbrtu.crc_verification:TRUE -o mbrtu.tcp.port:5020")]
 pub(crate) struct SniffArgs {
@@ -47,9 +60,13 @@ pub(crate) struct SniffArgs {
     pcap: Option<PathBuf>,
 
     /// One JSON object per line for each frame, fragment and unanswered request, and one for
-    /// the statistics at the end
+    /// the statistics at the end; with --device, one per value heard, as `poll --jsonl` writes
     #[arg(long)]
     json: bool,
+
+    /// With --device: the values as CSV, as `poll --csv` writes them
+    #[arg(long, conflicts_with = "json")]
+    csv: bool,
 
     /// Stop after this long; default: run until interrupted
     #[arg(long, value_name = "DURATION", value_parser = parse_duration)]
@@ -94,6 +111,7 @@ pub(crate) async fn run(connection: &ConnectArgs, args: &SniffArgs) -> Result<()
     if to_stdout && args.json {
         return Err(CliError::Usage("--pcap - writes the capture to stdout: --json has nowhere to go".into()));
     }
+    let watch = watch(connection, args, to_stdout)?;
     let mut timing = ferrobus_proto::frame::LineTiming::new(&line);
     if let Some(t15) = connection.t15 {
         timing = timing.with_t1_5(t15);
@@ -121,7 +139,11 @@ pub(crate) async fn run(connection: &ConnectArgs, args: &SniffArgs) -> Result<()
         char_time: timing.char_time(),
         filter: Filter { units: args.units.clone(), functions: args.function.clone() },
         stats: Stats::default(),
+        values: watch,
     };
+    if let Some(watch) = &sinks.values {
+        output::print(&watch.header())?;
+    }
     eprintln!(
         "sniff: listening on {path} at {line} (character {:.1} µs, t1.5 {:.1} µs, t3.5 {:.1} µs), transmitting nothing; \
          Ctrl-C or SIGTERM prints the statistics",
@@ -156,7 +178,8 @@ pub(crate) async fn run(connection: &ConnectArgs, args: &SniffArgs) -> Result<()
         pcap.flush().map_err(|source| CliError::Output { what: what.clone(), source })?;
     }
     let stats = if args.json { output::json_line(&sinks.stats_json()) } else { sinks.stats_text() };
-    if to_stdout {
+    // With --device, stdout carries the values alone.
+    if to_stdout || sinks.values.is_some() {
         eprint!("{stats}");
     } else {
         output::print(&stats)?;
@@ -165,6 +188,30 @@ pub(crate) async fn run(connection: &ConnectArgs, args: &SniffArgs) -> Result<()
         Some(e) => Err(ferrobus::Error::from(e).into()),
         None => Ok(()),
     }
+}
+
+/// `--device PROFILE[:UNIT]`: the values heard, in the style asked; `None` without it.
+fn watch(connection: &ConnectArgs, args: &SniffArgs, to_stdout: bool) -> Result<Option<values::Watch>, CliError> {
+    let Some(device) = connection.device.as_deref() else {
+        return if args.csv {
+            Err(CliError::Usage("--csv writes the values of --device PROFILE[:UNIT]; give --device".into()))
+        } else {
+            Ok(None)
+        };
+    };
+    if to_stdout {
+        return Err(CliError::Usage(
+            "--pcap - writes the capture to stdout, where --device writes the values: give --pcap a FILE".into(),
+        ));
+    }
+    let style = if args.json {
+        crate::poll::Style::Jsonl
+    } else if args.csv {
+        crate::poll::Style::Csv
+    } else {
+        crate::poll::Style::Table
+    };
+    values::Watch::new(device, &args.units, style).map(Some)
 }
 
 /// The capture file (or stdout with `-`), its headers written.

@@ -42,6 +42,8 @@ pub(super) struct Sinks {
     pub(super) char_time: Duration,
     pub(super) filter: Filter,
     pub(super) stats: Stats,
+    /// With `--device`: the values heard, printed instead of the frames.
+    pub(super) values: Option<super::values::Watch>,
 }
 
 impl Sinks {
@@ -57,7 +59,9 @@ impl Sinks {
         if let Some((pcap, what)) = &mut self.pcap {
             pcap.write(heard).map_err(|source| CliError::Output { what: what.clone(), source })?;
         }
-        if self.print {
+        if let Some(values) = &mut self.values {
+            values.take(heard)?;
+        } else if self.print {
             let text = if self.json { output::json_line(&self.json_of(heard)) } else { self.line_of(heard) };
             output::print(&text)?;
         }

@@ -33,6 +33,7 @@ mod scan;
 mod server;
 mod service;
 mod sniff;
+mod sniff_device;
 mod stderr;
 mod sunspec;
 mod systemd;

@@ -15,7 +15,7 @@ use serde_json::Value;
 use crate::server::{ferrobus, stderr};
 
 /// Kills the child it holds when dropped.
-struct Running(Child);
+pub(crate) struct Running(pub(crate) Child);
 
 impl Drop for Running {
     fn drop(&mut self) {
@@ -26,7 +26,7 @@ impl Drop for Running {
 
 impl Running {
     /// SIGTERM, its normal end, then its exit status.
-    fn stop(&mut self) -> std::process::ExitStatus {
+    pub(crate) fn stop(&mut self) -> std::process::ExitStatus {
         let pid = self.0.id().to_string();
         assert!(Command::new("kill").args(["-TERM", &pid]).status().unwrap().success());
         self.0.wait().unwrap()
@@ -34,7 +34,7 @@ impl Running {
 }
 
 /// Lines of a child's stream, as they come.
-fn lines(stream: impl std::io::Read + Send + 'static) -> mpsc::Receiver<String> {
+pub(crate) fn lines(stream: impl std::io::Read + Send + 'static) -> mpsc::Receiver<String> {
     let (tx, rx) = mpsc::channel();
     std::thread::spawn(move || {
         for line in BufReader::new(stream).lines().map_while(Result::ok) {
@@ -47,7 +47,7 @@ fn lines(stream: impl std::io::Read + Send + 'static) -> mpsc::Receiver<String> 
 }
 
 /// Waits (at most 10 s a line) for `n` lines, or for one containing `until`.
-fn wait_for(rx: &mpsc::Receiver<String>, n: usize, until: &str, what: &str) -> Vec<String> {
+pub(crate) fn wait_for(rx: &mpsc::Receiver<String>, n: usize, until: &str, what: &str) -> Vec<String> {
     let mut got = Vec::new();
     while got.len() < n && (until.is_empty() || !got.iter().any(|l: &String| l.contains(until))) {
         match rx.recv_timeout(Duration::from_secs(10)) {
@@ -58,13 +58,13 @@ fn wait_for(rx: &mpsc::Receiver<String>, n: usize, until: &str, what: &str) -> V
     got
 }
 
-/// A line with a tap and a simulated generic drive on its second drop; returns the master's
-/// drop and the tap.
-struct Bus {
+/// A line with a tap and a simulated drive on its second drop; returns the master's drop
+/// and the tap.
+pub(crate) struct Bus {
     line: Running,
     _sim: Running,
-    master: String,
-    tap: String,
+    pub(crate) master: String,
+    pub(crate) tap: String,
     stats: PathBuf,
 }
 
@@ -83,7 +83,13 @@ impl Drop for Bus {
     }
 }
 
+/// A line with a tap and a simulated generic drive.
 fn bus() -> Bus {
+    bus_of("generic")
+}
+
+/// A line with a tap and a drive simulated from `profile`.
+pub(crate) fn bus_of(profile: &str) -> Bus {
     static NEXT: std::sync::atomic::AtomicUsize = std::sync::atomic::AtomicUsize::new(0);
     let stats = temp(&format!("line-{}.json", NEXT.fetch_add(1, std::sync::atomic::Ordering::Relaxed)));
     let mut line = ferrobus();
@@ -92,7 +98,7 @@ fn bus() -> Bus {
     let mut line = Running(line.spawn().unwrap());
     let paths = wait_for(&lines(line.0.stdout.take().unwrap()), 3, "", "ferrobus line --tap");
     let mut sim = ferrobus();
-    sim.args(["--port", &paths[1], "sim", "--profile", "generic"]);
+    sim.args(["--port", &paths[1], "sim", "--profile", profile]);
     let mut sim = Running(sim.stdin(Stdio::null()).stdout(Stdio::null()).stderr(Stdio::piped()).spawn().unwrap());
     let said = lines(sim.0.stderr.take().unwrap());
     wait_for(&said, usize::MAX, "serving on", "ferrobus sim");
@@ -100,7 +106,7 @@ fn bus() -> Bus {
 }
 
 /// Starts `ferrobus --port TAP sniff ARGS` and waits until it listens.
-fn sniff(tap: &str, args: &[&str], stdout: Stdio) -> (Running, mpsc::Receiver<String>) {
+pub(crate) fn sniff(tap: &str, args: &[&str], stdout: Stdio) -> (Running, mpsc::Receiver<String>) {
     let mut command = ferrobus();
     command.args(["--port", tap, "sniff"]).args(args).stdin(Stdio::null()).stdout(stdout).stderr(Stdio::piped());
     let mut child = Running(command.spawn().unwrap());
@@ -199,7 +205,7 @@ fn tshark_fields(tshark: &str, capture: &Path) -> Vec<Vec<String>> {
     String::from_utf8_lossy(&out.stdout).lines().map(|l| l.split('|').map(str::to_string).collect()).collect()
 }
 
-fn temp(name: &str) -> PathBuf {
+pub(crate) fn temp(name: &str) -> PathBuf {
     std::env::temp_dir().join(format!("ferrobus-sniff-{}-{name}", std::process::id()))
 }
 
