@@ -4,7 +4,7 @@
 use std::path::Path;
 use std::time::Duration;
 
-use ferrobus_bridge::config::{Connection, Mode, Plant};
+use ferrobus_bridge::config::{Connection, LineMode, Mode, Plant};
 use ferrobus_bridge::sparkplug::convert::UintEncoding;
 use ferrobus_profile::Profile;
 use ferrobus_tools::poll::Group;
@@ -344,6 +344,29 @@ const FILE_CASES: &[(&str, &str, &[&str])] = &[
         &["in plain mode a metric name is a topic level: it is not empty and has no /, +, #"],
     ),
     (
+        "an unknown line mode",
+        "[[line]]\nname = \"a\"\nport = \"/dev/ttyS0\"\nmode = »\"sniff\"\n",
+        &["poll (the default) or listen"],
+    ),
+    (
+        "a listen line that would transmit: the client's timing and poll rates",
+        "[[line]]\nname = \"plc\"\nport = \"/dev/ttyS0\"\nmode = \"listen\"\ntimeout = »\"1s\"\nretries = »2\n\
+         [[line.device]]\nid = \"x\"\nunit = 1\nprofile = \"omron-3g3rx\"\npoints = [\"d001\"]\nevery = »\"1s\"\n\
+         »[[line.device.poll]]\nevery = \"5s\"\npoints = [\"F002\"]\n",
+        &[
+            "a listen line never transmits, so it has no timeout",
+            "no retries",
+            "at the master's pace",
+            "at the master's pace",
+        ],
+    ),
+    (
+        "a listen line on TCP, and one in ASCII",
+        "[[line]]\nname = \"a\"\ntcp = \"plc\"\nmode = »\"listen\"\n\
+         [[line]]\nname = \"b\"\nport = \"/dev/ttyS0\"\nascii = »true\nmode = \"listen\"\n",
+        &["give port", "decodes RTU only"],
+    ),
+    (
         "an unknown line key, and its devices still checked",
         "[[line]]\nname = \"a\"\nsimulated = true\n»speed = 9600\n[[line.device]]\nid = \"x\"\nunit = »0\n",
         &["unknown key `speed`", "unit 0"],
@@ -471,6 +494,22 @@ fn errors_of(text: &str) -> Vec<String> {
         Ok(_) => Vec::new(),
         Err(e) => e.0.iter().map(ToString::to_string).collect(),
     }
+}
+
+#[test]
+fn a_listen_line_is_a_serial_port_whose_devices_have_the_planners_groups() {
+    let text = format!(
+        "{}[[line]]\nname = \"plc\"\nport = \"/dev/ttyS0\"\nbaud = 9600\nmode = \"listen\"\n{}",
+        HEAD.split("[[line]]").next().unwrap(),
+        GOOD
+    );
+    let plant = Plant::parse(&text, "plant.toml", Path::new(".")).unwrap_or_else(|e| panic!("{e}"));
+    let [line] = plant.lines.as_slice() else { panic!("one line") };
+    assert_eq!(line.mode, LineMode::Listen);
+    assert!(matches!(&line.connection, Connection::Serial { ascii: false, .. }));
+    assert_eq!(line.devices[0].groups[0].cells[0].name, "d001");
+    let polled = Plant::parse(&text.replace("mode = \"listen\"\n", ""), "plant.toml", Path::new(".")).unwrap();
+    assert_eq!(polled.lines[0].mode, LineMode::Poll, "poll is the default");
 }
 
 #[test]

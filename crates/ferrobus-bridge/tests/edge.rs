@@ -6,7 +6,9 @@ use std::collections::HashMap;
 use std::sync::Arc;
 use std::time::{Duration, SystemTime};
 
-use ferrobus_bridge::config::{Broker, Connection, DeviceSpec, LineSpec, Mode, PlainConfig, Plant, SparkplugConfig};
+use ferrobus_bridge::config::{
+    Broker, Connection, DeviceSpec, LineMode, LineSpec, Mode, PlainConfig, Plant, SparkplugConfig,
+};
 use ferrobus_bridge::edge::{Action, DeviceRef, Edge, EdgeError, MAX_METRICS_PER_COMMAND, Output, Publish};
 use ferrobus_bridge::sparkplug::convert::UintEncoding;
 use ferrobus_bridge::sparkplug::payload::{DataType, Metric, MetricValue, Payload, PropertyValueKind};
@@ -61,6 +63,7 @@ fn plant(mode: Mode) -> Plant {
         name: name.into(),
         connection: Connection::Tcp("127.0.0.1:502".into()),
         client: ferrobus::ClientConfig::default(),
+        mode: LineMode::Poll,
         devices: vec![device],
     };
     Plant {

@@ -121,7 +121,8 @@ pub(crate) async fn run(plant_file: Option<&Path>, args: &BridgeArgs) -> Result<
     // keeps each real line's port until it has come (a simulated line is in-process).
     tokio::spawn(async move {
         let Ok(lines) = running.await else { return };
-        lines.iter().filter(|l| l.sim.is_none()).for_each(|l| crate::interrupt::keep_release(&l.client));
+        let real = lines.iter().filter(|l| l.sim.is_none());
+        real.filter_map(|l| l.client.as_ref()).for_each(crate::interrupt::keep_release);
         let watchdog = crate::systemd::ready(&format!("bridge: {} lines running", lines.len()));
         let _ = demo_tx.send(lines);
         watchdog.feed_forever().await;
@@ -389,7 +390,7 @@ async fn drive_inverter(
     quiet: bool,
 ) {
     let Ok(lines) = running.await else { return };
-    let Some(client) = lines.get(inverter.line).map(|l| l.client.clone()) else { return };
+    let Some(client) = lines.get(inverter.line).and_then(|l| l.client.clone()) else { return };
     let _ = tokio::time::timeout(Duration::from_secs(5), born.notified()).await;
     let say = |text: String| {
         if !quiet {

@@ -131,8 +131,22 @@ pub struct LineSpec {
     pub connection: Connection,
     /// Timeout, retries and the rest of the client's settings.
     pub client: ferrobus::ClientConfig,
+    /// Whether the bridge polls it, or only listens to its own master.
+    pub mode: LineMode,
     /// The devices, in file order.
     pub devices: Vec<DeviceSpec>,
+}
+
+/// How the bridge reads a line's devices (`mode` in the file).
+#[derive(Clone, Copy, PartialEq, Eq, Debug, Default)]
+pub enum LineMode {
+    /// The bridge is the line's master: it polls its devices (the default).
+    #[default]
+    Poll,
+    /// The line has a master of its own (a PLC): the bridge opens the port read-only, never
+    /// transmits, and publishes what the replies it hears say of its devices' points
+    /// (`mode = "listen"`; a serial RTU port only).
+    Listen,
 }
 
 /// How a line is reached.

@@ -72,6 +72,7 @@ pub(super) struct Store {
 #[serde(deny_unknown_fields)]
 pub(super) struct Line {
     pub name: Text,
+    pub mode: Option<Text>,
     pub port: Option<Text>,
     pub tcp: Option<Text>,
     pub rtu_tcp: Option<Text>,

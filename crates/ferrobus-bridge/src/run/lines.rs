@@ -4,6 +4,8 @@
 //! process with a simulator of every device on it (from its profile), served as `ferrobus
 //! demo` serves its drive.
 //!
+//! A listen line (`mode = "listen"`) is started by `listen.rs` instead: no client, no poller.
+//!
 //! A line that cannot be reached is no error here: its polls fail (and its devices die, in
 //! Sparkplug's words) while the other lines go on, and the client reopens the port.
 
@@ -19,7 +21,7 @@ use ferrobus_sim::{Device, Faults, Profile, Sim, tokio_clock};
 use ferrobus_tools::poll::{Event, Group, PollConfig, PollHandle, Poller};
 use tokio::sync::mpsc;
 
-use crate::config::{Connection, LineSpec};
+use crate::config::{Connection, LineMode, LineSpec};
 use crate::edge::DeviceRef;
 
 use super::RunError;
@@ -34,10 +36,11 @@ pub struct RunningLine {
     pub name: String,
     /// What it is (`/dev/ttyUSB0`, `10.0.0.7:502`, `virtual line (drives)`).
     pub describe: String,
-    /// Its client, free to use beside the poller (requests are queued one at a time).
-    pub client: Client,
-    /// Its poller's handle.
-    pub poll: PollHandle,
+    /// Its client, free to use beside the poller (requests are queued one at a time); `None`
+    /// on a listen line, which never transmits.
+    pub client: Option<Client>,
+    /// Its poller's handle; `None` on a listen line, which polls nothing.
+    pub poll: Option<PollHandle>,
     /// For a simulated line, the line and its simulators.
     pub sim: Option<SimulatedLine>,
 }
@@ -98,6 +101,9 @@ pub(super) async fn start(
     spec: &LineSpec,
     events: mpsc::Sender<(usize, Event)>,
 ) -> Result<(RunningLine, GroupMap), RunError> {
+    if spec.mode == LineMode::Listen {
+        return super::listen::start(index, spec, events);
+    }
     let (transport, timing, sim) = match &spec.connection {
         Connection::Serial { config, ascii } => {
             let timing = LineTiming::new(&config.line);
@@ -117,7 +123,8 @@ pub(super) async fn start(
     let groups: Vec<Group> = spec.devices.iter().flat_map(|d| d.groups.iter().cloned()).collect();
     let map = GroupMap::new(spec.devices.iter().map(|d| d.groups.len()));
     let mut poller = Poller::start(client.clone(), groups, PollConfig { line: timing });
-    let running = RunningLine { name: spec.name.clone(), describe, client, poll: poller.handle(), sim };
+    let running =
+        RunningLine { name: spec.name.clone(), describe, client: Some(client), poll: Some(poller.handle()), sim };
     tokio::spawn(async move {
         while let Some(event) = poller.next().await {
             if events.send((index, event)).await.is_err() {

@@ -36,6 +36,7 @@
 mod broker;
 mod command;
 mod lines;
+mod listen;
 pub mod mqtt;
 mod report;
 pub mod state;
@@ -285,9 +286,14 @@ impl Bridge {
     fn show_live(&self) {
         let Some(live) = &self.live else { return };
         let mut report = self.report.clone();
-        report.finish(&self.lines.iter().map(|l| l.running.poll.counters()).collect::<Vec<_>>(), &self.store);
+        report.finish(&self.counters(), &self.store);
         let now = Live { report, stored_now: self.store.len(), online: self.online };
         *live.lock().unwrap_or_else(std::sync::PoisonError::into_inner) = now;
+    }
+
+    /// Each line's poll counters, group by group (none for a listen line).
+    fn counters(&self) -> Vec<Vec<ferrobus_tools::poll::Counters>> {
+        self.lines.iter().map(|l| l.running.poll.as_ref().map(|p| p.counters()).unwrap_or_default()).collect()
     }
 
     /// Stops: NDEATH, DISCONNECT, the pollers; the report.
@@ -310,12 +316,12 @@ impl Bridge {
                 tracing::warn!("the broker did not take the DISCONNECT within {CLOSE_WAIT:?}");
             }
         }
-        for line in &self.lines {
-            line.running.poll.stop();
+        for poll in self.lines.iter().filter_map(|l| l.running.poll.as_ref()) {
+            poll.stop();
         }
         self.end_drop_burst();
         let mut report = std::mem::take(&mut self.report);
-        report.finish(&self.lines.iter().map(|l| l.running.poll.counters()).collect::<Vec<_>>(), &self.store);
+        report.finish(&self.counters(), &self.store);
         // What is left in memory goes to disk for the next run (if the store has a folder).
         if let Err(e) = self.store.close() {
             report.store_errors += 1;
@@ -447,10 +453,16 @@ impl Bridge {
         let spec = self.plant.lines.get(device.line).and_then(|l| l.devices.get(device.device));
         let guarded = spec.and_then(|d| Some((d.profile.clone()?, d.unit)));
         let line = self.lines.get_mut(device.line).ok_or_else(|| format!("{name}: no such line"))?;
+        let (Some(poll), Some(client)) = (line.running.poll.clone(), line.running.client.clone()) else {
+            return Err(format!(
+                "{name} is on line {:?}, which only listens (mode = \"listen\"): it never transmits, so nothing is written",
+                line.running.name
+            ));
+        };
         let mut resolved = Vec::with_capacity(writes.len());
         for (group, cell, raw, typed) in writes {
             let index = line.map.poller_group(device.device, group);
-            let found = index.and_then(|i| Some((i, line.running.poll.groups().get(i)?.cells.get(cell)?.clone())));
+            let found = index.and_then(|i| Some((i, poll.groups().get(i)?.cells.get(cell)?.clone())));
             let Some((index, target)) = found else {
                 return Err(format!("{name}: no cell {cell} in group {group}: nothing written"));
             };
@@ -459,8 +471,7 @@ impl Bridge {
         }
         let queue = line.writes.get_mut(device.device).ok_or_else(|| format!("{name}: no such device"))?;
         queue.admit(resolved.len()).map_err(|why| format!("{name}: {why}: nothing written"))?;
-        let (poll, turn, tx) = (line.running.poll.clone(), Arc::clone(&queue.turn), self.written_tx.clone());
-        let (client, topic) = (line.running.client.clone(), topic.to_string());
+        let (turn, tx, topic) = (Arc::clone(&queue.turn), self.written_tx.clone(), topic.to_string());
         tokio::spawn(async move {
             let _turn = turn.lock().await;
             if let Some((profile, unit)) = &guarded

@@ -429,7 +429,7 @@ async fn while_the_broker_is_away_samples_are_stored_and_replayed_as_historical_
     let options = Options { running: Some(running_tx), ..Options::default() };
     let bridge = tokio::spawn(run_with(plant, async move { drop(stop_rx.await) }, Some(status_tx), options));
     let running = running.await.expect("the running lines");
-    let (client, poll) = (running[0].client.clone(), running[0].poll.clone());
+    let (client, poll) = (running[0].client.clone().expect("a client"), running[0].poll.clone().expect("a poller"));
     let (_, first) = next_of(&mut watcher, MessageType::NBirth).await;
     next_of(&mut watcher, MessageType::DBirth).await;
 
@@ -571,7 +571,7 @@ async fn samples_polled_before_the_first_connack_are_live_data_after_the_births_
     let (running_tx, running) = oneshot::channel();
     let options = Options { running: Some(running_tx), ..Options::default() };
     let bridge = tokio::spawn(run_with(plant, async move { drop(stop_rx.await) }, None, options));
-    let poll = running.await.expect("the running lines")[0].poll.clone();
+    let poll = running.await.expect("the running lines")[0].poll.clone().expect("a poller");
     // Every group polled twice while the CONNECT waits: their first samples are in the bridge.
     polled_until(&poll, |c| c.iter().all(|c| c.ok >= 2)).await;
     release_tx.send(()).expect("the proxy waits");

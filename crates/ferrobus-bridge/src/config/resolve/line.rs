@@ -9,7 +9,7 @@ use toml::Spanned;
 
 use super::super::raw::{self, Text};
 use super::super::text::{duration, host_port};
-use super::super::{Connection, LineSpec};
+use super::super::{Connection, LineMode, LineSpec};
 use super::{Cx, device};
 
 /// Device ids (plant-wide) and line names seen so far, with where.
@@ -35,6 +35,7 @@ pub(super) fn resolve(cx: &mut Cx<'_>, line: &raw::Line, devices: &[raw::Device]
     first_use(cx, &mut ids.lines, &line.name, &format!("line name {name:?}"), "each line has its own");
     let connection = resolve_connection(cx, line);
     let client = resolve_client(cx, line);
+    let mode = resolve_mode(cx, line, devices);
     let simulated = matches!(connection, Some(Connection::Simulated { .. }));
     let mut units: HashMap<String, Range<usize>> = HashMap::new();
     let mut specs = Vec::new();
@@ -57,7 +58,57 @@ pub(super) fn resolve(cx: &mut Cx<'_>, line: &raw::Line, devices: &[raw::Device]
             specs.push(spec);
         }
     }
-    Some(LineSpec { name: line.name.get_ref().clone(), connection: connection?, client: client?, devices: specs })
+    let (connection, client, mode) = (connection?, client?, mode?);
+    Some(LineSpec { name: line.name.get_ref().clone(), connection, client, mode, devices: specs })
+}
+
+/// `mode`: `poll` (the default) or `listen`. A listen line is a serial RTU port that is never
+/// written: what needs transmitting (the client's timing, poll rates) is refused where it is
+/// written, saying why.
+fn resolve_mode(cx: &mut Cx<'_>, line: &raw::Line, devices: &[raw::Device]) -> Option<LineMode> {
+    let Some(mode) = &line.mode else { return Some(LineMode::Poll) };
+    match mode.get_ref().to_ascii_lowercase().as_str() {
+        "poll" => return Some(LineMode::Poll),
+        "listen" => {}
+        other => {
+            cx.at(mode.span(), format!("mode = {other:?}: a line's mode is poll (the default) or listen"));
+            return None;
+        }
+    }
+    let errors = cx.errors.len();
+    let name = line.name.get_ref();
+    let other = [("tcp", line.tcp.as_ref()), ("rtu_tcp", line.rtu_tcp.as_ref())];
+    if let Some((key, _)) = other.iter().find(|(_, v)| v.is_some()) {
+        cx.at(mode.span(), format!("line {name:?} listens: that is a serial port's, not {key}'s; give port"));
+    }
+    if line.simulated.as_ref().is_some_and(|s| *s.get_ref()) {
+        cx.at(mode.span(), format!("line {name:?} listens: a simulated line has no master of its own to listen to"));
+    }
+    if let Some(ascii) = line.ascii.as_ref().filter(|a| *a.get_ref()) {
+        cx.at(ascii.span(), "ascii: a listen line decodes RTU only");
+    }
+    let never = |key: &str| format!("{key}: a listen line never transmits, so it has no {key}; leave it out");
+    let timing = [
+        ("timeout", line.timeout.as_ref().map(Spanned::span)),
+        ("retries", line.retries.as_ref().map(Spanned::span)),
+        ("connect_timeout", line.connect_timeout.as_ref().map(Spanned::span)),
+        ("late_window", line.late_window.as_ref().map(Spanned::span)),
+        ("echo_suppression", line.echo_suppression.map(|_| mode.span())),
+    ];
+    for (key, span) in timing {
+        if let Some(span) = span {
+            cx.at(span, never(key));
+        }
+    }
+    let pace = "a listen line publishes each value as its master reads it, at the master's pace; leave it out";
+    for device in devices {
+        let rates = device.every.iter().map(Spanned::span).chain(device.poll.iter().map(Spanned::span));
+        let raw_rates = device.raw.iter().filter_map(|r| r.get_ref().every.as_ref().map(Spanned::span));
+        for span in rates.chain(raw_rates).collect::<Vec<_>>() {
+            cx.at(span, format!("a poll rate: {pace} (points and groups name what is published)"));
+        }
+    }
+    (cx.errors.len() == errors).then_some(LineMode::Listen)
 }
 
 /// Exactly one of `port`, `tcp`, `rtu_tcp` and `simulated = true`, with the keys it takes.
