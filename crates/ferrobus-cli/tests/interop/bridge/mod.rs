@@ -11,6 +11,8 @@
 //! - [`discovery`]: plain mode's Home Assistant discovery configs, retained, checked against
 //!   HA's documented schema, a sensor's state and a number's and a select's commands;
 //! - [`guard`]: a DCMD and a plain `.../set` of a run-locked point, taken stopped, refused running;
+//! - [`listen`]: a listen line on a `ferrobus line` tap, publishing what the bus's own master
+//!   read, at its wire time, transmitting nothing, a `.../set` refused;
 //! - [`cli`]: `--check` on a broken file and the shipped examples, and `--demo`;
 //! - [`harness`] (drives, plant.toml, the bridge process) and [`spb`] (recorder, checker,
 //!   publisher, protoc) are what they are made of.
@@ -24,6 +26,7 @@ mod cli;
 mod discovery;
 mod guard;
 mod harness;
+mod listen;
 mod outage;
 mod plain;
 mod sparkplug;
