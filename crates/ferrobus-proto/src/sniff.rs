@@ -70,6 +70,23 @@ pub struct WireTime {
     pub t1_5_violation: bool,
 }
 
+impl WireTime {
+    /// Something heard as if whole at `end`: it starts there too, no silence before it is
+    /// known, and no gap or violation is in it (what a frame made by a test, or taken from a
+    /// record without timing, carries).
+    #[must_use]
+    pub const fn at(end: Instant) -> WireTime {
+        WireTime {
+            start: end,
+            end,
+            silence_before: None,
+            longest_gap: Duration::ZERO,
+            t3_5_violation: false,
+            t1_5_violation: false,
+        }
+    }
+}
+
 /// A response paired with its request.
 #[derive(Clone, Copy, PartialEq, Eq, Debug)]
 pub struct Reply {

@@ -56,33 +56,28 @@ impl Devices {
         Devices { devices, seqs: vec![0; count] }
     }
 
-    fn seq(&mut self, index: usize) -> u64 {
-        let Some(seq) = self.seqs.get_mut(index) else { return 0 };
-        let now = *seq;
-        *seq = seq.saturating_add(1);
-        now
+    /// The samples given of group `index` so far: the next one's `seq`.
+    fn seq(&self, index: usize) -> u64 {
+        self.seqs.get(index).copied().unwrap_or(0)
     }
 
     /// The samples an event heard gives: a group's for each group of the unit that answered
     /// holding some of its cells; a silent poll of each group of a unit that did not answer.
     fn samples(&mut self, pairing: &mut Pairing, event: &BusEvent) -> Vec<Sample> {
-        if let BusEvent::Unanswered { unit, function, request_end } = event {
+        let samples: Vec<Sample> = if let BusEvent::Unanswered { unit, function, request_end } = event {
             let time = UNIX_EPOCH + Duration::from_nanos(request_end.as_nanos());
             let diagnosis = format!("unit {unit} left its master's request (function {function:#04x}) unanswered");
-            let indices: Vec<usize> = self.of(*unit).map(|(index, _)| *index).collect();
-            return indices.into_iter().map(|index| silent(index, self.seq(index), time, &diagnosis)).collect();
+            self.of(*unit).map(|(index, _)| silent(*index, self.seq(*index), time, &diagnosis)).collect()
+        } else {
+            let Some(heard) = pairing.take(event) else { return Vec::new() };
+            self.of(heard.unit).filter_map(|(index, group)| heard.sample(*index, self.seq(*index), group)).collect()
+        };
+        for sample in &samples {
+            if let Some(seq) = self.seqs.get_mut(sample.group) {
+                *seq = seq.saturating_add(1);
+            }
         }
-        let Some(heard) = pairing.take(event) else { return Vec::new() };
-        let found: Vec<(usize, Group)> = self.of(heard.unit).cloned().collect();
-        found
-            .into_iter()
-            .filter_map(|(index, group)| {
-                let seq = self.seqs.get(index).copied().unwrap_or(0);
-                let sample = heard.sample(index, seq, &group)?;
-                self.seq(index);
-                Some(sample)
-            })
-            .collect()
+        samples
     }
 
     /// The groups of the devices at `unit`.
@@ -184,15 +179,7 @@ mod tests {
     fn frame(body: &[u8], role: Role, ms: u64, response_time: Option<u64>) -> BusEvent {
         let mut bytes = body.to_vec();
         bytes.extend_from_slice(&crc16(body).to_le_bytes());
-        let end = Instant::from_nanos(ms * 1_000_000);
-        let time = WireTime {
-            start: end,
-            end,
-            silence_before: None,
-            longest_gap: Duration::ZERO,
-            t3_5_violation: false,
-            t1_5_violation: false,
-        };
+        let time = WireTime::at(Instant::from_nanos(ms * 1_000_000));
         BusEvent::Frame { bytes, role, crc_ok: true, time, response_time: response_time.map(Duration::from_millis) }
     }
 

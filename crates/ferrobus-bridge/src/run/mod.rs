@@ -293,7 +293,10 @@ impl Bridge {
 
     /// Each line's poll counters, group by group (none for a listen line).
     fn counters(&self) -> Vec<Vec<ferrobus_tools::poll::Counters>> {
-        self.lines.iter().map(|l| l.running.poll.as_ref().map(|p| p.counters()).unwrap_or_default()).collect()
+        self.lines
+            .iter()
+            .map(|l| l.running.poll.as_ref().map(ferrobus_tools::poll::PollHandle::counters).unwrap_or_default())
+            .collect()
     }
 
     /// Stops: NDEATH, DISCONNECT, the pollers; the report.

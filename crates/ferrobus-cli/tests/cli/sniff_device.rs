@@ -16,32 +16,27 @@ use crate::sniff::{bus_of, lines, sniff, wait_for};
 /// enumeration (d003). A004 has the highest address: `get` reads it last.
 const POINTS: [&str; 5] = ["F001", "d001", "d003", "F002", "A004"];
 
-/// What `get --json` reads of [`POINTS`]: code → (value as shown, engineering, raw, unit).
-fn get(master: &str) -> HashMap<String, (String, f64, i64, String)> {
+/// Per point code: its value as shown, engineering value, raw value and unit.
+type Read = HashMap<String, (String, f64, i64, String)>;
+
+/// A point of a JSON document by the names of its fields: code, value as shown, number, unit.
+fn point(p: &Value, [code, shown, number, unit]: [&str; 4]) -> (String, (String, f64, i64, String)) {
+    let text = |key: &str| p[key].as_str().unwrap_or_default().to_string();
+    (text(code), (text(shown), p[number].as_f64().unwrap(), p["raw"].as_i64().unwrap(), text(unit)))
+}
+
+/// What `get --json` reads of [`POINTS`].
+fn get(master: &str) -> Read {
     let out = ferrobus().args(["--port", master, "--device", "omron-3g3rx", "get", "--json"]).args(POINTS).assert();
     assert!(out.get_output().status.success(), "get: {}", stderr(&out));
     let doc: Value = serde_json::from_slice(&out.get_output().stdout).unwrap();
-    doc["points"]
-        .as_array()
-        .unwrap()
-        .iter()
-        .map(|p| {
-            let unit = p["unit"].as_str().unwrap_or_default().to_string();
-            let got = (
-                p["value"].as_str().unwrap().to_string(),
-                p["engineering"].as_f64().unwrap(),
-                p["raw"].as_i64().unwrap(),
-                unit,
-            );
-            (p["code"].as_str().unwrap().to_string(), got)
-        })
-        .collect()
+    doc["points"].as_array().unwrap().iter().map(|p| point(p, ["code", "value", "engineering", "unit"])).collect()
 }
 
 /// Runs `sniff --device omron-3g3rx:1 FLAGS` on a fresh bus while `set F001 45.5Hz` and `get`
 /// of [`POINTS`] are the master; returns what it printed on stdout (once `get`'s last reply,
 /// A004's, was printed) and what `get` read.
-fn sniffed(flags: &[&str]) -> (Vec<String>, HashMap<String, (String, f64, i64, String)>) {
+fn sniffed(flags: &[&str]) -> (Vec<String>, Read) {
     let bus = bus_of("omron-3g3rx");
     let mut args = vec!["--device", "omron-3g3rx:1"];
     args.extend_from_slice(flags);
@@ -108,16 +103,7 @@ fn the_sniffers_json_lines_are_polls_records_with_what_get_read() {
         let doc: Value = serde_json::from_str(line).unwrap_or_else(|e| panic!("{e}: {line}"));
         assert_eq!((doc["unit"].as_u64(), doc["status"].as_str()), (Some(1), Some("ok")), "{line}");
         assert!(doc["time"].as_str().unwrap().ends_with('Z'));
-        for p in doc["points"].as_array().unwrap() {
-            let uom = p["uom"].as_str().unwrap_or_default().to_string();
-            let seen = (
-                p["shown"].as_str().unwrap().to_string(),
-                p["value"].as_f64().unwrap(),
-                p["raw"].as_i64().unwrap(),
-                uom,
-            );
-            last.insert(p["point"].as_str().unwrap().to_string(), seen);
-        }
+        last.extend(doc["points"].as_array().unwrap().iter().map(|p| point(p, ["point", "shown", "value", "uom"])));
     }
     for (code, got) in &read {
         assert_eq!(last.get(code), Some(got), "{code}: {printed:#?}");

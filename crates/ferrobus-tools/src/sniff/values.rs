@@ -135,16 +135,15 @@ fn heard(asked: &[u8], reply: &[u8]) -> Option<Heard> {
         (Request::WriteSingleRegister(w), Response::WriteSingleRegister(echo)) if echo.address == w.address => {
             (Table::Holding, w.address, vec![w.value], true)
         }
-        (Request::WriteMultipleCoils(w), Response::WriteMultipleCoils(echo))
-            if (echo.start(), echo.quantity()) == (w.start(), w.quantity()) =>
-        {
+        // A multiple write is acknowledged with its start and count.
+        (Request::WriteMultipleCoils(w), Response::WriteMultipleCoils(echo)) => {
             let bits = w.values().iter().take(usize::from(w.quantity())).map(u16::from).collect();
-            (Table::Coils, w.start(), bits, true)
+            let echoed = (echo.start(), echo.quantity()) == (w.start(), w.quantity());
+            echoed.then_some((Table::Coils, w.start(), bits, true))?
         }
-        (Request::WriteMultipleRegisters(w), Response::WriteMultipleRegisters(echo))
-            if (echo.start(), echo.quantity()) == (w.start(), w.quantity()) =>
-        {
-            (Table::Holding, w.start(), w.values().iter().collect(), true)
+        (Request::WriteMultipleRegisters(w), Response::WriteMultipleRegisters(echo)) => {
+            let echoed = (echo.start(), echo.quantity()) == (w.start(), w.quantity());
+            echoed.then(|| (Table::Holding, w.start(), w.values().iter().collect(), true))?
         }
         _ => return None,
     };

@@ -31,15 +31,7 @@ fn adu(body: &[u8]) -> Vec<u8> {
 }
 
 fn at(ms: u64) -> WireTime {
-    let end = Instant::from_nanos(1_700_000_000_000_000_000 + ms * 1_000_000);
-    WireTime {
-        start: end,
-        end,
-        silence_before: None,
-        longest_gap: Duration::ZERO,
-        t3_5_violation: false,
-        t1_5_violation: false,
-    }
+    WireTime::at(Instant::from_nanos(1_700_000_000_000_000_000 + ms * 1_000_000))
 }
 
 fn request(body: &[u8], ms: u64) -> BusEvent {
@@ -80,7 +72,7 @@ fn a_read_reply_gives_every_point_it_holds_decoded_as_a_poll_decodes_it_at_the_r
     ]);
     let [one] = got.as_slice() else { panic!("{got:?}") };
     assert_eq!((one.unit, one.table, one.start, one.written), (1, Table::Holding, 0, false));
-    assert_eq!(one.time, UNIX_EPOCH + Duration::from_nanos(1_700_000_000_025_000_000));
+    assert_eq!(one.time, UNIX_EPOCH + Duration::from_millis(1_700_000_000_025));
     assert_eq!(one.response_time, Duration::from_millis(15));
     assert_eq!(
         shown(one),
