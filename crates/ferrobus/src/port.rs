@@ -153,7 +153,7 @@ impl Transport {
             incomplete_timeout: PC_INCOMPLETE_TIMEOUT,
             reopen: true,
             remote: false,
-            connector: Arc::new(SerialTarget { config, first: Mutex::new(None) }),
+            connector: Arc::new(SerialTarget { same: Mutex::new(SameDevice::new(config.path.clone())), config }),
         }
     }
 
@@ -353,14 +353,23 @@ impl Connector for SerialConfig {
 /// A serial port that remembers what its path named when first opened, and reopens only that.
 struct SerialTarget {
     config: SerialConfig,
-    first: Mutex<Option<Identity>>,
+    same: Mutex<SameDevice>,
 }
 
-/// Why a serial port is not reopened, carried through the connector's `io::Error`.
+/// Why a serial port is not reopened: its path names another device now, or it was a pty
+/// ([`SameDevice`]).
 #[derive(Debug)]
-struct NotSame {
+pub struct NotSame {
     reason: String,
     lasting: bool,
+}
+
+impl NotSame {
+    /// Whether it is for good: a pty that went away never comes back, so opening its path
+    /// again is never right. Otherwise the device may be plugged back in.
+    pub fn lasting(&self) -> bool {
+        self.lasting
+    }
 }
 
 impl fmt::Display for NotSame {
@@ -371,23 +380,47 @@ impl fmt::Display for NotSame {
 
 impl std::error::Error for NotSame {}
 
-impl SerialTarget {
-    fn open(&self) -> io::Result<BoxPort> {
-        let mut first = self.first.lock().unwrap_or_else(PoisonError::into_inner);
-        // Identify before opening: opening a tty can change its settings, and another's line
-        // must not be touched at all.
-        let now = crate::sys::identify(&self.config.path);
-        if let Some(first) = first.as_ref()
+/// What a serial port's path named when first opened, asked before each reopening (the rule
+/// of this module's head). The drivers' serial transport asks it; so does a program that
+/// opens a port itself, again and again (a listen-only line of the bridge).
+#[derive(Debug)]
+pub struct SameDevice {
+    path: std::path::PathBuf,
+    first: Option<Identity>,
+}
+
+impl SameDevice {
+    /// Nothing opened at `path` yet.
+    pub fn new(path: impl Into<std::path::PathBuf>) -> Self {
+        SameDevice { path: path.into(), first: None }
+    }
+
+    /// Runs `open` if the path still names the device it named at the first successful
+    /// `open` (the first time, whatever it names); else [`NotSame`], and `open` is not run.
+    /// The path is identified before `open` runs: opening a tty can change its settings, and
+    /// another device's line must not be touched at all.
+    pub fn open<T, E>(&mut self, open: impl FnOnce() -> Result<T, E>) -> Result<Result<T, E>, NotSame> {
+        let now = crate::sys::identify(&self.path);
+        if let Some(first) = self.first.as_ref()
             && let Err(reason) = first.reopen_check(now.as_ref())
         {
-            let lasting = matches!(first, Identity::Pty(_));
-            return Err(io::Error::other(NotSame { reason, lasting }));
+            return Err(NotSame { reason, lasting: matches!(first, Identity::Pty(_)) });
         }
-        let port = open_serial(&self.config)?;
-        if first.is_none() {
-            *first = now;
+        let opened = open();
+        if opened.is_ok() && self.first.is_none() {
+            self.first = now;
         }
-        Ok(Box::new(port))
+        Ok(opened)
+    }
+}
+
+impl SerialTarget {
+    fn open(&self) -> io::Result<BoxPort> {
+        let mut same = self.same.lock().unwrap_or_else(PoisonError::into_inner);
+        match same.open(|| open_serial(&self.config)) {
+            Ok(opened) => Ok(Box::new(opened?)),
+            Err(not_same) => Err(io::Error::other(not_same)),
+        }
     }
 }
 

@@ -1,12 +1,14 @@
 //! Reopening a lost serial port only while its path names the same device, on real ptys: a
 //! raw `/dev/pts/N` is never reopened, even when the next pty gets the number; a symlink (a
 //! name chosen for the device, as socat's `link=`) is reopened wherever it leads; and
-//! `with_reopen(false)` reopens nothing.
+//! `with_reopen(false)` reopens nothing. [`SameDevice`], the rule itself, is tested as a
+//! program that opens a port itself (the bridge's listen-only line) uses it.
 #![cfg(unix)] // on ptys and symlinks
 
 use std::path::{Path, PathBuf};
 use std::time::Duration;
 
+use ferrobus::port::SameDevice;
 use ferrobus::{Client, ClientConfig, Error, Pty, SerialConfig, Transport};
 use ferrobus_proto::frame::{LineConfig, Parity};
 use tokio::io::AsyncReadExt;
@@ -134,4 +136,28 @@ async fn without_reopening_a_lost_port_stays_lost() {
     assert!(matches!(refused, Err(Error::Io { .. })), "{refused:?}");
     assert!(message.contains("reopening is off"), "{message}");
     assert_eq!(written(&mut second).await, [], "the port was not reopened");
+}
+
+#[tokio::test]
+async fn same_device_opens_a_pty_until_its_number_is_another_ptys_and_a_symlink_wherever_it_leads() {
+    let _turn = ONE_AT_A_TIME.lock().await;
+    let first = Pty::open().unwrap();
+    let path = first.path.clone();
+    let mut same = SameDevice::new(&path);
+    // A failed open remembers nothing; the first that succeeds remembers the pty.
+    assert_eq!(same.open(|| Err::<(), _>("busy")).unwrap(), Err("busy"));
+    assert_eq!(same.open(|| Ok::<_, ()>(1)).unwrap(), Ok(1));
+    drop(first);
+    let _second = pty_numbered(&path).await;
+    let refused = same.open(|| -> Result<(), ()> { panic!("another pty's line must not be touched") }).unwrap_err();
+    assert!(refused.lasting(), "a pty never comes back: {refused}");
+    assert!(refused.to_string().contains("was a pty"), "{refused}");
+
+    let target = Pty::open().unwrap();
+    let link = Link::to(&target.path, "same-device");
+    let mut named = SameDevice::new(&link.path);
+    assert!(named.open(|| Ok::<_, ()>(())).is_ok());
+    let other = Pty::open().unwrap();
+    link.point_to(&other.path);
+    assert_eq!(named.open(|| Ok::<_, ()>("reopened")).unwrap(), Ok("reopened"), "a name chosen for the device");
 }

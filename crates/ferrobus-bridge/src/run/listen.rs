@@ -11,13 +11,16 @@
 //!   the device's groups: `death_after` of them in a row and the device is dead, as on a
 //!   polled line.
 //! - A port that cannot be opened, or that fails, is opened again every [`REOPEN`], until the
-//!   bridge stops.
+//!   bridge stops, while its path names the device first opened ([`SameDevice`]): a raw pty
+//!   that went away is never opened again (its number goes to the next pty made), and the
+//!   line stops listening, saying so.
 //!
 //! [`Heard::sample`]: ferrobus_tools::sniff::Heard::sample
 
 use std::time::{Duration, SystemTime, UNIX_EPOCH};
 
 use ferrobus::SerialConfig;
+use ferrobus::port::SameDevice;
 use ferrobus_proto::frame::LineTiming;
 use ferrobus_tools::poll::{Event, Failure, FailureKind, Group, Sample, Traffic};
 use ferrobus_tools::sniff::{BusEvent, Listener, Pairing};
@@ -129,9 +132,19 @@ async fn listen(
     events: mpsc::Sender<(usize, Event)>,
 ) {
     let timing = LineTiming::new(&config.line);
+    // Opened again only while the path names the device first opened (never a pty's number
+    // given to the next pty).
+    let mut same = SameDevice::new(config.path.clone());
     loop {
-        match Listener::open(config.clone(), timing) {
-            Ok(mut listener) => {
+        match same.open(|| Listener::open(config.clone(), timing)) {
+            Err(not_same) if not_same.lasting() => {
+                tracing::error!(line = %name, "{}: {not_same}; the line stops listening", config.path.display());
+                return;
+            }
+            Err(not_same) => {
+                tracing::warn!(line = %name, "{}: not opened again: {not_same}; trying again in {REOPEN:?}", config.path.display());
+            }
+            Ok(Ok(mut listener)) => {
                 let mut pairing = Pairing::new();
                 loop {
                     let heard = tokio::select! {
@@ -156,7 +169,7 @@ async fn listen(
                     }
                 }
             }
-            Err(e) => tracing::warn!(line = %name, "{e}; trying again in {REOPEN:?}"),
+            Ok(Err(e)) => tracing::warn!(line = %name, "{e}; trying again in {REOPEN:?}"),
         }
         tokio::select! {
             () = tokio::time::sleep(REOPEN) => {}
