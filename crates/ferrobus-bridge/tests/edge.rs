@@ -1271,3 +1271,129 @@ fn a_value_the_device_does_not_implement_is_a_null_metric_in_dbirth_and_ddata() 
     let gone = values(publishes(edge.sample(METER, g, &answered(g, t(30), sentinels()))));
     assert_eq!(gone, [("St".into(), Some(true), None), ("Tmp".into(), Some(true), None)], "null again, as DDATA");
 }
+
+// ---------------------------------------------------------------------------------------------
+// Reload: the edge carries out a plan from the running plant to a new one.
+// ---------------------------------------------------------------------------------------------
+
+/// The plant reloaded: the drive unchanged, the meter changed (`death_after`), a second drive
+/// added on the drive's line after it.
+fn grown(running: &Plant) -> Plant {
+    let mut new = running.clone();
+    new.lines[1].devices[0].death_after = 5;
+    let mut second = drive();
+    second.id = "drive2".into();
+    second.unit = 3;
+    new.lines[0].devices.push(second);
+    new
+}
+
+fn poll_meter(edge: &mut Edge, at: DeviceRef, time: SystemTime, a: i128) -> Vec<Publish> {
+    publishes(edge.sample(at, 0, &answered(0, time, vec![Value::Int(a), Value::Int(7)])))
+}
+
+#[test]
+fn a_reload_keeps_the_unchanged_devices_session_kills_the_changed_and_births_come_with_fresh_aliases() {
+    use ferrobus_bridge::config::reload::plan;
+    let running = sparkplug_plant();
+    let (mut edge, drive_birth) = online_with_drive(&running);
+    let meter_birth = decode(&poll_meter(&mut edge, METER, t(300), 20)[0]);
+    let new = grown(&running);
+    let plan = plan(&running, &new).unwrap();
+    let out = edge.reload(&new, &plan, t(400));
+    assert_eq!(out.iter().map(|p| p.topic.as_str()).collect::<Vec<_>>(), ["spBv1.0/plant/DDEATH/edge1/meter"]);
+    let ddeath = decode(&out[0]);
+    assert_eq!(ddeath.seq, Some(3), "NBIRTH 0, DBIRTH 1, DBIRTH 2, DDEATH 3");
+    // The drive goes on: the same sample publishes nothing, a change is DDATA under its aliases.
+    assert!(
+        publishes(poll_drive(&mut edge, &new, t(500), &[("F001", Value::Int(6000)), ("d001", Value::Int(5990))]))
+            .is_empty()
+    );
+    let moved =
+        publishes(poll_drive(&mut edge, &new, t(600), &[("F001", Value::Int(5000)), ("d001", Value::Int(5990))]));
+    assert_eq!(moved.iter().map(kind).collect::<Vec<_>>(), ["DDATA"]);
+    let f001 = metric(&drive_birth, "F001").alias;
+    assert_eq!(decode(&moved[0]).metrics.iter().map(|m| m.alias).collect::<Vec<_>>(), [f001]);
+    // The added drive and the changed meter are born at their first answers, with aliases no
+    // metric had.
+    let second = DeviceRef { line: 0, device: 1 };
+    let mut born = Vec::new();
+    for (g, group) in new.lines[0].devices[1].groups.iter().enumerate() {
+        let raws =
+            group.cells.iter().map(|c| if c.name == "running" { Value::Bool(false) } else { Value::Int(1) }).collect();
+        born.extend(publishes(edge.sample(second, g, &answered(g, t(700), raws))));
+    }
+    assert_eq!(born[0].topic, "spBv1.0/plant/DBIRTH/edge1/drive2", "born at its first answered group");
+    assert!(born[1..].iter().all(|p| p.topic == "spBv1.0/plant/DDATA/edge1/drive2"), "{born:?}");
+    let reborn = poll_meter(&mut edge, METER, t(800), 20);
+    assert_eq!(reborn.iter().map(|p| p.topic.as_str()).collect::<Vec<_>>(), ["spBv1.0/plant/DBIRTH/edge1/meter"]);
+    let old: Vec<u64> = aliases(&drive_birth).into_keys().chain(aliases(&meter_birth).into_keys()).collect();
+    let fresh: Vec<u64> =
+        aliases(&decode(&born[0])).into_keys().chain(aliases(&decode(&reborn[0])).into_keys()).collect();
+    assert!(fresh.iter().all(|a| !old.contains(a)), "old {old:?}, new {fresh:?}");
+    let mut unique = fresh.clone();
+    unique.sort_unstable();
+    unique.dedup();
+    assert_eq!(unique.len(), fresh.len(), "{fresh:?}");
+    // A rebirth asked by the host: the same aliases as the births.
+    let (again, _, _) = edge.message("spBv1.0/plant/NCMD/edge1", &rebirth_true(), t(900));
+    assert_eq!(again.iter().map(kind).collect::<Vec<_>>(), ["NBIRTH", "DBIRTH", "DBIRTH", "DBIRTH"]);
+    assert_eq!(aliases(&decode(&again[1])), aliases(&drive_birth));
+}
+
+fn rebirth_true() -> Vec<u8> {
+    let m = Metric::new("Node Control/Rebirth", DataType::Boolean, Some(MetricValue::Boolean(true)));
+    Payload { timestamp: Some(ms(t(0))), metrics: vec![m], ..Payload::default() }.encode()
+}
+
+#[test]
+fn a_reload_that_removes_a_device_sends_its_ddeath_and_its_samples_name_nothing_then() {
+    use ferrobus_bridge::config::reload::plan;
+    let running = sparkplug_plant();
+    let (mut edge, _) = online_with_drive(&running);
+    let mut new = running.clone();
+    new.lines.remove(0);
+    let plan = plan(&running, &new).unwrap();
+    let out = edge.reload(&new, &plan, t(400));
+    assert_eq!(out.iter().map(|p| p.topic.as_str()).collect::<Vec<_>>(), ["spBv1.0/plant/DDEATH/edge1/drive1"]);
+    // The meter, unborn, is now line 0: its first answer is its DBIRTH.
+    let meter = poll_meter(&mut edge, DeviceRef { line: 0, device: 0 }, t(500), 1);
+    assert_eq!(meter.iter().map(|p| p.topic.as_str()).collect::<Vec<_>>(), ["spBv1.0/plant/DBIRTH/edge1/meter"]);
+    // Offline, a reload publishes nothing.
+    edge.disconnected();
+    let plan = ferrobus_bridge::config::reload::plan(&new, &running).unwrap();
+    assert!(edge.reload(&running, &plan, t(600)).is_empty());
+}
+
+#[test]
+fn plain_a_reload_marks_removed_devices_offline_and_moves_the_discovery_configs() {
+    use ferrobus_bridge::config::reload::plan;
+    let mut running = plain_plant(false);
+    if let Mode::Plain(p) = &mut running.mode {
+        p.discovery = Some("homeassistant".into());
+    }
+    let mut edge = Edge::new(&running);
+    let hello = edge.connected(t(0));
+    let meter_configs: Vec<String> =
+        hello.iter().filter(|p| p.topic.contains("meter")).map(|p| p.topic.clone()).collect();
+    assert!(!meter_configs.is_empty());
+    let mut new = grown(&running);
+    new.lines.remove(1);
+    let plan = plan(&running, &new).unwrap();
+    let out = edge.reload(&new, &plan, t(100));
+    assert!(
+        out.iter().any(|p| p.topic == "factory/line1/meter/status" && p.payload == b"offline" && p.retain),
+        "{out:?}"
+    );
+    for topic in &meter_configs {
+        assert!(
+            out.iter().any(|p| &p.topic == topic && p.payload.is_empty() && p.retain),
+            "{topic} not removed: {out:?}"
+        );
+    }
+    let added: Vec<&Publish> =
+        out.iter().filter(|p| p.topic.starts_with("homeassistant/") && !p.payload.is_empty()).collect();
+    assert_eq!(added.len(), 3, "drive2's F001, d001 and running: {added:?}");
+    assert!(added.iter().all(|p| p.topic.contains("drive2") && p.retain));
+    assert!(out.iter().all(|p| !p.topic.contains("drive1")), "drive1 is unchanged: {out:?}");
+}

@@ -7,10 +7,10 @@
 //! settings file: the bridge reads no connection settings, each line has its own).
 //!
 //! SIGHUP reads the plant file again and checks it whole, as at the start: a mistake is logged
-//! at error level, each problem at its place, and counted; otherwise what would change is
-//! worked out ([`ferrobus_bridge::config::reload::plan`]) and logged. This bridge does not yet
-//! apply a changed plant while it runs: the running plant stays, and the log says to restart
-//! it (Unix only: Windows has no SIGHUP).
+//! at error level, each problem at its place, and counted, and the running plant stays;
+//! otherwise the running bridge carries out the plan ([`ferrobus_bridge::config::reload::plan`],
+//! [`ferrobus_bridge::run::Reload`]) without stopping its MQTT session, and what it did is
+//! logged (Unix only: Windows has no SIGHUP).
 
 use std::path::Path;
 use std::sync::{Arc, Mutex};
@@ -54,8 +54,11 @@ to stderr as things happen; the summary goes to stdout at the end (Ctrl-C, SIGTE
 --duration), after the NDEATH.
 
 SIGHUP (systemctl reload) reads the plant file again and checks it: a mistake is logged and \
-changes nothing; what a good file would change is logged, but the bridge does not yet apply it \
-while it runs (restart it to). Windows has no SIGHUP.
+changes nothing; a good file is applied while the bridge runs, without a new MQTT session: \
+unchanged lines and devices go on (no new DBIRTH), removed devices get their DDEATH, added and \
+changed ones are (re)born; a broker or session setting changed reconnects (NDEATH, then NBIRTH). \
+The ids of the edge node, the mode, the plain prefix and the store need a restart. Windows has no \
+SIGHUP.
 
 --demo runs that file against simulated drives (an Omron 3G3RX and an SDP servo on an in-process \
 virtual RS-485 line): after the births it sets the inverter's ramps (F002, F003 = 60 s for 400 Hz), \
@@ -141,13 +144,14 @@ pub(crate) async fn run(plant_file: Option<&Path>, args: &BridgeArgs) -> Result<
         metrics::spawn(listener, Arc::new(source), "bridge");
         live
     });
-    let options = Options { running: Some(running_tx), live };
+    let (reload_tx, reload_rx) = tokio::sync::mpsc::channel(1);
+    let options = Options { running: Some(running_tx), live, reload: Some(reload_rx) };
     let reloads = Arc::new(Mutex::new(Reloads::default()));
     let watching = tokio::spawn(reload_on_hangup(
         hangup,
         plant_file.map(Path::to_path_buf),
         args.clone(),
-        plant.clone(),
+        reload_tx,
         Arc::clone(&reloads),
     ));
     let report = run_with(plant, stop, Some(status_tx), options).await;
@@ -170,19 +174,19 @@ pub(crate) async fn run(plant_file: Option<&Path>, args: &BridgeArgs) -> Result<
 struct Reloads {
     /// Plant files read again.
     checked: u64,
-    /// Of them, refused: a mistake, a setting that cannot change, or a change not applied.
+    /// Of them, refused: a mistake, or a setting that cannot change.
     refused: u64,
 }
 
 /// At each SIGHUP, reads the plant file again (with `--broker` over it, as at the start) and
-/// checks it against `running`: a mistake, or a setting that cannot change while the bridge
-/// runs, is logged at error level; so is a change, which this bridge does not yet apply; a
-/// file that changes nothing is logged at info. Tells systemd it reloads, and when it is done.
+/// hands it to the running bridge, which carries out its plan: a mistake, or a setting that
+/// cannot change while the bridge runs, is logged at error level and changes nothing; what was
+/// done is logged at info. Tells systemd it reloads, and when it is done.
 async fn reload_on_hangup(
     mut hangup: Hangup,
     plant_file: Option<std::path::PathBuf>,
     args: BridgeArgs,
-    running: Plant,
+    bridge: tokio::sync::mpsc::Sender<ferrobus_bridge::run::Reload>,
     reloads: Arc<Mutex<Reloads>>,
 ) {
     loop {
@@ -199,23 +203,24 @@ async fn reload_on_hangup(
                 }
                 Err(format!("{} errors in the plant file", errors.0.len()))
             }
-            Ok(new) => match ferrobus_bridge::config::reload::plan(&running, &new) {
-                Err(fixed) => {
-                    tracing::error!("reload refused: {fixed}");
-                    Err(fixed.to_string())
+            Ok(new) => {
+                let (done, answer) = tokio::sync::oneshot::channel();
+                let asked = bridge.send(ferrobus_bridge::run::Reload { plant: new, done }).await;
+                match (asked, answer.await) {
+                    (Ok(()), Ok(Ok(done))) => {
+                        tracing::info!("reload: {done}");
+                        Ok(done)
+                    }
+                    (Ok(()), Ok(Err(why))) => {
+                        tracing::error!("reload refused: {why}");
+                        Err(why)
+                    }
+                    _ => {
+                        tracing::warn!("reload: the bridge is stopping");
+                        Err("the bridge is stopping".to_string())
+                    }
                 }
-                Ok(plan) if plan.is_empty() => {
-                    tracing::info!("reload: {plan}");
-                    Ok(plan.to_string())
-                }
-                Ok(plan) => {
-                    tracing::error!(
-                        "reload not applied, the running plant stays: the plant file changes {plan}, and this bridge \
-                         applies a changed plant only at its start: restart it"
-                    );
-                    Err(format!("not applied: {plan}"))
-                }
-            },
+            }
         };
         let mut counts = reloads.lock().unwrap_or_else(std::sync::PoisonError::into_inner);
         counts.checked = counts.checked.saturating_add(1);

@@ -81,6 +81,7 @@ use std::time::SystemTime;
 use ferrobus_profile::Value;
 use ferrobus_tools::poll::Sample;
 
+use crate::config::reload::Plan;
 use crate::config::{Mode, Plant};
 pub(crate) use device::{Device, Liveness};
 #[cfg(test)]
@@ -408,6 +409,22 @@ impl Edge {
         match &self.inner {
             Inner::Sparkplug(s) => s.is_online(),
             Inner::Plain(p) => p.is_online(),
+        }
+    }
+
+    /// The plant is reloaded: `plan` from the running plant to `plant` (the same mode: a plan
+    /// never changes it). Sparkplug: an unchanged device keeps its session (no new DBIRTH, its
+    /// aliases); a removed or changed device that is born gets its DDEATH now; a changed or
+    /// added one its DBIRTH at its first answered poll, with aliases never given before in this
+    /// process. Plain: a removed device's status "offline", and with discovery the configs of
+    /// the points gone removed and the new ones published. Devices are renumbered to their
+    /// places in `plant`; the new mode settings are taken (a plan that changes them also
+    /// reconnects: call [`Edge::shutdown`] before, as for an intentional disconnect).
+    pub fn reload(&mut self, plant: &Plant, plan: &Plan, now: SystemTime) -> Vec<Publish> {
+        match (&mut self.inner, &plant.mode) {
+            (Inner::Sparkplug(s), Mode::Sparkplug(config)) => s.reload(plant, config, plan, now),
+            (Inner::Plain(p), Mode::Plain(config)) => p.reload(plant, config, plan),
+            _ => Vec::new(),
         }
     }
 

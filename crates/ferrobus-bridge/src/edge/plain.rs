@@ -28,6 +28,7 @@ use super::device::{Device, Liveness, devices_of};
 use super::discovery;
 use super::record::Record;
 use super::{Action, DeviceRef, EdgeError, EdgeStats, Output, Publish, Reply};
+use crate::config::reload::{Fate, Plan};
 use crate::config::{PlainConfig, Plant};
 use crate::sparkplug::convert::is_scaled;
 
@@ -49,6 +50,9 @@ pub(crate) struct PlainEdge {
     discovery: Vec<Publish>,
     /// The values of the writes asked and not yet [`PlainEdge::written`], by cell, oldest first.
     pending: HashMap<(DeviceRef, usize, usize), VecDeque<String>>,
+    /// What a reload while offline owes the broker at the next connection: the discovery
+    /// configs of removed points (empty, retained) and the status of removed devices.
+    owed: Vec<Publish>,
     pub(crate) stats: EdgeStats,
 }
 
@@ -79,8 +83,64 @@ impl PlainEdge {
             connected: false,
             discovery,
             pending: HashMap::new(),
+            owed: Vec::new(),
             stats: EdgeStats::default(),
         }
+    }
+
+    /// The plant is reloaded (`plan`, from the running plant to `plant`): an unchanged device
+    /// keeps its state (renumbered to its place in `plant`), a changed or added one starts
+    /// afresh; a removed one's status becomes "offline"; with `discovery`, the configs of the
+    /// points gone are removed (empty, retained) and the new or changed ones published. Offline,
+    /// what is owed goes out at the next connection (after the bridge's status).
+    pub(crate) fn reload(&mut self, plant: &Plant, config: &PlainConfig, plan: &Plan) -> Vec<Publish> {
+        let mut old: Vec<Option<PlainDevice>> = std::mem::take(&mut self.devices).into_iter().map(Some).collect();
+        let mut moved: HashMap<DeviceRef, DeviceRef> = HashMap::new();
+        let mut devices = Vec::new();
+        for (device, fate) in devices_of(plant).into_iter().zip(&plan.devices) {
+            let kept = match fate {
+                Fate::Unchanged { was } => old.get_mut(*was).and_then(Option::take),
+                Fate::Changed { .. } | Fate::Added => None,
+            };
+            match kept {
+                Some(mut kept) => {
+                    moved.insert(kept.device.at, device.at);
+                    kept.device.at = device.at;
+                    devices.push(kept);
+                }
+                None => {
+                    let stale = vec![false; device.groups.len()];
+                    devices.push(PlainDevice { device, stale });
+                }
+            }
+        }
+        self.devices = devices;
+        self.pending = std::mem::take(&mut self.pending)
+            .into_iter()
+            .filter_map(|((at, g, c), q)| Some(((*moved.get(&at)?, g, c), q)))
+            .collect();
+        let mut out = Vec::new();
+        for i in &plan.removed_devices {
+            let id = plan_device_id(&old, *i);
+            if let Some(id) = id {
+                out.push(Self::status(format!("{}/{id}/status", config.prefix), "offline"));
+            }
+        }
+        let discovery = config.discovery.as_deref().map(|at| discovery::configs(plant, config, at)).unwrap_or_default();
+        for gone in self.discovery.iter().filter(|o| !discovery.iter().any(|n| n.topic == o.topic)) {
+            out.push(Publish { payload: Vec::new(), ..gone.clone() });
+        }
+        out.extend(discovery.iter().filter(|n| !self.discovery.contains(n)).cloned());
+        self.discovery = discovery;
+        self.config = config.clone();
+        if self.connected {
+            self.stats.data += out.len() as u64;
+            return out;
+        }
+        // Offline: the new configs go out with the connection's; the rest is owed.
+        let published = &self.discovery;
+        self.owed.extend(out.into_iter().filter(|m| !published.contains(m)));
+        Vec::new()
     }
 
     fn status_topic(&self) -> String {
@@ -110,6 +170,7 @@ impl PlainEdge {
     pub(crate) fn connected(&mut self) -> Vec<Publish> {
         self.connected = true;
         let mut out = vec![Self::status(self.status_topic(), "online")];
+        out.append(&mut self.owed);
         out.extend(self.discovery.iter().cloned());
         for d in self.devices.iter().filter(|d| d.device.answered_once()) {
             out.push(self.device_status(&d.device));
@@ -399,4 +460,9 @@ fn point_json(
     }
     json.push('}');
     json
+}
+
+/// The id of running device `i` (`old`, taken or not).
+fn plan_device_id(old: &[Option<PlainDevice>], i: usize) -> Option<String> {
+    old.get(i).and_then(Option::as_ref).map(|d| d.device.id.clone())
 }

@@ -19,7 +19,7 @@ use ferrobus_proto::frame::{Expect, LineConfig, LineTiming};
 use ferrobus_proto::slave::{Slave, SlaveConfig};
 use ferrobus_sim::{Device, Faults, Profile, Sim, tokio_clock};
 use ferrobus_tools::poll::{Event, Group, PollConfig, PollHandle, Poller};
-use tokio::sync::mpsc;
+use tokio::sync::{mpsc, watch};
 
 use crate::config::{Connection, LineMode, LineSpec};
 use crate::edge::DeviceRef;
@@ -94,15 +94,18 @@ impl GroupMap {
     }
 }
 
-/// Starts line `index` of the plant, `spec`: its client (a simulated line's devices too) and
-/// its poller, whose events go to `events` tagged with `index` until it stops.
+/// Starts line `spec` of the plant: its client (a simulated line's devices too) and its
+/// poller, whose events go to `events` tagged with `index` (the line's tag: never another
+/// line's in the bridge's life, so that a stopped line's last events name no line) until it
+/// stops; a listen line stops when `stop`'s sender is dropped.
 pub(super) async fn start(
     index: usize,
     spec: &LineSpec,
     events: mpsc::Sender<(usize, Event)>,
+    stop: watch::Receiver<()>,
 ) -> Result<(RunningLine, GroupMap), RunError> {
     if spec.mode == LineMode::Listen {
-        return super::listen::start(index, spec, events);
+        return super::listen::start(index, spec, events, stop);
     }
     let (transport, timing, sim) = match &spec.connection {
         Connection::Serial { config, ascii } => {

@@ -24,7 +24,7 @@ use ferrobus::port::SameDevice;
 use ferrobus_proto::frame::LineTiming;
 use ferrobus_tools::poll::{Event, Failure, FailureKind, Group, Sample, Traffic};
 use ferrobus_tools::sniff::{BusEvent, Listener, Pairing};
-use tokio::sync::mpsc;
+use tokio::sync::{mpsc, watch};
 
 use crate::config::{Connection, LineSpec};
 
@@ -106,11 +106,13 @@ fn silent(index: usize, seq: u64, time: SystemTime, diagnosis: &str) -> Sample {
 
 /// Starts listen line `index` of the plant, `spec` (a serial port): the listener, in a task of
 /// its own, sends its devices' samples to `events` tagged with `index` until the bridge drops
-/// the channel's receiver. The running line has no client and no poller.
+/// the channel's receiver or `stop`'s sender (a reload that removes or changes the line). The
+/// running line has no client and no poller.
 pub(super) fn start(
     index: usize,
     spec: &LineSpec,
     events: mpsc::Sender<(usize, Event)>,
+    stop: watch::Receiver<()>,
 ) -> Result<(RunningLine, GroupMap), RunError> {
     let Connection::Serial { config, .. } = &spec.connection else {
         return Err(RunError::Line { line: spec.name.clone(), detail: "a listen line is a serial port".into() });
@@ -119,17 +121,19 @@ pub(super) fn start(
     let devices = Devices::new(spec, &map);
     let describe = format!("{} (listening, transmitting nothing)", config.path.display());
     let running = RunningLine { name: spec.name.clone(), describe, client: None, poll: None, sim: None };
-    tokio::spawn(listen(index, spec.name.clone(), config.clone(), devices, events));
+    tokio::spawn(listen(index, spec.name.clone(), config.clone(), devices, events, stop));
     Ok((running, map))
 }
 
-/// Listens to `config`'s port until `events` is closed, opening it again when it fails.
+/// Listens to `config`'s port until `events` is closed or `stop`'s sender dropped, opening it
+/// again when it fails.
 async fn listen(
     index: usize,
     name: String,
     config: SerialConfig,
     mut devices: Devices,
     events: mpsc::Sender<(usize, Event)>,
+    mut stop: watch::Receiver<()>,
 ) {
     let timing = LineTiming::new(&config.line);
     // Opened again only while the path names the device first opened (never a pty's number
@@ -150,6 +154,7 @@ async fn listen(
                     let heard = tokio::select! {
                         heard = listener.next() => heard,
                         () = events.closed() => return,
+                        _ = stop.changed() => return,
                     };
                     let event = match heard {
                         Ok(Some(event)) => event,
@@ -174,6 +179,7 @@ async fn listen(
         tokio::select! {
             () = tokio::time::sleep(REOPEN) => {}
             () = events.closed() => return,
+            _ = stop.changed() => return,
         }
     }
 }

@@ -38,6 +38,7 @@ mod command;
 mod lines;
 mod listen;
 pub mod mqtt;
+mod reload;
 mod report;
 pub mod state;
 mod status;
@@ -48,10 +49,11 @@ use std::sync::{Arc, Mutex};
 use std::time::{Duration, SystemTime};
 
 use ferrobus_tools::poll::{Event, Sample};
-use tokio::sync::{mpsc, oneshot};
+use tokio::sync::{mpsc, oneshot, watch};
 use tokio::time::Instant;
 
 pub use lines::{GroupMap, RunningLine, SimulatedLine};
+pub use reload::Reload;
 pub use report::{LineReport, Report};
 pub use status::Status;
 
@@ -108,6 +110,9 @@ pub struct Options {
     /// Kept up to date while the bridge runs, every [`LIVE_EVERY`]: what a status endpoint
     /// shows (`bridge --metrics`).
     pub live: Option<Arc<Mutex<Live>>>,
+    /// Plant files read again, each carried out while the bridge runs ([`Reload`]): its plan
+    /// from the running plant, the answer what was done or why nothing was.
+    pub reload: Option<mpsc::Receiver<Reload>>,
 }
 
 /// A running bridge as it is now ([`Options::live`]).
@@ -146,6 +151,7 @@ pub async fn run_with(
         let _ = running.send(bridge.lines.iter().map(|l| l.running.clone()).collect());
     }
     bridge.live = options.live;
+    bridge.reloads = options.reload;
     bridge.serve(stop).await;
     Ok(bridge.finish().await)
 }
@@ -156,6 +162,10 @@ struct LineState {
     map: GroupMap,
     /// Each device's writes waiting for the bus.
     writes: Vec<DeviceWrites>,
+    /// What its events are tagged with: never another line's in the bridge's life.
+    tag: usize,
+    /// Dropped with the line: a listen line stops listening.
+    _stop: watch::Sender<()>,
 }
 
 /// A write a command asks for: the device's group and cell, the raw value, the value as typed.
@@ -169,9 +179,20 @@ struct Bridge {
     broker: String,
     bd_seq_file: Option<BdSeqFile>,
     lines: Vec<LineState>,
+    /// The lines' events, by line tag.
     samples: mpsc::Receiver<(usize, Event)>,
-    written_tx: mpsc::Sender<Applied>,
-    written: mpsc::Receiver<Applied>,
+    /// Kept for the lines a reload starts.
+    samples_tx: mpsc::Sender<(usize, Event)>,
+    /// The tag of the next line started.
+    next_tag: usize,
+    /// Reloads carried out so far: a write's result names its device as it was then.
+    epoch: u64,
+    /// Per reload (the latest last, a few kept): each running line's index after it, if it
+    /// went on, so that a write's result finds its device.
+    moves: VecDeque<Vec<Option<usize>>>,
+    reloads: Option<mpsc::Receiver<Reload>>,
+    written_tx: mpsc::Sender<(u64, Applied)>,
+    written: mpsc::Receiver<(u64, Applied)>,
     events: Option<mpsc::Sender<Status>>,
     backoff: Backoff,
     reconnect_at: Option<Instant>,
@@ -207,9 +228,10 @@ impl Bridge {
         let (written_tx, written) = mpsc::channel(64);
         let mut lines = Vec::with_capacity(plant.lines.len());
         for (index, spec) in plant.lines.iter().enumerate() {
-            let (running, map) = lines::start(index, spec, samples_tx.clone()).await?;
+            let (stop, stopped) = watch::channel(());
+            let (running, map) = lines::start(index, spec, samples_tx.clone(), stopped).await?;
             let writes = vec![DeviceWrites::default(); spec.devices.len()];
-            lines.push(LineState { running, map, writes });
+            lines.push(LineState { running, map, writes, tag: index, _stop: stop });
         }
         let report = Report::new(&plant, store.stats().recovered);
         let (bd_seq_file, note) = restore_bd_seq(&plant, &mut edge);
@@ -221,8 +243,13 @@ impl Bridge {
             store,
             session,
             broker,
+            next_tag: lines.len(),
             lines,
             samples,
+            samples_tx,
+            epoch: 0,
+            moves: VecDeque::new(),
+            reloads: None,
             written_tx,
             written,
             events,
@@ -267,7 +294,11 @@ impl Bridge {
                     None => return,
                 },
                 Some((line, event)) = self.samples.recv() => self.take_poll(line, event),
-                Some(applied) = self.written.recv() => self.on_applied(applied),
+                Some((epoch, applied)) = self.written.recv() => self.on_applied(epoch, applied),
+                Some(reload) = next_reload(&mut self.reloads) => {
+                    let done = self.reload(reload.plant).await;
+                    let _ = reload.done.send(done);
+                }
                 () = sleep_until(reconnect_at), if reconnect_at.is_some() => {
                     self.reconnect_at = None;
                     self.connect();
@@ -475,6 +506,7 @@ impl Bridge {
         let queue = line.writes.get_mut(device.device).ok_or_else(|| format!("{name}: no such device"))?;
         queue.admit(resolved.len()).map_err(|why| format!("{name}: {why}: nothing written"))?;
         let (turn, tx, topic) = (Arc::clone(&queue.turn), self.written_tx.clone(), topic.to_string());
+        let epoch = self.epoch;
         tokio::spawn(async move {
             let _turn = turn.lock().await;
             if let Some((profile, unit)) = &guarded
@@ -482,7 +514,7 @@ impl Bridge {
             {
                 let why = format!("{name}: {refusal}: nothing written");
                 let refused = Applied { device, tried: Vec::new(), not_written: resolved, refused: Some((topic, why)) };
-                let _ = tx.send(refused).await;
+                let _ = tx.send((epoch, refused)).await;
                 return;
             }
             let profile = guarded.map(|(profile, _)| profile);
@@ -491,7 +523,7 @@ impl Bridge {
                 async move { poll.write_raw(profile.as_deref(), index, cell, &raw).await.map_err(|e| e.to_string()) }
             })
             .await;
-            let _ = tx.send(applied).await;
+            let _ = tx.send((epoch, applied)).await;
         });
         Ok(())
     }
@@ -499,8 +531,12 @@ impl Bridge {
     /// A command's writes are done: a status line per write tried, the edge told of each (plain
     /// mode's results; a write not tried as failed), and one line saying exactly what was and
     /// was not written if the bus failed one midway.
-    fn on_applied(&mut self, applied: Applied) {
-        let device = applied.device;
+    fn on_applied(&mut self, epoch: u64, mut applied: Applied) {
+        let Some(device) = self.moved(epoch, applied.device) else {
+            tracing::info!("a write's result came after a reload stopped its device: {} writes", applied.tried.len());
+            return;
+        };
+        applied.device = device;
         let name = self.device_name(device);
         let count = applied.tried.len() + applied.not_written.len();
         if let Some(queue) = self.lines.get_mut(device.line).and_then(|l| l.writes.get_mut(device.device)) {
@@ -559,7 +595,9 @@ impl Bridge {
         }
     }
 
-    fn on_poll(&mut self, line: usize, event: Event) {
+    fn on_poll(&mut self, tag: usize, event: Event) {
+        // A line a reload stopped names no line now.
+        let Some(line) = self.line_of(tag) else { return };
         match event {
             Event::Sample(sample) => self.on_sample(line, &sample),
             Event::Overload(overload) => {
@@ -787,6 +825,20 @@ fn kind_of(topic: &str) -> String {
         || if topic.ends_with("/result") { "result".into() } else { "plain".into() },
         |t| t.kind.as_str().to_string(),
     )
+}
+
+/// The next plant file to carry out; never, without a channel (or once it is closed).
+async fn next_reload(reloads: &mut Option<mpsc::Receiver<Reload>>) -> Option<Reload> {
+    match reloads {
+        Some(rx) => match rx.recv().await {
+            Some(reload) => Some(reload),
+            None => {
+                *reloads = None;
+                None
+            }
+        },
+        None => std::future::pending().await,
+    }
 }
 
 async fn sleep_until(at: Option<Instant>) {

@@ -73,14 +73,7 @@ impl Report {
     /// the store.
     pub fn finish(&mut self, counters: &[Vec<Counters>], store: &Store) {
         for (line, groups) in self.lines.iter_mut().zip(counters) {
-            for c in groups {
-                line.polls += c.polls;
-                line.ok += c.ok;
-                line.overruns += c.overruns;
-                for (kind, n) in &c.failures {
-                    *line.failures.entry(*kind).or_default() += n;
-                }
-            }
+            line.add(groups);
         }
         self.left = store.len();
     }
@@ -88,6 +81,20 @@ impl Report {
     /// Messages published of type `kind`.
     pub fn published(&self, kind: &str) -> u64 {
         self.published.get(kind).copied().unwrap_or(0)
+    }
+}
+
+impl LineReport {
+    /// Adds a poller's counters, group by group (a poller stopped by a reload is counted so).
+    pub fn add(&mut self, groups: &[Counters]) {
+        for c in groups {
+            self.polls += c.polls;
+            self.ok += c.ok;
+            self.overruns += c.overruns;
+            for (kind, n) in &c.failures {
+                *self.failures.entry(*kind).or_default() += n;
+            }
+        }
     }
 }
 

@@ -15,6 +15,7 @@ use super::deadband::Seen;
 use super::device::{Device, Liveness, devices_of};
 use super::record::Record;
 use super::{DeviceRef, EdgeError, EdgeStats, Output, Publish, millis};
+use crate::config::reload::{Fate, Plan};
 use crate::config::{Plant, SparkplugConfig};
 use crate::sparkplug::convert::{UintEncoding, datatype_of, metric_value, properties_of};
 use crate::sparkplug::payload::{
@@ -60,43 +61,92 @@ pub(crate) struct SparkplugEdge {
     host_timestamp: Option<u64>,
     /// The NBIRTH of this session went out.
     node_born: bool,
+    /// The next metric alias: never given twice in the process's life, so that a device added
+    /// or changed by a reload takes aliases no live metric has.
+    next_alias: u64,
     pub(crate) stats: EdgeStats,
 }
 
 impl SparkplugEdge {
     pub(crate) fn new(plant: &Plant, config: &SparkplugConfig) -> SparkplugEdge {
-        let mut next_alias = 1_u64;
-        let devices = devices_of(plant)
-            .into_iter()
-            .map(|device| {
-                let aliases = device
-                    .groups
-                    .iter()
-                    .map(|g| {
-                        g.cells
-                            .iter()
-                            .map(|_| {
-                                let alias = next_alias;
-                                next_alias += 1;
-                                alias
-                            })
-                            .collect()
-                    })
-                    .collect();
-                SpDevice { device, aliases, born: false, death_due: false }
-            })
-            .collect();
-        SparkplugEdge {
+        let mut edge = SparkplugEdge {
             config: config.clone(),
-            devices,
+            devices: Vec::new(),
             bd_seq: 0,
             seq: 0,
             connected: false,
             host_online: config.primary_host.is_none(),
             host_timestamp: None,
             node_born: false,
+            next_alias: 1,
             stats: EdgeStats::default(),
+        };
+        edge.devices = devices_of(plant).into_iter().map(|device| edge.fresh(device)).collect();
+        edge
+    }
+
+    /// A device not born yet, with aliases never given before.
+    fn fresh(&mut self, device: Device) -> SpDevice {
+        let aliases = device
+            .groups
+            .iter()
+            .map(|g| {
+                g.cells
+                    .iter()
+                    .map(|_| {
+                        let alias = self.next_alias;
+                        self.next_alias = self.next_alias.saturating_add(1);
+                        alias
+                    })
+                    .collect()
+            })
+            .collect();
+        SpDevice { device, aliases, born: false, death_due: false }
+    }
+
+    /// The plant is reloaded (`plan`, from the running plant to `plant`): an unchanged device
+    /// keeps its state, aliases and birth (renumbered to its place in `plant`); a removed or
+    /// changed one that is born gets its DDEATH now; a changed or added one starts unborn with
+    /// new aliases (its DBIRTH comes at its first answered poll).
+    pub(crate) fn reload(
+        &mut self,
+        plant: &Plant,
+        config: &SparkplugConfig,
+        plan: &Plan,
+        now: SystemTime,
+    ) -> Vec<Publish> {
+        self.config = config.clone();
+        let mut old: Vec<Option<SpDevice>> = std::mem::take(&mut self.devices).into_iter().map(Some).collect();
+        let mut deaths = Vec::new();
+        for &i in &plan.removed_devices {
+            if let Some(d) = old.get_mut(i).and_then(Option::take) {
+                deaths.push(d);
+            }
         }
+        let mut devices = Vec::new();
+        for (device, fate) in devices_of(plant).into_iter().zip(&plan.devices) {
+            let was = match fate {
+                Fate::Unchanged { was } | Fate::Changed { was } => old.get_mut(*was).and_then(Option::take),
+                Fate::Added => None,
+            };
+            match (fate, was) {
+                (Fate::Unchanged { .. }, Some(mut kept)) => {
+                    kept.device.at = device.at;
+                    devices.push(kept);
+                }
+                (_, was) => {
+                    deaths.extend(was);
+                    devices.push(self.fresh(device));
+                }
+            }
+        }
+        self.devices = devices;
+        let mut out = Vec::new();
+        let online = self.node_born;
+        for d in deaths.into_iter().filter(|d| d.born && online) {
+            out.push(self.ddeath_of(&d.device.id, now));
+        }
+        out
     }
 
     pub(crate) fn bd_seq(&self) -> u8 {
@@ -265,17 +315,19 @@ impl SparkplugEdge {
     }
 
     fn ddeath(&mut self, i: usize, now: SystemTime) -> Option<Publish> {
-        if i >= self.devices.len() {
-            return None;
-        }
-        let seq = self.next_seq();
         let d = self.devices.get_mut(i)?;
         d.born = false;
         d.death_due = false;
         let id = d.device.id.clone();
+        Some(self.ddeath_of(&id, now))
+    }
+
+    /// The DDEATH of device `id` (the next seq).
+    fn ddeath_of(&mut self, id: &str, now: SystemTime) -> Publish {
+        let seq = self.next_seq();
         let payload = Payload { timestamp: Some(millis(now)), seq: Some(seq), ..Payload::default() };
         self.stats.device_deaths += 1;
-        Some(self.publish(MessageType::DDeath, Some(&id), &payload))
+        self.publish(MessageType::DDeath, Some(id), &payload)
     }
 
     fn index(&self, at: DeviceRef) -> Option<usize> {
