@@ -207,10 +207,8 @@ async fn reload_on_hangup(
                 let (done, answer) = tokio::sync::oneshot::channel();
                 let asked = bridge.send(ferrobus_bridge::run::Reload { plant: new, done }).await;
                 match (asked, answer.await) {
-                    (Ok(()), Ok(Ok(done))) => {
-                        tracing::info!("reload: {done}");
-                        Ok(done)
-                    }
+                    // The bridge says what it did, as a status line.
+                    (Ok(()), Ok(Ok(done))) => Ok(done),
                     (Ok(()), Ok(Err(why))) => {
                         tracing::error!("reload refused: {why}");
                         Err(why)

@@ -131,6 +131,7 @@ impl Bridge {
             self.say(Status::Connecting { broker: self.broker.clone() });
             self.connect();
         }
+        self.say(Status::Note(format!("reload: {plan}")));
         Ok(plan.to_string())
     }
 

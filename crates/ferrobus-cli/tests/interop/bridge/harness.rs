@@ -167,6 +167,13 @@ impl Bridge {
         self.proc.as_ref().map(Proc::log).unwrap_or_default()
     }
 
+    /// Sends it SIGHUP: it reads its plant file again.
+    pub(crate) fn hangup(&self) {
+        let Some(proc) = &self.proc else { return };
+        let status = Command::new("kill").args(["-HUP", &proc.id().to_string()]).status();
+        assert!(status.is_ok_and(|s| s.success()), "kill -HUP {}", proc.id());
+    }
+
     /// Kills it with SIGKILL, as a power cut would: no NDEATH of its own.
     pub(crate) fn kill(&mut self) {
         if let Some(proc) = self.proc.take() {
