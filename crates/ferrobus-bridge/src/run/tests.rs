@@ -704,3 +704,60 @@ async fn hostile_commands_and_states_keep_the_session_and_the_data_and_every_sta
     assert!(!kinds.contains(&MessageType::NBirth), "no second NBIRTH: {kinds:?}");
     assert_eq!(kinds.iter().filter(|k| **k == MessageType::NDeath).count(), 1, "only the stop's NDEATH: {kinds:?}");
 }
+
+/// Hands the running bridge `plant` through [`Options::reload`]: what it says it did.
+async fn reload_to(reloads: &mpsc::Sender<Reload>, plant: Plant) -> Result<String, String> {
+    let (done, answer) = oneshot::channel();
+    reloads.send(Reload { plant, done }).await.expect("the bridge takes reloads");
+    tokio::time::timeout(Duration::from_secs(20), answer).await.expect("a reload in 20 s").expect("an answer")
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_reload_removes_a_device_with_its_ddeath_refuses_a_fixed_setting_and_a_new_broker_gets_a_new_session() {
+    let Some(first) = start_broker("reload-a").await else { return };
+    let Some(second) = start_broker("reload-b").await else { return };
+    let mut watcher = subscribe(first.port).await;
+    let mut other = subscribe(second.port).await;
+    let plant = demo_plant(first.port, &first.dir.join("store"));
+    let devices: Vec<String> = plant.devices().map(|(_, d)| d.id.clone()).collect();
+    assert!(devices.len() >= 2, "{devices:?}");
+    let (reload_tx, reload_rx) = mpsc::channel(1);
+    let (stop_tx, stop_rx) = oneshot::channel::<()>();
+    let options = Options { reload: Some(reload_rx), ..Options::default() };
+    let bridge = tokio::spawn(run_with(plant.clone(), async move { drop(stop_rx.await) }, None, options));
+    let (_, birth) = next_of(&mut watcher, MessageType::NBirth).await;
+    for _ in 0..devices.len() {
+        next_of(&mut watcher, MessageType::DBirth).await;
+    }
+
+    // The last device removed: its DDEATH, nothing else dies and no session is made again.
+    let mut smaller = plant.clone();
+    let line = smaller.lines.iter_mut().rev().find(|l| !l.devices.is_empty()).expect("a line with devices");
+    let gone = line.devices.pop().expect("a device").id;
+    let done = reload_to(&reload_tx, smaller.clone()).await.expect("applied");
+    assert!(done.starts_with("0 devices added, 0 changed, 1 removed,"), "{done}");
+    let (topic, _) = next_of(&mut watcher, MessageType::DDeath).await;
+    assert!(topic.ends_with(&format!("/{gone}")), "{topic}");
+
+    // A setting fixed for the bridge's life: refused, nothing done.
+    let mut renamed = smaller.clone();
+    if let Mode::Sparkplug(s) = &mut renamed.mode {
+        s.edge_node_id = "renamed".into();
+    }
+    let refused = reload_to(&reload_tx, renamed).await.expect_err("refused");
+    assert!(refused.contains("edge_node_id"), "{refused}");
+
+    // Another broker: NDEATH on the first, a new session on the second with the next bdSeq.
+    let mut moved = smaller.clone();
+    moved.broker.port = second.port;
+    let done = reload_to(&reload_tx, moved).await.expect("applied");
+    assert!(done.ends_with("broker session made again"), "{done}");
+    let (_, death) = next_of(&mut watcher, MessageType::NDeath).await;
+    assert_eq!(bd_seq(&death), bd_seq(&birth), "the NDEATH of the first session");
+    let (_, again) = next_of(&mut other, MessageType::NBirth).await;
+    assert_eq!(bd_seq(&again), bd_seq(&birth).map(|n| (n + 1) % 256), "the next bdSeq");
+    stop_tx.send(()).expect("the bridge runs");
+    let report = bridge.await.expect("the bridge's task").expect("the bridge ran");
+    assert_eq!(report.connections, 2, "{report}");
+    assert_eq!(report.published("NBIRTH"), 2, "{report}");
+}
