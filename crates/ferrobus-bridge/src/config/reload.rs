@@ -16,8 +16,8 @@
 //! setting other than the edge node's identity (the primary host, the integer encoding,
 //! plain mode's retain, QoS and discovery), changed: the session to the broker is made again.
 //!
-//! The runtime ([`crate::run`]) does not yet carry a plan out: `ferrobus bridge` checks the file
-//! on SIGHUP, logs its plan and keeps the running plant until a restart.
+//! The runtime carries a plan out while it runs ([`crate::run::Reload`]); `ferrobus bridge` hands
+//! it the file read again on SIGHUP.
 //!
 //! Fixed for the bridge's life ([`Fixed`]): Sparkplug or plain; the Sparkplug group and edge
 //! node ids (the node's identity: its bdSeq, Will and the topics of every message); plain

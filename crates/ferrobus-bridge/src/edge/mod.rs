@@ -21,7 +21,8 @@
 //!   [`Edge::set_bd_seq`] let the runtime keep it across restarts. One seq per edge node,
 //!   +1 per message (NBIRTH, DBIRTH, DDATA, DDEATH), 255 → 0; every NBIRTH has seq 0.
 //! - **Aliases** are numbered from 1 in line, device, group and cell order: the same plant
-//!   gives the same aliases. Node metrics (`bdSeq`, `Node Control/Rebirth`,
+//!   gives the same aliases. [`Edge::reload`] keeps an unchanged device's and gives an added
+//!   or changed device new ones from a counter that never gives a number twice. Node metrics (`bdSeq`, `Node Control/Rebirth`,
 //!   `Properties/Software`) have none.
 //! - **Births.** NBIRTH: `bdSeq` (Int64), `Node Control/Rebirth` (Boolean false, writable),
 //!   `Properties/Software`. A device is born at its first answered poll: its DBIRTH has every
