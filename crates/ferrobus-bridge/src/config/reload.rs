@@ -12,7 +12,7 @@
 //! | gone | removed | removed: DDEATH |
 //!
 //! A device's settings are its line, unit, profile, groups (points and rates), deadbands and
-//! `death_after`; a line's its connection and client settings. A broker setting, or a mode
+//! `death_after`; a line's its connection, client settings and mode (polled or listened to). A broker setting, or a mode
 //! setting other than the edge node's identity (the primary host, the integer encoding,
 //! plain mode's retain, QoS and discovery), changed: the session to the broker is made again.
 //!
@@ -86,9 +86,9 @@ pub fn plan(running: &Plant, new: &Plant) -> Result<Plan, Fixed> {
     Ok(Plan { lines, removed_lines, devices, removed_devices, reconnect })
 }
 
-/// A line polls the same: the same connection and client settings (its devices apart).
+/// A line polls the same: the same connection, client settings and mode (its devices apart).
 fn same_line(a: &LineSpec, b: &LineSpec) -> bool {
-    a.connection == b.connection && a.client == b.client
+    a.connection == b.connection && a.client == b.client && a.mode == b.mode
 }
 
 /// A device publishes the same metrics, polled the same way.

@@ -102,16 +102,13 @@ impl PlainEdge {
                 Fate::Unchanged { was } => old.get_mut(*was).and_then(Option::take),
                 Fate::Changed { .. } | Fate::Added => None,
             };
-            match kept {
-                Some(mut kept) => {
-                    moved.insert(kept.device.at, device.at);
-                    kept.device.at = device.at;
-                    devices.push(kept);
-                }
-                None => {
-                    let stale = vec![false; device.groups.len()];
-                    devices.push(PlainDevice { device, stale });
-                }
+            if let Some(mut kept) = kept {
+                moved.insert(kept.device.at, device.at);
+                kept.device.at = device.at;
+                devices.push(kept);
+            } else {
+                let stale = vec![false; device.groups.len()];
+                devices.push(PlainDevice { device, stale });
             }
         }
         self.devices = devices;

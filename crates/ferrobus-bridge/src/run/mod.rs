@@ -31,7 +31,9 @@
 //! backoff (the configured delay, doubling to 30 s). Stopping publishes NDEATH before the
 //! DISCONNECT, stops the pollers, closes the store (what is left is kept on disk for the next
 //! run) and returns a [`Report`]. [`run_with`]'s [`Options`] hand out the running lines (their
-//! clients, pollers and simulated lines) to a caller that drives a device beside the bridge.
+//! clients, pollers and simulated lines) to a caller that drives a device beside the bridge,
+//! and take plants read again ([`Reload`]), each carried out while the bridge runs (`reload.rs`:
+//! lines and devices kept, stopped and started, the session kept unless the broker changed).
 
 mod broker;
 mod command;
@@ -830,13 +832,13 @@ fn kind_of(topic: &str) -> String {
 /// The next plant file to carry out; never, without a channel (or once it is closed).
 async fn next_reload(reloads: &mut Option<mpsc::Receiver<Reload>>) -> Option<Reload> {
     match reloads {
-        Some(rx) => match rx.recv().await {
-            Some(reload) => Some(reload),
-            None => {
+        Some(rx) => {
+            let reload = rx.recv().await;
+            if reload.is_none() {
                 *reloads = None;
-                None
             }
-        },
+            reload
+        }
         None => std::future::pending().await,
     }
 }

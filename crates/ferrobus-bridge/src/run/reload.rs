@@ -208,3 +208,77 @@ fn kept_lines(running: &Plant, new: &Plant, lines: &[Fate], devices: &[Fate]) ->
         })
         .collect()
 }
+
+#[cfg(test)]
+mod tests {
+    use std::path::Path;
+
+    use super::kept_lines;
+    use crate::config::Plant;
+    use crate::config::reload::plan;
+
+    const RUNNING: &str = r#"
+[broker]
+address = "127.0.0.1:1883"
+
+[sparkplug]
+group_id = "plant"
+edge_node_id = "edge"
+
+[[line]]
+name = "a"
+simulated = true
+
+[[line.device]]
+id = "inverter"
+unit = 1
+profile = "omron-3g3rx"
+every = "1s"
+points = ["d001"]
+
+[[line.device]]
+id = "servo"
+unit = 2
+profile = "sdp-servo"
+every = "1s"
+groups = ["monitor"]
+
+[[line]]
+name = "b"
+simulated = true
+
+[[line.device]]
+id = "meter"
+unit = 3
+profile = "omron-3g3rx"
+every = "1s"
+points = ["d003"]
+"#;
+
+    fn kept(new: &str) -> Vec<Option<usize>> {
+        let (running, new) = (parse(RUNNING), parse(new));
+        let plan = plan(&running, &new).unwrap();
+        kept_lines(&running, &new, &plan.lines, &plan.devices)
+    }
+
+    fn parse(text: &str) -> Plant {
+        Plant::parse(text, "plant.toml", Path::new(".")).unwrap()
+    }
+
+    #[test]
+    fn a_line_goes_on_only_unchanged_with_the_same_devices_unchanged_in_the_same_order() {
+        assert_eq!(kept(RUNNING), [Some(0), Some(1)]);
+        // The lines swapped in the file: each goes on, at its new place.
+        let (a, b) = RUNNING.split_at(RUNNING.find("[[line]]\nname = \"b\"").unwrap());
+        let head = a.find("[[line]]").unwrap();
+        assert_eq!(kept(&format!("{}{b}\n{}", &a[..head], &a[head..])), [Some(1), Some(0)]);
+        // A device changed on line b: b starts again, a goes on.
+        assert_eq!(kept(&RUNNING.replace("points = [\"d003\"]", "points = [\"d003\", \"d001\"]")), [Some(0), None]);
+        // A device gone from line a: a starts again.
+        let servo = RUNNING.find("[[line.device]]\nid = \"servo\"").unwrap();
+        let end = RUNNING.find("[[line]]\nname = \"b\"").unwrap();
+        assert_eq!(kept(&format!("{}{}", &RUNNING[..servo], &RUNNING[end..])), [None, Some(1)]);
+        // A line's setting changed: it starts again.
+        assert_eq!(kept(&RUNNING.replacen("simulated = true", "simulated = true\nbaud = 9600", 1)), [None, Some(1)]);
+    }
+}

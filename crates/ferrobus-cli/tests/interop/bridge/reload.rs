@@ -58,7 +58,7 @@ fn sighup_adds_and_changes_devices_without_a_new_nbirth_and_the_unchanged_one_is
     assert_eq!(spb::count(&messages, "DDEATH", Some("changed")), 1, "{listing}");
     let at = |kind: &str, n: usize| {
         let mut found = messages.iter().enumerate().filter(|(_, m)| spb::is(m, kind, Some("changed")));
-        found.nth(n).map(|(i, _)| i).unwrap_or_else(|| panic!("no {kind} of changed #{n}: {:?}", topics(&messages)))
+        found.nth(n).map_or_else(|| panic!("no {kind} of changed #{n}: {:?}", topics(&messages)), |(i, _)| i)
     };
     assert!(at("DBIRTH", 0) < at("DDEATH", 0) && at("DDEATH", 0) < at("DBIRTH", 1), "{listing}");
     let reborn = ferrobus_bridge::sparkplug::payload::Payload::decode(&messages[at("DBIRTH", 1)].payload).unwrap();
