@@ -187,6 +187,8 @@ struct Bridge {
     samples_tx: mpsc::Sender<(usize, Event)>,
     /// The tag of the next line started.
     next_tag: usize,
+    /// The lines started with the bridge (tags below this), handed out by [`Options::running`].
+    handed: usize,
     /// Reloads carried out so far: a write's result names its device as it was then.
     epoch: u64,
     /// Per reload (the latest last, a few kept): each running line's index after it, if it
@@ -246,6 +248,7 @@ impl Bridge {
             session,
             broker,
             next_tag: lines.len(),
+            handed: lines.len(),
             lines,
             samples,
             samples_tx,
@@ -354,6 +357,14 @@ impl Bridge {
         }
         for poll in self.lines.iter().filter_map(|l| l.running.poll.as_ref()) {
             poll.stop();
+        }
+        // The lines a reload started were never handed out ([`Options::running`]): the reply
+        // one of them is still owed is awaited here, so that it reaches no one else.
+        let started = self.lines.iter().filter(|l| l.tag >= self.handed && l.running.sim.is_none());
+        let releases: Vec<ferrobus::Release> =
+            started.filter_map(|l| l.running.client.as_ref().map(ferrobus::Client::release)).collect();
+        for release in releases {
+            release.settled().await;
         }
         self.end_drop_burst();
         let mut report = std::mem::take(&mut self.report);
