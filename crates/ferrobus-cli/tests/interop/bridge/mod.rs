@@ -13,7 +13,8 @@
 //! - [`guard`]: a DCMD and a plain `.../set` of a run-locked point, taken stopped, refused running;
 //! - [`listen`]: a listen line on a `ferrobus line` tap, publishing what the bus's own master
 //!   read, at its wire time, transmitting nothing, a `.../set` refused;
-//! - [`reload`]: SIGHUP with a device added and one changed, applied without a new session;
+//! - [`reload`]: SIGHUP with a device added and one changed, applied without a new session
+//!   (Sparkplug), and a device removed and one added with discovery (plain);
 //! - [`cli`]: `--check` on a broken file and the shipped examples, and `--demo`;
 //! - [`harness`] (drives, plant.toml, the bridge process) and [`spb`] (recorder, checker,
 //!   publisher, protoc) are what they are made of.

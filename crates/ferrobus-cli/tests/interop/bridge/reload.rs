@@ -2,7 +2,9 @@
 //! device added (on a line of its own) and one changed (a point more), the unchanged device
 //! gets no new DBIRTH, the added one is born, the changed one gets its DDEATH and then its
 //! DBIRTH with the new metric, and the node's NBIRTH is not repeated; pysparkplug finds the
-//! whole recording clean.
+//! whole recording clean. In plain mode with discovery: a removed device's status goes
+//! offline and its configs are removed (empty, retained), the added one's are published, and
+//! the bridge's status is not said online again.
 
 #![cfg(unix)]
 
@@ -78,4 +80,44 @@ fn sighup_adds_and_changes_devices_without_a_new_nbirth_and_the_unchanged_one_is
     let path = recorder.stop();
     drop(broker);
     spb::verify(&path, &[]).assert_clean();
+}
+
+#[test]
+fn sighup_in_plain_mode_removes_a_devices_discovery_configs_and_publishes_the_added_ones() {
+    let Some(_turn) = spb::require() else { return };
+    let dir = spb::evidence_dir("reload-plain");
+    let broker = crate::support::mosquitto::Broker::start();
+    let recorder = spb::Recorder::start(&broker, &dir, &["plant4/#", "homeassistant/#"]);
+    let drive = Drive::start(&["--profile", "omron-3g3rx"]);
+    let base = || Plant::plain(broker.port(), "plant4", false).discovery();
+    let config = base()
+        .tcp_line("a", drive.address(), &device("kept", "\"d001\""))
+        .tcp_line("b", drive.address(), &device("gone", "\"d001\""))
+        .write(&dir);
+    let mut bridge = Bridge::start(&config, &[]);
+    let values = |m: &[Message], id: &str| m.iter().any(|m| m.topic == format!("plant4/{id}/d001"));
+    recorder.wait_until("values of kept and gone", WITHIN, |m| values(m, "kept") && values(m, "gone"));
+    let gone_configs: Vec<String> = recorder
+        .messages()
+        .iter()
+        .filter(|m| m.topic.starts_with("homeassistant/") && m.topic.contains("gone") && !m.payload.is_empty())
+        .map(|m| m.topic.clone())
+        .collect();
+    assert!(!gone_configs.is_empty(), "the configs of gone");
+
+    base()
+        .tcp_line("a", drive.address(), &device("kept", "\"d001\""))
+        .tcp_line("c", drive.address(), &device("added", "\"d001\""))
+        .write(&dir);
+    bridge.hangup();
+    let messages = recorder.wait_until("gone offline and removed, added's values", WITHIN, |m| {
+        let removed = gone_configs.iter().all(|t| m.iter().any(|m| &m.topic == t && m.payload.is_empty()));
+        let offline = m.iter().any(|m| m.topic == "plant4/gone/status" && m.payload == b"offline");
+        removed && offline && values(m, "added")
+    });
+    let added = messages.iter().filter(|m| m.topic.starts_with("homeassistant/") && m.topic.contains("added"));
+    assert!(added.count() > 0, "added's config:\n{}", spb::listing(&messages));
+    let online = messages.iter().filter(|m| m.topic == "plant4/status" && m.payload == b"online").count();
+    assert_eq!(online, 1, "no new session:\n{}", spb::listing(&messages));
+    bridge.terminate();
 }
