@@ -123,11 +123,29 @@ pub(super) async fn start(
     };
     let describe = transport.describe();
     let client = Client::spawn(transport, spec.client);
+    Ok(poll(
+        index,
+        spec,
+        RunningLine { name: spec.name.clone(), describe, client: Some(client), poll: None, sim },
+        timing,
+        events,
+    ))
+}
+
+/// `line`'s client (open) polling `spec`'s devices in a new poller, whose events go to `events`
+/// tagged with `index`: a line started, or one a reload keeps open with other devices.
+pub(super) fn poll(
+    index: usize,
+    spec: &LineSpec,
+    mut line: RunningLine,
+    timing: Option<LineTiming>,
+    events: mpsc::Sender<(usize, Event)>,
+) -> (RunningLine, GroupMap) {
     let groups: Vec<Group> = spec.devices.iter().flat_map(|d| d.groups.iter().cloned()).collect();
     let map = GroupMap::new(spec.devices.iter().map(|d| d.groups.len()));
-    let mut poller = Poller::start(client.clone(), groups, PollConfig { line: timing });
-    let running =
-        RunningLine { name: spec.name.clone(), describe, client: Some(client), poll: Some(poller.handle()), sim };
+    let Some(client) = line.client.clone() else { return (line, GroupMap::default()) };
+    let mut poller = Poller::start(client, groups, PollConfig { line: timing });
+    line.poll = Some(poller.handle());
     tokio::spawn(async move {
         while let Some(event) = poller.next().await {
             if events.send((index, event)).await.is_err() {
@@ -135,7 +153,15 @@ pub(super) async fn start(
             }
         }
     });
-    Ok((running, map))
+    (line, map)
+}
+
+/// The line timing a poller of `spec` keeps to: a serial line's (none over TCP).
+pub(super) fn timing(spec: &LineSpec) -> Option<LineTiming> {
+    match &spec.connection {
+        Connection::Serial { config, .. } => Some(LineTiming::new(&config.line)),
+        _ => None,
+    }
 }
 
 /// A virtual line at `config` with a simulator of every device of `spec` behind one endpoint.

@@ -7,9 +7,11 @@
 //!   poller (a poll in flight finishes) or its listener, and its client dropped; the reload waits
 //!   for the reply a stopped line is still owed ([`ferrobus::Release`]) before it starts the new
 //!   lines, so a line started again on the same port never takes another's reply. A line of the
-//!   new plant that does not go on is started (a changed line, or an unchanged one whose devices
-//!   changed: its port is opened again), with a tag no line had: the last events of a stopped
-//!   line name no line and are dropped. A line's poll counts add up across its restarts.
+//!   new plant that does not go on is started, with a tag no line had: the last events of a
+//!   stopped line name no line and are dropped. An unchanged polled line whose devices changed
+//!   (not simulated: its simulator is made of its devices) keeps its client, its port open,
+//!   under a new poller: the client takes one request at a time, so the new poller's requests
+//!   wait behind the old one's last. A line's poll counts add up across its restarts.
 //! - The edge is told ([`Edge::reload`](crate::edge::Edge::reload)): a removed or changed device
 //!   that is born gets its DDEATH now, an unchanged one keeps its session and aliases, an added
 //!   or changed one is born at its first answered poll with aliases never given before.
@@ -26,8 +28,8 @@ use tokio::sync::{oneshot, watch};
 use super::lines::{self, GroupMap, RunningLine};
 use super::mqtt::{Backoff, Session, SessionEvent};
 use super::{Bridge, CLOSE_WAIT, LineReport, LineState, Status, broker};
-use crate::config::Plant;
 use crate::config::reload::{Fate, plan};
+use crate::config::{Connection, LineMode, Plant};
 use crate::edge::DeviceRef;
 
 use super::command::DeviceWrites;
@@ -56,6 +58,10 @@ impl Bridge {
         let mut old: Vec<Option<LineState>> = std::mem::take(&mut self.lines).into_iter().map(Some).collect();
         let mut reports: Vec<Option<LineReport>> =
             std::mem::take(&mut self.report.lines).into_iter().map(Some).collect();
+        // The running lines that stay open with other devices: by the new line's index.
+        let open = open_lines(&self.plant, &new, &plan.lines);
+        let reopened: BTreeSet<usize> = open.iter().flatten().copied().collect();
+        let mut clients: Vec<Option<RunningLine>> = vec![None; old.len()];
         let mut releases = Vec::new();
         for (i, slot) in old.iter_mut().enumerate() {
             if kept.contains(&i) {
@@ -67,6 +73,14 @@ impl Bridge {
                 if let Some(Some(report)) = reports.get_mut(i) {
                     report.add(&poll.counters());
                 }
+            }
+            if reopened.contains(&i) && line.running.client.is_some() {
+                // The client goes on (its port open) under a new poller: its requests queue
+                // behind the stopped poller's last, so no reply is taken by another.
+                if let Some(slot) = clients.get_mut(i) {
+                    *slot = Some(RunningLine { poll: None, ..line.running.clone() });
+                }
+                continue;
             }
             releases.extend(line.running.client.as_ref().map(ferrobus::Client::release));
         }
@@ -102,6 +116,13 @@ impl Bridge {
             let tag = self.next_tag;
             self.next_tag = self.next_tag.saturating_add(1);
             let (stop, stopped) = watch::channel(());
+            let open = open.get(n).copied().flatten().and_then(|w| clients.get_mut(w).and_then(Option::take));
+            if let Some(open) = open {
+                let (running, map) = lines::poll(tag, spec, open, lines::timing(spec), self.samples_tx.clone());
+                let writes = vec![DeviceWrites::default(); spec.devices.len()];
+                lines.push(LineState { running, map, writes, tag, _stop: stop });
+                continue;
+            }
             let (running, map) = match lines::start(tag, spec, self.samples_tx.clone(), stopped).await {
                 Ok(started) => started,
                 Err(e) => {
@@ -124,15 +145,20 @@ impl Bridge {
             self.moves.pop_front();
         }
         if let Some(options) = options {
-            self.session = Session::start(options);
-            self.broker = broker::describe(&self.plant.broker);
-            self.backoff = Backoff::new(self.plant.broker.reconnect);
-            self.reconnect_at = None;
-            self.say(Status::Connecting { broker: self.broker.clone() });
-            self.connect();
+            self.start_session(options);
         }
         self.say(Status::Note(format!("reload: {plan}")));
         Ok(plan.to_string())
+    }
+
+    /// A session with the new plant's broker, connecting now.
+    fn start_session(&mut self, options: rumqttc::MqttOptions) {
+        self.session = Session::start(options);
+        self.broker = broker::describe(&self.plant.broker);
+        self.backoff = Backoff::new(self.plant.broker.reconnect);
+        self.reconnect_at = None;
+        self.say(Status::Connecting { broker: self.broker.clone() });
+        self.connect();
     }
 
     /// Ends the session as a stop does (NDEATH, DISCONNECT, waiting a while for it to go out).
@@ -178,6 +204,22 @@ impl Bridge {
         }
         Some(DeviceRef { line, device: device.device })
     }
+}
+
+/// For each line of `new`: the running line whose client stays open for it with other devices,
+/// if any: an unchanged polled line that is neither simulated (its simulator is made of its
+/// devices) nor listened to (no client).
+fn open_lines(running: &Plant, new: &Plant, lines: &[Fate]) -> Vec<Option<usize>> {
+    lines
+        .iter()
+        .enumerate()
+        .map(|(n, fate)| {
+            let Fate::Unchanged { was } = *fate else { return None };
+            let spec = new.lines.get(n)?;
+            let polled = spec.mode == LineMode::Poll && !matches!(spec.connection, Connection::Simulated { .. });
+            (polled && running.lines.get(was).is_some()).then_some(was)
+        })
+        .collect()
 }
 
 /// For each line of `new`: the running line that goes on as it is, if any: unchanged, with the
