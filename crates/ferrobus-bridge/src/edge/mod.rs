@@ -22,8 +22,8 @@
 //!   +1 per message (NBIRTH, DBIRTH, DDATA, DDEATH), 255 → 0; every NBIRTH has seq 0.
 //! - **Aliases** are numbered from 1 in line, device, group and cell order: the same plant
 //!   gives the same aliases. [`Edge::reload`] keeps an unchanged device's and gives an added
-//!   or changed device new ones from a counter that never gives a number twice. Node metrics (`bdSeq`, `Node Control/Rebirth`,
-//!   `Properties/Software`) have none.
+//!   or changed device new ones from a counter that never gives a number twice. Node metrics
+//!   (`bdSeq`, `Node Control/Rebirth`, `Properties/Software`) have none.
 //! - **Births.** NBIRTH: `bdSeq` (Int64), `Node Control/Rebirth` (Boolean false, writable),
 //!   `Properties/Software`. A device is born at its first answered poll: its DBIRTH has every
 //!   metric (name, alias, datatype, last value or null, timestamp, properties `engUnit`,
