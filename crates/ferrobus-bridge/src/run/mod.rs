@@ -335,9 +335,9 @@ impl Bridge {
             .collect()
     }
 
-    /// Stops: NDEATH, DISCONNECT, the pollers; the report.
-    async fn finish(mut self) -> Report {
-        self.say(Status::Stopping);
+    /// Ends the session (NDEATH, DISCONNECT, waiting a while for it to go out): at a stop,
+    /// and when a reload changes the broker.
+    async fn close_session(&mut self) {
         self.release_held();
         if self.online {
             if let Some(death) = self.edge.shutdown(SystemTime::now()) {
@@ -355,6 +355,13 @@ impl Bridge {
                 tracing::warn!("the broker did not take the DISCONNECT within {CLOSE_WAIT:?}");
             }
         }
+        self.went_offline();
+    }
+
+    /// Stops: NDEATH, DISCONNECT, the pollers; the report.
+    async fn finish(mut self) -> Report {
+        self.say(Status::Stopping);
+        self.close_session().await;
         for poll in self.lines.iter().filter_map(|l| l.running.poll.as_ref()) {
             poll.stop();
         }

@@ -26,8 +26,8 @@ use std::time::SystemTime;
 use tokio::sync::{oneshot, watch};
 
 use super::lines::{self, GroupMap, RunningLine};
-use super::mqtt::{Backoff, Session, SessionEvent};
-use super::{Bridge, CLOSE_WAIT, LineReport, LineState, Status, broker};
+use super::mqtt::{Backoff, Session};
+use super::{Bridge, LineReport, LineState, Status, broker};
 use crate::config::reload::{Fate, plan};
 use crate::config::{Connection, LineMode, Plant};
 use crate::edge::DeviceRef;
@@ -159,28 +159,6 @@ impl Bridge {
         self.reconnect_at = None;
         self.say(Status::Connecting { broker: self.broker.clone() });
         self.connect();
-    }
-
-    /// Ends the session as a stop does (NDEATH, DISCONNECT, waiting a while for it to go out).
-    async fn close_session(&mut self) {
-        self.release_held();
-        if self.online {
-            if let Some(death) = self.edge.shutdown(SystemTime::now()) {
-                self.publish(death);
-            }
-            self.session.disconnect();
-            let closed = tokio::time::timeout(CLOSE_WAIT, async {
-                while let Some(event) = self.session.next().await {
-                    if matches!(event, SessionEvent::Closed | SessionEvent::Lost(_)) {
-                        return;
-                    }
-                }
-            });
-            if closed.await.is_err() {
-                tracing::warn!("the broker did not take the DISCONNECT within {CLOSE_WAIT:?}");
-            }
-        }
-        self.went_offline();
     }
 
     /// The index now of the running line tagged `tag`.
