@@ -12,8 +12,8 @@ use std::time::SystemTime;
 
 use ferrobus_tools::poll::{FailureKind, Group, Sample};
 
-use super::DeviceRef;
 use super::deadband::{Seen, beyond};
+use super::{DeviceRef, Reading};
 use crate::config::DeviceSpec;
 
 /// One cell's latest reading and the one last published.
@@ -136,6 +136,20 @@ pub(crate) struct Device {
 }
 
 impl Device {
+    /// Each of its points' latest reading, in group and cell order (a point never read: none).
+    pub(crate) fn readings(&self) -> impl Iterator<Item = Reading> + '_ {
+        self.groups.iter().zip(&self.cells).flat_map(move |(group, cells)| {
+            group.cells.iter().zip(cells).filter_map(move |(cell, state)| {
+                let (shown, failed) = match &state.latest {
+                    Seen::Unread => return None,
+                    Seen::Value(value) => (cell.show(value), false),
+                    Seen::Failed(why) => (why.clone(), true),
+                };
+                Some(Reading { device: self.id.clone(), point: cell.name.clone(), shown, time: state.time, failed })
+            })
+        })
+    }
+
     /// The device `spec` at `at`, nothing read yet.
     pub(crate) fn new(spec: &DeviceSpec, at: DeviceRef) -> Device {
         let cells = spec

@@ -234,6 +234,21 @@ pub struct Edge {
     inner: Inner,
 }
 
+/// A point's latest reading ([`Edge::readings`]).
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct Reading {
+    /// The device's id.
+    pub device: String,
+    /// The point, as its metric is named.
+    pub point: String,
+    /// The value as shown (`50.00 Hz`, `run`), or why the read failed.
+    pub shown: String,
+    /// When it was read.
+    pub time: SystemTime,
+    /// Whether the read failed (an exception, registers that do not decode).
+    pub failed: bool,
+}
+
 #[derive(Debug)]
 enum Inner {
     Sparkplug(Box<SparkplugEdge>),
@@ -426,6 +441,15 @@ impl Edge {
             (Inner::Sparkplug(s), Mode::Sparkplug(config)) => s.reload(plant, config, plan, now),
             (Inner::Plain(p), Mode::Plain(config)) => p.reload(plant, config, plan),
             _ => Vec::new(),
+        }
+    }
+
+    /// Every point's latest reading, device by device in plant order: what a status page
+    /// shows (a point never read is not there).
+    pub fn readings(&self) -> Vec<Reading> {
+        match &self.inner {
+            Inner::Sparkplug(s) => s.devices().flat_map(Device::readings).collect(),
+            Inner::Plain(p) => p.devices().flat_map(Device::readings).collect(),
         }
     }
 

@@ -68,6 +68,11 @@ enum Quality {
 }
 
 impl PlainEdge {
+    /// Its devices, in plant order.
+    pub(crate) fn devices(&self) -> impl Iterator<Item = &Device> {
+        self.devices.iter().map(|d| &d.device)
+    }
+
     pub(crate) fn new(plant: &Plant, config: &PlainConfig) -> PlainEdge {
         let devices = devices_of(plant)
             .into_iter()

@@ -126,6 +126,8 @@ pub struct Live {
     pub stored_now: u64,
     /// Whether a session with the broker is up.
     pub online: bool,
+    /// Every point's latest reading.
+    pub readings: Vec<crate::edge::Reading>,
 }
 
 /// How often [`Options::live`] is brought up to date.
@@ -323,7 +325,7 @@ impl Bridge {
         let Some(live) = &self.live else { return };
         let mut report = self.report.clone();
         report.finish(&self.counters(), &self.store);
-        let now = Live { report, stored_now: self.store.len(), online: self.online };
+        let now = Live { report, stored_now: self.store.len(), online: self.online, readings: self.edge.readings() };
         *live.lock().unwrap_or_else(std::sync::PoisonError::into_inner) = now;
     }
 

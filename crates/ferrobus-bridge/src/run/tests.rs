@@ -296,6 +296,10 @@ async fn the_live_view_shows_the_lines_polling_and_the_store_filling_while_the_b
     .expect("the live view shows polls and stored records");
     assert!(!seen.online, "no broker listens on {port}");
     assert_eq!(seen.report.connections, 0);
+    // The demo's inverter reads its points: each with its value as shown, none failed.
+    let inverter: Vec<&crate::edge::Reading> = seen.readings.iter().filter(|r| r.device == "inverter").collect();
+    assert!(inverter.iter().any(|r| r.point == "d001" && r.shown.ends_with(" Hz") && !r.failed), "{inverter:?}");
+    assert!(seen.readings.iter().all(|r| !r.failed && r.time > std::time::UNIX_EPOCH), "{:?}", seen.readings);
     stop_tx.send(()).expect("the bridge runs");
     let report = bridge.await.expect("the bridge's task").expect("the bridge ran");
     assert!(report.lines[0].ok >= seen.report.lines[0].ok, "the report at the end is not behind the live view");

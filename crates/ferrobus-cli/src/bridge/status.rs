@@ -14,6 +14,7 @@
 use std::sync::{Arc, Mutex, PoisonError};
 
 use ferrobus_bridge::run::Live;
+use ferrobus_tools::poll::iso8601_ms;
 use ferrobus_tools::status::{Family, Health, Labels, Source, Status, Table};
 use prometheus_client::collector::Collector;
 use prometheus_client::encoding::DescriptorEncoder;
@@ -126,7 +127,19 @@ impl Source for BridgeStatus {
             r.refused.to_string(),
             r.discarded.to_string(),
         ]);
-        Status { service: "bridge".into(), summary: self.summary.clone(), tables: vec![broker, store, lines, commands] }
+        let mut values = Table::new("Values", &["device", "point", "value", "read at", "state"]);
+        for r in &live.readings {
+            let state = if r.failed { "failed" } else { "ok" };
+            values.rows.push(vec![
+                r.device.clone(),
+                r.point.clone(),
+                r.shown.clone(),
+                iso8601_ms(r.time),
+                state.into(),
+            ]);
+        }
+        let tables = vec![broker, store, lines, commands, values];
+        Status { service: "bridge".into(), summary: self.summary.clone(), tables }
     }
 
     /// Failing while no session with the broker is up: what is read goes to the store.

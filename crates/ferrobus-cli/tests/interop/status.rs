@@ -231,6 +231,11 @@ fn the_bridges_metrics_follow_its_broker_away_and_back_and_healthz_says_so() {
     assert_eq!(value(&samples, "ferrobus_bridge_published_total", &[("type", "DBIRTH")]), Some(2.0), "{text}");
     assert_eq!(value(&samples, "ferrobus_bridge_broker_sessions_total", &[]), Some(1.0), "{text}");
     assert_eq!(get(&status, "/healthz"), (200, "ok\n".to_string()));
+    // The page shows every point's latest reading, as the bridge shows it.
+    let dom = page(&status);
+    let values = dom.split("data-title=\"Values\"").nth(1).unwrap_or_default();
+    assert!(values.contains("<td>inverter</td><td>d001</td>"), "the inverter's d001: {values}");
+    assert!(values.contains(" Hz</td>"), "a frequency as shown: {values}");
 
     // The broker goes: what is read is stored, and the probe fails saying why.
     broker.stop();

@@ -68,6 +68,11 @@ pub(crate) struct SparkplugEdge {
 }
 
 impl SparkplugEdge {
+    /// Its devices, in plant order.
+    pub(crate) fn devices(&self) -> impl Iterator<Item = &Device> {
+        self.devices.iter().map(|d| &d.device)
+    }
+
     pub(crate) fn new(plant: &Plant, config: &SparkplugConfig) -> SparkplugEdge {
         let mut edge = SparkplugEdge {
             config: config.clone(),
