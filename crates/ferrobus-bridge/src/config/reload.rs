@@ -127,4 +127,4 @@ fn fixed(running: &Plant, new: &Plant) -> Result<(), Fixed> {
 }
 
 #[cfg(test)]
-mod tests;
+pub(crate) mod tests;

@@ -231,58 +231,14 @@ fn kept_lines(running: &Plant, new: &Plant, lines: &[Fate], devices: &[Fate]) ->
 
 #[cfg(test)]
 mod tests {
-    use std::path::Path;
-
     use super::kept_lines;
-    use crate::config::Plant;
     use crate::config::reload::plan;
-
-    const RUNNING: &str = r#"
-[broker]
-address = "127.0.0.1:1883"
-
-[sparkplug]
-group_id = "plant"
-edge_node_id = "edge"
-
-[[line]]
-name = "a"
-simulated = true
-
-[[line.device]]
-id = "inverter"
-unit = 1
-profile = "omron-3g3rx"
-every = "1s"
-points = ["d001"]
-
-[[line.device]]
-id = "servo"
-unit = 2
-profile = "sdp-servo"
-every = "1s"
-groups = ["monitor"]
-
-[[line]]
-name = "b"
-simulated = true
-
-[[line.device]]
-id = "meter"
-unit = 3
-profile = "omron-3g3rx"
-every = "1s"
-points = ["d003"]
-"#;
+    use crate::config::reload::tests::{RUNNING, plant};
 
     fn kept(new: &str) -> Vec<Option<usize>> {
-        let (running, new) = (parse(RUNNING), parse(new));
+        let (running, new) = (plant(RUNNING), plant(new));
         let plan = plan(&running, &new).unwrap();
         kept_lines(&running, &new, &plan.lines, &plan.devices)
-    }
-
-    fn parse(text: &str) -> Plant {
-        Plant::parse(text, "plant.toml", Path::new(".")).unwrap()
     }
 
     #[test]

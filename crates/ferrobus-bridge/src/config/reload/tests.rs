@@ -3,8 +3,9 @@ use std::path::Path;
 use super::{Fate, Fixed, Plan, plan};
 use crate::config::Plant;
 
-/// Two simulated lines: a 3G3RX and a servo on the first, another 3G3RX on the second.
-const RUNNING: &str = r#"
+/// Two simulated lines: a 3G3RX and a servo on the first, another 3G3RX on the second (the
+/// running plant of the runtime's reload tests too).
+pub(crate) const RUNNING: &str = r#"
 [broker]
 address = "127.0.0.1:1883"
 
@@ -42,7 +43,7 @@ every = "1s"
 points = ["d003"]
 "#;
 
-fn plant(text: &str) -> Plant {
+pub(crate) fn plant(text: &str) -> Plant {
     Plant::parse(text, "plant.toml", Path::new(".")).unwrap()
 }
 
