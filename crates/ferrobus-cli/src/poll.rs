@@ -758,15 +758,15 @@ pub(crate) async fn run(connection: &ConnectArgs, args: &PollArgs) -> Result<(),
             }
             Event::Sample(sample) => {
                 let Some(group) = groups.get(sample.group) else { return Ok(()) };
-                let latest = {
+                let table = {
                     let mut latest = latest.lock().unwrap_or_else(PoisonError::into_inner);
                     latest.update(&sample);
-                    latest.clone()
+                    (style == Style::Table).then(|| screen.draw(&groups, &handle.counters(), &latest))
                 };
                 let (keep, any) =
                     if args.on_change { changes.filter(&sample, args.deadband) } else { (Vec::new(), true) };
-                if style == Style::Table {
-                    output::print(&screen.draw(&groups, &handle.counters(), &latest))?;
+                if let Some(table) = table {
+                    output::print(&table)?;
                 } else if any {
                     output::print(&records(&sample, group, style, &keep))?;
                 }
