@@ -84,6 +84,12 @@ pub(crate) struct PollArgs {
     #[arg(long, value_name = "FILE")]
     pub(crate) session: Option<PathBuf>,
 
+    /// With --tcp: groups read at once on the connection (1 to 16), each request matched to
+    /// its reply by transaction id; 1 reads one group at a time. More hides the round trip for a
+    /// device that answers every request of its connection in order (as gateway --in-flight)
+    #[arg(long = "in-flight", value_name = "N", default_value_t = 1, value_parser = clap::value_parser!(u32).range(1..=16))]
+    pub(crate) in_flight: u32,
+
     /// CSV records on stdout (the default when stdout is not a terminal)
     #[arg(long, conflicts_with = "jsonl")]
     pub(crate) csv: bool,
@@ -708,6 +714,33 @@ fn summary(
     out
 }
 
+/// The client of `poll`: `transport` to `target` opened (within the timeout, at least a
+/// second), with `--in-flight` requests at once on a Modbus/TCP connection and refused on any
+/// other, whose frames carry no transaction id.
+async fn connect(
+    connection: &ConnectArgs,
+    args: &PollArgs,
+    target: &crate::target::Target,
+    transport: ferrobus::Transport,
+) -> Result<Client, CliError> {
+    if args.in_flight > 1 && transport.framing() != ferrobus::Framing::Mbap {
+        return Err(CliError::Usage(format!(
+            "--in-flight {}: only a Modbus/TCP connection (--tcp) keeps several requests in flight, and this is \
+             {target}: its frames carry no transaction id to tell their replies apart",
+            args.in_flight
+        )));
+    }
+    let wait = connection.timeout.max(Duration::from_secs(1));
+    let config = ferrobus::ClientConfig {
+        in_flight: usize::try_from(args.in_flight).unwrap_or(1),
+        ..connection.client_config()
+    };
+    match tokio::time::timeout(wait, Client::connect(transport, config)).await {
+        Ok(result) => result.map_err(|error| CliError::Modbus { error }),
+        Err(_) => Err(CliError::ConnectTimeout { target: target.to_string(), waited: wait }),
+    }
+}
+
 /// Runs `poll`.
 pub(crate) async fn run(connection: &ConnectArgs, args: &PollArgs) -> Result<(), CliError> {
     let groups = groups(connection, args)?;
@@ -729,16 +762,12 @@ pub(crate) async fn run(connection: &ConnectArgs, args: &PollArgs) -> Result<(),
     let transport = connection.transport(&target);
     // The wire time of a cycle can be predicted on an RTU serial line only.
     let line = matches!(target, crate::target::Target::Serial { ascii: false, .. }).then(|| *transport.timing());
-    let wait = connection.timeout.max(Duration::from_secs(1));
-    let client = match tokio::time::timeout(wait, Client::connect(transport, connection.client_config())).await {
-        Ok(result) => result.map_err(|error| CliError::Modbus { error })?,
-        Err(_) => return Err(CliError::ConnectTimeout { target: target.to_string(), waited: wait }),
-    };
+    let client = connect(connection, args, &target, transport).await?;
     crate::interrupt::keep_release(&client);
     if style == Style::Csv {
         output::print(CSV_HEADER)?;
     }
-    let mut poller = Poller::start(client, groups.clone(), PollConfig { line });
+    let mut poller = Poller::start(client, groups.clone(), PollConfig { line, raw_only: false });
     let handle = poller.handle();
     let latest = Arc::new(Mutex::new(Latest::new(groups.len())));
     if let Some(listener) = status {
@@ -957,6 +986,7 @@ mod tests {
             order: Order::Abcd,
             group: Vec::new(),
             session: None,
+            in_flight: 1,
             csv: false,
             jsonl: false,
             log: None,

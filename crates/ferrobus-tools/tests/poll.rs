@@ -107,6 +107,81 @@ async fn the_rate_is_kept_from_the_start_without_drift_over_a_thousand_periods()
     assert_eq!((c.tx_bytes, c.rx_bytes), (6000, 11_000));
 }
 
+/// Over a pipelined Modbus/TCP connection the poller has as many groups under way as the
+/// connection carries, never two polls of one group: a device that holds every request until
+/// no more come sees the three groups together in each round (one at a time would stall it
+/// at the first), though each is overdue while it waits and four may be in flight.
+#[tokio::test]
+async fn a_pipelined_connection_gets_every_due_group_at_once_and_never_one_group_twice() {
+    let listener = tokio::net::TcpListener::bind("127.0.0.1:0").await.unwrap();
+    let addr = listener.local_addr().unwrap();
+    let device = tokio::spawn(async move {
+        let (mut stream, _) = listener.accept().await.unwrap();
+        let mut rounds = Vec::new();
+        for _ in 0..3 {
+            let mut held = vec![support::pipelined::asked(&mut stream).await];
+            while let Ok(asked) =
+                tokio::time::timeout(Duration::from_millis(200), support::pipelined::asked(&mut stream)).await
+            {
+                held.push(asked);
+            }
+            let mut registers: Vec<u16> = held.iter().map(|a| a.register).collect();
+            registers.sort_unstable();
+            rounds.push(registers);
+            for asked in held.into_iter().rev() {
+                support::pipelined::answer(&mut stream, asked).await;
+            }
+        }
+        rounds
+    });
+    let config = support::pipelined::pipelined(4, Duration::from_secs(5), 0);
+    let client = Client::connect(Transport::tcp(addr.to_string()), config).await.unwrap();
+    assert_eq!(client.in_flight(), 4);
+    let groups = vec![group("a", 1, 10, 1, 10), group("b", 1, 11, 1, 10), group("c", 1, 12, 1, 10)];
+    let mut poller = Poller::start(client, groups, PollConfig::default());
+    let (mut got, mut overloads) = (Vec::new(), 0);
+    while got.len() < 9 {
+        match poller.next().await.expect("the poller runs") {
+            Event::Sample(s) => got.push(s),
+            Event::Overload(o) => overloads += usize::from(o.seen),
+        }
+    }
+    poller.handle().stop();
+    assert_eq!(overloads, 1, "the overruns are said once");
+    assert_eq!(device.await.unwrap(), [[10, 11, 12]; 3], "each round: every group once, together");
+    for s in &got {
+        let register = 10 + u16::try_from(s.group).unwrap();
+        let values: Vec<&Value> = s.result.as_ref().unwrap().iter().map(|r| r.raw.as_ref().unwrap()).collect();
+        assert_eq!(values, [&Value::Int(i128::from(support::pipelined::value(register)))], "group {}", s.group);
+        assert!(s.overrun, "held past the next deadline");
+    }
+    for group in 0..3 {
+        let seqs: Vec<u64> = got.iter().filter(|s| s.group == group).map(|s| s.seq).collect();
+        assert_eq!(seqs, [0, 1, 2], "group {group}");
+    }
+}
+
+/// A poller of raw values only hands out what the group decodes, unscaled and unshown, and
+/// the same raw values as one that shows them.
+#[tokio::test(start_paused = true)]
+async fn a_raw_only_poller_hands_out_the_raw_values_without_showing_them() {
+    let refuse = Arc::new(AtomicBool::new(false));
+    let mut raw = Poller::start(
+        client(&refuse).await,
+        vec![group("g", 1, 4, 2, 10)],
+        PollConfig { raw_only: true, ..PollConfig::default() },
+    );
+    let mut shown = Poller::start(client(&refuse).await, vec![group("g", 1, 4, 2, 10)], PollConfig::default());
+    let (raw, shown) = (samples(&mut raw, 1).await, samples(&mut shown, 1).await);
+    let (raw, shown) = (raw[0].result.as_ref().unwrap(), shown[0].result.as_ref().unwrap());
+    for (r, s) in raw.iter().zip(shown) {
+        assert_eq!((r.cell, &r.raw), (s.cell, &s.raw));
+        assert_eq!((r.scaled, r.shown.as_str()), (None, ""), "raw only");
+        assert!(!s.shown.is_empty(), "shown: {s:?}");
+    }
+    assert_eq!(raw.iter().map(|r| r.raw.clone().unwrap()).collect::<Vec<_>>(), [Value::Int(4), Value::Int(5)]);
+}
+
 #[tokio::test(start_paused = true)]
 async fn groups_run_at_their_own_rates_and_units_are_told_apart() {
     let refuse = Arc::new(AtomicBool::new(false));
@@ -164,7 +239,11 @@ async fn a_line_too_slow_for_the_period_is_said_once_with_the_arithmetic_then_po
     // 100 registers at 19200 baud: (8 + 205) characters × 573 µs + 2 × 1.75 ms ≈ 125.6 ms
     // on the wire, every 50 ms.
     let line = Some(timing());
-    let mut poller = Poller::start(client(&refuse).await, vec![group("big", 1, 0, 100, 50)], PollConfig { line });
+    let mut poller = Poller::start(
+        client(&refuse).await,
+        vec![group("big", 1, 0, 100, 50)],
+        PollConfig { line, ..PollConfig::default() },
+    );
     let Some(Event::Overload(o)) = poller.next().await else { panic!("the overload is said first") };
     assert!(!o.seen);
     assert!(o.detail.contains("(8 + 205) characters"), "{}", o.detail);

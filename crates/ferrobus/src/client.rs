@@ -24,6 +24,7 @@ use std::sync::{Arc, Mutex, PoisonError};
 use std::time::Duration;
 
 use ferrobus_proto::codes::{DiagnosticCode, ReadDeviceIdCode};
+use ferrobus_proto::master::pipeline::MAX_IN_FLIGHT;
 use ferrobus_proto::master::{Master, MasterConfig};
 use ferrobus_proto::pdu::{
     Bits, CommEventCounter, Custom, Diagnostic, FileRecordReads, FileRecordRef, FileRecordWrite, FileRecordWrites,
@@ -69,6 +70,8 @@ pub struct Client {
     commands: mpsc::Sender<Command>,
     options: RequestOptions,
     framing: Framing,
+    /// Requests the connection carries at once: 1 but on a pipelined Modbus/TCP connection.
+    in_flight: usize,
     stats: Arc<Mutex<ClientStats>>,
     hold: watch::Receiver<Option<tokio::time::Instant>>,
 }
@@ -132,7 +135,8 @@ impl Client {
         let (tx, rx) = mpsc::channel(config.queue.max(1));
         let options = RequestOptions { timeout: config.timeout, retries: config.retries };
         let framing = transport.framing();
-        let watched = if framing == Framing::Mbap && config.in_flight > 1 {
+        let in_flight = if framing == Framing::Mbap { config.in_flight.clamp(1, MAX_IN_FLIGHT) } else { 1 };
+        let watched = if in_flight > 1 {
             let driver = Pipelined::new(transport, config, port);
             let watched = (driver.stats(), driver.hold());
             tokio::spawn(driver.run(rx));
@@ -151,7 +155,7 @@ impl Client {
             watched
         };
         let (stats, hold) = watched;
-        Client { commands: tx, options, framing, stats, hold }
+        Client { commands: tx, options, framing, in_flight, stats, hold }
     }
 
     /// When the driver lets its port go: wait on it before the program exits, so that a reply
@@ -175,6 +179,13 @@ impl Client {
     /// The timeout and retries of this handle's requests.
     pub fn options(&self) -> RequestOptions {
         self.options
+    }
+
+    /// How many requests the connection carries at once: [`ClientConfig::in_flight`] on
+    /// Modbus/TCP (at most [`MAX_IN_FLIGHT`]), 1 on every other framing. A caller with that
+    /// many requests under way keeps the connection full; more only wait in the queue.
+    pub fn in_flight(&self) -> usize {
+        self.in_flight
     }
 
     /// What the driver has seen on the bus so far, as of the end of the last request.

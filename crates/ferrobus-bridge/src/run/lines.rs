@@ -144,7 +144,7 @@ pub(super) fn poll(
     let groups: Vec<Group> = spec.devices.iter().flat_map(|d| d.groups.iter().cloned()).collect();
     let map = GroupMap::new(spec.devices.iter().map(|d| d.groups.len()));
     let Some(client) = line.client.clone() else { return (line, GroupMap::default()) };
-    let mut poller = Poller::start(client, groups, PollConfig { line: timing });
+    let mut poller = Poller::start(client, groups, PollConfig { line: timing, raw_only: true });
     line.poll = Some(poller.handle());
     tokio::spawn(async move {
         while let Some(event) = poller.next().await {

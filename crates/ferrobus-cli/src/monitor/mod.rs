@@ -181,7 +181,7 @@ pub(crate) async fn run(connection: &ConnectArgs, args: &MonitorArgs) -> Result<
     // The wire time of a cycle can be predicted on an RTU serial line only (as `poll` does).
     let line = matches!(session_client.target, crate::target::Target::Serial { ascii: false, .. })
         .then(|| *connection.transport(&session_client.target).timing());
-    let poller = Poller::start(session_client.client.clone(), groups, PollConfig { line });
+    let poller = Poller::start(session_client.client.clone(), groups, PollConfig { line, raw_only: false });
     let mut app = App::new(target, panes);
     app.rules = profile.as_ref().map_or(ferrobus_profile::WriteRules::SPEC, ferrobus_profile::Profile::write_rules);
     let saving = SaveTo { path: args.session.clone(), device: connection.device.clone() };

@@ -250,25 +250,58 @@ fn a_line_too_slow_for_the_period_is_said_once_with_the_arithmetic() {
     assert!(err.contains("every 50.000 ms"), "{err}");
 }
 
+/// A `ferrobus sim` of the generic profile serving Modbus/TCP on `addr`, once it listens.
+fn tcp_sim(addr: &str) -> Child {
+    let mut child = Command::new(env!("CARGO_BIN_EXE_ferrobus"))
+        .args(["--tcp", addr, "sim", "--profile", "generic", "--duration", "30s"])
+        .stdout(Stdio::null())
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap();
+    let mut lines = BufReader::new(child.stderr.take().unwrap()).lines();
+    while let Some(Ok(line)) = lines.next() {
+        if line.starts_with("sim: listening on ") {
+            break;
+        }
+    }
+    child
+}
+
+/// `--in-flight 4` reads four groups at once on a Modbus/TCP connection: every poll of each
+/// group answered, each group at its own rate; on a line without transaction ids it is a
+/// usage error that says why.
+#[test]
+fn in_flight_reads_groups_together_over_modbus_tcp_and_is_refused_elsewhere() {
+    let port = std::net::TcpListener::bind("127.0.0.1:0").unwrap().local_addr().unwrap().port();
+    let addr = format!("127.0.0.1:{port}");
+    let mut sim = tcp_sim(&addr);
+    let starts = ["0", "10", "20", "30", "40", "50"];
+    let groups = starts.iter().flat_map(|start| ["holding", start, "--every", "50ms"]);
+    let out = ferrobus()
+        .args(["--tcp", &addr, "poll"])
+        .args(groups)
+        .args(["--in-flight", "4", "--duration", "1s", "--jsonl"])
+        .assert()
+        .success();
+    sim.kill().unwrap();
+    sim.wait().unwrap();
+    let records = jsonl(&String::from_utf8_lossy(&out.get_output().stdout));
+    assert!(records.iter().all(|r| r["status"] == "ok"), "{records:?}");
+    for start in starts {
+        let name = format!("u1 holding {:#06x}", start.parse::<u16>().unwrap());
+        let mine = records.iter().filter(|r| r["group"] == name.as_str()).count();
+        assert!(mine >= 10, "{name}: {mine} polls in 1 s at 50 ms");
+    }
+    let out =
+        ferrobus().args(["--rtu-tcp", "127.0.0.1:1", "poll", "holding", "0", "--in-flight", "2"]).assert().code(2);
+    assert!(stderr(&out).contains("--in-flight 2: only a Modbus/TCP connection"), "{}", stderr(&out));
+}
+
 #[test]
 fn a_lost_tcp_server_is_a_port_record_and_polling_resumes_when_it_is_back() {
     let port = std::net::TcpListener::bind("127.0.0.1:0").unwrap().local_addr().unwrap().port();
     let addr = format!("127.0.0.1:{port}");
-    let start_sim = || {
-        let mut child = Command::new(env!("CARGO_BIN_EXE_ferrobus"))
-            .args(["--tcp", &addr, "sim", "--profile", "generic", "--duration", "30s"])
-            .stdout(Stdio::null())
-            .stderr(Stdio::piped())
-            .spawn()
-            .unwrap();
-        let mut lines = BufReader::new(child.stderr.take().unwrap()).lines();
-        while let Some(Ok(line)) = lines.next() {
-            if line.starts_with("sim: listening on ") {
-                break;
-            }
-        }
-        child
-    };
+    let start_sim = || tcp_sim(&addr);
     let mut sim = start_sim();
     let (mut poll, lines) =
         spawn_poll(&["--tcp", &addr, "--timeout", "200ms", "poll", "holding", "0", "--every", "50ms", "--jsonl"]);

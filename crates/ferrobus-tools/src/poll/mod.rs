@@ -5,7 +5,7 @@
 //!   Group (unit, table, start, count, every, cells) ──┐
 //!   Group ... ────────────────────────────────────────┼─▶ Poller ──▶ Event::Sample / Event::Overload
 //!                         PollHandle: pause, resume, ─┘      │
-//!                         reset, counters, write, stop       └─▶ Client (one request at a time)
+//!                         reset, counters, write, stop       └─▶ Client (Client::in_flight requests at a time)
 //! ```
 //!
 //! One task runs every group: it sleeps until the earliest deadline, reads, and hands out a
@@ -15,22 +15,29 @@
 //! client reopens the port. Deadlines are kept by the core's
 //! [`Schedule`]: from the start, not from the last poll,
 //! so the rate does not drift; a poll that runs over the next deadline is an overrun and the
-//! next one goes at once. When the line cannot carry what was asked — predicted from the wire
-//! time of each request if the line's timing is known, else seen at the first overrun — an
-//! [`Event::Overload`] says so once, with the arithmetic. The t3.5 gaps are the client's pump's
-//! business; the poller never writes to the port itself.
+//! next one goes at once. A connection that carries several requests at once (a pipelined
+//! Modbus/TCP one, [`Client::in_flight`]) gets that many groups under way, never two polls of
+//! one group; on every other line one group is read at a time. When the line cannot carry
+//! what was asked — predicted from the wire time of each request if the line's timing is
+//! known, else seen at the first overrun — an [`Event::Overload`] says so once, with the
+//! arithmetic. The t3.5 gaps are the client's pump's business; the poller never writes to the
+//! port itself.
 
 mod group;
 pub mod session;
 mod stats;
 
+use std::cmp::Reverse;
+use std::collections::BinaryHeap;
 use std::sync::{Arc, Mutex, PoisonError};
 use std::time::{Duration, SystemTime};
 
 use ferrobus_proto::frame::LineTiming;
 use ferrobus_proto::pdu::{ReadBits, ReadRegisters, Request, Response};
-use ferrobus_proto::schedule::{READ_REQUEST_CHARS, Schedule, read_reply_chars, wire_time};
+use ferrobus_proto::schedule::{Completion, READ_REQUEST_CHARS, Schedule, read_reply_chars, wire_time};
 use ferrobus_proto::time::Instant as CoreInstant;
+use futures_util::StreamExt;
+use futures_util::stream::FuturesUnordered;
 use hdrhistogram::Histogram;
 use tokio::sync::{mpsc, watch};
 use tokio::time::Instant;
@@ -139,6 +146,12 @@ pub struct PollConfig {
     /// The line's timing, when it is a serial line: the wire time of each group is checked
     /// against its period before polling starts.
     pub line: Option<LineTiming>,
+    /// Hand out each cell's raw value only ([`Reading::scaled`] `None`, [`Reading::shown`]
+    /// empty), for a consumer that scales and shows through the group's cells itself, and
+    /// only what it needs (the bridge: a deadband's comparison, the latest value on its
+    /// status page): showing every cell of every poll is a large share of a fast poller's
+    /// own cost (`bench/BRIDGE.md`).
+    pub raw_only: bool,
 }
 
 /// A handle to a running poller. Clone it freely.
@@ -347,6 +360,16 @@ fn tokio_at(epoch: Instant, t: CoreInstant) -> Instant {
     epoch.checked_add(t.since_epoch()).unwrap_or_else(|| epoch + Duration::from_secs(86_400 * 365 * 30))
 }
 
+/// A poll that has ended: its group, when it was due, started and ended, and what it gave.
+struct Polled {
+    index: usize,
+    due: CoreInstant,
+    started: Instant,
+    ended: Instant,
+    result: Result<Vec<Reading>, Failure>,
+    traffic: Traffic,
+}
+
 async fn run(handle: PollHandle, config: PollConfig, events: mpsc::Sender<Event>) {
     let shared = Arc::clone(&handle.shared);
     let mut stop = shared.stop.subscribe();
@@ -362,11 +385,20 @@ async fn run(handle: PollHandle, config: PollConfig, events: mpsc::Sender<Event>
             return;
         }
     }
+    // As many polls under way as the connection carries (one but on a pipelined Modbus/TCP
+    // connection), never two of one group: the groups not under way wait in `idle`.
+    let in_flight = handle.client.in_flight().max(1);
+    let mut idle = by_deadline(&schedules);
+    let launch = |index: usize, due: CoreInstant| {
+        poll_group(&handle.client, shared.groups.get(index), index, due, config.raw_only)
+    };
+    let mut flying = FuturesUnordered::new();
     loop {
         if *stop.borrow() {
             return;
         }
-        if *paused.borrow_and_update() {
+        let pausing = *paused.borrow_and_update();
+        if pausing && flying.is_empty() {
             tokio::select! {
                 _ = paused.changed() => {}
                 _ = stop.changed() => return,
@@ -376,75 +408,130 @@ async fn run(handle: PollHandle, config: PollConfig, events: mpsc::Sender<Event>
                 for (s, g) in schedules.iter_mut().zip(&shared.groups) {
                     *s = Schedule::new(now, g.every);
                 }
+                idle = by_deadline(&schedules);
             }
             continue;
         }
-        let Some((index, due)) = schedules.iter().enumerate().map(|(i, s)| (i, s.deadline())).min_by_key(|(_, d)| *d)
-        else {
+        let next = (!pausing && flying.len() < in_flight).then(|| idle.peek().map(|&Reverse(next)| next)).flatten();
+        if next.is_none() && flying.is_empty() {
             // No groups: wait to be stopped.
             let _ = stop.changed().await;
             return;
-        };
-        tokio::select! {
-            () = tokio::time::sleep_until(tokio_at(epoch, due)) => {}
+        }
+        let at = next.map(|(due, _)| tokio_at(epoch, due));
+        // A group already due starts without a timer: under load, every one is.
+        if let Some(((due, index), at)) = next.zip(at)
+            && at <= Instant::now()
+        {
+            idle.pop();
+            flying.push(launch(index, due));
+            continue;
+        }
+        let done = tokio::select! {
+            Some(done) = flying.next(), if !flying.is_empty() => done,
+            () = sleep_until_some(at) => {
+                if let Some((due, index)) = next {
+                    idle.pop();
+                    flying.push(launch(index, due));
+                }
+                continue;
+            }
             _ = stop.changed() => return,
             _ = paused.changed() => continue,
-        }
-        let Some(group) = shared.groups.get(index) else { return };
-        let started = Instant::now();
-        let outcome = tokio::select! {
-            o = poll_once(&handle.client, group) => o,
-            _ = stop.changed() => return,
         };
-        let ended = Instant::now();
-        let (result, traffic) = outcome;
-        let Some(schedule) = schedules.get_mut(index) else { return };
-        let completion = schedule.complete(core(epoch, ended));
-        let response_time = ended.saturating_duration_since(started);
-        let seq = seqs.get(index).copied().unwrap_or(0);
-        if let Some(s) = seqs.get_mut(index) {
+        let (Some(group), Some(schedule)) = (shared.groups.get(done.index), schedules.get_mut(done.index)) else {
+            return;
+        };
+        let completion = schedule.complete(core(epoch, done.ended));
+        idle.push(Reverse((schedule.deadline(), done.index)));
+        let seq = seqs.get(done.index).copied().unwrap_or(0);
+        if let Some(s) = seqs.get_mut(done.index) {
             *s = s.saturating_add(1);
         }
-        handle.stats().record(index, group.unit, &result, response_time, completion, &traffic);
+        let sample = done.sample(seq, completion, epoch);
+        handle.stats().record(
+            sample.group,
+            group.unit,
+            &sample.result,
+            sample.response_time,
+            completion,
+            &sample.traffic,
+        );
         if completion.overrun && !said {
             said = true;
-            let overload = Overload {
-                load: response_time,
-                detail: format!(
-                    "the line cannot keep up: poll {seq} of {} was due at {:.3} ms and ended at {:.3} ms, past the \
-                     next deadline (period {:.3} ms; its own request took {:.3} ms); polling as fast as the line \
-                     allows and counting overruns",
-                    group.name,
-                    ms(due.since_epoch()),
-                    ms(ended.saturating_duration_since(epoch)),
-                    ms(group.every),
-                    ms(response_time)
-                ),
-                seen: true,
-            };
-            if events.send(Event::Overload(overload)).await.is_err() {
+            if events.send(Event::Overload(overrun(group, &sample))).await.is_err() {
                 return;
             }
         }
-        let sample = Sample {
-            group: index,
-            seq,
-            time: SystemTime::now(),
-            due: due.since_epoch(),
-            started: started.saturating_duration_since(epoch),
-            response_time,
-            overrun: completion.overrun,
-            result,
-            traffic,
-        };
         if events.send(Event::Sample(sample)).await.is_err() {
             return;
         }
     }
 }
 
-/// Reads a group once: its readings or the failure, and the traffic.
-async fn poll_once(client: &Client, group: &Group) -> (Result<Vec<Reading>, Failure>, Traffic) {
+impl Polled {
+    /// The sample of poll `seq` of its group, which did `completion` to the schedule.
+    fn sample(self, seq: u64, completion: Completion, epoch: Instant) -> Sample {
+        Sample {
+            group: self.index,
+            seq,
+            time: SystemTime::now(),
+            due: self.due.since_epoch(),
+            started: self.started.saturating_duration_since(epoch),
+            response_time: self.ended.saturating_duration_since(self.started),
+            overrun: completion.overrun,
+            result: self.result,
+            traffic: self.traffic,
+        }
+    }
+}
+
+/// The first overrun, said once: `sample` of `group` ended past its next deadline.
+fn overrun(group: &Group, sample: &Sample) -> Overload {
+    let ended = sample.started.saturating_add(sample.response_time);
+    Overload {
+        load: sample.response_time,
+        detail: format!(
+            "the line cannot keep up: poll {} of {} was due at {:.3} ms and ended at {:.3} ms, past the next deadline \
+             (period {:.3} ms; its own request took {:.3} ms); polling as fast as the line allows and counting \
+             overruns",
+            sample.seq,
+            group.name,
+            ms(sample.due),
+            ms(ended),
+            ms(group.every),
+            ms(sample.response_time)
+        ),
+        seen: true,
+    }
+}
+
+/// Every group by its next deadline, the earliest first (the lower index first among equals).
+fn by_deadline(schedules: &[Schedule]) -> BinaryHeap<Reverse<(CoreInstant, usize)>> {
+    schedules.iter().enumerate().map(|(i, s)| Reverse((s.deadline(), i))).collect()
+}
+
+/// Polls `group` (poller group `index`, due at `due`) once.
+async fn poll_group(client: &Client, group: Option<&Group>, index: usize, due: CoreInstant, raw_only: bool) -> Polled {
+    let started = Instant::now();
+    let (result, traffic) = match group {
+        Some(group) => poll_once(client, group, raw_only).await,
+        None => (Err(Failure::of(&Error::Closed)), Traffic::default()),
+    };
+    Polled { index, due, started, ended: Instant::now(), result, traffic }
+}
+
+/// Sleeps until `at`, or for ever without one.
+async fn sleep_until_some(at: Option<Instant>) {
+    match at {
+        Some(at) => tokio::time::sleep_until(at).await,
+        None => std::future::pending().await,
+    }
+}
+
+/// Reads a group once: its readings (raw values only, if `raw_only`) or the failure, and the
+/// traffic.
+async fn poll_once(client: &Client, group: &Group, raw_only: bool) -> (Result<Vec<Reading>, Failure>, Traffic) {
     let request = match group.table {
         Table::Coils => ReadBits::new(group.start, group.count).map(Request::ReadCoils),
         Table::DiscreteInputs => ReadBits::new(group.start, group.count).map(Request::ReadDiscreteInputs),
@@ -475,7 +562,8 @@ async fn poll_once(client: &Client, group: &Group) -> (Result<Vec<Reading>, Fail
                 };
                 return (Err(failure), traffic);
             };
-            (Ok(group.readings(&items)), traffic)
+            let readings = if raw_only { group.raw_readings(&items) } else { group.readings(&items) };
+            (Ok(readings), traffic)
         }
         Ok(None) => {
             let failure = Failure {
@@ -513,6 +601,16 @@ impl Group {
                 Reading { cell, raw, scaled, shown }
             })
             .collect()
+    }
+
+    /// [`Group::readings`] without the scaling and showing: each cell's raw value, or why its
+    /// registers decode to none (in `shown`).
+    pub fn raw_readings(&self, items: &[u16]) -> Vec<Reading> {
+        let reading = |(cell, raw): (usize, Result<Value, String>)| match raw {
+            Ok(v) => Reading { cell, raw: Ok(v), scaled: None, shown: String::new() },
+            Err(e) => Reading { cell, shown: e.clone(), raw: Err(e), scaled: None },
+        };
+        self.decode(items).into_iter().enumerate().map(reading).collect()
     }
 }
 
