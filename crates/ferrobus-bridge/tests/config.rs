@@ -166,6 +166,8 @@ fn the_real_plant_example_says_what_a_plant_has() {
     assert_eq!(plant.lines[0].client.late_window, Some(Duration::from_secs(1)));
     assert_eq!(plant.lines[1].client.late_window, None);
     assert_eq!(plant.lines[2].connection, Connection::Tcp("192.168.10.20:502".into()));
+    let in_flight: Vec<usize> = plant.lines.iter().map(|l| l.client.in_flight).collect();
+    assert_eq!(in_flight, [1, 1, 4], "the TCP line's own; one request at a time on the serial lines");
     let scale = &plant.lines[1].devices[1];
     assert_eq!(scale.metric_names().collect::<Vec<_>>(), ["net-weight", "tare-mode", "filter"]);
     assert_eq!(scale.deadbands, [vec![0.01], vec![0.0, 0.0]]);
@@ -365,6 +367,13 @@ const FILE_CASES: &[(&str, &str, &[&str])] = &[
         "[[line]]\nname = \"a\"\ntcp = \"plc\"\nmode = »\"listen\"\n\
          [[line]]\nname = \"b\"\nport = \"/dev/ttyS0\"\nascii = »true\nmode = \"listen\"\n",
         &["give port", "decodes RTU only"],
+    ),
+    (
+        "requests in flight: out of range on TCP, and on lines without transaction ids",
+        "[[line]]\nname = \"a\"\ntcp = \"plc\"\nin_flight = »17\n\
+         [[line]]\nname = \"b\"\nrtu_tcp = \"server\"\nin_flight = »4\n\
+         [[line]]\nname = \"c\"\nport = \"/dev/ttyS0\"\nmode = \"listen\"\nin_flight = »1\n",
+        &["in_flight = 17: it is 1 to 16", "by transaction id", "by transaction id"],
     ),
     (
         "an unknown line key, and its devices still checked",

@@ -89,6 +89,7 @@ pub(super) struct Line {
     pub connect_timeout: Option<Text>,
     pub late_window: Option<Text>,
     pub echo_suppression: Option<bool>,
+    pub in_flight: Option<Spanned<i64>>,
 }
 
 /// `[[line.device]]`.

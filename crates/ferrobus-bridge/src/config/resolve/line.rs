@@ -5,6 +5,7 @@ use std::ops::Range;
 
 use ferrobus::{ClientConfig, Rs485, SerialConfig};
 use ferrobus_proto::frame::{DataBits, LineConfig, Parity, StopBits};
+use ferrobus_proto::master::pipeline::MAX_IN_FLIGHT;
 use toml::Spanned;
 
 use super::super::raw::{self, Text};
@@ -250,8 +251,8 @@ fn line_config(cx: &mut Cx<'_>, line: &raw::Line) -> Option<LineConfig> {
     (cx.errors.len() == errors).then_some(config)
 }
 
-/// The client's timeout, retries, connect timeout and late window (the library's defaults
-/// unless given).
+/// The client's timeout, retries, connect timeout, late window and requests in flight (the
+/// library's defaults unless given).
 fn resolve_client(cx: &mut Cx<'_>, line: &raw::Line) -> Option<ClientConfig> {
     let errors = cx.errors.len();
     let mut client = ClientConfig::default();
@@ -276,6 +277,18 @@ fn resolve_client(cx: &mut Cx<'_>, line: &raw::Line) -> Option<ClientConfig> {
     }
     if let Some(echo) = line.echo_suppression {
         client.echo_suppression = echo;
+    }
+    if let Some(in_flight) = &line.in_flight {
+        let n = *in_flight.get_ref();
+        match usize::try_from(n) {
+            _ if line.tcp.is_none() => cx.at(
+                in_flight.span(),
+                "in_flight: only a Modbus/TCP line (tcp) matches replies to requests by transaction id; every \
+                 other line carries one request at a time",
+            ),
+            Ok(n @ 1..=MAX_IN_FLIGHT) => client.in_flight = n,
+            _ => cx.at(in_flight.span(), format!("in_flight = {n}: it is 1 to {MAX_IN_FLIGHT}")),
+        }
     }
     (cx.errors.len() == errors).then_some(client)
 }
