@@ -21,8 +21,8 @@ mod lines;
 use std::collections::BTreeMap;
 use std::net::SocketAddr;
 use std::path::PathBuf;
-use std::sync::Arc;
-use std::time::Duration;
+use std::sync::{Arc, Mutex, PoisonError};
+use std::time::{Duration, SystemTime};
 
 use clap::Args;
 use ferrobus::server::TcpCounts;
@@ -33,6 +33,7 @@ use ferrobus_tools::gateway::{
     AllowAll, Authorize, FrontConfig, Gateway, GatewayConfig, GatewayLine, Inbound, OnFailure, Route, Routes, Rules,
     Upstream, serve_reverse,
 };
+use ferrobus_tools::status::{Reloads, Summary};
 
 use crate::connect::{ConnectArgs, Target, parse_duration};
 use crate::exit::CliError;
@@ -186,7 +187,6 @@ pub(crate) async fn run(connection: &ConnectArgs, args: &GatewayArgs) -> Result<
     let secure = tls.is_some();
     let mut interrupt = Interrupt::listen()?;
     let mut hangup = Hangup::listen()?;
-    let mut reloads = Reloads::default();
     #[cfg(unix)]
     let mut usr1 = tokio::signal::unix::signal(tokio::signal::unix::SignalKind::user_defined1())
         .map_err(|e| CliError::from(ferrobus::Error::io("listening for SIGUSR1", e)))?;
@@ -195,29 +195,32 @@ pub(crate) async fn run(connection: &ConnectArgs, args: &GatewayArgs) -> Result<
         .map_err(|e| ferrobus::Error::io(format!("listening on {}", args.listen), e))?;
     let bound = listener.local_addr().map_err(|e| ferrobus::Error::io("listening", e))?;
     let status = args.metrics.bind().await?;
-    let lines: Vec<String> = config.lines.iter().map(|l| l.transport.describe()).collect();
-    let gateway = Gateway::start(config).await?;
-    // A request a line has in flight when the gateway stops is owed its reply: the process
-    // keeps the port until it has come or its window has passed.
-    gateway.releases().into_iter().for_each(crate::interrupt::keep);
-    let inbound = if args.rtu_in { Inbound::RtuOverTcp } else { Inbound::Mbap };
-    let summary = format!(
-        "listening on {bound} ({}), lines: {}",
+    let front = format!(
+        "listening on {bound} ({})",
         if args.rtu_in {
             "RTU over TCP"
         } else if secure {
             "Modbus/TCP Security"
         } else {
             "Modbus/TCP"
-        },
-        lines.iter().enumerate().map(|(i, l)| format!("{i}={l}")).collect::<Vec<_>>().join(", ")
+        }
     );
-    eprintln!("gateway: {summary}");
+    let text = summary(&front, &config.lines);
+    let described = Described {
+        front,
+        summary: Arc::new(Mutex::new(if running.is_some() { Summary::reloadable(text) } else { Summary::fixed(text) })),
+    };
+    let gateway = Gateway::start(config).await?;
+    // A request a line has in flight when the gateway stops is owed its reply: the process
+    // keeps the port until it has come or its window has passed.
+    gateway.releases().into_iter().for_each(crate::interrupt::keep);
+    let inbound = if args.rtu_in { Inbound::RtuOverTcp } else { Inbound::Mbap };
+    eprintln!("gateway: {}", described.text());
     let pipeline = usize::try_from(args.pipeline).unwrap_or(usize::MAX);
     let limits = args.limits.limits(pipeline);
     let tcp = Arc::clone(&limits.stats);
     if let Some(listener) = status {
-        let source = GatewayStatus::new(gateway.clone(), Arc::clone(&tcp), summary);
+        let source = GatewayStatus::new(gateway.clone(), Arc::clone(&tcp), Arc::clone(&described.summary));
         metrics::spawn(listener, Arc::new(source), "gateway");
     }
     let front = FrontConfig { inbound, limits };
@@ -249,36 +252,67 @@ pub(crate) async fn run(connection: &ConnectArgs, args: &GatewayArgs) -> Result<
         tokio::select! {
             () = interrupt.wait() => break,
             () = &mut until => break,
-            _ = usr1 => print(&gateway, &tcp.counts(), secure, running.as_ref().map(|_| &reloads)),
-            () = hangup.wait() => watchdog.feeding(reload(connection, args, &gateway, &mut running, &mut reloads)).await,
+            _ = usr1 => print(&gateway, &tcp.counts(), secure, described.reloads().as_ref()),
+            () = hangup.wait() => watchdog.feeding(reload(connection, args, &gateway, &mut running, &described)).await,
             () = watchdog.tick() => watchdog.feed(),
         }
     }
     systemd::stopping();
     serving.abort();
-    print(&gateway, &tcp.counts(), secure, running.as_ref().map(|_| &reloads));
+    print(&gateway, &tcp.counts(), secure, described.reloads().as_ref());
     Ok(())
 }
 
-/// What SIGHUP has done so far.
-#[derive(Clone, Copy, Debug, Default)]
-struct Reloads {
-    /// Files read again and applied (one that changed nothing among them).
-    done: u64,
-    /// Files refused: a mistake in them, or an added line's port that does not open.
-    refused: u64,
+/// What the gateway says of itself (its summary, on stderr at the start and on the status
+/// page), and what SIGHUP has done so far, shared with the status page.
+#[derive(Debug)]
+struct Described {
+    /// `listening on 127.0.0.1:502 (Modbus/TCP)`: what no reload changes.
+    front: String,
+    /// The summary with the lines as applied last, and the reloads.
+    summary: Arc<Mutex<Summary>>,
+}
+
+impl Described {
+    /// The summary now.
+    fn text(&self) -> String {
+        self.summary.lock().unwrap_or_else(PoisonError::into_inner).text().to_string()
+    }
+
+    /// The reloads so far; `None` without a lines file.
+    fn reloads(&self) -> Option<Reloads> {
+        self.summary.lock().unwrap_or_else(PoisonError::into_inner).reloads().cloned()
+    }
+
+    /// A reload was applied: the summary is now `text`, and it did `done`.
+    fn applied(&self, text: String, done: String) {
+        self.summary.lock().unwrap_or_else(PoisonError::into_inner).applied(text, done, SystemTime::now());
+    }
+
+    /// A reload was refused: the lines are as they were.
+    fn refused(&self) {
+        self.summary.lock().unwrap_or_else(PoisonError::into_inner).refused(SystemTime::now());
+    }
+}
+
+/// `listening on 127.0.0.1:502 (Modbus/TCP), lines: 0=/dev/ttyUSB0 at 19200 8E1, 1=10.0.0.7:502`:
+/// `front` and each line by its number and what it is.
+fn summary(front: &str, lines: &[GatewayLine]) -> String {
+    let lines: Vec<String> = lines.iter().enumerate().map(|(i, l)| format!("{i}={}", l.transport.describe())).collect();
+    format!("{front}, lines: {}", lines.join(", "))
 }
 
 /// Reads `--lines-file` again and changes in `gateway` what differs from `running` (the
-/// file it runs now, which it then becomes); a file with a mistake, or an added serial port
-/// that cannot be opened, changes nothing and is logged as an error. Tells systemd it
-/// reloads, and when it is done. Without a lines file there is nothing to read: a warning.
+/// file it runs now, which it then becomes, and the summary its lines); a file with a mistake,
+/// or an added serial port that cannot be opened, changes nothing and is logged as an error.
+/// Either is counted in `described`. Tells systemd it reloads, and when it is done. Without a
+/// lines file there is nothing to read: a warning.
 async fn reload(
     connection: &ConnectArgs,
     args: &GatewayArgs,
     gateway: &Gateway,
     running: &mut Option<LinesFile>,
-    reloads: &mut Reloads,
+    described: &Described,
 ) {
     let (Some(path), Some(running)) = (&args.lines_file, running.as_mut()) else {
         tracing::warn!("SIGHUP: the gateway reads no --lines-file, so there is nothing to read again");
@@ -288,19 +322,20 @@ async fn reload(
     let applied = async {
         let (config, file) = lines_file(path, connection, args)?;
         let plan = ferrobus_tools::gateway::reload::plan(running, &file);
+        let text = summary(&described.front, &config.lines);
         let started = gateway.reload(&plan, config).await?;
         started.into_iter().for_each(crate::interrupt::keep);
         *running = file;
-        Ok::<_, CliError>(plan)
+        Ok::<_, CliError>((plan, text))
     };
     let status = match applied.await {
-        Ok(plan) => {
-            reloads.done = reloads.done.saturating_add(1);
+        Ok((plan, text)) => {
+            described.applied(text, plan.to_string());
             tracing::info!("reload: {plan}");
             format!("reloaded: {plan}")
         }
         Err(e) => {
-            reloads.refused = reloads.refused.saturating_add(1);
+            described.refused();
             let report = crate::exit::report(&e, None, 0);
             tracing::error!("reload refused, the running lines stay as they are: {}", report.message);
             "reload refused: see the log".to_string()
@@ -399,7 +434,8 @@ fn print(gateway: &Gateway, tcp: &TcpCounts, secure: bool, reloads: Option<&Relo
         );
     }
     if let Some(reloads) = reloads {
-        eprintln!("reload: {} done, {} refused", reloads.done, reloads.refused);
+        let done = reloads.checked.saturating_sub(reloads.refused);
+        eprintln!("reload: {done} done, {} refused", reloads.refused);
     }
 }
 

@@ -126,6 +126,40 @@ pub(crate) fn ask(stream: &mut TcpStream, transaction: u16, unit: u8, pdu: &[u8]
     reply
 }
 
+/// GET `/status.json` on the status endpoint at `addr`, parsed.
+pub(crate) fn status_json(addr: &str) -> Value {
+    let mut stream = TcpStream::connect(addr).unwrap();
+    stream.set_read_timeout(Some(Duration::from_secs(10))).unwrap();
+    write!(stream, "GET /status.json HTTP/1.1\r\nHost: {addr}\r\nConnection: close\r\n\r\n").unwrap();
+    let mut answer = String::new();
+    stream.read_to_string(&mut answer).unwrap();
+    let (head, body) = answer.split_once("\r\n\r\n").unwrap();
+    assert!(head.starts_with("HTTP/1.1 200"), "{head}");
+    serde_json::from_str(body).unwrap()
+}
+
+/// `/status.json` at `addr` once its `Reloads` table says `checked` files were read again
+/// (the command counts a reload just after it logs it), waiting at most 10 s; and that table's
+/// one row.
+pub(crate) fn status_after(addr: &str, checked: u64) -> (Value, Vec<String>) {
+    let deadline = std::time::Instant::now() + Duration::from_secs(10);
+    loop {
+        let status = status_json(addr);
+        let table = status["tables"].as_array().unwrap().iter().find(|t| t["title"] == "Reloads").cloned();
+        let row: Vec<String> = table
+            .and_then(|t| t["rows"][0].as_array().cloned())
+            .unwrap_or_default()
+            .iter()
+            .map(|c| c.as_str().unwrap().to_string())
+            .collect();
+        if row.first().map(String::as_str) == Some(checked.to_string().as_str()) {
+            return (status, row);
+        }
+        assert!(std::time::Instant::now() < deadline, "no {checked} reloads checked: {status:#}");
+        std::thread::sleep(Duration::from_millis(50));
+    }
+}
+
 pub(crate) const LINE_A: [&str; 6] = ["--baud", "9600", "--parity", "none", "--stop-bits", "2"];
 pub(crate) const LINE_B: [&str; 4] = ["--baud", "38400", "--parity", "none"];
 

@@ -3,12 +3,14 @@
 //! with its place; a good one adds a third line, changes one and leaves one running, and the
 //! client's one connection is answered before, between and after, the unchanged line's
 //! counters running on across the reload and the changed line's starting afresh; then the
-//! added line is removed again and its unit goes unrouted.
+//! added line is removed again and its unit goes unrouted. Throughout, `/status.json` names the
+//! lines as applied last and counts the reloads; the refused one's error is among its recent
+//! warnings, escaped.
 
 use std::net::TcpStream;
 use std::time::Duration;
 
-use crate::gateway_lines::{LINE_A, LINE_B, Proc, ask, bus, dir, sim};
+use crate::gateway_lines::{LINE_A, LINE_B, Proc, ask, bus, dir, sim, status_after};
 
 /// A `[[line]]` on `port` at 9600 8N2 (line A's settings), serving `units`.
 fn line_a(port: &str, units: &str) -> String {
@@ -38,10 +40,28 @@ fn sighup_with_a_broken_file_changes_nothing_and_a_good_one_adds_and_changes_lin
     let running = line_a(&a[0], "1") + &line_b(&b[0], "", "2");
     std::fs::write(&file, &running).unwrap();
     let path = file.to_str().unwrap();
-    let args = ["-v", "gateway", "--lines-file", path, "--listen", "127.0.0.1:0", "--duration", "120s"];
+    let args = [
+        "-v",
+        "gateway",
+        "--lines-file",
+        path,
+        "--listen",
+        "127.0.0.1:0",
+        "--metrics",
+        "127.0.0.1:0",
+        "--duration",
+        "120s",
+    ];
     let mut gateway = Proc::ferrobus(&args, false);
     let listening = gateway.until("gateway: listening on");
     let addr = listening.split_whitespace().nth(3).unwrap().to_string();
+    let page = gateway.until("gateway: status on http://");
+    let page = page.split("http://").nth(1).unwrap().split('/').next().unwrap().to_string();
+    let summary = |status: &serde_json::Value| status["summary"].as_str().unwrap().to_string();
+    let (status, row) = status_after(&page, 0);
+    let at_start = format!("listening on {addr} (Modbus/TCP), lines: 0={} at 9600 8N2, 1={} at 38400 8N1", a[0], b[0]);
+    assert_eq!(summary(&status), at_start);
+    assert_eq!(row, ["0", "0", "never", "-", "never"]);
     let mut stream = TcpStream::connect(&addr).unwrap();
     stream.set_read_timeout(Some(Duration::from_secs(10))).unwrap();
     answers(&mut stream, 1, 1);
@@ -57,6 +77,14 @@ fn sighup_with_a_broken_file_changes_nothing_and_a_good_one_adds_and_changes_lin
     assert!(refused.contains(r#"(in `baud = "fast\u{1b}[31m"`)"#), "the file's bytes are escaped: {refused}");
     answers(&mut stream, 4, 1);
     answers(&mut stream, 5, 2);
+    let (status, row) = status_after(&page, 1);
+    assert_eq!(summary(&status), at_start, "a refused reload leaves the summary");
+    assert_eq!(row[..4], ["1", "1", "never", "-"]);
+    assert!(row[4].ends_with(" (why: the recent warnings)"), "{row:?}");
+    let recent: Vec<&str> = status["recent"].as_array().unwrap().iter().map(|r| r["text"].as_str().unwrap()).collect();
+    let why = recent.iter().find(|r| r.contains("reload refused")).unwrap_or_else(|| panic!("{recent:?}"));
+    assert!(why.contains(&format!("{path}:10:13: invalid basic string")), "{why}");
+    assert!(why.contains(r#"`baud = "fast\u{1b}[31m"`"#) && !why.contains('\u{1b}'), "escaped on the page: {why}");
 
     // Line A as it was, line B with another timeout, line C added for unit 3.
     let new = line_a(&a[0], "1") + &line_b(&b[0], "timeout = \"700ms\"\n", "2") + &line_b(&c[0], "", "3");
@@ -67,6 +95,15 @@ fn sighup_with_a_broken_file_changes_nothing_and_a_good_one_adds_and_changes_lin
     answers(&mut stream, 6, 3);
     answers(&mut stream, 7, 1);
     answers(&mut stream, 8, 2);
+    let (status, row) = status_after(&page, 2);
+    let three = format!(
+        "listening on {addr} (Modbus/TCP), lines: 0={} at 9600 8N2, 1={} at 38400 8N1, 2={} at 38400 8N1",
+        a[0], b[0], c[0]
+    );
+    assert_eq!(summary(&status), three, "the summary names the lines as applied");
+    assert_eq!(row[..2], ["2", "1"]);
+    assert!(row[2].starts_with("20") && row[2].ends_with('Z'), "when it was applied: {row:?}");
+    assert_eq!(row[3], "1 line added, 1 changed, 0 removed, 1 unchanged; routes changed");
 
     // Line C removed again: unit 3 is in no route, the others answer on.
     std::fs::write(&file, line_a(&a[0], "1") + &line_b(&b[0], "timeout = \"700ms\"\n", "2")).unwrap();
@@ -76,6 +113,10 @@ fn sighup_with_a_broken_file_changes_nothing_and_a_good_one_adds_and_changes_lin
     assert_eq!(ask(&mut stream, 9, 3, &[0x03, 0, 0, 0, 1]), [0x83, 0x0A], "unit 3 is in no route again");
     answers(&mut stream, 10, 1);
     answers(&mut stream, 11, 2);
+    let (status, row) = status_after(&page, 3);
+    assert_eq!(summary(&status), at_start, "line C is gone from the summary");
+    assert_eq!(row[..2], ["3", "1"]);
+    assert_eq!(row[3], "0 lines added, 0 changed, 1 removed, 2 unchanged; routes changed");
 
     drop(stream);
     let report = gateway.stop().join("\n");

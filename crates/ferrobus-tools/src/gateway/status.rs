@@ -1,6 +1,7 @@
 //! The gateway on its status endpoint ([`crate::status`]): the counters it keeps per line
-//! and unit, its front end's refusals and its listener's counts as metrics, and each unit's
-//! health over the last few seconds.
+//! and unit, its front end's refusals and its listener's counts as metrics, each unit's
+//! health over the last few seconds, and its summary with what reloads did to it
+//! ([`Summary`]: the lines as the file applied last names them).
 //!
 //! Metrics (under `ferrobus_`; `line` is the line's number, `unit` the unit as clients
 //! address it):
@@ -30,7 +31,7 @@ use prometheus_client::encoding::DescriptorEncoder;
 
 use super::Gateway;
 use super::stats::{Counters, LineTraffic};
-use crate::status::{self, Family, Health, Labels, Source, Status, Table};
+use crate::status::{self, Family, Health, Labels, Source, Status, Summary, Table};
 
 /// A counter of `T`: its name, its help, and how to read it.
 type Count<T> = (&'static str, &'static str, fn(&T) -> u64);
@@ -42,7 +43,7 @@ const WINDOW: Duration = Duration::from_secs(2);
 pub struct GatewayStatus {
     gateway: Gateway,
     tcp: Arc<TcpStats>,
-    summary: String,
+    summary: Arc<Mutex<Summary>>,
     window: Mutex<Window>,
 }
 
@@ -91,14 +92,15 @@ impl Tally {
 
 impl std::fmt::Debug for GatewayStatus {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        f.debug_struct("GatewayStatus").field("summary", &self.summary).finish_non_exhaustive()
+        let summary = self.summary.lock().unwrap_or_else(PoisonError::into_inner).clone();
+        f.debug_struct("GatewayStatus").field("summary", &summary).finish_non_exhaustive()
     }
 }
 
 impl GatewayStatus {
     /// `gateway`, with its listener's counts `tcp`, described by `summary` (what it listens on,
-    /// its lines).
-    pub fn new(gateway: Gateway, tcp: Arc<TcpStats>, summary: String) -> Self {
+    /// its lines), which the gateway's reloads bring up to date.
+    pub fn new(gateway: Gateway, tcp: Arc<TcpStats>, summary: Arc<Mutex<Summary>>) -> Self {
         GatewayStatus { gateway, tcp, summary, window: Mutex::new(Window::default()) }
     }
 
@@ -263,7 +265,10 @@ impl Source for GatewayStatus {
             self.gateway.front_stats().total().to_string(),
             tcp.closed_idle.to_string(),
         ]);
-        Status { service: "gateway".into(), summary: self.summary.clone(), tables: vec![line_table, unit_table, front] }
+        let summary = self.summary.lock().unwrap_or_else(PoisonError::into_inner);
+        let mut tables = vec![line_table, unit_table, front];
+        tables.extend(summary.table());
+        Status { service: "gateway".into(), summary: summary.text().to_string(), tables }
     }
 
     /// Failing while every unit asked in the last window stayed silent: no device answers.

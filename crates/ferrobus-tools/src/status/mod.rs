@@ -18,6 +18,7 @@
 //! as HTML, so a value from outside (a device name, a log line) cannot become markup.
 
 mod recent;
+mod summary;
 
 use std::fmt::Write as _;
 use std::io;
@@ -38,6 +39,7 @@ use serde_json::{Value, json};
 use tokio::net::TcpListener;
 
 pub use recent::{RECENT, Recent};
+pub use summary::{Reloads, Summary};
 
 /// The page, served as it is.
 const PAGE: &str = include_str!("page.html");
@@ -64,7 +66,8 @@ pub enum Health {
 pub struct Status {
     /// What runs, as the command calls itself (`gateway`, `sim`).
     pub service: String,
-    /// One line about it (what it listens on, its lines).
+    /// One line about it (what it listens on, its lines): after a reload, as applied
+    /// ([`Summary`]).
     pub summary: String,
     /// The tables, in order.
     pub tables: Vec<Table>,
