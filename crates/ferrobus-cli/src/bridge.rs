@@ -13,14 +13,15 @@
 //! logged (Unix only: Windows has no SIGHUP).
 
 use std::path::Path;
-use std::sync::{Arc, Mutex};
-use std::time::Duration;
+use std::sync::{Arc, Mutex, PoisonError};
+use std::time::{Duration, SystemTime};
 
 use clap::Args;
 use ferrobus::Client;
 use ferrobus_bridge::config::{ConfigErrors, Mode, Plant};
 use ferrobus_bridge::run::{Live, Options, RunningLine, Status, run_with};
 use ferrobus_profile::{Point, Profile};
+use ferrobus_tools::status::Summary;
 use tokio::sync::{Notify, mpsc, oneshot};
 
 use crate::connect::parse_duration;
@@ -138,27 +139,29 @@ pub(crate) async fn run(plant_file: Option<&Path>, args: &BridgeArgs) -> Result<
             () = until(duration) => {}
         }
     };
+    // The demo's plant is never read again (SIGHUP warns): its summary stays.
+    let text = summary(&origin, &plant);
+    let described = Arc::new(Mutex::new(if args.demo { Summary::fixed(text) } else { Summary::reloadable(text) }));
     let live = status.map(|listener| {
         let live = Arc::new(Mutex::new(Live::default()));
-        let source = BridgeStatus { live: Arc::clone(&live), summary: summary(&origin, &plant) };
+        let source = BridgeStatus { live: Arc::clone(&live), summary: Arc::clone(&described) };
         metrics::spawn(listener, Arc::new(source), "bridge");
         live
     });
     let (reload_tx, reload_rx) = tokio::sync::mpsc::channel(1);
     let options = Options { running: Some(running_tx), live, reload: Some(reload_rx) };
-    let reloads = Arc::new(Mutex::new(Reloads::default()));
     let watching = tokio::spawn(reload_on_hangup(
         hangup,
         plant_file.map(Path::to_path_buf),
         args.clone(),
         reload_tx,
-        Arc::clone(&reloads),
+        Arc::clone(&described),
     ));
     let report = run_with(plant, stop, Some(status_tx), options).await;
     watching.abort();
     crate::systemd::stopping();
-    let reloads = *reloads.lock().unwrap_or_else(std::sync::PoisonError::into_inner);
-    if reloads.checked > 0 {
+    let reloads = described.lock().unwrap_or_else(PoisonError::into_inner).reloads().cloned();
+    if let Some(reloads) = reloads.filter(|r| r.checked > 0) {
         eprintln!("bridge: reload: {} files checked, {} refused", reloads.checked, reloads.refused);
     }
     if let Some(demo) = demo {
@@ -169,25 +172,17 @@ pub(crate) async fn run(plant_file: Option<&Path>, args: &BridgeArgs) -> Result<
     output::print(&report.to_string())
 }
 
-/// What SIGHUP has done so far.
-#[derive(Clone, Copy, Debug, Default)]
-struct Reloads {
-    /// Plant files read again.
-    checked: u64,
-    /// Of them, refused: a mistake, or a setting that cannot change.
-    refused: u64,
-}
-
 /// At each SIGHUP, reads the plant file again (with `--broker` over it, as at the start) and
 /// hands it to the running bridge, which carries out its plan: a mistake, or a setting that
 /// cannot change while the bridge runs, is logged at error level and changes nothing; what was
-/// done is logged at info. Tells systemd it reloads, and when it is done.
+/// done is logged at info, and the plant applied becomes `described`'s summary. Either is
+/// counted in `described`. Tells systemd it reloads, and when it is done.
 async fn reload_on_hangup(
     mut hangup: Hangup,
     plant_file: Option<std::path::PathBuf>,
     args: BridgeArgs,
     bridge: tokio::sync::mpsc::Sender<ferrobus_bridge::run::Reload>,
-    reloads: Arc<Mutex<Reloads>>,
+    described: Arc<Mutex<Summary>>,
 ) {
     loop {
         hangup.wait().await;
@@ -204,11 +199,12 @@ async fn reload_on_hangup(
                 Err(format!("{} errors in the plant file", errors.0.len()))
             }
             Ok(new) => {
+                let text = summary(&path.display().to_string(), &new);
                 let (done, answer) = tokio::sync::oneshot::channel();
                 let asked = bridge.send(ferrobus_bridge::run::Reload { plant: new, done }).await;
                 match (asked, answer.await) {
                     // The bridge says what it did, as a status line.
-                    (Ok(()), Ok(Ok(done))) => Ok(done),
+                    (Ok(()), Ok(Ok(done))) => Ok((text, done)),
                     (Ok(()), Ok(Err(why))) => {
                         tracing::error!("reload refused: {why}");
                         Err(why)
@@ -220,16 +216,20 @@ async fn reload_on_hangup(
                 }
             }
         };
-        let mut counts = reloads.lock().unwrap_or_else(std::sync::PoisonError::into_inner);
-        counts.checked = counts.checked.saturating_add(1);
-        if outcome.is_err() {
-            counts.refused = counts.refused.saturating_add(1);
-        }
-        drop(counts);
-        crate::systemd::reloaded(&match outcome {
-            Ok(status) => format!("reloaded: {status}"),
-            Err(why) => format!("reload refused: {why}"),
-        });
+        let mut now = described.lock().unwrap_or_else(PoisonError::into_inner);
+        let status = match outcome {
+            Ok((text, done)) => {
+                let status = format!("reloaded: {done}");
+                now.applied(text, done, SystemTime::now());
+                status
+            }
+            Err(why) => {
+                now.refused(SystemTime::now());
+                format!("reload refused: {why}")
+            }
+        };
+        drop(now);
+        crate::systemd::reloaded(&status);
     }
 }
 

@@ -1,5 +1,6 @@
 //! `bridge --metrics`: the bridge on its status endpoint ([`ferrobus_tools::status`]), from
-//! its live view ([`Live`], brought up to date by the bridge twice a second).
+//! its live view ([`Live`], brought up to date by the bridge twice a second) and its summary
+//! ([`Summary`]: the plant as the file applied last describes it, and the reloads).
 //!
 //! ```text
 //!   ferrobus_bridge_published_total{type}   NBIRTH, DBIRTH, DDATA, DDEATH, NDEATH; plain, result
@@ -15,19 +16,20 @@ use std::sync::{Arc, Mutex, PoisonError};
 
 use ferrobus_bridge::run::Live;
 use ferrobus_tools::poll::iso8601_ms;
-use ferrobus_tools::status::{Family, Health, Labels, Source, Status, Table};
+use ferrobus_tools::status::{Family, Health, Labels, Source, Status, Summary, Table};
 use prometheus_client::collector::Collector;
 use prometheus_client::encoding::DescriptorEncoder;
 
 /// The bridge as its status endpoint shows it.
 pub(super) struct BridgeStatus {
     pub(super) live: Arc<Mutex<Live>>,
-    pub(super) summary: String,
+    pub(super) summary: Arc<Mutex<Summary>>,
 }
 
 impl std::fmt::Debug for BridgeStatus {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        f.debug_struct("BridgeStatus").field("summary", &self.summary).finish_non_exhaustive()
+        let summary = self.summary.lock().unwrap_or_else(PoisonError::into_inner).clone();
+        f.debug_struct("BridgeStatus").field("summary", &summary).finish_non_exhaustive()
     }
 }
 
@@ -138,8 +140,12 @@ impl Source for BridgeStatus {
                 state.into(),
             ]);
         }
-        let tables = vec![broker, store, lines, commands, values];
-        Status { service: "bridge".into(), summary: self.summary.clone(), tables }
+        let summary = self.summary.lock().unwrap_or_else(PoisonError::into_inner);
+        // Reloads before the values: a table of every point, the longest.
+        let mut tables = vec![broker, store, lines, commands];
+        tables.extend(summary.table());
+        tables.push(values);
+        Status { service: "bridge".into(), summary: summary.text().to_string(), tables }
     }
 
     /// Failing while no session with the broker is up: what is read goes to the store.

@@ -2,8 +2,10 @@
 //! throughout (its broker away: it keeps retrying). A mistake is logged at error level at its
 //! place; the same file changes nothing; an added device is applied (the line it is on is
 //! started again with it) and what was done is logged; a new edge node id is refused by name.
+//! Throughout, `/status.json` sums up the plant as applied last and counts the reloads; a
+//! refused one's errors are among its recent warnings, escaped.
 
-use crate::gateway_lines::{Proc, dir};
+use crate::gateway_lines::{Proc, dir, status_after};
 
 /// The shipped demo plant (a simulated 3G3RX and servo on one virtual line), its broker at a
 /// port where none listens.
@@ -19,29 +21,59 @@ fn sighup_checks_the_plant_file_again_and_applies_it_while_the_bridge_runs_on() 
     let plant = plant();
     std::fs::write(&file, &plant).unwrap();
     let path = file.to_str().unwrap();
-    let mut bridge = Proc::ferrobus(&["-v", "--config", path, "bridge", "--duration", "120s"], false);
+    let args = ["-v", "--config", path, "bridge", "--metrics", "127.0.0.1:0", "--duration", "120s"];
+    let mut bridge = Proc::ferrobus(&args, false);
+    let page = bridge.until("bridge: status on http://");
+    let page = page.split("http://").nth(1).unwrap().split('/').next().unwrap().to_string();
     bridge.until("bridge: polling 2 devices on 1 line");
+    let summary = |status: &serde_json::Value| status["summary"].as_str().unwrap().to_string();
+    let (status, row) = status_after(&page, 0);
+    let at_start = summary(&status);
+    assert!(at_start.starts_with(&format!("{path}: 1 line, 2 devices, ")), "{at_start}");
+    assert_eq!(row, ["0", "0", "never", "-", "never"]);
 
-    std::fs::write(&file, plant.replace("unit = 1", "unit = 1\nunit = 2")).unwrap();
+    // A mistake: a profile whose name (an escape in TOML) holds an ESC.
+    std::fs::write(&file, plant.replacen(r#""omron-3g3rx""#, r#""omron\u001b[31m""#, 1)).unwrap();
     bridge.signal("HUP");
     let refused = bridge.until("reload refused");
     assert!(refused.contains("ERROR") && refused.contains(&format!("{path}:")), "{refused}");
+    let (status, row) = status_after(&page, 1);
+    assert_eq!(summary(&status), at_start, "a refused reload leaves the summary");
+    assert_eq!(row[..4], ["1", "1", "never", "-"]);
+    assert!(row[4].ends_with(" (why: the recent warnings)"), "{row:?}");
+    let recent: Vec<&str> = status["recent"].as_array().unwrap().iter().map(|r| r["text"].as_str().unwrap()).collect();
+    let why = format!("reload refused, the running plant stays: {path}:");
+    let named = recent.iter().find(|r| r.contains(&why)).unwrap_or_else(|| panic!("{recent:?}"));
+    assert!(named.contains(r#"profile "omron\u{1b}[31m""#) && !named.contains('\u{1b}'), "escaped: {named}");
 
     std::fs::write(&file, &plant).unwrap();
     bridge.signal("HUP");
     let same = bridge.until("reload:");
     assert!(same.contains("reload: 0 devices added, 0 changed, 0 removed, 2 unchanged;"), "{same}");
+    let (status, row) = status_after(&page, 2);
+    assert_eq!(summary(&status), at_start);
+    assert_eq!(row[..2], ["2", "1"]);
+    assert!(row[2].starts_with("20") && row[2].ends_with('Z'), "when it was applied: {row:?}");
 
     let added = "\n[[line.device]]\nid = \"second\"\nunit = 3\nprofile = \"omron-3g3rx\"\nevery = \"1s\"\npoints = [\"d001\"]\n";
     std::fs::write(&file, format!("{plant}{added}")).unwrap();
     bridge.signal("HUP");
     let applied = bridge.until("reload: 1 device");
     assert!(applied.contains("reload: 1 device added, 0 changed, 0 removed, 2 unchanged;"), "{applied}");
+    let (status, row) = status_after(&page, 3);
+    let three = summary(&status);
+    assert!(three.starts_with(&format!("{path}: 1 line, 3 devices, ")), "the plant as applied: {three}");
+    assert!(three.ends_with(at_start.split_once("; ").unwrap().1), "the same mode and broker: {three}");
+    assert_eq!(row[..2], ["3", "1"]);
+    assert!(row[3].starts_with("1 device added, 0 changed, 0 removed, 2 unchanged;"), "{row:?}");
 
     std::fs::write(&file, plant.replace("\"demo-edge\"", "\"other\"")).unwrap();
     bridge.signal("HUP");
     let fixed = bridge.until("reload refused");
     assert!(fixed.contains("[sparkplug] edge_node_id cannot change while the bridge runs"), "{fixed}");
+    let (status, row) = status_after(&page, 4);
+    assert_eq!(summary(&status), three, "the refused plant is not the one running");
+    assert_eq!(row[1], "2");
 
     let end = bridge.stop().join("\n");
     assert!(end.contains("bridge: reload: 4 files checked, 2 refused"), "{end}");
