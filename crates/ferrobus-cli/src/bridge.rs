@@ -385,7 +385,8 @@ fn inverter(plant: &Plant) -> Option<Inverter> {
 }
 
 /// After the births (or 5 s), runs the inverter and changes its set frequency every 20 s,
-/// through the line's own client.
+/// through the line's own client, as started ([`Options::running`]): the demo's plant is never
+/// read again (SIGHUP only warns), so no reload stops that line under the demo.
 async fn drive_inverter(
     inverter: Inverter,
     running: oneshot::Receiver<Vec<RunningLine>>,

@@ -107,7 +107,10 @@ pub enum RunError {
 #[derive(Debug, Default)]
 pub struct Options {
     /// Receives the running lines once they are started: their clients (to command a device
-    /// beside the poller, as `bridge --demo` does), pollers and simulated lines.
+    /// beside the poller, as `bridge --demo` does), pollers and simulated lines. These are the
+    /// lines started with the bridge: a line a reload stops is stopped under whoever holds it,
+    /// and the lines a reload starts are not handed out (the bridge awaits the reply one of
+    /// them is owed at the stop itself).
     pub running: Option<oneshot::Sender<Vec<RunningLine>>>,
     /// Kept up to date while the bridge runs, every [`LIVE_EVERY`]: what a status endpoint
     /// shows (`bridge --metrics`).

@@ -78,3 +78,28 @@ fn sighup_checks_the_plant_file_again_and_applies_it_while_the_bridge_runs_on() 
     let end = bridge.stop().join("\n");
     assert!(end.contains("bridge: reload: 4 files checked, 2 refused"), "{end}");
 }
+
+/// `--demo` drives its inverter through the client of the line as started: it holds because
+/// the demo's plant is never read again. SIGHUP says so and changes nothing, the page has no
+/// `Reloads` table, and the demo's writes after it still reach the drive.
+#[test]
+fn sighup_in_the_demo_reads_no_file_and_the_demo_drives_its_inverter_on() {
+    let args = ["bridge", "--demo", "--broker", "127.0.0.1:1", "--metrics", "127.0.0.1:0", "--duration", "120s"];
+    let mut bridge = Proc::ferrobus(&args, false);
+    let page = bridge.until("bridge: status on http://");
+    let page = page.split("http://").nth(1).unwrap().split('/').next().unwrap().to_string();
+    bridge.until("bridge: polling 2 devices on 1 line");
+    bridge.signal("HUP");
+    let warned = bridge.until("SIGHUP");
+    assert!(warned.contains("the bridge runs the demo's plant, so there is no file to read again"), "{warned}");
+    let status = crate::gateway_lines::status_json(&page);
+    assert!(status["summary"].as_str().unwrap().starts_with("examples/bridge/demo.toml: 1 line, 2 devices, "));
+    let titles: Vec<&str> = status["tables"].as_array().unwrap().iter().map(|t| t["title"].as_str().unwrap()).collect();
+    assert!(!titles.contains(&"Reloads"), "{titles:?}");
+    // The births never come (no broker): the demo starts after 5 s, on the line as started.
+    let set = bridge.until("demo: inverter F001 = 60 Hz");
+    assert!(set.ends_with("demo: inverter F001 = 60 Hz"), "the write went through: {set}");
+    let run = bridge.until("demo: inverter run");
+    assert!(run.ends_with("run: the output frequency ramps to F001"), "{run}");
+    bridge.stop();
+}
