@@ -15,7 +15,7 @@
 # the window (characters plus a t3.5 after each frame) per second of the window.
 # bench/BRIDGE.md has the method and the figures.
 #
-# Usage: bench/bridge.sh [--seconds N] [--baud B] [--lines N] [--units N] [--every D] [--tcp] [--poll] [--heaptrack] [--keep]
+# Usage: bench/bridge.sh [--seconds N] [--baud B] [--lines N] [--units N] [--every D] [--tcp [--in-flight N]] [--poll] [--heaptrack] [--keep]
 #   --seconds N  the steady window, after every DBIRTH has arrived and 5 s more (default 60)
 #   --baud B     the lines' speed, 8N1 (default 115200)
 #   --lines N, --units N  another plant: N lines (default 4), N drives on each (default 25);
@@ -25,6 +25,8 @@
 #                of a paced serial line: the bridge at scale, where the wire is not the limit
 #                (--tcp --lines 10 --units 50: 500 drives × 20 points at 100 ms, 100 k points/s);
 #                the polls made are read off the bridge's own --metrics at the window's ends
+#   --in-flight N  with --tcp: the lines' in_flight (requests outstanding on each connection at
+#                once; default 1)
 #   --heaptrack  run the bridge under heaptrack and print its peak heap and biggest allocators
 #                (allocation is slower under it: the CPU figure is not the bridge's then)
 #   --poll       instead of the bridge, one `ferrobus poll` per line on the same points: the
@@ -47,6 +49,7 @@ UNITS=25
 HEAPTRACK=0
 TRANSPORT=serial
 EVERY=""
+IN_FLIGHT=1
 while [[ $# -gt 0 ]]; do
     case "$1" in
         --seconds) WINDOW="$2"; shift 2 ;;
@@ -55,6 +58,7 @@ while [[ $# -gt 0 ]]; do
         --units) UNITS="$2"; shift 2 ;;
         --every) EVERY="$2"; shift 2 ;;
         --tcp) TRANSPORT=tcp; shift ;;
+        --in-flight) IN_FLIGHT="$2"; shift 2 ;;
         --heaptrack) HEAPTRACK=1; shift ;;
         --poll) MODE=poll; shift ;;
         --keep) KEEP=1; shift ;;
@@ -63,6 +67,10 @@ while [[ $# -gt 0 ]]; do
     esac
 done
 
+if [[ $IN_FLIGHT != 1 && ($TRANSPORT != tcp || $MODE != bridge) ]]; then
+    echo "bridge.sh: --in-flight is the bridge's Modbus/TCP lines' (with --tcp, without --poll)" >&2
+    exit 2
+fi
 if [[ -z $EVERY ]]; then
     if [[ $TRANSPORT == tcp ]]; then EVERY=100ms; else EVERY=1s; fi
 fi
@@ -185,6 +193,7 @@ toml_list() { local p out=""; for p in "$@"; do out+="\"$p\", "; done; echo "[${
         echo "name = \"line$l\""
         if [[ $TRANSPORT == tcp ]]; then
             echo "tcp = \"${MASTER[l]}\""
+            [[ $IN_FLIGHT == 1 ]] || echo "in_flight = $IN_FLIGHT"
         else
             echo "port = \"${MASTER[l]}\""
             echo "baud = $BAUD"
@@ -253,6 +262,8 @@ fi
 sleep "$SETTLE"
 
 cpu_ticks() { local p t=0; for p in "${MEASURED[@]}"; do t=$((t + $(awk '{print $14 + $15}' "/proc/$p/stat"))); done; echo $t; }
+# Of it, in the kernel (stime): on loopback a send also runs the peer's receive.
+sys_ticks() { local p t=0; for p in "${MEASURED[@]}"; do t=$((t + $(awk '{print $15}' "/proc/$p/stat"))); done; echo $t; }
 status_kb() { local p t=0; for p in "${MEASURED[@]}"; do t=$((t + $(awk -v k="$1:" '$1 == k {print $2}' "/proc/$p/status"))); done; echo $t; }
 
 # The polls the bridge made so far, by its own metrics (0 without them: the polls' mode).
@@ -263,11 +274,13 @@ polls_made() {
 POLLS0="$(polls_made)"
 START_NS="$(date +%s%N)"
 CPU0="$(cpu_ticks)"
+SYS0="$(sys_ticks)"
 RSS0="$(status_kb VmRSS)"
 LOAD="$(cut -d' ' -f1-3 /proc/loadavg)"
 echo "bridge.sh: $MODE, $((LINES * UNITS)) devices on $LINES $TRANSPORT lines, every $EVERY: measuring ${WINDOW} s (work: $WORK)" >&2
 sleep "$WINDOW"
 CPU1="$(cpu_ticks)"
+SYS1="$(sys_ticks)"
 END_NS="$(date +%s%N)"
 POLLS1="$(polls_made)"
 RSS1="$(status_kb VmRSS)"
@@ -292,11 +305,11 @@ LINES_JSON="$([[ $TRANSPORT == tcp ]] || for l in $(seq "$LINES"); do
 done | paste -sd, -)"
 list_json() { local f out=""; for f in "$@"; do out+="\"$f\", "; done; echo "[${out%, }]"; }
 cat >"$WORK/run.json" <<EOF
-{"mode": "$MODE", "transport": "$TRANSPORT", "every": "$EVERY", "baud": $BAUD, "devices": $((LINES * UNITS)), "points_per_device": ${#POINTS[@]},
+{"mode": "$MODE", "transport": "$TRANSPORT", "in_flight": $IN_FLIGHT, "every": "$EVERY", "baud": $BAUD, "devices": $((LINES * UNITS)), "points_per_device": ${#POINTS[@]},
  "polls_in_window": $((POLLS1 - POLLS0)), "reads_per_device": $READS_PER_DEVICE,
  "binary": "$FERROBUS", "load_average": "$LOAD",
  "window_start_ns": $START_NS, "window_end_ns": $END_NS,
- "cpu_ticks": $((CPU1 - CPU0)), "clk_tck": $(getconf CLK_TCK),
+ "cpu_ticks": $((CPU1 - CPU0)), "sys_ticks": $((SYS1 - SYS0)), "clk_tck": $(getconf CLK_TCK),
  "rss_start_kb": $RSS0, "rss_end_kb": $RSS1, "hwm_kb": $HWM, "memory_kb": {$MEMORY},
  "smaps": "$WORK/smaps.txt", "threads": $THREADS,
  "messages": "$WORK/messages.jsonl", "poll_records": $(list_json "${POLL_RECORDS[@]}"),

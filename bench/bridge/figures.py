@@ -253,6 +253,7 @@ def main() -> int:
     window_s = (end - start) / 1e9
     figures = {k: run[k] for k in ("mode", "baud", "devices", "points_per_device", "binary", "load_average")}
     figures["transport"] = run.get("transport", "serial")
+    figures["in_flight"] = run.get("in_flight", 1)
     figures["every"] = run.get("every", "1s")
     figures["window_s"] = round(window_s, 1)
     if run.get("polls_in_window"):
@@ -261,6 +262,8 @@ def main() -> int:
         figures["polls_per_s"] = round(run["polls_in_window"] / window_s, 1)
         figures["points_per_s"] = round(run["polls_in_window"] / window_s * run["points_per_device"] / reads)
     figures["cpu_share_of_one_core"] = round(run["cpu_ticks"] / run["clk_tck"] / window_s, 4)
+    if "sys_ticks" in run:
+        figures["kernel_share_of_one_core"] = round(run["sys_ticks"] / run["clk_tck"] / window_s, 4)
     figures["rss_kb"] = {"start": run["rss_start_kb"], "end": run["rss_end_kb"], "hwm": run["hwm_kb"]}
     figures["memory_kb"] = run.get("memory_kb", {})
     figures["threads"] = run.get("threads")
@@ -280,10 +283,11 @@ def print_table(f: dict) -> None:
     lat = f["latency_ms"]
     rows = [
         ("run", f"{f['mode']}, {f['devices']} devices × {f['points_per_device']} points every {f['every']}, "
-                + (f"{f['baud']} 8N1" if f["transport"] == "serial" else "Modbus/TCP")
+                + (f"{f['baud']} 8N1" if f["transport"] == "serial" else f"Modbus/TCP, {f['in_flight']} in flight")
                 + f", {f['window_s']} s window, load average {f['load_average']}"),
         ("binary", f["binary"]),
-        ("CPU, share of one core", f"{f['cpu_share_of_one_core'] * 100:.2f} %"),
+        ("CPU, share of one core", f"{f['cpu_share_of_one_core'] * 100:.2f} %"
+         + (f" ({f['kernel_share_of_one_core'] * 100:.2f} % in the kernel)" if "kernel_share_of_one_core" in f else "")),
         ("RSS start → end of window (VmHWM)",
          f"{f['rss_kb']['start']} → {f['rss_kb']['end']} kB ({f['rss_kb']['hwm']} kB)"),
     ]
