@@ -19,7 +19,7 @@ use std::time::{Duration, SystemTime};
 use clap::Args;
 use ferrobus::Client;
 use ferrobus_bridge::config::{ConfigErrors, Mode, Plant};
-use ferrobus_bridge::run::{Live, Options, RunningLine, Status, run_with};
+use ferrobus_bridge::run::{Options, RunningLine, Status, run_with};
 use ferrobus_profile::{Point, Profile};
 use ferrobus_tools::status::Summary;
 use tokio::sync::{Notify, mpsc, oneshot};
@@ -143,10 +143,9 @@ pub(crate) async fn run(plant_file: Option<&Path>, args: &BridgeArgs) -> Result<
     let text = summary(&origin, &plant);
     let described = Arc::new(Mutex::new(if args.demo { Summary::fixed(text) } else { Summary::reloadable(text) }));
     let live = status.map(|listener| {
-        let live = Arc::new(Mutex::new(Live::default()));
-        let source = BridgeStatus { live: Arc::clone(&live), summary: Arc::clone(&described) };
-        metrics::spawn(listener, Arc::new(source), "bridge");
-        live
+        let (ask, asked) = tokio::sync::mpsc::channel(8);
+        metrics::spawn(listener, Arc::new(BridgeStatus::new(ask, Arc::clone(&described))), "bridge");
+        asked
     });
     let (reload_tx, reload_rx) = tokio::sync::mpsc::channel(1);
     let options = Options { running: Some(running_tx), live, reload: Some(reload_rx) };

@@ -47,7 +47,7 @@ mod status;
 
 use std::collections::{BTreeMap, VecDeque};
 use std::future::Future;
-use std::sync::{Arc, Mutex};
+use std::sync::Arc;
 use std::time::{Duration, SystemTime};
 
 use ferrobus_tools::poll::{Event, Sample};
@@ -112,12 +112,22 @@ pub struct Options {
     /// and the lines a reload starts are not handed out (the bridge awaits the reply one of
     /// them is owed at the stop itself).
     pub running: Option<oneshot::Sender<Vec<RunningLine>>>,
-    /// Kept up to date while the bridge runs, every [`LIVE_EVERY`]: what a status endpoint
-    /// shows (`bridge --metrics`).
-    pub live: Option<Arc<Mutex<Live>>>,
+    /// Questions to the running bridge, each answered with how it is then ([`Live`]): what a
+    /// status endpoint shows (`bridge --metrics`), made only when it is asked for.
+    pub live: Option<mpsc::Receiver<LiveAsk>>,
     /// Plant files read again, each carried out while the bridge runs ([`Reload`]): its plan
     /// from the running plant, the answer what was done or why nothing was.
     pub reload: Option<mpsc::Receiver<Reload>>,
+}
+
+/// A question to the running bridge ([`Options::live`]): how it is now.
+#[derive(Debug)]
+pub struct LiveAsk {
+    /// Whether the answer carries every point's latest reading (a status page) or leaves
+    /// them out (the metrics and the health, which count).
+    pub readings: bool,
+    /// Where the answer goes.
+    pub answer: oneshot::Sender<Live>,
 }
 
 /// A running bridge as it is now ([`Options::live`]).
@@ -129,12 +139,9 @@ pub struct Live {
     pub stored_now: u64,
     /// Whether a session with the broker is up.
     pub online: bool,
-    /// Every point's latest reading.
+    /// Every point's latest reading, if they were asked for ([`LiveAsk::readings`]).
     pub readings: Vec<crate::edge::Reading>,
 }
-
-/// How often [`Options::live`] is brought up to date.
-pub const LIVE_EVERY: Duration = Duration::from_millis(500);
 
 /// Runs the bridge of `plant` until `stop` completes; `events`, if given, hears what happens
 /// as it happens (never waited for: a full channel loses the status, not the bridge's time).
@@ -223,8 +230,8 @@ struct Bridge {
     /// (then they are stored). `None` once the first attempt has its outcome.
     held: Option<VecDeque<(usize, Event)>>,
     report: Report,
-    /// Where the bridge as it is now is kept, for a status endpoint.
-    live: Option<Arc<Mutex<Live>>>,
+    /// A status endpoint's questions: how the bridge is now.
+    live: Option<mpsc::Receiver<LiveAsk>>,
 }
 
 impl Bridge {
@@ -291,8 +298,6 @@ impl Bridge {
     /// Loops until `stop`.
     async fn serve(&mut self, stop: impl Future<Output = ()>) {
         tokio::pin!(stop);
-        let mut show = tokio::time::interval(LIVE_EVERY);
-        show.set_missed_tick_behavior(tokio::time::MissedTickBehavior::Delay);
         loop {
             let reconnect_at = self.reconnect_at;
             let replaying = self.online && self.born && !self.store.is_empty();
@@ -303,9 +308,11 @@ impl Bridge {
                     Some(event) => self.on_session(event),
                     None => return,
                 },
+                // Before the samples: a steady flow of them does not keep a question waiting.
+                Some(ask) = next_of(&mut self.live) => self.answer_live(ask),
                 Some((line, event)) = self.samples.recv() => self.take_poll(line, event),
                 Some((epoch, applied)) = self.written.recv() => self.on_applied(epoch, applied),
-                Some(reload) = next_reload(&mut self.reloads) => {
+                Some(reload) = next_of(&mut self.reloads) => {
                     let done = self.reload(reload.plant).await;
                     let _ = reload.done.send(done);
                 }
@@ -318,18 +325,19 @@ impl Bridge {
                     self.replay();
                     self.replay_at = Instant::now() + REPLAY_PACE;
                 }
-                _ = show.tick(), if self.live.is_some() => self.show_live(),
             }
         }
     }
 
-    /// Brings [`Options::live`] up to date: the report so far with the lines' polls.
-    fn show_live(&self) {
-        let Some(live) = &self.live else { return };
+    /// Answers a question of [`Options::live`]: the report so far with the lines' polls, and
+    /// the readings if asked for (formatting every point's value is the costly part).
+    fn answer_live(&self, ask: LiveAsk) {
         let mut report = self.report.clone();
         report.finish(&self.counters(), &self.store);
-        let now = Live { report, stored_now: self.store.len(), online: self.online, readings: self.edge.readings() };
-        *live.lock().unwrap_or_else(std::sync::PoisonError::into_inner) = now;
+        let readings = if ask.readings { self.edge.readings() } else { Vec::new() };
+        let now = Live { report, stored_now: self.store.len(), online: self.online, readings };
+        // Whoever asked may have stopped waiting.
+        let _ = ask.answer.send(now);
     }
 
     /// Each line's poll counters, group by group (none for a listen line).
@@ -852,15 +860,16 @@ fn kind_of(topic: &str) -> String {
     )
 }
 
-/// The next plant file to carry out; never, without a channel (or once it is closed).
-async fn next_reload(reloads: &mut Option<mpsc::Receiver<Reload>>) -> Option<Reload> {
-    match reloads {
+/// The next plant file to carry out or question to answer; never, without a channel (or
+/// once it is closed).
+async fn next_of<T>(channel: &mut Option<mpsc::Receiver<T>>) -> Option<T> {
+    match channel {
         Some(rx) => {
-            let reload = rx.recv().await;
-            if reload.is_none() {
-                *reloads = None;
+            let next = rx.recv().await;
+            if next.is_none() {
+                *channel = None;
             }
-            reload
+            next
         }
         None => std::future::pending().await,
     }

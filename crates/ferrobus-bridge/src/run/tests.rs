@@ -279,14 +279,22 @@ async fn the_live_view_shows_the_lines_polling_and_the_store_filling_while_the_b
     let port = free_port();
     let dir = temporary_dir("live");
     let plant = demo_plant(port, &dir.join("store"));
-    let live = Arc::new(Mutex::new(Live::default()));
-    let options = Options { live: Some(Arc::clone(&live)), ..Options::default() };
+    let (ask_tx, ask_rx) = mpsc::channel(4);
+    let options = Options { live: Some(ask_rx), ..Options::default() };
     let (stop_tx, stop_rx) = oneshot::channel::<()>();
     let bridge = tokio::spawn(run_with(plant, async move { drop(stop_rx.await) }, None, options));
+    let ask = |readings: bool| {
+        let ask_tx = ask_tx.clone();
+        async move {
+            let (answer, answered) = oneshot::channel();
+            ask_tx.send(LiveAsk { readings, answer }).await.expect("the bridge takes questions");
+            answered.await.expect("the bridge answers")
+        }
+    };
     let seen = tokio::time::timeout(Duration::from_secs(20), async {
         loop {
-            tokio::time::sleep(LIVE_EVERY).await;
-            let now = live.lock().unwrap().clone();
+            tokio::time::sleep(Duration::from_millis(100)).await;
+            let now = ask(true).await;
             if now.report.lines.first().is_some_and(|l| l.ok > 0) && now.stored_now > 0 {
                 return now;
             }
@@ -294,6 +302,9 @@ async fn the_live_view_shows_the_lines_polling_and_the_store_filling_while_the_b
     })
     .await
     .expect("the live view shows polls and stored records");
+    // Asked for the counters only, it formats no reading.
+    let counted = ask(false).await;
+    assert!(counted.readings.is_empty() && counted.report.lines[0].ok >= seen.report.lines[0].ok, "{counted:?}");
     assert!(!seen.online, "no broker listens on {port}");
     assert_eq!(seen.report.connections, 0);
     // The demo's inverter reads its points: each with its value as shown, none failed.

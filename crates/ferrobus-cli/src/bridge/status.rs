@@ -1,6 +1,7 @@
 //! `bridge --metrics`: the bridge on its status endpoint ([`ferrobus_tools::status`]), from
-//! its live view ([`Live`], brought up to date by the bridge twice a second) and its summary
-//! ([`Summary`]: the plant as the file applied last describes it, and the reloads).
+//! its live view ([`Live`], which the bridge makes when a request asks for it, and only then)
+//! and its summary ([`Summary`]: the plant as the file applied last describes it, and the
+//! reloads).
 //!
 //! ```text
 //!   ferrobus_bridge_published_total{type}   NBIRTH, DBIRTH, DDATA, DDEATH, NDEATH; plain, result
@@ -12,18 +13,27 @@
 //!   bridge_polls_total{line}  bridge_poll_failures_total{line,kind}  bridge_poll_overruns_total{line}
 //! ```
 
-use std::sync::{Arc, Mutex, PoisonError};
+use std::sync::{Arc, Mutex, MutexGuard, PoisonError};
+use std::time::Duration;
 
-use ferrobus_bridge::run::Live;
+use ferrobus_bridge::run::{Live, LiveAsk};
 use ferrobus_tools::poll::iso8601_ms;
-use ferrobus_tools::status::{Family, Health, Labels, Source, Status, Summary, Table};
+use ferrobus_tools::status::{Family, Health, Labels, Refresh, Source, Status, Summary, Table, View};
 use prometheus_client::collector::Collector;
 use prometheus_client::encoding::DescriptorEncoder;
+use tokio::sync::{mpsc, oneshot};
+
+/// How long a request waits for the bridge's answer. The bridge answers between the samples
+/// it takes; one busy carrying out a reload answers after it, and until then a request is
+/// answered from the view before.
+const ANSWER_WAIT: Duration = Duration::from_secs(1);
 
 /// The bridge as its status endpoint shows it.
 pub(super) struct BridgeStatus {
-    pub(super) live: Arc<Mutex<Live>>,
-    pub(super) summary: Arc<Mutex<Summary>>,
+    ask: mpsc::Sender<LiveAsk>,
+    /// The bridge's last answer (its readings those of the last page asked for).
+    last: Mutex<Live>,
+    summary: Arc<Mutex<Summary>>,
 }
 
 impl std::fmt::Debug for BridgeStatus {
@@ -34,8 +44,30 @@ impl std::fmt::Debug for BridgeStatus {
 }
 
 impl BridgeStatus {
-    fn now(&self) -> Live {
-        self.live.lock().unwrap_or_else(PoisonError::into_inner).clone()
+    /// The status of the bridge that answers on `ask`, with the plant as `summary` has it.
+    pub(super) fn new(ask: mpsc::Sender<LiveAsk>, summary: Arc<Mutex<Summary>>) -> Self {
+        BridgeStatus { ask, last: Mutex::new(Live::default()), summary }
+    }
+
+    fn now(&self) -> MutexGuard<'_, Live> {
+        self.last.lock().unwrap_or_else(PoisonError::into_inner)
+    }
+
+    /// Asks the bridge how it is, for `view`: the readings only for a page. No answer in
+    /// [`ANSWER_WAIT`] (or a bridge that has stopped) leaves the view before.
+    async fn ask(&self, view: View) {
+        let readings = view == View::Page;
+        let (answer, answered) = oneshot::channel();
+        if self.ask.try_send(LiveAsk { readings, answer }).is_err() {
+            return;
+        }
+        let Ok(Ok(mut live)) = tokio::time::timeout(ANSWER_WAIT, answered).await else { return };
+        let mut last = self.now();
+        if !readings {
+            // A page asked for meanwhile still shows what it was answered.
+            live.readings = std::mem::take(&mut last.readings);
+        }
+        *last = live;
     }
 }
 
@@ -155,5 +187,9 @@ impl Source for BridgeStatus {
         } else {
             Health::Failing("not connected to the broker (storing what is read)".into())
         }
+    }
+
+    fn refresh(&self, view: View) -> Refresh<'_> {
+        Box::pin(self.ask(view))
     }
 }

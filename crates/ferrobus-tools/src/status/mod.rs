@@ -50,6 +50,26 @@ pub trait Source: Collector {
     fn status(&self) -> Status;
     /// Whether the command does its job now.
     fn health(&self) -> Health;
+    /// Brings what is shown for `view` up to date, before a request for it is answered: for a
+    /// command whose view is kept by a task of its own, which is asked then and never between
+    /// (the bridge). Nothing to do by default: a command's counters are read where they are.
+    fn refresh(&self, view: View) -> Refresh<'_> {
+        let _ = view;
+        Box::pin(std::future::ready(()))
+    }
+}
+
+/// What [`Source::refresh`] returns: done once the view is up to date, or as up to date as the
+/// source could make it in the time it allows.
+pub type Refresh<'a> = std::pin::Pin<Box<dyn Future<Output = ()> + Send + 'a>>;
+
+/// What a request shows.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum View {
+    /// The metrics (`/metrics`) or the health (`/healthz`): the counters.
+    Counters,
+    /// The page (`/status.json`): the counters and every table, the latest values among them.
+    Page,
 }
 
 /// Whether a command does its job.
@@ -97,15 +117,33 @@ pub async fn serve(listener: TcpListener, source: Arc<dyn Source>) -> io::Result
     registry.register_collector(Box::new(Shared(Arc::clone(&source))));
     let registry = Arc::new(registry);
     let app = Router::new()
-        .route("/metrics", get(move || std::future::ready(metrics(&registry))))
+        .route(
+            "/metrics",
+            get({
+                let source = Arc::clone(&source);
+                move || async move {
+                    source.refresh(View::Counters).await;
+                    metrics(&registry)
+                }
+            }),
+        )
         .route(
             "/healthz",
             get({
                 let source = Arc::clone(&source);
-                move || std::future::ready(healthz(&*source))
+                move || async move {
+                    source.refresh(View::Counters).await;
+                    healthz(&*source)
+                }
             }),
         )
-        .route("/status.json", get(move || std::future::ready(status(&*source))))
+        .route(
+            "/status.json",
+            get(move || async move {
+                source.refresh(View::Page).await;
+                status(&*source)
+            }),
+        )
         .route("/", get(|| std::future::ready(Html(PAGE))));
     axum::serve(listener, app).await
 }
