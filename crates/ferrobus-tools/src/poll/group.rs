@@ -328,20 +328,22 @@ impl Group {
     /// Decodes the items a read returned (registers or bits as 0/1, `count` of them) into
     /// each cell's raw value.
     pub fn decode(&self, items: &[u16]) -> Vec<Result<Value, String>> {
-        self.cells
-            .iter()
-            .map(|cell| {
-                let from = usize::from(cell.point.address.saturating_sub(self.start));
-                let to = from.saturating_add(usize::from(cell.point.width));
-                let words = items
-                    .get(from..to)
-                    .ok_or_else(|| format!("the reply held {} items, {} needs {from}..{to}", items.len(), cell.name))?;
-                if cell.point.value_type == ValueType::Bit {
-                    return Ok(Value::Bool(words.first().is_some_and(|w| *w != 0)));
-                }
-                cell.point.decode(words).map_err(|e| e.to_string())
-            })
-            .collect()
+        self.decoded(items).collect()
+    }
+
+    /// [`Group::decode`], value by value.
+    pub(crate) fn decoded<'a>(&'a self, items: &'a [u16]) -> impl Iterator<Item = Result<Value, String>> + 'a {
+        self.cells.iter().map(move |cell| {
+            let from = usize::from(cell.point.address.saturating_sub(self.start));
+            let to = from.saturating_add(usize::from(cell.point.width));
+            let words = items
+                .get(from..to)
+                .ok_or_else(|| format!("the reply held {} items, {} needs {from}..{to}", items.len(), cell.name))?;
+            if cell.point.value_type == ValueType::Bit {
+                return Ok(Value::Bool(words.first().is_some_and(|w| *w != 0)));
+            }
+            cell.point.decode(words).map_err(|e| e.to_string())
+        })
     }
 }
 

@@ -542,12 +542,10 @@ async fn poll_once(client: &Client, group: &Group, raw_only: bool) -> (Result<Ve
         Ok(r) => r,
         Err(e) => return (Err(Failure::of(&Error::InvalidRequest(e))), Traffic::default()),
     };
-    let mut tx = vec![group.unit];
-    let mut pdu = vec![0u8; request.encoded_len()];
-    if let Ok(n) = request.emit(&mut pdu) {
-        pdu.truncate(n);
-        tx.extend_from_slice(&pdu);
-    }
+    // The unit, then the request's PDU, encoded in place.
+    let mut tx = vec![group.unit; 1 + request.encoded_len()];
+    let encoded = tx.get_mut(1..).and_then(|pdu| request.emit(pdu).ok()).unwrap_or(0);
+    tx.truncate(1 + encoded);
     let reply = client.request(group.unit, &request).await;
     match reply {
         Ok(Some(reply)) => {
@@ -589,8 +587,7 @@ impl Group {
     /// as its point says. The one decoding of a poll's reply, and of a reply heard by the
     /// sniffer ([`crate::sniff::Heard`]).
     pub fn readings(&self, items: &[u16]) -> Vec<Reading> {
-        self.decode(items)
-            .into_iter()
+        self.decoded(items)
             .enumerate()
             .map(|(cell, raw)| {
                 let (scaled, shown) = match (&raw, self.cells.get(cell)) {
@@ -610,7 +607,7 @@ impl Group {
             Ok(v) => Reading { cell, raw: Ok(v), scaled: None, shown: String::new() },
             Err(e) => Reading { cell, shown: e.clone(), raw: Err(e), scaled: None },
         };
-        self.decode(items).into_iter().enumerate().map(reading).collect()
+        self.decoded(items).enumerate().map(reading).collect()
     }
 }
 
