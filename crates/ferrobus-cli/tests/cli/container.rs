@@ -3,7 +3,8 @@
 //! runs, holds a `ferrobus` that runs, the profiles and the store; the compose file's commands
 //! are ones `ferrobus` takes and its plant file checks. Where docker or podman can build, the
 //! image is built and run: `--version`, as a user without privileges, and a simulated drive in
-//! the container read from here. Without a container runtime that test says SKIPPED and why.
+//! the container read from here. Without a container runtime, or with one that can neither
+//! find nor fetch the images the Dockerfile builds from, that test says SKIPPED and why.
 
 use std::path::{Path, PathBuf};
 use std::process::{Command, Output};
@@ -92,25 +93,90 @@ fn the_compose_example_runs_commands_ferrobus_takes_mounts_files_that_exist_and_
     assert!(dockerfile.contains("scripts/image-root.sh"), "the image's root is the script's");
 }
 
-/// docker or podman, if one answers `info` (a client without a daemon does not); else why not.
+/// docker or podman, if one answers `info` (a client without a daemon does not) and has or can
+/// fetch every image the Dockerfile builds from (a machine without a registry cannot); else
+/// why not.
 fn container_runtime() -> Result<&'static str, String> {
+    let dockerfile = std::fs::read_to_string(repo().join("Dockerfile")).unwrap();
+    let bases = base_images(&dockerfile);
+    assert!(bases.len() >= 2, "the Dockerfile's FROM lines: {bases:?}");
     let mut why = Vec::new();
     for runtime in ["docker", "podman"] {
         match Command::new(runtime).arg("info").output() {
-            Ok(out) if out.status.success() => return Ok(runtime),
+            Ok(out) if out.status.success() => {}
             Ok(out) => {
-                let first = String::from_utf8_lossy(&out.stderr)
-                    .lines()
-                    .find(|l| !l.trim().is_empty())
-                    .unwrap_or_default()
-                    .trim()
-                    .to_string();
-                why.push(format!("`{runtime} info` failed: {first}"));
+                why.push(format!("`{runtime} info` failed: {}", first_line(&out)));
+                continue;
             }
-            Err(e) => why.push(format!("{runtime}: {e}")),
+            Err(e) => {
+                why.push(format!("{runtime}: {e}"));
+                continue;
+            }
+        }
+        let missing = bases.iter().find_map(|image| {
+            if run(runtime, &["image", "inspect", image]).status.success() {
+                return None;
+            }
+            let out = run(runtime, &["manifest", "inspect", image]);
+            (!out.status.success()).then(|| format!("{runtime} cannot fetch {image}: {}", first_line(&out)))
+        });
+        match missing {
+            None => return Ok(runtime),
+            Some(missing) => why.push(missing),
         }
     }
     Err(why.join("; "))
+}
+
+/// The images a Dockerfile's stages start from (`FROM [--platform=P] IMAGE [AS NAME]`), with
+/// its `ARG NAME=DEFAULT` put in for `${NAME}`; a stage built on another stage is none.
+fn base_images(dockerfile: &str) -> Vec<String> {
+    let mut args: Vec<(String, String)> = Vec::new();
+    let mut stages: Vec<String> = Vec::new();
+    let mut images = Vec::new();
+    for line in dockerfile.lines().map(str::trim) {
+        let mut words = line.split_whitespace();
+        match words.next() {
+            Some("ARG") => {
+                if let Some((name, default)) = words.next().and_then(|w| w.split_once('=')) {
+                    args.push((name.to_string(), default.to_string()));
+                }
+            }
+            Some("FROM") => {
+                let mut words = words.skip_while(|w| w.starts_with("--"));
+                let Some(image) = words.next() else { continue };
+                let image =
+                    args.iter().fold(image.to_string(), |i, (name, value)| i.replace(&format!("${{{name}}}"), value));
+                if !stages.contains(&image) {
+                    images.push(image);
+                }
+                if let (Some(as_), Some(name)) = (words.next(), words.next())
+                    && as_.eq_ignore_ascii_case("as")
+                {
+                    stages.push(name.to_string());
+                }
+            }
+            _ => {}
+        }
+    }
+    images
+}
+
+#[test]
+fn the_dockerfile_builds_from_a_rust_image_and_the_distroless_base() {
+    let dockerfile = std::fs::read_to_string(repo().join("Dockerfile")).unwrap();
+    assert_eq!(
+        base_images(&dockerfile),
+        ["docker.io/library/rust:1.95-slim-bookworm", "gcr.io/distroless/cc-debian12:nonroot"]
+    );
+    let staged = "ARG V=1\nFROM a:${V} AS build\nFROM build\nFROM --platform=$X b AS run\n";
+    assert_eq!(base_images(staged), ["a:1", "b"]);
+}
+
+/// The first line with something on it of what a command said on stderr.
+fn first_line(out: &Output) -> String {
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    stderr.lines().find(|l| !l.trim().is_empty()).unwrap_or_default().trim().to_string()
 }
 
 fn run(runtime: &str, args: &[&str]) -> Output {
