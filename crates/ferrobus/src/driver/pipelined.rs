@@ -160,8 +160,7 @@ impl Pipelined {
             }
             Ok(probe) => {
                 let retries = if probe { 0 } else { command.options.retries };
-                let sent = self.pump.clock().now();
-                self.send(Pending { command, attempts: 0, retries, heard: None, sent }).await;
+                self.send(Pending { command, attempts: 0, retries, heard: None, sent: now }).await;
             }
         }
     }
@@ -179,7 +178,8 @@ impl Pipelined {
             Ok(true) => self.engine.abort(),
             Ok(false) => {}
             Err(e) => {
-                self.ended(pending, Err(e));
+                let now = self.pump.clock().now();
+                self.ended(pending, Err(e), now);
                 // The failed connect is counted now, not at the next completion.
                 return self.publish_stats();
             }
@@ -193,7 +193,7 @@ impl Pipelined {
         } else {
             match Request::parse(&command.pdu) {
                 Ok(request) => self.engine.submit(now, command.unit, &request, timeout),
-                Err(e) => return self.settle(pending, Err(e.into())),
+                Err(e) => return self.settle(pending, Err(e.into()), now),
             }
         };
         if let Ok(Some(slot)) = submitted.map(|ticket| self.flying.get_mut(ticket.slot())) {
@@ -201,7 +201,7 @@ impl Pipelined {
         } else {
             // Only a PDU longer than 253 bytes cannot be framed.
             let len = pending.command.pdu.len();
-            self.settle(pending, Err(Error::InvalidRequest(ferrobus_proto::PduError::TooLong { len })));
+            self.settle(pending, Err(Error::InvalidRequest(ferrobus_proto::PduError::TooLong { len })), now);
         }
     }
 
@@ -225,10 +225,13 @@ impl Pipelined {
     /// Hands each completion the engine has to its request; returns whether there was any.
     fn deliver(&mut self) -> bool {
         let mut any = false;
+        // The completions of one turn end at one instant: the clock is read once for them.
+        let mut now = None;
         while let Some((ticket, completion)) = self.engine.poll_event() {
             let Some(pending) = self.flying.get_mut(ticket.slot()).and_then(Option::take) else { continue };
             let result = convert(&pending.command, completion);
-            self.ended(pending, result);
+            let now = *now.get_or_insert_with(|| self.pump.clock().now());
+            self.ended(pending, result, now);
             any = true;
         }
         any
@@ -249,21 +252,21 @@ impl Pipelined {
     fn abandon(&mut self, error: &std::io::Error) {
         let describe = self.link.transport.describe();
         self.engine.abort();
+        let now = self.pump.clock().now();
         for slot in 0..MAX_IN_FLIGHT {
             let Some(pending) = self.flying.get_mut(slot).and_then(Option::take) else { continue };
             let error = std::io::Error::new(error.kind(), error.to_string());
-            self.settle(pending, Err(Error::io(format!("reading from {describe}"), error)));
+            self.settle(pending, Err(Error::io(format!("reading from {describe}"), error)), now);
         }
         self.publish_stats();
     }
 
-    /// One attempt ended with `result`: counted for the IO backoff, then settled; a
+    /// One attempt ended with `result` at `now`: counted for the IO backoff, then settled; a
     /// connection it shows stalled is closed (the others in flight on it go again, or fail).
     /// Only a timeout of a request sent after the last reply says the connection may have
     /// stalled: one a device dropped while it answered others (pymodbus's server takes one
     /// of the requests a read brings) does not.
-    fn ended(&mut self, pending: Pending, result: Result<Reply, Error>) {
-        let now = self.pump.clock().now();
+    fn ended(&mut self, pending: Pending, result: Result<Reply, Error>, now: ferrobus_proto::Instant) {
         self.link.attempt_ended(&result, now);
         let stalled = match &result {
             Err(Error::Timeout { .. }) if self.last_reply.is_some_and(|last| pending.sent <= last) => false,
@@ -278,20 +281,20 @@ impl Pipelined {
             }
             _ => false,
         };
-        self.settle(pending, result);
+        self.settle(pending, result, now);
         if stalled {
             self.abandon(&std::io::Error::new(std::io::ErrorKind::TimedOut, "the connection stalled"));
             self.publish_stats();
         }
     }
 
-    /// Sends `pending` again if the retry policy says so; else records the unit's health and
-    /// answers its client.
-    fn settle(&mut self, mut pending: Pending, result: Result<Reply, Error>) {
-        if let Err(Error::Timeout { heard: Some(now), .. }) = result
-            && pending.heard.is_none_or(|kept| now.weight() >= kept.weight())
+    /// Sends `pending` again if the retry policy says so; else records the unit's health (at
+    /// `now`) and answers its client.
+    fn settle(&mut self, mut pending: Pending, result: Result<Reply, Error>, now: ferrobus_proto::Instant) {
+        if let Err(Error::Timeout { heard: Some(heard), .. }) = result
+            && pending.heard.is_none_or(|kept| heard.weight() >= kept.weight())
         {
-            pending.heard = Some(now);
+            pending.heard = Some(heard);
         }
         let command = &pending.command;
         if should_retry(outcome(command, &result), pending.attempts, pending.retries) {
@@ -299,7 +302,7 @@ impl Pipelined {
             self.again.push_back(pending);
             return;
         }
-        self.link.record_health(command, &result, self.pump.clock().now());
+        self.link.record_health(command, &result, now);
         let result = match result {
             Err(Error::Timeout { unit, timeout, .. }) => {
                 Err(Error::Timeout { unit, timeout, attempts: pending.attempts, heard: pending.heard })
